@@ -1,0 +1,1 @@
+"""bpy layer: operators, properties, panel, node trees and the CLI."""
