@@ -1,0 +1,85 @@
+"""The one place where arrays become Blender meshes and back (bpy).
+
+Keep bpy read/write helpers here so the rest of the bpy layer speaks arrays.
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+
+def grid_faces(rows: int, cols: int) -> np.ndarray:
+    """Quad indices of a ``rows x cols`` vertex grid stored row-major.
+
+    Returns
+    -------
+    faces : ndarray, shape ((rows - 1) * (cols - 1), 4), int64
+        Counter-clockwise (seen from +z when rows run along +y and cols along +x).
+    """
+    idx = np.arange(rows * cols).reshape(rows, cols)
+    a = idx[:-1, :-1].ravel()
+    b = idx[:-1, 1:].ravel()
+    c = idx[1:, 1:].ravel()
+    d = idx[1:, :-1].ravel()
+    return np.stack([a, b, c, d], axis=1)
+
+
+def mesh_object(name: str, vertices: np.ndarray, faces: np.ndarray, collection,
+                uv: np.ndarray | None = None, smooth: bool = True):
+    """Create a mesh object from arrays and link it into ``collection``.
+
+    Parameters
+    ----------
+    vertices : ndarray, shape (V, 3)
+        Object-space positions (metres).
+    faces : ndarray, shape (F, K), int
+        Polygon vertex indices, all polygons with K corners.
+    uv : ndarray, shape (V, 2), optional
+        Per-vertex UV coordinates; written per corner into a UV map named ``UVMap``.
+    smooth : bool
+        Smooth shading (interpolated normals), which bakes want for curved height fields.
+    """
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata(vertices.tolist(), [], faces.tolist())
+    if uv is not None:
+        layer = mesh.uv_layers.new(name="UVMap")
+        corner_vertex = np.empty(len(mesh.loops), dtype=np.int64)
+        mesh.loops.foreach_get("vertex_index", corner_vertex)
+        layer.data.foreach_set("uv", np.asarray(uv, dtype=np.float32)[corner_vertex].ravel())
+    mesh.shade_smooth() if smooth else mesh.shade_flat()
+    mesh.validate()
+    mesh.update()
+    obj = bpy.data.objects.new(name, mesh)
+    collection.objects.link(obj)
+    return obj
+
+
+def vertex_positions(obj) -> np.ndarray:
+    """Object-space vertex positions, shape (V, 3), float64."""
+    co = np.empty(len(obj.data.vertices) * 3, dtype=np.float64)
+    obj.data.vertices.foreach_get("co", co)
+    return co.reshape(-1, 3)
+
+
+def world_bounds(obj) -> np.ndarray:
+    """Axis-aligned world-space bounds of a mesh object, shape (2, 3): [min, max] in metres."""
+    co = vertex_positions(obj)
+    m = np.array(obj.matrix_world, dtype=np.float64)
+    world = co @ m[:3, :3].T + m[:3, 3]
+    return np.stack([world.min(axis=0), world.max(axis=0)])
+
+
+def object_from_bmesh(name: str, bm, collection, smooth: bool = True):
+    """Write a BMesh into a new mesh object linked into ``collection``; frees ``bm``."""
+    mesh = bpy.data.meshes.new(name)
+    bm.to_mesh(mesh)
+    bm.free()
+    mesh.shade_smooth() if smooth else mesh.shade_flat()
+    mesh.validate()
+    mesh.update()
+    obj = bpy.data.objects.new(name, mesh)
+    collection.objects.link(obj)
+    return obj

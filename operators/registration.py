@@ -1,0 +1,30 @@
+"""Register / unregister everything the extension adds to Blender (bpy).
+
+Also registers the ``relight`` command-line command, so inside Blender
+``blender -b [FILE.blend] --command relight VERB ...`` runs the same verbs as the venv CLI.
+"""
+
+from __future__ import annotations
+
+import bpy
+
+from . import cli, panel, properties, scene_ops
+
+CLASSES = properties.CLASSES + scene_ops.CLASSES + panel.CLASSES
+CLI_COMMAND = "relight"
+_cli_handles = []
+
+
+def register() -> None:
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+    properties.register()
+    _cli_handles.append(bpy.utils.register_cli_command(CLI_COMMAND, cli.run))
+
+
+def unregister() -> None:
+    while _cli_handles:
+        bpy.utils.unregister_cli_command(_cli_handles.pop())
+    properties.unregister()
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

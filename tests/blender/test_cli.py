@@ -1,0 +1,88 @@
+"""The venv CLI: real console script and ``python -m`` in subprocesses, real .blend files."""
+
+import json
+import os
+import pathlib
+import subprocess
+import sys
+
+import pytest
+
+BIN = pathlib.Path(sys.executable).parent
+
+
+def relight(*args, cwd=None):
+    return subprocess.run([str(BIN / "relight"), *map(str, args)], capture_output=True,
+                          text=True, cwd=cwd, timeout=300)
+
+
+def test_help_from_console_script_and_module():
+    a = relight("--help")
+    b = subprocess.run([sys.executable, "-m", "relightable_textures", "--help"],
+                       capture_output=True, text=True, timeout=120)
+    assert a.returncode == 0 and b.returncode == 0
+    for verb in ("scene", "info", "validate"):
+        assert verb in a.stdout
+    assert a.stdout.replace("relightable_textures", "relight") == b.stdout.replace(
+        "relightable_textures", "relight")
+
+
+def test_scene_then_info_round_trip(tmp_path):
+    out = tmp_path / "x.blend"
+    r = relight("scene", "bumps", "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert "1089 vertices" in r.stdout
+    r = relight("info", out, "--json")
+    assert r.returncode == 0, r.stderr
+    listing = json.loads(r.stdout)  # stdout carries only JSON (Blender's log goes to stderr)
+    assert listing["sample"] == "bumps" and listing["sample_size"] == "test"
+    (bumps,) = [o for o in listing["objects"] if o["name"] == "Bumps"]
+    assert bumps["vertices"] == 1089 and bumps["faces"] == 1024
+    assert bumps["uv_maps"] == ["UVMap"] and bumps["bakes"] == []
+    text = relight("info", out)
+    assert "Bumps: 1089 vertices" in text.stdout and "no relightable data" in text.stdout
+    assert sorted(os.listdir(tmp_path)) == ["x.blend"]  # no temporaries or .blend1 left
+
+
+def test_force_overwrites_atomically(tmp_path):
+    out = tmp_path / "x.blend"
+    assert relight("scene", "bumps", "--out", out).returncode == 0
+    before = out.read_bytes()
+    r = relight("scene", "statue", "--out", out)
+    assert r.returncode == 2 and out.read_bytes() == before  # refused, untouched
+    r = relight("scene", "statue", "--out", out, "--force")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(relight("info", out, "--json").stdout)["sample"] == "statue"
+    assert sorted(os.listdir(tmp_path)) == ["x.blend"]
+
+
+@pytest.mark.parametrize("args, message", [
+    (("scene", "castle", "--out", "{tmp}/a.blend"), "unknown scene 'castle'"),
+    (("scene", "bumps", "--out", "{tmp}/missing-dir/a.blend"), "output directory does not exist"),
+    (("scene", "bumps", "--out", "/proc/a.blend"), "not writable"),
+    (("scene", "bumps", "--out", "{tmp}/a.txt"), "output must end in .blend"),
+    (("scene", "bumps", "--out", "{tmp}/a.blend", "--size", "huge"), "invalid choice"),
+    (("info", "{tmp}/nothere.blend"), "input file not found"),
+    (("info", "{tmp}/notes.txt"), "must be a .blend file"),
+    (("info", "{tmp}/fake.blend"), "not a Blender file"),
+    (("info", "{tmp}"), "is a directory"),
+    (("bogus",), "invalid choice"),
+])
+def test_bad_input_one_line_exit_2_nothing_written(tmp_path, args, message):
+    (tmp_path / "notes.txt").write_text("hello")
+    (tmp_path / "fake.blend").write_text("not a blend file")
+    before = sorted(os.listdir(tmp_path))
+    r = relight(*[a.format(tmp=tmp_path) for a in args])
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("relight: error: "), r.stderr
+    assert message in lines[0]
+    assert sorted(os.listdir(tmp_path)) == before
+
+
+def test_existing_output_without_force_is_refused(tmp_path):
+    out = tmp_path / "a.blend"
+    out.write_bytes(b"BLENDER-user-data")
+    r = relight("scene", "room", "--out", out)
+    assert r.returncode == 2 and "use --force" in r.stderr
+    assert out.read_bytes() == b"BLENDER-user-data"

@@ -1,0 +1,111 @@
+"""The real extension zip: built and validated by Blender's own tool, installed into a temporary
+Blender user directory through bpy, enabled, exercised, disabled and removed."""
+
+import json
+import os
+import pathlib
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+
+INSTALL_SCRIPT = textwrap.dedent(r"""
+    import json, os, sys
+    import bpy, addon_utils
+
+    zip_path, blend_out = sys.argv[1], sys.argv[2]
+    user = os.environ["BLENDER_USER_RESOURCES"]
+    report = {"user_resource": bpy.utils.resource_path("USER")}
+    mod = "bl_ext.user_default.relightable_textures"
+    report["install"] = list(bpy.ops.extensions.package_install_files(
+        filepath=zip_path, repo="user_default", enable_on_install=True))
+    report["enabled"] = mod in bpy.context.preferences.addons
+    site = os.path.join(user, "extensions", ".local", "lib",
+                        f"python{sys.version_info.major}.{sys.version_info.minor}", "site-packages")
+    report["wheels_installed"] = sorted(n for n in os.listdir(site) if not n.startswith("_")) \
+        if os.path.isdir(site) else []
+    report["operator"] = hasattr(bpy.ops.relight, "add_sample_scene") and \
+        bpy.ops.relight.add_sample_scene.poll()
+    report["property"] = hasattr(bpy.types.Scene, "relight")
+    report["panels"] = [n for n in ("VIEW3D_PT_relight", "VIEW3D_PT_relight_samples")
+                        if hasattr(bpy.types, n)]
+    # The operator really builds a scene into the open file.
+    report["op_result"] = list(bpy.ops.relight.add_sample_scene(name="bumps", size="test"))
+    report["op_vertices"] = len(bpy.data.objects["Bumps"].data.vertices)
+    # The same CLI verbs, registered as Blender's `--command relight`; the bpy module cannot
+    # dispatch --command, so call the registered function itself.
+    from bl_ext.user_default.relightable_textures.operators import cli, registration
+    report["cli_registered"] = len(registration._cli_handles)
+    report["cli_scene"] = cli.run(["scene", "noise", "--out", blend_out])
+    report["cli_bad"] = cli.run(["scene", "castle", "--out", blend_out + "2.blend"])
+    report["enabled_after_cli"] = mod in bpy.context.preferences.addons
+    repo_index = [r.module for r in bpy.context.preferences.extensions.repos].index("user_default")
+    report["uninstall"] = list(bpy.ops.extensions.package_uninstall(
+        repo_index=repo_index, pkg_id="relightable_textures"))
+    report["enabled_after_uninstall"] = mod in bpy.context.preferences.addons
+    report["property_after_uninstall"] = hasattr(bpy.types.Scene, "relight")
+    report["panel_after_uninstall"] = hasattr(bpy.types, "VIEW3D_PT_relight")
+    report["files_left"] = os.path.exists(os.path.join(user, "extensions", "user_default",
+                                                       "relightable_textures"))
+    print("REPORT " + json.dumps(report))
+""")
+
+
+def _snapshot(path: pathlib.Path):
+    if not path.exists():
+        return None
+    return sorted((str(p), p.stat().st_mtime_ns) for p in path.rglob("*"))
+
+
+@pytest.fixture(scope="module")
+def extension_zip(tmp_path_factory):
+    out = tmp_path_factory.mktemp("dist")
+    r = subprocess.run([sys.executable, str(ROOT / "tools" / "extension_tool.py"),
+                        "--output-dir", str(out)], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    zip_path = pathlib.Path(r.stdout.strip().splitlines()[-1])
+    assert zip_path.exists()
+    return zip_path
+
+
+def test_zip_contents(extension_zip):
+    import zipfile
+
+    names = set(zipfile.ZipFile(extension_zip).namelist())
+    for required in ("blender_manifest.toml", "__init__.py", "lt_addon/__init__.py",
+                     "operators/registration.py", "samples/__init__.py"):
+        assert required in names
+    assert not any(n.startswith(("tests/", ".venv/", ".git/", "tools/")) for n in names)
+    assert sum(n.startswith("wheels/") and n.endswith(".whl") for n in names) == 2
+
+
+def test_install_enable_use_uninstall_in_temporary_user_dir(extension_zip, tmp_path):
+    real_config = pathlib.Path.home() / ".config" / "blender"
+    before = _snapshot(real_config)
+    user = tmp_path / "blender-user"
+    user.mkdir()
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(user))
+    blend_out = tmp_path / "from-blender-cli.blend"
+    r = subprocess.run([sys.executable, "-c", INSTALL_SCRIPT, str(extension_zip), str(blend_out)],
+                       capture_output=True, text=True, env=env, timeout=600, cwd=tmp_path)
+    lines = [ln for ln in r.stdout.splitlines() if ln.startswith("REPORT ")]
+    assert r.returncode == 0 and lines, r.stdout[-3000:] + r.stderr[-3000:]
+    rep = json.loads(lines[-1][len("REPORT "):])
+    assert rep["user_resource"].startswith(str(user))
+    assert rep["install"] == ["FINISHED"] and rep["enabled"]
+    assert "scipy" in rep["wheels_installed"] and any(
+        n.lower().startswith("openexr") for n in rep["wheels_installed"])
+    assert rep["operator"] and rep["property"]
+    assert rep["panels"] == ["VIEW3D_PT_relight", "VIEW3D_PT_relight_samples"]
+    assert rep["op_result"] == ["FINISHED"] and rep["op_vertices"] == 33 * 33
+    assert rep["cli_registered"] == 1
+    assert rep["cli_scene"] == 0 and blend_out.exists()
+    assert rep["cli_bad"] == 2 and not pathlib.Path(str(blend_out) + "2.blend").exists()
+    assert rep["enabled_after_cli"]
+    assert rep["uninstall"] == ["FINISHED"] and not rep["enabled_after_uninstall"]
+    assert not rep["property_after_uninstall"] and not rep["panel_after_uninstall"]
+    assert not rep["files_left"]
+    assert _snapshot(real_config) == before, "the real ~/.config/blender was modified"
