@@ -1,0 +1,108 @@
+"""Multi-channel OpenEXR files with JSON metadata, written atomically.
+
+Row order: every image array in this package is indexed ``[row, column]`` with **row 0 at the
+bottom** (v = 0), the way UV space and Blender's ``Image.pixels`` run. EXR files store the top row
+first; :func:`write_exr` and :func:`read_exr` flip, so files look upright in any EXR viewer and
+arrays need no flip at the bpy edge.
+
+Metadata is one JSON document in the header attribute ``relight:metadata`` (EXR string
+attributes are plain bytes; one JSON string keeps nested values and is easy to read elsewhere).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import secrets
+
+import numpy as np
+
+HALF_MAX = 65504.0
+METADATA_KEY = "relight:metadata"
+PIXEL_TYPES = {"half": np.float16, "float": np.float32}
+
+
+def _openexr():
+    try:
+        import OpenEXR
+    except ImportError as exc:  # pragma: no cover - the package is a hard dependency
+        raise ImportError("the OpenEXR package is required (pip install OpenEXR)") from exc
+    return OpenEXR
+
+
+def write_exr(path: str, channels: dict, metadata: dict | None = None,
+              pixel_type: str = "half") -> int:
+    """Write named channels to ``path`` atomically; returns the file size in bytes.
+
+    Parameters
+    ----------
+    path : str
+        Target ``.exr`` path. Written to a temporary name in the same folder, then renamed, so an
+        existing file is replaced only by a complete one.
+    channels : dict[str, ndarray of shape (H, W)]
+        Channel name -> image, row 0 at the bottom. All the same shape; any real dtype.
+    metadata : dict, optional
+        JSON-serialisable values stored in the ``relight:metadata`` header attribute.
+    pixel_type : {"half", "float"}
+        Storage precision. ``"half"`` refuses values outside +-65504 (they would become inf)
+        with a ValueError that names the channel -- use ``"float"`` for such data.
+
+    Raises
+    ------
+    ValueError
+        Empty or mismatched channels, NaN/inf values, half-float overflow, unknown pixel type.
+    """
+    if pixel_type not in PIXEL_TYPES:
+        raise ValueError(f"pixel_type must be one of {sorted(PIXEL_TYPES)}, got {pixel_type!r}")
+    if not channels:
+        raise ValueError("no channels to write")
+    shapes = {np.shape(a) for a in channels.values()}
+    if len(shapes) != 1 or len(next(iter(shapes))) != 2:
+        raise ValueError(f"all channels must be 2D images of one shape, got {sorted(shapes)}")
+    dtype = PIXEL_TYPES[pixel_type]
+    data = {}
+    for name, image in channels.items():
+        image = np.asarray(image)
+        if not np.all(np.isfinite(image)):
+            raise ValueError(f"channel {name!r} has NaN or inf values")
+        if pixel_type == "half" and np.abs(image).max(initial=0.0) > HALF_MAX:
+            raise ValueError(
+                f"channel {name!r} exceeds the half-float range (|x| > {HALF_MAX:g}); "
+                "store it as float")
+        data[name] = np.ascontiguousarray(image[::-1].astype(dtype))
+    OpenEXR = _openexr()
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    if metadata is not None:
+        header[METADATA_KEY] = json.dumps(metadata, sort_keys=True)
+    folder, base = os.path.split(os.path.abspath(path))
+    tmp = os.path.join(folder, f".{base}.{os.getpid()}-{secrets.token_hex(4)}.tmp.exr")
+    try:
+        with OpenEXR.File(header, data) as exr:
+            exr.write(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+    return os.path.getsize(path)
+
+
+def read_exr(path: str) -> tuple[dict, dict]:
+    """Read every channel and the metadata written by :func:`write_exr`.
+
+    Returns
+    -------
+    channels : dict[str, ndarray of shape (H, W)]
+        Row 0 at the bottom; dtype as stored (float16 or float32).
+    metadata : dict
+        The ``relight:metadata`` document, or ``{}`` for a file without one.
+    """
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"EXR file not found: {path}")
+    OpenEXR = _openexr()
+    with OpenEXR.File(path) as exr:
+        header = exr.header()
+        channels = {name: np.ascontiguousarray(ch.pixels[::-1]) for name, ch in exr.channels().items()}
+    raw = header.get(METADATA_KEY)
+    if isinstance(raw, bytes):
+        raw = raw.decode("utf-8")
+    return channels, (json.loads(raw) if raw else {})
