@@ -100,7 +100,7 @@ def read_exr(path: str) -> tuple[dict, dict]:
         raise FileNotFoundError(f"EXR file not found: {path}")
     OpenEXR = _openexr()
     with OpenEXR.File(path) as exr:
-        header = exr.header()
+        header = dict(exr.header())  # the live header is emptied when the file closes
         channels = {name: np.ascontiguousarray(ch.pixels[::-1]) for name, ch in exr.channels().items()}
     raw = header.get(METADATA_KEY)
     if isinstance(raw, bytes):
