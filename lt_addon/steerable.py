@@ -277,9 +277,9 @@ def fit_steerable_basis_1d(order: int = PAPER_ORDER, width: float = PAPER_WIDTH,
 
     Notes
     -----
-    The initial guess is ``w = (pi / 2) * L / (1 + 2 sqrt(width))`` (the modes of an interval
-    of half-length about 1 with a soft edge) and ``a_k`` from projecting the numerical functions
-    on the unit-amplitude analytic shapes. The residual is the stacked difference of all
+    The initial guess is ``w = (pi / 2) / (1 + sqrt(width) / 2)`` (the sine modes of an
+    interval of half-length about 1 with a soft edge) and ``a_k`` from projecting the numerical
+    functions on the unit-amplitude analytic shapes. The residual is the stacked difference of all
     ``order`` functions on the ``n`` samples.
     """
     x, B, lam = eigen_basis_1d(order, width, n)
