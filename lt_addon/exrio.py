@@ -99,7 +99,7 @@ def read_exr(path: str) -> tuple[dict, dict]:
     if not os.path.isfile(path):
         raise FileNotFoundError(f"EXR file not found: {path}")
     OpenEXR = _openexr()
-    with OpenEXR.File(path) as exr:
+    with OpenEXR.File(path, separate_channels=True) as exr:  # keep "b00.R" etc. apart
         header = dict(exr.header())  # the live header is emptied when the file closes
         channels = {name: np.ascontiguousarray(ch.pixels[::-1]) for name, ch in exr.channels().items()}
     raw = header.get(METADATA_KEY)

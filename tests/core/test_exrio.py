@@ -48,3 +48,12 @@ def test_half_overflow_nan_and_shapes_are_refused_and_nothing_is_written(tmp_pat
     assert sorted(os.listdir(tmp_path)) == ["x.exr"]
     exrio.write_exr(str(target), {"Y": np.full((2, 2), 70000.0)}, pixel_type="float")
     np.testing.assert_array_equal(exrio.read_exr(str(target))[0]["Y"], 70000.0)
+
+
+def test_layer_channel_names_stay_separate(tmp_path):
+    """OpenEXR groups "layer.R/G/B" into one array by default; we keep named channels apart."""
+    chans = {f"b00.{c}": np.full((2, 3), i, dtype=np.float32) for i, c in enumerate("RGB")}
+    exrio.write_exr(str(tmp_path / "l.exr"), chans, pixel_type="float")
+    back, _ = exrio.read_exr(str(tmp_path / "l.exr"))
+    assert sorted(back) == ["b00.B", "b00.G", "b00.R"]
+    np.testing.assert_array_equal(back["b00.G"], 1.0)
