@@ -50,7 +50,7 @@ DEFAULT_FLOOR = 0.05
 
 
 def flat_plane_basis_irradiance(basis: SteerableBasis1D, n_radial: int = 64,
-                                n_azimuth: int = 256, sigma=None) -> np.ndarray:
+                                n_azimuth: int = 256) -> np.ndarray:
     """``E_ij``: irradiance of a flat plane (normal +z) under each 2D basis light.
 
     Parameters
@@ -59,9 +59,8 @@ def flat_plane_basis_irradiance(basis: SteerableBasis1D, n_radial: int = 64,
     n_radial : int
         Gauss-Legendre nodes in ``r`` on [0, 1].
     n_azimuth : int
-        Trapezoid nodes in ``phi`` (periodic: spectrally accurate).
-    sigma : ignored placeholder for symmetry with steering calls (Gibbs factors act on the
-        coefficients, not on ``E_ij``).
+        Trapezoid nodes in ``phi`` (periodic: spectrally accurate). Gibbs factors act on the
+        steering coefficients, not on ``E_ij``, so they do not enter here.
 
     Returns
     -------
