@@ -18,6 +18,8 @@ import json
 import os
 import sys
 
+import numpy as np
+
 from .. import __version__
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
@@ -35,7 +37,10 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from ..lt_addon.calibration import METHODS as CALIBRATIONS
+    from ..lt_addon.steerable_texture import FRAMES, STORAGE_MODES
     from ..samples import DESCRIPTIONS, SIZES
+    from .presets import BAKE_MODES, PRESETS, WORLD_SAMPLING
 
     parser = _Parser(
         prog="relight",
@@ -61,6 +66,59 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the .blend to read (inside Blender: defaults to the open file)")
     p.add_argument("--json", action="store_true", help="print the listing as JSON")
     p.set_defaults(func=_cmd_info)
+
+    p = sub.add_parser("bake-textures", help="bake steerable illumination textures of an object",
+                       description="Bake an object's UV texture under the N = order^2 sampled "
+                                   "steerable lights with Cycles, solve for the basis textures and "
+                                   "write them as one EXR plus a JSON report; the .blend gets the "
+                                   "bake record and the live preview material.")
+    p.add_argument("file", metavar="FILE.blend")
+    p.add_argument("--object", required=True, metavar="NAME", help="mesh object with a UV map")
+    p.add_argument("--preset", choices=sorted(PRESETS), default="balanced",
+                   help="starting values for the settings below (default balanced)")
+    p.add_argument("--frame", choices=FRAMES, help="world: relight by a distant world light; "
+                   "tangent: a tileable patch relit per pixel in a surface's UV tangent frame")
+    p.add_argument("--order", type=int, help="basis order N1 (N = N1^2 bakes), 2..12")
+    p.add_argument("--resolution", type=int, help="texture side in texels")
+    p.add_argument("--samples", type=int, help="Cycles samples per texel per bake")
+    p.add_argument("--bounces", type=int, help="diffuse bounces (0 = direct light only)")
+    p.add_argument("--storage", choices=STORAGE_MODES, help="EXR precision (u8: 8-bit + min/max)")
+    p.add_argument("--mode", choices=BAKE_MODES, help="radiance: albedo x light (the paper); "
+                   "irradiance: light only, so the albedo stays editable")
+    p.add_argument("--world-sampling", choices=WORLD_SAMPLING,
+                   help="importance (lower noise, default) or none (exactly linear)")
+    p.add_argument("--seed", type=int, help="Cycles seed (default 0)")
+    p.add_argument("--truth", type=int, default=0, metavar="K",
+                   help="also bake Cycles ground truth for K light directions (elevations 5..85 "
+                        "degrees, none a sample centre) and put the errors in the report")
+    p.add_argument("--out", metavar="DIR", help="output folder (default: next to the .blend, "
+                   "<name>_relight/)")
+    p.set_defaults(func=_cmd_bake_textures)
+
+    p = sub.add_parser("relight", help="relight a stored steerable texture for one light (NumPy)")
+    p.add_argument("file", metavar="FILE.blend")
+    p.add_argument("--object", required=True, metavar="NAME")
+    p.add_argument("--light", required=True, type=_az_el, metavar="AZ,EL",
+                   help="light azimuth and elevation in degrees (bake frame, z up)")
+    p.add_argument("--intensity", type=float, default=1.0,
+                   help="normal irradiance, as a Sun lamp's strength (default 1)")
+    p.add_argument("--color", type=_rgb, default=(1.0, 1.0, 1.0), metavar="R,G,B")
+    p.add_argument("--out", metavar="IMG.exr", help="write the relit texture (float RGB EXR)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    p.set_defaults(func=_cmd_relight)
+
+    p = sub.add_parser("light-env", help="write the environment image of one steerable light",
+                       description="Write the equirectangular EXR of the calibrated steerable "
+                                   "light the relight uses, so its Cycles ground truth can be "
+                                   "rendered anywhere (Environment Texture, strength 1).")
+    p.add_argument("--order", type=int, default=7, help="basis order N1 (default 7)")
+    p.add_argument("--light", required=True, type=_az_el, metavar="AZ,EL")
+    p.add_argument("--height", type=int, default=256, help="image rows (width = 2 x height)")
+    p.add_argument("--intensity", type=float, default=1.0)
+    p.add_argument("--calibration", choices=CALIBRATIONS, default="steerable_cos")
+    p.add_argument("--out", required=True, metavar="ENV.exr")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    p.set_defaults(func=_cmd_light_env)
 
     p = sub.add_parser("validate", help="reproduce a paper's figures and check them")
     p.add_argument("--paper", required=True, choices=["ashikhmin2002"],
@@ -134,6 +192,157 @@ def _cmd_validate(args) -> int:
         bad = [k for k, v in report.items() if isinstance(v, dict) and not v.get("ok", True)]
         print(f"relight: validate: outside tolerance: {', '.join(bad)}", file=sys.stderr)
         return EXIT_FAILURE
+    return EXIT_OK
+
+
+def _az_el(text: str) -> tuple[float, float]:
+    try:
+        az, el = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected AZ,EL in degrees, got {text!r}") from None
+    if not (np.isfinite(az) and np.isfinite(el)) or not -90.0 <= el <= 90.0:
+        raise argparse.ArgumentTypeError(f"elevation must be in [-90, 90] degrees, got {text!r}")
+    return az, el
+
+
+def _rgb(text: str) -> tuple[float, float, float]:
+    try:
+        rgb = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        rgb = ()
+    if len(rgb) != 3 or not all(np.isfinite(rgb)) or min(rgb) < 0:
+        raise argparse.ArgumentTypeError(f"expected R,G,B (three non-negative numbers), got {text!r}")
+    return rgb
+
+
+def _progress_printer(prefix: str):
+    def show(step):
+        done, total, message = step if isinstance(step, tuple) else (step.done, step.total,
+                                                                     step.message)
+        print(f"{prefix} [{done}/{total}] {message}", file=sys.stderr, flush=True)
+    return show
+
+
+def _open_object(path: str, name: str):
+    """Open ``path`` and return its object ``name`` (a CliError names the meshes if missing)."""
+    import bpy
+
+    from .blend_files import blender_log_to_stderr
+
+    with blender_log_to_stderr():
+        bpy.ops.wm.open_mainfile(filepath=path, load_ui=False)
+    obj = bpy.data.objects.get(name)
+    if obj is None:
+        meshes = sorted(o.name for o in bpy.data.objects if o.type == "MESH")
+        raise CliError(f"no object {name!r} in {path}; mesh objects: {', '.join(meshes) or 'none'}")
+    return obj
+
+
+def _cmd_bake_textures(args) -> int:
+    import bpy
+
+    from . import blend_files, preview_nodes, steerable_bake
+    from .cycles_bake import BakeInputError
+    from .presets import settings_from_preset
+
+    path = _check_input_blend(args.file)
+    overrides = {k: getattr(args, k) for k in ("frame", "order", "resolution", "samples",
+                                               "bounces", "storage", "mode", "world_sampling",
+                                               "seed") if getattr(args, k) is not None}
+    try:
+        settings = settings_from_preset(args.preset, **overrides)
+        settings.validate()
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    if args.truth < 0 or args.truth > 32:
+        raise CliError(f"--truth takes 0..32 directions, got {args.truth}")
+    out_dir = os.path.abspath(args.out) if args.out else steerable_bake.default_output_dir(path)
+    parent = os.path.dirname(out_dir)
+    if not os.path.isdir(parent):
+        raise CliError(f"output folder's parent does not exist: {parent}")
+    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
+        raise CliError(f"output exists and is not a folder: {out_dir}")
+    if not _can_create_in(out_dir if os.path.isdir(out_dir) else parent):
+        raise CliError(f"output folder is not writable: {out_dir}")
+    if not _can_create_in(os.path.dirname(path)):
+        raise CliError(f"cannot update {path}: its folder is not writable")
+    obj = _open_object(path, args.object)
+    show = _progress_printer("bake-textures")
+    try:
+        gen = steerable_bake.bake_steerable_texture(bpy.context.scene, obj, settings)
+        result = steerable_bake.run(gen, on_progress=show)
+        if args.truth:
+            result.figures["ground_truth"] = steerable_bake.run_ground_truth(
+                bpy.context.scene, obj, result.texture, settings, args.truth, on_progress=show)
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    except KeyboardInterrupt:
+        print("bake-textures: cancelled; nothing was written", file=sys.stderr)
+        return 130
+    report = steerable_bake.write_bake(result, obj, out_dir, settings)
+    preview_nodes.install_preview(bpy.context.scene, obj, report["exr"], result.texture)
+    blend_files.save_atomically(path)
+    t = report["timings"]
+    print(f"baked {obj.name}: {report['exr']} ({report['bytes']['exr_file']} bytes, "
+          f"{t['total_seconds']:.2f} s total, {t['cycles_bake_seconds']:.2f} s in Cycles, "
+          f"overhead {100 * t['overhead_fraction']:.1f}%)")
+    for row in report.get("ground_truth", {}).get("directions", []):
+        e = row["errors"]
+        print(f"  light az {row['azimuth']:6.1f} el {row['elevation']:5.1f}: rel. RMSE vs same "
+              f"light {e['same_light']['rel_fro']:.4f}"
+              + (f", 4x samples {e['same_light_4x']['rel_fro']:.4f}" if "same_light_4x" in e else "")
+              + (f", vs Sun lamp {e['sun']['rel_fro']:.4f}" if "sun" in e else ""))
+    return EXIT_OK
+
+
+def _cmd_relight(args) -> int:
+    from ..lt_addon import exrio
+    from ..lt_addon.hemisphere import direction_from_az_el
+    from . import steerable_bake
+
+    path = _check_input_blend(args.file)
+    out = _check_output_path(args.out, ".exr", args.force) if args.out else None
+    obj = _open_object(path, args.object)
+    try:
+        texture = steerable_bake.load_texture(obj)
+    except (FileNotFoundError, ValueError) as exc:
+        raise CliError(str(exc)) from None
+    az, el = args.light
+    img = texture.relight(direction_from_az_el(az, el), args.intensity, args.color)
+    if out:
+        exrio.write_exr(out, {c: img[..., i] for i, c in enumerate("RGB")},
+                        {"light_azimuth": az, "light_elevation": el,
+                         "intensity": args.intensity, "color": list(args.color),
+                         "source": texture.settings}, pixel_type="float")
+    print(json.dumps({"object": obj.name, "light": [az, el], "mean": [float(v) for v in img.mean(axis=(0, 1))],
+                      "max": float(img.max()), "out": out}))
+    return EXIT_OK
+
+
+def _cmd_light_env(args) -> int:
+    from ..lt_addon import exrio
+    from ..lt_addon.hemisphere import direction_from_az_el
+    from ..lt_addon.steerable import environment_image, paper_basis
+    from ..lt_addon.calibration import make_calibration
+    from ..lt_addon.hemisphere import hemisphere_to_disk
+
+    if not 2 <= args.order <= 12:
+        raise CliError(f"--order must be in 2..12, got {args.order}")
+    if not 8 <= args.height <= 8192:
+        raise CliError(f"--height must be in 8..8192, got {args.height}")
+    out = _check_output_path(args.out, ".exr", args.force)
+    az, el = args.light
+    d = direction_from_az_el(az, el)
+    basis = paper_basis(args.order)
+    gain, _ = make_calibration(basis, args.calibration).gain_offset(d)
+    env = environment_image(basis, hemisphere_to_disk(d), args.height, 2 * args.height,
+                            row_order="bottom_first", dtype=np.float64) * float(gain) * args.intensity
+    nbytes = exrio.write_exr(out, {c: env for c in "RGB"},
+                             {"order": args.order, "light_azimuth": az, "light_elevation": el,
+                              "calibration": args.calibration, "gain": float(gain),
+                              "intensity": args.intensity}, pixel_type="float")
+    print(f"wrote {out} ({args.height}x{2 * args.height}, {nbytes} bytes; "
+          f"min {env.min():.4g}, max {env.max():.4g}: negative lobes are part of the light)")
     return EXIT_OK
 
 

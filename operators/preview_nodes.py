@@ -1,0 +1,389 @@
+"""The live preview: a "Steerable Illumination" shader node group and its material wiring (bpy).
+
+The group recombines the basis textures for a light direction entirely inside the node tree,
+so moving a slider (or the Sun lamp) needs no Python at all:
+
+1. light direction ``d`` (normalised) -- world frame, or per pixel in the UV tangent frame
+   ``(d.T, d.B, d.N)`` with ``T`` the UV tangent, ``N`` the shading normal, ``B = N x T``;
+2. disk point ``(x0, y0) = (dx, dy) / sqrt(1 + dz)`` (Ashikhmin & Shirley eq. 7);
+3. 1D coefficients ``c_i(x) = a_i cos(i w x + 3 (i - 1) pi / 2)``, products ``c_ij = c_i(x0) c_j(y0)``;
+4. ``S = sum_ij c_ij * tile_ij`` from one padded atlas image (one GPU sampler, see
+   :mod:`..lt_addon.atlas`), clamped at 0 (sec. 7.1);
+5. calibration gain ``max(dz, 0) / max(E(w0), floor * E_zenith)`` with
+   ``E(w0) = sum_ij c_ij E_ij`` (:mod:`..lt_addon.calibration`, steerable cos-law);
+6. output ``S * gain * intensity * colour`` (times an albedo input in irradiance mode).
+
+This equals :meth:`SteerableTexture.relight` up to float32 rounding and the half-float atlas
+(tests render it with Cycles and compare with NumPy).
+
+Material wiring is reversible: the nodes live in a frame "Relight Preview" with their own
+Material Output made active; :func:`remove_preview` deletes them and re-activates the user's
+output. Scene sliders are ID custom properties on the scene (``relight_azimuth`` ...), read by
+simple single-variable drivers, so the preview also works where the extension is not installed.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import bpy
+import numpy as np
+
+from ..lt_addon import exrio
+from ..lt_addon.atlas import atlas_layout, pack_atlas
+
+GROUP_PREFIX = "Steerable Illumination"
+FRAME_NAME = "Relight Preview"
+_TAG = "relight_preview"  # custom property marking our nodes
+
+#: Scene slider properties: name -> (default, min, max, description)
+SLIDERS = {
+    "relight_azimuth": (30.0, -360.0, 360.0, "Light azimuth in degrees (from +x towards +y)"),
+    "relight_elevation": (45.0, -90.0, 90.0, "Light elevation in degrees above the horizon"),
+    "relight_intensity": (1.0, 0.0, 1000.0, "Light normal irradiance (like a Sun's strength)"),
+    "relight_follow_sun": (0.0, 0.0, 1.0, "1: take the direction from the followed Sun lamp"),
+}
+COLOR_SLIDER = "relight_color"
+
+
+# ---------------------------------------------------------------------------------------------
+# small node helpers
+
+
+class _Builder:
+    """Adds nodes to a tree on a simple grid so the generated tree stays readable."""
+
+    def __init__(self, tree):
+        self.tree = tree
+        self.nodes, self.links = tree.nodes, tree.links
+
+    def node(self, kind, x, y, **attrs):
+        n = self.nodes.new(kind)
+        n.location = (x, y)
+        for k, v in attrs.items():
+            setattr(n, k, v)
+        return n
+
+    def math(self, op, a, b=None, c=None, x=0, y=0, clamp=False):
+        n = self.node("ShaderNodeMath", x, y, operation=op, use_clamp=clamp)
+        for i, v in enumerate((a, b, c)):
+            self._feed(n.inputs[i], v)
+        return n.outputs[0]
+
+    def vmath(self, op, a, b=None, x=0, y=0, scale=None):
+        n = self.node("ShaderNodeVectorMath", x, y, operation=op)
+        self._feed(n.inputs[0], a)
+        if b is not None:
+            self._feed(n.inputs[1], b)
+        if scale is not None:
+            self._feed(n.inputs["Scale"], scale)
+        return n.outputs["Value"] if op in ("DOT_PRODUCT", "LENGTH", "DISTANCE") else n.outputs["Vector"]
+
+    def _feed(self, socket, value):
+        if value is None:
+            return
+        if isinstance(value, bpy.types.NodeSocket):
+            self.links.new(value, socket)
+        else:
+            socket.default_value = value
+
+
+def _basis_constants(texture):
+    basis = texture.basis
+    cal = texture.calibration_model()
+    return basis, cal
+
+
+# ---------------------------------------------------------------------------------------------
+# the node group
+
+
+def build_group(texture, atlas_image, uv_map: str, name: str | None = None):
+    """Create the "Steerable Illumination" node group for ``texture`` sampling ``atlas_image``.
+
+    Inputs: Light Direction (vector, towards the light), Intensity, Color, Albedo (used in
+    irradiance mode). Output: Color.
+    """
+    if texture.calibration != "steerable_cos":
+        raise ValueError("the live preview implements the steerable_cos calibration only")
+    basis, cal = _basis_constants(texture)
+    n1, n = basis.order, basis.order ** 2
+    name = name or f"{GROUP_PREFIX}"
+    group = bpy.data.node_groups.new(name, "ShaderNodeTree")
+    group[_TAG] = True
+    iface = group.interface
+    s_dir = iface.new_socket("Light Direction", in_out="INPUT", socket_type="NodeSocketVector")
+    s_dir.default_value = (0.0, 0.0, 1.0)
+    s_int = iface.new_socket("Intensity", in_out="INPUT", socket_type="NodeSocketFloat")
+    s_int.default_value, s_int.min_value = 1.0, 0.0
+    s_col = iface.new_socket("Color", in_out="INPUT", socket_type="NodeSocketColor")
+    s_col.default_value = (1.0, 1.0, 1.0, 1.0)
+    s_alb = iface.new_socket("Albedo", in_out="INPUT", socket_type="NodeSocketColor")
+    s_alb.default_value = (0.8, 0.8, 0.8, 1.0)
+    iface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
+
+    b = _Builder(group)
+    gin = b.node("NodeGroupInput", -2400, 0)
+    gout = b.node("NodeGroupOutput", 2400, 0)
+    d = b.vmath("NORMALIZE", gin.outputs["Light Direction"], x=-2200, y=0)
+
+    if texture.frame == "tangent":
+        tangent = b.node("ShaderNodeTangent", -2400, -300, direction_type="UV_MAP", uv_map=uv_map)
+        geometry = b.node("ShaderNodeNewGeometry", -2400, -500)
+        normal = geometry.outputs["Normal"]
+        t_vec = tangent.outputs["Tangent"]
+        bitangent = b.vmath("CROSS_PRODUCT", normal, t_vec, x=-2200, y=-400)
+        dx = b.vmath("DOT_PRODUCT", d, t_vec, x=-2000, y=100)
+        dy = b.vmath("DOT_PRODUCT", d, bitangent, x=-2000, y=0)
+        dz = b.vmath("DOT_PRODUCT", d, normal, x=-2000, y=-100)
+    else:
+        sep = b.node("ShaderNodeSeparateXYZ", -2000, 0)
+        b.links.new(d, sep.inputs[0])
+        dx, dy, dz = sep.outputs["X"], sep.outputs["Y"], sep.outputs["Z"]
+
+    # disk point (eq. 7): divide by sqrt(1 + dz), guarded at dz = -1 (the light is off there)
+    root = b.math("SQRT", b.math("MAXIMUM", b.math("ADD", dz, 1.0, x=-1800, y=-100), 1e-6,
+                                 x=-1700, y=-100), x=-1600, y=-100)
+    x0 = b.math("DIVIDE", dx, root, x=-1500, y=100)
+    y0 = b.math("DIVIDE", dy, root, x=-1500, y=0)
+
+    # 1D steering coefficients
+    def coefficients(x, y_loc):
+        out = []
+        for i in range(1, n1 + 1):
+            phase = 3.0 * (i - 1) * math.pi / 2.0
+            arg = b.math("MULTIPLY_ADD", x, i * float(basis.w), phase, x=-1300, y=y_loc - 60 * i)
+            cos = b.math("COSINE", arg, x=-1150, y=y_loc - 60 * i)
+            out.append(b.math("MULTIPLY", cos, float(basis.a[i - 1]), x=-1000, y=y_loc - 60 * i))
+        return out
+
+    cx = coefficients(x0, 1200)
+    cy = coefficients(y0, 600)
+
+    # UV -> tile coordinates (tileable patches wrap with fract)
+    uv = b.node("ShaderNodeUVMap", -1300, -800, uv_map=uv_map).outputs["UV"]
+    if texture.frame == "tangent":
+        uv = b.vmath("FRACTION", uv, x=-1150, y=-800)
+
+    lay = atlas_layout(n, texture.resolution)
+    acc_color = None
+    acc_e = None
+    for k in range(n):
+        i, j = divmod(k, n1)
+        y_loc = 1400 - 120 * k
+        c = b.math("MULTIPLY", cx[i], cy[j], x=-700, y=y_loc)
+        su, sv, ou, ov = lay["tiles"][k]
+        mapping = b.node("ShaderNodeMapping", -500, y_loc, vector_type="POINT")
+        b.links.new(uv, mapping.inputs["Vector"])
+        mapping.inputs["Location"].default_value = (ou, ov, 0.0)
+        mapping.inputs["Scale"].default_value = (su, sv, 1.0)
+        tex = b.node("ShaderNodeTexImage", -300, y_loc, image=atlas_image,
+                     interpolation="Linear", extension="EXTEND")
+        b.links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
+        term = b.vmath("SCALE", tex.outputs["Color"], x=0, y=y_loc, scale=c)
+        acc_color = term if acc_color is None else b.vmath("ADD", acc_color, term, x=200, y=y_loc)
+        e_k = float(cal.E[k])
+        acc_e = (b.math("MULTIPLY", c, e_k, x=0, y=y_loc - 60) if acc_e is None
+                 else b.math("MULTIPLY_ADD", c, e_k, acc_e, x=200, y=y_loc - 60))
+
+    clamped = b.vmath("MAXIMUM", acc_color, (0.0, 0.0, 0.0), x=600, y=0)
+    denom = b.math("MAXIMUM", acc_e, float(cal.floor * cal.E_zenith), x=600, y=-200)
+    gain = b.math("DIVIDE", b.math("MAXIMUM", dz, 0.0, x=600, y=-300), denom, x=800, y=-250)
+    scale = b.math("MULTIPLY", gain, gin.outputs["Intensity"], x=1000, y=-250)
+    lit = b.vmath("SCALE", clamped, x=1200, y=0, scale=scale)
+    tinted = b.vmath("MULTIPLY", lit, gin.outputs["Color"], x=1400, y=0)
+    if texture.settings.get("mode") == "irradiance":
+        tinted = b.vmath("MULTIPLY", tinted, gin.outputs["Albedo"], x=1600, y=0)
+    b.links.new(tinted, gout.inputs["Color"])
+    return group
+
+
+# ---------------------------------------------------------------------------------------------
+# atlas image on disk
+
+
+def write_atlas(texture, exr_path: str) -> tuple[str, int]:
+    """Write the half-float preview atlas beside the basis EXR; returns (path, bytes)."""
+    padding = "wrap" if texture.frame == "tangent" else "edge"
+    atlas = pack_atlas(texture.basis_images, padding)
+    path = os.path.splitext(exr_path)[0] + "_atlas.exr"
+    nbytes = exrio.write_exr(path, {c: atlas[..., i] for i, c in enumerate("RGB")},
+                             {"format": "relightable_textures.atlas", "tiles": len(texture.basis_images),
+                              "resolution": texture.resolution, "padding": padding},
+                             pixel_type="half")
+    return path, nbytes
+
+
+def load_atlas_image(path: str, name: str):
+    """Load (or reload) the atlas as a non-colour float image with a relative path if possible."""
+    image = bpy.data.images.get(name)
+    if image is not None and bpy.path.abspath(image.filepath) == os.path.abspath(path):
+        image.reload()
+    else:
+        image = bpy.data.images.load(path, check_existing=False)
+        image.name = name
+    image.colorspace_settings.name = "Non-Color"
+    image.alpha_mode = "NONE"
+    if bpy.data.filepath:
+        try:
+            image.filepath = bpy.path.relpath(path)
+        except ValueError:
+            pass
+    image[_TAG] = True
+    return image
+
+
+# ---------------------------------------------------------------------------------------------
+# scene sliders and drivers
+
+
+def ensure_sliders(scene) -> None:
+    """Create the scene slider custom properties (with UI ranges) if missing."""
+    for key, (default, lo, hi, desc) in SLIDERS.items():
+        if key not in scene:
+            scene[key] = default
+        ui = scene.id_properties_ui(key)
+        ui.update(min=lo, max=hi, soft_min=max(lo, -180.0) if "azimuth" in key else lo,
+                  soft_max=hi, description=desc, default=default)
+    if COLOR_SLIDER not in scene:
+        scene[COLOR_SLIDER] = (1.0, 1.0, 1.0)
+    scene.id_properties_ui(COLOR_SLIDER).update(subtype="COLOR", min=0.0, soft_max=1.0,
+                                                description="Light colour (linear RGB)")
+
+
+def _drive(socket_owner, path: str, index: int, id_type: str, id_block, data_path: str,
+           expression: str = "var"):
+    fcurve = socket_owner.driver_add(path, index) if index >= 0 else socket_owner.driver_add(path)
+    drv = fcurve.driver
+    drv.type = "SCRIPTED"
+    while drv.variables:
+        drv.variables.remove(drv.variables[0])
+    var = drv.variables.new()
+    var.name = "var"
+    var.type = "SINGLE_PROP"
+    var.targets[0].id_type = id_type
+    var.targets[0].id = id_block
+    var.targets[0].data_path = data_path
+    drv.expression = expression  # a "simple expression": no Python needed
+    return fcurve
+
+
+def _controls(b, scene, sun, x, y):
+    """Nodes turning the scene sliders (and the Sun) into the group's direction/intensity/colour."""
+    az = b.node("ShaderNodeValue", x, y, label="Azimuth (deg)")
+    el = b.node("ShaderNodeValue", x, y - 100, label="Elevation (deg)")
+    inten = b.node("ShaderNodeValue", x, y - 200, label="Intensity")
+    follow = b.node("ShaderNodeValue", x, y - 300, label="Follow Sun")
+    color = b.node("ShaderNodeRGB", x, y - 400, label="Light Color")
+    sun_dir = b.node("ShaderNodeCombineXYZ", x, y - 600, label="Sun Direction")
+    for node, key in ((az, "relight_azimuth"), (el, "relight_elevation"),
+                      (inten, "relight_intensity"), (follow, "relight_follow_sun")):
+        node.outputs[0].default_value = float(scene[key])
+        _drive(node.outputs[0], "default_value", -1, "SCENE", scene, f'["{key}"]')
+    for i in range(3):
+        color.outputs[0].default_value[i] = float(scene[COLOR_SLIDER][i])
+        _drive(color.outputs[0], "default_value", i, "SCENE", scene, f'["{COLOR_SLIDER}"][{i}]')
+    set_sun_drivers(sun_dir, sun)
+    # direction from azimuth / elevation (degrees)
+    az_r = b.math("RADIANS", az.outputs[0], x=x + 200, y=y)
+    el_r = b.math("RADIANS", el.outputs[0], x=x + 200, y=y - 100)
+    cos_el = b.math("COSINE", el_r, x=x + 350, y=y - 100)
+    dir_x = b.math("MULTIPLY", cos_el, b.math("COSINE", az_r, x=x + 350, y=y), x=x + 500, y=y)
+    dir_y = b.math("MULTIPLY", cos_el, b.math("SINE", az_r, x=x + 350, y=y + 100), x=x + 500, y=y - 50)
+    dir_z = b.math("SINE", el_r, x=x + 500, y=y - 100)
+    slider_dir = b.node("ShaderNodeCombineXYZ", x + 650, y)
+    for i, s in enumerate((dir_x, dir_y, dir_z)):
+        b.links.new(s, slider_dir.inputs[i])
+    mix = b.node("ShaderNodeMix", x + 850, y - 200, data_type="VECTOR", clamp_factor=True)
+    b.links.new(follow.outputs[0], mix.inputs["Factor"])
+    b.links.new(slider_dir.outputs[0], mix.inputs[4])  # A (vector)
+    b.links.new(sun_dir.outputs[0], mix.inputs[5])  # B (vector)
+    return mix.outputs[1], inten.outputs[0], color.outputs[0], sun_dir
+
+
+def set_sun_drivers(sun_dir_node, sun) -> None:
+    """Drive the Sun Direction node from ``sun``'s local +z axis (the direction towards it)."""
+    for i in range(3):
+        sun_dir_node.inputs[i].driver_remove("default_value")
+        if sun is not None:
+            _drive(sun_dir_node.inputs[i], "default_value", -1, "OBJECT", sun,
+                   f"matrix_world[{i}][2]")
+        else:
+            sun_dir_node.inputs[i].default_value = (0.0, 0.0, 1.0)[i]
+
+
+# ---------------------------------------------------------------------------------------------
+# material wiring
+
+
+def _preview_nodes(tree):
+    return [n for n in tree.nodes if n.get(_TAG)]
+
+
+def remove_preview(obj) -> int:
+    """Remove our preview nodes from the object's materials; returns how many materials changed."""
+    changed = 0
+    for mat in {s.material for s in obj.material_slots if s.material}:
+        tree = mat.node_tree
+        ours = _preview_nodes(tree)
+        if not ours:
+            continue
+        for node in ours:
+            tree.nodes.remove(node)
+        outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+        if outputs and not any(n.is_active_output for n in outputs):
+            outputs[0].is_active_output = True
+        changed += 1
+    return changed
+
+
+def install_preview(scene, obj, exr_path: str, texture, sun=None) -> dict:
+    """Write the atlas, build the group and wire it into every material of ``obj``.
+
+    Replaces an earlier preview of the same object. Returns {"atlas": path, "atlas_bytes": n,
+    "group": name, "nodes": count}.
+    """
+    atlas_path, atlas_bytes = write_atlas(texture, exr_path)
+    image = load_atlas_image(atlas_path, f"{obj.name} steerable atlas")
+    uv_map = next((uv.name for uv in obj.data.uv_layers if uv.active_render),
+                  obj.data.uv_layers[0].name)
+    old = bpy.data.node_groups.get(f"{GROUP_PREFIX} ({obj.name})")
+    group = build_group(texture, image, uv_map, name=f"{GROUP_PREFIX} ({obj.name})")
+    if old is not None:
+        bpy.data.node_groups.remove(old)
+        group.name = f"{GROUP_PREFIX} ({obj.name})"
+    ensure_sliders(scene)
+    if sun is None:
+        sun = scene.get("relight_sun")
+    remove_preview(obj)
+    if not obj.material_slots or not any(s.material for s in obj.material_slots):
+        mat = bpy.data.materials.new(f"{obj.name} Relight")
+        obj.data.materials.append(mat)
+    for mat in {s.material for s in obj.material_slots if s.material}:
+        tree = mat.node_tree
+        before = {nd.name for nd in tree.nodes}
+        b = _Builder(tree)
+        frame = b.node("NodeFrame", -200, 900, label=FRAME_NAME)
+        direction, intensity, color, _ = _controls(b, scene, sun, -200, 800)
+        gnode = b.node("ShaderNodeGroup", 900, 700, node_tree=group, label="Steerable Illumination")
+        b.links.new(direction, gnode.inputs["Light Direction"])
+        b.links.new(intensity, gnode.inputs["Intensity"])
+        b.links.new(color, gnode.inputs["Color"])
+        emission = b.node("ShaderNodeEmission", 1100, 700)
+        emission.inputs["Strength"].default_value = 1.0
+        b.links.new(gnode.outputs["Color"], emission.inputs["Color"])
+        out = b.node("ShaderNodeOutputMaterial", 1300, 700, label="Relight Preview Output",
+                     target="ALL")
+        b.links.new(emission.outputs[0], out.inputs["Surface"])
+        for node in tree.nodes:
+            if node.bl_idname == "ShaderNodeOutputMaterial":
+                node.is_active_output = node == out
+        for nd in tree.nodes:
+            if nd.name not in before:
+                nd[_TAG] = True
+                if nd != frame:
+                    nd.parent = frame
+    return {"atlas": atlas_path, "atlas_bytes": atlas_bytes, "group": group.name,
+            "group_nodes": len(group.nodes)}
+

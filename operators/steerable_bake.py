@@ -1,0 +1,272 @@
+"""Bake steerable illumination textures with Cycles (bpy).
+
+:func:`bake_steerable_texture` is a generator: it yields :class:`Progress` after every Cycles
+bake and *returns* a :class:`BakeResult`. The modal operator, the CLI and the tests all drive
+the same generator (:func:`run`), so progress and cancel behave the same everywhere: stopping
+iteration (``generator.close()``) leaves the scene exactly as it was, and nothing is written
+until :func:`write_bake` runs on a finished result.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import asdict, dataclass, field
+
+import bpy
+import numpy as np
+
+from .. import __version__
+from ..lt_addon.sampled_basis import build_sampled_basis
+from ..lt_addon.steerable import paper_basis
+from ..lt_addon.steerable_texture import FRAMES, STORAGE_MODES, SteerableTexture
+from .cycles_bake import (BAKE_MODES, WORLD_SAMPLING, BakeInputError, EnvironmentBake,
+                          check_bakeable)
+
+BAKE_KIND = "steerable_texture"
+
+
+@dataclass
+class TextureBakeSettings:
+    """What to bake. Defaults follow the paper (N1 = 7, outgoing radiance)."""
+
+    order: int = 7
+    resolution: int = 512
+    samples: int = 64
+    bounces: int = 4
+    frame: str = "world"
+    mode: str = "radiance"
+    storage: str = "half"
+    calibration: str = "steerable_cos"
+    env_height: int = 128
+    seed: int = 0
+    world_sampling: str = "importance"
+
+    def validate(self) -> None:
+        if not 2 <= self.order <= 12:
+            raise BakeInputError(f"order must be in 2..12, got {self.order}")
+        if self.frame not in FRAMES:
+            raise BakeInputError(f"frame must be one of {FRAMES}, got {self.frame!r}")
+        if self.mode not in BAKE_MODES:
+            raise BakeInputError(f"mode must be one of {BAKE_MODES}, got {self.mode!r}")
+        if self.storage not in STORAGE_MODES:
+            raise BakeInputError(f"storage must be one of {STORAGE_MODES}, got {self.storage!r}")
+        if self.world_sampling not in WORLD_SAMPLING:
+            raise BakeInputError(f"world_sampling must be one of {WORLD_SAMPLING}, "
+                                 f"got {self.world_sampling!r}")
+        if not 8 <= self.env_height <= 4096:
+            raise BakeInputError(f"env_height must be in 8..4096, got {self.env_height}")
+        # basis images are float32 (N, R, R, 3) plus the sampled stack of the same size
+        need = 2 * self.order ** 2 * self.resolution ** 2 * 3 * 4
+        if need > 16 * 2 ** 30:
+            raise BakeInputError(f"order {self.order} at {self.resolution}^2 needs "
+                                 f"{need / 2 ** 30:.1f} GiB of memory; lower the resolution")
+
+
+@dataclass
+class Progress:
+    done: int
+    total: int
+    message: str
+
+
+@dataclass
+class BakeResult:
+    texture: SteerableTexture
+    cycles_seconds: float
+    total_seconds: float
+    bake_calls: int
+    condition_number: float
+    figures: dict = field(default_factory=dict)
+
+
+def bake_steerable_texture(scene, obj, settings: TextureBakeSettings):
+    """Generator: bake ``obj`` under the K sampled steerable lights; returns a BakeResult.
+
+    Yields
+    ------
+    Progress
+        After every Cycles bake (``total = K + 1``; the last step is the basis solve).
+    """
+    settings.validate()
+    check_bakeable(obj)
+    start = time.perf_counter()
+    basis = paper_basis(settings.order)
+    sampled = build_sampled_basis(basis)
+    k_total = sampled.n_lights
+    r = settings.resolution
+    h = settings.env_height
+    stack = np.empty((k_total, r, r, 3), dtype=np.float32)
+    with EnvironmentBake(scene, obj, r, settings.samples, settings.bounces, (h, 2 * h),
+                         mode=settings.mode, seed=settings.seed,
+                         world_sampling=settings.world_sampling) as session:
+        for k in range(k_total):
+            env = sampled.light_environment(k, h, 2 * h, row_order="bottom_first")
+            stack[k] = session.bake(env)
+            yield Progress(k + 1, k_total + 1, f"Cycles bake {k + 1}/{k_total}")
+        cycles_seconds, calls = session.bake_seconds, session.bake_calls
+    basis_images = sampled.to_basis_images(stack, dtype=np.float32)
+    total = time.perf_counter() - start
+    record = {
+        "resolution": r, "samples": settings.samples, "seed": settings.seed,
+        "bounces": settings.bounces, "mode": settings.mode, "env_height": h,
+        "world_sampling": settings.world_sampling,
+        "object": obj.name, "addon_version": __version__,
+        "blender_version": bpy.app.version_string,
+    }
+    texture = SteerableTexture(basis_images, settings.order, basis.width, sampled.centres,
+                               frame=settings.frame, calibration=settings.calibration,
+                               settings=record)
+    yield Progress(k_total + 1, k_total + 1, "basis solve done")
+    return BakeResult(texture, cycles_seconds, total, calls, float(sampled.condition_number))
+
+
+def run(generator, on_progress=None, should_cancel=None):
+    """Drive a bake generator to the end; returns its result or None if cancelled.
+
+    ``on_progress(progress)`` is called for every step; ``should_cancel()`` is checked after
+    each step and closes the generator (restoring the scene) when it returns True.
+    """
+    try:
+        while True:
+            step = next(generator)
+            if on_progress is not None:
+                on_progress(step)
+            if should_cancel is not None and should_cancel():
+                generator.close()
+                return None
+    except StopIteration as stop:
+        return stop.value
+
+
+def default_output_dir(blend_path: str) -> str:
+    """``<blend folder>/<blend stem>_relight`` (or a temp-safe name for unsaved files)."""
+    if blend_path:
+        folder, base = os.path.split(os.path.abspath(blend_path))
+        return os.path.join(folder, os.path.splitext(base)[0] + "_relight")
+    return os.path.abspath("relight_output")
+
+
+def write_bake(result: BakeResult, obj, out_dir: str, settings: TextureBakeSettings) -> dict:
+    """Write the EXR and the JSON report atomically and record the bake on ``obj``.
+
+    Returns the report dict. The EXR goes to ``<out_dir>/<object>_steerable.exr`` and the
+    report next to it as ``.json``; both replace earlier files only once complete.
+    """
+    os.makedirs(out_dir, exist_ok=True)
+    safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in obj.name)
+    exr_path = os.path.join(out_dir, f"{safe}_steerable.exr")
+    json_path = os.path.join(out_dir, f"{safe}_steerable.json")
+    t0 = time.perf_counter()
+    storage = settings.storage
+    nbytes = result.texture.save(exr_path, storage)
+    write_seconds = time.perf_counter() - t0
+    tex = result.texture
+    n, r = tex.basis_images.shape[0], tex.resolution
+    report = {
+        "kind": BAKE_KIND,
+        "object": obj.name,
+        "exr": os.path.abspath(exr_path),
+        "settings": asdict(settings),
+        "condition_number": result.condition_number,
+        "timings": {
+            "cycles_bake_seconds": round(result.cycles_seconds, 4),
+            "own_work_seconds": round(result.total_seconds - result.cycles_seconds, 4),
+            "write_seconds": round(write_seconds, 4),
+            "total_seconds": round(result.total_seconds + write_seconds, 4),
+            "overhead_fraction": round(
+                (result.total_seconds - result.cycles_seconds) / max(result.total_seconds, 1e-9), 4),
+            "bake_calls": result.bake_calls,
+        },
+        "bytes": {
+            "exr_file": nbytes,
+            "in_memory_float32": int(n * r * r * 3 * 4),
+            "per_texel_storage": {"float": n * 3 * 4, "half": n * 3 * 2, "u8": n * 3}[storage],
+        },
+        "preview_cost": {"basis_images": n, "multiply_adds_per_texel": n * 3},
+        **result.figures,
+    }
+    tmp = json_path + f".{os.getpid()}.tmp"
+    with open(tmp, "w") as fh:
+        json.dump(report, fh, indent=2)
+    os.replace(tmp, json_path)
+    record_bake(obj, exr_path, report)
+    return report
+
+
+def record_bake(obj, exr_path: str, report: dict) -> None:
+    """Replace the object's steerable-texture bake record (kept as an ID custom property)."""
+    from .blend_files import BAKES_KEY, object_bakes
+
+    try:
+        path = bpy.path.relpath(exr_path) if bpy.data.filepath else os.path.abspath(exr_path)
+    except ValueError:  # another drive on Windows
+        path = os.path.abspath(exr_path)
+    entry = {
+        "kind": BAKE_KIND,
+        "path": path,
+        "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "order": report["settings"]["order"],
+        "resolution": report["settings"]["resolution"],
+        "samples": report["settings"]["samples"],
+        "storage": report["settings"]["storage"],
+        "frame": report["settings"]["frame"],
+        "bytes": report["bytes"]["exr_file"],
+        "bake_seconds": report["timings"]["total_seconds"],
+    }
+    bakes = [b for b in object_bakes(obj) if b.get("kind") != BAKE_KIND]
+    obj[BAKES_KEY] = bakes + [entry]
+
+
+def truth_directions(texture, count: int = 5) -> list:
+    """``count`` light directions for ground truth: elevations spread over 5..85 degrees
+    (both ends included), azimuths spread by the golden angle, none within 0.05 (disk units)
+    of a baked sample centre, so the relight really interpolates.
+
+    Returns
+    -------
+    list of ndarray, shape (3,)
+    """
+    from ..lt_addon.hemisphere import direction_from_az_el, hemisphere_to_disk
+
+    elevations = np.linspace(5.0, 85.0, max(count, 2))[:count] if count > 1 else np.array([45.0])
+    out = []
+    for i, el in enumerate(elevations):
+        az = (17.0 + 137.508 * i) % 360.0
+        for _ in range(36):
+            d = direction_from_az_el(az, el)
+            gap = np.min(np.hypot(*(texture.centres - hemisphere_to_disk(d)).T))
+            if gap > 0.05:
+                break
+            az += 10.0
+        out.append(d)
+    return out
+
+
+def run_ground_truth(scene, obj, texture, settings: TextureBakeSettings, count: int,
+                     on_progress=None) -> dict:
+    """Cycles ground truth for ``count`` directions (see :mod:`.steerable_truth`); JSON-safe."""
+    from .steerable_truth import ground_truth
+
+    gen = ground_truth(scene, obj, texture, truth_directions(texture, count), settings.samples,
+                       settings.bounces, settings.mode, settings.env_height, seed=settings.seed,
+                       world_sampling=settings.world_sampling)
+    result = run(gen, on_progress=on_progress)
+    for row in result["directions"]:
+        row.pop("images")
+    return result
+
+
+def load_texture(obj) -> SteerableTexture:
+    """The steerable texture recorded on ``obj`` (its EXR path resolved against the .blend)."""
+    from .blend_files import object_bakes
+
+    records = [b for b in object_bakes(obj) if b.get("kind") == BAKE_KIND]
+    if not records:
+        raise ValueError(f"{obj.name} has no steerable texture bake; run bake-textures first")
+    path = bpy.path.abspath(records[-1]["path"])
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"{obj.name}'s steerable texture is missing: {path} "
+                                "(moved or deleted? re-bake or restore the file)")
+    return SteerableTexture.load(path)
