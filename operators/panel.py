@@ -5,6 +5,8 @@ from __future__ import annotations
 import bpy
 
 from .blend_files import object_bakes
+from .presets import preset_figures
+from .preview_nodes import COLOR_SLIDER, SLIDERS
 
 
 class VIEW3D_PT_relight(bpy.types.Panel):
@@ -35,7 +37,67 @@ class VIEW3D_PT_relight(bpy.types.Panel):
         if not bakes:
             box.label(text="No relightable data yet")
         for bake in bakes:
-            box.label(text=f"{bake.get('kind', '?')}: {bake.get('path', '?')}", icon="IMAGE_DATA")
+            col = box.column(align=True)
+            col.label(text=f"{bake.get('kind', '?')}: {bake.get('path', '?')}", icon="IMAGE_DATA")
+            if "order" in bake:
+                col.label(text=f"order {bake['order']}, {bake['resolution']} px, "
+                               f"{bake['samples']} spp, {bake['storage']}, "
+                               f"{bake.get('bake_seconds', 0):.1f} s")
+
+
+class VIEW3D_PT_relight_bake(bpy.types.Panel):
+    """Bake settings and presets"""
+
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Relight"
+    bl_label = "Bake Steerable Texture"
+    bl_parent_id = "VIEW3D_PT_relight"
+
+    def draw(self, context):
+        props = context.scene.relight
+        layout = self.layout
+        layout.prop(props, "preset")
+        fig = preset_figures().get(props.preset)
+        if fig:
+            layout.label(text=f"measured: {fig['bake_seconds']:.1f} s, rel. error "
+                              f"{fig['rel_error']:.3f} ({fig['scene']}, {fig['machine']})")
+        else:
+            layout.label(text="preset not measured yet (make bench)", icon="INFO")
+        col = layout.column(align=True)
+        for name in ("frame", "order", "resolution", "samples", "bounces", "storage", "mode",
+                     "world_sampling", "output_dir"):
+            col.prop(props, name)
+        layout.operator("relight.bake_textures", icon="RENDER_STILL")
+
+
+class VIEW3D_PT_relight_light(bpy.types.Panel):
+    """Light sliders of the live preview"""
+
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Relight"
+    bl_label = "Preview Light"
+    bl_parent_id = "VIEW3D_PT_relight"
+
+    def draw(self, context):
+        scene = context.scene
+        layout = self.layout
+        if "relight_azimuth" not in scene:
+            layout.label(text="Bake first: the sliders come with the preview")
+            return
+        col = layout.column(align=True)
+        for key in SLIDERS:
+            if key != "relight_follow_sun":
+                col.prop(scene, f'["{key}"]', text=key.replace("relight_", "").capitalize())
+        col.prop(scene, f'["{COLOR_SLIDER}"]', text="Color")
+        row = layout.row(align=True)
+        row.prop(scene.relight, "sun")
+        follow = scene.get("relight_follow_sun", 0.0) > 0.5
+        op = row.operator("relight.follow_sun", text="Stop" if follow else "Follow",
+                          depress=follow)
+        op.follow = not follow
+        layout.operator("relight.remove_preview", icon="X")
 
 
 class VIEW3D_PT_relight_samples(bpy.types.Panel):
@@ -58,4 +120,5 @@ class VIEW3D_PT_relight_samples(bpy.types.Panel):
         op.size = settings.sample_size
 
 
-CLASSES = (VIEW3D_PT_relight, VIEW3D_PT_relight_samples)
+CLASSES = (VIEW3D_PT_relight, VIEW3D_PT_relight_bake, VIEW3D_PT_relight_light,
+           VIEW3D_PT_relight_samples)

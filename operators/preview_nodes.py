@@ -307,8 +307,10 @@ def set_sun_drivers(sun_dir_node, sun) -> None:
     for i in range(3):
         sun_dir_node.inputs[i].driver_remove("default_value")
         if sun is not None:
+            # RNA stores matrices column-major: matrix_world[2][i] is mathutils' m[i][2],
+            # component i of the local +z axis
             _drive(sun_dir_node.inputs[i], "default_value", -1, "OBJECT", sun,
-                   f"matrix_world[{i}][2]")
+                   f"matrix_world[2][{i}]")
         else:
             sun_dir_node.inputs[i].default_value = (0.0, 0.0, 1.0)[i]
 
@@ -387,3 +389,21 @@ def install_preview(scene, obj, exr_path: str, texture, sun=None) -> dict:
     return {"atlas": atlas_path, "atlas_bytes": atlas_bytes, "group": group.name,
             "group_nodes": len(group.nodes)}
 
+
+
+def set_follow_sun(scene, sun) -> int:
+    """Point every preview's Sun Direction drivers at ``sun`` (None: detach); returns count."""
+    changed = 0
+    for mat in bpy.data.materials:
+        if mat.node_tree is None:
+            continue
+        for node in mat.node_tree.nodes:
+            if node.get(_TAG) and node.bl_idname == "ShaderNodeCombineXYZ" and \
+                    node.label == "Sun Direction":
+                set_sun_drivers(node, sun)
+                changed += 1
+    if sun is not None:
+        scene["relight_sun"] = sun
+    elif "relight_sun" in scene:
+        del scene["relight_sun"]
+    return changed

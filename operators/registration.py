@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import bpy
 
-from . import cli, panel, properties, scene_ops
+from . import bake_ops, cli, panel, properties, scene_ops
 
-CLASSES = properties.CLASSES + scene_ops.CLASSES + panel.CLASSES
+CLASSES = properties.CLASSES + scene_ops.CLASSES + bake_ops.CLASSES + panel.CLASSES
 CLI_COMMAND = "relight"
 _cli_handles = []
 

@@ -1,0 +1,166 @@
+"""Operators: bake steerable textures (modal, progress, Esc to cancel), follow a Sun, remove the
+preview (bpy).
+
+The modal operator drives the same generator as the CLI (:mod:`.steerable_bake`), one Cycles
+bake per timer tick, so the UI stays responsive between bakes and Esc cancels cleanly: closing
+the generator restores the scene and nothing is written, so the previous bake, its files and the
+material stay as they were. ``execute`` (used from scripts and in background mode) runs the
+same generator to completion.
+"""
+
+from __future__ import annotations
+
+import os
+
+import bpy
+
+from . import preview_nodes, steerable_bake
+from .cycles_bake import BakeInputError, check_bakeable
+from .properties import settings_from_scene
+
+
+def _output_dir(props) -> str:
+    path = bpy.path.abspath(props.output_dir or "//relight/")
+    if path.startswith("//") or not os.path.isabs(path):  # unsaved file: no '//' base
+        raise BakeInputError("save the .blend first or choose an absolute output folder")
+    return path
+
+
+def _finish(operator, context, result, settings, out_dir):
+    obj = context.active_object
+    report = steerable_bake.write_bake(result, obj, out_dir, settings)
+    sun = context.scene.relight.sun
+    preview_nodes.install_preview(context.scene, obj, report["exr"], result.texture, sun=sun)
+    t = report["timings"]
+    operator.report({"INFO"}, f"Baked {obj.name}: {t['total_seconds']:.1f} s "
+                              f"({t['cycles_bake_seconds']:.1f} s in Cycles), "
+                              f"{report['bytes']['exr_file'] / 1e6:.1f} MB")
+
+
+class RELIGHT_OT_bake_textures(bpy.types.Operator):
+    """Bake steerable illumination textures of the active object with Cycles (Esc cancels)"""
+
+    bl_idname = "relight.bake_textures"
+    bl_label = "Bake Relightable Texture"
+    bl_options = {"REGISTER"}
+
+    _timer = None
+    _gen = None
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        return obj is not None and obj.type == "MESH"
+
+    def _prepare(self, context):
+        props = context.scene.relight
+        obj = context.active_object
+        check_bakeable(obj)
+        self.settings = settings_from_scene(props)
+        self.settings.validate()
+        self.out_dir = _output_dir(props)
+        os.makedirs(self.out_dir, exist_ok=True)
+        return steerable_bake.bake_steerable_texture(context.scene, obj, self.settings)
+
+    def execute(self, context):
+        try:
+            gen = self._prepare(context)
+            result = steerable_bake.run(gen)
+            _finish(self, context, result, self.settings, self.out_dir)
+        except (BakeInputError, OSError, ValueError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if bpy.app.background:
+            return self.execute(context)
+        try:
+            self._gen = self._prepare(context)
+        except (BakeInputError, OSError, ValueError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.01, window=context.window)
+        wm.progress_begin(0, 1000)
+        wm.modal_handler_add(self)
+        context.workspace.status_text_set("Relight bake: starting (Esc to cancel)")
+        return {"RUNNING_MODAL"}
+
+    def _end(self, context):
+        wm = context.window_manager
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        context.workspace.status_text_set(None)
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            self._gen.close()  # restores the scene; nothing was written
+            self._end(context)
+            self.report({"WARNING"}, "Bake cancelled; the previous bake is unchanged")
+            return {"CANCELLED"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        try:
+            step = next(self._gen)
+        except StopIteration as stop:
+            self._end(context)
+            try:
+                _finish(self, context, stop.value, self.settings, self.out_dir)
+            except (OSError, ValueError) as exc:
+                self.report({"ERROR"}, f"Could not write the bake: {exc}")
+                return {"CANCELLED"}
+            return {"FINISHED"}
+        except Exception as exc:  # Cycles failure: the generator has restored the scene
+            self._end(context)
+            self.report({"ERROR"}, f"Bake failed: {exc}")
+            return {"CANCELLED"}
+        context.window_manager.progress_update(int(1000 * step.done / step.total))
+        context.workspace.status_text_set(f"Relight bake: {step.message} (Esc to cancel)")
+        return {"RUNNING_MODAL"}
+
+
+class RELIGHT_OT_follow_sun(bpy.types.Operator):
+    """Make the preview follow the chosen Sun lamp's direction (or stop following it)"""
+
+    bl_idname = "relight.follow_sun"
+    bl_label = "Follow Sun"
+    bl_options = {"REGISTER", "UNDO"}
+
+    follow: bpy.props.BoolProperty(name="Follow", default=True)
+
+    def execute(self, context):
+        scene = context.scene
+        sun = scene.relight.sun
+        if self.follow and sun is None:
+            self.report({"ERROR"}, "Choose a Sun lamp in the Relight panel first")
+            return {"CANCELLED"}
+        preview_nodes.ensure_sliders(scene)
+        changed = preview_nodes.set_follow_sun(scene, sun if self.follow else None)
+        scene["relight_follow_sun"] = 1.0 if self.follow else 0.0
+        scene.update_tag()
+        self.report({"INFO"}, f"{'Following ' + sun.name if self.follow else 'Sliders drive the light'}"
+                              f" ({changed} preview materials)")
+        return {"FINISHED"}
+
+
+class RELIGHT_OT_remove_preview(bpy.types.Operator):
+    """Remove the relight preview nodes from the active object's materials"""
+
+    bl_idname = "relight.remove_preview"
+    bl_label = "Remove Preview"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.active_object is not None and context.active_object.type == "MESH"
+
+    def execute(self, context):
+        n = preview_nodes.remove_preview(context.active_object)
+        self.report({"INFO"}, f"Removed the preview from {n} material(s)")
+        return {"FINISHED"}
+
+
+CLASSES = (RELIGHT_OT_bake_textures, RELIGHT_OT_follow_sun, RELIGHT_OT_remove_preview)

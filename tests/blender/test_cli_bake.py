@@ -1,0 +1,122 @@
+"""bake-textures / relight / light-env from the venv console script, on real .blend files."""
+
+import json
+import os
+import pathlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from relightable_textures.lt_addon import exrio
+
+BIN = pathlib.Path(sys.executable).parent
+TINY = ["--resolution", "16", "--samples", "4", "--order", "3", "--bounces", "0"]
+
+
+def relight(*args):
+    return subprocess.run([str(BIN / "relight"), *map(str, args)], capture_output=True,
+                          text=True, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def baked(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("bake")
+    blend = folder / "bumps.blend"
+    assert relight("scene", "bumps", "--out", blend).returncode == 0
+    r = relight("bake-textures", blend, "--object", "Bumps", *TINY, "--truth", "2")
+    assert r.returncode == 0, r.stderr[-2000:]
+    return folder, blend, r
+
+
+def test_bake_writes_exr_report_atlas_and_records_a_relative_path(baked):
+    folder, blend, r = baked
+    out = folder / "bumps_relight"
+    assert sorted(os.listdir(out)) == ["Bumps_steerable.exr", "Bumps_steerable.json",
+                                       "Bumps_steerable_atlas.exr"]
+    assert "[9/10]" in r.stderr  # progress: 9 bakes + the solve
+    report = json.loads((out / "Bumps_steerable.json").read_text())
+    t = report["timings"]
+    assert t["bake_calls"] == 9 and 0 < t["cycles_bake_seconds"] <= t["total_seconds"]
+    assert report["bytes"]["exr_file"] == os.path.getsize(out / "Bumps_steerable.exr")
+    assert len(report["ground_truth"]["directions"]) == 2
+    for row in report["ground_truth"]["directions"]:
+        assert set(row["errors"]) == {"same_light", "same_light_4x", "sun"}
+    _, meta = exrio.read_exr(str(out / "Bumps_steerable.exr"))
+    for key in ("order", "w", "a", "frame", "centres", "calibration", "resolution", "settings"):
+        assert key in meta
+    assert meta["settings"]["samples"] == 4 and meta["settings"]["seed"] == 0
+    assert meta["settings"]["addon_version"] and meta["settings"]["bounces"] == 0
+    listing = json.loads(relight("info", blend, "--json").stdout)
+    (bumps,) = [o for o in listing["objects"] if o["name"] == "Bumps"]
+    (rec,) = bumps["bakes"]
+    assert rec["kind"] == "steerable_texture" and rec["path"] == "//bumps_relight/Bumps_steerable.exr"
+
+
+def test_preview_survives_save_and_reopen(baked, tmp_path):
+    """The saved .blend references the atlas by a relative path; reopened, the image loads."""
+    folder, blend, _ = baked
+    script = (
+        "import bpy, sys; bpy.ops.wm.open_mainfile(filepath=sys.argv[1]);"
+        "img=[i for i in bpy.data.images if i.get('relight_preview')][0];"
+        "print('PATH', img.filepath, img.size[0], img.size[1], img.has_data or img.pixels[0] >= -1e30);"
+        "m=bpy.data.objects['Bumps'].active_material.node_tree;"
+        "print('GROUP', any(n.bl_idname=='ShaderNodeGroup' for n in m.nodes))")
+    r = subprocess.run([sys.executable, "-c", script, str(blend)], capture_output=True,
+                       text=True, timeout=300)
+    line = [ln for ln in r.stdout.splitlines() if ln.startswith("PATH")][0]
+    assert line.split()[1] == "//bumps_relight/Bumps_steerable_atlas.exr"
+    assert int(line.split()[2]) > 16 and line.split()[4] == "True"
+    assert "GROUP True" in r.stdout
+
+
+def test_relight_and_light_env_write_float_exrs(baked, tmp_path):
+    from relightable_textures.lt_addon.calibration import make_calibration
+    from relightable_textures.lt_addon.hemisphere import direction_from_az_el, hemisphere_to_disk
+    from relightable_textures.lt_addon.steerable import environment_image, paper_basis
+
+    folder, blend, _ = baked
+    out = tmp_path / "relit.exr"
+    r = relight("relight", blend, "--object", "Bumps", "--light", "30,40", "--out", out)
+    assert r.returncode == 0, r.stderr
+    ch, meta = exrio.read_exr(str(out))
+    assert ch["R"].shape == (16, 16) and meta["light_elevation"] == 40.0
+    assert json.loads(r.stdout)["mean"][0] == pytest.approx(float(ch["R"].mean()), rel=1e-5)
+
+    env_path = tmp_path / "env.exr"
+    r = relight("light-env", "--order", "5", "--light", "30,40", "--height", "32", "--out", env_path)
+    assert r.returncode == 0, r.stderr
+    ch, meta = exrio.read_exr(str(env_path))
+    d = direction_from_az_el(30.0, 40.0)
+    basis = paper_basis(5)
+    gain, _ = make_calibration(basis).gain_offset(d)
+    want = environment_image(basis, hemisphere_to_disk(d), 32, 64, row_order="bottom_first",
+                             dtype=np.float64) * gain
+    np.testing.assert_allclose(ch["G"], want, rtol=1e-6, atol=1e-7)
+    # the brightest texel points at the light: column of azimuth 30 deg, row of elevation 40 deg
+    row, col = np.unravel_index(np.argmax(ch["R"]), ch["R"].shape)
+    assert abs((row + 0.5) / 32 * 180 - 90 - 40) < 180 / 32 * 1.5
+    assert abs((0.5 - (col + 0.5) / 64) * 360 - 30) < 360 / 64 * 1.5
+
+
+@pytest.mark.parametrize("args, message", [
+    (("bake-textures", "{blend}", "--object", "Nope"), "no object 'Nope'"),
+    (("bake-textures", "{blend}", "--object", "Sun"), "not a mesh"),
+    (("bake-textures", "{blend}", "--object", "Bumps", "--order", "20"), "order must be in 2..12"),
+    (("bake-textures", "{blend}", "--object", "Bumps", "--out", "/proc/x"), "not writable"),
+    (("bake-textures", "{blend}", "--object", "Bumps", "--preset", "ultra"), "invalid choice"),
+    (("relight", "{blend}", "--object", "Bumps", "--light", "30"), "expected AZ,EL"),
+    (("relight", "{blend}", "--object", "Bumps", "--light", "30,95"), "elevation must be"),
+    (("relight", "{blend}", "--object", "Bumps", "--light", "30,40"), "no steerable texture"),
+    (("light-env", "--light", "0,45", "--out", "{tmp}/env.png"), "must end in .exr"),
+])
+def test_bad_bake_input_exit_2_and_nothing_changes(tmp_path, args, message):
+    blend = tmp_path / "b.blend"
+    assert relight("scene", "bumps", "--out", blend).returncode == 0
+    before = {n: (tmp_path / n).read_bytes() for n in os.listdir(tmp_path)}
+    r = relight(*[a.format(blend=blend, tmp=tmp_path) for a in args])
+    assert r.returncode == 2, r.stderr[-2000:]
+    last = r.stderr.strip().splitlines()[-1]
+    assert last.startswith("relight: error: ") and message in last, r.stderr[-2000:]
+    assert {n: (tmp_path / n).read_bytes() for n in os.listdir(tmp_path)} == before
