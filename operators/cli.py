@@ -91,6 +91,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--truth", type=int, default=0, metavar="K",
                    help="also bake Cycles ground truth for K light directions (elevations 5..85 "
                         "degrees, none a sample centre) and put the errors in the report")
+    p.add_argument("--contact-sheet", metavar="PNG", help="with --truth: write a PNG of steered | "
+                   "Cycles truth | difference x4 | Cycles Sun for up to 4 directions")
     p.add_argument("--out", metavar="DIR", help="output folder (default: next to the .blend, "
                    "<name>_relight/)")
     p.set_defaults(func=_cmd_bake_textures)
@@ -256,6 +258,11 @@ def _cmd_bake_textures(args) -> int:
         raise CliError(str(exc)) from None
     if args.truth < 0 or args.truth > 32:
         raise CliError(f"--truth takes 0..32 directions, got {args.truth}")
+    sheet = None
+    if args.contact_sheet:
+        if not args.truth:
+            raise CliError("--contact-sheet needs --truth K (K >= 1 directions)")
+        sheet = _check_output_path(args.contact_sheet, ".png", True)
     out_dir = os.path.abspath(args.out) if args.out else steerable_bake.default_output_dir(path)
     parent = os.path.dirname(out_dir)
     if not os.path.isdir(parent):
@@ -273,7 +280,8 @@ def _cmd_bake_textures(args) -> int:
         result = steerable_bake.run(gen, on_progress=show)
         if args.truth:
             result.figures["ground_truth"] = steerable_bake.run_ground_truth(
-                bpy.context.scene, obj, result.texture, settings, args.truth, on_progress=show)
+                bpy.context.scene, obj, result.texture, settings, args.truth, on_progress=show,
+                sheet_path=sheet)
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
     except KeyboardInterrupt:

@@ -245,14 +245,19 @@ def truth_directions(texture, count: int = 5) -> list:
 
 
 def run_ground_truth(scene, obj, texture, settings: TextureBakeSettings, count: int,
-                     on_progress=None) -> dict:
-    """Cycles ground truth for ``count`` directions (see :mod:`.steerable_truth`); JSON-safe."""
-    from .steerable_truth import ground_truth
+                     on_progress=None, sheet_path: str | None = None) -> dict:
+    """Cycles ground truth for ``count`` directions (see :mod:`.steerable_truth`); JSON-safe.
+
+    With ``sheet_path`` a PNG contact sheet of the first four directions is written there.
+    """
+    from .steerable_truth import contact_sheet, ground_truth
 
     gen = ground_truth(scene, obj, texture, truth_directions(texture, count), settings.samples,
                        settings.bounces, settings.mode, settings.env_height, seed=settings.seed,
                        world_sampling=settings.world_sampling)
     result = run(gen, on_progress=on_progress)
+    if sheet_path:
+        result["contact_sheet"] = contact_sheet(result["directions"], sheet_path)
     for row in result["directions"]:
         row.pop("images")
     return result

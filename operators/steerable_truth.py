@@ -52,7 +52,8 @@ def ground_truth(scene, obj, texture, directions, samples: int, bounces: int, mo
 
     Each dict has ``direction``, ``azimuth``/``elevation`` (degrees) and ``errors``:
     ``{"same_light": {...}, "same_light_4x": {...}, "sun": {...}}`` with the metrics of
-    :func:`..lt_addon.storage.reconstruction_error` (``rel_fro`` is the relative RMSE), plus ``images`` (relit, same_light, sun arrays).
+    :func:`..lt_addon.storage.reconstruction_error` (``rel_fro`` is the relative RMSE), plus
+    ``images``: relit (clamped), same_light (the 4x-sample truth when computed) and sun arrays.
     """
     r = texture.resolution
     sun_angle = equivalent_sun_angle_deg(texture)
@@ -89,7 +90,31 @@ def ground_truth(scene, obj, texture, directions, samples: int, bounces: int, mo
             "azimuth": math.degrees(math.atan2(d[1], d[0])),
             "elevation": math.degrees(math.asin(max(-1.0, min(1.0, d[2])))),
             "errors": errors,
-            "images": {"relit": relit, "same_light": images["same_light"][i],
+            "images": {"relit": relit,
+                       "same_light": images["same_light_4x" if with_4x else "same_light"][i],
                        **({"sun": suns[i]} if with_sun else {})},
         })
     return {"sun_angle_deg": sun_angle, "directions": results}
+
+
+def contact_sheet(rows: list[dict], path: str, max_rows: int = 4) -> dict:
+    """PNG: per light direction, steered | Cycles truth (same light) | |difference| x 4 | Sun.
+
+    ``rows`` are the per-direction dicts of :func:`ground_truth` (with ``images``). One
+    exposure for the whole sheet maps the 99th percentile of the truths to white.
+    """
+    from ..lt_addon.contact_sheet import linear_to_srgb8, tile, write_png
+
+    rows = rows[:max_rows]
+    truths = np.concatenate([r["images"]["same_light"].ravel() for r in rows])
+    exposure = 1.0 / max(float(np.percentile(truths, 99)), 1e-12)
+    grid = []
+    for r in rows:
+        im = r["images"]
+        line = [im["relit"], im["same_light"], 4.0 * np.abs(im["relit"] - im["same_light"])]
+        if "sun" in im:
+            line.append(im["sun"])
+        grid.append(line)
+    nbytes = write_png(path, linear_to_srgb8(tile(grid), exposure))
+    return {"path": path, "bytes": nbytes, "exposure": exposure,
+            "columns": ["steered", "cycles_same_light", "abs_difference_x4", "cycles_sun"]}

@@ -1,0 +1,84 @@
+"""Contact sheets: rows of same-sized linear images tiled into one 8-bit sRGB PNG.
+
+The PNG writer uses only the standard library (zlib), so sheets can be written from the CLI,
+the demo and tests without Pillow.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import zlib
+
+import numpy as np
+
+
+def linear_to_srgb8(image: np.ndarray, exposure: float = 1.0) -> np.ndarray:
+    """Linear RGB (any float shape (..., 3)) -> 8-bit sRGB, values clipped to [0, 1] first."""
+    x = np.clip(np.asarray(image, dtype=np.float64) * exposure, 0.0, 1.0)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+    return np.rint(srgb * 255.0).astype(np.uint8)
+
+
+def tile(rows: list[list[np.ndarray]], gap: int = 2) -> np.ndarray:
+    """Tile ``rows`` of (H, W, 3) images (row 0 at the bottom) into one image, top row first.
+
+    Returns
+    -------
+    sheet : ndarray, shape (rows * (H + gap) - gap, cols * (W + gap) - gap, 3), float64
+        Row 0 at the top (PNG order); gaps are 0.
+    """
+    if not rows or not rows[0]:
+        raise ValueError("nothing to tile")
+    h, w = np.shape(rows[0][0])[:2]
+    cols = max(len(r) for r in rows)
+    sheet = np.zeros((len(rows) * (h + gap) - gap, cols * (w + gap) - gap, 3))
+    for i, row in enumerate(rows):
+        for j, img in enumerate(row):
+            img = np.asarray(img, dtype=np.float64)
+            if img.shape[:2] != (h, w):
+                raise ValueError(f"all images must be {h}x{w}, got {img.shape[:2]}")
+            sheet[i * (h + gap):i * (h + gap) + h, j * (w + gap):j * (w + gap) + w] = img[::-1, :, :3]
+    return sheet
+
+
+def write_png(path: str, rgb8: np.ndarray) -> int:
+    """Write an (H, W, 3) uint8 image (row 0 at the top) as PNG atomically; returns bytes."""
+    a = np.ascontiguousarray(rgb8, dtype=np.uint8)
+    if a.ndim != 3 or a.shape[2] != 3:
+        raise ValueError(f"expected an (H, W, 3) uint8 image, got {a.shape}")
+    h, w = a.shape[:2]
+    raw = b"".join(b"\x00" + a[y].tobytes() for y in range(h))
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (struct.pack(">I", len(data)) + kind + data
+                + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF))
+
+    png = (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
+           + chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b""))
+    tmp = f"{path}.{os.getpid()}.tmp"
+    with open(tmp, "wb") as fh:
+        fh.write(png)
+    os.replace(tmp, path)
+    return len(png)
+
+
+def read_png(path: str) -> np.ndarray:
+    """Read back an 8-bit RGB PNG written by :func:`write_png` (filter type 0 only)."""
+    with open(path, "rb") as fh:
+        data = fh.read()
+    if data[:8] != b"\x89PNG\r\n\x1a\n":
+        raise ValueError(f"not a PNG file: {path}")
+    pos, idat, w, h = 8, b"", 0, 0
+    while pos < len(data):
+        (length,) = struct.unpack(">I", data[pos:pos + 4])
+        kind, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + length]
+        if kind == b"IHDR":
+            w, h = struct.unpack(">II", body[:8])
+        elif kind == b"IDAT":
+            idat += body
+        pos += 12 + length
+    raw = np.frombuffer(zlib.decompress(idat), dtype=np.uint8).reshape(h, 1 + 3 * w)
+    if np.any(raw[:, 0] != 0):
+        raise ValueError("only unfiltered PNG rows are supported")
+    return raw[:, 1:].reshape(h, w, 3)
