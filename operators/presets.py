@@ -18,7 +18,7 @@ from .steerable_bake import TextureBakeSettings
 PRESETS = {
     "draft": TextureBakeSettings(order=5, resolution=128, samples=16, bounces=1, storage="u8"),
     "balanced": TextureBakeSettings(order=7, resolution=256, samples=64, bounces=2, storage="half"),
-    "production": TextureBakeSettings(order=7, resolution=512, samples=256, bounces=4,
+    "production": TextureBakeSettings(order=7, resolution=512, samples=128, bounces=3,
                                       storage="half"),
 }
 FIGURES_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "preset_figures.json")

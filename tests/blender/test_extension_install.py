@@ -27,14 +27,24 @@ INSTALL_SCRIPT = textwrap.dedent(r"""
                         f"python{sys.version_info.major}.{sys.version_info.minor}", "site-packages")
     report["wheels_installed"] = sorted(n for n in os.listdir(site) if not n.startswith("_")) \
         if os.path.isdir(site) else []
-    report["operator"] = hasattr(bpy.ops.relight, "add_sample_scene") and \
-        bpy.ops.relight.add_sample_scene.poll()
-    report["property"] = hasattr(bpy.types.Scene, "relight")
-    report["panels"] = [n for n in ("VIEW3D_PT_relight", "VIEW3D_PT_relight_samples")
+    report["operators"] = [n for n in ("add_sample_scene", "bake_textures", "follow_sun",
+                                       "remove_preview") if hasattr(bpy.ops.relight, n)]
+    report["property"] = hasattr(bpy.types.Scene, "relight") and \
+        bpy.context.scene.relight.preset == "balanced"
+    report["panels"] = [n for n in ("VIEW3D_PT_relight", "VIEW3D_PT_relight_bake",
+                                    "VIEW3D_PT_relight_light", "VIEW3D_PT_relight_samples")
                         if hasattr(bpy.types, n)]
     # The operator really builds a scene into the open file.
     report["op_result"] = list(bpy.ops.relight.add_sample_scene(name="bumps", size="test"))
     report["op_vertices"] = len(bpy.data.objects["Bumps"].data.vertices)
+    # The installed bake operator (bundled wheels, relative imports) bakes and previews.
+    props = bpy.context.scene.relight
+    props.preset = "draft"
+    props.order, props.resolution, props.samples = 3, 16, 2
+    props.output_dir = os.path.join(os.path.dirname(blend_out), "op_bake") + os.sep
+    bpy.context.view_layer.objects.active = bpy.data.objects["Bumps"]
+    report["bake"] = list(bpy.ops.relight.bake_textures())
+    report["bake_files"] = sorted(os.listdir(props.output_dir))
     # The same CLI verbs, registered as Blender's `--command relight`; the bpy module cannot
     # dispatch --command, so call the registered function itself.
     from bl_ext.user_default.relightable_textures.operators import cli, registration
@@ -98,8 +108,13 @@ def test_install_enable_use_uninstall_in_temporary_user_dir(extension_zip, tmp_p
     assert rep["install"] == ["FINISHED"] and rep["enabled"]
     assert "scipy" in rep["wheels_installed"] and any(
         n.lower().startswith("openexr") for n in rep["wheels_installed"])
-    assert rep["operator"] and rep["property"]
-    assert rep["panels"] == ["VIEW3D_PT_relight", "VIEW3D_PT_relight_samples"]
+    assert rep["operators"] == ["add_sample_scene", "bake_textures", "follow_sun", "remove_preview"]
+    assert rep["property"]
+    assert rep["panels"] == ["VIEW3D_PT_relight", "VIEW3D_PT_relight_bake",
+                             "VIEW3D_PT_relight_light", "VIEW3D_PT_relight_samples"]
+    assert rep["bake"] == ["FINISHED"]
+    assert rep["bake_files"] == ["Bumps_steerable.exr", "Bumps_steerable.json",
+                                 "Bumps_steerable_atlas.exr"]
     assert rep["op_result"] == ["FINISHED"] and rep["op_vertices"] == 33 * 33
     assert rep["cli_registered"] == 1
     assert rep["cli_scene"] == 0 and blend_out.exists()
