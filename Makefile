@@ -41,7 +41,9 @@ test-core: $(STAMP)
 
 ## bench: slow sweeps that print figures (not part of `make test`)
 bench: $(STAMP)
-	$(PY) benchmarks/bench_steerable.py
+	mkdir -p $(OUT)/bench
+	$(PY) benchmarks/bench_steerable.py --json $(OUT)/bench/steerable.json
+	$(PY) benchmarks/bench_texture_bake.py --presets draft,balanced --write-presets
 
 ## dist: validate and build the extension zip with Blender's own extension tool (dist/)
 dist: $(STAMP)
