@@ -78,6 +78,9 @@ def bilinear_weights(xy0, grid_x, grid_y) -> np.ndarray:
     Returns
     -------
     weights : ndarray, shape (..., nx * ny), float64
+        Centres outside the grid are clamped onto its edge: give the baseline a grid spanning
+        [-1, 1] (the whole disk), not the sampled basis' +-0.81 grid, or lights below about
+        20 degrees elevation land in the wrong place.
         Non-negative, at most four non-zero, summing to 1; flattened with ``k = a * ny + b`` for
         the centre ``(grid_x[a], grid_y[b])`` -- the order of
         :func:`.sampled_basis.default_centres`.

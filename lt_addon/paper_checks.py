@@ -139,9 +139,22 @@ def ashikhmin2002_report(orders=range(2, 13)) -> dict:
     rep["calibration"] = _entry(
         {m: {"max_abs_error": v["max_abs_error"], "rms_error": v["rms_error"]}
          for m, v in cal.items()},
-        None, {"steerable_cos": 1e-6},
-        cal["steerable_cos"]["max_abs_error"] <= 1e-6,
-        "calibrated flat-plane response vs cos law over elevations 0..90 deg, 3 azimuths")
+        None, None, True,
+        "informational: calibrated flat-plane response vs the cos law over elevations 0..90 deg, "
+        "3 azimuths. steerable_cos is exact by construction (its gain divides by the same "
+        "response); its real check is a Cycles bake of a flat plane (tests/blender)")
+
+    # Informational: the basis lives on [-1, 1], so lights steered towards the horizon
+    # (|x0| -> 1) lose height, shift inwards and ring more (a property of the paper's design).
+    rows = []
+    for x0 in (0.0, 0.5, 0.8, 1.0):
+        pr = light_profile_1d(b, x0)
+        rows.append({"x0": x0, "peak_x": pr["peak_x"], "peak": pr["peak"],
+                     "negative_lobe_ratio": pr["negative_lobe_ratio"]})
+    rep["horizon_distortion"] = _entry(
+        rows, None, None, True,
+        "informational: 1D light steered towards the horizon (x0 = 1 is the horizon along an "
+        "axis); the peak drifts inwards and the ringing grows")
     return rep
 
 

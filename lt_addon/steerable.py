@@ -303,9 +303,13 @@ def fit_steerable_basis_1d(order: int = PAPER_ORDER, width: float = PAPER_WIDTH,
     Bf = _analytic(x, w, a)
     _, F = gaussian_kernel_matrix(n, width)
     diff = Bf - B
+    a = a.copy()
+    a.setflags(write=False)  # paper_basis() shares this object: nobody may edit it in place
+    eig = lam[: order + 1].copy()
+    eig.setflags(write=False)
     return SteerableBasis1D(
         order=int(order), w=w, a=a, width=float(width), n_samples=int(n),
-        eigenvalues=lam[: order + 1].copy(),
+        eigenvalues=eig,
         fit_rms=float(np.sqrt(np.mean(diff ** 2))), fit_max=float(np.max(np.abs(diff))),
         kernel_error_fit=float(np.linalg.norm(F - Bf @ Bf.T)),
         kernel_error_optimal=float(np.sqrt(np.sum(lam[order:] ** 2))),

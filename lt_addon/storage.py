@@ -132,6 +132,9 @@ def encode_uint8(images, per_channel: bool = False) -> Uint8Encoded:
         ``(hi - lo) / 510`` plus float32 rounding of ``lo`` / ``hi``.
     """
     a = _stack(images).astype(np.float64)
+    if np.abs(a).max(initial=0.0) > np.finfo(np.float32).max:
+        raise ValueError("images exceed the float32 range of the stored min/max; "
+                         "rescale them before 8-bit encoding")
     if per_channel:
         if a.ndim < 3:
             raise ValueError("per_channel needs images of shape (N, ..., C)")

@@ -109,14 +109,15 @@ def test_2d_basis_flattening_and_separability(basis):
 
 def test_2d_peak_at_steered_centre(basis):
     p = sb.light_profile_2d(basis, (0.3, 0.3), resolution=801)
-    step = 2.0 / 99  # n = 100 design grid step
-    assert np.all(np.abs(np.asarray(p["peak_xy"]) - 0.3) <= step)
+    # measured offset ~0.005 (the light is only approximately steerable); 0.01 = half a
+    # design-grid step (2/99)
+    assert np.all(np.abs(np.asarray(p["peak_xy"]) - 0.3) <= 0.01)
     # independent argmax on a fine grid
     g = np.linspace(0.1, 0.5, 401)
     X, Y = np.meshgrid(g, g, indexing="ij")
     L = sb.steered_light_disk(basis, np.stack([X, Y], -1), [0.3, 0.3])
     i, j = np.unravel_index(np.argmax(L), L.shape)
-    assert abs(g[i] - 0.3) <= step and abs(g[j] - 0.3) <= step
+    assert abs(g[i] - 0.3) <= 0.01 and abs(g[j] - 0.3) <= 0.01
 
 
 def test_zenith_and_horizon_lights_are_finite(basis):
@@ -223,3 +224,13 @@ def test_dict_roundtrip(basis):
     b2 = sb.SteerableBasis1D.from_dict(d)
     x = np.linspace(-1, 1, 11)
     assert np.array_equal(b2.evaluate(x), basis.evaluate(x))
+
+
+def test_shared_basis_cannot_be_edited_in_place(basis):
+    """paper_basis() is cached and shared; writing into it must fail loudly."""
+    import pytest
+
+    with pytest.raises(ValueError):
+        basis.a[0] = 1.0
+    with pytest.raises(ValueError):
+        basis.eigenvalues[0] = 1.0

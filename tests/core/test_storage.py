@@ -102,3 +102,10 @@ def test_codec_table_and_validation():
         sto.encode_uint8(np.array([[np.nan]]))
     with pytest.raises(ValueError, match="k must be"):
         sto.encode_pca(x, 0)
+
+
+def test_uint8_refuses_values_beyond_float32_min_max():
+    import pytest
+
+    with pytest.raises(ValueError, match="float32 range"):
+        sto.encode_uint8(np.array([[0.0, 1e39]]))
