@@ -181,8 +181,11 @@ class EnvironmentBake:
         obj.hide_render = False
 
         def restore_selection():
-            for o in view_layer.objects:
-                o.select_set(o in selected)
+            # only touch the objects we changed: the view layer's list can hold stale entries
+            # right after a temporary object (the truth Sun) was removed
+            obj.select_set(obj in selected)
+            for o in selected:
+                o.select_set(True)
             view_layer.objects.active = active
             obj.hide_set(hidden[0])
             obj.hide_viewport, obj.hide_render = hidden[1], hidden[2]
@@ -288,5 +291,10 @@ class EnvironmentBake:
             raise RuntimeError(f"could not fully restore the scene after baking: {errors[0]}")
 
     def __exit__(self, exc_type, exc, tb):
-        self._teardown()
+        try:
+            self._teardown()
+        except RuntimeError:
+            if exc_type is None:
+                raise
+            # keep the original error visible; the restore problem is secondary
         return False
