@@ -34,13 +34,13 @@ class BakeInputError(ValueError):
     """The object or settings cannot be baked; the message says what to change."""
 
 
-def check_bakeable(obj) -> None:
-    """Raise :class:`BakeInputError` unless ``obj`` is a mesh object with a UV map."""
+def check_bakeable(obj, need_uv: bool = True) -> None:
+    """Raise :class:`BakeInputError` unless ``obj`` is a mesh object (with a UV map if asked)."""
     if obj is None:
         raise BakeInputError("no object given")
     if obj.type != "MESH":
         raise BakeInputError(f"{obj.name} is a {obj.type.lower()}, not a mesh")
-    if not obj.data.uv_layers:
+    if need_uv and not obj.data.uv_layers:
         raise BakeInputError(f"{obj.name} has no UV map; add one (UV > Unwrap) before baking")
     if not obj.data.polygons:
         raise BakeInputError(f"{obj.name} has no faces to bake")
@@ -54,8 +54,9 @@ class EnvironmentBake:
     scene : bpy.types.Scene
     obj : bpy.types.Object
         Mesh with a UV map (its active render UV map is used).
-    resolution : int
-        Baked texture side in texels.
+    resolution : int or None
+        Baked texture side in texels; ``None`` bakes per vertex instead (into a temporary
+        FLOAT_COLOR point attribute; no UV map needed).
     samples : int
         Cycles samples per texel (fixed seed ``seed``, no adaptive sampling, no denoiser).
     bounces : int
@@ -75,10 +76,11 @@ class EnvironmentBake:
     def __init__(self, scene, obj, resolution: int, samples: int, bounces: int,
                  env_size: tuple[int, int], mode: str = "radiance", seed: int = 0,
                  margin: int = 4, world_sampling: str = "importance", importance_map_size: int = 256):
-        check_bakeable(obj)
+        self.per_vertex = resolution is None
+        check_bakeable(obj, need_uv=not self.per_vertex)
         if mode not in BAKE_MODES:
             raise BakeInputError(f"mode must be one of {BAKE_MODES}, got {mode!r}")
-        if not 1 <= resolution <= 16384:
+        if not self.per_vertex and not 1 <= resolution <= 16384:
             raise BakeInputError(f"resolution must be in 1..16384, got {resolution}")
         if samples < 1 or bounces < 0:
             raise BakeInputError(f"need samples >= 1 and bounces >= 0, got {samples}, {bounces}")
@@ -124,7 +126,7 @@ class EnvironmentBake:
         self._save_attr(bake, "use_pass_indirect", True)
         self._save_attr(bake, "use_pass_color", self.mode == "radiance")
         self._save_attr(bake, "margin", self.margin)
-        self._save_attr(bake, "target", "IMAGE_TEXTURES")
+        self._save_attr(bake, "target", "VERTEX_COLORS" if self.per_vertex else "IMAGE_TEXTURES")
         self._save_attr(bake, "use_selected_to_active", False)
 
         # Lamps would add light the basis does not know about: hide them from render.
@@ -153,14 +155,40 @@ class EnvironmentBake:
         links.new(background.outputs["Background"], out.inputs["Surface"])
         self._save_attr(scene, "world", world)
 
-        # The bake target: our own float image, made the active node of every material.
-        r = self.resolution
-        self.target = self._new_image(f"{_PREFIX}Target", r, r)
         if not obj.material_slots or not any(s.material for s in obj.material_slots):
             mat = bpy.data.materials.new(f"{_PREFIX}DefaultMaterial")
             self._created.append((bpy.data.materials, mat))
             obj.data.materials.append(mat)
             self._restore.append(lambda: obj.data.materials.pop(index=len(obj.data.materials) - 1))
+        if self.per_vertex:
+            self._setup_vertex_target(obj)
+        else:
+            self._setup_image_target(obj)
+        self._select_only(obj)
+
+    def _setup_vertex_target(self, obj):
+        """A temporary float colour attribute per vertex, made the active colour attribute."""
+        attrs = obj.data.color_attributes
+        old_active = attrs.active_color_name
+        old_render = attrs.render_color_index
+        self.target = attrs.new(f"{_PREFIX}Target", "FLOAT_COLOR", "POINT")
+        name = self.target.name
+        attrs.active_color = self.target
+
+        def restore(mesh=obj.data):
+            attrs = mesh.color_attributes
+            attrs.remove(attrs[name])
+            if old_active and old_active in attrs:
+                attrs.active_color = attrs[old_active]
+            if 0 <= old_render < len(attrs):
+                attrs.render_color_index = old_render
+
+        self._restore.append(restore)
+
+    def _setup_image_target(self, obj):
+        """Our own float image, made the active node of every material."""
+        r = self.resolution
+        self.target = self._new_image(f"{_PREFIX}Target", r, r)
         for mat in {s.material for s in obj.material_slots if s.material}:
             tree = mat.node_tree
             node = tree.nodes.new("ShaderNodeTexImage")
@@ -171,7 +199,8 @@ class EnvironmentBake:
             self._restore.append(lambda t=tree, n=node, a=old_active: (
                 setattr(t.nodes, "active", a), t.nodes.remove(n)))
 
-        # Select only the object (bake works on the selection).
+    def _select_only(self, obj):
+        """Select only the object (bake works on the selection); restored on exit."""
         view_layer = bpy.context.view_layer
         selected = [o for o in view_layer.objects if o.select_get()]
         active = view_layer.objects.active
@@ -214,8 +243,8 @@ class EnvironmentBake:
 
         Returns
         -------
-        texture : ndarray, shape (R, R, 3), float32
-            Baked values, row 0 at v = 0.
+        values : ndarray, shape (R, R, 3) or (V, 3) per vertex, float32
+            Baked values (textures: row 0 at v = 0).
         """
         env = np.asarray(environment, dtype=np.float32)
         h, w = self.env_size
@@ -233,6 +262,10 @@ class EnvironmentBake:
         self.bake_calls += 1
         if "FINISHED" not in result:
             raise RuntimeError(f"Cycles bake did not finish: {result}")
+        if self.per_vertex:
+            px = np.empty(len(self.target.data) * 4, dtype=np.float32)
+            self.target.data.foreach_get("color", px)
+            return px.reshape(-1, 4)[:, :3].copy()
         r = self.resolution
         px = np.empty(r * r * 4, dtype=np.float32)
         self.target.pixels.foreach_get(px)
