@@ -122,6 +122,42 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
     p.set_defaults(func=_cmd_light_env)
 
+    p = sub.add_parser("bake-transport", help="bake per-vertex light transport and fit "
+                       "eigentransport (Nowrouzezahrai 2008)",
+                       description="One Cycles vertex bake per sample direction under a hard "
+                                   "Sun (T = visibility x cosine, plus interreflection with "
+                                   "--bounces), then PCA to d eigentransports. Writes an .npz "
+                                   "sidecar and a JSON report; the .blend gets the bake record "
+                                   "and a per-vertex preview.")
+    p.add_argument("file", metavar="FILE.blend")
+    p.add_argument("--object", required=True, metavar="NAME")
+    p.add_argument("--directions", default="cube:8",
+                   help="halton:N | latlong:RxC | cube:N | cubegauss:N (default cube:8 = 384)")
+    p.add_argument("--bounces", type=int, default=0)
+    p.add_argument("--samples", type=int, help="Cycles samples per vertex (default 1 without "
+                   "bounces: exact for a hard Sun; 64 with bounces)")
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("--energy", type=float, help="keep d capturing this fraction of the "
+                       "centred transport energy (default 0.99)")
+    group.add_argument("--coeffs", type=int, help="keep exactly d eigentransports")
+    p.add_argument("--truth", action="store_true", help="also bake the object under the world "
+                   "(or a sun-and-sky HDRI) with Cycles and report the error per d")
+    p.add_argument("--out", metavar="DIR", help="output folder (default <blend>_relight/)")
+    p.set_defaults(func=_cmd_bake_transport)
+
+    p = sub.add_parser("relight-vertices", help="shade a stored eigentransport bake (NumPy)")
+    p.add_argument("file", metavar="FILE.blend")
+    p.add_argument("--object", required=True, metavar="NAME")
+    p.add_argument("--env", metavar="HDR.exr", help="equirect RGB EXR (default: the scene world)")
+    p.add_argument("--rotate", type=float, default=0.0, metavar="DEG",
+                   help="rotate the environment about +z (paper sec. 5: lattice rotation)")
+    p.add_argument("--point-light", type=_point_light, metavar="X,Y,Z,POWER",
+                   help="add an isotropic point light (W); valid outside the convex hull")
+    p.add_argument("--out", required=True, metavar="shading.npy",
+                   help="per-vertex RGB, shape (V, 3), float32")
+    p.add_argument("--force", action="store_true")
+    p.set_defaults(func=_cmd_relight_vertices)
+
     p = sub.add_parser("validate", help="reproduce a paper's figures and check them")
     p.add_argument("--paper", required=True, choices=["ashikhmin2002"],
                    help="which paper's figures to reproduce")
@@ -217,6 +253,16 @@ def _rgb(text: str) -> tuple[float, float, float]:
     return rgb
 
 
+def _point_light(text: str):
+    try:
+        x, y, z, power = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y,Z,POWER, got {text!r}") from None
+    if not all(np.isfinite([x, y, z, power])) or power < 0:
+        raise argparse.ArgumentTypeError(f"need finite X,Y,Z and POWER >= 0, got {text!r}")
+    return (x, y, z), power
+
+
 def _progress_printer(prefix: str):
     def show(step):
         done, total, message = step if isinstance(step, tuple) else (step.done, step.total,
@@ -300,6 +346,120 @@ def _cmd_bake_textures(args) -> int:
               f"light {e['same_light']['rel_fro']:.4f}"
               + (f", 4x samples {e['same_light_4x']['rel_fro']:.4f}" if "same_light_4x" in e else "")
               + (f", vs Sun lamp {e['sun']['rel_fro']:.4f}" if "sun" in e else ""))
+    return EXIT_OK
+
+
+def _cmd_bake_transport(args) -> int:
+    import bpy
+
+    from . import blend_files, preview_nodes, steerable_bake, transport_bake, vertex_relight
+    from .cycles_bake import BakeInputError
+
+    path = _check_input_blend(args.file)
+    settings = transport_bake.TransportSettings(
+        directions=args.directions, bounces=args.bounces, samples=args.samples,
+        energy=args.energy if args.coeffs is None else None, coeffs=args.coeffs)
+    if settings.energy is None and settings.coeffs is None:
+        settings.energy = 0.99
+    try:
+        direction_set = settings.validate()
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    out_dir = os.path.abspath(args.out) if args.out else steerable_bake.default_output_dir(path)
+    parent = os.path.dirname(out_dir)
+    if not os.path.isdir(parent) or not _can_create_in(out_dir if os.path.isdir(out_dir) else parent):
+        raise CliError(f"output folder is not writable: {out_dir}")
+    if not _can_create_in(os.path.dirname(path)):
+        raise CliError(f"cannot update {path}: its folder is not writable")
+    obj = _open_object(path, args.object)
+    scene = bpy.context.scene
+    show = _progress_printer("bake-transport")
+    try:
+        gen = transport_bake.bake_transport(scene, obj, direction_set.directions,
+                                            settings.bounces, settings.samples)
+        result = steerable_bake.run(gen, on_progress=show)
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    except KeyboardInterrupt:
+        print("bake-transport: cancelled; nothing was written", file=sys.stderr)
+        return 130
+    report = transport_bake.fit_and_write(result, obj, direction_set, settings, out_dir)
+    model = report.pop("model")
+    if args.truth:
+        env = vertex_relight.world_environment(scene)
+        if env is None or np.ptp(env) == 0:
+            from ..lt_addon.transport_error import sun_sky_environment
+
+            env = sun_sky_environment(64, [0.4, -0.3, 0.8], row_order="bottom_first")
+        truth = transport_bake.truth_errors(scene, obj, model, direction_set, env,
+                                            settings.bounces, samples=256,
+                                            transport=result.transport)
+        report["ground_truth"] = truth
+        _rewrite_report(report)
+    vertex_relight.write_shading(obj, vertex_relight.TransportData(report["sidecar"]).shade(
+        vertex_relight.world_environment(scene)))
+    preview_nodes.install_attribute_preview(obj, vertex_relight.SHADING_ATTRIBUTE)
+    blend_files.save_atomically(path)
+    t = report["timings"]
+    print(f"baked {obj.name}: {report['vertices']} vertices x {report['directions']} directions "
+          f"in {t['total_bake_seconds']:.2f} s ({t['directions_per_second']:.1f} directions/s); "
+          f"d = {report['d']} (captured energy {report['captured_energy']:.4f}); "
+          f"{report['bytes']['sidecar_file']} bytes -> {report['sidecar']}")
+    for row in report.get("ground_truth", {}).get("per_d", []):
+        print(f"  d = {row['d']:4d}: rel. RMS error vs Cycles {row['rel_rms_error']:.4f}")
+    if "all_directions_rel_rms_error" in report.get("ground_truth", {}):
+        print(f"  all {report['directions']} directions, no PCA: "
+              f"{report['ground_truth']['all_directions_rel_rms_error']:.4f} (sampling floor)")
+    return EXIT_OK
+
+
+def _rewrite_report(report: dict) -> None:
+    path = os.path.splitext(report["sidecar"])[0] + ".json"
+    tmp = path + f".{os.getpid()}.tmp"
+    with open(tmp, "w") as fh:
+        json.dump(report, fh, indent=2)
+    os.replace(tmp, path)
+
+
+def _cmd_relight_vertices(args) -> int:
+    import warnings
+
+    import bpy
+
+    from . import vertex_relight
+
+    path = _check_input_blend(args.file)
+    out = _check_output_path(args.out, ".npy", args.force)
+    env = None
+    if args.env:
+        if not os.path.isfile(args.env):
+            raise CliError(f"environment file not found: {args.env}")
+        try:
+            env = vertex_relight.read_environment_exr(args.env)
+        except (ValueError, OSError) as exc:
+            raise CliError(str(exc)) from None
+    obj = _open_object(path, args.object)
+    if env is None and args.point_light is None:
+        env = vertex_relight.world_environment(bpy.context.scene)
+        if env is None:
+            raise CliError("the scene world has no environment image or colour; pass --env")
+    try:
+        data = vertex_relight.transport_data(obj)
+    except (ValueError, FileNotFoundError) as exc:
+        raise CliError(str(exc)) from None
+    light = None
+    if args.point_light is not None:
+        light = (np.array(args.point_light[0]), args.point_light[1], (1.0, 1.0, 1.0))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        values = data.shade(env, args.rotate, 1.0, light).astype(np.float32)
+    for w in caught:
+        print(f"relight: warning: {w.message}", file=sys.stderr)
+    tmp = out + f".{os.getpid()}.tmp.npy"
+    np.save(tmp, values)
+    os.replace(tmp, out)
+    print(json.dumps({"object": obj.name, "vertices": int(values.shape[0]), "d": data.model.d,
+                      "mean": [float(v) for v in values.mean(axis=0)], "out": out}))
     return EXIT_OK
 
 

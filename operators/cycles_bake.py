@@ -155,6 +155,7 @@ class EnvironmentBake:
         links.new(background.outputs["Background"], out.inputs["Surface"])
         self._save_attr(scene, "world", world)
 
+        self._bypass_previews()
         if not obj.material_slots or not any(s.material for s in obj.material_slots):
             mat = bpy.data.materials.new(f"{_PREFIX}DefaultMaterial")
             self._created.append((bpy.data.materials, mat))
@@ -165,6 +166,20 @@ class EnvironmentBake:
         else:
             self._setup_image_target(obj)
         self._select_only(obj)
+
+    def _bypass_previews(self):
+        """Bake the user's shading, not our relight previews: in every material whose active
+        output is a preview output, make the user's own output active for the bake."""
+        for mat in bpy.data.materials:
+            tree = mat.node_tree
+            if tree is None:
+                continue
+            outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+            ours = [n for n in outputs if n.get("relight_preview") and n.is_active_output]
+            theirs = [n for n in outputs if not n.get("relight_preview")]
+            if ours and theirs:
+                theirs[0].is_active_output = True
+                self._restore.append(lambda o=ours[0]: setattr(o, "is_active_output", True))
 
     def _setup_vertex_target(self, obj):
         """A temporary float colour attribute per vertex, made the active colour attribute."""

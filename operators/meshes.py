@@ -49,6 +49,10 @@ def mesh_object(name: str, vertices: np.ndarray, faces: np.ndarray, collection,
         corner_vertex = np.empty(len(mesh.loops), dtype=np.int64)
         mesh.loops.foreach_get("vertex_index", corner_vertex)
         layer.data.foreach_set("uv", np.asarray(uv, dtype=np.float32)[corner_vertex].ravel())
+    return _link_object(name, mesh, collection, smooth)
+
+
+def _link_object(name: str, mesh, collection, smooth: bool):
     mesh.shade_smooth() if smooth else mesh.shade_flat()
     mesh.validate()
     mesh.update()
@@ -77,9 +81,4 @@ def object_from_bmesh(name: str, bm, collection, smooth: bool = True):
     mesh = bpy.data.meshes.new(name)
     bm.to_mesh(mesh)
     bm.free()
-    mesh.shade_smooth() if smooth else mesh.shade_flat()
-    mesh.validate()
-    mesh.update()
-    obj = bpy.data.objects.new(name, mesh)
-    collection.objects.link(obj)
-    return obj
+    return _link_object(name, mesh, collection, smooth)

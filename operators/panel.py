@@ -9,12 +9,19 @@ from .presets import preset_figures
 from .preview_nodes import COLOR_SLIDER, SLIDERS
 
 
-class VIEW3D_PT_relight(bpy.types.Panel):
-    """Relightable data of the active object"""
-
+class _RelightTab:
     bl_space_type = "VIEW_3D"
     bl_region_type = "UI"
     bl_category = "Relight"
+
+
+class _RelightSubPanel(_RelightTab):
+    bl_parent_id = "VIEW3D_PT_relight"
+
+
+class VIEW3D_PT_relight(_RelightTab, bpy.types.Panel):
+    """Relightable data of the active object"""
+
     bl_label = "Relightable Textures"
 
     def draw(self, context):
@@ -45,14 +52,10 @@ class VIEW3D_PT_relight(bpy.types.Panel):
                                f"{bake.get('bake_seconds', 0):.1f} s")
 
 
-class VIEW3D_PT_relight_bake(bpy.types.Panel):
+class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
     """Bake settings and presets"""
 
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "Relight"
     bl_label = "Bake Steerable Texture"
-    bl_parent_id = "VIEW3D_PT_relight"
 
     def draw(self, context):
         props = context.scene.relight
@@ -71,14 +74,10 @@ class VIEW3D_PT_relight_bake(bpy.types.Panel):
         layout.operator("relight.bake_textures", icon="RENDER_STILL")
 
 
-class VIEW3D_PT_relight_light(bpy.types.Panel):
+class VIEW3D_PT_relight_light(_RelightSubPanel, bpy.types.Panel):
     """Light sliders of the live preview"""
 
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "Relight"
     bl_label = "Preview Light"
-    bl_parent_id = "VIEW3D_PT_relight"
 
     def draw(self, context):
         scene = context.scene
@@ -100,14 +99,10 @@ class VIEW3D_PT_relight_light(bpy.types.Panel):
         layout.operator("relight.remove_preview", icon="X")
 
 
-class VIEW3D_PT_relight_samples(bpy.types.Panel):
+class VIEW3D_PT_relight_samples(_RelightSubPanel, bpy.types.Panel):
     """Add the paper sample scenes"""
 
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "Relight"
     bl_label = "Sample Scenes"
-    bl_parent_id = "VIEW3D_PT_relight"
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):

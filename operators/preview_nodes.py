@@ -407,3 +407,30 @@ def set_follow_sun(scene, sun) -> int:
     elif "relight_sun" in scene:
         del scene["relight_sun"]
     return changed
+
+
+def install_attribute_preview(obj, attribute: str) -> None:
+    """Show a colour attribute as emission through our own, active Material Output (reversible
+    with :func:`remove_preview`); used by the per-vertex (eigentransport) preview."""
+    remove_preview(obj)
+    if not obj.material_slots or not any(s.material for s in obj.material_slots):
+        obj.data.materials.append(bpy.data.materials.new(f"{obj.name} Relight"))
+    for mat in {s.material for s in obj.material_slots if s.material}:
+        tree = mat.node_tree
+        before = {nd.name for nd in tree.nodes}
+        b = _Builder(tree)
+        frame = b.node("NodeFrame", 600, 900, label=FRAME_NAME)
+        attr = b.node("ShaderNodeVertexColor", 700, 800, layer_name=attribute)
+        emission = b.node("ShaderNodeEmission", 900, 800)
+        b.links.new(attr.outputs["Color"], emission.inputs["Color"])
+        out = b.node("ShaderNodeOutputMaterial", 1100, 800, label="Relight Preview Output",
+                     target="ALL")
+        b.links.new(emission.outputs[0], out.inputs["Surface"])
+        for node in tree.nodes:
+            if node.bl_idname == "ShaderNodeOutputMaterial":
+                node.is_active_output = node == out
+        for nd in tree.nodes:
+            if nd.name not in before:
+                nd[_TAG] = True
+                if nd != frame:
+                    nd.parent = frame

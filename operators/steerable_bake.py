@@ -195,18 +195,24 @@ def write_bake(result: BakeResult, obj, out_dir: str, settings: TextureBakeSetti
     return report
 
 
-def record_bake(obj, exr_path: str, report: dict) -> None:
-    """Replace the object's steerable-texture bake record (kept as an ID custom property)."""
+def record_kind(obj, kind: str, file_path: str, fields: dict) -> None:
+    """Replace the object's bake record of ``kind`` (kept as an ID custom property), with the
+    file path relative to the .blend when it is saved."""
     from .blend_files import BAKES_KEY, object_bakes
 
     try:
-        path = bpy.path.relpath(exr_path) if bpy.data.filepath else os.path.abspath(exr_path)
+        path = bpy.path.relpath(file_path) if bpy.data.filepath else os.path.abspath(file_path)
     except ValueError:  # another drive on Windows
-        path = os.path.abspath(exr_path)
-    entry = {
-        "kind": BAKE_KIND,
-        "path": path,
-        "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        path = os.path.abspath(file_path)
+    entry = {"kind": kind, "path": path,
+             "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), **fields}
+    bakes = [b for b in object_bakes(obj) if b.get("kind") != kind]
+    obj[BAKES_KEY] = bakes + [entry]
+
+
+def record_bake(obj, exr_path: str, report: dict) -> None:
+    """Replace the object's steerable-texture bake record."""
+    record_kind(obj, BAKE_KIND, exr_path, {
         "order": report["settings"]["order"],
         "resolution": report["settings"]["resolution"],
         "samples": report["settings"]["samples"],
@@ -214,9 +220,7 @@ def record_bake(obj, exr_path: str, report: dict) -> None:
         "frame": report["settings"]["frame"],
         "bytes": report["bytes"]["exr_file"],
         "bake_seconds": report["timings"]["total_seconds"],
-    }
-    bakes = [b for b in object_bakes(obj) if b.get("kind") != BAKE_KIND]
-    obj[BAKES_KEY] = bakes + [entry]
+    })
 
 
 def truth_directions(texture, count: int = 5) -> list:

@@ -96,3 +96,111 @@ def bake_environment_truth(scene, obj, environment, bounces: int, samples: int,
     with EnvironmentBake(scene, obj, None, samples, bounces, env.shape[:2], mode="irradiance",
                          seed=seed, world_sampling="importance") as session:
         return session.bake(env)
+
+
+@dataclass
+class TransportSettings:
+    """What to bake and how many eigentransports to keep (exactly one of energy / coeffs)."""
+
+    directions: str = "cube:8"
+    bounces: int = 0
+    samples: int | None = None
+    energy: float | None = 0.99
+    coeffs: int | None = None
+    seed: int = 0
+
+    def validate(self):
+        from ..lt_addon.directions import parse_direction_spec
+
+        try:
+            ds = parse_direction_spec(self.directions)
+        except ValueError as exc:
+            raise BakeInputError(str(exc)) from None
+        if self.bounces < 0 or self.bounces > 64:
+            raise BakeInputError(f"bounces must be in 0..64, got {self.bounces}")
+        if (self.energy is None) == (self.coeffs is None):
+            raise BakeInputError("give exactly one of --energy and --coeffs")
+        if self.energy is not None and not 0.0 < self.energy <= 1.0:
+            raise BakeInputError(f"--energy must be in (0, 1], got {self.energy}")
+        if self.coeffs is not None and self.coeffs < 1:
+            raise BakeInputError(f"--coeffs must be >= 1, got {self.coeffs}")
+        return ds
+
+
+def fit_and_write(result: TransportBakeResult, obj, direction_set, settings: TransportSettings,
+                  out_dir: str, figures: dict | None = None) -> dict:
+    """Fit eigentransport to a bake, write the sidecar + JSON report, record the bake on ``obj``.
+
+    Returns the report dict.
+    """
+    import json
+    import os
+
+    from ..lt_addon.eigentransport import fit_eigentransport
+    from .steerable_bake import record_kind
+    from .vertex_relight import KIND, mesh_positions_normals, save_sidecar
+
+    t0 = time.perf_counter()
+    model = fit_eigentransport(result.transport.astype(np.float64), d=settings.coeffs,
+                               energy=settings.energy,
+                               metadata={"directions": direction_set.spec,
+                                         "bounces": settings.bounces})
+    fit_seconds = time.perf_counter() - t0
+    os.makedirs(out_dir, exist_ok=True)
+    safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in obj.name)
+    path = os.path.join(out_dir, f"{safe}_transport.npz")
+    pos, nrm = mesh_positions_normals(obj)
+    meta = {"object": obj.name, "directions": direction_set.spec, "bounces": settings.bounces,
+            "samples": settings.samples or (1 if settings.bounces == 0 else 64),
+            "seed": settings.seed}
+    nbytes = save_sidecar(path, model, direction_set, pos, nrm, meta)
+    V, S = result.transport.shape
+    report = {
+        "kind": KIND, "object": obj.name, "sidecar": os.path.abspath(path),
+        "vertices": V, "directions": S, "direction_set": direction_set.spec,
+        "settings": {"bounces": settings.bounces, "samples": meta["samples"],
+                     "energy": settings.energy, "coeffs": settings.coeffs, "seed": settings.seed},
+        "d": model.d, "captured_energy": model.captured_energy, "selection": model.selection,
+        "timings": {"cycles_bake_seconds": round(result.cycles_seconds, 4),
+                    "total_bake_seconds": round(result.total_seconds, 4),
+                    "fit_seconds": round(fit_seconds, 4),
+                    "seconds_per_direction": round(result.cycles_seconds / max(S, 1), 5),
+                    "directions_per_second": round(S / max(result.total_seconds, 1e-9), 2)},
+        "bytes": {"sidecar_file": nbytes, **model.storage_bytes()},
+        **(figures or {}),
+    }
+    tmp = os.path.join(out_dir, f".{safe}_transport.json.{os.getpid()}.tmp")
+    with open(tmp, "w") as fh:
+        json.dump(report, fh, indent=2)
+    os.replace(tmp, os.path.join(out_dir, f"{safe}_transport.json"))
+    record_kind(obj, KIND, path, {"d": model.d, "directions": direction_set.spec,
+                                  "bounces": settings.bounces, "vertices": V,
+                                  "bytes": nbytes,
+                                  "bake_seconds": round(result.total_seconds, 2)})
+    report["model"] = model
+    return report
+
+
+def truth_errors(scene, obj, model, direction_set, environment, bounces: int, samples: int,
+                 ds_for=(1, 2, 4, 8, 16, 32, 64, 128), transport=None) -> dict:
+    """Relative RMS error per d of eigentransport shading vs a Cycles vertex bake of the same
+    environment (white Lambertian, same bounces). ``environment``: (H, W, 3) bottom row first.
+
+    With ``transport`` (the full (V, S) bake) the error of shading with *all* S directions is
+    reported too: the floor that the direction sampling alone leaves, whatever d is."""
+    from ..lt_addon.eigentransport import project_environment, relative_rms_error
+
+    t0 = time.perf_counter()
+    truth = bake_environment_truth(scene, obj, environment, bounces, samples)
+    truth_seconds = time.perf_counter() - t0
+    Lw = project_environment(environment, direction_set.directions, direction_set.solid_angles,
+                             row_order="bottom_first")
+    rows = []
+    for d in sorted({min(d, model.d) for d in ds_for} | {model.d}):
+        shade = model.truncate(d).shade(Lw)  # albedo 1: E / pi, as the DIFFUSE bake
+        rows.append({"d": d, "rel_rms_error": relative_rms_error(truth, shade)})
+    out = {"truth_samples": samples, "truth_seconds": round(truth_seconds, 3), "per_d": rows}
+    if transport is not None:
+        full = np.asarray(transport, np.float64) @ Lw / np.pi
+        out["all_directions_rel_rms_error"] = relative_rms_error(truth, full)
+    return out

@@ -197,6 +197,10 @@ def test_cancel_keeps_the_previous_bake_and_rebake_replaces_it(bumps, tmp_path):
     assert scene.world == world and sorted(i.name for i in bpy.data.images) == images
     assert not [o for o in bpy.data.objects if o.name.startswith("RelightBake")]
 
+    # a re-bake sees the user's material, not the emission preview now wired into it
+    s_same, again = bake(scene, obj, samples=4)
+    np.testing.assert_allclose(again.texture.basis_images, result.texture.basis_images,
+                               rtol=1e-5, atol=1e-6)
     s2, result2 = bake(scene, obj, samples=4, order=4)
     report2 = sb.write_bake(result2, obj, str(tmp_path), s2)
     preview_nodes.install_preview(scene, obj, report2["exr"], result2.texture)

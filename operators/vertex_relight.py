@@ -1,0 +1,216 @@
+"""Eigentransport relighting of baked per-vertex transport (bpy side).
+
+Storage: one ``.npz`` sidecar per object (``<object>_transport.npz``) holding the mean, the d
+eigentransports, the per-vertex coefficients (float32), the sample directions and solid angles,
+and the vertices' world positions and normals at bake time (for local lights), plus JSON
+metadata. Coefficients are not stored as mesh attributes: a GPU material reads at most ~15
+vertex attributes (DESIGN.md sec. 4) and d is typically 20-150, and the shading is a NumPy dot
+product on the CPU anyway; only its result goes to the GPU as one colour attribute.
+
+Shading (white Lambertian, so values are irradiance / pi, comparable with a Cycles DIFFUSE bake
+without the colour pass): ``B = 1/pi (m . Lw + C (E Lw))`` with ``Lw_j = L(w_j) dw_j`` from the
+environment (optionally rotated, paper sec. 5) and/or a point light (sec. 4.2.1).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import secrets
+import time
+
+import bpy
+import numpy as np
+
+from ..lt_addon import eigentransport as et_mod
+from ..lt_addon import exrio
+from ..lt_addon.directions import DirectionSet
+
+KIND = "eigentransport"
+SHADING_ATTRIBUTE = "relight_shading"
+
+
+# ---------------------------------------------------------------------------------------------
+# sidecar files
+
+
+def save_sidecar(path: str, model, direction_set: DirectionSet, positions, normals,
+                 metadata: dict) -> int:
+    """Write the ``.npz`` sidecar atomically; returns its size in bytes."""
+    arrays = model.to_arrays()
+    arrays.update(
+        directions=np.asarray(direction_set.directions, np.float64),
+        solid_angles=np.asarray(direction_set.solid_angles, np.float64),
+        direction_set=np.array(json.dumps(direction_set.to_dict())),
+        positions=np.asarray(positions, np.float32), normals=np.asarray(normals, np.float32),
+        bake=np.array(json.dumps(metadata)))
+    folder, base = os.path.split(os.path.abspath(path))
+    tmp = os.path.join(folder, f".{base}.{os.getpid()}-{secrets.token_hex(4)}.tmp.npz")
+    try:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+    return os.path.getsize(path)
+
+
+class TransportData:
+    """A loaded sidecar: the model, its direction set, vertex positions/normals and metadata."""
+
+    def __init__(self, path: str):
+        if not os.path.isfile(path):
+            raise FileNotFoundError(f"transport sidecar not found: {path}")
+        with np.load(path, allow_pickle=False) as z:
+            self.model = et_mod.Eigentransport.from_arrays(z)
+            params = json.loads(str(z["direction_set"][()]))
+            self.direction_set = DirectionSet(z["directions"], z["solid_angles"],
+                                              params.get("kind", "custom"),
+                                              params.get("params", {}))
+            self.positions = np.asarray(z["positions"], np.float64)
+            self.normals = np.asarray(z["normals"], np.float64)
+            self.bake = json.loads(str(z["bake"][()]))
+        self.path = path
+
+    def weighted_environment(self, env, rotate_deg: float = 0.0) -> np.ndarray:
+        """``Lw`` (S, 3) of an equirect environment (bottom row first), rotated about +z."""
+        ds = self.direction_set
+        if not rotate_deg % 360.0:
+            return et_mod.project_environment(env, ds.directions, ds.solid_angles,
+                                              row_order="bottom_first")
+        radiance = et_mod.sample_equirect(env, ds.directions, row_order="bottom_first")
+        R = et_mod.rotation_about_axis([0.0, 0.0, 1.0], rotate_deg)
+        return et_mod.rotate_environment_samples(radiance, ds, R)
+
+    def shade(self, env=None, rotate_deg: float = 0.0, strength: float = 1.0,
+              point_light=None) -> np.ndarray:
+        """Per-vertex outgoing radiance of a white Lambertian surface, shape (V, 3), float64.
+
+        ``point_light`` = (position (3,), power W, colour (3,)).
+        """
+        out = np.zeros((self.model.n_vertices, 3))
+        if env is not None:
+            out += self.model.shade(strength * self.weighted_environment(env, rotate_deg))
+        if point_light is not None:
+            pos, power, color = point_light
+            W = et_mod.point_light_weights(self.positions, self.normals, self.direction_set,
+                                           pos, power)
+            out += self.model.shade_local(W)[:, None] * np.asarray(color, np.float64)[None, :]
+        return out
+
+
+def world_environment(scene):
+    """The scene world's light as an equirect (H, W, 3) radiance image, bottom row first: its
+    Environment Texture (or else its constant Background colour) times the Background strength;
+    None if neither can be read (e.g. a procedural sky)."""
+    world = scene.world
+    if world is None or world.node_tree is None:
+        return None
+    tex = next((n for n in world.node_tree.nodes
+                if n.bl_idname == "ShaderNodeTexEnvironment" and n.image is not None), None)
+    bg = next((n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeBackground"), None)
+    strength = bg.inputs["Strength"].default_value if bg is not None else 1.0
+    if tex is None:
+        if bg is None or bg.inputs["Color"].is_linked:
+            return None
+        color = np.array(bg.inputs["Color"].default_value[:3], dtype=np.float64)
+        return np.broadcast_to(color * strength, (8, 16, 3)).copy()  # a constant sky
+    img = tex.image
+    w, h = img.size
+    if not w or not h:
+        return None
+    px = np.empty(w * h * img.channels, dtype=np.float32)
+    img.pixels.foreach_get(px)
+    rgb = px.reshape(h, w, img.channels)[..., :3].astype(np.float64)
+    return rgb * strength
+
+
+def read_environment_exr(path: str) -> np.ndarray:
+    """An equirect EXR (R, G, B channels) as (H, W, 3) float64, bottom row first."""
+    channels, _ = exrio.read_exr(path)
+    missing = [c for c in "RGB" if c not in channels]
+    if missing:
+        raise ValueError(f"{path} has no {'/'.join(missing)} channel(s); need an RGB "
+                         "equirectangular EXR")
+    return np.stack([channels[c] for c in "RGB"], -1).astype(np.float64)
+
+
+def mesh_positions_normals(obj) -> tuple[np.ndarray, np.ndarray]:
+    """World-space vertex positions (V, 3) and unit normals (V, 3) of the evaluated base mesh."""
+    mesh = obj.data
+    co = np.empty(len(mesh.vertices) * 3)
+    mesh.vertices.foreach_get("co", co)
+    n = np.empty(len(mesh.vertices) * 3)
+    mesh.vertices.foreach_get("normal", n)
+    m = np.array(obj.matrix_world, dtype=np.float64)
+    pos = co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
+    nrm = n.reshape(-1, 3) @ np.linalg.inv(m[:3, :3])  # inverse transpose for normals
+    nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12)
+    return pos, nrm
+
+
+# ---------------------------------------------------------------------------------------------
+# the viewport preview: one colour attribute written from NumPy
+
+
+def write_shading(obj, values: np.ndarray) -> None:
+    """Write (V, 3) linear RGB into the FLOAT_COLOR point attribute ``relight_shading``."""
+    mesh = obj.data
+    attr = mesh.color_attributes.get(SHADING_ATTRIBUTE)
+    if attr is None or attr.domain != "POINT" or attr.data_type != "FLOAT_COLOR":
+        if attr is not None:
+            mesh.color_attributes.remove(attr)
+        attr = mesh.color_attributes.new(SHADING_ATTRIBUTE, "FLOAT_COLOR", "POINT")
+    rgba = np.ones((len(mesh.vertices), 4), dtype=np.float32)
+    rgba[:, :3] = values
+    attr.data.foreach_set("color", rgba.ravel())
+    mesh.update()
+
+
+_CACHE: dict = {}
+
+
+def transport_data(obj) -> TransportData:
+    """The object's sidecar, loaded once and cached until the file changes."""
+    from .blend_files import object_bakes
+
+    records = [b for b in object_bakes(obj) if b.get("kind") == KIND]
+    if not records:
+        raise ValueError(f"{obj.name} has no eigentransport bake; run bake-transport first")
+    path = bpy.path.abspath(records[-1]["path"])
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"{obj.name}'s transport sidecar is missing: {path}")
+    key = (obj.name, path, os.path.getmtime(path))
+    if key not in _CACHE:
+        _CACHE.clear()
+        _CACHE[key] = TransportData(path)
+    return _CACHE[key]
+
+
+def update_preview(scene) -> dict:
+    """Recompute the shading of every object with an eigentransport bake; returns ms timings."""
+    props = getattr(scene, "relight", None)
+    env = world_environment(scene)
+    timings = {}
+    for obj in scene.objects:
+        if obj.type != "MESH" or "relightable_bakes" not in obj:
+            continue
+        try:
+            data = transport_data(obj)
+        except (ValueError, FileNotFoundError):
+            continue
+        t0 = time.perf_counter()
+        light = None
+        if props is not None and props.point_light is not None:
+            lamp = props.point_light
+            light = (np.array(lamp.matrix_world.translation), float(lamp.data.energy),
+                     tuple(lamp.data.color))
+        values = data.shade(env, props.env_rotation if props else 0.0,
+                            props.env_strength if props else 1.0, light)
+        t1 = time.perf_counter()
+        write_shading(obj, values)
+        timings[obj.name] = {"shade_ms": 1e3 * (t1 - t0),
+                             "write_ms": 1e3 * (time.perf_counter() - t1)}
+    return timings
