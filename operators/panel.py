@@ -99,6 +99,21 @@ class VIEW3D_PT_relight_light(_RelightSubPanel, bpy.types.Panel):
         layout.operator("relight.remove_preview", icon="X")
 
 
+class VIEW3D_PT_relight_vertex(_RelightSubPanel, bpy.types.Panel):
+    """Per-vertex eigentransport preview"""
+
+    bl_label = "Vertex Transport Preview"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        props = context.scene.relight
+        col = self.layout.column(align=True)
+        col.prop(props, "env_strength")
+        col.prop(props, "env_rotation")
+        col.prop(props, "point_light")
+        col.label(text="Bake with: relight bake-transport (CLI)", icon="INFO")
+
+
 class VIEW3D_PT_relight_samples(_RelightSubPanel, bpy.types.Panel):
     """Add the paper sample scenes"""
 
@@ -116,4 +131,4 @@ class VIEW3D_PT_relight_samples(_RelightSubPanel, bpy.types.Panel):
 
 
 CLASSES = (VIEW3D_PT_relight, VIEW3D_PT_relight_bake, VIEW3D_PT_relight_light,
-           VIEW3D_PT_relight_samples)
+           VIEW3D_PT_relight_vertex, VIEW3D_PT_relight_samples)

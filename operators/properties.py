@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import bpy
-from bpy.props import (BoolProperty, EnumProperty, IntProperty, PointerProperty,
-                       StringProperty)
+from bpy.props import EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 from ..lt_addon.steerable_texture import STORAGE_MODES
 from ..samples import DESCRIPTIONS, SIZES
@@ -22,6 +21,16 @@ def _apply_preset(self, context):
 
 def _sun_poll(self, obj):
     return obj.type == "LIGHT" and obj.data.type == "SUN"
+
+
+def _point_poll(self, obj):
+    return obj.type == "LIGHT" and obj.data.type == "POINT"
+
+
+def _refresh_vertex_preview(self, context):
+    from .vertex_relight import update_preview
+
+    update_preview(context.scene)
 
 
 class RelightSceneSettings(bpy.types.PropertyGroup):
@@ -65,6 +74,21 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
     sun: PointerProperty(name="Sun", type=bpy.types.Object, poll=_sun_poll,
                          description="Sun lamp whose direction the preview follows")
 
+    # per-vertex (eigentransport) preview: NumPy shading written into one colour attribute
+    env_strength: FloatProperty(
+        name="Environment Strength", default=1.0, min=0.0, soft_max=10.0,
+        description="Scale of the world environment lighting the vertex preview",
+        update=_refresh_vertex_preview)
+    env_rotation: FloatProperty(
+        name="Environment Rotation", default=0.0, soft_min=-180.0, soft_max=180.0,
+        description="Rotation of the environment about +z in degrees (lattice rotation, "
+                    "Nowrouzezahrai 2008 sec. 5)", update=_refresh_vertex_preview)
+    point_light: PointerProperty(
+        name="Point Light", type=bpy.types.Object, poll=_point_poll,
+        description="A point lamp added to the vertex preview (nearest sample direction, "
+                    "1/r^2; valid outside the object's convex hull)",
+        update=_refresh_vertex_preview)
+
 
 CLASSES = (RelightSceneSettings,)
 
@@ -76,10 +100,28 @@ def settings_from_scene(props):
     return TextureBakeSettings(**{name: getattr(props, name) for name in _SETTING_NAMES})
 
 
+@bpy.app.handlers.persistent
+def _on_depsgraph_update(scene, depsgraph):
+    """Refresh the vertex preview when the chosen point lamp moves or changes power."""
+    props = getattr(scene, "relight", None)
+    lamp = props.point_light if props is not None else None
+    if lamp is None:
+        return
+    for update in depsgraph.updates:
+        if getattr(update.id, "original", None) in (lamp, lamp.data):
+            from .vertex_relight import update_preview
+
+            update_preview(scene)
+            return
+
+
 def register() -> None:
     bpy.types.Scene.relight = PointerProperty(type=RelightSceneSettings)
+    bpy.app.handlers.depsgraph_update_post.append(_on_depsgraph_update)
 
 
 def unregister() -> None:
+    if _on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.remove(_on_depsgraph_update)
     del bpy.types.Scene.relight
 

@@ -32,7 +32,8 @@ INSTALL_SCRIPT = textwrap.dedent(r"""
     report["property"] = hasattr(bpy.types.Scene, "relight") and \
         bpy.context.scene.relight.preset == "balanced"
     report["panels"] = [n for n in ("VIEW3D_PT_relight", "VIEW3D_PT_relight_bake",
-                                    "VIEW3D_PT_relight_light", "VIEW3D_PT_relight_samples")
+                                    "VIEW3D_PT_relight_light", "VIEW3D_PT_relight_vertex",
+                                    "VIEW3D_PT_relight_samples")
                         if hasattr(bpy.types, n)]
     # The operator really builds a scene into the open file.
     report["op_result"] = list(bpy.ops.relight.add_sample_scene(name="bumps", size="test"))
@@ -111,7 +112,8 @@ def test_install_enable_use_uninstall_in_temporary_user_dir(extension_zip, tmp_p
     assert rep["operators"] == ["add_sample_scene", "bake_textures", "follow_sun", "remove_preview"]
     assert rep["property"]
     assert rep["panels"] == ["VIEW3D_PT_relight", "VIEW3D_PT_relight_bake",
-                             "VIEW3D_PT_relight_light", "VIEW3D_PT_relight_samples"]
+                             "VIEW3D_PT_relight_light", "VIEW3D_PT_relight_vertex",
+                             "VIEW3D_PT_relight_samples"]
     assert rep["bake"] == ["FINISHED"]
     assert rep["bake_files"] == ["Bumps_steerable.exr", "Bumps_steerable.json",
                                  "Bumps_steerable_atlas.exr"]

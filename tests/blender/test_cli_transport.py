@@ -1,0 +1,84 @@
+"""bake-transport / relight-vertices from the venv console script."""
+
+import json
+import os
+import pathlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+BIN = pathlib.Path(sys.executable).parent
+
+
+def relight(*args):
+    return subprocess.run([str(BIN / "relight"), *map(str, args)], capture_output=True,
+                          text=True, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def baked(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("transport")
+    blend = folder / "statue.blend"
+    assert relight("scene", "statue", "--out", blend).returncode == 0
+    r = relight("bake-transport", blend, "--object", "Statue", "--directions", "cube:4",
+                "--coeffs", "12", "--truth")
+    assert r.returncode == 0, r.stderr[-2000:]
+    return folder, blend, r
+
+
+def test_bake_transport_writes_sidecar_report_and_record(baked):
+    folder, blend, r = baked
+    out = folder / "statue_relight"
+    assert sorted(os.listdir(out)) == ["Statue_transport.json", "Statue_transport.npz"]
+    rep = json.loads((out / "Statue_transport.json").read_text())
+    assert rep["vertices"] == 507 and rep["directions"] == 96 and rep["d"] == 12
+    assert rep["timings"]["directions_per_second"] > 0
+    assert rep["bytes"]["paper_runtime"] == 4 * 12 * (507 + 1)
+    per_d = rep["ground_truth"]["per_d"]
+    assert per_d[-1]["d"] == 12 and per_d[-1]["rel_rms_error"] < per_d[0]["rel_rms_error"]
+    listing = json.loads(relight("info", blend, "--json").stdout)
+    (statue,) = [o for o in listing["objects"] if o["name"] == "Statue"]
+    assert statue["bakes"][0]["kind"] == "eigentransport"
+    assert statue["bakes"][0]["path"] == "//statue_relight/Statue_transport.npz"
+
+
+def test_relight_vertices_rotation_and_point_light(baked, tmp_path):
+    folder, blend, _ = baked
+    a, b = tmp_path / "a.npy", tmp_path / "b.npy"
+    assert relight("relight-vertices", blend, "--object", "Statue", "--out", a).returncode == 0
+    r = relight("relight-vertices", blend, "--object", "Statue", "--rotate", "360", "--out", b)
+    assert r.returncode == 0, r.stderr
+    # the statue's world is a constant sky: any rotation, 360 in particular, changes nothing
+    np.testing.assert_allclose(np.load(b), np.load(a), rtol=1e-5, atol=1e-7)
+    assert np.load(a).shape == (507, 3)
+    inside = tmp_path / "inside.npy"
+    r = relight("relight-vertices", blend, "--object", "Statue", "--point-light", "0,0,1,100",
+                "--out", inside)
+    assert r.returncode == 0 and "inside the convex hull" in r.stderr.lower()
+    r = relight("relight-vertices", blend, "--object", "Statue", "--point-light", "0,-6,4,100",
+                "--out", tmp_path / "outside.npy")
+    assert r.returncode == 0 and "convex hull" not in r.stderr.lower()
+
+
+@pytest.mark.parametrize("args, message", [
+    (("bake-transport", "{blend}", "--object", "Statue", "--directions", "sphere:9"), "direction"),
+    (("bake-transport", "{blend}", "--object", "Statue", "--energy", "1.5"), "--energy"),
+    (("bake-transport", "{blend}", "--object", "Camera"), "not a mesh"),
+    (("relight-vertices", "{blend}", "--object", "Statue", "--out", "{tmp}/s.npy"),
+     "no eigentransport bake"),
+    (("relight-vertices", "{blend}", "--object", "Statue", "--env", "{tmp}/none.exr",
+      "--out", "{tmp}/s.npy"), "not found"),
+    (("relight-vertices", "{blend}", "--object", "Statue", "--point-light", "1,2,3",
+      "--out", "{tmp}/s.npy"), "X,Y,Z,POWER"),
+])
+def test_bad_transport_input_exit_2(tmp_path, args, message):
+    blend = tmp_path / "s.blend"
+    assert relight("scene", "statue", "--out", blend).returncode == 0
+    before = {n: (tmp_path / n).read_bytes() for n in os.listdir(tmp_path)}
+    r = relight(*[x.format(blend=blend, tmp=tmp_path) for x in args])
+    assert r.returncode == 2, r.stderr[-2000:]
+    last = r.stderr.strip().splitlines()[-1]
+    assert last.startswith("relight: error: ") and message.lower() in last.lower(), last
+    assert {n: (tmp_path / n).read_bytes() for n in os.listdir(tmp_path)} == before
