@@ -27,9 +27,13 @@ demo: $(STAMP)
 	$(VENV)/bin/relight validate --paper ashikhmin2002 > $(OUT)/validate-ashikhmin2002.json
 	$(VENV)/bin/relight bake-textures $(OUT)/bumps.blend --object Bumps --preset balanced \
 	  --samples 32 --truth 4 --contact-sheet $(OUT)/bumps-contact-sheet.png
+	$(VENV)/bin/relight bake-transport $(OUT)/statue.blend --object Statue --directions cube:8 \
+	  --energy 0.99 --truth
 	$(VENV)/bin/relight info $(OUT)/bumps.blend
+	$(VENV)/bin/relight info $(OUT)/statue.blend
 	@echo "demo: open $(OUT)/bumps.blend in Blender (Relight tab, Preview Light sliders);"
 	@echo "      report $(OUT)/bumps_relight/Bumps_steerable.json, sheet $(OUT)/bumps-contact-sheet.png"
+	@echo "      open $(OUT)/statue.blend (Vertex Transport Preview); report $(OUT)/statue_relight/"
 
 ## test: the full default test suite (core + real Blender/Cycles), a few minutes on 2 cores
 test: $(STAMP)

@@ -103,6 +103,22 @@ def object_bakes(obj) -> list[dict]:
     return _plain(obj.get(BAKES_KEY, [])) or []
 
 
+def bake_file(obj, kind: str, what: str) -> str:
+    """Absolute path of the file behind ``obj``'s latest bake record of ``kind``.
+
+    Raises ValueError (no such bake) or FileNotFoundError (the file moved), both naming the
+    command that fixes it.
+    """
+    records = [b for b in object_bakes(obj) if b.get("kind") == kind]
+    if not records:
+        raise ValueError(f"{obj.name} has no {what} bake; run the bake first")
+    path = bpy.path.abspath(records[-1]["path"])
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"{obj.name}'s {what} file is missing: {path} "
+                                "(moved or deleted? re-bake or restore the file)")
+    return path
+
+
 def relightable_listing(path: str) -> dict:
     """Open ``path`` (unless it is already the open file) and describe its relightable data."""
     if os.path.abspath(path) != os.path.abspath(bpy.data.filepath or "<unsaved>"):

@@ -340,11 +340,41 @@ def remove_preview(obj) -> int:
     return changed
 
 
+def _wire_preview(obj, build_color) -> None:
+    """Put a preview into every material of ``obj``: ``build_color(builder)`` adds the nodes
+    computing the preview colour and returns its socket; it is shown through an Emission and
+    our own Material Output, made active. All new nodes are tagged and framed, so
+    :func:`remove_preview` can take them out again; the user's nodes are not touched."""
+    remove_preview(obj)
+    if not obj.material_slots or not any(s.material for s in obj.material_slots):
+        obj.data.materials.append(bpy.data.materials.new(f"{obj.name} Relight"))
+    for mat in {s.material for s in obj.material_slots if s.material}:
+        tree = mat.node_tree
+        before = {nd.name for nd in tree.nodes}
+        b = _Builder(tree)
+        frame = b.node("NodeFrame", -200, 900, label=FRAME_NAME)
+        color = build_color(b)
+        emission = b.node("ShaderNodeEmission", 1100, 700)
+        emission.inputs["Strength"].default_value = 1.0
+        b.links.new(color, emission.inputs["Color"])
+        out = b.node("ShaderNodeOutputMaterial", 1300, 700, label="Relight Preview Output",
+                     target="ALL")
+        b.links.new(emission.outputs[0], out.inputs["Surface"])
+        for node in tree.nodes:
+            if node.bl_idname == "ShaderNodeOutputMaterial":
+                node.is_active_output = node == out
+        for nd in tree.nodes:
+            if nd.name not in before:
+                nd[_TAG] = True
+                if nd != frame:
+                    nd.parent = frame
+
+
 def install_preview(scene, obj, exr_path: str, texture, sun=None) -> dict:
     """Write the atlas, build the group and wire it into every material of ``obj``.
 
     Replaces an earlier preview of the same object. Returns {"atlas": path, "atlas_bytes": n,
-    "group": name, "nodes": count}.
+    "group": name, "group_nodes": count}.
     """
     atlas_path, atlas_bytes = write_atlas(texture, exr_path)
     image = load_atlas_image(atlas_path, f"{obj.name} steerable atlas")
@@ -358,37 +388,19 @@ def install_preview(scene, obj, exr_path: str, texture, sun=None) -> dict:
     ensure_sliders(scene)
     if sun is None:
         sun = scene.get("relight_sun")
-    remove_preview(obj)
-    if not obj.material_slots or not any(s.material for s in obj.material_slots):
-        mat = bpy.data.materials.new(f"{obj.name} Relight")
-        obj.data.materials.append(mat)
-    for mat in {s.material for s in obj.material_slots if s.material}:
-        tree = mat.node_tree
-        before = {nd.name for nd in tree.nodes}
-        b = _Builder(tree)
-        frame = b.node("NodeFrame", -200, 900, label=FRAME_NAME)
+
+    def steered_color(b):
         direction, intensity, color, _ = _controls(b, scene, sun, -200, 800)
-        gnode = b.node("ShaderNodeGroup", 900, 700, node_tree=group, label="Steerable Illumination")
+        gnode = b.node("ShaderNodeGroup", 900, 700, node_tree=group,
+                       label="Steerable Illumination")
         b.links.new(direction, gnode.inputs["Light Direction"])
         b.links.new(intensity, gnode.inputs["Intensity"])
         b.links.new(color, gnode.inputs["Color"])
-        emission = b.node("ShaderNodeEmission", 1100, 700)
-        emission.inputs["Strength"].default_value = 1.0
-        b.links.new(gnode.outputs["Color"], emission.inputs["Color"])
-        out = b.node("ShaderNodeOutputMaterial", 1300, 700, label="Relight Preview Output",
-                     target="ALL")
-        b.links.new(emission.outputs[0], out.inputs["Surface"])
-        for node in tree.nodes:
-            if node.bl_idname == "ShaderNodeOutputMaterial":
-                node.is_active_output = node == out
-        for nd in tree.nodes:
-            if nd.name not in before:
-                nd[_TAG] = True
-                if nd != frame:
-                    nd.parent = frame
+        return gnode.outputs["Color"]
+
+    _wire_preview(obj, steered_color)
     return {"atlas": atlas_path, "atlas_bytes": atlas_bytes, "group": group.name,
             "group_nodes": len(group.nodes)}
-
 
 
 def set_follow_sun(scene, sun) -> int:
@@ -410,27 +422,6 @@ def set_follow_sun(scene, sun) -> int:
 
 
 def install_attribute_preview(obj, attribute: str) -> None:
-    """Show a colour attribute as emission through our own, active Material Output (reversible
-    with :func:`remove_preview`); used by the per-vertex (eigentransport) preview."""
-    remove_preview(obj)
-    if not obj.material_slots or not any(s.material for s in obj.material_slots):
-        obj.data.materials.append(bpy.data.materials.new(f"{obj.name} Relight"))
-    for mat in {s.material for s in obj.material_slots if s.material}:
-        tree = mat.node_tree
-        before = {nd.name for nd in tree.nodes}
-        b = _Builder(tree)
-        frame = b.node("NodeFrame", 600, 900, label=FRAME_NAME)
-        attr = b.node("ShaderNodeVertexColor", 700, 800, layer_name=attribute)
-        emission = b.node("ShaderNodeEmission", 900, 800)
-        b.links.new(attr.outputs["Color"], emission.inputs["Color"])
-        out = b.node("ShaderNodeOutputMaterial", 1100, 800, label="Relight Preview Output",
-                     target="ALL")
-        b.links.new(emission.outputs[0], out.inputs["Surface"])
-        for node in tree.nodes:
-            if node.bl_idname == "ShaderNodeOutputMaterial":
-                node.is_active_output = node == out
-        for nd in tree.nodes:
-            if nd.name not in before:
-                nd[_TAG] = True
-                if nd != frame:
-                    nd.parent = frame
+    """Show a colour attribute as emission (the per-vertex eigentransport preview)."""
+    _wire_preview(obj, lambda b: b.node("ShaderNodeVertexColor", 900, 900,
+                                        layer_name=attribute).outputs["Color"])

@@ -269,13 +269,6 @@ def run_ground_truth(scene, obj, texture, settings: TextureBakeSettings, count: 
 
 def load_texture(obj) -> SteerableTexture:
     """The steerable texture recorded on ``obj`` (its EXR path resolved against the .blend)."""
-    from .blend_files import object_bakes
+    from .blend_files import bake_file
 
-    records = [b for b in object_bakes(obj) if b.get("kind") == BAKE_KIND]
-    if not records:
-        raise ValueError(f"{obj.name} has no steerable texture bake; run bake-textures first")
-    path = bpy.path.abspath(records[-1]["path"])
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"{obj.name}'s steerable texture is missing: {path} "
-                                "(moved or deleted? re-bake or restore the file)")
-    return SteerableTexture.load(path)
+    return SteerableTexture.load(bake_file(obj, BAKE_KIND, "steerable texture"))

@@ -174,14 +174,9 @@ _CACHE: dict = {}
 
 def transport_data(obj) -> TransportData:
     """The object's sidecar, loaded once and cached until the file changes."""
-    from .blend_files import object_bakes
+    from .blend_files import bake_file
 
-    records = [b for b in object_bakes(obj) if b.get("kind") == KIND]
-    if not records:
-        raise ValueError(f"{obj.name} has no eigentransport bake; run bake-transport first")
-    path = bpy.path.abspath(records[-1]["path"])
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"{obj.name}'s transport sidecar is missing: {path}")
+    path = bake_file(obj, KIND, "eigentransport")
     key = (obj.name, path, os.path.getmtime(path))
     if key not in _CACHE:
         _CACHE.clear()

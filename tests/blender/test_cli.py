@@ -2,18 +2,13 @@
 
 import json
 import os
-import pathlib
 import subprocess
 import sys
 
 import pytest
+from relight_cli import relight
 
-BIN = pathlib.Path(sys.executable).parent
 
-
-def relight(*args, cwd=None):
-    return subprocess.run([str(BIN / "relight"), *map(str, args)], capture_output=True,
-                          text=True, cwd=cwd, timeout=300)
 
 
 def test_help_from_console_script_and_module():

@@ -2,22 +2,17 @@
 
 import json
 import os
-import pathlib
 import subprocess
 import sys
 
 import numpy as np
 import pytest
+from relight_cli import relight
 
 from relightable_textures.lt_addon import exrio
 
-BIN = pathlib.Path(sys.executable).parent
 TINY = ["--resolution", "16", "--samples", "4", "--order", "3", "--bounces", "0"]
 
-
-def relight(*args):
-    return subprocess.run([str(BIN / "relight"), *map(str, args)], capture_output=True,
-                          text=True, timeout=600)
 
 
 @pytest.fixture(scope="module")

@@ -2,19 +2,12 @@
 
 import json
 import os
-import pathlib
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from relight_cli import relight
 
-BIN = pathlib.Path(sys.executable).parent
 
-
-def relight(*args):
-    return subprocess.run([str(BIN / "relight"), *map(str, args)], capture_output=True,
-                          text=True, timeout=600)
 
 
 @pytest.fixture(scope="module")
