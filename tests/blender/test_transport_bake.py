@@ -187,3 +187,27 @@ def test_point_light_shading_matches_a_cycles_point_lamp(fresh_scene, tmp_path):
     analytic = 1000.0 / (4 * np.pi) * np.sum(nrm * to_light, 1) / r2 ** 1.5 / np.pi
     np.testing.assert_allclose(cycles, analytic, rtol=1e-4)
     assert abs(ours.mean() / cycles.mean() - 1) < 0.03
+
+
+def test_interreflected_transport_matches_cycles_with_the_same_bounces(ball_on_floor):
+    """--bounces 1: the grey floor lights the ball's underside. Against a 1-bounce Cycles
+    truth, measured: direct-only transport 0.39 off, 1-bounce transport at 16 spp 0.054
+    (0.025 at 64 spp). Tolerances 0.1 and > 0.2."""
+    from relightable_textures.lt_addon.directions import parse_direction_spec
+    from relightable_textures.lt_addon.eigentransport import fit_eigentransport
+    from relightable_textures.lt_addon.transport_error import sun_sky_environment
+    from relightable_textures.operators import transport_bake as tb
+    from relightable_textures.operators.steerable_bake import run
+
+    scene, obj = ball_on_floor
+    ds = parse_direction_spec("cube:6")
+    env = sun_sky_environment(64, [0.4, -0.3, 0.8], row_order="bottom_first",
+                              sun_radius_deg=15.0, sun_radiance=2000.0 * (4.0 / 15.0) ** 2)
+    errors = {}
+    for bounces, spp in ((0, None), (1, 16)):
+        res = run(tb.bake_transport(scene, obj, ds.directions, bounces=bounces, samples=spp))
+        model = fit_eigentransport(res.transport.astype(np.float64), energy=0.999)
+        out = tb.truth_errors(scene, obj, model, ds, env, 1, 256, ds_for=(8,),
+                              transport=res.transport)
+        errors[bounces] = out["all_directions_rel_rms_error"]
+    assert errors[1] < 0.1 and errors[0] > 0.2, errors
