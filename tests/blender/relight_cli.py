@@ -10,3 +10,21 @@ BIN = pathlib.Path(sys.executable).parent
 def relight(*args, cwd=None):
     return subprocess.run([str(BIN / "relight"), *map(str, args)], capture_output=True,
                           text=True, cwd=cwd, timeout=600)
+
+
+def folder_state(folder):
+    """Every file in ``folder`` with its bytes, to prove a refused command changed nothing."""
+    return {p.name: p.read_bytes() for p in pathlib.Path(folder).iterdir() if p.is_file()}
+
+
+def assert_refused(folder, message, *args):
+    """Run ``relight *args`` expecting a one-line ``relight: error:`` containing ``message``
+    (case-insensitive), exit code 2, and ``folder`` unchanged."""
+    before = folder_state(folder)
+    r = relight(*args)
+    assert r.returncode == 2, r.stderr[-2000:]
+    last = r.stderr.strip().splitlines()[-1]
+    assert last.startswith("relight: error: "), r.stderr[-2000:]
+    assert message.lower() in last.lower(), last
+    assert folder_state(folder) == before
+    return r

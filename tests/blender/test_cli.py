@@ -6,7 +6,7 @@ import subprocess
 import sys
 
 import pytest
-from relight_cli import relight
+from relight_cli import assert_refused, relight
 
 
 
@@ -66,13 +66,8 @@ def test_force_overwrites_atomically(tmp_path):
 def test_bad_input_one_line_exit_2_nothing_written(tmp_path, args, message):
     (tmp_path / "notes.txt").write_text("hello")
     (tmp_path / "fake.blend").write_text("not a blend file")
-    before = sorted(os.listdir(tmp_path))
-    r = relight(*[a.format(tmp=tmp_path) for a in args])
-    assert r.returncode == 2
-    lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("relight: error: "), r.stderr
-    assert message in lines[0]
-    assert sorted(os.listdir(tmp_path)) == before
+    r = assert_refused(tmp_path, message, *[a.format(tmp=tmp_path) for a in args])
+    assert len(r.stderr.strip().splitlines()) == 1, r.stderr  # no traceback, no Blender log
 
 
 def test_existing_output_without_force_is_refused(tmp_path):
