@@ -65,7 +65,12 @@ class RELIGHT_OT_bake_textures(bpy.types.Operator):
     def execute(self, context):
         try:
             gen = self._prepare(context)
-            result = steerable_bake.run(gen)
+
+            def warn(step):
+                if step.message.startswith("warning:"):
+                    self.report({"WARNING"}, step.message[len("warning: "):])
+
+            result = steerable_bake.run(gen, on_progress=warn)
             _finish(self, context, result, self.settings, self.out_dir)
         except (BakeInputError, OSError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))
@@ -117,6 +122,8 @@ class RELIGHT_OT_bake_textures(bpy.types.Operator):
             self._end(context)
             self.report({"ERROR"}, f"Bake failed: {exc}")
             return {"CANCELLED"}
+        if step.message.startswith("warning:"):
+            self.report({"WARNING"}, step.message[len("warning: "):])
         context.window_manager.progress_update(int(1000 * step.done / step.total))
         context.workspace.status_text_set(f"Relight bake: {step.message} (Esc to cancel)")
         return {"RUNNING_MODAL"}

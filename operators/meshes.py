@@ -82,3 +82,15 @@ def object_from_bmesh(name: str, bm, collection, smooth: bool = True):
     bm.to_mesh(mesh)
     bm.free()
     return _link_object(name, mesh, collection, smooth)
+
+
+def uv_triangles(obj) -> np.ndarray:
+    """UV coordinates of the mesh's triangulated faces (active render UV map), shape (T, 3, 2)."""
+    mesh = obj.data
+    mesh.calc_loop_triangles()
+    layer = next((uv for uv in mesh.uv_layers if uv.active_render), mesh.uv_layers[0])
+    uv = np.empty(len(mesh.loops) * 2, dtype=np.float64)
+    layer.data.foreach_get("uv", uv)
+    loops = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int64)
+    mesh.loop_triangles.foreach_get("loops", loops)
+    return uv.reshape(-1, 2)[loops].reshape(-1, 3, 2)

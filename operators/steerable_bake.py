@@ -25,6 +25,8 @@ from .cycles_bake import (BAKE_MODES, WORLD_SAMPLING, BakeInputError, Environmen
                           check_bakeable)
 
 BAKE_KIND = "steerable_texture"
+#: Fraction of covered texels with overlapping UVs above which a bake warns.
+UV_OVERLAP_WARNING = 0.01
 
 
 @dataclass
@@ -92,6 +94,14 @@ def bake_steerable_texture(scene, obj, settings: TextureBakeSettings):
     settings.validate()
     check_bakeable(obj)
     start = time.perf_counter()
+    from ..lt_addon.uv_layout import uv_overlap_report
+    from .meshes import uv_triangles
+
+    uv_report = uv_overlap_report(uv_triangles(obj), min(settings.resolution, 256))
+    if uv_report["overlapping"] > UV_OVERLAP_WARNING:
+        yield Progress(0, 1, f"warning: {100 * uv_report['overlapping']:.1f}% of the covered "
+                             f"texels have overlapping UVs on {obj.name}; those texels mix "
+                             "several faces (unwrap without overlaps)")
     basis = paper_basis(settings.order)
     sampled = build_sampled_basis(basis)
     k_total = sampled.n_lights
@@ -119,7 +129,8 @@ def bake_steerable_texture(scene, obj, settings: TextureBakeSettings):
                                frame=settings.frame, calibration=settings.calibration,
                                settings=record)
     yield Progress(k_total + 1, k_total + 1, "basis solve done")
-    return BakeResult(texture, cycles_seconds, total, calls, float(sampled.condition_number))
+    return BakeResult(texture, cycles_seconds, total, calls, float(sampled.condition_number),
+                      figures={"uv_layout": uv_report})
 
 
 def run(generator, on_progress=None, should_cancel=None):

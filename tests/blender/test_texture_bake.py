@@ -277,3 +277,23 @@ def test_calibrated_flat_plane_follows_the_cosine_law_in_cycles(fresh_scene):
             assert abs(relit.mean() - want) < 0.02 * zenith, (el, relit.mean(), want)
             sun = session.bake_sun(d, 1.0, 0.0)  # hard sun: noise-free at 1 spp
             assert abs(sun.mean() - want) < 1e-3 * zenith
+
+
+def test_overlapping_uvs_are_reported_before_baking(fresh_scene):
+    """Two quads mapped onto the same UV square: every covered texel overlaps; the bake warns
+    through its progress stream (operator report / CLI line) and records it in the figures."""
+    from relightable_textures.operators import steerable_bake as sb
+    from relightable_textures.operators.meshes import mesh_object
+
+    verts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
+                      [2, 0, 0], [3, 0, 0], [3, 1, 0], [2, 1, 0]], dtype=float)
+    uv = np.array([[0, 0], [1, 0], [1, 1], [0, 1]] * 2, dtype=float)
+    obj = mesh_object("Twins", verts, np.array([[0, 1, 2, 3], [4, 5, 6, 7]]),
+                      fresh_scene.collection, uv=uv)
+    steps = []
+    result = sb.run(sb.bake_steerable_texture(fresh_scene, obj, settings(order=2, samples=1,
+                                                                        resolution=16)),
+                    on_progress=steps.append)
+    assert steps[0].message.startswith("warning:") and "overlapping UVs" in steps[0].message
+    assert result.figures["uv_layout"]["overlapping"] == pytest.approx(1.0)
+    assert result.figures["uv_layout"]["covered"] == pytest.approx(1.0)
