@@ -34,6 +34,24 @@ class BakeInputError(ValueError):
     """The object or settings cannot be baked; the message says what to change."""
 
 
+def available_memory_bytes() -> int:
+    """Physical memory available now (Linux/macOS sysconf); 16 GiB where it cannot be read."""
+    import os
+
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, OSError, ValueError):
+        return 16 * 2 ** 30
+
+
+def check_memory(need_bytes: int, what: str, fix: str) -> None:
+    """Refuse up front when ``need_bytes`` exceeds 80% of the memory available now."""
+    have = available_memory_bytes()
+    if need_bytes > 0.8 * have:
+        raise BakeInputError(f"{what} needs {need_bytes / 2 ** 30:.1f} GiB but only "
+                             f"{have / 2 ** 30:.1f} GiB of memory is available; {fix}")
+
+
 def check_bakeable(obj, need_uv: bool = True) -> None:
     """Raise :class:`BakeInputError` unless ``obj`` is a mesh object (with a UV map if asked)."""
     if obj is None:

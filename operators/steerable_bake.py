@@ -22,7 +22,7 @@ from ..lt_addon.sampled_basis import build_sampled_basis
 from ..lt_addon.steerable import paper_basis
 from ..lt_addon.steerable_texture import FRAMES, STORAGE_MODES, SteerableTexture
 from .cycles_bake import (BAKE_MODES, WORLD_SAMPLING, BakeInputError, EnvironmentBake,
-                          check_bakeable)
+                          check_bakeable, check_memory)
 
 BAKE_KIND = "steerable_texture"
 #: Fraction of covered texels with overlapping UVs above which a bake warns.
@@ -60,10 +60,9 @@ class TextureBakeSettings:
         if not 8 <= self.env_height <= 4096:
             raise BakeInputError(f"env_height must be in 8..4096, got {self.env_height}")
         # basis images are float32 (N, R, R, 3) plus the sampled stack of the same size
-        need = 2 * self.order ** 2 * self.resolution ** 2 * 3 * 4
-        if need > 16 * 2 ** 30:
-            raise BakeInputError(f"order {self.order} at {self.resolution}^2 needs "
-                                 f"{need / 2 ** 30:.1f} GiB of memory; lower the resolution")
+        check_memory(2 * self.order ** 2 * self.resolution ** 2 * 3 * 4,
+                     f"order {self.order} at {self.resolution}^2",
+                     "lower the resolution or the order")
 
 
 @dataclass

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cycles_bake import BakeInputError, EnvironmentBake, check_bakeable
+from .cycles_bake import BakeInputError, EnvironmentBake, check_bakeable, check_memory
 
 
 @dataclass
@@ -69,9 +69,9 @@ def bake_transport(scene, obj, directions, bounces: int = 0, samples: int | None
     if samples is None:
         samples = 1 if bounces == 0 else 64
     n_vertices = len(obj.data.vertices)
-    if n_vertices * len(dirs) * 4 > 8 * 2 ** 30:
-        raise BakeInputError(f"{n_vertices} vertices x {len(dirs)} directions needs more than "
-                             "8 GiB; use fewer directions")
+    # T (float32) plus the float64 copy the fit makes
+    check_memory(n_vertices * len(dirs) * 12, f"{n_vertices} vertices x {len(dirs)} directions",
+                 "use fewer directions")
     start = time.perf_counter()
     T = np.empty((n_vertices, len(dirs)), dtype=np.float32)
     with EnvironmentBake(scene, obj, None, samples, bounces, (8, 16), mode="irradiance",
