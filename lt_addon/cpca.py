@@ -82,6 +82,18 @@ def energy_dimension(singular_values, energy: float) -> int:
     return int(np.searchsorted(frac, float(energy) - 1e-12) + 1)
 
 
+def singular_values(X) -> np.ndarray:
+    """Singular values of a (m, k) float64 matrix, descending, via the eigenvalues of the
+    smaller Gram matrix (``X X^T`` or ``X^T X``); several times faster than an SVD for the
+    energy counts used here (relative accuracy ~eps of the largest squared value)."""
+    X = np.asarray(X, dtype=np.float64)
+    if X.size == 0:
+        return np.zeros(0)
+    G = X @ X.T if X.shape[0] <= X.shape[1] else X.T @ X
+    lam = scipy.linalg.eigvalsh(G)[::-1]
+    return np.sqrt(np.clip(lam, 0.0, None))
+
+
 def global_dimension(T, energy: float = GLOBAL_ENERGY, subset: int | None = GLOBAL_SUBSET,
                      seed: int = 0) -> int:
     """Global dimension ``N`` of the transport (Mahajan 2007 sec. 5.1).
@@ -112,8 +124,7 @@ def global_dimension(T, energy: float = GLOBAL_ENERGY, subset: int | None = GLOB
         if int(subset) < V:
             rows = np.random.default_rng(seed).choice(V, int(subset), replace=False)
             T = T[np.sort(rows)]
-    sv = scipy.linalg.svdvals(T)
-    return energy_dimension(sv, energy)
+    return energy_dimension(singular_values(T), energy)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -20,10 +20,9 @@ from __future__ import annotations
 from collections import deque
 
 import numpy as np
-import scipy.linalg
 import scipy.sparse
 
-from .cpca import energy_dimension
+from .cpca import energy_dimension, singular_values
 from .eigentransport import _transport
 
 #: energy fraction defining patch dimensionality (Mahajan 2007 Fig. 7)
@@ -34,7 +33,7 @@ def patch_dimension(T_patch, energy: float = PATCH_ENERGY) -> int:
     """Number of singular values of ``T_patch`` (p, S) holding ``energy`` of its energy
     (no centring); 0 for an all-zero patch."""
     t = _transport(T_patch)
-    return energy_dimension(scipy.linalg.svdvals(t), energy)
+    return energy_dimension(singular_values(t), energy)
 
 
 def _adjacency(edges, n_vertices: int) -> scipy.sparse.csr_matrix:

@@ -189,3 +189,11 @@ def test_degenerate_inputs():
     # adaptive with more start clusters than vertices clips to V
     a = CP.adaptive_cpca(T, start_clusters=50, tol=1e-3)
     assert a.n_clusters <= 5
+
+
+@pytest.mark.parametrize("shape", [(30, 7), (7, 30), (1, 5), (12, 12)])
+def test_gram_singular_values_match_svd(shape):
+    X = np.random.default_rng(2).standard_normal(shape)
+    import scipy.linalg
+    ref = scipy.linalg.svdvals(X)
+    assert np.allclose(CP.singular_values(X)[:ref.size], ref, rtol=1e-9, atol=1e-12)

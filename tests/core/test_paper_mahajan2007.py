@@ -78,3 +78,12 @@ def test_cpca_on_sphere_matches_theory_direction():
     assert ad.cost() < one.cost()
     rep = DM.analyse(T, [0], edges=np.zeros((0, 2), int), sizes=[1], N=N)
     assert rep["N"] == N
+
+
+def test_cluster_count_and_adaptive(report):
+    v = report["cpca_cluster_count"]["value"]
+    c = v["cost_per_vertex"]
+    assert min(c) < c[0] and min(c) < c[-1]                      # interior minimum (Fig. 9b)
+    a = report["adaptive_vs_fixed"]["value"]
+    assert a["adaptive_cost_per_vertex"] <= a["fixed_same_count"]
+    assert a["adaptive_cost_per_vertex"] < a["N"]                 # beats global PCA alone
