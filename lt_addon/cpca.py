@@ -174,6 +174,9 @@ class CPCA:
                 raise ValueError(f"cluster {i} has {c.n_vertices} coefficient rows but "
                                  f"{counts[i]} labelled vertices")
         self.N = int(self.N)
+        # member lists once (stable sort keeps increasing vertex order inside each cluster)
+        order = np.argsort(self.labels, kind="stable")
+        self._members = np.split(order, np.cumsum(counts)[:-1])
 
     # -- sizes -----------------------------------------------------------------------------------
     @property
@@ -190,7 +193,7 @@ class CPCA:
 
     def members(self, i: int) -> np.ndarray:
         """Vertex indices of cluster ``i`` (increasing); shape (p_i,)."""
-        return np.flatnonzero(self.labels == i)
+        return self._members[i]
 
     def sizes(self) -> np.ndarray:
         """``p_i``, shape (k,)."""

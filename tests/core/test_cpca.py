@@ -197,3 +197,20 @@ def test_gram_singular_values_match_svd(shape):
     import scipy.linalg
     ref = scipy.linalg.svdvals(X)
     assert np.allclose(CP.singular_values(X)[:ref.size], ref, rtol=1e-9, atol=1e-12)
+
+
+@FEW
+@given(st.integers(2, 40), st.integers(1, 12), st.integers(1, 6), st.integers(0, 99),
+       st.booleans())
+def test_shading_property(V, S, k, seed, use_tol):
+    rng = np.random.default_rng(seed)
+    T = rng.random((V, S)) ** 3
+    k = min(k, V)
+    m = (CP.fit_cpca(T, k, tol=0.05, N=3, seed=seed) if use_tol
+         else CP.fit_cpca(T, k, dims=1, N=3, seed=seed))
+    lw = rng.random((S, 3))
+    albedo = rng.random(3)
+    ref = m.reconstruct() @ lw * albedo / np.pi
+    assert np.allclose(m.shade(lw, albedo), ref, rtol=1e-10, atol=1e-12)
+    for i in range(m.n_clusters):
+        assert np.array_equal(m.members(i), np.flatnonzero(m.labels == i))
