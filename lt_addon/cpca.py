@@ -305,7 +305,7 @@ class CPCA:
         for i in range(mean.shape[0]):
             n = int(off[i + 1] - off[i])
             clusters.append(Eigentransport(
-                mean[i], basis[off[i]:off[i + 1]].reshape(n, -1),
+                mean[i], basis[off[i]:off[i + 1]].reshape(n, mean.shape[1]),
                 coef[labels == i, :n], eig[eoff[i]:eoff[i + 1]], meta["total_energy"][i],
                 None, meta["selection"][i]))
         return cls(labels, clusters, meta["N"], meta.get("info", {}))

@@ -214,3 +214,13 @@ def test_shading_property(V, S, k, seed, use_tol):
     assert np.allclose(m.shade(lw, albedo), ref, rtol=1e-10, atol=1e-12)
     for i in range(m.n_clusters):
         assert np.array_equal(m.members(i), np.flatnonzero(m.labels == i))
+
+
+@pytest.mark.parametrize("T", [np.zeros((6, 4)), np.random.default_rng(0).random((9, 4))])
+def test_npz_round_trip_means_only(T, tmp_path):
+    # clusters with no basis vectors (zero transport, tol = 1) must survive an .npz file
+    m = CP.fit_cpca(T, 3, tol=1.0)
+    np.savez(tmp_path / "c.npz", **m.to_arrays())
+    back = CP.CPCA.from_arrays(np.load(tmp_path / "c.npz", allow_pickle=False))
+    assert np.allclose(back.reconstruct(), m.reconstruct(), atol=1e-6)
+    assert back.cost() == m.cost()
