@@ -159,7 +159,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_relight_vertices)
 
     p = sub.add_parser("validate", help="reproduce a paper's figures and check them")
-    p.add_argument("--paper", required=True, choices=["ashikhmin2002"],
+    p.add_argument("--paper", required=True, choices=sorted(PAPER_CHECKS),
                    help="which paper's figures to reproduce")
     p.set_defaults(func=_cmd_validate)
     return parser
@@ -221,12 +221,19 @@ def _cmd_info(args) -> int:
     return EXIT_OK
 
 
-def _cmd_validate(args) -> int:
-    from ..lt_addon import paper_checks
+#: paper name -> (module in lt_addon, report function)
+PAPER_CHECKS = {"ashikhmin2002": ("paper_checks", "ashikhmin2002_report"),
+                "mahajan2007": ("paper_checks_mahajan", "mahajan2007_report")}
 
-    report = paper_checks.ashikhmin2002_report()
+
+def _cmd_validate(args) -> int:
+    import importlib
+
+    module_name, function = PAPER_CHECKS[args.paper]
+    checks = importlib.import_module(f"..lt_addon.{module_name}", __package__)
+    report = getattr(checks, function)()
     print(json.dumps(report, indent=2))
-    if not paper_checks.all_ok(report):
+    if not checks.all_ok(report):
         bad = [k for k, v in report.items() if isinstance(v, dict) and not v.get("ok", True)]
         print(f"relight: validate: outside tolerance: {', '.join(bad)}", file=sys.stderr)
         return EXIT_FAILURE

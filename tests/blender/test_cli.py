@@ -76,3 +76,11 @@ def test_existing_output_without_force_is_refused(tmp_path):
     r = relight("scene", "room", "--out", out)
     assert r.returncode == 2 and "use --force" in r.stderr
     assert out.read_bytes() == b"BLENDER-user-data"
+
+
+@pytest.mark.parametrize("paper, key", [("ashikhmin2002", "w"), ("mahajan2007", "slope_step_shadow")])
+def test_validate_prints_the_reproduced_figures_and_exits_0(paper, key):
+    r = relight("validate", "--paper", paper)
+    assert r.returncode == 0, r.stderr[-2000:]
+    report = json.loads(r.stdout)
+    assert report[key]["ok"] and all(entry["ok"] for entry in report.values())
