@@ -86,16 +86,21 @@ def _albedo_factor(albedo, out_shape: tuple) -> np.ndarray | float:
     if not np.all(np.isfinite(a)):
         raise ValueError("albedo must be finite")
     V = out_shape[0]
+    C = out_shape[1] if len(out_shape) == 2 else None
     if a.ndim == 0:
         return float(a) / np.pi
-    if a.shape == out_shape:
+    if a.shape == out_shape or (C is not None and a.shape in ((V, 1), (1, C))):
         return a / np.pi
+    if a.shape == (V,) and C == V:
+        raise ValueError(f"albedo of shape ({V},) is ambiguous for {V} vertices and {C} "
+                         f"channels: pass shape ({V}, 1) for one albedo per vertex or "
+                         f"(1, {C}) for one per channel")
     if a.shape == (V,):                  # one albedo per vertex, all channels
         return (a / np.pi).reshape((V,) + (1,) * (len(out_shape) - 1))
-    if len(out_shape) == 2 and a.shape == out_shape[1:]:   # one albedo per channel
+    if C is not None and a.shape == (C,):   # one albedo per channel
         return a / np.pi
     raise ValueError(f"albedo must be a scalar or have shape {out_shape}, ({V},)"
-                     + (f" or ({out_shape[1]},)" if len(out_shape) == 2 else "")
+                     + (f", ({C},), ({V}, 1) or (1, {C})" if C is not None else "")
                      + f"; got {a.shape}")
 
 
@@ -229,7 +234,8 @@ class Eigentransport:
         ----------
         L_weighted : array_like, shape (S,) or (S, C)
             Radiance (W m^-2 sr^-1) times solid angle (sr) per sample direction.
-        albedo : float or array_like, shape (V,), (C,) or (V, C)
+        albedo : float or array_like, shape (V,), (C,), (V, 1), (1, C) or (V, C)
+            A 1-D albedo with V == C is ambiguous and refused; use (V, 1) or (1, C).
             Diffuse reflectance rho.
 
         Returns

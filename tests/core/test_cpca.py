@@ -209,7 +209,7 @@ def test_shading_property(V, S, k, seed, use_tol):
     m = (CP.fit_cpca(T, k, tol=0.05, N=3, seed=seed) if use_tol
          else CP.fit_cpca(T, k, dims=1, N=3, seed=seed))
     lw = rng.random((S, 3))
-    albedo = rng.random(3)
+    albedo = rng.random((1, 3))  # one per channel, explicit (a (3,) albedo is ambiguous at V = 3)
     ref = m.reconstruct() @ lw * albedo / np.pi
     assert np.allclose(m.shade(lw, albedo), ref, rtol=1e-10, atol=1e-12)
     for i in range(m.n_clusters):

@@ -385,3 +385,18 @@ def test_eigentransport_beats_sh_and_haar_on_shadowed_transport():
     halton = D.halton_sphere(384)
     skipped = TE.error_curves(sc["T"], halton, _envs(halton, 1), counts=[4], bases=["haar"])
     assert "cube:n" in skipped["haar"]["skipped"]
+
+
+def test_albedo_shape_is_never_guessed():
+    """(V,) vs (C,) is ambiguous when V == C: refused; explicit (V, 1) / (1, C) work."""
+    rng = np.random.default_rng(0)
+    T = rng.random((3, 5))
+    model = ET.fit_eigentransport(T, d=2)
+    lw = rng.random((5, 3))
+    full = model.reconstruct() @ lw / np.pi
+    with pytest.raises(ValueError, match="ambiguous"):
+        model.shade(lw, np.array([0.1, 0.5, 0.9]))
+    per_vertex = np.array([[0.1], [0.5], [0.9]])
+    per_channel = np.array([[0.2, 0.4, 0.6]])
+    np.testing.assert_allclose(model.shade(lw, per_vertex), full * per_vertex, rtol=1e-10)
+    np.testing.assert_allclose(model.shade(lw, per_channel), full * per_channel, rtol=1e-10)
