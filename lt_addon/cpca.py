@@ -39,6 +39,7 @@ import scipy.linalg
 from .eigentransport import (
     Eigentransport,
     _albedo_factor,
+    read_sidecar_metadata,
     _lighting,
     _transport,
     fit_eigentransport,
@@ -285,15 +286,7 @@ class CPCA:
     def from_arrays(cls, arrays) -> "CPCA":
         """Inverse of :meth:`to_arrays` (dict or ``np.load`` result); float64 copies of the
         stored float32 values."""
-        try:
-            meta = json.loads(str(np.asarray(arrays["metadata"])[()]))
-        except KeyError:
-            raise ValueError("not a CPCA sidecar: no 'metadata' entry") from None
-        if meta.get("format") != FORMAT:
-            raise ValueError(f"not a CPCA sidecar (format {meta.get('format')!r})")
-        if meta.get("format_version", 0) > FORMAT_VERSION:
-            raise ValueError(f"sidecar format version {meta['format_version']} is newer than "
-                             f"this code ({FORMAT_VERSION}); update the extension")
+        meta = read_sidecar_metadata(arrays, FORMAT, FORMAT_VERSION, "a CPCA")
         labels = np.asarray(arrays["labels"], dtype=np.int64)
         mean = np.asarray(arrays["mean"], np.float64)
         basis = np.asarray(arrays["basis"], np.float64)

@@ -339,19 +339,29 @@ class Eigentransport:
     def from_arrays(cls, arrays) -> "Eigentransport":
         """Inverse of :meth:`to_arrays` (accepts a dict or an ``np.load`` result); arrays come
         back as float64 copies of the stored float32 values."""
-        try:
-            meta = json.loads(str(np.asarray(arrays["metadata"])[()]))
-        except KeyError:
-            raise ValueError("not an eigentransport sidecar: no 'metadata' entry") from None
-        if meta.get("format") != FORMAT:
-            raise ValueError(f"not an eigentransport sidecar (format {meta.get('format')!r})")
-        if meta.get("format_version", 0) > FORMAT_VERSION:
-            raise ValueError(f"sidecar format version {meta['format_version']} is newer than "
-                             f"this code ({FORMAT_VERSION}); update the extension")
+        meta = read_sidecar_metadata(arrays, FORMAT, FORMAT_VERSION, "an eigentransport")
         return cls(np.asarray(arrays["mean"], np.float64), np.asarray(arrays["basis"], np.float64),
                    np.asarray(arrays["coefficients"], np.float64),
                    np.asarray(arrays["eigenvalues"], np.float64), meta["total_energy"],
                    meta.get("d_requested"), meta.get("selection", {}), meta.get("metadata", {}))
+
+
+def read_sidecar_metadata(arrays, fmt: str, version: int, what: str) -> dict:
+    """The JSON ``metadata`` entry of an ``.npz`` sidecar, checked for format and version.
+
+    Raises ValueError naming ``what`` (with its article, e.g. "an eigentransport") when it is
+    not such a sidecar or is from a newer version.
+    """
+    try:
+        meta = json.loads(str(np.asarray(arrays["metadata"])[()]))
+    except KeyError:
+        raise ValueError(f"not {what} sidecar: no 'metadata' entry") from None
+    if meta.get("format") != fmt:
+        raise ValueError(f"not {what} sidecar (format {meta.get('format')!r})")
+    if meta.get("format_version", 0) > version:
+        raise ValueError(f"sidecar format version {meta['format_version']} is newer than "
+                         f"this code ({version}); update the extension")
+    return meta
 
 
 def captured_energy_curve(eigenvalues, total_energy: float) -> np.ndarray:

@@ -35,10 +35,7 @@ from .dimensionality import (
     mu_from_slope,
     optimal_patch_size,
 )
-
-
-def _entry(value, paper, tolerance, ok, note):
-    return {"value": value, "paper": paper, "tolerance": tolerance, "ok": bool(ok), "note": note}
+from .paper_checks import _entry, all_ok  # noqa: F401  (one report format for every paper)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -307,7 +304,3 @@ def mahajan2007_report(fast: bool = True) -> dict:
         "fit_cpca with the same final count and with 1..64 clusters; same data, tol, N")
     return rep
 
-
-def all_ok(report: dict) -> bool:
-    """True when every entry of a report passed."""
-    return all(v["ok"] for v in report.values())
