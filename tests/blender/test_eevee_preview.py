@@ -7,9 +7,9 @@ Linear, EEVEE's own pixel sample positions and texture filtering differ from Cyc
 scale (measured: image mean equal to 0.04%, single pixels up to 24% of the peak at 16^2)."""
 
 import numpy as np
+from render_check import render_rgb
 
 from relightable_textures import samples
-from relightable_textures.lt_addon import exrio
 from relightable_textures.lt_addon.hemisphere import direction_from_az_el
 
 
@@ -31,20 +31,7 @@ def test_eevee_renders_the_preview_group_like_numpy(fresh_scene, tmp_path):
     for n in lookups:
         n.interpolation = "Closest"
     fresh_scene["relight_azimuth"], fresh_scene["relight_elevation"] = 40.0, 35.0
-    fresh_scene.update_tag()
-    bpy.context.view_layer.update()
-    fresh_scene.render.engine = "BLENDER_EEVEE"
-    fresh_scene.eevee.taa_render_samples = 1
-    fresh_scene.render.resolution_x = fresh_scene.render.resolution_y = r
-    fresh_scene.render.resolution_percentage = 100
-    fresh_scene.render.filter_size = 0.0
-    fresh_scene.world = None
-    fresh_scene.render.image_settings.file_format = "OPEN_EXR"
-    fresh_scene.render.image_settings.color_depth = "32"
-    fresh_scene.render.filepath = str(tmp_path / "eevee.exr")
-    bpy.ops.render.render(write_still=True)
-    ch, _ = exrio.read_exr(str(tmp_path / "eevee.exr"))
-    img = np.stack([ch["R"], ch["G"], ch["B"]], -1).astype(np.float64)
+    img = render_rgb(fresh_scene, tmp_path, r, engine="BLENDER_EEVEE")
     want = result.texture.relight(direction_from_az_el(40.0, 35.0)).astype(np.float64)
     assert want.max() > 0.1
     assert np.abs(img - want).max() <= 2.0 ** -10 * want.max()  # half-float atlas precision

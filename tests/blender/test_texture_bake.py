@@ -8,9 +8,9 @@ import os
 
 import numpy as np
 import pytest
+from render_check import render_rgb
 
 from relightable_textures import samples
-from relightable_textures.lt_addon import exrio
 from relightable_textures.lt_addon.hemisphere import direction_from_az_el, disk_to_hemisphere
 from relightable_textures.lt_addon.storage import reconstruction_error
 
@@ -127,28 +127,10 @@ def test_preview_node_group_rendered_by_cycles_equals_numpy_relight(bumps, tmp_p
     az, el, inten, color = 40.0, 35.0, 2.0, (1.0, 0.5, 0.25)
     scene["relight_azimuth"], scene["relight_elevation"] = az, el
     scene["relight_intensity"], scene["relight_color"] = inten, color
-    img = _render(scene, tmp_path)
+    img = render_rgb(scene, tmp_path, R)
     want = result.texture.relight(direction_from_az_el(az, el), inten, color)
     assert want.max() > 0.1
     assert np.abs(img - want).max() <= 2.0 ** -10 * want.max()
-
-
-def _render(scene, tmp_path):
-    import bpy
-
-    scene.update_tag()
-    bpy.context.view_layer.update()
-    scene.render.resolution_x = scene.render.resolution_y = R
-    scene.render.resolution_percentage = 100
-    scene.cycles.samples = 1
-    scene.cycles.filter_width = 0.01  # sample pixel centres = texel centres
-    scene.world = None
-    scene.render.image_settings.file_format = "OPEN_EXR"
-    scene.render.image_settings.color_depth = "32"
-    scene.render.filepath = str(tmp_path / "render.exr")
-    bpy.ops.render.render(write_still=True)
-    ch, _ = exrio.read_exr(str(tmp_path / "render.exr"))
-    return np.stack([ch["R"], ch["G"], ch["B"]], -1).astype(np.float64)
 
 
 def test_preview_follows_the_sun_lamp(bumps, tmp_path):
@@ -167,7 +149,7 @@ def test_preview_follows_the_sun_lamp(bumps, tmp_path):
     preview_nodes.set_follow_sun(scene, sun)
     scene["relight_follow_sun"] = 1.0
     scene["relight_azimuth"], scene["relight_elevation"] = 0.0, 10.0  # ignored while following
-    img = _render(scene, tmp_path)
+    img = render_rgb(scene, tmp_path, R)
     want = result.texture.relight(direction_from_az_el(120.0, 50.0))
     assert np.abs(img - want).max() <= 2.0 ** -10 * want.max()
 
