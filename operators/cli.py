@@ -40,7 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
     from ..lt_addon.calibration import METHODS as CALIBRATIONS
     from ..lt_addon.steerable_texture import FRAMES, STORAGE_MODES
     from ..samples import DESCRIPTIONS, SIZES
-    from .presets import BAKE_MODES, PRESETS, WORLD_SAMPLING
+    from .cycles_bake import BAKE_MODES, WORLD_SAMPLING
+    from .presets import PRESETS
 
     parser = _Parser(
         prog="relight",

@@ -12,7 +12,6 @@ import json
 import os
 from dataclasses import replace
 
-from .cycles_bake import BAKE_MODES, WORLD_SAMPLING  # noqa: F401  (re-exported for the CLI)
 from .steerable_bake import TextureBakeSettings
 
 PRESETS = {

@@ -45,6 +45,16 @@ def bake(scene, obj, **kw):
     return s, sb.run(sb.bake_steerable_texture(scene, obj, s))
 
 
+def bake_with_preview(scene, obj, tmp_path, target=None, **kw):
+    """Bake ``obj``, write its files to ``tmp_path`` and install the preview on ``target``."""
+    from relightable_textures.operators import preview_nodes, steerable_bake as sb
+
+    s, result = bake(scene, obj, **kw)
+    report = sb.write_bake(result, obj, str(tmp_path), s)
+    preview_nodes.install_preview(scene, target or obj, report["exr"], result.texture)
+    return result
+
+
 def env_bake(scene, obj, env, spp, seed, sampling="importance"):
     from relightable_textures.operators.cycles_bake import EnvironmentBake
 
@@ -109,12 +119,9 @@ def test_preview_node_group_rendered_by_cycles_equals_numpy_relight(bumps, tmp_p
     import bpy
 
     from relightable_textures.lt_addon import heightfield
-    from relightable_textures.operators import preview_nodes, steerable_bake as sb
     from relightable_textures.operators.meshes import grid_faces, mesh_object
 
     scene, obj = bumps
-    s, result = bake(scene, obj, frame=frame, samples=4)
-    report = sb.write_bake(result, obj, str(tmp_path), s)
     target = obj
     if frame == "tangent":
         u, v = heightfield.grid(4)
@@ -123,7 +130,7 @@ def test_preview_node_group_rendered_by_cycles_equals_numpy_relight(bumps, tmp_p
                              uv=np.stack([u, v], -1).reshape(-1, 2))
         target.data.materials.append(bpy.data.materials.new("FlatMaterial"))
         obj.hide_render = True
-    preview_nodes.install_preview(scene, target, report["exr"], result.texture)
+    result = bake_with_preview(scene, obj, tmp_path, target, frame=frame, samples=4)
     az, el, inten, color = 40.0, 35.0, 2.0, (1.0, 0.5, 0.25)
     scene["relight_azimuth"], scene["relight_elevation"] = az, el
     scene["relight_intensity"], scene["relight_color"] = inten, color
@@ -134,18 +141,12 @@ def test_preview_node_group_rendered_by_cycles_equals_numpy_relight(bumps, tmp_p
 
 
 def test_preview_follows_the_sun_lamp(bumps, tmp_path):
-    import math
-
-    import bpy
-
-    from relightable_textures.operators import preview_nodes, steerable_bake as sb
+    from relightable_textures.operators import preview_nodes
+    from relightable_textures.samples.scene_setup import sun_lamp
 
     scene, obj = bumps
-    s, result = bake(scene, obj, samples=4)
-    report = sb.write_bake(result, obj, str(tmp_path), s)
-    preview_nodes.install_preview(scene, obj, report["exr"], result.texture)
-    sun = bpy.data.objects["Sun"]
-    sun.rotation_euler = (math.radians(90 - 50.0), 0.0, math.radians(120.0 + 90.0))  # az 120, el 50
+    result = bake_with_preview(scene, obj, tmp_path, samples=4)
+    sun = sun_lamp(scene.collection, elevation_deg=50.0, azimuth_deg=120.0)
     preview_nodes.set_follow_sun(scene, sun)
     scene["relight_follow_sun"] = 1.0
     scene["relight_azimuth"], scene["relight_elevation"] = 0.0, 10.0  # ignored while following
@@ -161,9 +162,7 @@ def test_cancel_keeps_the_previous_bake_and_rebake_replaces_it(bumps, tmp_path):
     from relightable_textures.operators.blend_files import object_bakes
 
     scene, obj = bumps
-    s, result = bake(scene, obj, samples=4)
-    report = sb.write_bake(result, obj, str(tmp_path), s)
-    preview_nodes.install_preview(scene, obj, report["exr"], result.texture)
+    result = bake_with_preview(scene, obj, tmp_path, samples=4)
     files = {n: (tmp_path / n).read_bytes() for n in os.listdir(tmp_path)}
     record = object_bakes(obj)
     nodes = sorted(n.name for n in obj.active_material.node_tree.nodes)
