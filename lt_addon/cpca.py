@@ -240,6 +240,58 @@ class CPCA:
             B[self.members(i)] = c.coefficients @ lc + mean_term
         return B * _albedo_factor(albedo, B.shape)
 
+    def shade_local(self, L_weighted_per_vertex, albedo=1.0) -> np.ndarray:
+        """Shading under per-vertex lighting (local lights), as
+        :meth:`Eigentransport.shade_local` cluster by cluster.
+
+        Parameters
+        ----------
+        L_weighted_per_vertex : array_like or scipy.sparse matrix, shape (V, S)
+        albedo : float or array_like, shape (V,)
+
+        Returns
+        -------
+        B : ndarray, shape (V,)
+        """
+        import scipy.sparse
+
+        V, S = self.n_vertices, self.n_samples
+        lw = (scipy.sparse.csr_matrix(L_weighted_per_vertex, dtype=np.float64)
+              if scipy.sparse.issparse(L_weighted_per_vertex)
+              else np.asarray(L_weighted_per_vertex, dtype=np.float64))
+        if lw.shape != (V, S):
+            raise ValueError(f"per-vertex lighting must have shape ({V}, {S}), got {lw.shape}")
+        B = np.empty(V)
+        for i, c in enumerate(self.clusters):
+            idx = self.members(i)
+            B[idx] = c.shade_local(lw[idx], albedo=np.pi)  # albedo pi: the plain dot product
+        return B * _albedo_factor(albedo, B.shape)
+
+    @property
+    def d(self) -> int:
+        """Largest per-cluster basis size ``max n_i`` (mean not counted)."""
+        return int(max(c.d for c in self.clusters))
+
+    def storage_bytes(self) -> dict:
+        """Bytes of the stored arrays at 4 bytes per value (float32).
+
+        Returns
+        -------
+        dict of int
+            ``labels`` (4 V), ``coefficients`` (4 V max n_i, as stored padded),
+            ``coefficients_packed`` (4 sum p_i n_i), ``mean`` (4 k S), ``basis`` (4 S sum n_i),
+            ``sidecar`` (labels + padded coefficients + means + bases) and ``runtime``
+            = 4 sum_i n_i (p_i + 1): the packed coefficients plus one projected lighting value
+            per basis vector (the CPCA counterpart of eigentransport's ``paper_runtime``).
+        """
+        V, S = self.n_vertices, self.n_samples
+        p, n = self.sizes(), np.array([c.d for c in self.clusters], dtype=np.int64)
+        out = {"labels": 4 * V, "coefficients": 4 * V * self.d,
+               "coefficients_packed": int(4 * np.sum(p * n)), "mean": 4 * self.n_clusters * S,
+               "basis": int(4 * S * n.sum()), "runtime": int(4 * np.sum(n * (p + 1)))}
+        out["sidecar"] = out["labels"] + out["coefficients"] + out["mean"] + out["basis"]
+        return out
+
     def reconstruct(self) -> np.ndarray:
         """Clustered reconstruction; shape (V, S), float64."""
         out = np.empty((self.n_vertices, self.n_samples))
@@ -580,3 +632,41 @@ def adaptive_cpca(T, start_clusters: int = 8, tol: float = 1e-3, n_iter: int = 1
                   "relative_rms_error": relative_rms_error(T, model.reconstruct()),
                   "tree": tree}
     return model
+
+
+# ----------------------------------------------------------------------------------------------
+# runtime helpers
+
+
+def model_from_arrays(arrays):
+    """An :class:`Eigentransport` or a :class:`CPCA`, whichever the sidecar holds."""
+    try:
+        fmt = json.loads(str(np.asarray(arrays["metadata"])[()])).get("format")
+    except KeyError:
+        raise ValueError("not a transport sidecar: no 'metadata' entry") from None
+    return CPCA.from_arrays(arrays) if fmt == FORMAT else Eigentransport.from_arrays(arrays)
+
+
+def cluster_colors(labels) -> np.ndarray:
+    """A distinct, deterministic linear-RGB colour per cluster label.
+
+    Hues step by the golden angle so neighbouring labels differ strongly; saturation and value
+    alternate over three levels so large cluster counts stay distinguishable.
+
+    Parameters
+    ----------
+    labels : array_like of int, shape (V,)
+
+    Returns
+    -------
+    rgb : ndarray, shape (V, 3), float64 in [0, 1] (linear)
+    """
+    lab = np.asarray(labels, dtype=np.int64).reshape(-1)
+    if lab.size and lab.min() < 0:
+        raise ValueError("cluster labels must be >= 0")
+    h = (lab * 0.6180339887498949) % 1.0
+    sat = np.array([0.85, 0.6, 0.95])[lab % 3]
+    val = np.array([0.9, 0.7, 0.5])[(lab // 3) % 3]
+    k = (np.array([5.0, 3.0, 1.0])[None, :] + 6.0 * h[:, None]) % 6.0
+    rgb_srgb = val[:, None] * (1.0 - sat[:, None] * np.clip(np.minimum(k, 4.0 - k), 0.0, 1.0))
+    return rgb_srgb ** 2.2  # display values -> linear, so the viewport shows the intended hue

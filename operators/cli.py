@@ -141,6 +141,9 @@ def build_parser() -> argparse.ArgumentParser:
     group.add_argument("--energy", type=float, help="keep d capturing this fraction of the "
                        "centred transport energy (default 0.99)")
     group.add_argument("--coeffs", type=int, help="keep exactly d eigentransports")
+    p.add_argument("--clusters", metavar="auto|K", help="clustered PCA (Mahajan 2007) instead of "
+                   "one global PCA: K clusters, or 'auto' for adaptive subdivision by cost; "
+                   "--energy is then each cluster's tolerance")
     p.add_argument("--truth", action="store_true", help="also bake the object under the world "
                    "(or a sun-and-sky HDRI) with Cycles and report the error per d")
     p.add_argument("--out", metavar="DIR", help="output folder (default <blend>_relight/)")
@@ -366,7 +369,8 @@ def _cmd_bake_transport(args) -> int:
     path = _check_input_blend(args.file)
     settings = transport_bake.TransportSettings(
         directions=args.directions, bounces=args.bounces, samples=args.samples,
-        energy=args.energy if args.coeffs is None else None, coeffs=args.coeffs)
+        energy=args.energy if args.coeffs is None else None, coeffs=args.coeffs,
+        clusters=args.clusters)
     if settings.energy is None and settings.coeffs is None:
         settings.energy = 0.99
     try:
@@ -380,6 +384,10 @@ def _cmd_bake_transport(args) -> int:
     if not _can_create_in(os.path.dirname(path)):
         raise CliError(f"cannot update {path}: its folder is not writable")
     obj = _open_object(path, args.object)
+    n_vertices = len(obj.data.vertices) if obj.type == "MESH" else 0
+    if isinstance(settings.clusters, int) and settings.clusters > n_vertices > 0:
+        raise CliError(f"--clusters {settings.clusters} exceeds {obj.name}'s {n_vertices} "
+                       f"vertices; use at most {n_vertices} or 'auto'")
     scene = bpy.context.scene
     show = _progress_printer("bake-transport")
     try:
@@ -391,8 +399,11 @@ def _cmd_bake_transport(args) -> int:
     except KeyboardInterrupt:
         print("bake-transport: cancelled; nothing was written", file=sys.stderr)
         return 130
-    report = transport_bake.fit_and_write(result, obj, direction_set, settings, out_dir)
-    model = report.pop("model")
+    try:
+        report = transport_bake.fit_and_write(result, obj, direction_set, settings, out_dir)
+    except (BakeInputError, ValueError) as exc:
+        raise CliError(f"fitting failed, nothing was written: {exc}") from None
+    model = report.pop("fitted")
     if args.truth:
         env = vertex_relight.world_environment(scene)
         if env is None or np.ptp(env) == 0:
@@ -411,10 +422,14 @@ def _cmd_bake_transport(args) -> int:
     t = report["timings"]
     print(f"baked {obj.name}: {report['vertices']} vertices x {report['directions']} directions "
           f"in {t['total_bake_seconds']:.2f} s ({t['directions_per_second']:.1f} directions/s); "
-          f"d = {report['d']} (captured energy {report['captured_energy']:.4f}); "
-          f"{report['bytes']['sidecar_file']} bytes -> {report['sidecar']}")
+          + (f"CPCA {report['cpca']['clusters']} clusters, {report['cpca']['cost_per_vertex']:.1f}"
+             f" multiply-adds per vertex (N = {report['cpca']['N']}), rel. RMS error "
+             f"{report['relative_rms_error']:.4f}; " if "cpca" in report else
+             f"d = {report['d']} (captured energy {report['captured_energy']:.4f}); ")
+          + f"{report['bytes']['sidecar_file']} bytes -> {report['sidecar']}")
     for row in report.get("ground_truth", {}).get("per_d", []):
-        print(f"  d = {row['d']:4d}: rel. RMS error vs Cycles {row['rel_rms_error']:.4f}")
+        what = "CPCA model" if "cpca" in report else f"d = {row['d']:4d}"
+        print(f"  {what}: rel. RMS error vs Cycles {row['rel_rms_error']:.4f}")
     if "all_directions_rel_rms_error" in report.get("ground_truth", {}):
         print(f"  all {report['directions']} directions, no PCA: "
               f"{report['ground_truth']['all_directions_rel_rms_error']:.4f} (sampling floor)")

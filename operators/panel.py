@@ -111,6 +111,7 @@ class VIEW3D_PT_relight_vertex(_RelightSubPanel, bpy.types.Panel):
         col.prop(props, "env_strength")
         col.prop(props, "env_rotation")
         col.prop(props, "point_light")
+        col.prop(props, "show_clusters")
         col.label(text="Bake with: relight bake-transport (CLI)", icon="INFO")
 
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import bpy
-from bpy.props import EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 from ..lt_addon.steerable_texture import STORAGE_MODES
 from ..samples import DESCRIPTIONS, SIZES
@@ -88,6 +88,10 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         description="A point lamp added to the vertex preview (nearest sample direction, "
                     "1/r^2; valid outside the object's convex hull)",
         update=_refresh_vertex_preview)
+    show_clusters: BoolProperty(
+        name="Show Clusters", default=False,
+        description="Colour the vertices by CPCA cluster (bake-transport --clusters) instead "
+                    "of the shading", update=_refresh_vertex_preview)
 
 
 CLASSES = (RelightSceneSettings,)

@@ -100,7 +100,13 @@ def bake_environment_truth(scene, obj, environment, bounces: int, samples: int,
 
 @dataclass
 class TransportSettings:
-    """What to bake and how many eigentransports to keep (exactly one of energy / coeffs)."""
+    """What to bake and how many eigentransports to keep (exactly one of energy / coeffs).
+
+    ``clusters``: None = one global eigentransport (Nowrouzezahrai 2008); an int k = CPCA with k
+    clusters; "auto" = Mahajan 2007's adaptive subdivision (starts at 8 clusters, keeps a split
+    only when the cost falls). With clusters, ``energy`` E is a per-cluster tolerance: each
+    cluster keeps the fewest vectors leaving at most 1 - E of its energy (``coeffs`` = a fixed
+    count per cluster; "auto" needs ``energy``)."""
 
     directions: str = "cube:8"
     bounces: int = 0
@@ -108,6 +114,7 @@ class TransportSettings:
     energy: float | None = 0.99
     coeffs: int | None = None
     seed: int = 0
+    clusters: int | str | None = None
 
     def validate(self):
         from ..lt_addon.directions import parse_direction_spec
@@ -124,7 +131,52 @@ class TransportSettings:
             raise BakeInputError(f"--energy must be in (0, 1], got {self.energy}")
         if self.coeffs is not None and self.coeffs < 1:
             raise BakeInputError(f"--coeffs must be >= 1, got {self.coeffs}")
+        self.clusters = parse_clusters(self.clusters)
+        if self.clusters == "auto" and self.energy is None:
+            raise BakeInputError("--clusters auto chooses the clusters by cost at a tolerance; "
+                                 "use --energy instead of --coeffs")
         return ds
+
+
+def parse_clusters(value):
+    """None, "auto" or a positive int from a CLI / settings value; BakeInputError otherwise."""
+    if value is None or value == "auto":
+        return value
+    text = str(value).strip()
+    if isinstance(value, bool) or not text.isdigit() or int(text) < 1:
+        raise BakeInputError(f"--clusters takes 'auto' or a positive integer, got {value!r}")
+    return int(text)
+
+
+def fit_model(T: np.ndarray, settings: TransportSettings, metadata: dict):
+    """Eigentransport (no clusters) or CPCA (``settings.clusters``) of a (V, S) bake.
+
+    Raises BakeInputError when a fixed cluster count exceeds the vertex count."""
+    from ..lt_addon import cpca
+    from ..lt_addon.eigentransport import fit_eigentransport
+
+    T = np.asarray(T, dtype=np.float64)
+    if settings.clusters is None:
+        return fit_eigentransport(T, d=settings.coeffs, energy=settings.energy,
+                                  metadata=metadata)
+    tol = None if settings.energy is None else 1.0 - settings.energy
+    if settings.clusters == "auto":
+        return cpca.adaptive_cpca(T, start_clusters=8, tol=tol, seed=settings.seed)
+    if settings.clusters > T.shape[0]:
+        raise BakeInputError(f"--clusters {settings.clusters} exceeds the object's "
+                             f"{T.shape[0]} vertices; use at most {T.shape[0]} or 'auto'")
+    return cpca.fit_cpca(T, settings.clusters, tol=tol, dims=settings.coeffs, seed=settings.seed)
+
+
+def cluster_summary(model) -> dict:
+    """JSON-safe CPCA figures for reports: counts, sizes, dims, N and Mahajan's cost."""
+    p, n = model.sizes(), model.dims()
+    info = {k: v for k, v in model.info.items() if k != "tree"}
+    return {"clusters": model.n_clusters, "N": model.N, "cost": model.cost(),
+            "cost_per_vertex": model.cost_per_vertex(),
+            "size_min": int(p.min()), "size_median": float(np.median(p)), "size_max": int(p.max()),
+            "dims_min": int(n.min()), "dims_mean": float(n.mean()), "dims_max": int(n.max()),
+            "fit": info}
 
 
 def fit_and_write(result: TransportBakeResult, obj, direction_set, settings: TransportSettings,
@@ -136,16 +188,15 @@ def fit_and_write(result: TransportBakeResult, obj, direction_set, settings: Tra
     import json
     import os
 
-    from ..lt_addon.eigentransport import fit_eigentransport
+    from ..lt_addon.cpca import CPCA
     from .steerable_bake import record_kind
     from .vertex_relight import KIND, mesh_positions_normals, save_sidecar
 
     t0 = time.perf_counter()
-    model = fit_eigentransport(result.transport.astype(np.float64), d=settings.coeffs,
-                               energy=settings.energy,
-                               metadata={"directions": direction_set.spec,
-                                         "bounces": settings.bounces})
+    model = fit_model(result.transport, settings, {"directions": direction_set.spec,
+                                                    "bounces": settings.bounces})
     fit_seconds = time.perf_counter() - t0
+    clustered = isinstance(model, CPCA)
     os.makedirs(out_dir, exist_ok=True)
     safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in obj.name)
     path = os.path.join(out_dir, f"{safe}_transport.npz")
@@ -159,8 +210,12 @@ def fit_and_write(result: TransportBakeResult, obj, direction_set, settings: Tra
         "kind": KIND, "object": obj.name, "sidecar": os.path.abspath(path),
         "vertices": V, "directions": S, "direction_set": direction_set.spec,
         "settings": {"bounces": settings.bounces, "samples": meta["samples"],
-                     "energy": settings.energy, "coeffs": settings.coeffs, "seed": settings.seed},
-        "d": model.d, "captured_energy": model.captured_energy, "selection": model.selection,
+                     "energy": settings.energy, "coeffs": settings.coeffs, "seed": settings.seed,
+                     "clusters": settings.clusters},
+        "model": "cpca" if clustered else "eigentransport", "d": model.d,
+        **({"cpca": cluster_summary(model),
+            "relative_rms_error": model.info["relative_rms_error"]} if clustered else
+           {"captured_energy": model.captured_energy, "selection": model.selection}),
         "timings": {"cycles_bake_seconds": round(result.cycles_seconds, 4),
                     "total_bake_seconds": round(result.total_seconds, 4),
                     "fit_seconds": round(fit_seconds, 4),
@@ -174,10 +229,12 @@ def fit_and_write(result: TransportBakeResult, obj, direction_set, settings: Tra
         json.dump(report, fh, indent=2)
     os.replace(tmp, os.path.join(out_dir, f"{safe}_transport.json"))
     record_kind(obj, KIND, path, {"d": model.d, "directions": direction_set.spec,
+                                  "model": report["model"],
+                                  "clusters": model.n_clusters if clustered else 1,
                                   "bounces": settings.bounces, "vertices": V,
                                   "bytes": nbytes,
                                   "bake_seconds": round(result.total_seconds, 2)})
-    report["model"] = model
+    report["fitted"] = model
     return report
 
 
@@ -196,7 +253,12 @@ def truth_errors(scene, obj, model, direction_set, environment, bounces: int, sa
     Lw = project_environment(environment, direction_set.directions, direction_set.solid_angles,
                              row_order="bottom_first")
     rows = []
+    if not hasattr(model, "truncate"):  # CPCA: the fitted model only
+        ds_for = ()
     for d in sorted({min(d, model.d) for d in ds_for} | {model.d}):
+        if not hasattr(model, "truncate"):
+            rows.append({"d": d, "rel_rms_error": relative_rms_error(truth, model.shade(Lw))})
+            continue
         shade = model.truncate(d).shade(Lw)  # albedo 1: E / pi, as the DIFFUSE bake
         rows.append({"d": d, "rel_rms_error": relative_rms_error(truth, shade)})
     out = {"truth_samples": samples, "truth_seconds": round(truth_seconds, 3), "per_d": rows}

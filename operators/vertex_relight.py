@@ -10,6 +10,10 @@ product on the CPU anyway; only its result goes to the GPU as one colour attribu
 Shading (white Lambertian, so values are irradiance / pi, comparable with a Cycles DIFFUSE bake
 without the colour pass): ``B = 1/pi (m . Lw + C (E Lw))`` with ``Lw_j = L(w_j) dw_j`` from the
 environment (optionally rotated, paper sec. 5) and/or a point light (sec. 4.2.1).
+
+A bake with ``--clusters`` stores a CPCA model (Mahajan 2007) in the same sidecar slot instead;
+both models have the same ``shade`` / ``shade_local`` interface, so the preview path is one. With
+the scene's ``show_clusters`` toggle the preview colours each vertex by its CPCA cluster.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ import time
 import bpy
 import numpy as np
 
+from ..lt_addon import cpca as cpca_mod
 from ..lt_addon import eigentransport as et_mod
 from ..lt_addon import exrio
 from ..lt_addon.directions import DirectionSet
@@ -58,13 +63,14 @@ def save_sidecar(path: str, model, direction_set: DirectionSet, positions, norma
 
 
 class TransportData:
-    """A loaded sidecar: the model, its direction set, vertex positions/normals and metadata."""
+    """A loaded sidecar: the model (an Eigentransport or a CPCA), its direction set, vertex
+    positions/normals and metadata."""
 
     def __init__(self, path: str):
         if not os.path.isfile(path):
             raise FileNotFoundError(f"transport sidecar not found: {path}")
         with np.load(path, allow_pickle=False) as z:
-            self.model = et_mod.Eigentransport.from_arrays(z)
+            self.model = cpca_mod.model_from_arrays(z)
             params = json.loads(str(z["direction_set"][()]))
             self.direction_set = DirectionSet(z["directions"], z["solid_angles"],
                                               params.get("kind", "custom"),
@@ -99,6 +105,16 @@ class TransportData:
                                            pos, power)
             out += self.model.shade_local(W)[:, None] * np.asarray(color, np.float64)[None, :]
         return out
+
+    @property
+    def is_clustered(self) -> bool:
+        return isinstance(self.model, cpca_mod.CPCA)
+
+    def cluster_colors(self) -> np.ndarray:
+        """(V, 3) linear RGB: one colour per CPCA cluster (one colour for eigentransport)."""
+        labels = (self.model.labels if self.is_clustered
+                  else np.zeros(self.model.n_vertices, dtype=np.int64))
+        return cpca_mod.cluster_colors(labels)
 
 
 def world_environment(scene):
@@ -185,7 +201,9 @@ def transport_data(obj) -> TransportData:
 
 
 def update_preview(scene) -> dict:
-    """Recompute the shading of every object with an eigentransport bake; returns ms timings."""
+    """Recompute the shading of every object with a transport bake; returns ms timings.
+
+    With ``scene.relight.show_clusters`` the vertices get their CPCA cluster colours instead."""
     props = getattr(scene, "relight", None)
     env = world_environment(scene)
     timings = {}
@@ -197,6 +215,10 @@ def update_preview(scene) -> dict:
         except (ValueError, FileNotFoundError):
             continue
         t0 = time.perf_counter()
+        if props is not None and props.show_clusters:
+            write_shading(obj, data.cluster_colors())
+            timings[obj.name] = {"clusters_ms": 1e3 * (time.perf_counter() - t0)}
+            continue
         light = None
         if props is not None and props.point_light is not None:
             lamp = props.point_light

@@ -55,7 +55,45 @@ def test_relight_vertices_rotation_and_point_light(baked, tmp_path):
     assert r.returncode == 0 and "convex hull" not in r.stderr.lower()
 
 
+def test_cpca_bakes_shade_like_the_full_eigentransport(tmp_path):
+    """--clusters 3 --energy 1.0 (every cluster at full rank) and the unclustered --energy 1.0
+    are two exact models of the same deterministic bake: relight-vertices must agree to float32
+    round-off. --clusters auto records its subdivision tree and Mahajan's cost."""
+    blend = tmp_path / "statue.blend"
+    assert relight("scene", "statue", "--out", blend).returncode == 0
+    common = ("--object", "Statue", "--directions", "cube:4")
+    out = {}
+    for name, extra in (("pca", ()), ("cpca", ("--clusters", "3"))):
+        r = relight("bake-transport", blend, *common, "--energy", "1.0", *extra,
+                    "--out", tmp_path / name)
+        assert r.returncode == 0, r.stderr[-2000:]
+        out[name] = tmp_path / f"{name}.npy"
+        r = relight("relight-vertices", blend, "--object", "Statue", "--out", out[name])
+        assert r.returncode == 0, r.stderr[-2000:]
+    a, b = np.load(out["pca"]), np.load(out["cpca"])
+    np.testing.assert_allclose(b, a, rtol=0, atol=2e-5 * np.abs(a).max())
+    rep = json.loads((tmp_path / "cpca" / "Statue_transport.json").read_text())
+    assert rep["model"] == "cpca" and rep["cpca"]["clusters"] == 3
+    assert rep["relative_rms_error"] < 1e-6
+    r = relight("bake-transport", blend, *common, "--energy", "0.999", "--clusters", "auto",
+                "--out", tmp_path / "auto")
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "CPCA" in r.stdout and "multiply-adds per vertex" in r.stdout
+    rep = json.loads((tmp_path / "auto" / "Statue_transport.json").read_text())
+    fit = rep["cpca"]["fit"]
+    assert fit["adaptive"] and fit["cost"] <= fit["initial_cost"]
+    assert rep["cpca"]["clusters"] == fit["n_clusters"] >= fit["start_clusters"]
+    assert rep["relative_rms_error"] <= np.sqrt(1e-3) + 1e-9
+
+
 @pytest.mark.parametrize("args, message", [
+    (("bake-transport", "{blend}", "--object", "Statue", "--clusters", "0"), "positive integer"),
+    (("bake-transport", "{blend}", "--object", "Statue", "--clusters", "many"),
+     "positive integer"),
+    (("bake-transport", "{blend}", "--object", "Statue", "--clusters", "100000"),
+     "exceeds Statue's 507 vertices"),
+    (("bake-transport", "{blend}", "--object", "Statue", "--clusters", "auto", "--coeffs", "3"),
+     "use --energy instead"),
     (("bake-transport", "{blend}", "--object", "Statue", "--directions", "sphere:9"), "direction"),
     (("bake-transport", "{blend}", "--object", "Statue", "--energy", "1.5"), "--energy"),
     (("bake-transport", "{blend}", "--object", "Camera"), "not a mesh"),

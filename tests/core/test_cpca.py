@@ -224,3 +224,59 @@ def test_npz_round_trip_means_only(T, tmp_path):
     back = CP.CPCA.from_arrays(np.load(tmp_path / "c.npz", allow_pickle=False))
     assert np.allclose(back.reconstruct(), m.reconstruct(), atol=1e-6)
     assert back.cost() == m.cost()
+
+
+# -- runtime helpers: local lights, storage, sidecar dispatch, cluster colours -------------------
+
+
+def test_shade_local_equals_per_vertex_dot_products_of_the_reconstruction():
+    rng = np.random.default_rng(5)
+    T = rng.random((40, 12))
+    m = CP.fit_cpca(T, 4, dims=3, N=6)
+    W = rng.random((40, 12))
+    expected = np.einsum("vs,vs->v", m.reconstruct(), W) / np.pi * 0.5
+    np.testing.assert_allclose(m.shade_local(W, albedo=0.5), expected, rtol=1e-12, atol=1e-14)
+    import scipy.sparse
+
+    np.testing.assert_allclose(m.shade_local(scipy.sparse.csr_matrix(W), albedo=0.5), expected,
+                               rtol=1e-12, atol=1e-14)
+    with pytest.raises(ValueError, match=r"shape \(40, 12\)"):
+        m.shade_local(W[:, :5])
+
+
+def test_storage_bytes_count_the_stored_arrays():
+    rng = np.random.default_rng(6)
+    T = rng.random((30, 8))
+    m = CP.fit_cpca(T, 3, dims=2, N=4)
+    b = m.storage_bytes()
+    arrays = m.to_arrays()
+    assert b["coefficients"] == arrays["coefficients"].nbytes
+    assert b["basis"] == arrays["basis"].nbytes
+    assert b["mean"] == arrays["mean"].nbytes
+    assert b["labels"] == arrays["labels"].nbytes
+    assert b["coefficients_packed"] == 4 * 30 * 2
+    assert b["runtime"] == 4 * sum(2 * (p + 1) for p in m.sizes())
+
+
+def test_model_from_arrays_dispatches_on_the_format():
+    from relightable_textures.lt_addon.eigentransport import Eigentransport, fit_eigentransport
+
+    T = np.random.default_rng(7).random((20, 6))
+    assert isinstance(CP.model_from_arrays(CP.fit_cpca(T, 2, dims=1, N=3).to_arrays()), CP.CPCA)
+    assert isinstance(CP.model_from_arrays(fit_eigentransport(T, d=2).to_arrays()),
+                      Eigentransport)
+    with pytest.raises(ValueError, match="no 'metadata'"):
+        CP.model_from_arrays({})
+
+
+def test_cluster_colors_are_deterministic_distinct_and_in_range():
+    c = CP.cluster_colors(np.arange(64))
+    assert c.shape == (64, 3) and c.min() >= 0.0 and c.max() <= 1.0
+    np.testing.assert_array_equal(CP.cluster_colors([5, 5, 2]), c[[5, 5, 2]])
+    # every pair of the first 64 labels differs visibly: >= 0.045 in some display (sRGB-ish)
+    # channel, i.e. >= 11 of 255 levels
+    d = c ** (1 / 2.2)
+    diff = np.abs(d[:, None, :] - d[None, :, :]).max(axis=2) + np.eye(64)
+    assert diff.min() >= 0.045
+    with pytest.raises(ValueError):
+        CP.cluster_colors([-1])
