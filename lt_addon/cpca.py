@@ -493,7 +493,11 @@ def fit_cpca(T, n_clusters: int, tol: float | None = None, dims: int | None = No
         raise ValueError(f"n_iter must be >= 0, got {n_iter!r}")
     if N is None:
         N = global_dimension(T, global_energy, global_subset, seed)
-    if labels is None:
+    if labels is None and int(n_clusters) == V:
+        # one cluster per distinct row: exact, and k-means++ with k = V would cost O(V^2 S)
+        lab = np.unique(T, axis=0, return_inverse=True)[1].reshape(-1).astype(np.int64)
+        n_iter = 0
+    elif labels is None:
         lab = kmeans(T, int(n_clusters), seed=seed)
     else:
         lab = np.asarray(labels).reshape(-1)

@@ -199,7 +199,7 @@ def recommended_clusters(n_vertices: int, p_star: float) -> int:
 
 def analyse(T, seeds, *, edges=None, grid_shape=None, sizes=None, halves=None,
             energy: float = PATCH_ENERGY, N: int | None = None, r: float = 2.0,
-            min_size: int = 1) -> dict:
+            min_size: int = 1, max_dims: int | None = None) -> dict:
     """Dimensionality report: curves around seeds, mean slope, mu, p*, cluster count.
 
     Parameters
@@ -218,6 +218,10 @@ def analyse(T, seeds, *, edges=None, grid_shape=None, sizes=None, halves=None,
     min_size : int
         Only patches with at least this many vertices enter the slope fit (the paper's
         slopes are for large patches).
+    max_dims : int, optional
+        Patches with a dimensionality above this are left out of the fit too: near the
+        dimensionality of the whole matrix (at most S) the curve saturates, which is a limit of
+        the sampling, not of the transport's locality.
 
     Returns
     -------
@@ -242,7 +246,7 @@ def analyse(T, seeds, *, edges=None, grid_shape=None, sizes=None, halves=None,
                 raise ValueError("halves are needed with grid_shape")
             p, n = grid_dimensionality_curve(T, grid_shape, sd, halves, energy)
             seed_out = [int(sd[0]), int(sd[1])]
-        keep = p >= int(min_size)
+        keep = (p >= int(min_size)) & (n <= (np.inf if max_dims is None else int(max_dims)))
         curves.append({"seed": seed_out, "sizes": p.tolist(), "dims": n.tolist(),
                        "slope": loglog_slope(p[keep], n[keep])})
     slopes = [c["slope"] for c in curves if np.isfinite(c["slope"])]

@@ -149,6 +149,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", help="output folder (default <blend>_relight/)")
     p.set_defaults(func=_cmd_bake_transport)
 
+    p = sub.add_parser("analyze", help="how many CPCA clusters an object's transport needs "
+                       "(Mahajan 2007): JSON + PNG charts",
+                       description="Bakes the object's per-vertex transport (as bake-transport), "
+                                   "measures patch dimensionality vs size (log-log slope, mu, "
+                                   "p*), the CPCA cost per vertex over cluster counts and the "
+                                   "adaptive subdivision. Writes <object>_analysis.json, "
+                                   "<object>_dimensionality.png and <object>_cost.png; the "
+                                   ".blend is not changed.")
+    p.add_argument("file", metavar="FILE.blend")
+    p.add_argument("--object", required=True, metavar="NAME")
+    p.add_argument("--directions", default="cube:8",
+                   help="halton:N | latlong:RxC | cube:N | cubegauss:N (default cube:8 = 384)")
+    p.add_argument("--bounces", type=int, default=0)
+    p.add_argument("--tol", type=float, default=1e-3, help="CPCA per-cluster unexplained "
+                   "energy fraction (default 1e-3: the paper's 99.9%%)")
+    p.add_argument("--seeds", type=int, default=8, help="seed vertices of the dimensionality "
+                   "curves (default 8)")
+    p.add_argument("--out", metavar="DIR", help="output folder (default <blend>_relight/)")
+    p.set_defaults(func=_cmd_analyze)
+
     p = sub.add_parser("relight-vertices", help="shade a stored eigentransport bake (NumPy)")
     p.add_argument("file", metavar="FILE.blend")
     p.add_argument("--object", required=True, metavar="NAME")
@@ -276,6 +296,9 @@ def _point_light(text: str):
 
 def _progress_printer(prefix: str):
     def show(step):
+        if isinstance(step, str):  # a stage without a count (e.g. fitting)
+            print(f"{prefix}: {step}", file=sys.stderr, flush=True)
+            return
         done, total, message = step if isinstance(step, tuple) else (step.done, step.total,
                                                                      step.message)
         print(f"{prefix} [{done}/{total}] {message}", file=sys.stderr, flush=True)
@@ -320,14 +343,7 @@ def _cmd_bake_textures(args) -> int:
         if not args.truth:
             raise CliError("--contact-sheet needs --truth K (K >= 1 directions)")
         sheet = _check_output_path(args.contact_sheet, ".png", True)
-    out_dir = os.path.abspath(args.out) if args.out else steerable_bake.default_output_dir(path)
-    parent = os.path.dirname(out_dir)
-    if not os.path.isdir(parent):
-        raise CliError(f"output folder's parent does not exist: {parent}")
-    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
-        raise CliError(f"output exists and is not a folder: {out_dir}")
-    if not _can_create_in(out_dir if os.path.isdir(out_dir) else parent):
-        raise CliError(f"output folder is not writable: {out_dir}")
+    out_dir = _check_output_dir(args.out, path)
     if not _can_create_in(os.path.dirname(path)):
         raise CliError(f"cannot update {path}: its folder is not writable")
     obj = _open_object(path, args.object)
@@ -377,10 +393,7 @@ def _cmd_bake_transport(args) -> int:
         direction_set = settings.validate()
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
-    out_dir = os.path.abspath(args.out) if args.out else steerable_bake.default_output_dir(path)
-    parent = os.path.dirname(out_dir)
-    if not os.path.isdir(parent) or not _can_create_in(out_dir if os.path.isdir(out_dir) else parent):
-        raise CliError(f"output folder is not writable: {out_dir}")
+    out_dir = _check_output_dir(args.out, path)
     if not _can_create_in(os.path.dirname(path)):
         raise CliError(f"cannot update {path}: its folder is not writable")
     obj = _open_object(path, args.object)
@@ -434,6 +447,65 @@ def _cmd_bake_transport(args) -> int:
         print(f"  all {report['directions']} directions, no PCA: "
               f"{report['ground_truth']['all_directions_rel_rms_error']:.4f} (sampling floor)")
     return EXIT_OK
+
+
+def _cmd_analyze(args) -> int:
+    import bpy
+
+    from ..lt_addon.directions import parse_direction_spec
+    from . import analyze
+    from .cycles_bake import BakeInputError
+
+    path = _check_input_blend(args.file)
+    try:
+        ds = parse_direction_spec(args.directions)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    if not 0 <= args.bounces <= 64:
+        raise CliError(f"--bounces must be in 0..64, got {args.bounces}")
+    if not 0.0 <= args.tol <= 1.0:
+        raise CliError(f"--tol must be in [0, 1], got {args.tol}")
+    if args.seeds < 1:
+        raise CliError(f"--seeds must be >= 1, got {args.seeds}")
+    out_dir = _check_output_dir(args.out, path)
+    obj = _open_object(path, args.object)
+    show = _progress_printer("analyze")
+    try:
+        report = analyze.analyse_object(bpy.context.scene, obj, ds, args.bounces, None,
+                                        args.tol, args.seeds, on_progress=show)
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    except KeyboardInterrupt:
+        print("analyze: cancelled; nothing was written", file=sys.stderr)
+        return 130
+    paths = analyze.write_analysis(report, out_dir)
+    dim, best, ad = report["dimensionality"], report["optimum"], report["adaptive"]
+    one = report["global_pca"]
+    prediction = (f"slope {dim['slope']:.3f}, mu {dim['mu']:.3f}, p* {dim['p_star']:.1f} -> "
+                  f"predicted {report['predicted_clusters']} clusters" if dim["mu"] is not None
+                  else "no slope (patches too small or saturated): no prediction")
+    print(f"analyzed {obj.name}: {report['vertices']} vertices x {report['samples']} directions, "
+          f"N = {report['N']}; {prediction}")
+    print(f"  cost per vertex: global PCA {one['cost_per_vertex']:.1f}, best fixed CPCA "
+          f"{best['cost_per_vertex']:.1f} at {best['clusters']} clusters, adaptive "
+          f"{ad['cost_per_vertex']:.1f} at {ad['clusters']} clusters")
+    print("  wrote " + ", ".join(paths.values()))
+    return EXIT_OK
+
+
+def _check_output_dir(out: str | None, blend_path: str) -> str:
+    """The output folder (default next to the .blend), checked creatable and writable."""
+    from .steerable_bake import default_output_dir
+
+    out_dir = os.path.abspath(out) if out else default_output_dir(blend_path)
+    parent = os.path.dirname(out_dir)
+    if not os.path.isdir(parent):
+        raise CliError(f"output folder's parent does not exist: {parent}")
+    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
+        raise CliError(f"output exists and is not a folder: {out_dir}")
+    if not _can_create_in(out_dir if os.path.isdir(out_dir) else parent):
+        raise CliError(f"output folder is not writable: {out_dir}")
+    return out_dir
 
 
 def _rewrite_report(report: dict) -> None:

@@ -280,3 +280,14 @@ def test_cluster_colors_are_deterministic_distinct_and_in_range():
     assert diff.min() >= 0.045
     with pytest.raises(ValueError):
         CP.cluster_colors([-1])
+
+
+def test_one_cluster_per_vertex_is_exact_and_merges_identical_rows():
+    rng = np.random.default_rng(8)
+    T = rng.random((12, 5))
+    T[7] = T[3]                                        # two identical rows: one cluster
+    m = CP.fit_cpca(T, 12, tol=1e-3, N=4)
+    assert m.n_clusters == 11 and m.info["empty_dropped"] == 1
+    assert m.labels[7] == m.labels[3]
+    np.testing.assert_allclose(m.reconstruct(), T, rtol=0, atol=1e-12)
+    assert m.cost() == 11 * 4 + 12                     # n_i = 1 (the mean): sum (p_i + N)

@@ -109,3 +109,17 @@ def test_analyse_report():
         DM.analyse(T, [0])
     with pytest.raises(ValueError, match=r"edges must have shape \(E, 2\)"):
         DM.graph_patch_order([1, 2, 3], 4, 0)
+
+
+def test_saturated_points_are_left_out_of_the_slope_fit():
+    """Rows e_(v mod 8) on a path graph: a BFS patch of p vertices has dimensionality
+    min(p, 8), slope 1 until it saturates at S = 8. With max_dims = 4 the fit sees only the
+    growing part (slope 1); without it the saturated points pull the slope down."""
+    V = 64
+    T = np.eye(8)[np.arange(V) % 8]
+    edges = np.stack([np.arange(V - 1), np.arange(1, V)], 1)
+    sizes = [2, 4, 8, 16, 32, 64]
+    kept = DM.analyse(T, [0], edges=edges, sizes=sizes, N=8, max_dims=4)
+    assert kept["curves"][0]["dims"] == [2, 4, 8, 8, 8, 8]
+    assert kept["slope"] == pytest.approx(1.0)
+    assert DM.analyse(T, [0], edges=edges, sizes=sizes, N=8)["slope"] < 0.5
