@@ -139,13 +139,30 @@ class SteerableTexture:
         Returns
         -------
         texture : ndarray, shape (R, R, 3), float32
+
+        Raises
+        ------
+        ValueError
+            Non-finite ``intensity`` / ``color``, or a result beyond the float32 range (it
+            would silently become inf).
         """
+        intensity = float(intensity)
+        color64 = np.asarray(color, dtype=np.float64)
+        if not (np.isfinite(intensity) and np.all(np.isfinite(color64))):
+            raise ValueError(f"intensity and color must be finite, got intensity {intensity!r}, "
+                             f"color {color!r}")
         c, gain = self.steering_weights(direction)
         flat = self.basis_images.reshape(len(c), -1)
         steered = (c.astype(np.float32) @ flat).reshape(self.basis_images.shape[1:])
         if clamp:
             steered = clamp_steered(steered)
-        scale = np.float32(gain * float(intensity)) * np.asarray(color, dtype=np.float32)
+        scale64 = gain * intensity * color64
+        top = float(np.max(np.abs(scale64), initial=0.0))
+        peak = max(top, top * float(np.max(np.abs(steered), initial=0.0)))
+        if peak > np.finfo(np.float32).max:
+            raise ValueError(f"relit values would reach {peak:.3g}, beyond the float32 range "
+                             f"({np.finfo(np.float32).max:.3g}); lower the intensity")
+        scale = scale64.astype(np.float32)
         return (steered * scale).astype(np.float32)
 
     # -- files ----------------------------------------------------------------------------------

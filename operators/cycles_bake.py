@@ -34,6 +34,32 @@ class BakeInputError(ValueError):
     """The object or settings cannot be baked; the message says what to change."""
 
 
+def dark_material_reason(material) -> str | None:
+    """Why a material's diffuse colour is (near) zero, or None: its active output's surface is
+    a Principled BSDF with an unlinked black Base Color or Metallic 1, or a Diffuse BSDF with an
+    unlinked black Color. Materials driven by textures or other nodes are not judged."""
+    tree = material.node_tree  # Blender 5: every material has a node tree (use_nodes is going)
+    if tree is None:
+        return "black" if max(material.diffuse_color[:3]) < 1e-3 else None
+    out = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"
+                and n.is_active_output), None)
+    if out is None or not out.inputs["Surface"].is_linked:
+        return None
+    node = out.inputs["Surface"].links[0].from_node
+    if node.bl_idname == "ShaderNodeBsdfPrincipled":
+        metal = node.inputs["Metallic"]
+        if not metal.is_linked and metal.default_value >= 0.999:
+            return "fully metallic"
+        color = node.inputs["Base Color"]
+    elif node.bl_idname == "ShaderNodeBsdfDiffuse":
+        color = node.inputs["Color"]
+    else:
+        return None
+    if not color.is_linked and max(color.default_value[:3]) < 1e-3:
+        return "black"
+    return None
+
+
 def available_memory_bytes() -> int:
     """Physical memory available now (Linux/macOS sysconf); 16 GiB where it cannot be read."""
     import os
@@ -48,8 +74,16 @@ def check_memory(need_bytes: int, what: str, fix: str) -> None:
     """Refuse up front when ``need_bytes`` exceeds 80% of the memory available now."""
     have = available_memory_bytes()
     if need_bytes > 0.8 * have:
-        raise BakeInputError(f"{what} needs {need_bytes / 2 ** 30:.1f} GiB but only "
-                             f"{have / 2 ** 30:.1f} GiB of memory is available; {fix}")
+        raise BakeInputError(f"{what} needs {_size(need_bytes)} but only {_size(have)} of "
+                             f"memory is available; {fix}")
+
+
+def _size(nbytes: float) -> str:
+    """``1.5 GiB`` / ``12.0 MiB`` / ``300 bytes``: readable at any scale."""
+    for unit, scale in (("GiB", 2 ** 30), ("MiB", 2 ** 20), ("KiB", 2 ** 10)):
+        if nbytes >= scale:
+            return f"{nbytes / scale:.1f} {unit}"
+    return f"{int(nbytes)} bytes"
 
 
 def check_bakeable(obj, need_uv: bool = True) -> None:
@@ -179,11 +213,39 @@ class EnvironmentBake:
             self._created.append((bpy.data.materials, mat))
             obj.data.materials.append(mat)
             self._restore.append(lambda: obj.data.materials.pop(index=len(obj.data.materials) - 1))
+        if self.mode == "irradiance":
+            self._whiten_dark_materials(obj)
         if self.per_vertex:
             self._setup_vertex_target(obj)
         else:
             self._setup_image_target(obj)
         self._select_only(obj)
+
+    def _whiten_dark_materials(self, obj):
+        """Irradiance bakes divide Cycles' diffuse pass by the diffuse colour, so a black or
+        fully metallic surface bakes 0 instead of its irradiance. Without bounces the surface's
+        own colour plays no part in the light, so such materials are swapped for a white
+        diffuse one during the bake (restored on exit); with bounces their colour matters for
+        the interreflection and the bake is refused with what to change."""
+        dark = [slot for slot in obj.material_slots if slot.material is not None
+                and dark_material_reason(slot.material)]
+        if not dark:
+            return
+        if self.bounces > 0:
+            mat = dark[0].material
+            raise BakeInputError(
+                f"{obj.name}'s material {mat.name!r} is {dark_material_reason(mat)}: an "
+                "irradiance bake divides by the diffuse colour and would give 0; bake with 0 "
+                "bounces (the colour then plays no part) or give it a diffuse colour")
+        white = bpy.data.materials.new(f"{_PREFIX}White")
+        self._created.append((bpy.data.materials, white))
+        bsdf = white.node_tree.nodes.get("Principled BSDF")
+        bsdf.inputs["Base Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+        bsdf.inputs["Metallic"].default_value = 0.0
+        for slot in dark:
+            old = slot.material
+            slot.material = white
+            self._restore.append(lambda s=slot, m=old: setattr(s, "material", m))
 
     def _bypass_previews(self):
         """Bake the user's shading, not our relight previews: in every material whose active

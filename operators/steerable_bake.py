@@ -48,6 +48,12 @@ class TextureBakeSettings:
     def validate(self) -> None:
         if not 2 <= self.order <= 12:
             raise BakeInputError(f"order must be in 2..12, got {self.order}")
+        if not 1 <= self.resolution <= 16384:
+            raise BakeInputError(f"resolution must be in 1..16384, got {self.resolution}")
+        if self.samples < 1:
+            raise BakeInputError(f"samples must be >= 1, got {self.samples}")
+        if not 0 <= self.bounces <= 64:
+            raise BakeInputError(f"bounces must be in 0..64, got {self.bounces}")
         if self.frame not in FRAMES:
             raise BakeInputError(f"frame must be one of {FRAMES}, got {self.frame!r}")
         if self.mode not in BAKE_MODES:

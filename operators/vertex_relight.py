@@ -154,15 +154,35 @@ def read_environment_exr(path: str) -> np.ndarray:
 
 
 def mesh_positions_normals(obj) -> tuple[np.ndarray, np.ndarray]:
-    """World-space vertex positions (V, 3) and unit normals (V, 3) of the evaluated base mesh."""
-    mesh = obj.data
-    co = np.empty(len(mesh.vertices) * 3)
-    mesh.vertices.foreach_get("co", co)
-    n = np.empty(len(mesh.vertices) * 3)
-    mesh.vertices.foreach_get("normal", n)
+    """World-space positions (V, 3) and unit normals (V, 3) of the base vertices where the bake
+    saw them: on the evaluated mesh (modifiers applied), as the transport was baked.
+
+    Topology-preserving modifiers (Displace, Shrinkwrap ...) keep vertex ``i`` at index ``i``;
+    Subdivision Surface puts the base vertices first, at their subdivided positions. A modifier
+    that leaves fewer vertices than the base mesh (Decimate, Weld ...) cannot be mapped back;
+    the base mesh is used then."""
+    V = len(obj.data.vertices)
+    mesh, evaluated = obj.data, None
+    try:
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        evaluated = obj.evaluated_get(depsgraph)
+        ev_mesh = evaluated.to_mesh()
+        if len(ev_mesh.vertices) >= V:
+            mesh = ev_mesh
+    except (RuntimeError, AttributeError):
+        evaluated = None
+    try:
+        co = np.empty(len(mesh.vertices) * 3)
+        mesh.vertices.foreach_get("co", co)
+        n = np.empty(len(mesh.vertices) * 3)
+        mesh.vertices.foreach_get("normal", n)
+    finally:
+        if evaluated is not None:
+            evaluated.to_mesh_clear()
+    co, n = co.reshape(-1, 3)[:V], n.reshape(-1, 3)[:V]
     m = np.array(obj.matrix_world, dtype=np.float64)
-    pos = co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
-    nrm = n.reshape(-1, 3) @ np.linalg.inv(m[:3, :3])  # inverse transpose for normals
+    pos = co @ m[:3, :3].T + m[:3, 3]
+    nrm = n @ np.linalg.inv(m[:3, :3])  # inverse transpose for normals
     nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12)
     return pos, nrm
 
