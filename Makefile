@@ -47,7 +47,7 @@ test-core: $(STAMP)
 bench: $(STAMP)
 	mkdir -p $(OUT)/bench
 	$(PY) benchmarks/bench_steerable.py --json $(OUT)/bench/steerable.json
-	$(PY) benchmarks/bench_texture_bake.py --presets draft,balanced --write-presets
+	$(PY) benchmarks/bench_texture_bake.py --presets draft,balanced
 	$(PY) benchmarks/bench_transport.py --scenes statue,room --directions cube:16
 
 ## dist: validate and build the extension zip with Blender's own extension tool (dist/)

@@ -7,11 +7,12 @@ Prints figures (not a test) and writes JSON:
   vs a Cycles Sun lamp of the lobe's angular size, for 5 directions (elevations 5..85 deg);
 * relight error per storage mode (float / half / u8) against the float result;
 * 1 process x 2 threads vs 2 worker processes x 1 thread on the same 8 bakes;
-* ``--write-presets`` stores the per-preset figures in operators/preset_figures.json, which
-  the panel shows next to each preset.
+
+The presets themselves are chosen from measured data by ``relight bench --scene bumps
+--write-presets`` (operators/presets.json); this script measures them in more depth.
 
 Usage: python benchmarks/bench_texture_bake.py [--presets draft,balanced,production]
-       [--size demo|test] [--json out/bench/texture_bake.json] [--write-presets] [--no-workers]
+       [--size demo|test] [--json out/bench/texture_bake.json] [--no-workers]
 """
 
 from __future__ import annotations
@@ -129,7 +130,6 @@ def main() -> None:
     parser.add_argument("--size", default="demo", choices=["test", "demo"])
     parser.add_argument("--truth", type=int, default=5, help="ground-truth directions per preset")
     parser.add_argument("--json", default=os.path.join(ROOT, "out", "bench", "texture_bake.json"))
-    parser.add_argument("--write-presets", action="store_true")
     parser.add_argument("--no-workers", action="store_true")
     args = parser.parse_args()
     os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="relight-bench-"))
@@ -164,21 +164,6 @@ def main() -> None:
     with open(args.json, "w") as fh:
         json.dump(out, fh, indent=2)
     print(f"\nwrote {args.json}")
-    if args.write_presets:
-        from relightable_textures.operators.presets import FIGURES_PATH, preset_figures
-
-        figures = preset_figures()
-        for row in out["presets"]:
-            if "rel_error" in row:
-                figures[row["preset"]] = {
-                    "bake_seconds": row["bake_seconds"], "rel_error": round(row["rel_error"], 4),
-                    "rel_error_vs_sun": round(row["rel_error_vs_sun"], 4),
-                    "exr_bytes": row["storage_modes"][row["storage"]]["exr_bytes"],
-                    "scene": row["scene"], "machine": out["machine"],
-                    "measured": time.strftime("%Y-%m-%d")}
-        with open(FIGURES_PATH, "w") as fh:
-            json.dump(figures, fh, indent=2, sort_keys=True)
-        print(f"wrote {FIGURES_PATH}")
 
 
 if __name__ == "__main__":

@@ -169,6 +169,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", help="output folder (default <blend>_relight/)")
     p.set_defaults(func=_cmd_analyze)
 
+    p = sub.add_parser("bench", help="sweep the knobs that cost time or bytes; JSON, CSV and "
+                       "PNG charts with the Pareto-optimal points",
+                       description="Texture scenes (bumps, noise): a grid over basis order, "
+                                   "samples and resolution, each stored at every precision, "
+                                   "against Cycles Sun-lamp references. Transport scenes "
+                                   "(statue, room): direction sets x eigentransport d x CPCA "
+                                   "clusters against a Cycles environment bake. Per point: bake "
+                                   "time (Cycles vs own), peak memory, stored bytes, preview "
+                                   "cost, rel. RMSE / PSNR / max error. --quick: test-size "
+                                   "scenes, a few minutes; default: demo-size scenes (tens of "
+                                   "minutes).")
+    p.add_argument("--scene", action="append", choices=("bumps", "noise", "statue", "room"),
+                   help="scene to sweep (repeatable; default: all four)")
+    p.add_argument("--quick", action="store_true", help="the small sweep (make bench)")
+    p.add_argument("--out", default="out/bench", metavar="DIR",
+                   help="output folder (default out/bench)")
+    p.add_argument("--write-presets", action="store_true", help="store the draft / balanced / "
+                   "production presets chosen from the bumps sweep's Pareto front")
+    p.set_defaults(func=_cmd_bench)
+
     p = sub.add_parser("relight-vertices", help="shade a stored eigentransport bake (NumPy)")
     p.add_argument("file", metavar="FILE.blend")
     p.add_argument("--object", required=True, metavar="NAME")
@@ -490,6 +510,44 @@ def _cmd_analyze(args) -> int:
           f"{best['cost_per_vertex']:.1f} at {best['clusters']} clusters, adaptive "
           f"{ad['cost_per_vertex']:.1f} at {ad['clusters']} clusters")
     print("  wrote " + ", ".join(paths.values()))
+    return EXIT_OK
+
+
+def _cmd_bench(args) -> int:
+    from . import bench
+
+    out_dir = os.path.abspath(args.out)
+    parent = os.path.dirname(out_dir)
+    if not os.path.isdir(out_dir):
+        if not os.path.isdir(parent):
+            raise CliError(f"output folder's parent does not exist: {parent}")
+        os.makedirs(out_dir)
+    if not _can_create_in(out_dir):
+        raise CliError(f"output folder is not writable: {out_dir}")
+    scenes = args.scene or ["bumps", "noise", "statue", "room"]
+    if args.write_presets and "bumps" not in scenes:
+        raise CliError("--write-presets chooses the presets from the bumps sweep; add "
+                       "--scene bumps")
+    mode = "quick" if args.quick else "standard"
+    if args.write_presets and args.quick:
+        raise CliError("--write-presets needs the standard (demo-size) sweep; drop --quick")
+    show = _progress_printer("bench")
+    for name in scenes:
+        try:
+            report = bench.bench_scene(name, mode, out_dir, on_progress=show)
+        except KeyboardInterrupt:
+            print(f"bench: cancelled during {name}; finished scenes are in {out_dir}",
+                  file=sys.stderr)
+            return 130
+        print(bench.format_report(report))
+        if args.write_presets and name == "bumps":
+            from .presets import write_presets
+
+            try:
+                path = write_presets(report)
+            except ValueError as exc:
+                raise CliError(str(exc)) from None
+            print(f"  presets written to {path}")
     return EXIT_OK
 
 

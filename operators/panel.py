@@ -63,8 +63,8 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
         layout.prop(props, "preset")
         fig = preset_figures().get(props.preset)
         if fig:
-            layout.label(text=f"measured: {fig['bake_seconds']:.1f} s, rel. error "
-                              f"{fig['rel_error']:.3f} ({fig['scene']}, {fig['machine']})")
+            layout.label(text=f"measured: {fig['bake_seconds']:.1f} s, rel. RMSE "
+                              f"{fig['rel_rmse']:.3f} ({fig['scene']}, {fig['machine']})")
         else:
             layout.label(text="preset not measured yet (make bench)", icon="INFO")
         col = layout.column(align=True)

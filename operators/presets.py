@@ -1,26 +1,54 @@
-"""Bake presets (Draft / Balanced / Production) and their measured figures.
+"""Bake presets (Draft / Balanced / Production), chosen from measured data.
 
-The settings of each preset live here; their *figures* (bake time, error vs Cycles truth,
-bytes) are measured by ``make bench`` (``benchmarks/bench_texture_bake.py``) and stored in
-``preset_figures.json`` next to this file, which the panel and ``relight bake-textures --help``
-show. Nothing here is guessed: a preset without a measurement shows "not measured".
+``presets.json`` next to this file holds, per preset, the settings chosen from the Pareto front
+of bake time vs error that ``relight bench --scene bumps --write-presets`` measured (draft: the
+cheapest front point; production: the most accurate; balanced: the knee, see
+:func:`..lt_addon.pareto.choose_presets`), the figures measured for it and the rule that chose
+it. The panel and ``relight bake-textures --preset`` read it. ``FALLBACK`` is used only if the
+file is missing or unreadable, and the panel then says the presets are not measured.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import time
 from dataclasses import replace
 
 from .steerable_bake import TextureBakeSettings
 
-PRESETS = {
+PRESET_NAMES = ("draft", "balanced", "production")
+PRESETS_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "presets.json")
+#: settings keys a preset may set
+SETTING_KEYS = ("order", "resolution", "samples", "bounces", "storage")
+
+FALLBACK = {
     "draft": TextureBakeSettings(order=5, resolution=128, samples=16, bounces=1, storage="u8"),
     "balanced": TextureBakeSettings(order=7, resolution=256, samples=64, bounces=2, storage="half"),
     "production": TextureBakeSettings(order=7, resolution=512, samples=128, bounces=3,
                                       storage="half"),
 }
-FIGURES_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "preset_figures.json")
+
+
+def _read() -> dict:
+    try:
+        with open(PRESETS_PATH) as fh:
+            data = json.load(fh)
+        return data if set(PRESET_NAMES) <= set(data.get("presets", {})) else {}
+    except (OSError, ValueError):
+        return {}
+
+
+def _load_presets() -> dict:
+    data = _read()
+    if not data:
+        return dict(FALLBACK)
+    return {name: TextureBakeSettings(**{k: data["presets"][name]["settings"][k]
+                                         for k in SETTING_KEYS})
+            for name in PRESET_NAMES}
+
+
+PRESETS = _load_presets()
 
 
 def settings_from_preset(name: str, **overrides) -> TextureBakeSettings:
@@ -31,9 +59,31 @@ def settings_from_preset(name: str, **overrides) -> TextureBakeSettings:
 
 
 def preset_figures() -> dict:
-    """Measured figures per preset name ({} when the benchmark has not been run)."""
-    try:
-        with open(FIGURES_PATH) as fh:
-            return json.load(fh)
-    except (OSError, ValueError):
+    """Measured figures per preset name (``bake_seconds``, ``rel_rmse``, ``stored_bytes`` ...,
+    plus ``why``, ``scene`` and ``machine``); {} when not measured."""
+    data = _read()
+    if not data:
         return {}
+    source = data.get("source", {})
+    return {name: {**p["figures"], "why": p["why"], "scene": source.get("scene", "?"),
+                   "machine": source.get("machine", "?")}
+            for name, p in data["presets"].items()}
+
+
+def write_presets(report: dict, path: str = PRESETS_PATH) -> str:
+    """Store the presets a ``standard`` bench report of a texture scene chose (atomically).
+
+    Raises ValueError for a quick (test-size) sweep: its tiny resolutions are not presets."""
+    if report.get("mode") != "standard":
+        raise ValueError("presets come from the standard (demo-size) sweep, not --quick")
+    data = {"source": {"command": f"relight bench --scene {report['scene']} --write-presets",
+                       "scene": f"{report['scene']}-{report['size']}",
+                       "machine": report["machine"], "date": time.strftime("%Y-%m-%d"),
+                       "reference": {k: v for k, v in report["reference"].items()
+                                     if k != "images"}},
+            "presets": report["presets"]}
+    tmp = f"{path}.{os.getpid()}.tmp"
+    with open(tmp, "w") as fh:
+        json.dump(data, fh, indent=2)
+    os.replace(tmp, path)
+    return path
