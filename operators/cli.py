@@ -130,11 +130,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "--bounces), then PCA to d eigentransports. Writes an .npz "
                                    "sidecar and a JSON report; the .blend gets the bake record "
                                    "and a per-vertex preview.")
-    p.add_argument("file", metavar="FILE.blend")
-    p.add_argument("--object", required=True, metavar="NAME")
-    p.add_argument("--directions", default="cube:8",
-                   help="halton:N | latlong:RxC | cube:N | cubegauss:N (default cube:8 = 384)")
-    p.add_argument("--bounces", type=int, default=0)
+    _add_transport_source_args(p)
     p.add_argument("--samples", type=int, help="Cycles samples per vertex (default 1 without "
                    "bounces: exact for a hard Sun; 64 with bounces)")
     group = p.add_mutually_exclusive_group()
@@ -157,11 +153,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "adaptive subdivision. Writes <object>_analysis.json, "
                                    "<object>_dimensionality.png and <object>_cost.png; the "
                                    ".blend is not changed.")
-    p.add_argument("file", metavar="FILE.blend")
-    p.add_argument("--object", required=True, metavar="NAME")
-    p.add_argument("--directions", default="cube:8",
-                   help="halton:N | latlong:RxC | cube:N | cubegauss:N (default cube:8 = 384)")
-    p.add_argument("--bounces", type=int, default=0)
+    _add_transport_source_args(p)
     p.add_argument("--tol", type=float, default=1e-3, help="CPCA per-cluster unexplained "
                    "energy fraction (default 1e-3: the paper's 99.9%%)")
     p.add_argument("--seeds", type=int, default=8, help="seed vertices of the dimensionality "
@@ -207,6 +199,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="which paper's figures to reproduce")
     p.set_defaults(func=_cmd_validate)
     return parser
+
+
+def _add_transport_source_args(p) -> None:
+    """FILE, --object, --directions and --bounces: what a per-vertex transport bake reads."""
+    p.add_argument("file", metavar="FILE.blend")
+    p.add_argument("--object", required=True, metavar="NAME")
+    p.add_argument("--directions", default="cube:8",
+                   help="halton:N | latlong:RxC | cube:N | cubegauss:N (default cube:8 = 384)")
+    p.add_argument("--bounces", type=int, default=0)
 
 
 def run(argv: list[str]) -> int:
