@@ -96,6 +96,23 @@ def cost_curve(T, counts, tol: float, N: int, seed: int = 0, n_iter: int = 10,
     return rows
 
 
+def mesh_dimensionality(T, edges, N: int, n_seeds: int = 8, seed: int = 0) -> dict:
+    """:func:`.dimensionality.analyse` on BFS patches around random vertices of the mesh's
+    largest component, slopes fitted over the larger two thirds of the patch sizes (the
+    paper's slopes are for large patches) and below half the whole matrix's dimensionality
+    (where the curves saturate at the direction count). Adds ``whole_matrix_dims``."""
+    T = _transport(T)
+    component = largest_component(edges, T.shape[0])
+    rng = np.random.default_rng(seed)
+    seeds = np.sort(rng.choice(component, min(int(n_seeds), component.size), replace=False))
+    sizes = patch_sizes(component.size)
+    full = dim.patch_dimension(T)
+    out = dim.analyse(T, seeds, edges=edges, sizes=sizes, N=N,
+                      min_size=int(sizes[len(sizes) // 3]), max_dims=max(full // 2, 2))
+    out["whole_matrix_dims"] = full
+    return out
+
+
 def analyse_clusters(T, edges, *, tol: float = 1e-3, n_seeds: int = 8, seed: int = 0,
                      counts=None, start_clusters: int = 8, progress=None) -> dict:
     """Dimensionality analysis, cost curve and adaptive CPCA of a per-vertex transport.
@@ -119,41 +136,77 @@ def analyse_clusters(T, edges, *, tol: float = 1e-3, n_seeds: int = 8, seed: int
     dict (JSON-safe)
         ``vertices``, ``samples``, ``N``, ``tol``, ``dimensionality`` (:func:`.dimensionality.
         analyse` output), ``predicted_clusters``, ``cost_curve`` (rows), ``optimum`` (the
-        cheapest row), ``global_pca`` (the one-cluster row), ``adaptive`` (clusters, cost per
-        vertex, error, splits, seconds).
+        cheapest row), ``global_pca`` (the one-cluster row), ``adaptive`` (the paper's: from
+        ``start_clusters``, binary splits) and ``auto`` (:func:`auto_cpca`), each with
+        clusters, cost per vertex, error, splits and seconds.
     """
     T = _transport(T)
     V, S = T.shape
     say = progress or (lambda _msg: None)
     N = cp.global_dimension(T, seed=seed)
-    component = largest_component(edges, V)
-    rng = np.random.default_rng(seed)
-    seeds = np.sort(rng.choice(component, min(int(n_seeds), component.size), replace=False))
-    sizes = patch_sizes(component.size)
-    say(f"dimensionality of {len(sizes)} patch sizes around {len(seeds)} vertices")
-    # slopes over the larger two thirds of the sizes (the paper's slopes are for large
-    # patches), below half the dimensionality of the whole matrix (where the curves saturate)
-    full = dim.patch_dimension(T)
-    report_dim = dim.analyse(T, seeds, edges=edges, sizes=sizes, N=N,
-                             min_size=int(sizes[len(sizes) // 3]), max_dims=max(full // 2, 2))
-    report_dim["whole_matrix_dims"] = full
+    say(f"dimensionality around {n_seeds} vertices")
+    report_dim = mesh_dimensionality(T, edges, N, n_seeds, seed)
     predicted = report_dim["recommended_clusters"]
     ks = cluster_counts(V, extra=[predicted]) if counts is None else list(counts)
     curve = cost_curve(T, ks, tol, N, seed=seed, progress=say)
     t0 = time.perf_counter()
     say(f"adaptive CPCA from {start_clusters} clusters")
     ad = cp.adaptive_cpca(T, start_clusters=start_clusters, tol=tol, seed=seed, N=N)
+    t1 = time.perf_counter()
+    say("adaptive CPCA from the predicted count (--clusters auto)")
+    au = auto_cpca(T, edges, tol=tol, seed=seed, N=N, predicted=predicted)
     best = min(curve, key=lambda r: r["cost_per_vertex"])
     one = next((r for r in curve if r["clusters"] == 1), None)
     return {"vertices": V, "samples": S, "N": N, "tol": tol, "dimensionality": report_dim,
             "predicted_clusters": predicted, "cost_curve": curve, "optimum": best,
-            "global_pca": one,
-            "adaptive": {"clusters": ad.n_clusters, "start_clusters": ad.info["start_clusters"],
-                         "cost_per_vertex": ad.cost_per_vertex(),
-                         "relative_rms_error": ad.info["relative_rms_error"],
-                         "splits_kept": ad.info["splits_kept"],
-                         "splits_tried": ad.info["splits_tried"],
-                         "seconds": round(time.perf_counter() - t0, 3)}}
+            "global_pca": one, "adaptive": _summary(ad, t1 - t0),
+            "auto": _summary(au, time.perf_counter() - t1)}
+
+
+def _summary(model, seconds: float) -> dict:
+    return {"clusters": model.n_clusters, "start_clusters": model.info["start_clusters"],
+            "cost_per_vertex": model.cost_per_vertex(),
+            "relative_rms_error": model.info["relative_rms_error"],
+            "splits_kept": model.info["splits_kept"], "splits_tried": model.info["splits_tried"],
+            "seconds": round(seconds, 3)}
+
+
+def auto_cpca(T, edges, tol: float = 1e-3, seed: int = 0, N: int | None = None,
+              n_seeds: int = 8, min_start: int = 8, predicted: int | None = None):
+    """``--clusters auto``: adaptive CPCA started from the cluster count the dimensionality
+    analysis predicts (``V / p*``, at least ``min_start``), splitting in two or, when halving
+    does not pay, in four.
+
+    Measured on the statue and room scenes at equal shading error this is 3-25 % cheaper than
+    the paper's start from 8 clusters with binary splits (docs/bench, README): greedy halving
+    from a few large clusters stops where a cluster's halves each still need most of its basis.
+
+    Parameters
+    ----------
+    T : array_like (V, S)
+    edges : array_like (E, 2) of int
+        Mesh edges for the dimensionality patches.
+    tol : float
+        Per-cluster tolerance (see :mod:`.cpca`).
+    predicted : int, optional
+        The predicted count when already known (skips the dimensionality analysis).
+
+    Returns
+    -------
+    CPCA
+        ``info`` adds ``start_from`` ("predicted" or "minimum") and ``predicted_clusters``.
+    """
+    T = _transport(T)
+    V = T.shape[0]
+    N = cp.global_dimension(T, seed=seed) if N is None else int(N)
+    if predicted is None:
+        predicted = mesh_dimensionality(T, edges, N, n_seeds, seed)["recommended_clusters"]
+    start = max(int(min_start), predicted or 0)
+    model = cp.adaptive_cpca(T, start_clusters=min(start, V), tol=tol, seed=seed, N=N,
+                             ways=(2, 4))
+    model.info.update(start_from="predicted" if predicted and predicted >= min_start
+                      else "minimum", predicted_clusters=predicted)
+    return model
 
 
 # ----------------------------------------------------------------------------------------------

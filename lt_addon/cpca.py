@@ -548,7 +548,7 @@ def adaptive_cpca(T, start_clusters: int = 8, tol: float = 1e-3, n_iter: int = 1
                   seed: int = 0, N: int | None = None, max_depth: int = 20,
                   min_size: int = 2, count_mean: bool = True,
                   global_energy: float = GLOBAL_ENERGY,
-                  global_subset: int | None = GLOBAL_SUBSET) -> CPCA:
+                  global_subset: int | None = GLOBAL_SUBSET, ways=(2,)) -> CPCA:
     """Adaptive hierarchical CPCA (Mahajan 2007 sec. 5.2).
 
     Run :func:`fit_cpca` with ``start_clusters``; then, for every cluster, fit a 2-cluster CPCA
@@ -572,6 +572,10 @@ def adaptive_cpca(T, start_clusters: int = 8, tol: float = 1e-3, n_iter: int = 1
         Clusters with fewer vertices are not split.
     count_mean : bool
         Count each non-zero cluster mean as a basis vector in the cost (module doc).
+    ways : sequence of int >= 2
+        Split arities tried in turn until one lowers the cost: ``(2,)`` is the paper's binary
+        split; ``(2, 4)`` looks one level further when halving alone does not pay (a cluster
+        whose halves each still need most of its basis may pay off in quarters).
 
     Returns
     -------
@@ -583,6 +587,9 @@ def adaptive_cpca(T, start_clusters: int = 8, tol: float = 1e-3, n_iter: int = 1
     """
     T = _transport(T)
     tol, _ = _check_choice(tol, None)
+    ways = tuple(int(w) for w in ways)
+    if not ways or min(ways) < 2:
+        raise ValueError(f"ways must be split arities >= 2, got {ways!r}")
     if int(min_size) < 2:
         raise ValueError(f"min_size must be >= 2 (a cluster of one vertex cannot split), "
                          f"got {min_size!r}")
@@ -606,22 +613,30 @@ def adaptive_cpca(T, start_clusters: int = 8, tol: float = 1e-3, n_iter: int = 1
         node = tree[nid]
         if idx.size >= int(min_size) and node["depth"] < int(max_depth) and node["n"] > 0:
             tried += 1
-            sub = fit_cpca(T[idx], 2, tol=tol, n_iter=n_iter, seed=seed, N=N)
-            if sub.n_clusters == 2:
+            accepted = None
+            for way in ways:
+                if idx.size < way:
+                    break
+                sub = fit_cpca(T[idx], way, tol=tol, n_iter=n_iter, seed=seed, N=N)
+                if sub.n_clusters < 2:
+                    break                           # identical rows: nothing to split
                 split_cost = sum(_node_cost(s, N, count_mean) for s in sub.clusters)
                 node["split_cost"] = split_cost
                 if split_cost < node["cost"]:
-                    kept += 1
-                    node["split"] = True
-                    for j, s in enumerate(sub.clusters):
-                        cid = len(tree)
-                        tree.append({"id": cid, "parent": nid, "depth": node["depth"] + 1,
-                                     "size": s.n_vertices, "n": _cluster_dim(s, count_mean),
-                                     "cost": _node_cost(s, N, count_mean), "split_cost": None,
-                                     "split": False, "children": [], "leaf": None})
-                        node["children"].append(cid)
-                        stack.append((idx[sub.members(j)], s, cid))
-                    continue
+                    accepted = sub
+                    break
+            if accepted is not None:
+                kept += 1
+                node["split"] = True
+                for j, s in enumerate(accepted.clusters):
+                    cid = len(tree)
+                    tree.append({"id": cid, "parent": nid, "depth": node["depth"] + 1,
+                                 "size": s.n_vertices, "n": _cluster_dim(s, count_mean),
+                                 "cost": _node_cost(s, N, count_mean), "split_cost": None,
+                                 "split": False, "children": [], "leaf": None})
+                    node["children"].append(cid)
+                    stack.append((idx[accepted.members(j)], s, cid))
+                continue
         node["leaf"] = len(leaves)
         leaves.append((idx, c, nid))
     labels = np.empty(V, dtype=np.int64)
@@ -632,7 +647,8 @@ def adaptive_cpca(T, start_clusters: int = 8, tol: float = 1e-3, n_iter: int = 1
     model.info = {"criterion": "tol", "target": tol, "adaptive": True,
                   "start_clusters": start.n_clusters, "n_clusters": model.n_clusters,
                   "initial_cost": start.cost(count_mean), "cost": model.cost(count_mean),
-                  "count_mean": bool(count_mean), "splits_tried": tried, "splits_kept": kept,
+                  "count_mean": bool(count_mean), "ways": list(ways), "splits_tried": tried,
+                  "splits_kept": kept,
                   "relative_rms_error": relative_rms_error(T, model.reconstruct()),
                   "tree": tree}
     return model

@@ -7,7 +7,8 @@ on it and writes ``<object>_analysis.json`` plus two PNG charts:
 * ``<object>_dimensionality.png``: patch dimensionality vs patch size, log-log, one curve per
   seed vertex, with the fitted slope in the legend;
 * ``<object>_cost.png``: cost per vertex vs cluster count (log x), the measured optimum, the
-  count predicted from the slope (``V / p*``) and the adaptive result marked.
+  count predicted from the slope (``V / p*``) and the two adaptive results (the paper's, and
+  ``--clusters auto``) marked.
 
 Nothing in the .blend changes; every output is written under a temporary name and renamed.
 """
@@ -21,13 +22,7 @@ import time
 import numpy as np
 
 from ..lt_addon import cluster_analysis, plot
-
-
-def mesh_edges(obj) -> np.ndarray:
-    """The base mesh's edges as vertex index pairs, shape (E, 2), int64."""
-    e = np.empty(len(obj.data.edges) * 2, dtype=np.int64)
-    obj.data.edges.foreach_get("vertices", e)
-    return e.reshape(-1, 2)
+from .meshes import mesh_edges
 
 
 def analyse_object(scene, obj, direction_set, bounces: int = 0, samples: int | None = None,
@@ -70,7 +65,10 @@ def cost_chart(report: dict) -> tuple[list, list]:
     series = [plot.Series(k, c, "fixed CPCA (measured)", highlight=best),
               plot.Series(np.array([report["adaptive"]["clusters"]], float),
                           np.array([report["adaptive"]["cost_per_vertex"]], float),
-                          "adaptive CPCA", line=False, marker="x")]
+                          "adaptive (paper: from 8, halving)", line=False, marker="x"),
+              plot.Series(np.array([report["auto"]["clusters"]], float),
+                          np.array([report["auto"]["cost_per_vertex"]], float),
+                          "auto (from predicted, halving/quartering)", line=False, marker="x")]
     marks = [(float(report["optimum"]["clusters"]), "optimum")]
     if report["predicted_clusters"]:
         marks.append((float(report["predicted_clusters"]), "predicted V/p*"))

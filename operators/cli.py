@@ -500,7 +500,8 @@ def _cmd_analyze(args) -> int:
         print("analyze: cancelled; nothing was written", file=sys.stderr)
         return 130
     paths = analyze.write_analysis(report, out_dir)
-    dim, best, ad = report["dimensionality"], report["optimum"], report["adaptive"]
+    dim, best, ad, au = (report["dimensionality"], report["optimum"], report["adaptive"],
+                         report["auto"])
     one = report["global_pca"]
     prediction = (f"slope {dim['slope']:.3f}, mu {dim['mu']:.3f}, p* {dim['p_star']:.1f} -> "
                   f"predicted {report['predicted_clusters']} clusters" if dim["mu"] is not None
@@ -508,8 +509,9 @@ def _cmd_analyze(args) -> int:
     print(f"analyzed {obj.name}: {report['vertices']} vertices x {report['samples']} directions, "
           f"N = {report['N']}; {prediction}")
     print(f"  cost per vertex: global PCA {one['cost_per_vertex']:.1f}, best fixed CPCA "
-          f"{best['cost_per_vertex']:.1f} at {best['clusters']} clusters, adaptive "
-          f"{ad['cost_per_vertex']:.1f} at {ad['clusters']} clusters")
+          f"{best['cost_per_vertex']:.1f} at {best['clusters']} clusters, adaptive (paper) "
+          f"{ad['cost_per_vertex']:.1f} at {ad['clusters']} clusters, auto "
+          f"{au['cost_per_vertex']:.1f} at {au['clusters']} clusters")
     print("  wrote " + ", ".join(paths.values()))
     return EXIT_OK
 

@@ -94,3 +94,10 @@ def uv_triangles(obj) -> np.ndarray:
     loops = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int64)
     mesh.loop_triangles.foreach_get("loops", loops)
     return uv.reshape(-1, 2)[loops].reshape(-1, 3, 2)
+
+
+def mesh_edges(obj) -> np.ndarray:
+    """The base mesh's edges as vertex index pairs, shape (E, 2), int64."""
+    e = np.empty(len(obj.data.edges) * 2, dtype=np.int64)
+    obj.data.edges.foreach_get("vertices", e)
+    return e.reshape(-1, 2)

@@ -103,8 +103,9 @@ class TransportSettings:
     """What to bake and how many eigentransports to keep (exactly one of energy / coeffs).
 
     ``clusters``: None = one global eigentransport (Nowrouzezahrai 2008); an int k = CPCA with k
-    clusters; "auto" = Mahajan 2007's adaptive subdivision (starts at 8 clusters, keeps a split
-    only when the cost falls). With clusters, ``energy`` E is a per-cluster tolerance: each
+    clusters; "auto" = Mahajan 2007's adaptive subdivision, started from the count predicted by
+    the dimensionality analysis (:func:`..lt_addon.cluster_analysis.auto_cpca`), keeping a
+    split only when the cost falls. With clusters, ``energy`` E is a per-cluster tolerance: each
     cluster keeps the fewest vectors leaving at most 1 - E of its energy (``coeffs`` = a fixed
     count per cluster; "auto" needs ``energy``)."""
 
@@ -148,11 +149,13 @@ def parse_clusters(value):
     return int(text)
 
 
-def fit_model(T: np.ndarray, settings: TransportSettings, metadata: dict):
+def fit_model(T: np.ndarray, settings: TransportSettings, metadata: dict, edges=None):
     """Eigentransport (no clusters) or CPCA (``settings.clusters``) of a (V, S) bake.
 
+    ``edges`` (E, 2): the mesh edges, needed by ``clusters="auto"`` (the dimensionality
+    analysis that picks the starting count grows patches along them).
     Raises BakeInputError when a fixed cluster count exceeds the vertex count."""
-    from ..lt_addon import cpca
+    from ..lt_addon import cluster_analysis, cpca
     from ..lt_addon.eigentransport import fit_eigentransport
 
     T = np.asarray(T, dtype=np.float64)
@@ -161,7 +164,9 @@ def fit_model(T: np.ndarray, settings: TransportSettings, metadata: dict):
                                   metadata=metadata)
     tol = None if settings.energy is None else 1.0 - settings.energy
     if settings.clusters == "auto":
-        return cpca.adaptive_cpca(T, start_clusters=8, tol=tol, seed=settings.seed)
+        if edges is None:
+            raise BakeInputError("--clusters auto needs the mesh edges")
+        return cluster_analysis.auto_cpca(T, edges, tol=tol, seed=settings.seed)
     if settings.clusters > T.shape[0]:
         raise BakeInputError(f"--clusters {settings.clusters} exceeds the object's "
                              f"{T.shape[0]} vertices; use at most {T.shape[0]} or 'auto'")
@@ -193,8 +198,11 @@ def fit_and_write(result: TransportBakeResult, obj, direction_set, settings: Tra
     from .vertex_relight import KIND, mesh_positions_normals, save_sidecar
 
     t0 = time.perf_counter()
+    from .meshes import mesh_edges
+
     model = fit_model(result.transport, settings, {"directions": direction_set.spec,
-                                                    "bounces": settings.bounces})
+                                                    "bounces": settings.bounces},
+                      edges=mesh_edges(obj))
     fit_seconds = time.perf_counter() - t0
     clustered = isinstance(model, CPCA)
     os.makedirs(out_dir, exist_ok=True)

@@ -38,6 +38,8 @@ def test_analyze_writes_json_and_charts_and_leaves_the_blend_alone(analyzed):
     costs = [row["cost_per_vertex"] for row in rep["cost_curve"]]
     assert rep["optimum"]["cost_per_vertex"] == min(costs) < rep["global_pca"]["cost_per_vertex"]
     assert rep["adaptive"]["cost_per_vertex"] < rep["global_pca"]["cost_per_vertex"]
+    assert rep["auto"]["start_clusters"] == max(8, rep["predicted_clusters"])
+    assert rep["auto"]["cost_per_vertex"] < rep["global_pca"]["cost_per_vertex"]
     for name in ("Statue_cost.png", "Statue_dimensionality.png"):
         img = read_png(str(folder / "an" / name))
         assert img.shape == (420, 640, 3)

@@ -66,3 +66,15 @@ def test_counts_and_sizes_are_clipped_and_unique():
 def test_seeds_come_from_the_largest_component():
     edges = np.array([[0, 1], [1, 2], [2, 3], [5, 6]])
     assert CA.largest_component(edges, 8).tolist() == [0, 1, 2, 3]
+
+
+def test_auto_cpca_starts_from_the_prediction_and_meets_the_tolerance():
+    T, edges = _strip()
+    m = CA.auto_cpca(T, edges, tol=1e-3, predicted=12)
+    assert m.info["start_clusters"] == 12 and m.info["start_from"] == "predicted"
+    assert m.info["ways"] == [2, 4] and m.cost() <= m.info["initial_cost"]
+    assert m.info["relative_rms_error"] <= np.sqrt(1e-3) + 1e-9
+    low = CA.auto_cpca(T, edges, tol=1e-3, predicted=3)
+    assert low.info["start_clusters"] == 8 and low.info["start_from"] == "minimum"
+    measured = CA.auto_cpca(T, edges, tol=1e-3)     # runs the dimensionality analysis itself
+    assert measured.info["predicted_clusters"] >= 1

@@ -291,3 +291,17 @@ def test_one_cluster_per_vertex_is_exact_and_merges_identical_rows():
     assert m.labels[7] == m.labels[3]
     np.testing.assert_allclose(m.reconstruct(), T, rtol=0, atol=1e-12)
     assert m.cost() == 11 * 4 + 12                     # n_i = 1 (the mean): sum (p_i + N)
+
+
+def test_adaptive_lookahead_never_costs_more_than_its_start_and_records_the_arities():
+    rng = np.random.default_rng(11)
+    T = np.concatenate([np.outer(rng.random(15), rng.random(10)) + 0.01 * rng.random((15, 10))
+                        for _ in range(6)])
+    binary = CP.adaptive_cpca(T, start_clusters=2, tol=1e-3, N=6, seed=1)
+    look = CP.adaptive_cpca(T, start_clusters=2, tol=1e-3, N=6, seed=1, ways=(2, 4))
+    assert look.info["ways"] == [2, 4] and binary.info["ways"] == [2]
+    for m in (binary, look):
+        assert m.cost() <= m.info["initial_cost"]
+        assert m.info["relative_rms_error"] <= np.sqrt(1e-3) + 1e-12
+    with pytest.raises(ValueError, match="arities >= 2"):
+        CP.adaptive_cpca(T, ways=(1,))
