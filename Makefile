@@ -7,7 +7,7 @@ OUT    := out
 # Never touch the user's real Blender configuration from make targets.
 export BLENDER_USER_RESOURCES ?= $(CURDIR)/build/blender-user
 
-.PHONY: venv demo test test-core bench dist validate clean
+.PHONY: venv demo test test-core bench bench-full dist validate clean
 
 venv: $(STAMP)
 
@@ -26,7 +26,7 @@ demo: $(STAMP)
 	done
 	$(VENV)/bin/relight validate --paper ashikhmin2002 > $(OUT)/validate-ashikhmin2002.json
 	$(VENV)/bin/relight bake-textures $(OUT)/bumps.blend --object Bumps --preset balanced \
-	  --samples 32 --truth 4 --contact-sheet $(OUT)/bumps-contact-sheet.png
+	  --truth 4 --contact-sheet $(OUT)/bumps-contact-sheet.png
 	$(VENV)/bin/relight bake-transport $(OUT)/statue.blend --object Statue --directions cube:8 \
 	  --energy 0.99 --truth
 	$(VENV)/bin/relight info $(OUT)/bumps.blend
@@ -43,9 +43,21 @@ test: $(STAMP)
 test-core: $(STAMP)
 	$(PY) -m pytest -q tests/core
 
-## bench: slow sweeps that print figures (not part of `make test`)
+## bench: the quick sweeps that print figures (not part of `make test`; ~15 min on 2 cores):
+##   relight bench --quick on all four scenes (JSON, CSV, Pareto charts in out/bench) and the
+##   CPCA comparison at equal shading error on statue and room (out/bench/cpca.*)
 bench: $(STAMP)
-	mkdir -p $(OUT)/bench
+	mkdir -p $(OUT)/bench $(BLENDER_USER_RESOURCES)
+	$(VENV)/bin/relight bench --quick --out $(OUT)/bench
+	$(PY) benchmarks/bench_cpca.py --scenes statue,room --out $(OUT)/bench
+
+## bench-full: the standard (demo-size) sweeps behind the README tables and the presets
+##   (~2 h): writes docs/bench and operators/presets.json, plus the deeper per-method benchmarks
+bench-full: $(STAMP)
+	mkdir -p $(OUT)/bench docs/bench $(BLENDER_USER_RESOURCES)
+	$(VENV)/bin/relight bench --scene bumps --write-presets --out docs/bench
+	$(VENV)/bin/relight bench --scene statue --scene room --out docs/bench
+	$(PY) benchmarks/bench_cpca.py --scenes statue,room --out docs/bench
 	$(PY) benchmarks/bench_steerable.py --json $(OUT)/bench/steerable.json
 	$(PY) benchmarks/bench_texture_bake.py --presets draft,balanced
 	$(PY) benchmarks/bench_transport.py --scenes statue,room --directions cube:16

@@ -177,9 +177,10 @@ def auto_cpca(T, edges, tol: float = 1e-3, seed: int = 0, N: int | None = None,
     analysis predicts (``V / p*``, at least ``min_start``), splitting in two or, when halving
     does not pay, in four.
 
-    Measured on the statue and room scenes at equal shading error this is 3-25 % cheaper than
-    the paper's start from 8 clusters with binary splits (docs/bench, README): greedy halving
-    from a few large clusters stops where a cluster's halves each still need most of its basis.
+    Measured at equal shading error (benchmarks/bench_cpca.py, docs/bench/cpca.json) this is
+    22-24 % cheaper than the paper's start from 8 clusters with binary splits on the statue and
+    3-6 % on the room: greedy halving from a few large clusters stops where a cluster's halves
+    each still need most of its basis.
 
     Parameters
     ----------
