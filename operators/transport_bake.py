@@ -186,7 +186,8 @@ def cluster_summary(model) -> dict:
 
 def fit_and_write(result: TransportBakeResult, obj, direction_set, settings: TransportSettings,
                   out_dir: str, figures: dict | None = None) -> dict:
-    """Fit eigentransport to a bake, write the sidecar + JSON report, record the bake on ``obj``.
+    """Fit eigentransport or CPCA to a bake, write the sidecar + JSON report, record the bake on
+    ``obj``.
 
     Returns the report dict.
     """
@@ -194,12 +195,11 @@ def fit_and_write(result: TransportBakeResult, obj, direction_set, settings: Tra
     import os
 
     from ..lt_addon.cpca import CPCA
+    from .meshes import mesh_edges
     from .steerable_bake import record_kind
     from .vertex_relight import KIND, mesh_positions_normals, save_sidecar
 
     t0 = time.perf_counter()
-    from .meshes import mesh_edges
-
     model = fit_model(result.transport, settings, {"directions": direction_set.spec,
                                                     "bounces": settings.bounces},
                       edges=mesh_edges(obj))
@@ -253,6 +253,7 @@ def truth_errors(scene, obj, model, direction_set, environment, bounces: int, sa
 
     With ``transport`` (the full (V, S) bake) the error of shading with *all* S directions is
     reported too: the floor that the direction sampling alone leaves, whatever d is."""
+    from ..lt_addon.cpca import CPCA
     from ..lt_addon.eigentransport import project_environment, relative_rms_error
 
     t0 = time.perf_counter()
@@ -260,15 +261,11 @@ def truth_errors(scene, obj, model, direction_set, environment, bounces: int, sa
     truth_seconds = time.perf_counter() - t0
     Lw = project_environment(environment, direction_set.directions, direction_set.solid_angles,
                              row_order="bottom_first")
-    rows = []
-    if not hasattr(model, "truncate"):  # CPCA: the fitted model only
-        ds_for = ()
-    for d in sorted({min(d, model.d) for d in ds_for} | {model.d}):
-        if not hasattr(model, "truncate"):
-            rows.append({"d": d, "rel_rms_error": relative_rms_error(truth, model.shade(Lw))})
-            continue
-        shade = model.truncate(d).shade(Lw)  # albedo 1: E / pi, as the DIFFUSE bake
-        rows.append({"d": d, "rel_rms_error": relative_rms_error(truth, shade)})
+    # albedo 1: E / pi, as the DIFFUSE bake; a CPCA model has no single d to truncate
+    models = ([(model.d, model)] if isinstance(model, CPCA) else
+              [(d, model.truncate(d)) for d in sorted({min(d, model.d) for d in ds_for}
+                                                        | {model.d})])
+    rows = [{"d": d, "rel_rms_error": relative_rms_error(truth, m.shade(Lw))} for d, m in models]
     out = {"truth_samples": samples, "truth_seconds": round(truth_seconds, 3), "per_d": rows}
     if transport is not None:
         full = np.asarray(transport, np.float64) @ Lw / np.pi
