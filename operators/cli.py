@@ -473,17 +473,15 @@ def _cmd_bake_transport(args) -> int:
 def _cmd_analyze(args) -> int:
     import bpy
 
-    from ..lt_addon.directions import parse_direction_spec
-    from . import analyze
+    from . import analyze, transport_bake
     from .cycles_bake import BakeInputError
 
     path = _check_input_blend(args.file)
-    try:
-        ds = parse_direction_spec(args.directions)
-    except ValueError as exc:
+    try:  # the same direction / bounce checks as bake-transport
+        ds = transport_bake.TransportSettings(directions=args.directions,
+                                              bounces=args.bounces).validate()
+    except BakeInputError as exc:
         raise CliError(str(exc)) from None
-    if not 0 <= args.bounces <= 64:
-        raise CliError(f"--bounces must be in 0..64, got {args.bounces}")
     if not 0.0 <= args.tol <= 1.0:
         raise CliError(f"--tol must be in [0, 1], got {args.tol}")
     if args.seeds < 1:
