@@ -27,6 +27,12 @@ Kinds and their sample order (index ``j``):
     angles from ``A(s, t) = atan2(s t, sqrt(s^2 + t^2 + 1))``. Z is up (Blender world).
 ``cubegauss`` -- :func:`cube_gauss`
     ``n x n`` Gauss-Legendre nodes per face with weights ``w_a w_b / (1 + s^2 + t^2)^{3/2}``.
+``hemi`` -- :func:`hemisphere_fibonacci`
+    ``n`` directions over the *upper* hemisphere only (a distant light below the horizon is
+    off): a Fibonacci spiral, ``z = u_i^p`` with ``u_i = (i + 0.5) / n`` and azimuth ``i`` times
+    the golden angle. ``p = 1`` is uniform in solid angle; ``p > 1`` puts more directions near
+    the horizon, where grazing shadows change fastest. Weights ``2 pi p u_i^(p-1) / n`` (sum
+    2 pi). Spec ``hemi:N`` or ``hemi:N:P``.
 
 A :class:`DirectionSet` is described by a short *spec* string (``"halton:1024"``,
 ``"latlong:32x64"``, ``"cube:16"``, ``"cubegauss:12"``; :func:`parse_direction_spec`) that is
@@ -42,7 +48,7 @@ import scipy.spatial
 
 from .hemisphere import direction_to_equirect_uv, equirect_uv_to_direction, normalize_directions
 
-KINDS = ("halton", "latlong", "cube", "cubegauss")
+KINDS = ("halton", "latlong", "cube", "cubegauss", "hemi")
 
 #: Cubemap faces (OpenGL convention): (major axis, s axis, t axis); a texel direction is
 #: ``major + s * s_axis + t * t_axis`` for ``s, t`` in [-1, 1].
@@ -115,6 +121,9 @@ class DirectionSet:
             return f"latlong:{p['rows']}x{p['cols']}"
         if self.kind in ("cube", "cubegauss"):
             return f"{self.kind}:{p['n']}"
+        if self.kind == "hemi":
+            power = float(p.get("power", 1.0))
+            return f"hemi:{p['n']}" if power == 1.0 else f"hemi:{p['n']}:{power:g}"
         return "custom"
 
     def to_dict(self, include_arrays: bool = False) -> dict:
@@ -286,12 +295,36 @@ def cube_gauss(n: int) -> DirectionSet:
     return DirectionSet(d, np.tile(ww.ravel(), 6), "cubegauss", {"n": n})
 
 
+def hemisphere_fibonacci(n: int, power: float = 1.0) -> DirectionSet:
+    """``n`` upper-hemisphere directions on a Fibonacci spiral, denser near the horizon for
+    ``power > 1`` (see the module docstring, kind ``hemi``).
+
+    Returns
+    -------
+    DirectionSet
+        ``solid_angles`` sum to 2 pi (the upper hemisphere).
+    """
+    n = _check_count(n, "n")
+    power = float(power)
+    if not 1.0 <= power <= 4.0:
+        raise ValueError(f"hemisphere power must be in [1, 4], got {power}")
+    u = (np.arange(n) + 0.5) / n
+    z = u ** power
+    phi = np.arange(n) * (np.pi * (3.0 - np.sqrt(5.0)))
+    r = np.sqrt(np.clip(1.0 - z * z, 0.0, None))
+    dirs = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
+    w = 2.0 * np.pi * power * u ** (power - 1.0) / n
+    w *= 2.0 * np.pi / w.sum()   # exact total for any power (the midpoint rule is not)
+    return DirectionSet(dirs, w, "hemi", {"n": n, "power": power})
+
+
 def make_direction_set(kind: str, **params) -> DirectionSet:
     """Build a set by kind name: ``make_direction_set("cube", n=16)``."""
     builders = {"halton": lambda p: halton_sphere(p["n"]),
                 "latlong": lambda p: latlong(p["rows"], p["cols"]),
                 "cube": lambda p: cubemap(p["n"]),
-                "cubegauss": lambda p: cube_gauss(p["n"])}
+                "cubegauss": lambda p: cube_gauss(p["n"]),
+                "hemi": lambda p: hemisphere_fibonacci(p["n"], p.get("power", 1.0))}
     if kind not in builders:
         raise ValueError(f"unknown direction-set kind {kind!r}; expected one of {KINDS}")
     try:
@@ -319,7 +352,7 @@ def parse_direction_spec(spec: str) -> DirectionSet:
         With the accepted forms, for anything else (unknown kind, missing or non-positive
         numbers, more than :data:`MAX_DIRECTIONS` directions).
     """
-    forms = "'halton:1024', 'latlong:32x64', 'cube:16' or 'cubegauss:12'"
+    forms = "'halton:1024', 'latlong:32x64', 'cube:16', 'cubegauss:12' or 'hemi:400[:1.5]'"
     if not isinstance(spec, str):
         raise ValueError(f"direction spec must be a string like {forms}, got {spec!r}")
     text = spec.strip().lower()
@@ -334,6 +367,20 @@ def parse_direction_spec(spec: str) -> DirectionSet:
                              f"expected {forms}")
         return int(s)
 
+    if kind == "hemi":
+        count, _, power = arg.partition(":")
+        n = _int(count)
+        try:
+            p = float(power) if power else 1.0
+        except ValueError:
+            p = float("nan")
+        if not 1.0 <= p <= 4.0:
+            raise ValueError(f"bad direction spec {spec!r}: the horizon power must be a number "
+                             "in [1, 4], e.g. 'hemi:400:1.5'")
+        if n > MAX_DIRECTIONS:
+            raise ValueError(f"direction spec {spec!r} asks for {n} directions; the limit is "
+                             f"{MAX_DIRECTIONS}")
+        return hemisphere_fibonacci(n, p)
     if kind == "latlong":
         parts = arg.split("x")
         if len(parts) != 2:

@@ -68,15 +68,42 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print the listing as JSON")
     p.set_defaults(func=_cmd_info)
 
-    p = sub.add_parser("bake-textures", help="bake steerable illumination textures of an object",
-                       description="Bake an object's UV texture under the N = order^2 sampled "
-                                   "steerable lights with Cycles, solve for the basis textures and "
-                                   "write them as one EXR plus a JSON report; the .blend gets the "
-                                   "bake record and the live preview material.")
+    p = sub.add_parser("bake-textures", help="bake relightable textures of one or more objects",
+                       description="--method transport (default): bake each object's UV texture "
+                                   "under S hard Sun lamps (1 sample each, streamed to disk), the "
+                                   "albedo, and the indirect light as a low-order steerable term; "
+                                   "fit a model (PCA eigen-textures by default) and install a live "
+                                   "preview. --method lobes: the paper's broad-lobe bake under the "
+                                   "N = order^2 sampled steerable lights. Both write EXR/NPZ files "
+                                   "and a JSON report; the .blend gets the bake record and preview.")
     p.add_argument("file", metavar="FILE.blend")
-    p.add_argument("--object", required=True, metavar="NAME", help="mesh object with a UV map")
-    p.add_argument("--preset", choices=sorted(PRESETS), default="balanced",
+    p.add_argument("--object", required=True, action="append", metavar="NAME",
+                   help="mesh object with a UV map; repeat to bake several objects in the same "
+                        "Cycles calls (shadows fall between them; transport method only)")
+    p.add_argument("--method", choices=("transport", "lobes"), default="transport",
+                   help="transport: direction-sampled hard-sun bake (default); lobes: the "
+                        "paper's steerable-lobe environment bake")
+    p.add_argument("--preset", choices=("draft", "balanced", "production"), default="balanced",
                    help="starting values for the settings below (default balanced)")
+    p.add_argument("--directions", metavar="SPEC", help="transport: sun directions, hemi:N[:P] "
+                   "(N directions over the upper hemisphere, P > 1 denser near the horizon)")
+    p.add_argument("--sun-angle", type=float, help="transport: sun size in degrees for the "
+                   "preview and the truth (default 2)")
+    p.add_argument("--model", choices=("pca", "blocks", "steerable", "none"),
+                   help="transport: pca eigen-textures (live preview), blocks (clustered PCA "
+                        "over texel blocks), steerable (the paper's basis by quadrature), none")
+    p.add_argument("--components", type=int, help="transport: PCA components (default: from "
+                   "--tol) or the steerable order")
+    p.add_argument("--tol", type=float, help="transport: relative residual the PCA keeps")
+    p.add_argument("--indirect-samples", type=int, help="transport: samples of the indirect bake")
+    p.add_argument("--indirect-resolution", type=int, help="transport: indirect texture side")
+    p.add_argument("--target-error", type=float, metavar="E", help="transport: a pilot bake "
+                   "chooses the directions and the PCA tolerance to reach relative RMSE E on "
+                   "held-out lights; the report says what it chose and achieved")
+    p.add_argument("--truth-samples", type=int, default=256,
+                   help="transport: Cycles samples of the truth bakes (default 256)")
+    p.add_argument("--force", action="store_true",
+                   help="transport: replace an existing bake of the same object in --out")
     p.add_argument("--frame", choices=FRAMES, help="world: relight by a distant world light; "
                    "tangent: a tileable patch relit per pixel in a surface's UV tangent frame")
     p.add_argument("--order", type=int, help="basis order N1 (N = N1^2 bakes), 2..12")
@@ -101,11 +128,19 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("relight", help="relight a stored steerable texture for one light (NumPy)")
     p.add_argument("file", metavar="FILE.blend")
     p.add_argument("--object", required=True, metavar="NAME")
-    p.add_argument("--light", required=True, type=_az_el, metavar="AZ,EL",
+    p.add_argument("--light", type=_az_el, metavar="AZ,EL",
                    help="light azimuth and elevation in degrees (bake frame, z up)")
     p.add_argument("--intensity", type=float, default=1.0,
                    help="normal irradiance, as a Sun lamp's strength (default 1)")
     p.add_argument("--color", type=_rgb, default=(1.0, 1.0, 1.0), metavar="R,G,B")
+    p.add_argument("--sun-angle", type=float, default=None, metavar="DEG",
+                   help="transport bakes: sun size in degrees (default: the bake's)")
+    p.add_argument("--env", metavar="HDR.exr", help="transport bakes: relight under this "
+                   "equirectangular environment instead of a sun (direct light)")
+    p.add_argument("--rotate", type=float, default=0.0, metavar="DEG",
+                   help="with --env: rotate the environment about +z")
+    p.add_argument("--source", choices=("model", "transport"), default="model",
+                   help="transport bakes: relight from the fitted model or from T itself")
     p.add_argument("--out", metavar="IMG.exr", help="write the relit texture (float RGB EXR)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
     p.set_defaults(func=_cmd_relight)
@@ -342,6 +377,18 @@ def _open_object(path: str, name: str):
 
 
 def _cmd_bake_textures(args) -> int:
+    if args.method == "transport":
+        return _cmd_bake_texture_transport(args)
+    lobes_only = [f"--{k.replace('_', '-')}" for k in ("directions", "sun_angle", "model",
+                                                       "components", "tol", "indirect_samples",
+                                                       "indirect_resolution", "target_error")
+                  if getattr(args, k) is not None]
+    if lobes_only:
+        raise CliError(f"{', '.join(lobes_only)} apply to --method transport, not lobes")
+    if len(args.object) > 1:
+        raise CliError("--method lobes bakes one object; give --object once "
+                       "(or use --method transport for several)")
+    args.object = args.object[0]
     import bpy
 
     from . import blend_files, preview_nodes, steerable_bake
@@ -394,6 +441,90 @@ def _cmd_bake_textures(args) -> int:
               f"light {e['same_light']['rel_fro']:.4f}"
               + (f", 4x samples {e['same_light_4x']['rel_fro']:.4f}" if "same_light_4x" in e else "")
               + (f", vs Sun lamp {e['sun']['rel_fro']:.4f}" if "sun" in e else ""))
+    return EXIT_OK
+
+
+def _cmd_bake_texture_transport(args) -> int:
+    import bpy
+
+    from . import blend_files, texture_transport as tx
+    from .cycles_bake import BakeInputError
+    from .steerable_bake import run
+
+    lobes_only = [f"--{k.replace('_', '-')}" for k in ("frame", "order", "samples", "storage",
+                                                       "mode", "world_sampling", "contact_sheet")
+                  if getattr(args, k) is not None]
+    if lobes_only:
+        raise CliError(f"{', '.join(lobes_only)} apply to --method lobes; the transport method "
+                       "takes --directions, --resolution, --bounces, --model, --sun-angle")
+    path = _check_input_blend(args.file)
+    names = {"directions": "directions", "resolution": "resolution", "bounces": "bounces",
+             "seed": "seed", "sun_angle": "sun_angle", "model": "model",
+             "components": "components", "tol": "tol", "indirect_samples": "indirect_samples",
+             "indirect_resolution": "indirect_resolution"}
+    overrides = {v: getattr(args, k) for k, v in names.items() if getattr(args, k) is not None}
+    try:
+        settings = tx.settings_from_preset(args.preset, **overrides)
+        settings.validate()
+        if args.truth:
+            tx.truth_lights(args.truth)
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    if args.truth_samples < 1:
+        raise CliError(f"--truth-samples must be >= 1, got {args.truth_samples}")
+    if args.target_error is not None and not 0.0 < args.target_error < 1.0:
+        raise CliError(f"--target-error must be in (0, 1), got {args.target_error}")
+    out_dir = _check_output_dir(args.out, path)
+    if not _can_create_in(os.path.dirname(path)):
+        raise CliError(f"cannot update {path}: its folder is not writable")
+    if len(set(args.object)) != len(args.object):
+        raise CliError("an --object is given twice")
+    objects = [_open_object(path, args.object[0])]
+    for name in args.object[1:]:
+        obj = bpy.data.objects.get(name)
+        if obj is None:
+            meshes = sorted(o.name for o in bpy.data.objects if o.type == "MESH")
+            raise CliError(f"no object {name!r} in {path}; mesh objects: {', '.join(meshes)}")
+        objects.append(obj)
+    if not args.force:
+        for o in objects:
+            rp = os.path.join(out_dir, f"{tx._safe(o.name)}_texture_report.json")
+            if os.path.exists(rp):
+                raise CliError(f"a bake of {o.name} exists in {out_dir} (use --force to "
+                               "replace it)")
+    show = _progress_printer("bake-textures")
+    try:
+        reports = run(tx.bake_job(bpy.context.scene, objects, settings, out_dir,
+                                  truth=args.truth, truth_samples=args.truth_samples,
+                                  target_error=args.target_error), on_progress=show)
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    except KeyboardInterrupt:
+        print("bake-textures: cancelled; nothing was written", file=sys.stderr)
+        return 130
+    blend_files.save_atomically(path)
+    for rep in reports:
+        t = rep["timings"]
+        print(f"baked {rep['object']}: {rep['directions']} directions at "
+              f"{rep['settings']['resolution']}^2, model {rep['model']['kind']}, "
+              f"{rep['bytes']['total'] / 2**20:.1f} MiB; {t['wall_total']:.1f} s in all "
+              f"(bake {t['bake_total']:.1f} s: Cycles direct {t.get('direct_cycles', 0):.1f} s, "
+              f"indirect {t.get('indirect_cycles', 0):.1f} s; fit {t['fit']:.1f} s); "
+              f"report {rep['report']}")
+        gt = rep.get("ground_truth")
+        if gt:
+            print(f"  error vs Cycles Sun ({gt['sun_angle']:g} deg, {gt['truth_samples']} spp, "
+                  f"{rep['settings']['bounces']} bounces) at {len(gt['lights']) // len(reports)}"
+                  f" held-out lights: {gt['headline_rel_rmse']:.3f} relative RMSE "
+                  f"({gt['headline_of']}; from T directly {gt['transport_rel_rmse']:.3f})")
+        te = rep.get("target_error")
+        if te:
+            print(f"  target {te['target_error']}: chose {te['chosen_directions']}, tol "
+                  f"{te['tol']}; achieved {te.get('achieved', float('nan')):.3f}"
+                  f"{'' if te.get('met') else ' (NOT met)'}")
+        if rep["glossy"]["materials"]:
+            print(f"  note: {rep['glossy']['note']}: "
+                  + ", ".join(m["material"] for m in rep["glossy"]["materials"]))
     return EXIT_OK
 
 
@@ -624,7 +755,19 @@ def _cmd_relight(args) -> int:
 
     path = _check_input_blend(args.file)
     out = _check_output_path(args.out, ".exr", args.force) if args.out else None
+    if (args.light is None) == (args.env is None):
+        raise CliError("give exactly one of --light AZ,EL and --env HDR.exr")
     obj = _open_object(path, args.object)
+    from .blend_files import object_bakes
+
+    kinds = [b.get("kind") for b in object_bakes(obj)]
+    if "transport_texture" in kinds and (args.env or kinds.index("transport_texture") >
+                                         (kinds.index("steerable_texture")
+                                          if "steerable_texture" in kinds else -1)):
+        return _relight_transport(args, obj, out)
+    if args.env:
+        raise CliError(f"{obj.name}'s bake is a lobes bake; --env needs a transport bake "
+                       "(bake-textures --method transport)")
     try:
         texture = steerable_bake.load_texture(obj)
     except (FileNotFoundError, ValueError) as exc:
@@ -637,6 +780,46 @@ def _cmd_relight(args) -> int:
                          "intensity": args.intensity, "color": list(args.color),
                          "source": texture.settings}, pixel_type="float")
     print(json.dumps({"object": obj.name, "light": [az, el], "mean": [float(v) for v in img.mean(axis=(0, 1))],
+                      "max": float(img.max()), "out": out}))
+    return EXIT_OK
+
+
+def _relight_transport(args, obj, out) -> int:
+    from ..lt_addon import exrio
+    from ..lt_addon.hemisphere import direction_from_az_el
+    from . import texture_transport as tx
+    from .blend_files import bake_file
+
+    try:
+        bake, store, report = tx.load_bake(bake_file(obj, tx.KIND, "transport texture"))
+    except (FileNotFoundError, ValueError, KeyError) as exc:
+        raise CliError(str(exc)) from None
+    angle = report["settings"]["sun_angle"] if args.sun_angle is None else args.sun_angle
+    if not 0.0 <= angle <= 90.0:
+        raise CliError(f"--sun-angle must be in 0..90 degrees, got {angle}")
+    info = {"object": obj.name, "method": "transport"}
+    if args.env:
+        env_path = os.path.abspath(args.env)
+        try:
+            ch, _ = exrio.read_exr(env_path)
+        except Exception as exc:  # not an EXR, unreadable
+            raise CliError(f"cannot read {env_path} as an EXR environment: {exc}") from None
+        if not {"R", "G", "B"} <= set(ch):
+            raise CliError(f"{env_path} has no R, G, B channels")
+        env = np.stack([ch[c] for c in "RGB"], axis=-1)   # row 0 at the bottom (exrio)
+        img = tx.relight_environment(bake, store, env, args.rotate, row_order="bottom_first")
+        img = img * args.intensity * np.asarray(args.color, np.float32)
+        info.update(env=env_path, rotate=args.rotate, indirect="not included (direct light)")
+    else:
+        az, el = args.light
+        img = tx.relight(bake, store, direction_from_az_el(az, el), angle, args.intensity,
+                         source=args.source, kernel=report["settings"].get("kernel", "linear"))
+        img = img * np.asarray(args.color, np.float32)
+        info.update(light=[az, el], sun_angle=angle, source=args.source)
+    if out:
+        exrio.write_exr(out, {c: img[..., i] for i, c in enumerate("RGB")},
+                        {k: v for k, v in info.items()}, pixel_type="float")
+    print(json.dumps({**info, "mean": [float(v) for v in img.mean(axis=(0, 1))],
                       "max": float(img.max()), "out": out}))
     return EXIT_OK
 

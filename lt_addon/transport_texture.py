@@ -1,0 +1,573 @@
+"""Direction-sampled transport textures: relight a texture from S hard-sun bakes (bpy-free).
+
+A transport texture is ``T[s, p]``: the value Cycles bakes at texel ``p`` (irradiance mode,
+direct light only, i.e. ``E / pi`` of a white Lambertian surface) under a hard Sun lamp of
+strength 1 (unit normal irradiance, angle 0) from direction ``w_s`` of a
+:class:`~.directions.DirectionSet`. Because the bake is linear in the light, any distant
+lighting is a weighted sum of these images:
+
+* a sun of angular diameter ``a`` from ``w0``: ``E/pi = sum_s k_s(w0, a) T[s]`` with a
+  normalised kernel ``k`` (:func:`sun_weights`);
+* an environment ``L``: ``E/pi = sum_s L(w_s) dw_s T[s]`` (:func:`environment_weights`).
+
+Outgoing radiance of the diffuse surface is ``albedo * E/pi``; indirect light is a separate
+term (see ``operators/texture_transport.py``).
+
+Storage is direction-major, ``(S, P)`` float16 on disk through a NumPy memmap
+(:class:`TransportStore`), so a bake is streamed one direction at a time and a relight reads only
+the few rows its kernel touches. Models fitted from the store stream over texel chunks too:
+
+* :class:`TexturePCA` -- ``T ~ V U`` with ``V`` (S, K) direction loadings and ``U`` (K, P)
+  eigen-textures, from the (S, S) Gram matrix accumulated chunk by chunk (uncentred: the
+  best rank-K approximation in the Frobenius norm, no mean term to carry);
+* :class:`BlockPCA` -- the same per square block of texels (clustered PCA over texel blocks,
+  Mahajan et al. 2007's texture application), each block keeping the fewest components
+  that meet the tolerance;
+* the steerable basis of Ashikhmin & Shirley by quadrature (:func:`quadrature_sampled_lights`).
+
+For the viewport a model's light dependence is tabulated: ``c_k(w0) = sum_s k_s(w0, a) V[s, k]``
+on a D x D grid over the hemisphere disk (:func:`coefficient_tables`), sampled in the node tree
+at the light's disk point (:func:`table_lookup` is the same bilinear lookup in NumPy).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.spatial
+
+from .directions import DirectionSet, parse_direction_spec
+from .hemisphere import disk_to_hemisphere, hemisphere_to_disk, normalize_directions
+
+KERNELS = ("gauss", "linear")
+#: Bytes of float64 working array per chunk when streaming over the store's texels.
+CHUNK_BYTES = 32 << 20
+
+
+def chunk_texels(n_directions: int) -> int:
+    """Texels per streamed chunk so one (S, chunk) float64 block is about CHUNK_BYTES."""
+    return max(256, CHUNK_BYTES // (8 * max(int(n_directions), 1)))
+STORE_FORMAT = "relightable_textures.transport_texture"
+
+
+# ----------------------------------------------------------------------------------------------
+# light kernels
+
+
+def _spacing(dset: DirectionSet, idx: np.ndarray) -> np.ndarray:
+    """Local sample spacing (rad) at sample(s) ``idx``: sqrt of the sample's solid angle."""
+    return np.sqrt(dset.solid_angles[idx])
+
+
+def _disc_points(direction: np.ndarray, radius: float, count: int) -> np.ndarray:
+    """``count`` directions spread evenly (sunflower) over a cone of half-angle ``radius``."""
+    if count <= 1 or radius <= 0:
+        return direction[None, :]
+    helper = np.array([1.0, 0.0, 0.0]) if abs(direction[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    t = np.cross(direction, helper)
+    t /= np.linalg.norm(t)
+    b = np.cross(direction, t)
+    i = np.arange(count) + 0.5
+    # uniform in solid angle over the cap: cos(theta) uniform in [cos r, 1]
+    cos_t = 1.0 - (i / count) * (1.0 - np.cos(radius))
+    sin_t = np.sqrt(np.clip(1.0 - cos_t ** 2, 0.0, None))
+    phi = i * (np.pi * (3.0 - np.sqrt(5.0)))
+    return (cos_t[:, None] * direction + sin_t[:, None] * (np.cos(phi)[:, None] * t
+                                                           + np.sin(phi)[:, None] * b))
+
+
+class _Hull:
+    """Barycentric interpolation on the triangulated hull of the set plus a zero-valued nadir
+    (so every upper-hemisphere query lies in a triangle; weight on the nadir is dropped)."""
+
+    def __init__(self, dset: DirectionSet):
+        pts = np.vstack([dset.directions, [[0.0, 0.0, -1.0]]])
+        self.points = pts
+        self.n = dset.size
+        hull = scipy.spatial.ConvexHull(pts)
+        self.eq = hull.equations
+        if np.any(self.eq[:, 3] >= 0):
+            raise ValueError("the sample directions do not surround the zenith; cannot interpolate")
+        self.simplices = hull.simplices
+
+    def weights(self, q: np.ndarray):
+        """(Q, 3) indices and (Q, 3) weights; indices == n (the nadir) carry weight 0."""
+        score = (q @ self.eq[:, :3].T) / (-self.eq[:, 3])
+        facet = np.argmax(score, axis=1)
+        tri = self.simplices[facet]
+        p = q / score[np.arange(len(q)), facet][:, None]
+        a, b, c = (self.points[tri[:, i]] for i in range(3))
+        v0, v1, v2 = b - a, c - a, p - a
+        d00 = np.einsum("qi,qi->q", v0, v0)
+        d01 = np.einsum("qi,qi->q", v0, v1)
+        d11 = np.einsum("qi,qi->q", v1, v1)
+        d20 = np.einsum("qi,qi->q", v2, v0)
+        d21 = np.einsum("qi,qi->q", v2, v1)
+        den = d00 * d11 - d01 * d01
+        wb = (d11 * d20 - d01 * d21) / den
+        wc = (d00 * d21 - d01 * d20) / den
+        w = np.clip(np.stack([1.0 - wb - wc, wb, wc], axis=-1), 0.0, 1.0)
+        w /= w.sum(axis=1, keepdims=True)
+        w[tri == self.n] = 0.0
+        return tri, w
+
+
+_HULLS: dict = {}
+
+
+def _hull(dset: DirectionSet) -> _Hull:
+    key = (dset.spec, dset.size) if dset.kind != "custom" else id(dset)
+    if key not in _HULLS:
+        if len(_HULLS) > 8:
+            _HULLS.clear()
+        _HULLS[key] = _Hull(dset)
+    return _HULLS[key]
+
+
+def sun_weights(dset: DirectionSet, direction, sun_angle_deg: float = 0.0,
+                kernel: str = "linear") -> tuple[np.ndarray, np.ndarray]:
+    """Sparse weights that relight a sun from the sampled hard suns: ``sum_s w_s T[s]``.
+
+    Parameters
+    ----------
+    dset : DirectionSet
+        The baked directions (upper hemisphere).
+    direction : array_like, shape (3,)
+        Towards the sun, world frame (z up); below the horizon gives no weights (the light is
+        off, as for a distant light under the ground).
+    sun_angle_deg : float
+        Angular diameter of the sun disc (degrees, 0..90).
+    kernel : {"linear", "gauss"}
+        ``"linear"``: barycentric interpolation over the triangulated direction set, averaged
+        over points spread on the sun disc -- exact at a sample direction for a 0-degree sun.
+        ``"gauss"``: a Gaussian in the angle to the sun with ``sigma^2 = (a/4)^2 + (h/2)^2``
+        (``h`` the local sample spacing), cut at 4 sigma and normalised (DESIGN.md sec. 3).
+
+    Returns
+    -------
+    indices : ndarray of int, shape (K,)
+    weights : ndarray, shape (K,), float64, summing to 1 (or empty below the horizon)
+        Dimensionless: the sun's normal irradiance multiplies them.
+    """
+    if kernel not in KERNELS:
+        raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
+    a = float(sun_angle_deg)
+    if not np.isfinite(a) or not 0.0 <= a <= 90.0:
+        raise ValueError(f"sun angle must be in 0..90 degrees, got {sun_angle_deg!r}")
+    d = normalize_directions(np.asarray(direction, dtype=np.float64).reshape(1, 3))[0]
+    if d[2] <= 0.0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0)
+    alpha = np.radians(a)
+    if kernel == "gauss":
+        cosang = np.clip(dset.directions @ d, -1.0, 1.0)
+        near = int(np.argmax(cosang))
+        h = float(_spacing(dset, np.array([near]))[0])
+        sigma = np.sqrt((alpha / 4.0) ** 2 + (0.5 * h) ** 2)
+        ang = np.arccos(cosang)
+        keep = np.nonzero(ang <= 4.0 * sigma)[0]
+        w = np.exp(-0.5 * (ang[keep] / sigma) ** 2)
+        return keep.astype(np.int64), w / w.sum()
+    hull = _hull(dset)
+    cosang = dset.directions @ d
+    h = float(_spacing(dset, np.array([int(np.argmax(cosang))]))[0])
+    # enough disc points that neighbouring ones are closer than the sample spacing
+    count = 1 if alpha <= 0 else int(min(256, max(1, np.ceil(4.0 * (alpha / 2.0 / h) ** 2 * 3))))
+    pts = _disc_points(d, alpha / 2.0, count)
+    pts = pts[pts[:, 2] > 0.0]
+    if len(pts) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0)
+    tri, w = hull.weights(pts)
+    acc = np.zeros(dset.size + 1)
+    np.add.at(acc, tri.ravel(), w.ravel() / count)
+    acc = acc[:-1]
+    keep = np.nonzero(acc > 0)[0]
+    return keep.astype(np.int64), acc[keep]
+
+
+def environment_weights(dset: DirectionSet, env_image, *, row_order: str,
+                        rotation_deg: float = 0.0) -> np.ndarray:
+    """Dense weights ``L(w_s) dw_s`` of an equirectangular environment (upper hemisphere).
+
+    Parameters
+    ----------
+    env_image : array_like, shape (H, W) or (H, W, C)
+        Radiance (W m^-2 sr^-1).
+    row_order : {"top_first", "bottom_first"}
+    rotation_deg : float
+        Rotation of the environment about +z (degrees, counter-clockwise seen from above, the
+        sign of a Mapping node's Z rotation in the world tree): the relit light from direction
+        ``w`` is ``L(R^T w)``.
+
+    Returns
+    -------
+    weights : ndarray, shape (S,) or (S, C), float64 (W m^-2 per sample)
+    """
+    from .eigentransport import sample_equirect
+
+    t = np.radians(float(rotation_deg))
+    c, s = np.cos(t), np.sin(t)
+    Rt = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    L = sample_equirect(env_image, dset.directions @ Rt.T, row_order=row_order)
+    w = dset.solid_angles
+    return L * (w if L.ndim == 1 else w[:, None])
+
+
+# ----------------------------------------------------------------------------------------------
+# the on-disk store
+
+
+def transport_bytes(n_directions: int, n_texels: int, channels: int = 1) -> int:
+    """Bytes of a float16 transport store (S x P x C)."""
+    return int(n_directions) * int(n_texels) * int(channels) * 2
+
+
+@dataclass
+class TransportStore:
+    """``T[s, p]`` as a float16 ``.npy`` memmap plus a JSON header beside it.
+
+    Attributes
+    ----------
+    path : str
+        The ``.npy`` file (shape (S, P), float16, P = resolution^2, row 0 of the texture at
+        v = 0 as Blender's images).
+    directions : DirectionSet
+    resolution : int
+    meta : dict
+    """
+
+    path: str
+    directions: DirectionSet
+    resolution: int
+    meta: dict = field(default_factory=dict)
+    _array: np.ndarray | None = None
+
+    @property
+    def n_texels(self) -> int:
+        return self.resolution * self.resolution
+
+    @property
+    def array(self) -> np.ndarray:
+        """The (S, P) float16 memmap (read-only once finished)."""
+        if self._array is None:
+            self._array = np.load(self.path, mmap_mode="r")
+        return self._array
+
+    @staticmethod
+    def header_path(path: str) -> str:
+        return os.path.splitext(path)[0] + ".json"
+
+    @classmethod
+    def create(cls, path: str, directions: DirectionSet, resolution: int, meta: dict | None = None):
+        """Open a new store for writing under a temporary name (:meth:`finish` renames it)."""
+        folder = os.path.dirname(os.path.abspath(path))
+        os.makedirs(folder, exist_ok=True)
+        tmp = os.path.join(folder, f".{os.path.basename(path)}.{os.getpid()}.tmp.npy")
+        arr = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float16,
+                                        shape=(directions.size, resolution * resolution))
+        store = cls(path, directions, int(resolution), dict(meta or {}), arr)
+        store._tmp = tmp
+        return store
+
+    def write(self, s: int, image) -> None:
+        """Store direction ``s``'s bake, shape (R, R) or (R*R,), and flush it to disk."""
+        img = np.asarray(image, dtype=np.float32).reshape(-1)
+        if img.shape[0] != self.n_texels:
+            raise ValueError(f"image must have {self.n_texels} texels, got {img.shape[0]}")
+        if np.any(np.abs(img) > 65504.0):
+            raise OverflowError("a transport value exceeds the float16 range")
+        self._array[s] = img.astype(np.float16)
+        self._array.flush()
+
+    def finish(self) -> int:
+        """Flush, rename into place and write the header; returns the file's bytes."""
+        self._array.flush()
+        del self._array
+        self._array = None
+        os.replace(self._tmp, self.path)
+        header = {"format": STORE_FORMAT, "resolution": self.resolution,
+                  "directions": self.directions.to_dict(include_arrays=True), **self.meta}
+        hp = self.header_path(self.path)
+        tmp = hp + f".{os.getpid()}.tmp"
+        with open(tmp, "w") as fh:
+            json.dump(header, fh, indent=1)
+        os.replace(tmp, hp)
+        return os.path.getsize(self.path)
+
+    def abort(self) -> None:
+        """Drop a store that is being written (cancel): nothing is left behind."""
+        self._array = None
+        tmp = getattr(self, "_tmp", None)
+        if tmp and os.path.exists(tmp):
+            os.remove(tmp)
+
+    @classmethod
+    def open(cls, path: str) -> "TransportStore":
+        with open(cls.header_path(path)) as fh:
+            header = json.load(fh)
+        if header.get("format") != STORE_FORMAT:
+            raise ValueError(f"{path} is not a transport texture store")
+        dset = DirectionSet.from_dict(header.pop("directions"))
+        res = int(header.pop("resolution"))
+        header.pop("format")
+        return cls(path, dset, res, header)
+
+    # -- relighting --------------------------------------------------------------------------
+    def relight(self, indices, weights) -> np.ndarray:
+        """``sum_k weights[k] T[indices[k]]``; shape (R, R), float32 (row 0 at v = 0)."""
+        out = np.zeros(self.n_texels, dtype=np.float64)
+        arr = self.array
+        for s, w in zip(np.asarray(indices), np.asarray(weights)):
+            out += float(w) * arr[int(s)].astype(np.float64)
+        return out.reshape(self.resolution, self.resolution).astype(np.float32)
+
+    def relight_dense(self, weights) -> np.ndarray:
+        """``weights @ T`` for dense (S,) or (S, C) weights; shape (R, R) or (R, R, C)."""
+        w = np.asarray(weights, dtype=np.float64)
+        arr = self.array
+        out = np.zeros((self.n_texels,) + w.shape[1:], dtype=np.float64)
+        c = chunk_texels(arr.shape[0])
+        for a in range(0, self.n_texels, c):
+            block = arr[:, a:a + c].astype(np.float64)   # (S, c)
+            out[a:a + c] = (block.T @ w)
+        return out.reshape((self.resolution, self.resolution) + w.shape[1:]).astype(np.float32)
+
+    def sun(self, direction, sun_angle_deg: float = 0.0, kernel: str = "linear") -> np.ndarray:
+        """White-albedo direct radiance ``E/pi`` under a unit sun; shape (R, R)."""
+        idx, w = sun_weights(self.directions, direction, sun_angle_deg, kernel)
+        return self.relight(idx, w)
+
+
+# ----------------------------------------------------------------------------------------------
+# models
+
+
+def gram_matrix(store: TransportStore, texels=None) -> np.ndarray:
+    """``T T^T`` (S, S) in float64, streamed over texel chunks (optionally a texel subset)."""
+    arr = store.array
+    S = arr.shape[0]
+    G = np.zeros((S, S))
+    cols = np.arange(store.n_texels) if texels is None else np.asarray(texels)
+    c = chunk_texels(S)
+    for a in range(0, len(cols), c):
+        sel = cols[a:a + c]
+        X = (arr[:, sel[0]:sel[-1] + 1] if texels is None else arr[:, sel]).astype(np.float64)
+        G += X @ X.T
+    return G
+
+
+def components_for_tolerance(eigenvalues, tol: float) -> int:
+    """Fewest leading components whose residual ``sqrt(sum rest / sum all)`` is <= ``tol``."""
+    lam = np.clip(np.sort(np.asarray(eigenvalues, dtype=np.float64))[::-1], 0.0, None)
+    total = lam.sum()
+    if total <= 0:
+        return 1
+    rest = np.sqrt(np.clip(total - np.cumsum(lam), 0.0, None) / total)
+    return int(np.argmax(rest <= tol) + 1) if np.any(rest <= tol) else len(lam)
+
+
+@dataclass
+class TexturePCA:
+    """``T ~ V U``: eigen-textures ``U`` (K, P) and direction loadings ``V`` (S, K).
+
+    ``V`` has orthonormal columns (eigenvectors of ``T T^T``), so ``U = V^T T`` and the
+    relative Frobenius residual is ``sqrt(sum of dropped eigenvalues / sum of all)``
+    (:attr:`residual`).
+    """
+
+    V: np.ndarray
+    U: np.ndarray
+    resolution: int
+    residual: float
+    eigenvalues: np.ndarray
+
+    @property
+    def k(self) -> int:
+        return int(self.V.shape[1])
+
+    def coefficients(self, indices, weights) -> np.ndarray:
+        """(K,) coefficients for sparse light weights."""
+        return np.asarray(weights, np.float64) @ self.V[np.asarray(indices)].astype(np.float64)
+
+    def relight(self, indices, weights) -> np.ndarray:
+        c = self.coefficients(indices, weights)
+        return (c @ self.U.astype(np.float64)).reshape(self.resolution, self.resolution).astype(
+            np.float32)
+
+    def relight_dense(self, weights) -> np.ndarray:
+        c = np.asarray(weights, np.float64) @ self.V.astype(np.float64)   # (K,) or (C, K)
+        out = c @ self.U.astype(np.float64) if c.ndim == 1 else (c.T.T @ self.U).T
+        return out.reshape((self.resolution, self.resolution) + np.shape(weights)[1:]).astype(
+            np.float32)
+
+    def storage_bytes(self) -> dict:
+        return {"eigen_textures_half": int(self.U.size * 2), "loadings_float32": int(self.V.size * 4)}
+
+
+def fit_texture_pca(store: TransportStore, *, k: int | None = None, tol: float | None = None,
+                    max_k: int = 48) -> TexturePCA:
+    """Global uncentred PCA of the store (streamed). Exactly one of ``k`` / ``tol``.
+
+    ``tol`` is the relative Frobenius residual of ``T`` to reach; ``k`` is capped at ``S``.
+    Conditioning: no inverse is formed (eigenvectors of the Gram matrix); eigenvalues below
+    1e-12 of the largest are treated as zero.
+    """
+    if (k is None) == (tol is None):
+        raise ValueError("give exactly one of k and tol")
+    G = gram_matrix(store)
+    lam, vec = np.linalg.eigh(G)
+    order = np.argsort(lam)[::-1]
+    lam, vec = np.clip(lam[order], 0.0, None), vec[:, order]
+    lam[lam < 1e-12 * max(lam[0], 1e-300)] = 0.0
+    kk = min(int(k), len(lam)) if k is not None else min(components_for_tolerance(lam, tol), max_k)
+    kk = max(kk, 1)
+    V = vec[:, :kk]
+    arr = store.array
+    U = np.empty((kk, store.n_texels), dtype=np.float32)
+    c = chunk_texels(arr.shape[0])
+    for a in range(0, store.n_texels, c):
+        U[:, a:a + c] = V.T @ arr[:, a:a + c].astype(np.float64)
+    total = lam.sum()
+    residual = float(np.sqrt(max(total - lam[:kk].sum(), 0.0) / total)) if total > 0 else 0.0
+    return TexturePCA(V.astype(np.float32), U, store.resolution, residual, lam)
+
+
+@dataclass
+class BlockPCA:
+    """Clustered PCA over square texel blocks: block ``b`` has loadings ``V[b]`` (S, n_b) and
+    eigen-textures ``U[b]`` (n_b, block*block); ``K = max n_b``."""
+
+    V: list
+    U: list
+    resolution: int
+    block: int
+    residual: float
+
+    @property
+    def n_blocks(self) -> int:
+        return len(self.V)
+
+    @property
+    def dims(self) -> np.ndarray:
+        return np.array([v.shape[1] for v in self.V])
+
+    def relight(self, indices, weights) -> np.ndarray:
+        R, B = self.resolution, self.block
+        nb = R // B
+        out = np.zeros((R, R))
+        idx = np.asarray(indices)
+        w = np.asarray(weights, np.float64)
+        for b in range(self.n_blocks):
+            by, bx = divmod(b, nb)
+            c = w @ self.V[b][idx].astype(np.float64)
+            out[by * B:(by + 1) * B, bx * B:(bx + 1) * B] = (c @ self.U[b]).reshape(B, B)
+        return out.astype(np.float32)
+
+    def storage_bytes(self) -> dict:
+        return {"eigen_textures_half": int(sum(u.size for u in self.U) * 2),
+                "loadings_float32": int(sum(v.size for v in self.V) * 4)}
+
+    def cost_per_texel(self, S: int) -> float:
+        """Mahajan's cost ``sum n_b (p + S) / P`` with p = block^2 texels."""
+        p = self.block ** 2
+        return float(sum(n * (p + S) for n in self.dims) / (self.n_blocks * p))
+
+
+def fit_block_pca(store: TransportStore, *, block: int = 16, tol: float = 0.02) -> BlockPCA:
+    """Per-block uncentred PCA; each block keeps the fewest components with relative residual
+    <= ``tol`` (so the whole fit is within ``tol`` too). Streams one strip of blocks at a time."""
+    R = store.resolution
+    if block < 1 or R % block:
+        raise ValueError(f"block must divide the resolution {R}, got {block}")
+    arr = store.array
+    Vs, Us = [], []
+    err2 = tot2 = 0.0
+    for by in range(R // block):
+        strip = arr[:, by * block * R:(by + 1) * block * R].astype(np.float64)   # (S, B*R)
+        strip = strip.reshape(arr.shape[0], block, R)
+        for bx in range(R // block):
+            X = strip[:, :, bx * block:(bx + 1) * block].reshape(arr.shape[0], -1)  # (S, p)
+            u, sv, vt = np.linalg.svd(X, full_matrices=False)
+            lam = sv ** 2
+            n = components_for_tolerance(lam, tol) if lam.sum() > 0 else 1
+            Vs.append(u[:, :n].astype(np.float32))
+            Us.append((sv[:n, None] * vt[:n]).astype(np.float32))
+            tot2 += lam.sum()
+            err2 += lam[n:].sum()
+    return BlockPCA(Vs, Us, R, block, float(np.sqrt(err2 / tot2)) if tot2 > 0 else 0.0)
+
+
+def quadrature_sampled_lights(store: TransportStore, sampled_basis) -> np.ndarray:
+    """Images of the K sampled steerable lights by quadrature over the baked directions:
+    ``S_k = sum_s L_k(w_s) dw_s T[s]`` (noise-free; equals an environment bake of light k up to
+    the quadrature error). Returns (K, R, R) float32 (white albedo, direct light)."""
+    from .steerable import evaluate_light
+
+    d = store.directions
+    L = np.stack([evaluate_light(sampled_basis.basis, d.directions, c) for c in
+                  sampled_basis.centres])                      # (K, S)
+    L = L * d.solid_angles[None, :]
+    L[:, d.directions[:, 2] <= 0] = 0.0
+    return np.stack([store.relight_dense(L[k]) for k in range(len(L))])
+
+
+# ----------------------------------------------------------------------------------------------
+# tables over the hemisphere disk (viewport)
+
+
+def disk_grid(size: int) -> np.ndarray:
+    """(D, D, 2) disk coordinates of texel centres, row 0 at y = -1 (bottom, as Blender)."""
+    c = -1.0 + (np.arange(size) + 0.5) * 2.0 / size
+    x, y = np.meshgrid(c, c)
+    return np.stack([x, y], axis=-1)
+
+
+def coefficient_tables(V, dset: DirectionSet, size: int = 32, sun_angle_deg: float = 0.0,
+                       kernel: str = "linear") -> np.ndarray:
+    """``c_k(w0) = sum_s k_s(w0, a) V[s, k]`` tabulated at the disk texel centres.
+
+    Returns (K, D, D) float32; texels whose centre lies outside the unit disk (below the
+    horizon) hold the value at the nearest disk point on the rim, so bilinear lookups stay
+    continuous, and the lookup itself is gated by the light's elevation."""
+    V = np.asarray(V, np.float64)
+    xy = disk_grid(size).reshape(-1, 2)
+    r = np.hypot(xy[:, 0], xy[:, 1])
+    inside = np.where(r > 0.999, 0.999 / np.maximum(r, 1e-12), 1.0)
+    dirs = disk_to_hemisphere(xy * inside[:, None])
+    out = np.zeros((size * size, V.shape[1]))
+    for i, d in enumerate(dirs):
+        idx, w = sun_weights(dset, d, sun_angle_deg, kernel)
+        if len(idx):
+            out[i] = w @ V[idx]
+    return out.T.reshape(V.shape[1], size, size).astype(np.float32)
+
+
+def table_lookup(tables, direction) -> np.ndarray:
+    """Bilinear lookup of (K, D, D) tables at a light direction's disk point, as a GPU
+    sampler with Linear interpolation and Extend does (texel centres at ``(i + 0.5) / D``).
+    Returns (K,); zero below the horizon."""
+    t = np.asarray(tables, np.float64)
+    d = normalize_directions(np.asarray(direction, np.float64).reshape(1, 3))[0]
+    if d[2] <= 0:
+        return np.zeros(t.shape[0])
+    D = t.shape[-1]
+    xy = hemisphere_to_disk(d[None])[0]
+    fx = np.clip((xy[0] + 1.0) * 0.5 * D - 0.5, 0.0, D - 1.0)
+    fy = np.clip((xy[1] + 1.0) * 0.5 * D - 0.5, 0.0, D - 1.0)
+    x0, y0 = min(int(np.floor(fx)), D - 2), min(int(np.floor(fy)), D - 2)
+    ax, ay = fx - x0, fy - y0
+    return ((1 - ax) * (1 - ay) * t[:, y0, x0] + ax * (1 - ay) * t[:, y0, x0 + 1]
+            + (1 - ax) * ay * t[:, y0 + 1, x0] + ax * ay * t[:, y0 + 1, x0 + 1])
+
+
+def parse_directions(spec: str) -> DirectionSet:
+    """A direction set for a texel transport bake: ``hemi:N[:P]`` (default), or any spec of
+    :func:`.directions.parse_direction_spec` restricted to its upper hemisphere."""
+    dset = parse_direction_spec(spec)
+    if dset.kind == "hemi":
+        return dset
+    up = dset.directions[:, 2] > 0
+    return DirectionSet(dset.directions[up], dset.solid_angles[up], "custom",
+                        {"from": dset.spec})

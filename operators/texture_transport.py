@@ -1,0 +1,712 @@
+"""Direction-sampled transport textures baked with Cycles (bpy): the default texture bake.
+
+For every selected object, in the same Cycles calls:
+
+1. an **albedo** texture (DIFFUSE colour pass, no light);
+2. the **direct transport** ``T[s]``: one irradiance bake per direction ``w_s`` of a hemisphere
+   set under a hard Sun (angle 0, strength 1, 1 sample: noise-free apart from anti-aliasing),
+   streamed to a float16 store on disk (:class:`..lt_addon.transport_texture.TransportStore`)
+   one direction at a time, so memory holds one image, never ``T``;
+3. the **indirect** light as its own term, when the scene has bounces: a low-order steerable
+   bake of the indirect pass only (Ashikhmin & Shirley's lobes are accurate for light that is
+   smooth in the light direction, which interreflection is), in radiance units.
+
+Relit radiance for a sun of angular size ``a`` from ``w0`` and normal irradiance ``I``::
+
+    I * (albedo * sum_s k_s(w0, a) T[s]  +  steer(indirect, w0))
+
+The same geometry-of-the-generator as the other bakes: a generator yielding Progress and
+returning the result; stopping it restores the scene and deletes the partial store.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import time
+from dataclasses import asdict, dataclass, field
+
+import bpy
+import numpy as np
+
+from .. import __version__
+from ..lt_addon import exrio
+from ..lt_addon import transport_texture as tt
+from ..lt_addon.hemisphere import direction_from_az_el
+from .cycles_bake import BakeInputError, EnvironmentBake, check_bakeable, check_memory
+
+KIND = "transport_texture"
+MODELS = ("pca", "blocks", "steerable", "none")
+INDIRECT = ("steerable", "none")
+#: Held-out truth lights (azimuth, elevation in degrees): the four elevations of issue 13.
+TRUTH_LIGHTS = ((37.0, 10.0), (161.0, 30.0), (283.0, 55.0), (59.0, 80.0))
+
+
+@dataclass
+class Progress:
+    done: int
+    total: int
+    message: str
+
+
+@dataclass
+class TransportTextureSettings:
+    """What to bake (``directions``, ``resolution``, indirect effort) and which model to fit.
+
+    ``bounces``: the scene's diffuse bounces for the indirect term (0 = direct light only).
+    ``tol``: relative Frobenius residual of T the PCA models keep (or ``components``: a fixed
+    count for ``pca``). ``sun_angle``: the sun size (degrees) the viewport tables are made
+    for (the NumPy relight takes any size).
+    """
+
+    directions: str = "hemi:400:1.5"
+    resolution: int = 256
+    bounces: int = 2
+    indirect: str = "steerable"
+    indirect_order: int = 3
+    indirect_resolution: int = 128
+    indirect_samples: int = 64
+    model: str = "pca"
+    components: int | None = None
+    tol: float = 0.02
+    block: int = 16
+    sun_angle: float = 2.0
+    kernel: str = "linear"
+    table_size: int = 32
+    seed: int = 0
+
+    def validate(self):
+        """Check ranges; returns the DirectionSet."""
+        try:
+            dset = tt.parse_directions(self.directions)
+        except ValueError as exc:
+            raise BakeInputError(str(exc)) from None
+        if dset.size < 8:
+            raise BakeInputError(f"need at least 8 upper-hemisphere directions, got {dset.size}")
+        if not 4 <= self.resolution <= 8192:
+            raise BakeInputError(f"resolution must be in 4..8192, got {self.resolution}")
+        if not 0 <= self.bounces <= 64:
+            raise BakeInputError(f"bounces must be in 0..64, got {self.bounces}")
+        if self.indirect not in INDIRECT:
+            raise BakeInputError(f"indirect must be one of {INDIRECT}, got {self.indirect!r}")
+        if self.model not in MODELS:
+            raise BakeInputError(f"model must be one of {MODELS}, got {self.model!r}")
+        if not 2 <= self.indirect_order <= 7:
+            raise BakeInputError(f"indirect order must be in 2..7, got {self.indirect_order}")
+        if not 4 <= self.indirect_resolution <= 8192 or self.indirect_samples < 1:
+            raise BakeInputError("indirect resolution must be in 4..8192 and samples >= 1")
+        if self.components is not None and self.components < 1:
+            raise BakeInputError(f"components must be >= 1, got {self.components}")
+        if not 0.0 < self.tol < 1.0:
+            raise BakeInputError(f"tol must be in (0, 1), got {self.tol}")
+        if self.model == "blocks" and (self.block < 2 or self.resolution % self.block):
+            raise BakeInputError(f"block {self.block} must divide the resolution {self.resolution}")
+        if not 0.0 <= self.sun_angle <= 30.0:
+            raise BakeInputError(f"sun angle must be in 0..30 degrees, got {self.sun_angle}")
+        if self.kernel not in tt.KERNELS:
+            raise BakeInputError(f"kernel must be one of {tt.KERNELS}, got {self.kernel!r}")
+        if not 8 <= self.table_size <= 256:
+            raise BakeInputError(f"table size must be in 8..256, got {self.table_size}")
+        return dset
+
+
+@dataclass
+class ObjectBake:
+    """What one object's bake produced (arrays in memory are small: no T)."""
+
+    name: str
+    store_path: str
+    albedo: np.ndarray                      # (R, R, 3) float32
+    indirect: object = None                 # SteerableTexture or None
+    model: object = None                    # TexturePCA / BlockPCA / SteerableTexture / None
+    fit_seconds: float = 0.0
+
+
+@dataclass
+class TransportTextureResult:
+    objects: list
+    directions: object
+    settings: TransportTextureSettings
+    seconds: dict = field(default_factory=dict)
+    bake_calls: int = 0
+    peak_rss_mb: float = 0.0         # anonymous memory above the level before the bake
+    growth_after_first_mb: float = 0.0   # ... above the level after the first direction
+
+
+def _safe(name: str) -> str:
+    return "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in name)
+
+
+def _rss_mb() -> float:
+    """Anonymous resident memory (MiB): what the process holds. File-backed pages of the store's
+    memmap are page cache the kernel can drop, so they are not counted (VmRSS would)."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("RssAnon:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return 0.0
+
+
+def check_space(n_objects: int, dset, settings: TransportTextureSettings, out_dir: str) -> int:
+    """Refuse up front, with the figure, when T would not fit on disk (and the fit's working
+    set in memory). Returns the bytes T will take on disk."""
+    P = settings.resolution ** 2
+    need = n_objects * tt.transport_bytes(dset.size, P)
+    folder = out_dir
+    while folder and not os.path.isdir(folder):
+        folder = os.path.dirname(folder)
+    free = shutil.disk_usage(folder or ".").free
+    if need > 0.9 * free:
+        raise BakeInputError(
+            f"the transport textures need {need / 2**20:.0f} MiB on disk ({n_objects} object(s) "
+            f"x {dset.size} directions x {settings.resolution}^2 texels, half floats) but "
+            f"{free / 2**20:.0f} MiB are free in {folder}; use fewer directions or a lower "
+            "resolution")
+    # in memory: one chunk of T in float64, the eigen-textures and a few images
+    k = settings.components or 48
+    check_memory(tt.CHUNK_BYTES + k * P * 4 + 8 * P * 3 * 4,
+                 f"{settings.resolution}^2 texels x {dset.size} directions",
+                 "use fewer directions or a lower resolution")
+    return need
+
+
+def bake_transport_textures(scene, objects, settings: TransportTextureSettings, out_dir: str):
+    """Generator: bake albedo, direct transport and indirect light of ``objects``; fit models.
+
+    Writes the stores (temporary names until complete) into ``out_dir``; the models and
+    reports are written by :func:`write_bake`. Returns a TransportTextureResult.
+    """
+    dset = settings.validate()
+    objects = list(objects)
+    for o in objects:
+        check_bakeable(o)
+    check_space(len(objects), dset, settings, out_dir)
+    t_start = time.perf_counter()
+    rss0 = _rss_mb()
+    peak = rss0
+    R = settings.resolution
+    S = dset.size
+    do_indirect = settings.bounces > 0 and settings.indirect == "steerable"
+    n_ind = settings.indirect_order ** 2 if do_indirect else 0
+    total = 1 + S + n_ind + 1
+    calls = 0
+    seconds = {}
+
+    # 1. albedo (colour pass only)
+    with EnvironmentBake(scene, objects, R, 1, 0, (8, 16), mode="irradiance", seed=settings.seed,
+                         world_sampling="none", passes="color") as session:
+        albedos = session.bake_all(np.zeros((8, 16), np.float32))
+        seconds["albedo_cycles"] = session.bake_seconds
+        calls += session.bake_calls
+    yield Progress(1, total, "albedo baked")
+
+    # 2. direct transport, streamed to disk
+    os.makedirs(out_dir, exist_ok=True)
+    stores = [tt.TransportStore.create(
+        os.path.join(out_dir, f"{_safe(o.name)}_transport_texture.npy"), dset, R,
+        {"object": o.name, "kind": "direct_irradiance_over_pi", "samples": 1,
+         "seed": settings.seed,
+         "texel_sampling": "1 sample at the texel centre (Cycles' first bake sample)",
+         "addon_version": __version__}) for o in objects]
+    finished = False
+    try:
+        with EnvironmentBake(scene, objects, R, 1, 0, (8, 16), mode="irradiance",
+                             seed=settings.seed, world_sampling="none",
+                             passes="direct") as session:
+            for s, d in enumerate(dset.directions):
+                images = session.bake_sun_all(d, 1.0, 0.0)
+                for store, img in zip(stores, images):
+                    store.write(s, img[..., 0])
+                peak = max(peak, _rss_mb())
+                if s == 0:
+                    first = peak   # Cycles' own session memory is allocated by now
+                yield Progress(2 + s, total, f"direction {s + 1}/{S}")
+            seconds["direct_cycles"] = session.bake_seconds
+            calls += session.bake_calls
+        for store in stores:
+            store.finish()
+        finished = True
+    finally:
+        if not finished:
+            for store in stores:
+                store.abort()
+    seconds["direct_total"] = time.perf_counter() - t_start
+
+    # 3. indirect light: a low-order steerable bake of the indirect pass
+    indirects = [None] * len(objects)
+    if do_indirect:
+        from ..lt_addon.sampled_basis import build_sampled_basis
+        from ..lt_addon.steerable import paper_basis
+        from ..lt_addon.steerable_texture import SteerableTexture
+
+        t0 = time.perf_counter()
+        basis = paper_basis(settings.indirect_order)
+        sampled = build_sampled_basis(basis)
+        h = 64
+        ri = settings.indirect_resolution
+        stacks = [np.empty((sampled.n_lights, ri, ri, 3), np.float32) for _ in objects]
+        with EnvironmentBake(scene, objects, ri, settings.indirect_samples, settings.bounces,
+                             (h, 2 * h), mode="radiance", seed=settings.seed,
+                             world_sampling="importance", passes="indirect") as session:
+            for k in range(sampled.n_lights):
+                env = sampled.light_environment(k, h, 2 * h, row_order="bottom_first")
+                for stack, img in zip(stacks, session.bake_all(env)):
+                    stack[k] = img
+                yield Progress(2 + S + k, total, f"indirect bake {k + 1}/{sampled.n_lights}")
+            seconds["indirect_cycles"] = session.bake_seconds
+            calls += session.bake_calls
+        for i, o in enumerate(objects):
+            indirects[i] = SteerableTexture(
+                sampled.to_basis_images(stacks[i], dtype=np.float32), settings.indirect_order,
+                basis.width, sampled.centres, frame="world", calibration="steerable_cos",
+                settings={"resolution": ri, "samples": settings.indirect_samples,
+                          "bounces": settings.bounces, "mode": "radiance", "passes": "indirect",
+                          "object": o.name, "seed": settings.seed})
+        seconds["indirect_total"] = time.perf_counter() - t0
+
+    # 4. models
+    results = []
+    for i, o in enumerate(objects):
+        t0 = time.perf_counter()
+        store = tt.TransportStore.open(stores[i].path)
+        model = fit_model(store, settings, albedos[i])
+        results.append(ObjectBake(o.name, store.path, albedos[i], indirects[i], model,
+                                  time.perf_counter() - t0))
+        peak = max(peak, _rss_mb())
+    seconds["fit"] = sum(r.fit_seconds for r in results)
+    seconds["bake_total"] = time.perf_counter() - t_start
+    yield Progress(total, total, "models fitted")
+    return TransportTextureResult(results, dset, settings, seconds, calls, peak - rss0,
+                                  peak - first)
+
+
+def fit_model(store, settings: TransportTextureSettings, albedo):
+    """The chosen model of one object's store (None for ``model="none"``)."""
+    if settings.model == "pca":
+        return tt.fit_texture_pca(store, k=settings.components,
+                                  tol=None if settings.components else settings.tol)
+    if settings.model == "blocks":
+        return tt.fit_block_pca(store, block=settings.block, tol=settings.tol)
+    if settings.model == "steerable":
+        return steerable_from_store(store, albedo, order=settings.components or 7)
+    return None
+
+
+def steerable_from_store(store, albedo, order: int = 7):
+    """The steerable basis of Ashikhmin & Shirley by quadrature over the baked directions:
+    noise-free, any order, radiance of the direct light (albedo applied)."""
+    from ..lt_addon.sampled_basis import build_sampled_basis
+    from ..lt_addon.steerable import paper_basis
+    from ..lt_addon.steerable_texture import SteerableTexture
+
+    basis = paper_basis(order)
+    sampled = build_sampled_basis(basis)
+    stack = tt.quadrature_sampled_lights(store, sampled)              # (K, R, R)
+    rgb = stack[..., None] * np.asarray(albedo, np.float32)[None]
+    return SteerableTexture(sampled.to_basis_images(rgb, dtype=np.float32), order, basis.width,
+                            sampled.centres, frame="world", calibration="steerable_cos",
+                            settings={"resolution": store.resolution, "mode": "radiance",
+                                      "method": "transport-quadrature",
+                                      "directions": store.directions.spec})
+
+
+# ----------------------------------------------------------------------------------------------
+# relighting (NumPy)
+
+
+def _upsample(img, R):
+    """Bilinear resize of (r, r, C) to (R, R, C) at texel centres (as a GPU sampler would)."""
+    img = np.asarray(img, np.float32)
+    r = img.shape[0]
+    if r == R:
+        return img
+    c = (np.arange(R) + 0.5) * r / R - 0.5
+    c = np.clip(c, 0.0, r - 1.0)
+    i0 = np.minimum(np.floor(c).astype(int), r - 2 if r > 1 else 0)
+    f = (c - i0)[:, None]
+    i1 = np.minimum(i0 + 1, r - 1)
+    rows = img[i0] * (1 - f)[..., None] + img[i1] * f[..., None]
+    return rows[:, i0] * (1 - f.T)[..., None] + rows[:, i1] * f.T[..., None]
+
+
+def relight(bake: ObjectBake, store, direction, sun_angle: float = 0.0, intensity: float = 1.0,
+            source: str = "transport", kernel: str = "linear") -> np.ndarray:
+    """Radiance (R, R, 3) under a sun: ``source="transport"`` relights from T itself (the
+    full-accuracy reference), ``"model"`` from the fitted model."""
+    idx, w = tt.sun_weights(store.directions, direction, sun_angle, kernel)
+    R = store.resolution
+    if source == "transport" or bake.model is None:
+        e = store.relight(idx, w)
+        direct = e[..., None] * bake.albedo
+    elif hasattr(bake.model, "relight") and hasattr(bake.model, "V"):
+        e = bake.model.relight(idx, w)
+        direct = e[..., None] * bake.albedo
+    else:   # steerable texture
+        direct = bake.model.relight(np.asarray(direction, np.float64))
+    out = direct
+    if bake.indirect is not None:
+        out = out + _upsample(bake.indirect.relight(np.asarray(direction, np.float64)), R)
+    return (intensity * out).astype(np.float32)
+
+
+def relight_environment(bake: ObjectBake, store, env_image, rotation_deg: float = 0.0,
+                        *, row_order: str = "top_first") -> np.ndarray:
+    """Radiance (R, R, 3) under an equirectangular environment (upper hemisphere, direct
+    light from T; the indirect term is not included -- see the report)."""
+    w = tt.environment_weights(store.directions, env_image, row_order=row_order,
+                               rotation_deg=rotation_deg)
+    e = store.relight_dense(w)
+    return (e if e.ndim == 3 else e[..., None]) * bake.albedo
+
+
+# ----------------------------------------------------------------------------------------------
+# ground truth and the report
+
+
+def rel_rmse(estimate, truth) -> float:
+    e, t = np.asarray(estimate, np.float64), np.asarray(truth, np.float64)
+    den = np.linalg.norm(t)
+    return float(np.linalg.norm(e - t) / den) if den > 0 else float(np.linalg.norm(e) > 0)
+
+
+def truth_bakes(scene, objects, lights, sun_angle: float, bounces: int, samples: int,
+                resolution: int, seed: int = 1):
+    """Generator: Cycles radiance bakes of ``objects`` under Sun lamps (strength 1, angle
+    ``sun_angle``) from ``lights`` [(az, el) degrees]; returns {light: [image per object]}."""
+    out = {}
+    t0 = time.perf_counter()
+    with EnvironmentBake(scene, list(objects), resolution, samples, bounces, (8, 16),
+                         mode="radiance", seed=seed, world_sampling="none") as session:
+        for i, (az, el) in enumerate(lights):
+            out[(az, el)] = session.bake_sun_all(direction_from_az_el(az, el), 1.0, sun_angle)
+            yield Progress(i + 1, len(lights), f"truth {i + 1}/{len(lights)}")
+    out["seconds"] = time.perf_counter() - t0
+    return out
+
+
+def truth_errors(result: TransportTextureResult, truths: dict, sun_angle: float,
+                 lights=TRUTH_LIGHTS) -> dict:
+    """Relative RMSE of the transport relight and of the model against the truths, per object
+    and light, and one headline figure: ``sqrt(mean(rel^2))`` over lights (model)."""
+    rows = []
+    for oi, b in enumerate(result.objects):
+        store = tt.TransportStore.open(b.store_path)
+        for az, el in lights:
+            truth = truths[(az, el)][oi]
+            d = direction_from_az_el(az, el)
+            row = {"object": b.name, "azimuth": az, "elevation": el,
+                   "transport": rel_rmse(relight(b, store, d, sun_angle, source="transport",
+                                                 kernel=result.settings.kernel), truth)}
+            if b.model is not None:
+                row["model"] = rel_rmse(relight(b, store, d, sun_angle, source="model",
+                                                kernel=result.settings.kernel), truth)
+            if b.indirect is not None:
+                ind = _upsample(b.indirect.relight(d), store.resolution)
+                row["indirect_share"] = float(np.sum(ind) / max(np.sum(truth), 1e-12))
+            rows.append(row)
+    key = "model" if all("model" in r for r in rows) else "transport"
+    head = float(np.sqrt(np.mean([r[key] ** 2 for r in rows])))
+    return {"sun_angle": sun_angle, "lights": rows, "headline_rel_rmse": head,
+            "headline_of": key,
+            "transport_rel_rmse": float(np.sqrt(np.mean([r["transport"] ** 2 for r in rows]))),
+            "meaning": "relative RMSE ||relit - Cycles||_F / ||Cycles||_F over texels and RGB "
+                       "against Cycles Sun-lamp radiance bakes (with the bake's bounces) at "
+                       "held-out lights; combined as sqrt(mean(rel^2)); 0.05 = 5 %"}
+
+
+def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: dict | None = None,
+               started: float | None = None) -> list:
+    """Write per object: albedo + indirect EXRs, the model (NPZ) and the report JSON; record the
+    bake on the object. Returns the reports."""
+    from ..lt_addon.steerable_texture import SteerableTexture
+    from .steerable_bake import record_kind
+
+    t0 = time.perf_counter()
+    reports = []
+    for b, obj in zip(result.objects, objects):
+        base = os.path.join(out_dir, _safe(b.name))
+        files = {"transport": b.store_path}
+        files["albedo"] = base + "_albedo.exr"
+        tmp = base + f"_albedo.{os.getpid()}.tmp.exr"
+        exrio.write_exr(tmp, {c: b.albedo[..., i] for i, c in enumerate("RGB")},
+                        {"format": "relightable_textures.albedo"}, pixel_type="half")
+        os.replace(tmp, files["albedo"])
+        if b.indirect is not None:
+            files["indirect"] = base + "_indirect.exr"
+            b.indirect.save(files["indirect"], "half")
+        if b.model is not None:
+            if isinstance(b.model, SteerableTexture):
+                files["model"] = base + "_transport_steerable.exr"
+                b.model.save(files["model"], "half")
+            else:
+                files["model"] = base + "_transport_model.npz"
+                save_model(files["model"], b.model, result)
+        nbytes = {k: os.path.getsize(v) for k, v in files.items()}
+        s = result.settings
+        report = {
+            "kind": KIND, "object": b.name, "method": "transport",
+            "settings": asdict(s), "directions": result.directions.size,
+            "direction_set": result.directions.spec,
+            "objects_baked_together": [o.name for o in objects],
+            "files": {k: os.path.abspath(v) for k, v in files.items()},
+            "bytes": {**nbytes, "total": int(sum(nbytes.values())),
+                      **(b.model.storage_bytes() if hasattr(b.model, "storage_bytes") else {})},
+            "model": model_summary(b.model, result.directions.size),
+            "timings": {k: round(v, 3) for k, v in result.seconds.items()},
+            "bake_calls": result.bake_calls,
+            "peak_rss_above_start_mb": round(result.peak_rss_mb, 1),
+            "rss_growth_while_streaming_mb": round(result.growth_after_first_mb, 1),
+            "preview_cost": preview_cost(b.model, s),
+            **(figures or {}),
+        }
+        report["timings"]["write"] = round(time.perf_counter() - t0, 3)
+        if started is not None:
+            report["timings"]["wall_total"] = round(time.perf_counter() - started, 3)
+        path = base + "_texture_report.json"
+        tmp = path + f".{os.getpid()}.tmp"
+        with open(tmp, "w") as fh:
+            json.dump(report, fh, indent=2, default=float)
+        os.replace(tmp, path)
+        report["report"] = os.path.abspath(path)
+        record_kind(obj, KIND, path, {"directions": result.directions.spec,
+                                      "resolution": s.resolution, "model": s.model,
+                                      "bytes": report["bytes"]["total"],
+                                      "bake_seconds": round(result.seconds.get("bake_total", 0), 2)})
+        reports.append(report)
+    return reports
+
+
+def model_summary(model, S: int) -> dict:
+    if model is None:
+        return {"kind": "none"}
+    if isinstance(model, tt.TexturePCA):
+        return {"kind": "pca", "components": model.k, "residual": model.residual}
+    if isinstance(model, tt.BlockPCA):
+        d = model.dims
+        return {"kind": "blocks", "block": model.block, "blocks": model.n_blocks,
+                "dims_min": int(d.min()), "dims_mean": float(d.mean()), "dims_max": int(d.max()),
+                "residual": model.residual, "cost_per_texel": model.cost_per_texel(S)}
+    return {"kind": "steerable", "order": model.order}
+
+
+def preview_cost(model, settings) -> dict:
+    if isinstance(model, tt.TexturePCA):
+        tiles = -(-model.k // 3)
+        return {"texture_lookups_per_pixel": 2 * tiles + 1 + (settings.indirect_order ** 2
+                                                            if settings.bounces else 0),
+                "multiply_adds_per_texel": 3 * model.k, "python_per_light_change": False}
+    if isinstance(model, tt.BlockPCA):
+        return {"multiply_adds_per_texel": int(model.dims.max()), "viewport": "NumPy only"}
+    return {}
+
+
+def save_model(path: str, model, result: TransportTextureResult) -> None:
+    arrays = {"directions_spec": np.array(result.directions.spec)}
+    if isinstance(model, tt.TexturePCA):
+        arrays.update(kind=np.array("pca"), V=model.V, U=model.U.astype(np.float16),
+                      resolution=np.array(model.resolution), residual=np.array(model.residual))
+    else:
+        arrays.update(kind=np.array("blocks"), block=np.array(model.block),
+                      resolution=np.array(model.resolution), residual=np.array(model.residual),
+                      dims=model.dims, V=np.concatenate(model.V, axis=1),
+                      U=np.concatenate([u.ravel() for u in model.U]).astype(np.float16))
+    tmp = path + f".{os.getpid()}.tmp.npz"
+    np.savez(tmp, **arrays)
+    os.replace(tmp, path)
+
+
+def load_model(path: str):
+    z = np.load(path)
+    kind = str(z["kind"])
+    R = int(z["resolution"])
+    if kind == "pca":
+        V = z["V"]
+        return tt.TexturePCA(V, z["U"].astype(np.float32), R, float(z["residual"]),
+                             np.zeros(V.shape[1]))
+    B = int(z["block"])
+    dims = z["dims"]
+    Vs, Us, a, u0 = [], [], 0, 0
+    for n in dims:
+        Vs.append(z["V"][:, a:a + n])
+        Us.append(z["U"][u0:u0 + n * B * B].astype(np.float32).reshape(n, B * B))
+        a += n
+        u0 += n * B * B
+    return tt.BlockPCA(Vs, Us, R, B, float(z["residual"]))
+
+
+def load_bake(report_path: str) -> tuple:
+    """(ObjectBake, TransportStore, report) from a report written by :func:`write_bake`."""
+    from ..lt_addon.steerable_texture import SteerableTexture
+
+    with open(report_path) as fh:
+        report = json.load(fh)
+    files = report["files"]
+    folder = os.path.dirname(report_path)
+
+    def where(p):  # the report's folder may have moved with the files
+        return p if os.path.exists(p) else os.path.join(folder, os.path.basename(p))
+
+    store = tt.TransportStore.open(where(files["transport"]))
+    ch, _ = exrio.read_exr(where(files["albedo"]))
+    albedo = np.stack([ch[c] for c in "RGB"], axis=-1).astype(np.float32)
+    indirect = SteerableTexture.load(where(files["indirect"])) if "indirect" in files else None
+    model = None
+    if "model" in files:
+        m = where(files["model"])
+        model = SteerableTexture.load(m) if m.endswith(".exr") else load_model(m)
+    return ObjectBake(report["object"], store.path, albedo, indirect, model), store, report
+
+
+# ----------------------------------------------------------------------------------------------
+# presets, the pilot for --target-error, and the whole job
+
+
+#: Starting points for ``--method transport`` (see the README for how they were measured).
+PRESETS = {
+    "draft": dict(directions="hemi:100:1.5", resolution=128, indirect_resolution=64,
+                  indirect_samples=16, tol=0.03),
+    "balanced": dict(directions="hemi:400:1.5", resolution=256, indirect_resolution=128,
+                     indirect_samples=64, tol=0.02),
+    "production": dict(directions="hemi:800:1.5", resolution=256, indirect_resolution=128,
+                       indirect_samples=256, tol=0.01),
+}
+#: Direction counts the pilot tries for ``--target-error``, cheapest first.
+PILOT_COUNTS = (64, 100, 200, 400, 800, 1600)
+
+
+def truth_lights(count: int) -> list:
+    """``count`` held-out (azimuth, elevation) lights: the four of :data:`TRUTH_LIGHTS` first,
+    then elevations 5..85 degrees with golden-angle azimuths."""
+    extra = [((17.0 + 137.508 * i) % 360.0, float(el))
+             for i, el in enumerate((20.0, 45.0, 70.0, 5.0, 38.0, 63.0, 15.0, 85.0))]
+    lights = list(TRUTH_LIGHTS) + extra
+    if not 1 <= count <= len(lights):
+        raise BakeInputError(f"--truth takes 1..{len(lights)} lights, got {count}")
+    return lights[:count]
+
+
+def settings_from_preset(name: str, **overrides) -> TransportTextureSettings:
+    if name not in PRESETS:
+        raise BakeInputError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
+    return TransportTextureSettings(**{**PRESETS[name], **overrides})
+
+
+def pilot(scene, objects, settings: TransportTextureSettings, target: float, out_dir: str,
+          resolution: int = 64, truth_samples: int = 256):
+    """Generator: choose the fewest directions whose *transport* relight meets ``target``
+    (relative RMSE vs Cycles Sun truths with the bake's bounces at the four held-out lights,
+    sun of ``settings.sun_angle``) on a small bake at ``resolution``; the model tolerance is
+    then set to a third of the target so the fitted model adds little. Returns a dict of what
+    was tried and chosen."""
+    import tempfile
+
+    from dataclasses import replace
+
+    t0 = time.perf_counter()
+    truths = yield from truth_bakes(scene, objects, TRUTH_LIGHTS, settings.sun_angle,
+                                    settings.bounces, truth_samples, resolution)
+    tried = []
+    power = settings.directions.split(":")[2] if settings.directions.count(":") == 2 else "1.5"
+    chosen = None
+    with tempfile.TemporaryDirectory(dir=out_dir if os.path.isdir(out_dir) else None) as tmp:
+        for n in PILOT_COUNTS:
+            s = replace(settings, directions=f"hemi:{n}:{power}", resolution=resolution,
+                        indirect_resolution=min(settings.indirect_resolution, resolution),
+                        model="none")
+            res = yield from bake_transport_textures(scene, objects, s, tmp)
+            err = truth_errors(res, truths, settings.sun_angle)["transport_rel_rmse"]
+            tried.append({"directions": s.directions, "rel_rmse": err,
+                          "bake_seconds": round(res.seconds["bake_total"], 2)})
+            if err <= target:
+                chosen = s.directions
+                break
+    out = {"target_error": target, "pilot_resolution": resolution, "tried": tried,
+           "chosen_directions": chosen or tried[-1]["directions"],
+           "met_in_pilot": chosen is not None, "tol": round(target / 3.0, 5),
+           "seconds": round(time.perf_counter() - t0, 2)}
+    return out
+
+
+def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *,
+             truth: int = 4, truth_samples: int = 256, target_error: float | None = None,
+             preview: bool = True):
+    """The whole ``bake-textures --method transport`` verb as one generator: optional pilot
+    (``target_error``), the bake, Cycles truths at held-out lights, files, preview. Returns
+    the list of per-object reports (their ``timings.wall_total`` covers all of it)."""
+    from dataclasses import replace
+
+    started = time.perf_counter()
+    figures = {}
+    if target_error is not None:
+        if not 0.0 < target_error < 1.0:
+            raise BakeInputError(f"--target-error must be in (0, 1), got {target_error}")
+        chosen = yield from pilot(scene, objects, settings, target_error, out_dir)
+        settings = replace(settings, directions=chosen["chosen_directions"], tol=chosen["tol"])
+        figures["target_error"] = chosen
+        truth = max(truth, 4)
+    result = yield from bake_transport_textures(scene, objects, settings, out_dir)
+    if truth:
+        lights = truth_lights(truth)
+        t0 = time.perf_counter()
+        truths = yield from truth_bakes(scene, objects, lights, settings.sun_angle,
+                                        settings.bounces, truth_samples, settings.resolution)
+        errs = truth_errors(result, truths, settings.sun_angle, lights)
+        errs["truth_samples"] = truth_samples
+        errs["truth_seconds"] = round(time.perf_counter() - t0, 2)
+        figures["ground_truth"] = errs
+        if target_error is not None:
+            figures["target_error"]["achieved"] = errs["headline_rel_rmse"]
+            figures["target_error"]["met"] = errs["headline_rel_rmse"] <= target_error
+    figures["glossy"] = glossy_note(objects)
+    reports = write_bake(result, objects, out_dir, figures)
+    if preview and settings.model == "pca":
+        for rep, b, obj in zip(reports, result.objects, objects):
+            store = tt.TransportStore.open(b.store_path)
+            rep["preview"] = install_transport_preview(scene, obj, rep, b, store)
+    wall = round(time.perf_counter() - started, 3)
+    for rep in reports:   # the wall time of everything the verb did, in the file too
+        rep["timings"]["wall_total"] = wall
+        with open(rep["report"] + ".tmp", "w") as fh:
+            json.dump({k: v for k, v in rep.items() if k != "report"}, fh, indent=2, default=float)
+        os.replace(rep["report"] + ".tmp", rep["report"])
+    return reports
+
+
+def install_transport_preview(scene, obj, report, bake, store, **kw):
+    from .transport_preview import install_transport_preview as install
+
+    return install(scene, obj, report, bake, store, **kw)
+
+
+def glossy_note(objects) -> dict:
+    """Which materials have a non-negligible specular part the diffuse bake leaves out."""
+    found = []
+    for o in objects:
+        for slot in o.material_slots:
+            mat = slot.material
+            tree = getattr(mat, "node_tree", None)
+            if tree is None:
+                continue
+            for node in tree.nodes:
+                if node.bl_idname != "ShaderNodeBsdfPrincipled":
+                    continue
+                spec = node.inputs.get("Specular IOR Level") or node.inputs.get("Specular")
+                rough = node.inputs.get("Roughness")
+                metal = node.inputs.get("Metallic")
+                s = spec.default_value if spec is not None and not spec.is_linked else 0.5
+                r = rough.default_value if rough is not None and not rough.is_linked else 0.5
+                m = metal.default_value if metal is not None and not metal.is_linked else 0.0
+                if (s > 0.05 and r < 0.6) or m > 0.1:
+                    found.append({"object": o.name, "material": mat.name,
+                                  "specular": round(float(s), 3), "roughness": round(float(r), 3),
+                                  "metallic": round(float(m), 3)})
+            if any(n.bl_idname == "ShaderNodeBsdfGlossy" for n in tree.nodes):
+                found.append({"object": o.name, "material": mat.name, "glossy_bsdf": True})
+    return {"materials": found,
+            "note": ("the bake is diffuse-only (Cycles DIFFUSE pass): these materials' "
+                     "view-dependent reflection is not in the relit texture and the preview "
+                     "shows them darker than a render") if found else "all diffuse"}

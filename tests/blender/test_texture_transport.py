@@ -1,0 +1,287 @@
+"""Direction-sampled transport textures with real Cycles at tiny sizes (fixed seeds).
+
+Independent references: fresh Cycles bakes of the same sun / environment / steerable light, a
+Cycles render of the preview node group, and the scene's own objects baked one at a time.
+"""
+
+import json
+import os
+
+import numpy as np
+import pytest
+from render_check import render_rgb
+
+from relightable_textures import samples
+from relightable_textures.lt_addon import transport_texture as tt
+from relightable_textures.lt_addon.hemisphere import direction_from_az_el
+
+R = 16
+
+
+def rel(a, b):
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    return float(np.linalg.norm(a - b) / np.linalg.norm(b))
+
+
+@pytest.fixture
+def bumps(fresh_scene):
+    import bpy
+
+    samples.build("bumps", fresh_scene, "test")
+    return fresh_scene, bpy.data.objects["Bumps"]
+
+
+@pytest.fixture
+def statue(fresh_scene):
+    import bpy
+
+    samples.build("statue", fresh_scene, "test")
+    return fresh_scene, bpy.data.objects["Statue"], bpy.data.objects["Ground"]
+
+
+def settings(**kw):
+    from relightable_textures.operators.texture_transport import TransportTextureSettings
+
+    base = dict(directions="hemi:48:1.5", resolution=R, bounces=0, model="pca", components=48,
+                table_size=16)
+    base.update(kw)
+    return TransportTextureSettings(**base)
+
+
+def bake(scene, objects, out, **kw):
+    from relightable_textures.operators import texture_transport as tx
+    from relightable_textures.operators.steerable_bake import run
+
+    return run(tx.bake_transport_textures(scene, objects, settings(**kw), str(out)))
+
+
+def sun_bake(scene, objects, direction, angle=0.0, spp=1, bounces=0, passes="direct",
+             mode="irradiance", seed=0, res=R):
+    from relightable_textures.operators.cycles_bake import EnvironmentBake
+
+    with EnvironmentBake(scene, objects, res, spp, bounces, (8, 16), mode=mode, seed=seed,
+                         world_sampling="none", passes=passes) as s:
+        return s.bake_sun_all(direction, 1.0, angle)
+
+
+def test_relight_at_a_sample_direction_with_a_point_sun_equals_that_directions_bake(bumps,
+                                                                                     tmp_path):
+    """The linear kernel is exact at a baked direction (0-degree sun); the store keeps half
+    floats, so the bake agrees to half precision (2^-11 relative)."""
+    scene, obj = bumps
+    res = bake(scene, [obj], tmp_path, model="none")
+    store = tt.TransportStore.open(res.objects[0].store_path)
+    for s in (0, 20, 47):
+        d = store.directions.directions[s]
+        fresh = sun_bake(scene, [obj], d)[0][..., 0]
+        relit = store.sun(d, 0.0, "linear")
+        assert fresh.max() > 0.05
+        assert np.abs(relit - fresh).max() <= 2.0 ** -11 * fresh.max() + 1e-7
+
+
+def test_stores_are_streamed_and_cancel_leaves_nothing(bumps, tmp_path):
+    from relightable_textures.operators import texture_transport as tx
+
+    scene, obj = bumps
+    gen = tx.bake_transport_textures(scene, [obj], settings(), str(tmp_path))
+    for _ in range(10):
+        next(gen)
+    partial = [p for p in os.listdir(tmp_path) if p.endswith(".npy")]
+    assert partial and all(p.startswith(".") for p in partial)   # temporary name while baking
+    gen.close()
+    assert os.listdir(tmp_path) == []
+    assert not any(o.name.startswith("RelightBake") for o in scene.objects)
+
+
+def test_quadrature_steerable_light_equals_its_environment_bake(bumps, tmp_path):
+    """Sampled steerable light k by quadrature over 600 hard suns vs Cycles baking the same
+    light as an environment (direct light): agreement to the environment bake's own noise."""
+    from relightable_textures.lt_addon.sampled_basis import build_sampled_basis
+    from relightable_textures.lt_addon.steerable import paper_basis
+    from relightable_textures.operators.cycles_bake import EnvironmentBake
+
+    scene, obj = bumps
+    res = bake(scene, [obj], tmp_path, directions="hemi:600:1.0", model="none")
+    store = tt.TransportStore.open(res.objects[0].store_path)
+    sampled = build_sampled_basis(paper_basis(3))
+    quad = tt.quadrature_sampled_lights(store, sampled)
+    h = 128
+    k = 4   # the central light
+    env = sampled.light_environment(k, h, 2 * h, row_order="bottom_first")
+    baked = []
+    for seed in (1, 2):
+        with EnvironmentBake(scene, obj, R, 256, 0, (h, 2 * h), mode="irradiance", seed=seed,
+                             world_sampling="importance", passes="direct") as s:
+            baked.append(s.bake(env)[..., 0])
+    noise = rel(baked[0], baked[1]) / np.sqrt(2)     # one bake's relative noise
+    err = rel(quad[k], 0.5 * (baked[0] + baked[1]))
+    # T samples each texel at its centre (Cycles' first bake sample), the 256-spp bake averages
+    # the texel: measure that aliasing term on one hard sun of this scene (~3 % at 16^2)
+    d = direction_from_az_el(30.0, 45.0)
+    alias = rel(sun_bake(scene, [obj], d)[0], sun_bake(scene, [obj], d, spp=256)[0])
+    # 3 sigma of the two-bake mean's noise, the aliasing term and 0.5 % quadrature error
+    assert err <= 3 * noise / np.sqrt(2) + alias + 0.005, (err, noise, alias)
+
+
+def test_pca_model_is_exact_at_full_rank_and_viewport_twin_matches(bumps, tmp_path):
+    from relightable_textures.operators import transport_preview as tp
+
+    scene, obj = bumps
+    res = bake(scene, [obj], tmp_path, components=48)
+    b = res.objects[0]
+    store = tt.TransportStore.open(b.store_path)
+    for az, el in ((30, 20), (200, 65)):
+        idx, w = tt.sun_weights(store.directions, direction_from_az_el(az, el), 3.0)
+        full = store.relight(idx, w)
+        assert rel(b.model.relight(idx, w), full) < 1e-5
+    # tables sampled at a texel centre equal the kernel weights applied to the loadings
+    eig, tab = tp.preview_arrays(b.model, b.albedo, store.directions, 3.0, 16)
+    from relightable_textures.lt_addon.hemisphere import disk_to_hemisphere
+
+    d = disk_to_hemisphere(tt.disk_grid(16)[9, 6][None])[0]
+    idx, w = tt.sun_weights(store.directions, d, 3.0)
+    want = store.relight(idx, w)[..., None] * b.albedo
+    assert rel(tp.viewport_relight(eig, tab, d), want) < 1e-5
+
+
+def test_preview_group_rendered_by_cycles_equals_numpy_twin(bumps, tmp_path):
+    """The node group (disk point, table and eigen atlases, albedo tile, half floats) rendered by
+    Cycles through the top camera equals viewport_relight of the half-float atlases."""
+    from relightable_textures.lt_addon import exrio
+    from relightable_textures.lt_addon.atlas import unpack_atlas
+    from relightable_textures.operators import texture_transport as tx
+    from relightable_textures.operators import transport_preview as tp
+    from relightable_textures.operators.steerable_bake import run
+
+    scene, obj = bumps
+    s = settings(components=12, sun_angle=4.0)
+    reports = run(tx.bake_job(scene, [obj], s, str(tmp_path), truth=0))
+    prev = reports[0]["preview"]
+    ntile = prev["tiles"]
+    eig = unpack_atlas(np.stack([exrio.read_exr(prev["eigen"])[0][c] for c in "RGB"], -1),
+                       ntile + 1, R)
+    tab = unpack_atlas(np.stack([exrio.read_exr(prev["tables"])[0][c] for c in "RGB"], -1),
+                       ntile, 16)
+    for az, el, inten in ((40.0, 35.0, 2.0), (250.0, 12.0, 1.0)):
+        scene["relight_azimuth"], scene["relight_elevation"] = az, el
+        scene["relight_intensity"] = inten
+        img = render_rgb(scene, tmp_path, R)
+        want = inten * tp.viewport_relight(eig, tab, direction_from_az_el(az, el))
+        assert want.max() > 0.05
+        assert np.abs(img - want).max() <= 2.0 ** -10 * want.max()
+    scene["relight_elevation"] = -20.0         # below the horizon: off
+    assert np.abs(render_rgb(scene, tmp_path, R)).max() == 0.0
+
+
+def test_two_objects_baked_together_shadow_each_other(statue, tmp_path):
+    """Statue and ground in the same Cycles calls: each texture equals that object baked alone
+    (exactly: same seed, 1 spp), and the ground shows the statue's shadow (darker than the
+    ground baked with the statue hidden)."""
+    scene, statue_obj, ground = statue
+    res = bake(scene, [statue_obj, ground], tmp_path, directions="hemi:24", model="none")
+    assert [b.name for b in res.objects] == ["Statue", "Ground"]
+    stores = [tt.TransportStore.open(b.store_path) for b in res.objects]
+    d = stores[1].directions.directions[3]
+    alone = sun_bake(scene, [ground], d)[0][..., 0]
+    np.testing.assert_allclose(stores[1].sun(d), alone, atol=2.0 ** -11 * alone.max())
+    alone_statue = sun_bake(scene, [statue_obj], d)[0][..., 0]
+    np.testing.assert_allclose(stores[0].sun(d), alone_statue, atol=2.0 ** -11 * alone_statue.max())
+    statue_obj.hide_render = True
+    unshadowed = sun_bake(scene, [ground], d)[0][..., 0]
+    statue_obj.hide_render = False
+    shadow = unshadowed - stores[1].sun(d)
+    assert shadow.max() > 0.5 * unshadowed.max()      # some ground texels lose most light
+    assert shadow.min() >= -1e-3
+
+
+def test_environment_relight_equals_a_cycles_bake_of_the_same_hdri(bumps, tmp_path):
+    """A smooth sky (upper hemisphere) relit from T vs Cycles baking it (direct light)."""
+    from relightable_textures.operators import texture_transport as tx
+    from relightable_textures.operators.cycles_bake import EnvironmentBake
+
+    scene, obj = bumps
+    res = bake(scene, [obj], tmp_path, directions="hemi:600:1.0", model="none")
+    b = res.objects[0]
+    store = tt.TransportStore.open(b.store_path)
+    h = 64
+    v = (np.arange(h) + 0.5) / h                      # bottom first
+    u = (np.arange(2 * h) + 0.5) / (2 * h)
+    el = (v - 0.5) * np.pi
+    sky = np.where(el[:, None] > 0, 1.0 + 0.8 * np.cos(2 * np.pi * u)[None, :] * np.cos(el)[:, None],
+                   0.0)
+    env = np.stack([sky, 0.8 * sky, 0.6 * sky], -1).astype(np.float32)
+    for rot in (0.0, 70.0):
+        relit = tx.relight_environment(b, store, env, rot, row_order="bottom_first")
+        if rot:
+            # rotating the environment by +rot about z = sampling it at azimuth - rot
+            shift = int(round(rot / 360.0 * 2 * h))
+            env_r = np.roll(env, -shift, axis=1)
+        else:
+            env_r = env
+        baked = []
+        for seed in (1, 2):
+            with EnvironmentBake(scene, obj, R, 256, 0, (h, 2 * h), mode="radiance", seed=seed,
+                                 world_sampling="importance", passes="direct") as s:
+                baked.append(s.bake(env_r))
+        noise = rel(baked[0], baked[1]) / np.sqrt(2)
+        err = rel(relit, 0.5 * (baked[0] + baked[1]))
+        # centre-sampled T vs the area-averaged bake, as in the quadrature test
+        d = direction_from_az_el(30.0, 45.0)
+        alias = rel(sun_bake(scene, [obj], d)[0], sun_bake(scene, [obj], d, spp=256)[0])
+        assert err <= 3 * noise / np.sqrt(2) + alias + 0.005, (rot, err, noise, alias)
+
+
+def test_memory_is_refused_up_front_with_the_figure(bumps, tmp_path):
+    from relightable_textures.operators import texture_transport as tx
+    from relightable_textures.operators.cycles_bake import BakeInputError
+
+    scene, obj = bumps
+    before = {o.name for o in scene.objects}
+    with pytest.raises(BakeInputError, match=r"MiB"):
+        next(tx.bake_transport_textures(scene, [obj],
+                                        settings(directions="hemi:4000000", resolution=8192),
+                                        str(tmp_path)))
+    assert {o.name for o in scene.objects} == before
+    assert not os.listdir(tmp_path)
+
+
+def test_streaming_keeps_peak_memory_below_the_transport_size(bumps, tmp_path):
+    """T (S x R^2 half floats) is never held: after the first direction (when Cycles has
+    allocated its session), the anonymous resident memory (RssAnon; the store's memmap pages
+    are page cache) grows by far less than T's size on disk while the other directions stream
+    (here T = 400 x 160^2 x 2 bytes = 19.5 MiB; measured growth about 3 MiB). The fit's own
+    bounded working set is tested in tests/core/test_transport_texture.py."""
+    scene, obj = bumps
+    res = bake(scene, [obj], tmp_path, directions="hemi:400", resolution=160, model="none")
+    size_mb = os.path.getsize(res.objects[0].store_path) / 2 ** 20
+    assert size_mb > 19
+    assert res.growth_after_first_mb < 0.25 * size_mb, (res.growth_after_first_mb, size_mb)
+
+
+def test_cli_bake_textures_default_method_relight_and_force(tmp_path):
+    from relightable_textures.operators import cli
+
+    blend = str(tmp_path / "b.blend")
+    assert cli.run(["scene", "bumps", "--out", blend]) == 0
+    args = ["bake-textures", blend, "--object", "Bumps", "--preset", "draft", "--directions",
+            "hemi:32", "--resolution", "16", "--indirect-resolution", "8",
+            "--indirect-samples", "4", "--truth", "1", "--truth-samples", "8", "--bounces", "1"]
+    assert cli.run(args) == 0
+    rep_path = tmp_path / "b_relight" / "Bumps_texture_report.json"
+    rep = json.loads(rep_path.read_text())
+    assert rep["method"] == "transport" and rep["directions"] == 32
+    assert rep["timings"]["wall_total"] >= rep["timings"]["bake_total"] > 0
+    assert 0 < rep["ground_truth"]["headline_rel_rmse"] < 1
+    assert rep["model"]["kind"] == "pca"
+    stamp = rep_path.stat().st_mtime_ns
+    assert cli.run(args) == 2                               # exists: refused without --force
+    assert rep_path.stat().st_mtime_ns == stamp
+    assert cli.run(args + ["--force"]) == 0
+    out = str(tmp_path / "relit.exr")
+    assert cli.run(["relight", blend, "--object", "Bumps", "--light", "30,20",
+                    "--sun-angle", "5", "--out", out]) == 0
+    assert os.path.getsize(out) > 0
+    # lobes-only options are refused for the transport method, and vice versa
+    assert cli.run(args + ["--order", "3"]) == 2
+    assert cli.run(["bake-textures", blend, "--object", "Bumps", "--method", "lobes",
+                    "--directions", "hemi:32"]) == 2
