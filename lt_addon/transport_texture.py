@@ -281,27 +281,38 @@ class TransportStore:
         self._array[s] = img.astype(np.float16)
         self._array.flush()
 
-    def finish(self) -> int:
-        """Flush, rename into place and write the header; returns the file's bytes."""
+    def finish(self) -> "TransportStore":
+        """Flush and close for writing; returns a reader of the still-temporary store (its
+        header beside it). :meth:`commit` renames both into place, :meth:`abort` drops them."""
         self._array.flush()
         del self._array
         self._array = None
-        os.replace(self._tmp, self.path)
         header = {"format": STORE_FORMAT, "resolution": self.resolution,
                   "directions": self.directions.to_dict(include_arrays=True), **self.meta}
-        hp = self.header_path(self.path)
-        tmp = hp + f".{os.getpid()}.tmp"
-        with open(tmp, "w") as fh:
+        with open(self.header_path(self._tmp), "w") as fh:
             json.dump(header, fh, indent=1)
-        os.replace(tmp, hp)
-        return os.path.getsize(self.path)
+        reader = TransportStore(self._tmp, self.directions, self.resolution, dict(self.meta))
+        reader._tmp, reader.final_path = self._tmp, self.path
+        return reader
+
+    def commit(self) -> str:
+        """Rename a finished store (data, then header) into its final place; returns the path.
+        An earlier store of the same name is replaced only now."""
+        final = getattr(self, "final_path", self.path)
+        self._array = None
+        os.replace(self._tmp, final)
+        os.replace(self.header_path(self._tmp), self.header_path(final))
+        self.path = final
+        self._tmp = None
+        return final
 
     def abort(self) -> None:
-        """Drop a store that is being written (cancel): nothing is left behind."""
+        """Drop a store that is being written or not yet committed: nothing is left behind."""
         self._array = None
         tmp = getattr(self, "_tmp", None)
-        if tmp and os.path.exists(tmp):
-            os.remove(tmp)
+        for p in ((tmp, self.header_path(tmp)) if tmp else ()):
+            if os.path.exists(p):
+                os.remove(p)
 
     @classmethod
     def open(cls, path: str) -> "TransportStore":

@@ -26,7 +26,24 @@ def _output_dir(props) -> str:
     return path
 
 
+def _transport_objects(context):
+    """The active mesh plus every other selected mesh (baked in the same Cycles calls)."""
+    active = context.active_object
+    others = [o for o in context.selected_objects if o.type == "MESH" and o != active]
+    return [active] + sorted(others, key=lambda o: o.name)
+
+
 def _finish(operator, context, result, settings, out_dir):
+    if isinstance(result, list):   # transport bake: bake_job wrote everything already
+        for rep in result:
+            gt = rep.get("ground_truth")
+            operator.report({"INFO"}, f"Baked {rep['object']}: {rep['directions']} directions, "
+                            f"{rep['timings']['wall_total']:.1f} s in all, "
+                            f"{rep['bytes']['total'] / 2**20:.1f} MiB"
+                            + (f", error vs Cycles {gt['headline_rel_rmse']:.3f}" if gt else ""))
+            if rep["glossy"]["materials"]:
+                operator.report({"WARNING"}, rep["glossy"]["note"])
+        return
     obj = context.active_object
     report = steerable_bake.write_bake(result, obj, out_dir, settings)
     sun = context.scene.relight.sun
@@ -55,6 +72,19 @@ class RELIGHT_OT_bake_textures(bpy.types.Operator):
     def _prepare(self, context):
         props = context.scene.relight
         obj = context.active_object
+        if props.method == "transport":
+            from . import texture_transport as tx
+            from .properties import transport_settings_from_scene
+
+            objects = _transport_objects(context)
+            for o in objects:
+                check_bakeable(o)
+            self.settings = transport_settings_from_scene(props)
+            self.settings.validate()
+            self.out_dir = _output_dir(props)
+            os.makedirs(self.out_dir, exist_ok=True)
+            return tx.bake_job(context.scene, objects, self.settings, self.out_dir,
+                               truth=props.truth_lights)
         check_bakeable(obj)
         self.settings = settings_from_scene(props)
         self.settings.validate()

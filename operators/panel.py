@@ -55,12 +55,30 @@ class VIEW3D_PT_relight(_RelightTab, bpy.types.Panel):
 class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
     """Bake settings and presets"""
 
-    bl_label = "Bake Steerable Texture"
+    bl_label = "Bake Relightable Texture"
 
     def draw(self, context):
         props = context.scene.relight
         layout = self.layout
+        layout.prop(props, "method")
         layout.prop(props, "preset")
+        if props.method == "transport":
+            from .texture_transport import PRESETS as TRANSPORT_PRESETS
+
+            fig = TRANSPORT_PRESETS[props.preset].get("measured")
+            if fig:
+                layout.label(text=f"measured: {fig['bake_seconds']:.0f} s, rel. RMSE "
+                                  f"{fig['rel_rmse']:.3f} ({fig['scene']})")
+            col = layout.column(align=True)
+            for name in ("directions", "horizon_power", "resolution", "bounces",
+                         "indirect_samples", "transport_model", "transport_tol", "sun_angle",
+                         "truth_lights", "output_dir"):
+                col.prop(props, name)
+            n = len([o for o in context.selected_objects if o.type == "MESH"])
+            if n > 1:
+                layout.label(text=f"{n} selected meshes are baked together", icon="INFO")
+            layout.operator("relight.bake_textures", icon="RENDER_STILL")
+            return
         fig = preset_figures().get(props.preset)
         if fig:
             layout.label(text=f"measured: {fig['bake_seconds']:.1f} s, rel. RMSE "

@@ -14,9 +14,27 @@ _SETTING_NAMES = ("frame", "order", "resolution", "samples", "bounces", "storage
 
 
 def _apply_preset(self, context):
-    preset = settings_from_preset(self.preset)
-    for name in _SETTING_NAMES:
-        setattr(self, name, getattr(preset, name))
+    from .texture_transport import PRESETS as TRANSPORT_PRESETS
+
+    if self.method == "lobes":
+        preset = settings_from_preset(self.preset)
+        for name in _SETTING_NAMES:
+            setattr(self, name, getattr(preset, name))
+        return
+    t = TRANSPORT_PRESETS[self.preset]
+    count, _, power = t["directions"].partition(":")[2].partition(":")
+    self.directions, self.horizon_power = int(count), float(power or 1.0)
+    self.resolution, self.transport_tol = t["resolution"], t["tol"]
+    self.indirect_samples = t["indirect_samples"]
+
+
+def _refresh_tables(self, context):
+    """A new sun size only changes the preview's coefficient tables (no re-bake)."""
+    from .texture_transport import refresh_preview_tables
+
+    obj = context.active_object if context is not None else None
+    if obj is not None:
+        refresh_preview_tables(context.scene, obj, self.sun_angle)
 
 
 def _sun_poll(self, obj):
@@ -93,8 +111,55 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         description="Colour the vertices by CPCA cluster (bake-transport --clusters) instead "
                     "of the shading", update=_refresh_vertex_preview)
 
+    # direction-sampled transport textures (the default texture bake)
+    method: EnumProperty(
+        name="Method", default="transport", update=_apply_preset, items=[
+            ("transport", "Transport (hard suns)",
+             "Bake under S hard Sun lamps and relight any sun or sky from them: sharp shadows"),
+            ("lobes", "Steerable lobes",
+             "The paper's bake under order^2 broad steerable lights: soft (~27 degree) light")])
+    directions: IntProperty(
+        name="Directions", default=400, min=8, max=100000,
+        description="Hard-sun bakes over the upper hemisphere (1 sample each)")
+    horizon_power: FloatProperty(
+        name="Horizon Density", default=1.5, min=1.0, max=4.0,
+        description="1: uniform over the hemisphere; above 1: more directions near the horizon, "
+                    "where grazing shadows change fastest")
+    sun_angle: FloatProperty(
+        name="Sun Size", default=2.0, min=0.0, max=30.0, update=_refresh_tables,
+        description="Angular diameter of the preview sun in degrees (re-tabulates the preview "
+                    "coefficients, no re-bake)")
+    transport_model: EnumProperty(
+        name="Model", default="pca", items=[
+            ("pca", "PCA eigen-textures", "Global PCA of the transport: live viewport preview"),
+            ("blocks", "Block PCA", "Clustered PCA over texel blocks (CLI/NumPy relight only)"),
+            ("steerable", "Steerable (quadrature)", "The paper's basis fitted noise-free from T"),
+            ("none", "None", "Keep T only")])
+    transport_tol: FloatProperty(
+        name="PCA Tolerance", default=0.02, min=0.001, max=0.5,
+        description="Relative residual of T the PCA keeps (fewer components when larger)")
+    indirect_samples: IntProperty(
+        name="Indirect Samples", default=64, min=1, max=65536,
+        description="Samples of the low-order steerable bake of the indirect light")
+    truth_lights: IntProperty(
+        name="Check vs Cycles", default=0, min=0, max=12,
+        description="Also bake Cycles Sun truths for this many held-out lights and report the "
+                    "error (0 = skip)")
+
 
 CLASSES = (RelightSceneSettings,)
+
+
+def transport_settings_from_scene(props):
+    """TransportTextureSettings from the panel's properties."""
+    from .texture_transport import TransportTextureSettings
+
+    power = f":{props.horizon_power:g}" if props.horizon_power != 1.0 else ""
+    return TransportTextureSettings(
+        directions=f"hemi:{props.directions}{power}", resolution=props.resolution,
+        bounces=props.bounces, model=props.transport_model, tol=props.transport_tol,
+        indirect_samples=props.indirect_samples,
+        indirect_resolution=max(4, props.resolution // 2), sun_angle=props.sun_angle)
 
 
 def settings_from_scene(props):

@@ -121,6 +121,7 @@ class ObjectBake:
     indirect: object = None                 # SteerableTexture or None
     model: object = None                    # TexturePCA / BlockPCA / SteerableTexture / None
     fit_seconds: float = 0.0
+    store: object = None                    # the TransportStore (temporary until written)
 
 
 @dataclass
@@ -227,8 +228,7 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
                 yield Progress(2 + s, total, f"direction {s + 1}/{S}")
             seconds["direct_cycles"] = session.bake_seconds
             calls += session.bake_calls
-        for store in stores:
-            store.finish()
+        readers = [store.finish() for store in stores]
         finished = True
     finally:
         if not finished:
@@ -236,6 +236,21 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
                 store.abort()
     seconds["direct_total"] = time.perf_counter() - t_start
 
+    try:
+        return (yield from _indirect_and_models(scene, objects, settings, dset, albedos,
+                                                readers, seconds, calls, t_start, rss0, peak,
+                                                first, 2 + S, total))
+    except BaseException:   # cancelled or failed after the directions: drop the stores too
+        for r in readers:
+            r.abort()
+        raise
+
+
+def _indirect_and_models(scene, objects, settings, dset, albedos, readers, seconds, calls,
+                         t_start, rss0, peak, first, step, total):
+    """Steps 3 and 4 of :func:`bake_transport_textures` (the stores are not committed yet)."""
+    S = dset.size
+    do_indirect = settings.bounces > 0 and settings.indirect == "steerable"
     # 3. indirect light: a low-order steerable bake of the indirect pass
     indirects = [None] * len(objects)
     if do_indirect:
@@ -256,7 +271,7 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
                 env = sampled.light_environment(k, h, 2 * h, row_order="bottom_first")
                 for stack, img in zip(stacks, session.bake_all(env)):
                     stack[k] = img
-                yield Progress(2 + S + k, total, f"indirect bake {k + 1}/{sampled.n_lights}")
+                yield Progress(step + k, total, f"indirect bake {k + 1}/{sampled.n_lights}")
             seconds["indirect_cycles"] = session.bake_seconds
             calls += session.bake_calls
         for i, o in enumerate(objects):
@@ -272,10 +287,9 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
     results = []
     for i, o in enumerate(objects):
         t0 = time.perf_counter()
-        store = tt.TransportStore.open(stores[i].path)
-        model = fit_model(store, settings, albedos[i])
-        results.append(ObjectBake(o.name, store.path, albedos[i], indirects[i], model,
-                                  time.perf_counter() - t0))
+        model = fit_model(readers[i], settings, albedos[i])
+        results.append(ObjectBake(o.name, readers[i].path, albedos[i], indirects[i], model,
+                                  time.perf_counter() - t0, readers[i]))
         peak = max(peak, _rss_mb())
     seconds["fit"] = sum(r.fit_seconds for r in results)
     seconds["bake_total"] = time.perf_counter() - t_start
@@ -394,7 +408,7 @@ def truth_errors(result: TransportTextureResult, truths: dict, sun_angle: float,
     and light, and one headline figure: ``sqrt(mean(rel^2))`` over lights (model)."""
     rows = []
     for oi, b in enumerate(result.objects):
-        store = tt.TransportStore.open(b.store_path)
+        store = b.store or tt.TransportStore.open(b.store_path)
         for az, el in lights:
             truth = truths[(az, el)][oi]
             d = direction_from_az_el(az, el)
@@ -429,6 +443,8 @@ def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: d
     reports = []
     for b, obj in zip(result.objects, objects):
         base = os.path.join(out_dir, _safe(b.name))
+        if b.store is not None and getattr(b.store, "_tmp", None):
+            b.store_path = b.store.commit()
         files = {"transport": b.store_path}
         files["albedo"] = base + "_albedo.exr"
         tmp = base + f"_albedo.{os.getpid()}.tmp.exr"
@@ -544,6 +560,7 @@ def load_bake(report_path: str) -> tuple:
 
     with open(report_path) as fh:
         report = json.load(fh)
+    report["report"] = os.path.abspath(report_path)
     files = report["files"]
     folder = os.path.dirname(report_path)
 
@@ -649,20 +666,17 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
         figures["target_error"] = chosen
         truth = max(truth, 4)
     result = yield from bake_transport_textures(scene, objects, settings, out_dir)
-    if truth:
-        lights = truth_lights(truth)
-        t0 = time.perf_counter()
-        truths = yield from truth_bakes(scene, objects, lights, settings.sun_angle,
-                                        settings.bounces, truth_samples, settings.resolution)
-        errs = truth_errors(result, truths, settings.sun_angle, lights)
-        errs["truth_samples"] = truth_samples
-        errs["truth_seconds"] = round(time.perf_counter() - t0, 2)
-        figures["ground_truth"] = errs
-        if target_error is not None:
-            figures["target_error"]["achieved"] = errs["headline_rel_rmse"]
-            figures["target_error"]["met"] = errs["headline_rel_rmse"] <= target_error
+    try:
+        figures.update((yield from _truth_figures(scene, objects, settings, result, truth,
+                                                  truth_samples, target_error, figures)))
+    except BaseException:   # cancelled during the truths: the previous bake stays as it was
+        for b in result.objects:
+            if b.store is not None:
+                b.store.abort()
+        raise
     figures["glossy"] = glossy_note(objects)
     reports = write_bake(result, objects, out_dir, figures)
+
     if preview and settings.model == "pca":
         for rep, b, obj in zip(reports, result.objects, objects):
             store = tt.TransportStore.open(b.store_path)
@@ -674,6 +688,26 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
             json.dump({k: v for k, v in rep.items() if k != "report"}, fh, indent=2, default=float)
         os.replace(rep["report"] + ".tmp", rep["report"])
     return reports
+
+
+def _truth_figures(scene, objects, settings, result, truth, truth_samples, target_error,
+                   figures):
+    """Generator: the ground-truth block of the report (empty without ``truth``)."""
+    out = {}
+    if not truth:
+        return out
+    lights = truth_lights(truth)
+    t0 = time.perf_counter()
+    truths = yield from truth_bakes(scene, objects, lights, settings.sun_angle,
+                                    settings.bounces, truth_samples, settings.resolution)
+    errs = truth_errors(result, truths, settings.sun_angle, lights)
+    errs["truth_samples"] = truth_samples
+    errs["truth_seconds"] = round(time.perf_counter() - t0, 2)
+    out["ground_truth"] = errs
+    if target_error is not None:
+        figures["target_error"]["achieved"] = errs["headline_rel_rmse"]
+        figures["target_error"]["met"] = errs["headline_rel_rmse"] <= target_error
+    return out
 
 
 def install_transport_preview(scene, obj, report, bake, store, **kw):
@@ -710,3 +744,20 @@ def glossy_note(objects) -> dict:
             "note": ("the bake is diffuse-only (Cycles DIFFUSE pass): these materials' "
                      "view-dependent reflection is not in the relit texture and the preview "
                      "shows them darker than a render") if found else "all diffuse"}
+
+
+def refresh_preview_tables(scene, obj, sun_angle: float) -> dict | None:
+    """Rewrite ``obj``'s preview coefficient tables for a new sun size (no re-bake); returns
+    {"seconds": ...} or None when ``obj`` has no transport preview."""
+    from .blend_files import object_bakes
+    from .transport_preview import rewrite_tables
+
+    records = [b for b in object_bakes(obj) if b.get("kind") == KIND]
+    if not records or bpy.data.node_groups.get(f"Relight Transport ({obj.name})") is None:
+        return None
+    t0 = time.perf_counter()
+    bake, store, report = load_bake(bpy.path.abspath(records[-1]["path"]))
+    if not isinstance(bake.model, tt.TexturePCA):
+        return None
+    rewrite_tables(obj, report, bake, store, sun_angle)
+    return {"seconds": time.perf_counter() - t0}

@@ -195,3 +195,17 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
     pn._wire_preview(obj, color)
     return {**files, "group": gname, "group_nodes": len(group.nodes), "sun_angle": angle,
             "tiles": len(tables)}
+
+
+def rewrite_tables(obj, report: dict, bake, store, sun_angle: float) -> None:
+    """Re-tabulate the coefficients for ``sun_angle`` and reload the table image in place."""
+    s = report["settings"]
+    tables = _tiles3(tt.coefficient_tables(bake.model.V, store.directions, s["table_size"],
+                                           sun_angle, s.get("kernel", "linear")))
+    base = os.path.splitext(report["report"])[0].removesuffix("_texture_report")
+    atlas = pack_atlas(tables, "edge")
+    path = f"{base}_preview_tables.exr"
+    exrio.write_exr(path, {c: atlas[..., i] for i, c in enumerate("RGB")},
+                    {"format": "relightable_textures.transport_preview", "tiles": len(tables),
+                     "resolution": tables.shape[1], "sun_angle": sun_angle}, pixel_type="half")
+    pn.load_atlas_image(path, f"{obj.name} transport tables")

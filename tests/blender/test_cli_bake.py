@@ -11,7 +11,8 @@ from relight_cli import assert_refused, relight
 
 from relightable_textures.lt_addon import exrio
 
-TINY = ["--resolution", "16", "--samples", "4", "--order", "3", "--bounces", "0"]
+TINY = ["--method", "lobes", "--resolution", "16", "--samples", "4", "--order", "3",
+        "--bounces", "0"]
 
 
 
@@ -98,10 +99,27 @@ def test_relight_and_light_env_write_float_exrs(baked, tmp_path):
 @pytest.mark.parametrize("args, message", [
     (("bake-textures", "{blend}", "--object", "Nope"), "no object 'Nope'"),
     (("bake-textures", "{blend}", "--object", "Sun"), "not a mesh"),
-    (("bake-textures", "{blend}", "--object", "Bumps", "--order", "20"), "order must be in 2..12"),
-    (("bake-textures", "{blend}", "--object", "Bumps", "--resolution", "0"),
+    (("bake-textures", "{blend}", "--object", "Bumps", "--method", "lobes", "--order", "20"),
+     "order must be in 2..12"),
+    (("bake-textures", "{blend}", "--object", "Bumps", "--method", "lobes", "--resolution", "0"),
      "resolution must be in 1..16384"),
-    (("bake-textures", "{blend}", "--object", "Bumps", "--samples", "0"), "samples must be >= 1"),
+    (("bake-textures", "{blend}", "--object", "Bumps", "--resolution", "0"),
+     "resolution must be in 4..8192"),
+    (("bake-textures", "{blend}", "--object", "Bumps", "--method", "lobes", "--samples", "0"),
+     "samples must be >= 1"),
+    (("bake-textures", "{blend}", "--object", "Bumps", "--samples", "4"),
+     "--samples apply to --method lobes"),
+    (("bake-textures", "{blend}", "--object", "Bumps", "--directions", "hemi:4"),
+     "at least 8 upper-hemisphere directions"),
+    (("bake-textures", "{blend}", "--object", "Bumps", "--directions", "fib:40"),
+     "bad direction spec"),
+    (("bake-textures", "{blend}", "--object", "Bumps", "--sun-angle", "45"),
+     "sun angle must be in 0..30"),
+    (("bake-textures", "{blend}", "--object", "Bumps", "--object", "Nope"), "no object 'Nope'"),
+    (("bake-textures", "{blend}", "--object", "Bumps", "--target-error", "2"),
+     "--target-error must be in (0, 1)"),
+    (("bake-textures", "{blend}", "--object", "Bumps", "--method", "lobes", "--object",
+      "Bumps2"), "--method lobes bakes one object"),
     (("bake-textures", "{blend}", "--object", "Bumps", "--bounces", "65"),
      "bounces must be in 0..64"),
     (("bake-textures", "{blend}", "--object", "Bumps", "--out", "/proc/x"), "not writable"),

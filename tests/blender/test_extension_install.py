@@ -41,6 +41,7 @@ INSTALL_SCRIPT = textwrap.dedent(r"""
     # The installed bake operator (bundled wheels, relative imports) bakes and previews.
     props = bpy.context.scene.relight
     props.preset = "draft"
+    props.method = "lobes"
     props.order, props.resolution, props.samples = 3, 16, 2
     props.output_dir = os.path.join(os.path.dirname(blend_out), "op_bake") + os.sep
     bpy.context.view_layer.objects.active = bpy.data.objects["Bumps"]

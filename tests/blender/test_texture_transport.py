@@ -285,3 +285,45 @@ def test_cli_bake_textures_default_method_relight_and_force(tmp_path):
     assert cli.run(args + ["--order", "3"]) == 2
     assert cli.run(["bake-textures", blend, "--object", "Bumps", "--method", "lobes",
                     "--directions", "hemi:32"]) == 2
+
+
+def test_panel_operator_bakes_selected_objects_and_sun_size_retabulates(statue, tmp_path):
+    """The Relight tab's Bake (method transport, the default) through bpy.ops: the active and
+    the other selected mesh are baked together, files and bake records written, the preview
+    installed; the Sun Size slider rewrites the preview tables without a re-bake."""
+    import bpy
+
+    import relightable_textures
+    from relightable_textures.lt_addon import exrio
+    from relightable_textures.operators.blend_files import object_bakes
+
+    scene, statue_obj, ground = statue
+    relightable_textures.register()
+    try:
+        props = scene.relight
+        assert props.method == "transport"
+        props.preset = "draft"
+        props.directions, props.resolution, props.indirect_samples = 24, 16, 4
+        props.truth_lights = 1
+        props.output_dir = str(tmp_path) + os.sep
+        for o in scene.objects:
+            o.select_set(o in (statue_obj, ground))
+        bpy.context.view_layer.objects.active = statue_obj
+        assert bpy.ops.relight.bake_textures() == {"FINISHED"}
+        files = sorted(os.listdir(tmp_path))
+        for name in ("Statue", "Ground"):
+            assert f"{name}_texture_report.json" in files
+            assert f"{name}_transport_texture.npy" in files
+            assert f"{name}_preview_tables.exr" in files
+        rep = json.loads((tmp_path / "Ground_texture_report.json").read_text())
+        assert rep["objects_baked_together"] == ["Statue", "Ground"]
+        assert rep["directions"] == 24 and "ground_truth" in rep
+        assert [b["kind"] for b in object_bakes(ground)] == ["transport_texture"]
+        tables = lambda: exrio.read_exr(str(tmp_path / "Statue_preview_tables.exr"))[0]["R"]
+        before = tables().copy()
+        props.sun_angle = 20.0                 # update callback re-tabulates, no bake
+        after = tables()
+        assert not np.allclose(before, after)
+        assert sorted(os.listdir(tmp_path)) == files
+    finally:
+        relightable_textures.unregister()

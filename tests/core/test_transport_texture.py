@@ -50,7 +50,7 @@ def _store(tmp_path, T, dset, R):
     st = tt.TransportStore.create(str(tmp_path / "t.npy"), dset, R, {"object": "x"})
     for s in range(dset.size):
         st.write(s, T[s])
-    st.finish()
+    st.finish().commit()
     return tt.TransportStore.open(str(tmp_path / "t.npy"))
 
 
@@ -86,6 +86,14 @@ def test_store_abort_leaves_nothing(tmp_path):
     st = tt.TransportStore.create(str(tmp_path / "t.npy"), d, 4)
     st.write(0, np.ones(16))
     st.abort()
+    assert list(tmp_path.iterdir()) == []
+    st = tt.TransportStore.create(str(tmp_path / "t.npy"), d, 4)
+    for s in range(d.size):
+        st.write(s, np.ones(16))
+    reader = st.finish()                 # finished but not committed: still temporary
+    assert reader.sun([0, 0, 1]).shape == (4, 4)
+    assert not (tmp_path / "t.npy").exists()
+    reader.abort()
     assert list(tmp_path.iterdir()) == []
 
 
@@ -143,7 +151,7 @@ def test_fit_streams_with_a_bounded_working_set(tmp_path, monkeypatch):
     base = rng.random((8, R * R)).astype(np.float32)
     for s in range(d.size):
         st.write(s, rng.random(8).astype(np.float32) @ base)
-    st.finish()
+    st.finish().commit()
     st = tt.TransportStore.open(str(tmp_path / "big.npy"))
     T_bytes = st.array.nbytes
     assert T_bytes == 32 * 2 ** 20
