@@ -145,6 +145,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
     p.set_defaults(func=_cmd_relight)
 
+    p = sub.add_parser("compare", help="render the preview next to a Cycles Sun render (PNG)",
+                       description="Render the open scene from its camera twice with Cycles: "
+                                   "through the relight previews and with the objects' own "
+                                   "materials under a real Sun of the same direction and size; "
+                                   "writes preview | Cycles | |difference| x 4 as one PNG. The "
+                                   ".blend is not changed.")
+    p.add_argument("file", metavar="FILE.blend")
+    p.add_argument("--light", required=True, type=_az_el, metavar="AZ,EL")
+    p.add_argument("--sun-angle", type=float, default=2.0, metavar="DEG")
+    p.add_argument("--samples", type=int, default=128, help="Cycles samples of the Sun render")
+    p.add_argument("--resolution", type=int, help="square render size (default: the scene's)")
+    p.add_argument("--out", required=True, metavar="IMG.png")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    p.set_defaults(func=_cmd_compare)
+
     p = sub.add_parser("light-env", help="write the environment image of one steerable light",
                        description="Write the equirectangular EXR of the calibrated steerable "
                                    "light the relight uses, so its Cycles ground truth can be "
@@ -821,6 +836,34 @@ def _relight_transport(args, obj, out) -> int:
                         {k: v for k, v in info.items()}, pixel_type="float")
     print(json.dumps({**info, "mean": [float(v) for v in img.mean(axis=(0, 1))],
                       "max": float(img.max()), "out": out}))
+    return EXIT_OK
+
+
+def _cmd_compare(args) -> int:
+    import bpy
+
+    from . import compare_render
+    from .blend_files import blender_log_to_stderr
+    from .cycles_bake import BakeInputError
+
+    path = _check_input_blend(args.file)
+    out = _check_output_path(args.out, ".png", args.force)
+    if not 0.0 <= args.sun_angle <= 30.0:
+        raise CliError(f"--sun-angle must be in 0..30 degrees, got {args.sun_angle}")
+    if args.samples < 1 or (args.resolution is not None and not 8 <= args.resolution <= 4096):
+        raise CliError("--samples must be >= 1 and --resolution in 8..4096")
+    with blender_log_to_stderr():
+        bpy.ops.wm.open_mainfile(filepath=path, load_ui=False)
+    scene = bpy.context.scene
+    objects = [o for o in scene.objects if o.type == "MESH"]
+    az, el = args.light
+    try:
+        with blender_log_to_stderr():
+            info = compare_render.compare(scene, objects, az, el, args.sun_angle, out,
+                                          args.samples, args.resolution)
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    print(json.dumps(info))
     return EXIT_OK
 
 

@@ -1,0 +1,284 @@
+"""Benchmark: the direction-sampled transport bake against the paper's steerable-lobe bake,
+measured in the same run on the same scenes and Cycles truths.
+
+Per scene (``bumps``, ``noise``: the patch; ``statue``: Suzanne *and* its ground plane, baked in
+the same Cycles calls) it bakes Cycles truths -- radiance under a Sun lamp of 2 and 10 degrees
+with the scene's 2 diffuse bounces at four held-out lights (elevations 10, 30, 55, 80 degrees)
+-- and then, per setting:
+
+* transport: directions S x indirect samples x resolution, each with the models fitted from the
+  same store (PCA at k components, block PCA at a tolerance, and the relight from T itself);
+* lobes: the three lobes presets (``operators/presets.json``).
+
+Per point: bake wall time (Cycles and everything else, fit included), peak anonymous memory
+above the start, bytes on disk (what the preview needs, and T), preview cost (texture lookups per
+pixel and multiply-adds per texel), and the relative RMSE against the 2- and 10-degree truths
+(``sqrt(mean(rel^2))`` over the four lights). Prints each scene's table with the Pareto front
+(error vs bake time) marked, the goals of issue 13, and writes JSON + CSV.
+
+Usage: python benchmarks/bench_transport_textures.py [--scenes bumps,noise,statue]
+           [--size demo|test] [--quick] [--out out/bench] [--write-presets]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+SCENES = {"bumps": ["Bumps"], "noise": ["Noise"], "statue": ["Statue", "Ground"]}
+ANGLES = (2.0, 10.0)
+
+
+def _rss():
+    from relightable_textures.operators.texture_transport import _rss_mb
+
+    return _rss_mb()
+
+
+def combined(errors):
+    return float(np.sqrt(np.mean(np.square(errors))))
+
+
+def build(name, size):
+    import bpy
+
+    from relightable_textures import samples
+
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = bpy.context.scene
+    samples.build(name, scene, size)
+    return scene, [bpy.data.objects[n] for n in SCENES[name]]
+
+
+def truths(scene, objects, R, spp):
+    from relightable_textures.operators import texture_transport as tx
+    from relightable_textures.operators.steerable_bake import run
+
+    out = {}
+    for a in ANGLES:
+        t0 = time.perf_counter()
+        out[a] = run(tx.truth_bakes(scene, objects, tx.TRUTH_LIGHTS, a, 2, spp, R))
+        print(f"  truth {a:g} deg: {time.perf_counter() - t0:.1f} s", flush=True)
+    return out
+
+
+def single_bake_seconds(scene, objects, R):
+    """Wall time of one 64-spp Cycles radiance bake of the same textures (2 bounces, a Sun)."""
+    from relightable_textures.lt_addon.hemisphere import direction_from_az_el
+    from relightable_textures.operators.cycles_bake import EnvironmentBake
+
+    with EnvironmentBake(scene, objects, R, 64, 2, (8, 16), mode="radiance",
+                         world_sampling="none") as s:
+        s.bake_sun_all(direction_from_az_el(10, 60), 1.0, 10.0)       # warm-up (kernels, BVH)
+        t0 = time.perf_counter()
+        s.bake_sun_all(direction_from_az_el(37, 10), 1.0, 10.0)
+        return time.perf_counter() - t0
+
+
+def _up(img, R):
+    from relightable_textures.operators.texture_transport import _upsample
+
+    return _upsample(img, R)
+
+
+def errors_for(relight_fn, truth, R):
+    """{angle: combined rel. RMSE over lights and objects} for relight_fn(obj_index, d, angle)."""
+    from relightable_textures.lt_addon.hemisphere import direction_from_az_el
+    from relightable_textures.operators import texture_transport as tx
+
+    out = {}
+    for a in ANGLES:
+        errs = []
+        for (az, el) in tx.TRUTH_LIGHTS:
+            for oi, t in enumerate(truth[a][(az, el)]):
+                errs.append(tx.rel_rmse(_up(relight_fn(oi, direction_from_az_el(az, el), a), R),
+                                        t))
+        out[a] = combined(errs)
+    return out
+
+
+def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder):
+    """Bake once at (S, ind_spp, res); one row per model fitted from that store."""
+    from relightable_textures.lt_addon import transport_texture as tt
+    from relightable_textures.operators import texture_transport as tx
+    from relightable_textures.operators.steerable_bake import run
+
+    st = tx.TransportTextureSettings(directions=f"hemi:{S}:1.5", resolution=res, bounces=2,
+                                     indirect_resolution=max(8, res // 2),
+                                     indirect_samples=ind_spp, model="none")
+    t0 = time.perf_counter()
+    result = run(tx.bake_transport_textures(scene, objects, st, folder))
+    bake_s = time.perf_counter() - t0
+    cycles = result.seconds.get("direct_cycles", 0) + result.seconds.get("indirect_cycles", 0) \
+        + result.seconds.get("albedo_cycles", 0)
+    stores = [b.store for b in result.objects]
+    t_bytes = sum(os.path.getsize(s.path) for s in stores)
+    ind_bytes = sum(b.indirect.basis_images.nbytes // 2 for b in result.objects if b.indirect)
+    alb_bytes = sum(b.albedo.size * 2 for b in result.objects)
+    rows = []
+    label = f"transport S {S}, {res}^2, indirect {ind_spp} spp"
+    for kind, arg in models:
+        t1 = time.perf_counter()
+        if kind == "T":
+            fitted = [None for _ in stores]
+        elif kind == "pca":
+            fitted = [tt.fit_texture_pca(s, k=arg) for s in stores]
+        else:
+            fitted = [tt.fit_block_pca(s, block=16 if res % 16 == 0 else 8, tol=arg)
+                      for s in stores]
+        fit_s = time.perf_counter() - t1
+
+        def relight(oi, d, a, fitted=fitted):
+            b = result.objects[oi]
+            b.model = fitted[oi]
+            return tx.relight(b, stores[oi], d, a, source="model" if fitted[oi] else "transport")
+
+        err = errors_for(relight, truth, R)
+        if kind == "T":
+            model_bytes, lookups, madds, name = t_bytes, None, None, "relight from T (offline)"
+        elif kind == "pca":
+            k = fitted[0].k
+            model_bytes = sum(m.U.size * 2 + m.V.size * 4 for m in fitted)
+            lookups = 2 * -(-k // 3) + 1 + (9 if ind_spp else 0)
+            madds = 3 * k + 27
+            name = f"PCA k {k}"
+        else:
+            model_bytes = sum(sum(u.size for u in m.U) * 2
+                              + sum(v.size for v in m.V) * 4 for m in fitted)
+            dims = np.concatenate([m.dims for m in fitted])
+            lookups, madds = None, int(3 * dims.mean() + 27)
+            name = f"block PCA tol {arg} (mean {dims.mean():.1f} comps)"
+        rows.append({
+            "method": "transport", "setting": f"{label}, {name}", "S": S, "resolution": res,
+            "indirect_samples": ind_spp, "model": kind, "model_arg": arg,
+            "bake_seconds": round(bake_s + fit_s, 2), "cycles_seconds": round(cycles, 2),
+            "peak_mem_mb": round(result.peak_rss_mb, 1),
+            "stored_bytes": int(model_bytes + ind_bytes + alb_bytes), "transport_bytes": t_bytes,
+            "preview_lookups": lookups, "preview_madds_per_texel": madds,
+            "err_2deg": round(err[2.0], 4), "err_10deg": round(err[10.0], 4)})
+        print(f"  {rows[-1]['setting']}: {rows[-1]['bake_seconds']} s, err 2/10 deg "
+              f"{rows[-1]['err_2deg']}/{rows[-1]['err_10deg']}", flush=True)
+    for s in stores:
+        s.abort()
+    return rows
+
+
+def lobes_points(scene, objects, truth, R):
+    """The lobes presets (one object: the first)."""
+    from relightable_textures.operators import steerable_bake as sb
+    from relightable_textures.operators.presets import settings_from_preset
+
+    rows = []
+    for name in ("draft", "balanced", "production"):
+        s = settings_from_preset(name, storage="float")
+        rss0 = _rss()
+        t0 = time.perf_counter()
+        res = sb.run(sb.bake_steerable_texture(scene, objects[0], s))
+        bake_s = time.perf_counter() - t0
+        tex = res.texture
+        first_only = {a: {k: [v[0]] for k, v in truth[a].items() if isinstance(k, tuple)}
+                      for a in ANGLES}
+        err = errors_for(lambda oi, d, a: tex.relight(d), first_only, R)
+        n = s.order ** 2
+        rows.append({
+            "method": "lobes", "setting": f"lobes {name}: order {s.order}, {s.resolution}^2, "
+                                          f"{s.samples} spp", "S": n, "resolution": s.resolution,
+            "indirect_samples": None, "model": "steerable", "model_arg": s.order,
+            "bake_seconds": round(bake_s, 2), "cycles_seconds": round(res.cycles_seconds, 2),
+            "peak_mem_mb": round(_rss() - rss0, 1),
+            "stored_bytes": int(n * s.resolution ** 2 * 3), "transport_bytes": 0,
+            "preview_lookups": n, "preview_madds_per_texel": 3 * n,
+            "err_2deg": round(err[2.0], 4), "err_10deg": round(err[10.0], 4)})
+        print(f"  {rows[-1]['setting']}: {rows[-1]['bake_seconds']} s, err 2/10 deg "
+              f"{rows[-1]['err_2deg']}/{rows[-1]['err_10deg']}", flush=True)
+    return rows
+
+
+def front(rows, key="err_10deg"):
+    from relightable_textures.lt_addon.pareto import pareto_mask
+
+    mask = pareto_mask([r["bake_seconds"] for r in rows], [r[key] for r in rows])
+    return [bool(m) for m in mask]
+
+
+def table(rows, title):
+    mask = front(rows)
+    lines = [f"#### {title}", "",
+             "| | setting | bake | peak mem | stored (preview) | T on disk | preview | err 2° | err 10° |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r, m in sorted(zip(rows, mask), key=lambda t: t[0]["bake_seconds"]):
+        prev = (f"{r['preview_lookups']} lookups, {r['preview_madds_per_texel']} madds"
+                if r["preview_lookups"] else
+                (f"NumPy, {r['preview_madds_per_texel']} madds" if r["preview_madds_per_texel"]
+                 else "offline"))
+        lines.append(
+            f"| {'**front**' if m else ''} | {r['setting']} | {r['bake_seconds']:.1f} s "
+            f"({r['cycles_seconds']:.1f} s Cycles) | {r['peak_mem_mb']:.0f} MB | "
+            f"{r['stored_bytes'] / 2**20:.2f} MiB | {r['transport_bytes'] / 2**20:.1f} MiB | "
+            f"{prev} | {r['err_2deg']:.3f} | {r['err_10deg']:.3f} |")
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenes", default="bumps,noise,statue")
+    ap.add_argument("--size", choices=("demo", "test"), default="demo")
+    ap.add_argument("--quick", action="store_true", help="test-size scenes, fewer points")
+    ap.add_argument("--out", default="out/bench")
+    args = ap.parse_args(argv)
+    size = "test" if args.quick else args.size
+    R = 64 if args.quick else 256
+    spp = 64 if args.quick else 256
+    counts = (50, 100, 200) if args.quick else (100, 200, 400, 800)
+    ks = (16, 48) if args.quick else (16, 32, 48, 96)
+    os.makedirs(args.out, exist_ok=True)
+    report = {"machine": f"{os.cpu_count()} cores", "size": size, "resolution": R,
+              "truth_samples": spp, "angles": ANGLES, "scenes": {}}
+    md = []
+    for name in args.scenes.split(","):
+        print(f"{name}:", flush=True)
+        t_scene = time.perf_counter()
+        scene, objects = build(name, size)
+        one = single_bake_seconds(scene, objects, R)
+        print(f"  one 64-spp Cycles bake at {R}^2: {one:.2f} s", flush=True)
+        truth = truths(scene, objects, R, spp)
+        rows = []
+        models = [("T", None)] + [("pca", k) for k in ks] + [("blocks", 0.02)]
+        with tempfile.TemporaryDirectory(dir=args.out) as folder:
+            for S in counts:
+                rows += transport_points(scene, objects, truth, R, S, 64, R, models, folder)
+            mid = counts[-2]
+            for ind in (16, 256):
+                rows += transport_points(scene, objects, truth, R, mid, ind, R,
+                                         [("pca", ks[-2])], folder)
+            rows += transport_points(scene, objects, truth, R, mid, 64, R // 2,
+                                     [("pca", ks[-2])], folder)
+        rows += lobes_points(scene, objects, truth, R)
+        for r, m in zip(rows, front(rows)):
+            r["pareto_10deg"] = m
+        report["scenes"][name] = {"objects": SCENES[name], "single_64spp_bake_seconds": one,
+                                  "rows": rows,
+                                  "minutes": round((time.perf_counter() - t_scene) / 60, 1)}
+        title = (f"{name} ({size}, {' + '.join(SCENES[name])}, {R}^2; one 64-spp bake "
+                 f"{one:.1f} s; truths {spp} spp, 2 bounces)")
+        md.append(table(rows, title))
+        print(md[-1], flush=True)
+        with open(os.path.join(args.out, "transport_textures.json"), "w") as fh:
+            json.dump(report, fh, indent=1)
+    with open(os.path.join(args.out, "transport_textures.md"), "w") as fh:
+        fh.write("\n\n".join(md) + "\n")
+    from relightable_textures.lt_addon.pareto import write_csv
+
+    write_csv(os.path.join(args.out, "transport_textures.csv"),
+              [{"scene": s, **r} for s, v in report["scenes"].items() for r in v["rows"]])
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,147 @@
+"""Look at a bake the way a user does: the live preview next to a Cycles render of the same Sun,
+rendered from the scene camera (bpy).
+
+:func:`compare` renders the open scene twice with Cycles -- once through the preview materials
+(emission: exactly what the viewport preview computes), once with the user's own materials under a
+real Sun lamp of the same direction, size and strength with the scene's bounces -- and writes
+``preview | Cycles | |difference| x 4`` side by side as a PNG (sRGB, values clipped at 1), plus
+the relative RMSE over the pixels the relit objects cover.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+
+import bpy
+import numpy as np
+
+from ..lt_addon import exrio
+from .cycles_bake import BakeInputError
+
+
+def _render(scene, path: str, samples: int) -> np.ndarray:
+    scene.render.engine = "CYCLES"
+    scene.cycles.samples = samples
+    scene.cycles.use_denoising = False
+    scene.cycles.use_adaptive_sampling = False
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.image_settings.color_depth = "32"
+    scene.render.filepath = path
+    bpy.ops.render.render(write_still=True)
+    ch, _ = exrio.read_exr(path)
+    return np.stack([ch["R"], ch["G"], ch["B"]], -1).astype(np.float64)
+
+
+def _set_preview_outputs(objects, on: bool) -> list:
+    """Make our preview outputs active (on) or the user's (off); returns undo callables."""
+    undo = []
+    for obj in objects:
+        for slot in obj.material_slots:
+            mat = slot.material
+            tree = mat.node_tree if mat is not None else None
+            if tree is None:
+                continue
+            outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+            ours = [n for n in outs if n.get("relight_preview")]
+            theirs = [n for n in outs if not n.get("relight_preview")]
+            if not ours or not theirs:
+                continue
+            active = next((n for n in outs if n.is_active_output), None)
+            undo.append(lambda n=active: setattr(n, "is_active_output", True))
+            (ours[0] if on else theirs[0]).is_active_output = True
+    return undo
+
+
+def _srgb(x):
+    x = np.clip(x, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def write_png(path: str, rgb: np.ndarray) -> None:
+    """(H, W, 3) linear RGB, row 0 at the bottom -> sRGB PNG through Blender, atomically."""
+    h, w = rgb.shape[:2]
+    img = bpy.data.images.new("relight_compare", w, h, alpha=False)
+    try:
+        img.colorspace_settings.name = "Non-Color"   # values below are already sRGB-encoded
+        px = np.ones((h, w, 4), np.float32)
+        px[..., :3] = _srgb(rgb)
+        img.pixels.foreach_set(px.ravel())
+        tmp = os.path.join(os.path.dirname(os.path.abspath(path)),
+                           f".{os.path.basename(path)}.{os.getpid()}.tmp.png")
+        img.filepath_raw = tmp
+        img.file_format = "PNG"
+        img.save()
+        os.replace(tmp, path)
+    finally:
+        bpy.data.images.remove(img)
+
+
+def compare(scene, objects, azimuth: float, elevation: float, sun_angle: float, out_png: str,
+            samples: int = 128, resolution: int | None = None) -> dict:
+    """Render preview vs Cycles Sun from the scene camera; write the PNG; return figures."""
+    from ..lt_addon.hemisphere import direction_from_az_el
+    from mathutils import Vector
+
+    from .texture_transport import refresh_preview_tables
+
+    if scene.camera is None:
+        raise BakeInputError(f"scene {scene.name!r} has no camera to render the comparison from")
+    previews = [o for o in objects if any(
+        n.get("relight_preview") for s in o.material_slots if s.material and s.material.node_tree
+        for n in s.material.node_tree.nodes)]
+    if not previews:
+        raise BakeInputError("none of the objects has a relight preview; bake first")
+    saved = {k: scene.get(k) for k in ("relight_azimuth", "relight_elevation",
+                                       "relight_intensity", "relight_follow_sun")}
+    world, res = scene.world, (scene.render.resolution_x, scene.render.resolution_y,
+                               scene.render.resolution_percentage)
+    hidden = [(o, o.hide_render) for o in scene.objects if o.type == "LIGHT"]
+    undo = []
+    data = bpy.data.lights.new("RelightCompareSun", type="SUN")
+    sun = bpy.data.objects.new("RelightCompareSun", data)
+    try:
+        for o in previews:
+            refresh_preview_tables(scene, o, sun_angle)
+        if resolution:
+            scene.render.resolution_x = scene.render.resolution_y = int(resolution)
+            scene.render.resolution_percentage = 100
+        scene["relight_azimuth"], scene["relight_elevation"] = float(azimuth), float(elevation)
+        scene["relight_intensity"], scene["relight_follow_sun"] = 1.0, 0.0
+        scene.world = None
+        for o, _ in hidden:
+            o.hide_render = True
+        scene.update_tag()
+        bpy.context.view_layer.update()
+        with tempfile.TemporaryDirectory() as tmp:
+            undo += _set_preview_outputs(previews, True)
+            preview = _render(scene, os.path.join(tmp, "preview.exr"), 1)
+            undo += _set_preview_outputs(previews, False)
+            scene.collection.objects.link(sun)
+            data.energy, data.angle = 1.0, math.radians(sun_angle)
+            towards = Vector(direction_from_az_el(azimuth, elevation).tolist())
+            sun.rotation_euler = (-towards).to_track_quat("-Z", "Y").to_euler()
+            truth = _render(scene, os.path.join(tmp, "truth.exr"), samples)
+        diff = np.abs(preview - truth)
+        mask = preview.sum(-1) > 0
+        err = (float(np.linalg.norm((preview - truth)[mask]) / np.linalg.norm(truth[mask]))
+               if mask.any() else float("nan"))
+        sheet = np.concatenate([preview, truth, 4.0 * diff], axis=1)
+        write_png(out_png, sheet)
+        return {"png": os.path.abspath(out_png), "azimuth": azimuth, "elevation": elevation,
+                "sun_angle": sun_angle, "truth_samples": samples,
+                "rel_rmse_covered_pixels": err, "panels": "preview | Cycles Sun | |diff| x 4"}
+    finally:
+        for f in reversed(undo):
+            f()
+        bpy.data.objects.remove(sun)
+        bpy.data.lights.remove(data)
+        for o, h in hidden:
+            o.hide_render = h
+        scene.world = world
+        scene.render.resolution_x, scene.render.resolution_y, \
+            scene.render.resolution_percentage = res
+        for k, v in saved.items():
+            if v is not None:
+                scene[k] = v
