@@ -26,13 +26,20 @@ demo: $(STAMP)
 	done
 	$(VENV)/bin/relight validate --paper ashikhmin2002 > $(OUT)/validate-ashikhmin2002.json
 	$(VENV)/bin/relight bake-textures $(OUT)/bumps.blend --object Bumps --preset balanced \
-	  --truth 4 --contact-sheet $(OUT)/bumps-contact-sheet.png
+	  --truth 4 --force
+	$(VENV)/bin/relight compare $(OUT)/bumps.blend --light 37,10 --sun-angle 2 --resolution 384 \
+	  --out $(OUT)/bumps-compare-low-sun.png --force
+	$(VENV)/bin/relight bake-textures $(OUT)/statue.blend --object Statue --object Ground \
+	  --preset draft --truth 4 --force
+	$(VENV)/bin/relight compare $(OUT)/statue.blend --light 200,15 --sun-angle 2 \
+	  --out $(OUT)/statue-compare-low-sun.png --force
 	$(VENV)/bin/relight bake-transport $(OUT)/statue.blend --object Statue --directions cube:8 \
 	  --energy 0.99 --truth
 	$(VENV)/bin/relight info $(OUT)/bumps.blend
 	$(VENV)/bin/relight info $(OUT)/statue.blend
-	@echo "demo: open $(OUT)/bumps.blend in Blender (Relight tab, Preview Light sliders);"
-	@echo "      report $(OUT)/bumps_relight/Bumps_steerable.json, sheet $(OUT)/bumps-contact-sheet.png"
+	@echo "demo: open $(OUT)/bumps.blend or $(OUT)/statue.blend in Blender (Relight tab, Preview"
+	@echo "      Light sliders); reports $(OUT)/*_relight/*_texture_report.json; pictures"
+	@echo "      $(OUT)/*-compare-low-sun.png (preview | Cycles Sun | difference x4)"
 	@echo "      open $(OUT)/statue.blend (Vertex Transport Preview); report $(OUT)/statue_relight/"
 
 ## test: the full default test suite (core + real Blender/Cycles), a few minutes on 2 cores
@@ -43,11 +50,13 @@ test: $(STAMP)
 test-core: $(STAMP)
 	$(PY) -m pytest -q tests/core
 
-## bench: the quick sweeps that print figures (not part of `make test`; ~15 min on 2 cores):
-##   relight bench --quick on all four scenes (JSON, CSV, Pareto charts in out/bench) and the
-##   CPCA comparison at equal shading error on statue and room (out/bench/cpca.*)
+## bench: the sweeps that print figures (not part of `make test`; ~1 h on 2 cores): the
+##   transport bake vs the lobes presets on bumps, noise and statue+ground at demo size
+##   (out/bench/transport_textures.*), relight bench --quick on all four scenes (JSON, CSV,
+##   Pareto charts in out/bench) and the CPCA comparison on statue and room (out/bench/cpca.*)
 bench: $(STAMP)
 	mkdir -p $(OUT)/bench $(BLENDER_USER_RESOURCES)
+	$(PY) benchmarks/bench_transport_textures.py --out $(OUT)/bench
 	$(VENV)/bin/relight bench --quick --out $(OUT)/bench
 	$(PY) benchmarks/bench_cpca.py --scenes statue,room --out $(OUT)/bench
 

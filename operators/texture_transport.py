@@ -67,6 +67,7 @@ class TransportTextureSettings:
     indirect_order: int = 3
     indirect_resolution: int = 128
     indirect_samples: int = 64
+    indirect_smoothing: float = 1.5
     model: str = "pca"
     components: int | None = None
     tol: float = 0.02
@@ -96,6 +97,9 @@ class TransportTextureSettings:
             raise BakeInputError(f"indirect order must be in 2..7, got {self.indirect_order}")
         if not 4 <= self.indirect_resolution <= 8192 or self.indirect_samples < 1:
             raise BakeInputError("indirect resolution must be in 4..8192 and samples >= 1")
+        if not 0.0 <= self.indirect_smoothing <= 16.0:
+            raise BakeInputError(f"indirect smoothing must be in 0..16 texels, got "
+                                 f"{self.indirect_smoothing}")
         if self.components is not None and self.components < 1:
             raise BakeInputError(f"components must be >= 1, got {self.components}")
         if not 0.0 < self.tol < 1.0:
@@ -274,12 +278,20 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
                 yield Progress(step + k, total, f"indirect bake {k + 1}/{sampled.n_lights}")
             seconds["indirect_cycles"] = session.bake_seconds
             calls += session.bake_calls
+        from ..lt_addon.uv_layout import uv_coverage
+        from .meshes import uv_triangles
+
         for i, o in enumerate(objects):
+            images = sampled.to_basis_images(stacks[i], dtype=np.float32)
+            if settings.indirect_smoothing > 0:
+                covered = uv_coverage(uv_triangles(o), ri) > 0
+                images = tt.smooth_in_coverage(images, covered, settings.indirect_smoothing)
             indirects[i] = SteerableTexture(
-                sampled.to_basis_images(stacks[i], dtype=np.float32), settings.indirect_order,
+                images, settings.indirect_order,
                 basis.width, sampled.centres, frame="world", calibration="steerable_cos",
                 settings={"resolution": ri, "samples": settings.indirect_samples,
                           "bounces": settings.bounces, "mode": "radiance", "passes": "indirect",
+                          "smoothing_texels": settings.indirect_smoothing,
                           "object": o.name, "seed": settings.seed})
         seconds["indirect_total"] = time.perf_counter() - t0
 

@@ -164,3 +164,17 @@ def test_fit_streams_with_a_bounded_working_set(tmp_path, monkeypatch):
         tracemalloc.stop()
     assert model.residual < 1e-3          # rank 8 by construction (half-float rounding left)
     assert peak < 0.5 * T_bytes, peak / 2 ** 20
+
+
+def test_smoothing_keeps_constants_and_ignores_uncovered_texels():
+    rng = np.random.default_rng(2)
+    cov = np.zeros((32, 32), bool)
+    cov[4:20, 6:28] = True
+    img = np.where(cov[..., None], 0.5, 9.0) * np.ones((32, 32, 3))
+    out = tt.smooth_in_coverage(img, cov, 2.0)
+    np.testing.assert_allclose(out[cov], 0.5, rtol=1e-6)        # no bleeding from outside
+    np.testing.assert_array_equal(out[~cov], img[~cov])
+    noisy = 0.5 + 0.1 * rng.normal(size=(32, 32, 3))
+    sm = tt.smooth_in_coverage(noisy, cov, 1.5)
+    assert np.std(sm[cov] - 0.5) < 0.35 * np.std(noisy[cov] - 0.5)
+    assert np.mean(sm[cov]) == pytest.approx(np.mean(noisy[cov]), abs=0.01)
