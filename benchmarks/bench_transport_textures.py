@@ -231,11 +231,15 @@ def main(argv=None):
     ap.add_argument("--size", choices=("demo", "test"), default="demo")
     ap.add_argument("--quick", action="store_true", help="test-size scenes, fewer points")
     ap.add_argument("--out", default="out/bench")
+    ap.add_argument("--counts", help="direction counts to sweep, e.g. 100,200,400,800")
+    ap.add_argument("--no-lobes", action="store_true", help="skip the lobes presets")
     args = ap.parse_args(argv)
     size = "test" if args.quick else args.size
     R = 64 if args.quick else 256
     spp = 64 if args.quick else 256
     counts = (50, 100, 200) if args.quick else (100, 200, 400, 800)
+    if args.counts:
+        counts = tuple(int(c) for c in args.counts.split(","))
     ks = (16, 48) if args.quick else (16, 32, 48, 96)
     os.makedirs(args.out, exist_ok=True)
     report = {"machine": f"{os.cpu_count()} cores", "size": size, "resolution": R,
@@ -259,7 +263,8 @@ def main(argv=None):
                                          [("pca", ks[-2])], folder)
             rows += transport_points(scene, objects, truth, R, mid, 64, R // 2,
                                      [("pca", ks[-2])], folder)
-        rows += lobes_points(scene, objects, truth, R)
+        if not args.no_lobes:
+            rows += lobes_points(scene, objects, truth, R)
         for r, m in zip(rows, front(rows)):
             r["pareto_10deg"] = m
         report["scenes"][name] = {"objects": SCENES[name], "single_64spp_bake_seconds": one,
@@ -269,13 +274,15 @@ def main(argv=None):
                  f"{one:.1f} s; truths {spp} spp, 2 bounces)")
         md.append(table(rows, title))
         print(md[-1], flush=True)
-        with open(os.path.join(args.out, "transport_textures.json"), "w") as fh:
+        with open(os.path.join(args.out, f"transport_textures_{args.scenes.replace(',', '_')}"
+                                         ".json"), "w") as fh:
             json.dump(report, fh, indent=1)
-    with open(os.path.join(args.out, "transport_textures.md"), "w") as fh:
+    tag = args.scenes.replace(",", "_")
+    with open(os.path.join(args.out, f"transport_textures_{tag}.md"), "w") as fh:
         fh.write("\n\n".join(md) + "\n")
     from relightable_textures.lt_addon.pareto import write_csv
 
-    write_csv(os.path.join(args.out, "transport_textures.csv"),
+    write_csv(os.path.join(args.out, f"transport_textures_{tag}.csv"),
               [{"scene": s, **r} for s, v in report["scenes"].items() for r in v["rows"]])
     return 0
 

@@ -607,6 +607,13 @@ PRESETS = {
 PILOT_COUNTS = (64, 100, 200, 400, 800, 1600)
 
 
+def steerable_bake_run(generator, on_progress=None, should_cancel=None):
+    """Drive a job generator to its end (the same driver as every bake; see steerable_bake.run)."""
+    from .steerable_bake import run
+
+    return run(generator, on_progress, should_cancel)
+
+
 def truth_lights(count: int) -> list:
     """``count`` held-out (azimuth, elevation) lights: the four of :data:`TRUTH_LIGHTS` first,
     then elevations 5..85 degrees with golden-angle azimuths."""

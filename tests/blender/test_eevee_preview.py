@@ -35,3 +35,46 @@ def test_eevee_renders_the_preview_group_like_numpy(fresh_scene, tmp_path):
     want = result.texture.relight(direction_from_az_el(40.0, 35.0)).astype(np.float64)
     assert want.max() > 0.1
     assert np.abs(img - want).max() <= 2.0 ** -10 * want.max()  # half-float atlas precision
+
+
+def test_eevee_renders_the_transport_preview_like_its_numpy_twin(fresh_scene, tmp_path):
+    """The transport PCA group (table atlas + eigen atlas + albedo tile) in EEVEE. The light is
+    put on a table texel centre, where bilinear filtering returns that texel exactly whatever
+    the GPU's filter precision; eigen lookups are Closest as above."""
+    import bpy
+
+    from relightable_textures.lt_addon import exrio, transport_texture as tt
+    from relightable_textures.lt_addon.atlas import unpack_atlas
+    from relightable_textures.lt_addon.hemisphere import az_el_from_direction, disk_to_hemisphere
+    from relightable_textures.operators import texture_transport as tx, transport_preview as tp
+
+    samples.build("bumps", fresh_scene, "test")
+    obj = bpy.data.objects["Bumps"]
+    r, d_tab = 16, 16
+    s = tx.TransportTextureSettings(directions="hemi:48:1.5", resolution=r, bounces=0,
+                                    components=9, table_size=d_tab)
+    reports = tx.steerable_bake_run(tx.bake_job(fresh_scene, [obj], s, str(tmp_path), truth=0))
+    prev = reports[0]["preview"]
+    group = bpy.data.node_groups[prev["group"]]
+    lookups = [n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]
+    assert len(lookups) == 2 * prev["tiles"] + 1
+    assert len({n.image.name for n in lookups}) == 2            # two samplers
+    for n in lookups:
+        if "eigen" in n.image.name:
+            n.interpolation = "Closest"
+    d = disk_to_hemisphere(tt.disk_grid(d_tab)[10, 5][None])[0]
+    az, el = (float(v[0]) for v in az_el_from_direction(d[None]))
+    fresh_scene["relight_azimuth"], fresh_scene["relight_elevation"] = az, el
+    img = render_rgb(fresh_scene, tmp_path, r, engine="BLENDER_EEVEE")
+    eig = unpack_atlas(np.stack([exrio.read_exr(prev["eigen"])[0][c] for c in "RGB"], -1),
+                       prev["tiles"] + 1, r)
+    tab = unpack_atlas(np.stack([exrio.read_exr(prev["tables"])[0][c] for c in "RGB"], -1),
+                       prev["tiles"], d_tab)
+    want = tp.viewport_relight(eig, tab, d).astype(np.float64)
+    assert want.max() > 0.05
+    # Measured: EEVEE returns 0.4-0.7 % less than the twin per pixel (Cycles matches it to half
+    # precision, tests/blender/test_texture_transport.py). Not the 8-bit sub-texel precision of
+    # GPU bilinear filtering (the twin at table coordinates +-1/256 texel moves 0.1 %); the cause
+    # is not isolated. 1 % of the peak is the bound checked here.
+    assert np.abs(img - want).max() <= 0.01 * want.max()
+    assert abs(img.mean() / want.mean() - 1.0) < 0.01
