@@ -493,12 +493,18 @@ def _hull_interpolation(direction_set: DirectionSet, q: np.ndarray):
     eq = hull.equations                       # n . x + off <= 0 inside, off < 0 (origin inside)
     if np.any(eq[:, 3] >= 0):
         raise ValueError("the sample directions do not surround the origin; cannot interpolate")
+    return hull_barycentric(direction_set.directions, hull.simplices, eq, q)
+
+
+def hull_barycentric(points, simplices, equations, q):
+    """Triangle (Q, 3) and barycentric weights (Q, 3) where the rays ``t q`` leave a convex hull
+    (``points`` (P, 3), its ``simplices`` and facet ``equations`` from scipy, origin inside)."""
     # the ray t * q leaves the hull through the facet with the largest (n . q) / (-off)
-    score = (q @ eq[:, :3].T) / (-eq[:, 3])
+    score = (q @ equations[:, :3].T) / (-equations[:, 3])
     facet = np.argmax(score, axis=1)
-    tri = hull.simplices[facet]                 # (Q, 3)
+    tri = simplices[facet]                       # (Q, 3)
     p = q / score[np.arange(q.shape[0]), facet][:, None]   # hit point on the facet plane
-    a, b, c = (direction_set.directions[tri[:, i]] for i in range(3))
+    a, b, c = (points[tri[:, i]] for i in range(3))
     v0, v1, v2 = b - a, c - a, p - a
     d00 = np.einsum("qi,qi->q", v0, v0)
     d01 = np.einsum("qi,qi->q", v0, v1)

@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.spatial
 
-from .directions import DirectionSet, parse_direction_spec
+from .directions import DirectionSet, hull_barycentric, parse_direction_spec
 from .hemisphere import disk_to_hemisphere, hemisphere_to_disk, normalize_directions
 
 KERNELS = ("gauss", "linear")
@@ -95,22 +95,8 @@ class _Hull:
 
     def weights(self, q: np.ndarray):
         """(Q, 3) indices and (Q, 3) weights; indices == n (the nadir) carry weight 0."""
-        score = (q @ self.eq[:, :3].T) / (-self.eq[:, 3])
-        facet = np.argmax(score, axis=1)
-        tri = self.simplices[facet]
-        p = q / score[np.arange(len(q)), facet][:, None]
-        a, b, c = (self.points[tri[:, i]] for i in range(3))
-        v0, v1, v2 = b - a, c - a, p - a
-        d00 = np.einsum("qi,qi->q", v0, v0)
-        d01 = np.einsum("qi,qi->q", v0, v1)
-        d11 = np.einsum("qi,qi->q", v1, v1)
-        d20 = np.einsum("qi,qi->q", v2, v0)
-        d21 = np.einsum("qi,qi->q", v2, v1)
-        den = d00 * d11 - d01 * d01
-        wb = (d11 * d20 - d01 * d21) / den
-        wc = (d00 * d21 - d01 * d20) / den
-        w = np.clip(np.stack([1.0 - wb - wc, wb, wc], axis=-1), 0.0, 1.0)
-        w /= w.sum(axis=1, keepdims=True)
+        tri, w = hull_barycentric(self.points, self.simplices, self.eq, q)
+        w = w.copy()
         w[tri == self.n] = 0.0
         return tri, w
 

@@ -35,19 +35,13 @@ from ..lt_addon import exrio
 from ..lt_addon import transport_texture as tt
 from ..lt_addon.hemisphere import direction_from_az_el
 from .cycles_bake import BakeInputError, EnvironmentBake, check_bakeable, check_memory
+from .steerable_bake import Progress
 
 KIND = "transport_texture"
 MODELS = ("pca", "blocks", "steerable", "none")
 INDIRECT = ("steerable", "none")
 #: Held-out truth lights (azimuth, elevation in degrees): the four elevations of issue 13.
 TRUTH_LIGHTS = ((37.0, 10.0), (161.0, 30.0), (283.0, 55.0), (59.0, 80.0))
-
-
-@dataclass
-class Progress:
-    done: int
-    total: int
-    message: str
 
 
 @dataclass
