@@ -225,6 +225,34 @@ def table(rows, title):
     return "\n".join(lines)
 
 
+def write_presets(report, scene):
+    """Presets from the measured front of PCA points (they have a live preview): cheapest,
+    knee and most accurate by the 10-degree error (lt_addon.pareto.choose_presets)."""
+    from relightable_textures.lt_addon.pareto import choose_presets
+
+    rows = [r for r in report["scenes"][scene]["rows"]
+            if r["method"] == "transport" and r["model"] == "pca"]
+    chosen = choose_presets(rows, cost_key="bake_seconds", error_key="err_10deg")
+    out = {"rule": "Pareto front of bake time vs rel. RMSE against a 10-degree Cycles Sun with 2 "
+                   "bounces (4 held-out lights), PCA models only; cheapest / knee / lowest error",
+           "scene": scene, "size": report["size"], "machine": report["machine"], "presets": {}}
+    for name, r in chosen.items():
+        out["presets"][name] = {
+            "directions": f"hemi:{r['S']}:1.5", "resolution": r["resolution"],
+            "indirect_resolution": max(8, r["resolution"] // 2),
+            "indirect_samples": r["indirect_samples"], "components": r["model_arg"],
+            "measured": {"bake_seconds": r["bake_seconds"], "rel_rmse": r["err_10deg"],
+                         "rel_rmse_2deg": r["err_2deg"], "scene": f"{scene} {report['size']}",
+                         "why": r["why"]}}
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                        "operators", "transport_presets.json")
+    tmp = path + ".tmp"
+    with open(tmp, "w") as fh:
+        json.dump(out, fh, indent=1)
+    os.replace(tmp, path)
+    print(f"presets written to {path}")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", default="bumps,noise,statue")
@@ -233,6 +261,9 @@ def main(argv=None):
     ap.add_argument("--out", default="out/bench")
     ap.add_argument("--counts", help="direction counts to sweep, e.g. 100,200,400,800")
     ap.add_argument("--no-lobes", action="store_true", help="skip the lobes presets")
+    ap.add_argument("--write-presets", action="store_true",
+                    help="choose draft / balanced / production from the first scene's front of "
+                         "viewport (PCA) points and write operators/transport_presets.json")
     args = ap.parse_args(argv)
     size = "test" if args.quick else args.size
     R = 64 if args.quick else 256
@@ -282,6 +313,8 @@ def main(argv=None):
         fh.write("\n\n".join(md) + "\n")
     from relightable_textures.lt_addon.pareto import write_csv
 
+    if args.write_presets:
+        write_presets(report, next(iter(report["scenes"])))
     write_csv(os.path.join(args.out, f"transport_textures_{tag}.csv"),
               [{"scene": s, **r} for s, v in report["scenes"].items() for r in v["rows"]])
     return 0

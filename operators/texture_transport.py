@@ -597,6 +597,26 @@ PRESETS = {
     "production": dict(directions="hemi:800:1.5", resolution=256, indirect_resolution=128,
                        indirect_samples=256, tol=0.01),
 }
+def _measured_presets() -> dict:
+    """PRESETS updated from operators/transport_presets.json (written by
+    ``benchmarks/bench_transport_textures.py --write-presets`` from the measured front)."""
+    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), "transport_presets.json")
+    out = {k: dict(v) for k, v in PRESETS.items()}
+    try:
+        with open(path) as fh:
+            data = json.load(fh)["presets"]
+    except (OSError, ValueError, KeyError):
+        return out
+    for name in out:
+        if name in data:
+            out[name].update({k: v for k, v in data[name].items()
+                              if k in TransportTextureSettings.__dataclass_fields__
+                              or k == "measured"})
+    return out
+
+
+PRESETS = _measured_presets()
+
 #: Direction counts the pilot tries for ``--target-error``, cheapest first.
 PILOT_COUNTS = (64, 100, 200, 400, 800, 1600)
 
@@ -622,7 +642,10 @@ def truth_lights(count: int) -> list:
 def settings_from_preset(name: str, **overrides) -> TransportTextureSettings:
     if name not in PRESETS:
         raise BakeInputError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
-    return TransportTextureSettings(**{**PRESETS[name], **overrides})
+    values = {k: v for k, v in PRESETS[name].items() if k != "measured"}
+    if "components" in overrides or "tol" in overrides:
+        values.pop("components", None)
+    return TransportTextureSettings(**{**values, **overrides})
 
 
 def pilot(scene, objects, settings: TransportTextureSettings, target: float, out_dir: str,
