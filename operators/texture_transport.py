@@ -697,7 +697,9 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
     if target_error is not None:
         if not 0.0 < target_error < 1.0:
             raise BakeInputError(f"--target-error must be in (0, 1), got {target_error}")
-        chosen = yield from pilot(scene, objects, settings, target_error, out_dir)
+        chosen = yield from pilot(scene, objects, settings, target_error, out_dir,
+                                  resolution=min(64, settings.resolution),
+                                  truth_samples=truth_samples)
         settings = replace(settings, directions=chosen["chosen_directions"], tol=chosen["tol"])
         figures["target_error"] = chosen
         truth = max(truth, 4)

@@ -327,3 +327,26 @@ def test_panel_operator_bakes_selected_objects_and_sun_size_retabulates(statue, 
         assert sorted(os.listdir(tmp_path)) == files
     finally:
         relightable_textures.unregister()
+
+
+def test_target_error_pilot_chooses_directions_and_reports_what_it_achieved(bumps, tmp_path):
+    """--target-error: the pilot tries direction counts cheapest first, stops at the first that
+    meets the target on its small bake, and the report states the choice and the error the
+    real bake achieved against its own truths."""
+    from relightable_textures.operators import texture_transport as tx
+
+    scene, obj = bumps
+    s = settings(components=None, tol=0.02, bounces=1, indirect_resolution=8,
+                 indirect_samples=4)
+    reports = tx.steerable_bake_run(tx.bake_job(scene, [obj], s, str(tmp_path), truth=0,
+                                                truth_samples=16, target_error=0.35,
+                                                preview=False))
+    te = reports[0]["target_error"]
+    tried = te["tried"]
+    assert tried[0]["directions"].startswith("hemi:64")
+    assert te["met_in_pilot"] == (tried[-1]["rel_rmse"] <= 0.35)
+    assert all(t["rel_rmse"] > 0.35 for t in tried[:-1])
+    assert reports[0]["direction_set"] == te["chosen_directions"]
+    assert te["tol"] == pytest.approx(0.35 / 3, abs=1e-4)
+    assert te["met"] == (te["achieved"] <= 0.35)
+    assert len(reports[0]["ground_truth"]["lights"]) == 4       # forced on by the target
