@@ -342,7 +342,9 @@ class EnvironmentBake:
     def _select_only(self, objs):
         """Select only the baked objects (bake works on the selection); restored on exit."""
         view_layer = bpy.context.view_layer
-        selected = [o for o in view_layer.objects if o.select_get()]
+        # a just-removed object (our session Sun, removed at teardown) can leave a stale None
+        # in the view layer's list until the next depsgraph update
+        selected = [o for o in view_layer.objects if o is not None and o.select_get()]
         active = view_layer.objects.active
         hidden = [(o.hide_get(), o.hide_viewport, o.hide_render) for o in objs]
         for o in objs:
