@@ -404,7 +404,7 @@ class TexturePCA:
 
 
 def fit_texture_pca(store: TransportStore, *, k: int | None = None, tol: float | None = None,
-                    max_k: int = 48) -> TexturePCA:
+                    max_k: int = 96) -> TexturePCA:
     """Global uncentred PCA of the store (streamed). Exactly one of ``k`` / ``tol``.
 
     ``tol`` is the relative Frobenius residual of ``T`` to reach; ``k`` is capped at ``S``.
