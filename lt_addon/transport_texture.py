@@ -407,7 +407,10 @@ def fit_texture_pca(store: TransportStore, *, k: int | None = None, tol: float |
                     max_k: int = 96) -> TexturePCA:
     """Global uncentred PCA of the store (streamed). Exactly one of ``k`` / ``tol``.
 
-    ``tol`` is the relative Frobenius residual of ``T`` to reach; ``k`` is capped at ``S``.
+    ``tol`` is the relative Frobenius residual of ``T`` to reach, with at most ``max_k``
+    components (96: on the bumps demo at 400 directions the relight error against a 10-degree
+    Cycles Sun was 0.077 with 48 components and 0.064 with 96, T itself 0.061; the preview
+    reads two textures per three components); ``k`` is capped at ``S``.
     Conditioning: no inverse is formed (eigenvectors of the Gram matrix); eigenvalues below
     1e-12 of the largest are treated as zero.
     """
