@@ -261,12 +261,13 @@ def main(argv=None):
     ap.add_argument("--out", default="out/bench")
     ap.add_argument("--counts", help="direction counts to sweep, e.g. 100,200,400,800")
     ap.add_argument("--no-lobes", action="store_true", help="skip the lobes presets")
+    ap.add_argument("--resolution", type=int, help="texture side (default 256; 64 with --quick)")
     ap.add_argument("--write-presets", action="store_true",
                     help="choose draft / balanced / production from the first scene's front of "
                          "viewport (PCA) points and write operators/transport_presets.json")
     args = ap.parse_args(argv)
     size = "test" if args.quick else args.size
-    R = 64 if args.quick else 256
+    R = args.resolution or (64 if args.quick else 256)
     spp = 64 if args.quick else 256
     counts = (50, 100, 200) if args.quick else (100, 200, 400, 800)
     if args.counts:
