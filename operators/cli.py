@@ -527,7 +527,7 @@ def _cmd_bake_texture_transport(args) -> int:
               f"indirect {t.get('indirect_cycles', 0):.1f} s; fit {t['fit']:.1f} s); "
               f"report {rep['report']}")
         gt = rep.get("ground_truth")
-        if gt:
+        if gt and rep is reports[0]:   # one headline over all objects baked together
             print(f"  error vs Cycles Sun ({gt['sun_angle']:g} deg, {gt['truth_samples']} spp, "
                   f"{rep['settings']['bounces']} bounces) at {len(gt['lights']) // len(reports)}"
                   f" held-out lights: {gt['headline_rel_rmse']:.3f} relative RMSE "
