@@ -22,6 +22,8 @@ import time
 import bpy
 import numpy as np
 
+from .compat import ensure_node_tree
+
 BAKE_MODES = ("radiance", "irradiance")
 #: World light sampling: "importance" (an importance map of the environment image: ~3x lower
 #: noise at equal samples on the steerable lobes, unbiased, linear in the light in expectation)
@@ -194,7 +196,7 @@ class EnvironmentBake:
         self._created.append((bpy.data.worlds, world))
         world.cycles.sampling_method = "MANUAL" if self.world_sampling == "importance" else "NONE"
         world.cycles.sample_map_resolution = self.importance_map_size
-        nodes, links = world.node_tree.nodes, world.node_tree.links
+        nodes, links = ensure_node_tree(world).nodes, world.node_tree.links
         for node in list(nodes):
             nodes.remove(node)
         tex = nodes.new("ShaderNodeTexEnvironment")
@@ -239,7 +241,7 @@ class EnvironmentBake:
                 "bounces (the colour then plays no part) or give it a diffuse colour")
         white = bpy.data.materials.new(f"{_PREFIX}White")
         self._created.append((bpy.data.materials, white))
-        bsdf = white.node_tree.nodes.get("Principled BSDF")
+        bsdf = ensure_node_tree(white).nodes.get("Principled BSDF")
         bsdf.inputs["Base Color"].default_value = (1.0, 1.0, 1.0, 1.0)
         bsdf.inputs["Metallic"].default_value = 0.0
         for slot in dark:
@@ -285,7 +287,7 @@ class EnvironmentBake:
         r = self.resolution
         self.target = self._new_image(f"{_PREFIX}Target", r, r)
         for mat in {s.material for s in obj.material_slots if s.material}:
-            tree = mat.node_tree
+            tree = ensure_node_tree(mat)
             node = tree.nodes.new("ShaderNodeTexImage")
             node.name = node.label = f"{_PREFIX}Target"
             node.image = self.target
