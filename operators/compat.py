@@ -4,6 +4,8 @@ place, so the rest of the code runs the same on every version without scattered 
 * Before Blender 5.0 a new material or world has ``node_tree is None`` until ``use_nodes`` is
   set; from 5.0 on every material/world has a node tree and ``use_nodes`` is deprecated (reading
   or writing it warns). :func:`ensure_node_tree` returns the tree on both.
+* EEVEE's render engine id is ``BLENDER_EEVEE_NEXT`` in 4.2-4.5, ``BLENDER_EEVEE`` from 5.0:
+  :data:`EEVEE_ENGINE`.
 * Blender 5 warns about a ``DIR_PATH``/``FILE_PATH`` string property whose value starts with
   ``//`` unless the property declares ``PATH_SUPPORTS_BLEND_RELATIVE``, an option older versions
   reject. :func:`path_options` gives the options to pass.
@@ -15,6 +17,9 @@ import bpy
 
 #: Blender 5.0 gave every material and world a node tree and deprecated ``use_nodes``.
 _ALWAYS_NODES = bpy.app.version >= (5, 0, 0)
+
+#: ``scene.render.engine`` of EEVEE on this Blender.
+EEVEE_ENGINE = "BLENDER_EEVEE" if _ALWAYS_NODES else "BLENDER_EEVEE_NEXT"
 
 #: Whether ``StringProperty(options=...)`` knows ``PATH_SUPPORTS_BLEND_RELATIVE``.
 HAS_BLEND_RELATIVE_OPTION = "is_path_supports_blend_relative" in \

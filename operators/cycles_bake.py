@@ -175,6 +175,7 @@ class EnvironmentBake:
                             ("diffuse_bounces", self.bounces), ("glossy_bounces", 0),
                             ("transmission_bounces", 0), ("volume_bounces", 0)):
             self._save_attr(cyc, name, value)
+        self._save_attr(cyc, "sampling_pattern", "TABULATED_SOBOL")  # 4.x's AUTOMATIC: blue noise
         bake = scene.render.bake
         self._save_attr(bake, "use_pass_direct", True)
         self._save_attr(bake, "use_pass_indirect", True)
