@@ -69,7 +69,7 @@ dist: $(STAMP)
 
 ## matrix: build the zips, install the linux-x64 one into each supported Blender (PyPI bpy
 ##   4.2.0 must refuse it, 4.2.13 ... newest 5.x must install, enable, bake) in venvs holding
-##   only bpy, then run the full suite on the newest (Python 3.13) bpy; cached under ~/.cache
+##   only bpy, then run the full suite on bpy 5.2.3 LTS (Python 3.13); cached under ~/.cache
 matrix: dist
 	$(PY) tools/blender_matrix.py --markdown dist/blender-matrix.md
 
