@@ -7,7 +7,7 @@ OUT    := out
 # Never touch the user's real Blender configuration from make targets.
 export BLENDER_USER_RESOURCES ?= $(CURDIR)/build/blender-user
 
-.PHONY: venv demo test test-core bench bench-full dist validate clean
+.PHONY: venv demo test test-core bench bench-full dist matrix validate clean
 
 venv: $(STAMP)
 
@@ -71,9 +71,16 @@ bench-full: $(STAMP)
 	$(PY) benchmarks/bench_texture_bake.py --presets draft,balanced
 	$(PY) benchmarks/bench_transport.py --scenes statue,room --directions cube:16
 
-## dist: validate and build the extension zip with Blender's own extension tool (dist/)
+## dist: validate and build the extension zips, one per platform, with Blender's own
+##   extension tool (dist/relightable_textures-<version>-<platform>.zip)
 dist: $(STAMP)
 	$(PY) tools/extension_tool.py --output-dir dist
+
+## matrix: build the zips, install the linux-x64 one into each supported Blender (PyPI bpy
+##   4.2.0 must refuse it, 4.2.13 ... newest 5.x must install, enable, bake) in venvs holding
+##   only bpy, then run the full suite on bpy 5.2.3 LTS (Python 3.13); cached under ~/.cache
+matrix: dist
+	$(PY) tools/blender_matrix.py --markdown dist/blender-matrix.md
 
 clean:
 	rm -rf $(OUT) dist build wheels .pytest_cache

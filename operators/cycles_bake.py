@@ -22,6 +22,8 @@ import time
 import bpy
 import numpy as np
 
+from .compat import ensure_node_tree
+
 BAKE_MODES = ("radiance", "irradiance")
 #: Light paths a bake keeps: everything, direct only, indirect only, or the diffuse colour alone
 #: (the albedo texture: no light at all).
@@ -194,6 +196,7 @@ class EnvironmentBake:
                             ("diffuse_bounces", self.bounces), ("glossy_bounces", 0),
                             ("transmission_bounces", 0), ("volume_bounces", 0)):
             self._save_attr(cyc, name, value)
+        self._save_attr(cyc, "sampling_pattern", "TABULATED_SOBOL")  # 4.x's AUTOMATIC: blue noise
         bake = scene.render.bake
         self._save_attr(bake, "use_pass_direct", self.passes in ("all", "direct"))
         self._save_attr(bake, "use_pass_indirect", self.passes in ("all", "indirect"))
@@ -215,7 +218,7 @@ class EnvironmentBake:
         self._created.append((bpy.data.worlds, world))
         world.cycles.sampling_method = "MANUAL" if self.world_sampling == "importance" else "NONE"
         world.cycles.sample_map_resolution = self.importance_map_size
-        nodes, links = world.node_tree.nodes, world.node_tree.links
+        nodes, links = ensure_node_tree(world).nodes, world.node_tree.links
         for node in list(nodes):
             nodes.remove(node)
         tex = nodes.new("ShaderNodeTexEnvironment")
@@ -264,7 +267,7 @@ class EnvironmentBake:
                 "bounces (the colour then plays no part) or give it a diffuse colour")
         white = bpy.data.materials.new(f"{_PREFIX}White")
         self._created.append((bpy.data.materials, white))
-        bsdf = white.node_tree.nodes.get("Principled BSDF")
+        bsdf = ensure_node_tree(white).nodes.get("Principled BSDF")
         bsdf.inputs["Base Color"].default_value = (1.0, 1.0, 1.0, 1.0)
         bsdf.inputs["Metallic"].default_value = 0.0
         for slot in dark:
@@ -329,7 +332,7 @@ class EnvironmentBake:
         r = self.resolution
         target = self._new_image(f"{_PREFIX}Target", r, r)
         for mat in {s.material for s in obj.material_slots if s.material}:
-            tree = mat.node_tree
+            tree = ensure_node_tree(mat)
             node = tree.nodes.new("ShaderNodeTexImage")
             node.name = node.label = f"{_PREFIX}Target"
             node.image = target

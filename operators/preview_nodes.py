@@ -32,6 +32,7 @@ import numpy as np
 
 from ..lt_addon import exrio
 from ..lt_addon.atlas import atlas_layout, pack_atlas
+from .compat import ensure_node_tree
 
 GROUP_PREFIX = "Steerable Illumination"
 FRAME_NAME = "Relight Preview"
@@ -320,7 +321,7 @@ def set_sun_drivers(sun_dir_node, sun) -> None:
 
 
 def _preview_nodes(tree):
-    return [n for n in tree.nodes if n.get(_TAG)]
+    return [n for n in tree.nodes if n.get(_TAG)] if tree is not None else []
 
 
 def remove_preview(obj) -> int:
@@ -349,7 +350,7 @@ def _wire_preview(obj, build_color) -> None:
     if not obj.material_slots or not any(s.material for s in obj.material_slots):
         obj.data.materials.append(bpy.data.materials.new(f"{obj.name} Relight"))
     for mat in {s.material for s in obj.material_slots if s.material}:
-        tree = mat.node_tree
+        tree = ensure_node_tree(mat)
         before = {nd.name for nd in tree.nodes}
         b = _Builder(tree)
         frame = b.node("NodeFrame", -200, 900, label=FRAME_NAME)

@@ -7,6 +7,7 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, Po
 
 from ..lt_addon.steerable_texture import STORAGE_MODES
 from ..samples import DESCRIPTIONS, SIZES
+from .compat import path_options
 from .presets import PRESETS, settings_from_preset
 
 _SETTING_NAMES = ("frame", "order", "resolution", "samples", "bounces", "storage", "mode",
@@ -87,7 +88,7 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         ("importance", "Importance", "Lower noise at equal samples"),
         ("none", "None", "BSDF sampling only: exactly linear in the light")])
     output_dir: StringProperty(
-        name="Output", subtype="DIR_PATH", default="//relight/",
+        name="Output", subtype="DIR_PATH", default="//relight/", options=path_options(),
         description="Folder for the EXR files and the JSON report ('//' = next to the .blend)")
     sun: PointerProperty(name="Sun", type=bpy.types.Object, poll=_sun_poll,
                          description="Sun lamp whose direction the preview follows")

@@ -10,6 +10,8 @@ import math
 
 import bpy
 
+from ..operators.compat import ensure_node_tree
+
 #: Samples per pixel written into each sample scene, by size.
 SAMPLES = {"test": 16, "demo": 64}
 
@@ -40,7 +42,7 @@ def configure_cycles(scene, size: str) -> None:
 def uniform_world(scene, name: str, strength: float = 1.0, color=(1.0, 1.0, 1.0)):
     """A world with a constant background; sampling off so bakes stay linear in the light."""
     world = bpy.data.worlds.new(name)
-    nodes = world.node_tree.nodes
+    nodes = ensure_node_tree(world).nodes
     background = nodes.get("Background") or nodes.new("ShaderNodeBackground")
     background.inputs["Color"].default_value = (*color, 1.0)
     background.inputs["Strength"].default_value = strength
@@ -52,7 +54,7 @@ def uniform_world(scene, name: str, strength: float = 1.0, color=(1.0, 1.0, 1.0)
 def diffuse_material(name: str, color) -> bpy.types.Material:
     """A pure Lambertian material (Diffuse BSDF, roughness 0) of the given linear RGB albedo."""
     mat = bpy.data.materials.new(name)
-    nodes = mat.node_tree.nodes
+    nodes = ensure_node_tree(mat).nodes
     for node in list(nodes):
         nodes.remove(node)
     bsdf = nodes.new("ShaderNodeBsdfDiffuse")

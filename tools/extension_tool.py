@@ -1,10 +1,14 @@
-"""Build and validate the extension zip with Blender's own extension tool.
+"""Build and validate the extension zips, one per platform, with Blender's own extension tool.
 
-Blender's ``blender_ext.py`` ships inside the ``bpy`` wheel (``bpy/5.0/scripts/addons_core/
+Blender's ``blender_ext.py`` ships inside the ``bpy`` wheel (``bpy/<version>/scripts/addons_core/
 bl_pkg/cli/blender_ext.py``) and runs with plain Python; we locate it rather than re-implement
-it. The wheels the manifest lists are downloaded first (pinned in requirements-wheels.txt).
+it. The wheels the manifest lists (SciPy and OpenEXR for CPython 3.11 and 3.13 on every platform
+in ``platforms``) are downloaded first, pinned in requirements-wheels.txt. ``build
+--split-platforms`` then writes one zip per platform holding only that platform's wheels; each
+zip is validated by the tool and checked here against the manifest.
 
-Usage: ``python tools/extension_tool.py [--output-dir DIR]`` prints the path of the built zip.
+Usage: ``python tools/extension_tool.py [--output-dir DIR]`` prints the built zips, one a line,
+as ``<blender platform> <path>``.
 """
 
 from __future__ import annotations
@@ -16,8 +20,21 @@ import os
 import subprocess
 import sys
 import tomllib
+import zipfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+#: The Python versions of the supported Blenders (4.2 LTS-5.0: 3.11; 5.1 and later: 3.13).
+PYTHONS = ("3.11", "3.13")
+
+#: Blender platform -> pip ``--platform`` tags that select its wheels (pip also accepts older
+#: macOS versions than the one named, so each pair yields exactly one wheel per package).
+PIP_PLATFORMS = {
+    "linux-x64": ("manylinux_2_28_x86_64",),
+    "windows-x64": ("win_amd64",),
+    "macos-arm64": ("macosx_14_0_arm64",),
+    "macos-x64": ("macosx_10_15_x86_64",),
+}
 
 
 def blender_ext_script() -> str:
@@ -38,17 +55,37 @@ def manifest() -> dict:
         return tomllib.load(fh)
 
 
+def wheel_platform(name: str) -> str | None:
+    """The Blender platform a wheel file name is for (by its platform tag), or None."""
+    tag = os.path.basename(name)[:-len(".whl")].split("-")[-1]
+    if "manylinux" in tag and tag.endswith("x86_64"):
+        return "linux-x64"
+    if tag == "win_amd64":
+        return "windows-x64"
+    if tag.startswith("macosx_") and tag.endswith("_arm64"):
+        return "macos-arm64"
+    if tag.startswith("macosx_") and tag.endswith("_x86_64"):
+        return "macos-x64"
+    return None
+
+
 def ensure_wheels() -> list[str]:
     """Download the manifest's wheels into ./wheels unless already there; returns their paths."""
-    wanted = [os.path.normpath(os.path.join(ROOT, w)) for w in manifest().get("wheels", [])]
-    missing = [w for w in wanted if not os.path.exists(w)]
-    if missing:
-        cmd = [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps",
-               "--only-binary=:all:", "--python-version", "3.11", "--implementation", "cp",
-               "--platform", "manylinux_2_28_x86_64", "--platform", "manylinux_2_17_x86_64",
-               "-d", os.path.join(ROOT, "wheels"),
-               "-r", os.path.join(ROOT, "requirements-wheels.txt")]
-        subprocess.run(cmd, check=True)
+    m = manifest()
+    wanted = [os.path.normpath(os.path.join(ROOT, w)) for w in m.get("wheels", [])]
+    unknown = [p for p in m.get("platforms", []) if p not in PIP_PLATFORMS]
+    if unknown:
+        raise SystemExit(f"extension_tool: no pip platform tags known for {unknown}")
+    if any(not os.path.exists(w) for w in wanted):
+        for platform in m.get("platforms", []):
+            for python in PYTHONS:
+                cmd = [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps",
+                       "--only-binary=:all:", "--python-version", python,
+                       "--implementation", "cp", "-d", os.path.join(ROOT, "wheels"),
+                       "-r", os.path.join(ROOT, "requirements-wheels.txt")]
+                for tag in PIP_PLATFORMS[platform]:
+                    cmd += ["--platform", tag]
+                subprocess.run(cmd, check=True)
     still = [w for w in wanted if not os.path.exists(w)]
     if still:
         raise SystemExit("extension_tool: manifest wheels not downloaded (check the file names "
@@ -57,25 +94,46 @@ def ensure_wheels() -> list[str]:
     return wanted
 
 
-def build(output_dir: str) -> str:
-    """Validate the source tree, build the zip into ``output_dir``, validate the zip; returns it."""
-    ensure_wheels()
+def check_zip(zip_path: str, platform: str, wheels: list[str]) -> None:
+    """The zip holds exactly the manifest's wheels for ``platform``: both Pythons, both
+    packages, nothing of another platform."""
+    inside = sorted(os.path.basename(n) for n in zipfile.ZipFile(zip_path).namelist()
+                    if n.endswith(".whl"))
+    expected = sorted(os.path.basename(w) for w in wheels if wheel_platform(w) == platform)
+    if inside != expected or len(expected) != 2 * len(PYTHONS):
+        raise SystemExit(f"extension_tool: {os.path.basename(zip_path)} holds wheels {inside}, "
+                         f"expected {expected}")
+
+
+def build(output_dir: str) -> dict[str, str]:
+    """Validate the source tree, build one zip per platform into ``output_dir``, validate and
+    check each; returns {blender platform: zip path}."""
+    wheels = ensure_wheels()
     tool = blender_ext_script()
     os.makedirs(output_dir, exist_ok=True)
     m = manifest()
-    zip_path = os.path.join(os.path.abspath(output_dir), f"{m['id']}-{m['version']}.zip")
-    subprocess.run([sys.executable, tool, "validate", ROOT], check=True)
-    subprocess.run([sys.executable, tool, "build", "--source-dir", ROOT,
-                    "--output-filepath", zip_path], check=True)
-    subprocess.run([sys.executable, tool, "validate", zip_path], check=True)
-    return zip_path
+    base = os.path.join(os.path.abspath(output_dir), f"{m['id']}-{m['version']}.zip")
+    subprocess.run([sys.executable, tool, "validate", ROOT], check=True, stdout=sys.stderr)
+    subprocess.run([sys.executable, tool, "build", "--source-dir", ROOT, "--split-platforms",
+                    "--output-filepath", base], check=True, stdout=sys.stderr)
+    zips = {}
+    for platform in m["platforms"]:
+        zip_path = base[:-len(".zip")] + "-" + platform.replace("-", "_") + ".zip"
+        if not os.path.exists(zip_path):
+            raise SystemExit(f"extension_tool: the extension tool did not write {zip_path}")
+        subprocess.run([sys.executable, tool, "validate", zip_path], check=True,
+                       stdout=sys.stderr)
+        check_zip(zip_path, platform, wheels)
+        zips[platform] = zip_path
+    return zips
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--output-dir", default=os.path.join(ROOT, "dist"))
     args = parser.parse_args()
-    print(build(args.output_dir))
+    for platform, path in build(args.output_dir).items():
+        print(platform, path)
 
 
 if __name__ == "__main__":

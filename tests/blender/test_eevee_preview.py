@@ -16,7 +16,7 @@ from relightable_textures.lt_addon.hemisphere import direction_from_az_el
 def test_eevee_renders_the_preview_group_like_numpy(fresh_scene, tmp_path):
     import bpy
 
-    from relightable_textures.operators import preview_nodes, steerable_bake as sb
+    from relightable_textures.operators import compat, preview_nodes, steerable_bake as sb
 
     samples.build("bumps", fresh_scene, "test")
     obj = bpy.data.objects["Bumps"]
@@ -31,7 +31,7 @@ def test_eevee_renders_the_preview_group_like_numpy(fresh_scene, tmp_path):
     for n in lookups:
         n.interpolation = "Closest"
     fresh_scene["relight_azimuth"], fresh_scene["relight_elevation"] = 40.0, 35.0
-    img = render_rgb(fresh_scene, tmp_path, r, engine="BLENDER_EEVEE")
+    img = render_rgb(fresh_scene, tmp_path, r, engine=compat.EEVEE_ENGINE)
     want = result.texture.relight(direction_from_az_el(40.0, 35.0)).astype(np.float64)
     assert want.max() > 0.1
     assert np.abs(img - want).max() <= 2.0 ** -10 * want.max()  # half-float atlas precision

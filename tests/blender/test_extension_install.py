@@ -18,23 +18,44 @@ INSTALL_SCRIPT = textwrap.dedent(r"""
 
     zip_path, blend_out = sys.argv[1], sys.argv[2]
     user = os.environ["BLENDER_USER_RESOURCES"]
+    site = os.path.join(user, "extensions", ".local", "lib",
+                        f"python{sys.version_info.major}.{sys.version_info.minor}", "site-packages")
+
+    # The test venv has its own scipy/OpenEXR; hide them, so these imports (the extension's
+    # too) can only find the wheels Blender extracted from the zip into the extension site.
+    import importlib.machinery
+
+    class OnlyBundledWheels:
+        def find_spec(self, name, path=None, target=None):
+            if "." not in name and name in ("scipy", "OpenEXR"):
+                return importlib.machinery.PathFinder.find_spec(name, [site]) or \
+                    importlib.machinery.ModuleSpec(name, None)  # None loader: ImportError
+            return None
+
+    sys.meta_path.insert(0, OnlyBundledWheels())
     report = {"user_resource": bpy.utils.resource_path("USER")}
     mod = "bl_ext.user_default.relightable_textures"
     report["install"] = list(bpy.ops.extensions.package_install_files(
         filepath=zip_path, repo="user_default", enable_on_install=True))
     report["enabled"] = mod in bpy.context.preferences.addons
-    site = os.path.join(user, "extensions", ".local", "lib",
-                        f"python{sys.version_info.major}.{sys.version_info.minor}", "site-packages")
     report["wheels_installed"] = sorted(n for n in os.listdir(site) if not n.startswith("_")) \
         if os.path.isdir(site) else []
+    # `hasattr(bpy.ops.relight, name)` is true for any name; dir() lists registered operators.
     report["operators"] = [n for n in ("add_sample_scene", "bake_textures", "follow_sun",
-                                       "remove_preview") if hasattr(bpy.ops.relight, n)]
+                                       "remove_preview") if n in dir(bpy.ops.relight)]
+    report["operator_types"] = [n for n in ("RELIGHT_OT_add_sample_scene",
+                                            "RELIGHT_OT_bake_textures", "RELIGHT_OT_follow_sun",
+                                            "RELIGHT_OT_remove_preview") if n in dir(bpy.types)]
+    # The bundled wheels import from the extension's own site-packages.
+    import scipy, scipy.linalg, OpenEXR
+    report["site"] = site
+    report["imported_from"] = {m.__name__: m.__file__ for m in (scipy, OpenEXR)}
     report["property"] = hasattr(bpy.types.Scene, "relight") and \
         bpy.context.scene.relight.preset == "balanced"
     report["panels"] = [n for n in ("VIEW3D_PT_relight", "VIEW3D_PT_relight_bake",
                                     "VIEW3D_PT_relight_light", "VIEW3D_PT_relight_vertex",
                                     "VIEW3D_PT_relight_samples")
-                        if hasattr(bpy.types, n)]
+                        if n in dir(bpy.types)]
     # The operator really builds a scene into the open file.
     report["op_result"] = list(bpy.ops.relight.add_sample_scene(name="bumps", size="test"))
     report["op_vertices"] = len(bpy.data.objects["Bumps"].data.vertices)
@@ -59,7 +80,8 @@ INSTALL_SCRIPT = textwrap.dedent(r"""
         repo_index=repo_index, pkg_id="relightable_textures"))
     report["enabled_after_uninstall"] = mod in bpy.context.preferences.addons
     report["property_after_uninstall"] = hasattr(bpy.types.Scene, "relight")
-    report["panel_after_uninstall"] = hasattr(bpy.types, "VIEW3D_PT_relight")
+    report["panel_after_uninstall"] = "VIEW3D_PT_relight" in dir(bpy.types)
+    report["operators_after_uninstall"] = [n for n in dir(bpy.ops.relight) if not n.startswith("_")]
     report["files_left"] = os.path.exists(os.path.join(user, "extensions", "user_default",
                                                        "relightable_textures"))
     print("REPORT " + json.dumps(report))
@@ -78,7 +100,9 @@ def extension_zip(tmp_path_factory):
     r = subprocess.run([sys.executable, str(ROOT / "tools" / "extension_tool.py"),
                         "--output-dir", str(out)], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
-    zip_path = pathlib.Path(r.stdout.strip().splitlines()[-1])
+    zips = dict(line.split(" ", 1) for line in r.stdout.strip().splitlines())
+    assert sorted(zips) == ["linux-x64", "macos-arm64", "macos-x64", "windows-x64"], r.stdout
+    zip_path = pathlib.Path(zips["linux-x64"])
     assert zip_path.exists()
     return zip_path
 
@@ -91,7 +115,12 @@ def test_zip_contents(extension_zip):
                      "operators/registration.py", "samples/__init__.py"):
         assert required in names
     assert not any(n.startswith(("tests/", ".venv/", ".git/", "tools/")) for n in names)
-    assert sum(n.startswith("wheels/") and n.endswith(".whl") for n in names) == 2
+    # This platform's SciPy and OpenEXR for both Pythons Blender uses (3.11 and 3.13), no other.
+    wheels = sorted(n.split("-")[0] + "-" + n.split("-")[2] for n in names
+                    if n.startswith("wheels/") and n.endswith(".whl"))
+    assert wheels == ["wheels/openexr-cp311", "wheels/openexr-cp313", "wheels/scipy-cp311",
+                      "wheels/scipy-cp313"]
+    assert all("x86_64" in n for n in names if n.endswith(".whl"))
 
 
 def test_install_enable_use_uninstall_in_temporary_user_dir(extension_zip, tmp_path):
@@ -111,6 +140,9 @@ def test_install_enable_use_uninstall_in_temporary_user_dir(extension_zip, tmp_p
     assert "scipy" in rep["wheels_installed"] and any(
         n.lower().startswith("openexr") for n in rep["wheels_installed"])
     assert rep["operators"] == ["add_sample_scene", "bake_textures", "follow_sun", "remove_preview"]
+    assert len(rep["operator_types"]) == 4
+    for name, path in rep["imported_from"].items():
+        assert path.startswith(rep["site"]), f"{name} imported from {path}, not the extension"
     assert rep["property"]
     assert rep["panels"] == ["VIEW3D_PT_relight", "VIEW3D_PT_relight_bake",
                              "VIEW3D_PT_relight_light", "VIEW3D_PT_relight_vertex",
@@ -125,5 +157,6 @@ def test_install_enable_use_uninstall_in_temporary_user_dir(extension_zip, tmp_p
     assert rep["enabled_after_cli"]
     assert rep["uninstall"] == ["FINISHED"] and not rep["enabled_after_uninstall"]
     assert not rep["property_after_uninstall"] and not rep["panel_after_uninstall"]
+    assert rep["operators_after_uninstall"] == []
     assert not rep["files_left"]
     assert _snapshot(real_config) == before, "the real ~/.config/blender was modified"

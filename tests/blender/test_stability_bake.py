@@ -433,12 +433,13 @@ def test_transport_is_geometry_whatever_the_material(fresh_scene, surface):
     import bpy
 
     from relightable_textures.operators import transport_bake as tb
+    from relightable_textures.operators.compat import ensure_node_tree
     from relightable_textures.operators.cycles_bake import BakeInputError
     from relightable_textures.operators.steerable_bake import run
 
     plane = flat_plane(fresh_scene)
     mat = bpy.data.materials.new("Surface")
-    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    bsdf = ensure_node_tree(mat).nodes["Principled BSDF"]
     bsdf.inputs["Base Color"].default_value = (0, 0, 0, 1) if surface == "black" else (1, 1, 1, 1)
     bsdf.inputs["Metallic"].default_value = 1.0 if surface == "metal" else 0.0
     plane.data.materials.append(mat)

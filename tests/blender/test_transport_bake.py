@@ -48,7 +48,7 @@ def test_an_occluder_casts_a_shadow_and_cancel_restores_attributes(ball):
 
     scene, obj = ball
     t = np.linspace(-3, 3, 3)
-    verts = np.stack(np.meshgrid(t, t, indexing="ij") + [np.full((3, 3), 2.0)], -1).reshape(-1, 3)
+    verts = np.stack([*np.meshgrid(t, t, indexing="ij"), np.full((3, 3), 2.0)], -1).reshape(-1, 3)
     mesh_object("Plate", verts, grid_faces(3, 3), scene.collection)
     before = [a.name for a in obj.data.color_attributes]
     res = run(tb.bake_transport(scene, obj, [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]))
@@ -70,7 +70,7 @@ def ball_on_floor(ball):
 
     scene, obj = ball
     t = np.linspace(-3, 3, 3)
-    verts = np.stack(np.meshgrid(t, t, indexing="ij") + [np.full((3, 3), -1.2)], -1).reshape(-1, 3)
+    verts = np.stack([*np.meshgrid(t, t, indexing="ij"), np.full((3, 3), -1.2)], -1).reshape(-1, 3)
     mesh_object("Floor", verts, grid_faces(3, 3), scene.collection)
     return scene, obj
 
