@@ -273,8 +273,26 @@ def run(argv: list[str]) -> int:
         return int(exc.code or 0) if not isinstance(exc.code, str) else EXIT_USAGE
 
 
+def _keep_stdout_for_results() -> None:
+    """Give the CLI's results a stdout of their own, before bpy is imported.
+
+    Blender's C code logs to file descriptor 1, e.g. ``color_management | Using OCIO=...``
+    whenever ``$OCIO`` is set (studios set it for ACES; bpy 5.2 itself sets it for every child
+    process), which would corrupt ``--json`` output. Descriptor 1 is pointed at stderr, where
+    diagnostics belong, and Python's ``sys.stdout`` keeps the original stream."""
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+        os.dup2(2, 1)
+        sys.stdout = os.fdopen(saved, "w", buffering=1, encoding=sys.stdout.encoding,
+                               errors=sys.stdout.errors)
+    except (OSError, ValueError, AttributeError):  # no real descriptors (embedded, captured)
+        pass
+
+
 def main() -> None:
-    """Console-script entry point."""
+    """Console-script entry point (``relight`` and ``python -m relightable_textures``)."""
+    _keep_stdout_for_results()
     sys.exit(run(sys.argv[1:]))
 
 
@@ -388,7 +406,29 @@ def _open_object(path: str, name: str):
     if obj is None:
         meshes = sorted(o.name for o in bpy.data.objects if o.type == "MESH")
         raise CliError(f"no object {name!r} in {path}; mesh objects: {', '.join(meshes) or 'none'}")
+    _activate_scene_of(obj, path)
     return obj
+
+
+def _activate_scene_of(obj, path: str) -> None:
+    """Make the scene holding ``obj`` the context scene: a file saved with another scene active
+    (e.g. after *Add Sample Scene*) must still bake the object where it lives."""
+    import bpy
+
+    if obj.name in bpy.context.view_layer.objects:
+        return
+    homes = list(obj.users_scene)
+    if not homes:
+        raise CliError(f"object {obj.name!r} is in no scene of {path}; link it to a scene first")
+    wm = bpy.context.window_manager
+    window = bpy.context.window or (wm.windows[0] if wm.windows else None)
+    if window is None:
+        raise CliError(f"object {obj.name!r} is in scene {homes[0].name!r}, not the active one, "
+                       f"and {path} has no window to switch scenes; save it with that scene active")
+    window.scene = homes[0]
+    if obj.name not in bpy.context.view_layer.objects:
+        raise CliError(f"object {obj.name!r} is not in view layer {bpy.context.view_layer.name!r} "
+                       f"of scene {homes[0].name!r} (its collection is excluded); include it")
 
 
 def _cmd_bake_textures(args) -> int:
@@ -500,6 +540,9 @@ def _cmd_bake_texture_transport(args) -> int:
         if obj is None:
             meshes = sorted(o.name for o in bpy.data.objects if o.type == "MESH")
             raise CliError(f"no object {name!r} in {path}; mesh objects: {', '.join(meshes)}")
+        if obj.name not in bpy.context.view_layer.objects:
+            raise CliError(f"{obj.name!r} is not in scene {bpy.context.scene.name!r} with "
+                           f"{objects[0].name!r}; objects baked together share one scene")
         objects.append(obj)
     if not args.force:
         for o in objects:

@@ -103,6 +103,30 @@ def check_bakeable(obj, need_uv: bool = True) -> None:
         raise BakeInputError(f"{obj.name} has no faces to bake")
 
 
+def _vertices_with_area(mesh) -> np.ndarray:
+    """bool, shape (V,): the vertices of at least one face of positive area.
+
+    The others (loose vertices, corners of zero-area faces only) have no surface to receive
+    light and get 0 by definition: Blender 5.0's Cycles bakes them to 0, 5.2's shades a
+    zero-area triangle with a made-up normal (measured: cosine of an upward normal)."""
+    n_faces = len(mesh.polygons)
+    lit = np.zeros(len(mesh.vertices), dtype=bool)
+    if n_faces == 0:
+        return lit
+    area = np.empty(n_faces, dtype=np.float32)
+    mesh.polygons.foreach_get("area", area)
+    sizes = np.empty(n_faces, dtype=np.int32)
+    mesh.polygons.foreach_get("loop_total", sizes)
+    loop_verts = np.empty(len(mesh.loops), dtype=np.int32)
+    mesh.loops.foreach_get("vertex_index", loop_verts)
+    starts = np.empty(n_faces, dtype=np.int32)
+    mesh.polygons.foreach_get("loop_start", starts)
+    by_start = np.argsort(starts, kind="stable")  # a face's loops are contiguous
+    face_of_loop = np.repeat(by_start, sizes[by_start])
+    lit[loop_verts[area[face_of_loop] > 0]] = True
+    return lit
+
+
 class EnvironmentBake:
     """Context manager: bake ``obj`` under environment images, restoring the scene on exit.
 
@@ -295,6 +319,7 @@ class EnvironmentBake:
         old_active = attrs.active_color_name
         old_render = attrs.render_color_index
         self.target = attrs.new(f"{_PREFIX}Target", "FLOAT_COLOR", "POINT")
+        self._lit_vertices = _vertices_with_area(obj.data)
         name = self.target.name
         attrs.active_color = self.target
 
@@ -345,9 +370,11 @@ class EnvironmentBake:
     def _select_only(self, objs):
         """Select only the baked objects (bake works on the selection); restored on exit."""
         view_layer = bpy.context.view_layer
-        # a just-removed object (our session Sun, removed at teardown) can leave a stale None
-        # in the view layer's list until the next depsgraph update
-        selected = [o for o in view_layer.objects if o is not None and o.select_get()]
+        # Not view_layer.objects: right after an object was removed (our session Sun, at the
+        # teardown of an earlier bake) its list can hold a stale None or a dangling pointer
+        # until the next sync -- reading it crashed Blender 5.0.1 in about 1 run in 6.
+        # select_get() syncs the view layer before it looks the object up.
+        selected = [o for o in bpy.data.objects if o.select_get(view_layer=view_layer)]
         active = view_layer.objects.active
         hidden = [(o.hide_get(), o.hide_viewport, o.hide_render) for o in objs]
         for o in objs:
@@ -419,7 +446,9 @@ class EnvironmentBake:
         if self.per_vertex:
             px = np.empty(len(self.target.data) * 4, dtype=np.float32)
             self.target.data.foreach_get("color", px)
-            return [px.reshape(-1, 4)[:, :3].copy()]
+            values = px.reshape(-1, 4)[:, :3].copy()
+            values[~self._lit_vertices] = 0.0
+            return [values]
         r = self.resolution
         out = []
         for target in self.targets:

@@ -102,7 +102,12 @@ def bake_steerable_texture(scene, obj, settings: TextureBakeSettings):
     from ..lt_addon.uv_layout import uv_overlap_report
     from .meshes import uv_triangles
 
-    uv_report = uv_overlap_report(uv_triangles(obj), min(settings.resolution, 256))
+    uv_tris = uv_triangles(obj)
+    uv_report = uv_overlap_report(uv_tris, min(settings.resolution, 256))
+    e1, e2 = uv_tris[:, 1] - uv_tris[:, 0], uv_tris[:, 2] - uv_tris[:, 0]
+    # every UV triangle of zero area: no texel can belong to a face. Blender 5.3's Cycles still
+    # writes one texel plus its margin for such a face, 5.0's nothing; the bake keeps nothing.
+    no_uv_area = not np.any(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
     if uv_report["overlapping"] > UV_OVERLAP_WARNING:
         yield Progress(0, 1, f"warning: {100 * uv_report['overlapping']:.1f}% of the covered "
                              f"texels have overlapping UVs on {obj.name}; those texels mix "
@@ -121,6 +126,8 @@ def bake_steerable_texture(scene, obj, settings: TextureBakeSettings):
             stack[k] = session.bake(env)
             yield Progress(k + 1, k_total + 1, f"Cycles bake {k + 1}/{k_total}")
         cycles_seconds, calls = session.bake_seconds, session.bake_calls
+    if no_uv_area:
+        stack[:] = 0.0
     basis_images = sampled.to_basis_images(stack, dtype=np.float32)
     total = time.perf_counter() - start
     record = {

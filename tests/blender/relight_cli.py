@@ -1,6 +1,7 @@
 """Run the venv's real ``relight`` console script in a subprocess (shared by the CLI tests)."""
 
 import pathlib
+import re
 import subprocess
 import sys
 
@@ -10,6 +11,16 @@ BIN = pathlib.Path(sys.executable).parent
 def relight(*args, cwd=None):
     return subprocess.run([str(BIN / "relight"), *map(str, args)], capture_output=True,
                           text=True, cwd=cwd, timeout=600)
+
+
+#: Blender's own log lines (``00:00.035  color_management | Using OCIO=...``): the relight CLI
+#: sends file descriptor 1 to stderr, so Blender 5.2+ logs them there when ``$OCIO`` is set.
+BLENDER_LOG = re.compile(r"^\d\d:\d\d\.\d{3}\s+\S+ \| ")
+
+
+def our_lines(stderr: str) -> list:
+    """stderr without Blender's own log lines: what the CLI itself wrote."""
+    return [ln for ln in stderr.strip().splitlines() if not BLENDER_LOG.match(ln)]
 
 
 def folder_state(folder):
@@ -23,7 +34,7 @@ def assert_refused(folder, message, *args):
     before = folder_state(folder)
     r = relight(*args)
     assert r.returncode == 2, r.stderr[-2000:]
-    last = r.stderr.strip().splitlines()[-1]
+    last = our_lines(r.stderr)[-1]
     assert last.startswith("relight: error: "), r.stderr[-2000:]
     assert message.lower() in last.lower(), last
     assert folder_state(folder) == before

@@ -6,7 +6,7 @@ import subprocess
 import sys
 
 import pytest
-from relight_cli import assert_refused, relight
+from relight_cli import BIN, assert_refused, our_lines, relight
 
 
 
@@ -51,6 +51,31 @@ def test_force_overwrites_atomically(tmp_path):
     assert sorted(os.listdir(tmp_path)) == ["x.blend"]
 
 
+def test_json_stdout_stays_clean_when_blender_logs(tmp_path):
+    """With ``$OCIO`` set (studios set it for ACES; bpy 5.2 sets it for its child processes)
+    Blender logs ``color_management | Using OCIO=...`` to file descriptor 1 on 5.0 and 5.2: the
+    CLI moves that descriptor to stderr, so ``--json`` stdout still parses and an error is
+    still the last line of stderr."""
+    import bpy
+
+    ocio = os.path.join(bpy.utils.resource_path("LOCAL"), "datafiles", "colormanagement",
+                        "config.ocio")
+    assert os.path.isfile(ocio)
+    env = dict(os.environ, OCIO=ocio)
+    out = tmp_path / "x.blend"
+    assert relight("scene", "bumps", "--out", out).returncode == 0
+    r = subprocess.run([str(BIN / "relight"), "info", str(out), "--json"], capture_output=True,
+                       text=True, timeout=600, env=env)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["sample"] == "bumps"
+    assert "Using OCIO" in r.stderr                # Blender did log: the test can fail
+    r = subprocess.run([str(BIN / "relight"), "info", str(tmp_path / "nothere.blend")],
+                       capture_output=True, text=True, timeout=600, env=env)
+    assert r.returncode == 2 and r.stdout == ""
+    assert our_lines(r.stderr) == [f"relight: error: input file not found: "
+                                   f"{tmp_path / 'nothere.blend'}"], r.stderr
+
+
 @pytest.mark.parametrize("args, message", [
     (("scene", "castle", "--out", "{tmp}/a.blend"), "unknown scene 'castle'"),
     (("scene", "bumps", "--out", "{tmp}/missing-dir/a.blend"), "output directory does not exist"),
@@ -67,7 +92,7 @@ def test_bad_input_one_line_exit_2_nothing_written(tmp_path, args, message):
     (tmp_path / "notes.txt").write_text("hello")
     (tmp_path / "fake.blend").write_text("not a blend file")
     r = assert_refused(tmp_path, message, *[a.format(tmp=tmp_path) for a in args])
-    assert len(r.stderr.strip().splitlines()) == 1, r.stderr  # no traceback, no Blender log
+    assert len(our_lines(r.stderr)) == 1, r.stderr  # no traceback, no other output
 
 
 def test_existing_output_without_force_is_refused(tmp_path):

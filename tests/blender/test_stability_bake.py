@@ -169,12 +169,16 @@ def test_duplicate_loose_and_coincident_vertices_get_defined_transport(fresh_sce
     T = bake_transport(fresh_scene, obj, DIRS)
     assert T.shape == (12, len(DIRS)) and np.all(np.isfinite(T))
     np.testing.assert_allclose(T[:8], np.maximum(normals @ DIRS.T, 0.0), atol=1e-4)
-    np.testing.assert_array_equal(T[1], T[2])  # same face, different ridge ends
+    # same face, different ridge ends: equal up to float32 rounding (5.2's Cycles differs in
+    # one unit in the last place, 6e-8 at 0.866; 5.0 gives bit-equal values)
+    np.testing.assert_allclose(T[1], T[2], rtol=2.5e-7, atol=0)
     assert np.abs(T[1] - T[4]).max() > 0.5     # same position, different faces
     assert np.all(T[8:] == 0.0)                # no area / no face: no light
     model = fit_eigentransport(T.astype(np.float64), energy=1.0)
     lw = np.linspace(0.1, 1.0, len(DIRS))
-    np.testing.assert_allclose(model.shade(lw), T @ lw / np.pi, rtol=1e-9, atol=1e-12)
+    # energy=1.0 keeps components up to 1 - 1e-12 of the energy: a dropped rest of <= 1e-12
+    # moves shading by <= 1e-6 relative (5.2's float32 rounding leaves such a component)
+    np.testing.assert_allclose(model.shade(lw), T @ lw / np.pi, rtol=1e-6, atol=1e-12)
 
 
 def test_flat_shaded_zero_area_faces_add_nothing(fresh_scene):

@@ -249,13 +249,15 @@ def test_streaming_keeps_peak_memory_below_the_transport_size(bumps, tmp_path):
     """T (S x R^2 half floats) is never held: after the first direction (when Cycles has
     allocated its session), the anonymous resident memory (RssAnon; the store's memmap pages
     are page cache) grows by far less than T's size on disk while the other directions stream
-    (here T = 400 x 160^2 x 2 bytes = 19.5 MiB; measured growth about 3 MiB). The fit's own
-    bounded working set is tested in tests/core/test_transport_texture.py."""
+    (here T = 400 x 160^2 x 2 bytes = 19.5 MiB; measured growth about 3 MiB on Blender 5.0.1
+    and 5.7 MiB on 5.2.3, whose Cycles keeps more per bake). Holding T would grow by at least its
+    size (twice that as float32), so half of it separates the two with room for Cycles' own
+    growth. The fit's own bounded working set is tested in tests/core/test_transport_texture.py."""
     scene, obj = bumps
     res = bake(scene, [obj], tmp_path, directions="hemi:400", resolution=160, model="none")
     size_mb = os.path.getsize(res.objects[0].store_path) / 2 ** 20
     assert size_mb > 19
-    assert res.growth_after_first_mb < 0.25 * size_mb, (res.growth_after_first_mb, size_mb)
+    assert res.growth_after_first_mb < 0.5 * size_mb, (res.growth_after_first_mb, size_mb)
 
 
 def test_cli_bake_textures_default_method_relight_and_force(tmp_path):
@@ -350,3 +352,29 @@ def test_target_error_pilot_chooses_directions_and_reports_what_it_achieved(bump
     assert te["tol"] == pytest.approx(0.35 / 3, abs=1e-4)
     assert te["met"] == (te["achieved"] <= 0.35)
     assert len(reports[0]["ground_truth"]["lights"]) == 4       # forced on by the target
+
+
+def test_cli_bakes_an_object_of_a_scene_that_is_not_the_active_one(tmp_path):
+    """A file saved with another scene active (e.g. after *Add Sample Scene*) bakes the object
+    in its own scene (it crashed with "cannot be selected because it is not in View Layer");
+    objects of two different scenes cannot be baked together: one line, exit 2."""
+    import bpy
+
+    from relightable_textures.operators import cli
+
+    blend = str(tmp_path / "m.blend")
+    assert cli.run(["scene", "bumps", "--out", blend]) == 0
+    bpy.ops.wm.open_mainfile(filepath=blend, load_ui=False)
+    other = bpy.data.scenes.new("Other")
+    lone = bpy.data.objects.new("Lone", bpy.data.meshes.new("Lone"))
+    other.collection.objects.link(lone)
+    bpy.context.window_manager.windows[0].scene = other
+    bpy.ops.wm.save_as_mainfile(filepath=blend)
+    bpy.ops.wm.open_mainfile(filepath=blend, load_ui=False)
+    assert bpy.context.scene.name == "Other"
+    args = ["bake-textures", blend, "--object", "Bumps", "--directions", "hemi:16",
+            "--resolution", "8", "--indirect-resolution", "8", "--indirect-samples", "2"]
+    assert cli.run(args) == 0
+    rep = json.loads((tmp_path / "m_relight" / "Bumps_texture_report.json").read_text())
+    assert rep["directions"] == 16
+    assert cli.run(args + ["--object", "Lone", "--force"]) == 2
