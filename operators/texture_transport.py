@@ -61,7 +61,7 @@ class TransportTextureSettings:
     indirect_order: int = 3
     indirect_resolution: int = 128
     indirect_samples: int = 64
-    indirect_smoothing: float = 1.5
+    indirect_smoothing: float = 0.75
     model: str = "pca"
     components: int | None = None
     tol: float = 0.02
