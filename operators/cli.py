@@ -103,7 +103,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--truth-samples", type=int, default=256,
                    help="transport: Cycles samples of the truth bakes (default 256)")
     p.add_argument("--force", action="store_true",
-                   help="transport: replace an existing bake of the same object in --out")
+                   help="replace an existing bake of the same object in --out")
     p.add_argument("--frame", choices=FRAMES, help="world: relight by a distant world light; "
                    "tangent: a tileable patch relit per pixel in a surface's UV tangent frame")
     p.add_argument("--order", type=int, help="basis order N1 (N = N1^2 bakes), 2..12")
@@ -193,6 +193,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--truth", action="store_true", help="also bake the object under the world "
                    "(or a sun-and-sky HDRI) with Cycles and report the error per d")
     p.add_argument("--out", metavar="DIR", help="output folder (default <blend>_relight/)")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing transport bake of the same object in --out")
     p.set_defaults(func=_cmd_bake_transport)
 
     p = sub.add_parser("analyze", help="how many CPCA clusters an object's transport needs "
@@ -209,6 +211,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seeds", type=int, default=8, help="seed vertices of the dimensionality "
                    "curves (default 8)")
     p.add_argument("--out", metavar="DIR", help="output folder (default <blend>_relight/)")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing analysis of the same object in --out")
     p.set_defaults(func=_cmd_analyze)
 
     p = sub.add_parser("bench", help="sweep the knobs that cost time or bytes; JSON, CSV and "
@@ -431,6 +435,16 @@ def _activate_scene_of(obj, path: str) -> None:
                        f"of scene {homes[0].name!r} (its collection is excluded); include it")
 
 
+def _refuse_existing(out_dir: str, obj_name: str, suffixes, force: bool, what: str) -> None:
+    """Refuse (before any work) to replace ``<out_dir>/<object><suffix>`` without --force."""
+    safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in obj_name)
+    if force:
+        return
+    for suffix in suffixes:
+        if os.path.exists(os.path.join(out_dir, safe + suffix)):
+            raise CliError(f"{what} of {obj_name} exists in {out_dir} (use --force to replace it)")
+
+
 def _cmd_bake_textures(args) -> int:
     if args.method == "transport":
         return _cmd_bake_texture_transport(args)
@@ -470,6 +484,8 @@ def _cmd_bake_textures(args) -> int:
     if not _can_create_in(os.path.dirname(path)):
         raise CliError(f"cannot update {path}: its folder is not writable")
     obj = _open_object(path, args.object)
+    _refuse_existing(out_dir, obj.name, ("_steerable.exr", "_steerable.json"), args.force,
+                     "a steerable bake")
     show = _progress_printer("bake-textures")
     try:
         gen = steerable_bake.bake_steerable_texture(bpy.context.scene, obj, settings)
@@ -607,6 +623,8 @@ def _cmd_bake_transport(args) -> int:
     if not _can_create_in(os.path.dirname(path)):
         raise CliError(f"cannot update {path}: its folder is not writable")
     obj = _open_object(path, args.object)
+    _refuse_existing(out_dir, obj.name, ("_transport.npz", "_transport.json"), args.force,
+                     "a transport bake")
     n_vertices = len(obj.data.vertices) if obj.type == "MESH" else 0
     if isinstance(settings.clusters, int) and settings.clusters > n_vertices > 0:
         raise CliError(f"--clusters {settings.clusters} exceeds {obj.name}'s {n_vertices} "
@@ -677,6 +695,8 @@ def _cmd_analyze(args) -> int:
         raise CliError(f"--seeds must be >= 1, got {args.seeds}")
     out_dir = _check_output_dir(args.out, path)
     obj = _open_object(path, args.object)
+    _refuse_existing(out_dir, obj.name, ("_analysis.json", "_dimensionality.png", "_cost.png"),
+                     args.force, "an analysis")
     show = _progress_printer("analyze")
     try:
         report = analyze.analyse_object(bpy.context.scene, obj, ds, args.bounces, None,

@@ -27,6 +27,10 @@ def test_analyze_writes_json_and_charts_and_leaves_the_blend_alone(analyzed):
     assert hashlib.sha256(blend.read_bytes()).hexdigest() == before
     assert sorted(p.name for p in (folder / "an").iterdir()) == [
         "Statue_analysis.json", "Statue_cost.png", "Statue_dimensionality.png"]
+    # running it again into the same folder is refused up front (exit 2, one line, nothing
+    # changed); --force would replace it
+    assert_refused(folder / "an", "use --force", "analyze", blend, "--object", "Statue",
+                   "--directions", "cube:8", "--seeds", "4", "--out", folder / "an")
     rep = json.loads((folder / "an" / "Statue_analysis.json").read_text())
     assert rep["vertices"] == 507 and rep["samples"] == 384
     dim = rep["dimensionality"]

@@ -108,3 +108,22 @@ def test_bad_transport_input_exit_2(tmp_path, args, message):
     blend = tmp_path / "s.blend"
     assert relight("scene", "statue", "--out", blend).returncode == 0
     assert_refused(tmp_path, message, *[x.format(blend=blend, tmp=tmp_path) for x in args])
+
+
+def test_bake_verbs_refuse_to_replace_a_bake_without_force(tmp_path):
+    """bake-transport and the lobes bake-textures refuse an existing bake of the same object in
+    --out (one line, exit 2, nothing changed) before any work; --force replaces it."""
+    blend = tmp_path / "statue.blend"
+    assert relight("scene", "statue", "--out", blend).returncode == 0
+    runs = [("bake-transport", blend, "--object", "Statue", "--directions", "cube:2",
+             "--out", tmp_path / "t"),
+            ("bake-textures", blend, "--object", "Statue", "--method", "lobes", "--order", "2",
+             "--resolution", "8", "--samples", "2", "--out", tmp_path / "l")]
+    for args in runs:
+        r = relight(*args)
+        assert r.returncode == 0, r.stderr[-2000:]
+        out = args[-1]
+        assert_refused(out, "exists", *args)
+        assert_refused(tmp_path, "--force", *args)   # the .blend is not touched either
+        r = relight(*args, "--force")
+        assert r.returncode == 0, r.stderr[-2000:]
