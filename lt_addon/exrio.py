@@ -95,11 +95,22 @@ def read_exr(path: str) -> tuple[dict, dict]:
         Row 0 at the bottom; dtype as stored (float16 or float32).
     metadata : dict
         The ``relight:metadata`` document, or ``{}`` for a file without one.
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    ValueError
+        The file is not an OpenEXR image OpenEXR can read.
     """
     if not os.path.isfile(path):
         raise FileNotFoundError(f"EXR file not found: {path}")
     OpenEXR = _openexr()
-    with OpenEXR.File(path, separate_channels=True) as exr:  # keep "b00.R" etc. apart
+    try:
+        exr = OpenEXR.File(path, separate_channels=True)  # keep "b00.R" etc. apart
+    except RuntimeError as exc:  # OpenEXR's only error for "not an EXR" / unreadable
+        raise ValueError(f"{path} is not a readable OpenEXR image ({exc})") from None
+    with exr:
         header = dict(exr.header())  # the live header is emptied when the file closes
         channels = {name: np.ascontiguousarray(ch.pixels[::-1]) for name, ch in exr.channels().items()}
     raw = header.get(METADATA_KEY)

@@ -101,6 +101,8 @@ def test_cpca_bakes_shade_like_the_full_eigentransport(tmp_path):
      "no eigentransport bake"),
     (("relight-vertices", "{blend}", "--object", "Statue", "--env", "{tmp}/none.exr",
       "--out", "{tmp}/s.npy"), "not found"),
+    (("relight-vertices", "{blend}", "--object", "Statue", "--env", "{blend}",
+      "--out", "{tmp}/s.npy"), "not a readable OpenEXR image"),   # was a traceback
     (("relight-vertices", "{blend}", "--object", "Statue", "--point-light", "1,2,3",
       "--out", "{tmp}/s.npy"), "X,Y,Z,POWER"),
 ])
