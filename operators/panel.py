@@ -6,6 +6,7 @@ import bpy
 
 from .blend_files import object_bakes
 from .presets import preset_figures
+from .properties import preset_differences
 from .preview_nodes import COLOR_SLIDER, SLIDERS
 
 
@@ -62,17 +63,22 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
         layout = self.layout
         layout.prop(props, "method")
         layout.prop(props, "preset")
+        changed = preset_differences(props)
+        if changed:
+            # the measured figures belong to the preset's values, not to these
+            layout.label(text=f"Custom: {', '.join(changed)} differ from "
+                              f"{props.preset.capitalize()}", icon="MODIFIER")
         if props.method == "transport":
             from .texture_transport import PRESETS as TRANSPORT_PRESETS
 
             fig = TRANSPORT_PRESETS[props.preset].get("measured")
-            if fig:
+            if fig and not changed:
                 layout.label(text=f"measured: {fig['bake_seconds']:.0f} s, rel. RMSE "
                                   f"{fig['rel_rmse']:.3f} ({fig['scene']})")
             col = layout.column(align=True)
             for name in ("directions", "horizon_power", "resolution", "bounces",
-                         "indirect_samples", "transport_model", "transport_tol", "sun_angle",
-                         "truth_lights", "output_dir"):
+                         "indirect_samples", "transport_model", "transport_components",
+                         "transport_tol", "sun_angle", "truth_lights", "output_dir"):
                 col.prop(props, name)
             n = len([o for o in context.selected_objects if o.type == "MESH"])
             if n > 1:
@@ -80,7 +86,9 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
             layout.operator("relight.bake_textures", icon="RENDER_STILL")
             return
         fig = preset_figures().get(props.preset)
-        if fig:
+        if changed:
+            pass
+        elif fig:
             layout.label(text=f"measured: {fig['bake_seconds']:.1f} s, rel. RMSE "
                               f"{fig['rel_rmse']:.3f} ({fig['scene']}, {fig['machine']})")
         else:

@@ -14,19 +14,43 @@ _SETTING_NAMES = ("frame", "order", "resolution", "samples", "bounces", "storage
                   "world_sampling")
 
 
-def _apply_preset(self, context):
+def preset_values(method: str, preset: str) -> dict:
+    """The panel fields a preset sets, by property name (what :func:`_apply_preset` writes and
+    what :func:`preset_differences` compares)."""
+    if method == "lobes":
+        lobes = settings_from_preset(preset)
+        return {name: getattr(lobes, name) for name in _SETTING_NAMES}
     from .texture_transport import PRESETS as TRANSPORT_PRESETS
 
-    if self.method == "lobes":
-        preset = settings_from_preset(self.preset)
-        for name in _SETTING_NAMES:
-            setattr(self, name, getattr(preset, name))
-        return
-    t = TRANSPORT_PRESETS[self.preset]
+    t = TRANSPORT_PRESETS[preset]
     count, _, power = t["directions"].partition(":")[2].partition(":")
-    self.directions, self.horizon_power = int(count), float(power or 1.0)
-    self.resolution, self.transport_tol = t["resolution"], t["tol"]
-    self.indirect_samples = t["indirect_samples"]
+    return {"directions": int(count), "horizon_power": float(power or 1.0),
+            "resolution": t["resolution"], "transport_tol": t["tol"],
+            "transport_components": int(t.get("components") or 0),
+            "indirect_samples": t["indirect_samples"]}
+
+
+def preset_differences(props) -> list:
+    """Names of the fields that no longer hold the chosen preset's values (the panel then says
+    "Custom" instead of showing the preset's measured figures)."""
+    out = []
+    for name, value in preset_values(props.method, props.preset).items():
+        mine = getattr(props, name)
+        if (abs(mine - value) > 1e-6 * max(1.0, abs(value)) if isinstance(value, float)
+                else mine != value):
+            out.append(name)
+    return out
+
+
+def _apply_preset(self, context):
+    for name, value in preset_values(self.method, self.preset).items():
+        setattr(self, name, value)
+
+
+#: New scenes start on the balanced presets (transport, the default method, for the shared
+#: resolution), so the preset shown is the one the fields hold.
+_LOBES = preset_values("lobes", "balanced")
+_TRANSPORT = preset_values("transport", "balanced")
 
 
 def _refresh_tables(self, context):
@@ -66,25 +90,25 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         name="Preset", description="Starting values for the bake settings (measured by make bench)",
         items=[(k, k.capitalize(), "") for k in PRESETS], default="balanced", update=_apply_preset)
     frame: EnumProperty(
-        name="Frame", default="world", items=[
+        name="Frame", default=_LOBES["frame"], items=[
             ("world", "World", "Relight the object by a distant light over the world's upper "
                                "hemisphere"),
             ("tangent", "Tangent", "A tileable patch relit per pixel in a surface's UV tangent "
                                    "frame")])
     order: IntProperty(name="Order", description="Basis order N1: N = N1^2 Cycles bakes",
-                       default=7, min=2, max=12)
+                       default=_LOBES["order"], min=2, max=12)
     resolution: IntProperty(name="Resolution", description="Texture side in texels",
-                            default=256, min=8, max=8192)
+                            default=_TRANSPORT["resolution"], min=8, max=8192)
     samples: IntProperty(name="Samples", description="Cycles samples per texel per bake",
-                         default=64, min=1, max=65536)
+                         default=_LOBES["samples"], min=1, max=65536)
     bounces: IntProperty(name="Bounces", description="Diffuse bounces (0 = direct only)",
-                         default=2, min=0, max=64)
-    storage: EnumProperty(name="Storage", default="half",
+                         default=_LOBES["bounces"], min=0, max=64)
+    storage: EnumProperty(name="Storage", default=_LOBES["storage"],
                           items=[(s, s, "") for s in STORAGE_MODES])
-    mode: EnumProperty(name="Bake", default="radiance", items=[
+    mode: EnumProperty(name="Bake", default=_LOBES["mode"], items=[
         ("radiance", "Radiance", "Albedo x light with interreflection (the paper)"),
         ("irradiance", "Light only", "Light without the albedo, so the albedo stays editable")])
-    world_sampling: EnumProperty(name="World Sampling", default="importance", items=[
+    world_sampling: EnumProperty(name="World Sampling", default=_LOBES["world_sampling"], items=[
         ("importance", "Importance", "Lower noise at equal samples"),
         ("none", "None", "BSDF sampling only: exactly linear in the light")])
     output_dir: StringProperty(
@@ -120,10 +144,10 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
             ("lobes", "Steerable lobes",
              "The paper's bake under order^2 broad steerable lights: soft (~27 degree) light")])
     directions: IntProperty(
-        name="Directions", default=400, min=8, max=100000,
+        name="Directions", default=_TRANSPORT["directions"], min=8, max=100000,
         description="Hard-sun bakes over the upper hemisphere (1 sample each)")
     horizon_power: FloatProperty(
-        name="Horizon Density", default=1.5, min=1.0, max=4.0,
+        name="Horizon Density", default=_TRANSPORT["horizon_power"], min=1.0, max=4.0,
         description="1: uniform over the hemisphere; above 1: more directions near the horizon, "
                     "where grazing shadows change fastest")
     sun_angle: FloatProperty(
@@ -137,10 +161,15 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
             ("steerable", "Steerable (quadrature)", "The paper's basis fitted noise-free from T"),
             ("none", "None", "Keep T only")])
     transport_tol: FloatProperty(
-        name="PCA Tolerance", default=0.02, min=0.001, max=0.5,
-        description="Relative residual of T the PCA keeps (fewer components when larger)")
+        name="PCA Tolerance", default=_TRANSPORT["transport_tol"], min=0.001, max=0.5,
+        description="Relative residual of T the PCA keeps when Components is 0 (fewer "
+                    "components when larger)")
+    transport_components: IntProperty(
+        name="Components", default=_TRANSPORT["transport_components"], min=0, max=96,
+        description="PCA eigen-textures to keep (the presets' measured figures use a fixed "
+                    "count); 0 = as many as the tolerance needs")
     indirect_samples: IntProperty(
-        name="Indirect Samples", default=64, min=1, max=65536,
+        name="Indirect Samples", default=_TRANSPORT["indirect_samples"], min=1, max=65536,
         description="Samples of the low-order steerable bake of the indirect light")
     truth_lights: IntProperty(
         name="Check vs Cycles", default=0, min=0, max=12,
@@ -159,7 +188,7 @@ def transport_settings_from_scene(props):
     return TransportTextureSettings(
         directions=f"hemi:{props.directions}{power}", resolution=props.resolution,
         bounces=props.bounces, model=props.transport_model, tol=props.transport_tol,
-        indirect_samples=props.indirect_samples,
+        components=props.transport_components or None, indirect_samples=props.indirect_samples,
         indirect_resolution=max(4, props.resolution // 2), sun_angle=props.sun_angle)
 
 

@@ -331,6 +331,38 @@ def test_panel_operator_bakes_selected_objects_and_sun_size_retabulates(statue, 
         relightable_textures.unregister()
 
 
+def test_new_scene_holds_the_preset_it_names_and_edits_make_it_custom(fresh_scene):
+    """Issue 12: a new scene said "Balanced" while its fields held other values (the preset was
+    applied only when the dropdown changed). Now the fields start on the balanced preset of
+    either method, the panel's settings equal what the preset's measured figures used
+    (components included), and any edit is reported as Custom with the field's name."""
+    import relightable_textures
+    from relightable_textures.operators import properties as pr
+    from relightable_textures.operators import texture_transport as tx
+
+    relightable_textures.register()
+    try:
+        props = fresh_scene.relight
+        assert props.method == "transport" and props.preset == "balanced"
+        assert pr.preset_differences(props) == []
+        want = tx.settings_from_preset("balanced")
+        got = pr.transport_settings_from_scene(props)
+        for name in ("directions", "resolution", "indirect_resolution", "indirect_samples",
+                     "components", "bounces"):
+            assert getattr(got, name) == getattr(want, name), name
+        props.resolution = 128
+        assert pr.preset_differences(props) == ["resolution"]
+        props.preset = "draft"                       # choosing a preset applies it
+        assert pr.preset_differences(props) == []
+        assert pr.transport_settings_from_scene(props).components == 48
+        props.method = "lobes"                       # the lobes preset of the same name
+        assert pr.preset_differences(props) == []
+        props.order = 9
+        assert pr.preset_differences(props) == ["order"]
+    finally:
+        relightable_textures.unregister()
+
+
 def test_target_error_pilot_chooses_directions_and_reports_what_it_achieved(bumps, tmp_path):
     """--target-error: the pilot tries direction counts cheapest first, stops at the first that
     meets the target on its small bake, and the report states the choice and the error the
