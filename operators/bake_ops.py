@@ -1,5 +1,5 @@
-"""Operators: bake steerable textures (modal, progress, Esc to cancel), follow a Sun, remove the
-preview (bpy).
+"""Operators: bake relightable textures and per-vertex transport (modal, progress, Esc to
+cancel), follow a Sun, remove the preview (bpy).
 
 The modal operator drives the same generator as the CLI (:mod:`.steerable_bake`), one Cycles
 bake per timer tick, so the UI stays responsive between bakes and Esc cancels cleanly: closing
@@ -54,12 +54,11 @@ def _finish(operator, context, result, settings, out_dir):
                               f"{report['bytes']['exr_file'] / 1e6:.1f} MB")
 
 
-class RELIGHT_OT_bake_textures(bpy.types.Operator):
-    """Bake steerable illumination textures of the active object with Cycles (Esc cancels)"""
-
-    bl_idname = "relight.bake_textures"
-    bl_label = "Bake Relightable Texture"
-    bl_options = {"REGISTER"}
+class _ModalBake:
+    """A bake job driven one step per timer tick (progress, status text, Esc cancels), or to
+    completion by ``execute`` (scripts, background mode). Subclasses give ``_prepare`` (the
+    job generator) and ``_finish`` (write and preview). A mixin, not an Operator: Blender
+    cannot subclass a registered operator class."""
 
     _timer = None
     _gen = None
@@ -70,27 +69,10 @@ class RELIGHT_OT_bake_textures(bpy.types.Operator):
         return obj is not None and obj.type == "MESH"
 
     def _prepare(self, context):
-        props = context.scene.relight
-        obj = context.active_object
-        if props.method == "transport":
-            from . import texture_transport as tx
-            from .properties import transport_settings_from_scene
+        raise NotImplementedError
 
-            objects = _transport_objects(context)
-            for o in objects:
-                check_bakeable(o)
-            self.settings = transport_settings_from_scene(props)
-            self.settings.validate()
-            self.out_dir = _output_dir(props)
-            os.makedirs(self.out_dir, exist_ok=True)
-            return tx.bake_job(context.scene, objects, self.settings, self.out_dir,
-                               truth=props.truth_lights)
-        check_bakeable(obj)
-        self.settings = settings_from_scene(props)
-        self.settings.validate()
-        self.out_dir = _output_dir(props)
-        os.makedirs(self.out_dir, exist_ok=True)
-        return steerable_bake.bake_steerable_texture(context.scene, obj, self.settings)
+    def _finish(self, context, result):
+        raise NotImplementedError
 
     def execute(self, context):
         try:
@@ -101,7 +83,7 @@ class RELIGHT_OT_bake_textures(bpy.types.Operator):
                     self.report({"WARNING"}, step.message[len("warning: "):])
 
             result = steerable_bake.run(gen, on_progress=warn)
-            _finish(self, context, result, self.settings, self.out_dir)
+            self._finish(context, result)
         except (BakeInputError, OSError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
@@ -143,7 +125,7 @@ class RELIGHT_OT_bake_textures(bpy.types.Operator):
         except StopIteration as stop:
             self._end(context)
             try:
-                _finish(self, context, stop.value, self.settings, self.out_dir)
+                self._finish(context, stop.value)
             except (OSError, ValueError) as exc:
                 self.report({"ERROR"}, f"Could not write the bake: {exc}")
                 return {"CANCELLED"}
@@ -157,6 +139,81 @@ class RELIGHT_OT_bake_textures(bpy.types.Operator):
         context.window_manager.progress_update(int(1000 * step.done / step.total))
         context.workspace.status_text_set(f"Relight bake: {step.message} (Esc to cancel)")
         return {"RUNNING_MODAL"}
+
+
+class RELIGHT_OT_bake_textures(_ModalBake, bpy.types.Operator):
+    """Bake relightable textures of the active object (and the other selected meshes) with
+    Cycles (Esc cancels)"""
+
+    bl_idname = "relight.bake_textures"
+    bl_label = "Bake Relightable Texture"
+    bl_options = {"REGISTER"}
+
+    def _prepare(self, context):
+        props = context.scene.relight
+        obj = context.active_object
+        if props.method == "transport":
+            from . import texture_transport as tx
+            from .properties import transport_settings_from_scene
+
+            objects = _transport_objects(context)
+            for o in objects:
+                check_bakeable(o)
+            self.settings = transport_settings_from_scene(props)
+            self.settings.validate()
+            self.out_dir = _output_dir(props)
+            os.makedirs(self.out_dir, exist_ok=True)
+            return tx.bake_job(context.scene, objects, self.settings, self.out_dir,
+                               truth=props.truth_lights)
+        check_bakeable(obj)
+        self.settings = settings_from_scene(props)
+        self.settings.validate()
+        self.out_dir = _output_dir(props)
+        os.makedirs(self.out_dir, exist_ok=True)
+        return steerable_bake.bake_steerable_texture(context.scene, obj, self.settings)
+
+    def _finish(self, context, result):
+        _finish(self, context, result, self.settings, self.out_dir)
+
+
+class RELIGHT_OT_bake_transport(_ModalBake, bpy.types.Operator):
+    """Bake the active object's per-vertex light transport with Cycles and fit eigentransport
+    (Nowrouzezahrai 2008); the vertex preview then shades it under the world (Esc cancels)"""
+
+    bl_idname = "relight.bake_transport"
+    bl_label = "Bake Vertex Transport"
+    bl_options = {"REGISTER"}
+
+    def _prepare(self, context):
+        from . import transport_bake
+
+        props = context.scene.relight
+        obj = context.active_object
+        check_bakeable(obj, need_uv=False)
+        self.settings = transport_bake.TransportSettings(
+            directions=props.vertex_directions, bounces=props.vertex_bounces,
+            energy=props.vertex_energy)
+        self.direction_set = self.settings.validate()
+        self.out_dir = _output_dir(props)
+        os.makedirs(self.out_dir, exist_ok=True)
+        return transport_bake.bake_transport(context.scene, obj,
+                                             self.direction_set.directions,
+                                             self.settings.bounces, self.settings.samples)
+
+    def _finish(self, context, result):
+        from . import transport_bake, vertex_relight
+
+        obj = context.active_object
+        report = transport_bake.fit_and_write(result, obj, self.direction_set, self.settings,
+                                              self.out_dir)
+        report.pop("fitted", None)
+        timings = vertex_relight.update_preview(context.scene)
+        preview_nodes.install_attribute_preview(obj, vertex_relight.SHADING_ATTRIBUTE)
+        t = report["timings"]
+        self.report({"INFO"}, f"Baked {obj.name}: {report['vertices']} vertices x "
+                              f"{report['directions']} directions in "
+                              f"{t['total_bake_seconds']:.1f} s, d = {report.get('d', '?')}, "
+                              f"preview {timings.get(obj.name, {}).get('shade_ms', 0):.0f} ms")
 
 
 class RELIGHT_OT_follow_sun(bpy.types.Operator):
@@ -200,4 +257,5 @@ class RELIGHT_OT_remove_preview(bpy.types.Operator):
         return {"FINISHED"}
 
 
-CLASSES = (RELIGHT_OT_bake_textures, RELIGHT_OT_follow_sun, RELIGHT_OT_remove_preview)
+CLASSES = (RELIGHT_OT_bake_textures, RELIGHT_OT_bake_transport, RELIGHT_OT_follow_sun,
+           RELIGHT_OT_remove_preview)

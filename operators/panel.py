@@ -138,7 +138,11 @@ class VIEW3D_PT_relight_vertex(_RelightSubPanel, bpy.types.Panel):
         col.prop(props, "env_rotation")
         col.prop(props, "point_light")
         col.prop(props, "show_clusters")
-        col.label(text="Bake with: relight bake-transport (CLI)", icon="INFO")
+        col = self.layout.column(align=True)
+        col.prop(props, "vertex_directions")
+        col.prop(props, "vertex_bounces")
+        col.prop(props, "vertex_energy")
+        self.layout.operator("relight.bake_transport", icon="RENDER_STILL")
 
 
 class VIEW3D_PT_relight_samples(_RelightSubPanel, bpy.types.Panel):

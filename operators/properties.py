@@ -131,6 +131,17 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         description="A point lamp added to the vertex preview (nearest sample direction, "
                     "1/r^2; valid outside the object's convex hull)",
         update=_refresh_vertex_preview)
+    vertex_directions: StringProperty(
+        name="Directions", default="cube:8",
+        description="Hard-sun directions of the per-vertex bake: cube:N (6 N^2), halton:N, "
+                    "latlong:RxC, cubegauss:N")
+    vertex_bounces: IntProperty(
+        name="Bounces", default=0, min=0, max=64,
+        description="Diffuse bounces of the per-vertex bake (0 = visibility x cosine, exact at "
+                    "1 sample)")
+    vertex_energy: FloatProperty(
+        name="Energy Kept", default=0.99, min=0.5, max=1.0,
+        description="Fraction of the centred transport energy the eigentransports keep")
     show_clusters: BoolProperty(
         name="Show Clusters", default=False,
         description="Colour the vertices by CPCA cluster (bake-transport --clusters) instead "
