@@ -252,7 +252,7 @@ class RELIGHT_OT_remove_preview(bpy.types.Operator):
         return context.active_object is not None and context.active_object.type == "MESH"
 
     def execute(self, context):
-        n = preview_nodes.remove_preview(context.active_object)
+        n = preview_nodes.remove_preview(context.active_object, context.scene)
         self.report({"INFO"}, f"Removed the preview from {n} material(s)")
         return {"FINISHED"}
 

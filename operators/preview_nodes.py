@@ -324,20 +324,41 @@ def _preview_nodes(tree):
     return [n for n in tree.nodes if n.get(_TAG)] if tree is not None else []
 
 
-def remove_preview(obj) -> int:
-    """Remove our preview nodes from the object's materials; returns how many materials changed."""
+def remove_preview(obj, scene=None, purge: bool = True) -> int:
+    """Remove our preview from the object's materials completely: the tagged nodes and the
+    drivers on them, then our node groups and atlas images nothing uses any more, and -- given
+    ``scene`` and when no material shows a preview any more -- the scene's light sliders (so the
+    Preview Light panel offers no sliders that drive nothing). Returns how many materials
+    changed. The user's own nodes, images and properties are never touched. ``purge=False``
+    keeps the unused groups and images (a new preview about to use them is being wired)."""
     changed = 0
     for mat in {s.material for s in obj.material_slots if s.material}:
         tree = mat.node_tree
         ours = _preview_nodes(tree)
         if not ours:
             continue
+        names = {f'nodes["{n.name}"]' for n in ours}
+        anim = tree.animation_data
+        if anim is not None:
+            for fc in [fc for fc in anim.drivers if fc.data_path.split(".")[0] in names]:
+                anim.drivers.remove(fc)
         for node in ours:
             tree.nodes.remove(node)
         outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
         if outputs and not any(n.is_active_output for n in outputs):
             outputs[0].is_active_output = True
         changed += 1
+    if not purge:
+        return changed
+    for group in [g for g in bpy.data.node_groups if g.get(_TAG) and g.users == 0]:
+        bpy.data.node_groups.remove(group)
+    for image in [i for i in bpy.data.images if i.get(_TAG) and i.users == 0]:
+        bpy.data.images.remove(image)
+    if scene is not None and not any(_preview_nodes(m.node_tree) for m in bpy.data.materials
+                                     if m.node_tree is not None):
+        for key in (*SLIDERS, COLOR_SLIDER):
+            if key in scene:
+                del scene[key]
     return changed
 
 
@@ -346,7 +367,7 @@ def _wire_preview(obj, build_color) -> None:
     computing the preview colour and returns its socket; it is shown through an Emission and
     our own Material Output, made active. All new nodes are tagged and framed, so
     :func:`remove_preview` can take them out again; the user's nodes are not touched."""
-    remove_preview(obj)
+    remove_preview(obj, purge=False)
     if not obj.material_slots or not any(s.material for s in obj.material_slots):
         obj.data.materials.append(bpy.data.materials.new(f"{obj.name} Relight"))
     for mat in {s.material for s in obj.material_slots if s.material}:

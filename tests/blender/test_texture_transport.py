@@ -327,6 +327,28 @@ def test_panel_operator_bakes_selected_objects_and_sun_size_retabulates(statue, 
         after = tables()
         assert not np.allclose(before, after)
         assert sorted(os.listdir(tmp_path)) == files
+        # Remove Preview takes everything out (issue 12: group, atlas images and sliders
+        # were left behind): the tagged nodes and their drivers, our unused groups and images,
+        # and the sliders once no material shows a preview; the user's nodes stay
+        tag = "relight_preview"
+        user_nodes = {m.name: sorted(n.name for n in m.node_tree.nodes if not n.get(tag))
+                      for m in bpy.data.materials if m.node_tree}
+        assert any(g.get(tag) for g in bpy.data.node_groups)
+        assert any(i.get(tag) for i in bpy.data.images) and "relight_azimuth" in scene
+        for o in (statue_obj, ground):
+            bpy.context.view_layer.objects.active = o
+            assert bpy.ops.relight.remove_preview() == {"FINISHED"}
+        for m in bpy.data.materials:
+            if m.node_tree:
+                assert not [n for n in m.node_tree.nodes if n.get(tag)]
+                assert sorted(n.name for n in m.node_tree.nodes) == user_nodes[m.name]
+                assert not (m.node_tree.animation_data and m.node_tree.animation_data.drivers)
+        assert not [g for g in bpy.data.node_groups if g.get(tag)]
+        assert not [i for i in bpy.data.images if i.get(tag)]
+        from relightable_textures.operators.preview_nodes import COLOR_SLIDER, SLIDERS
+
+        assert not [k for k in (*SLIDERS, COLOR_SLIDER) if k in scene]
+        assert scene["relight_sample"] == "statue"          # not ours to remove
     finally:
         relightable_textures.unregister()
 
