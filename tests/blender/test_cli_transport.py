@@ -27,6 +27,9 @@ def test_bake_transport_writes_sidecar_report_and_record(baked):
     assert sorted(os.listdir(out)) == ["Statue_transport.json", "Statue_transport.npz"]
     rep = json.loads((out / "Statue_transport.json").read_text())
     assert rep["vertices"] == 507 and rep["directions"] == 96 and rep["d"] == 12
+    t = rep["timings"]   # the wall time covers the fit and the truth bake too
+    assert t["wall_total"] >= t["total_bake_seconds"] + t["fit_seconds"]
+    assert f"{t['wall_total']:.2f} s in all" in r.stdout
     assert rep["timings"]["directions_per_second"] > 0
     assert rep["bytes"]["paper_runtime"] == 4 * 12 * (507 + 1)
     per_d = rep["ground_truth"]["per_d"]
