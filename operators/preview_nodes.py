@@ -443,7 +443,39 @@ def set_follow_sun(scene, sun) -> int:
     return changed
 
 
+def _base_color(b):
+    """The material's own diffuse colour as a socket of ``b.tree``: whatever feeds the first
+    Principled / Diffuse BSDF's Base Color (a texture keeps working), or its constant colour;
+    None for a material without one."""
+    for node in b.tree.nodes:
+        if node.get(_TAG):
+            continue
+        name = {"ShaderNodeBsdfPrincipled": "Base Color",
+                "ShaderNodeBsdfDiffuse": "Color"}.get(node.bl_idname)
+        if name is None:
+            continue
+        socket = node.inputs[name]
+        if socket.is_linked:
+            return socket.links[0].from_socket
+        rgb = b.node("ShaderNodeRGB", 900, 1100, label="Base Color")
+        rgb.outputs[0].default_value = tuple(socket.default_value)
+        return rgb.outputs[0]
+    return None
+
+
 def install_attribute_preview(obj, attribute: str) -> None:
-    """Show a colour attribute as emission (the per-vertex eigentransport preview)."""
-    _wire_preview(obj, lambda b: b.node("ShaderNodeVertexColor", 900, 900,
-                                        layer_name=attribute).outputs["Color"])
+    """Show a colour attribute (white-surface radiance, the per-vertex eigentransport preview)
+    as emission, multiplied by the material's own base colour (issue 12: an orange object
+    previewed grey)."""
+    def build(b):
+        light = b.node("ShaderNodeVertexColor", 900, 900, layer_name=attribute).outputs["Color"]
+        base = _base_color(b)
+        if base is None:
+            return light
+        mul = b.node("ShaderNodeVectorMath", 1000, 1000, operation="MULTIPLY",
+                     label="Light x Base Color")
+        b.links.new(light, mul.inputs[0])
+        b.links.new(base, mul.inputs[1])
+        return mul.outputs[0]
+
+    _wire_preview(obj, build)

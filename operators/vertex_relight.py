@@ -92,7 +92,10 @@ class TransportData:
 
     def shade(self, env=None, rotate_deg: float = 0.0, strength: float = 1.0,
               point_light=None) -> np.ndarray:
-        """Per-vertex outgoing radiance of a white Lambertian surface, shape (V, 3), float64.
+        """Per-vertex outgoing radiance of a white Lambertian surface, shape (V, 3), float64,
+        never negative (a truncated eigentransport or the point light's nearest-direction
+        approximation can dip below 0 -- measured -0.157 with a lamp inside the hull -- and
+        light cannot).
 
         ``point_light`` = (position (3,), power W, colour (3,)).
         """
@@ -104,7 +107,7 @@ class TransportData:
             W = et_mod.point_light_weights(self.positions, self.normals, self.direction_set,
                                            pos, power)
             out += self.model.shade_local(W)[:, None] * np.asarray(color, np.float64)[None, :]
-        return out
+        return np.maximum(out, 0.0)
 
     @property
     def is_clustered(self) -> bool:

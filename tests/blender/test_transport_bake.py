@@ -314,5 +314,19 @@ def test_panel_bakes_vertex_transport_and_shows_it(fresh_scene, tmp_path):
         ratio = shade[:, 0] / bound
         assert ratio.max() <= 1.0 + 1e-3, ratio.max()
         assert ratio.max() > 0.95                    # some vertices see the whole sky
+        # the preview multiplies that white-surface light by the material's base colour
+        tree = obj.active_material.node_tree
+        (mul,) = [n for n in tree.nodes if n.get("relight_preview")
+                  and n.bl_idname == "ShaderNodeVectorMath"]
+        bsdf = next(n for n in tree.nodes if n.bl_idname in ("ShaderNodeBsdfPrincipled",
+                                                             "ShaderNodeBsdfDiffuse")
+                    and not n.get("relight_preview"))
+        base = bsdf.inputs["Base Color" if "Base Color" in bsdf.inputs else "Color"]
+        feed = mul.inputs[1].links[0].from_socket
+        if base.is_linked:
+            assert feed == base.links[0].from_socket
+        else:
+            np.testing.assert_allclose(feed.default_value[:3], base.default_value[:3])
+        assert mul.inputs[0].links[0].from_node.layer_name == SHADING_ATTRIBUTE
     finally:
         relightable_textures.unregister()
