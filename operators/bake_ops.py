@@ -209,6 +209,8 @@ class RELIGHT_OT_bake_transport(_ModalBake, bpy.types.Operator):
         report.pop("fitted", None)
         timings = vertex_relight.update_preview(context.scene)
         preview_nodes.install_attribute_preview(obj, vertex_relight.SHADING_ATTRIBUTE)
+        for message in timings.get("warnings", []):
+            self.report({"WARNING"}, message)
         t = report["timings"]
         self.report({"INFO"}, f"Baked {obj.name}: {report['vertices']} vertices x "
                               f"{report['directions']} directions in "

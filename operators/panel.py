@@ -138,6 +138,10 @@ class VIEW3D_PT_relight_vertex(_RelightSubPanel, bpy.types.Panel):
         col.prop(props, "env_rotation")
         col.prop(props, "point_light")
         col.prop(props, "show_clusters")
+        warning = context.scene.get("relight_vertex_warning")
+        if warning:
+            for line in warning.split("; "):
+                self.layout.label(text=line, icon="ERROR")
         col = self.layout.column(align=True)
         col.prop(props, "vertex_directions")
         col.prop(props, "vertex_bounces")

@@ -34,6 +34,8 @@ from ..lt_addon.directions import DirectionSet
 
 KIND = "eigentransport"
 SHADING_ATTRIBUTE = "relight_shading"
+#: Scene property holding the last vertex-preview warning (e.g. a lamp inside the hull).
+WARNING_KEY = "relight_vertex_warning"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -224,12 +226,14 @@ def transport_data(obj) -> TransportData:
 
 
 def update_preview(scene) -> dict:
-    """Recompute the shading of every object with a transport bake; returns ms timings.
+    """Recompute the shading of every object with a transport bake; returns ms timings per
+    object and ``"warnings"`` (also kept in ``scene[WARNING_KEY]`` for the panel).
 
     With ``scene.relight.show_clusters`` the vertices get their CPCA cluster colours instead."""
     props = getattr(scene, "relight", None)
     env = world_environment(scene)
     timings = {}
+    messages = []
     for obj in scene.objects:
         if obj.type != "MESH" or "relightable_bakes" not in obj:
             continue
@@ -247,10 +251,20 @@ def update_preview(scene) -> dict:
             lamp = props.point_light
             light = (np.array(lamp.matrix_world.translation), float(lamp.data.energy),
                      tuple(lamp.data.color))
-        values = data.shade(env, props.env_rotation if props else 0.0,
-                            props.env_strength if props else 1.0, light)
+        import warnings
+
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            values = data.shade(env, props.env_rotation if props else 0.0,
+                                props.env_strength if props else 1.0, light)
+        messages += [f"{obj.name}: {w.message}" for w in caught]
         t1 = time.perf_counter()
         write_shading(obj, values)
         timings[obj.name] = {"shade_ms": 1e3 * (t1 - t0),
                              "write_ms": 1e3 * (time.perf_counter() - t1)}
+    # the panel shows it (a property callback or handler has no operator to report to)
+    text = "; ".join(messages)
+    if scene.get(WARNING_KEY, "") != text:
+        scene[WARNING_KEY] = text
+    timings["warnings"] = messages
     return timings

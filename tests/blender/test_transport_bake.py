@@ -273,6 +273,7 @@ def test_panel_bakes_vertex_transport_and_shows_it(fresh_scene, tmp_path):
     import json
 
     import bpy
+    from mathutils import Vector
 
     import relightable_textures
     from relightable_textures import samples
@@ -328,5 +329,19 @@ def test_panel_bakes_vertex_transport_and_shows_it(fresh_scene, tmp_path):
         else:
             np.testing.assert_allclose(feed.default_value[:3], base.default_value[:3])
         assert mul.inputs[0].links[0].from_node.layer_name == SHADING_ATTRIBUTE
+        # a point lamp inside the object's hull: the preview says so in the panel (it only
+        # reached the console) and still never shows negative light
+        assert fresh_scene.get("relight_vertex_warning", "") == ""
+        lamp = bpy.data.objects.new("Inside", bpy.data.lights.new("Inside", "POINT"))
+        lamp.data.energy = 500.0
+        fresh_scene.collection.objects.link(lamp)
+        co = np.empty(len(obj.data.vertices) * 3)
+        obj.data.vertices.foreach_get("co", co)
+        lamp.location = obj.matrix_world @ Vector(co.reshape(-1, 3).mean(axis=0))
+        bpy.context.view_layer.update()            # matrix_world follows the location
+        props.point_light = lamp                   # update callback re-shades
+        assert "inside the convex hull" in fresh_scene["relight_vertex_warning"]
+        attr.data.foreach_get("color", px)
+        assert px.reshape(-1, 4)[:, :3].min() >= 0.0
     finally:
         relightable_textures.unregister()
