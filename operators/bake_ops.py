@@ -218,6 +218,64 @@ class RELIGHT_OT_bake_transport(_ModalBake, bpy.types.Operator):
                               f"preview {timings.get(obj.name, {}).get('shade_ms', 0):.0f} ms")
 
 
+def show_preview(scene, obj, kind: str) -> str:
+    """Install the preview of ``obj``'s existing bake of ``kind`` from its files (no bake):
+    ``steerable_texture``, ``transport_texture`` or ``eigentransport``. Replaces the preview the
+    object shows now, so bakes of different kinds can be switched. Returns the file used.
+    Raises ValueError / FileNotFoundError with what to do."""
+    from .blend_files import bake_file
+
+    what = {"steerable_texture": "steerable texture", "transport_texture": "transport texture",
+            "eigentransport": "vertex transport"}.get(kind)
+    if what is None:
+        raise ValueError(f"unknown bake kind {kind!r}")
+    path = bake_file(obj, kind, what)
+    if kind == "steerable_texture":
+        from ..lt_addon.steerable_texture import SteerableTexture
+
+        preview_nodes.install_preview(scene, obj, path, SteerableTexture.load(path),
+                                      sun=scene.relight.sun)
+    elif kind == "transport_texture":
+        from . import texture_transport as tx
+
+        bake, store, report = tx.load_bake(path)
+        tx.install_transport_preview(scene, obj, report, bake, store,
+                                     sun_angle=scene.relight.sun_angle, sun=scene.relight.sun)
+    else:
+        from . import vertex_relight
+
+        vertex_relight.update_preview(scene)
+        preview_nodes.install_attribute_preview(obj, vertex_relight.SHADING_ATTRIBUTE)
+    return path
+
+
+class RELIGHT_OT_show_preview(bpy.types.Operator):
+    """Show the preview of one of the active object's existing bakes (from its files, no
+    re-bake); replaces the preview shown now"""
+
+    bl_idname = "relight.show_preview"
+    bl_label = "Show Preview"
+    bl_options = {"REGISTER", "UNDO"}
+
+    kind: bpy.props.EnumProperty(name="Bake", items=[
+        ("transport_texture", "Transport texture", ""),
+        ("steerable_texture", "Steerable texture", ""),
+        ("eigentransport", "Vertex transport", "")])
+
+    @classmethod
+    def poll(cls, context):
+        return context.active_object is not None and context.active_object.type == "MESH"
+
+    def execute(self, context):
+        try:
+            path = show_preview(context.scene, context.active_object, self.kind)
+        except (ValueError, OSError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"Showing {os.path.basename(path)}")
+        return {"FINISHED"}
+
+
 class RELIGHT_OT_follow_sun(bpy.types.Operator):
     """Make the preview follow the chosen Sun lamp's direction (or stop following it)"""
 
@@ -259,5 +317,5 @@ class RELIGHT_OT_remove_preview(bpy.types.Operator):
         return {"FINISHED"}
 
 
-CLASSES = (RELIGHT_OT_bake_textures, RELIGHT_OT_bake_transport, RELIGHT_OT_follow_sun,
-           RELIGHT_OT_remove_preview)
+CLASSES = (RELIGHT_OT_bake_textures, RELIGHT_OT_bake_transport, RELIGHT_OT_show_preview,
+           RELIGHT_OT_follow_sun, RELIGHT_OT_remove_preview)

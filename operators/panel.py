@@ -46,7 +46,10 @@ class VIEW3D_PT_relight(_RelightTab, bpy.types.Panel):
             box.label(text="No relightable data yet")
         for bake in bakes:
             col = box.column(align=True)
-            col.label(text=f"{bake.get('kind', '?')}: {bake.get('path', '?')}", icon="IMAGE_DATA")
+            row = col.row()
+            row.label(text=f"{bake.get('kind', '?')}: {bake.get('path', '?')}", icon="IMAGE_DATA")
+            if bake.get("kind") in ("steerable_texture", "transport_texture", "eigentransport"):
+                row.operator("relight.show_preview", text="Show").kind = bake["kind"]
             if "order" in bake:
                 col.label(text=f"order {bake['order']}, {bake['resolution']} px, "
                                f"{bake['samples']} spp, {bake['storage']}, "

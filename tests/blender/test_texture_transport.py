@@ -349,6 +349,19 @@ def test_panel_operator_bakes_selected_objects_and_sun_size_retabulates(statue, 
 
         assert not [k for k in (*SLIDERS, COLOR_SLIDER) if k in scene]
         assert scene["relight_sample"] == "statue"          # not ours to remove
+        # Show Preview reinstalls it from the existing bake's files, without baking
+        store = tmp_path / "Statue_transport_texture.npy"
+        stamp = (store.stat().st_mtime_ns, (tmp_path / "Statue_texture_report.json").read_bytes())
+        bpy.context.view_layer.objects.active = statue_obj
+        assert bpy.ops.relight.show_preview(kind="transport_texture") == {"FINISHED"}
+        assert (store.stat().st_mtime_ns,
+                (tmp_path / "Statue_texture_report.json").read_bytes()) == stamp
+        assert any(n.get(tag) and n.bl_idname == "ShaderNodeGroup"
+                   for n in statue_obj.active_material.node_tree.nodes)
+        assert "relight_azimuth" in scene and sorted(os.listdir(tmp_path)) == files
+        # a kind the object has no bake of: one clear error, nothing changed
+        with pytest.raises(RuntimeError, match="no steerable texture bake"):
+            bpy.ops.relight.show_preview(kind="steerable_texture")
     finally:
         relightable_textures.unregister()
 
