@@ -74,6 +74,10 @@ class _ModalBake:
     def _finish(self, context, result):
         raise NotImplementedError
 
+    def _make_out_dir(self, props):
+        self.out_dir = _output_dir(props)
+        os.makedirs(self.out_dir, exist_ok=True)
+
     def execute(self, context):
         try:
             gen = self._prepare(context)
@@ -161,15 +165,13 @@ class RELIGHT_OT_bake_textures(_ModalBake, bpy.types.Operator):
                 check_bakeable(o)
             self.settings = transport_settings_from_scene(props)
             self.settings.validate()
-            self.out_dir = _output_dir(props)
-            os.makedirs(self.out_dir, exist_ok=True)
+            self._make_out_dir(props)
             return tx.bake_job(context.scene, objects, self.settings, self.out_dir,
                                truth=props.truth_lights)
         check_bakeable(obj)
         self.settings = settings_from_scene(props)
         self.settings.validate()
-        self.out_dir = _output_dir(props)
-        os.makedirs(self.out_dir, exist_ok=True)
+        self._make_out_dir(props)
         return steerable_bake.bake_steerable_texture(context.scene, obj, self.settings)
 
     def _finish(self, context, result):
@@ -194,8 +196,7 @@ class RELIGHT_OT_bake_transport(_ModalBake, bpy.types.Operator):
             directions=props.vertex_directions, bounces=props.vertex_bounces,
             energy=props.vertex_energy)
         self.direction_set = self.settings.validate()
-        self.out_dir = _output_dir(props)
-        os.makedirs(self.out_dir, exist_ok=True)
+        self._make_out_dir(props)
         return transport_bake.bake_transport(context.scene, obj,
                                              self.direction_set.directions,
                                              self.settings.bounces, self.settings.samples)
