@@ -34,7 +34,7 @@ demo: $(STAMP)
 	$(VENV)/bin/relight compare $(OUT)/statue.blend --light 200,15 --sun-angle 2 \
 	  --out $(OUT)/statue-compare-low-sun.png --force
 	$(VENV)/bin/relight bake-transport $(OUT)/statue.blend --object Statue --directions cube:8 \
-	  --energy 0.99 --truth
+	  --energy 0.99 --truth --force
 	$(VENV)/bin/relight info $(OUT)/bumps.blend
 	$(VENV)/bin/relight info $(OUT)/statue.blend
 	@echo "demo: open $(OUT)/bumps.blend or $(OUT)/statue.blend in Blender (Relight tab, Preview"
