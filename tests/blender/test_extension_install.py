@@ -40,7 +40,7 @@ INSTALL_SCRIPT = textwrap.dedent(r"""
     report["enabled"] = mod in bpy.context.preferences.addons
     report["wheels_installed"] = sorted(n for n in os.listdir(site) if not n.startswith("_")) \
         if os.path.isdir(site) else []
-    # `hasattr(bpy.ops.relight, name)` is true for any name; dir() lists registered operators.
+    # hasattr() on bpy.ops.relight is true for any name; dir() lists registered operators.
     report["operators"] = [n for n in ("add_sample_scene", "bake_textures", "bake_transport",
                                        "follow_sun", "remove_preview", "show_preview")
                            if n in dir(bpy.ops.relight)]
