@@ -37,7 +37,7 @@ def bake(name: str, size: str, spec: str):
     import bpy
 
     from relightable_textures import samples
-    from relightable_textures.lt_addon.directions import parse_direction_spec
+    from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
     from relightable_textures.operators import transport_bake as tb
     from relightable_textures.operators.meshes import mesh_edges
     from relightable_textures.operators.steerable_bake import run
@@ -53,8 +53,8 @@ def bake(name: str, size: str, spec: str):
 
 def lightings(ds) -> np.ndarray:
     """(4, S, 3) weighted sun-and-sky lightings (8 degree suns)."""
-    from relightable_textures.lt_addon.eigentransport import project_environment
-    from relightable_textures.lt_addon.transport_error import sun_sky_environment
+    from relightable_textures.lt_addon.transport.eigentransport import project_environment
+    from relightable_textures.lt_addon.transport.error import sun_sky_environment
 
     return np.stack([project_environment(
         sun_sky_environment(64, d, row_order="bottom_first", sun_radius_deg=8.0,
@@ -63,8 +63,8 @@ def lightings(ds) -> np.ndarray:
 
 
 def bench_scene(name: str, size: str, spec: str, targets) -> dict:
-    from relightable_textures.lt_addon import cluster_analysis as CA
-    from relightable_textures.lt_addon import cpca as cp
+    from relightable_textures.lt_addon.transport import cluster_analysis as CA
+    from relightable_textures.lt_addon.transport import cpca as cp
 
     res, ds, edges = bake(name, size, spec)
     T = res.transport.astype(np.float64)
@@ -113,7 +113,7 @@ def bench_scene(name: str, size: str, spec: str, targets) -> dict:
 
 
 def chart(row: dict, path: str, targets) -> None:
-    from relightable_textures.lt_addon import plot
+    from relightable_textures.devtools import charts as plot
 
     series = []
     for label, rows in row["methods"].items():
@@ -131,7 +131,7 @@ def chart(row: dict, path: str, targets) -> None:
 
 
 def main() -> None:
-    from relightable_textures.lt_addon.pareto import write_csv
+    from relightable_textures.devtools.pareto import write_csv
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", default="statue,room")

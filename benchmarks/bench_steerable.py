@@ -22,14 +22,13 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
 import time
 
 import numpy as np
 
-from relightable_textures.lt_addon import hemisphere as hs
-from relightable_textures.lt_addon import steerable as sb
-from relightable_textures.lt_addon import storage as sto
+from relightable_textures.lt_addon.sphere import hemisphere as hs
+from relightable_textures.lt_addon.steerable import basis as sb
+from relightable_textures.lt_addon.io import storage as sto
 
 
 def time_steering(size: int, repeats: int, n: int = 49, k_pca: int = 16) -> dict:
@@ -171,8 +170,9 @@ def main(argv=None) -> dict:
                                          "shadows, 384-direction quadrature, RGB albedo"},
            "codecs": rows, "total_s": time.perf_counter() - t0}
     if args.json:
-        with open(args.json, "w", encoding="utf-8") as fh:
-            json.dump(out, fh, indent=1)
+        from relightable_textures.lt_addon.io import atomic
+
+        atomic.write_json(args.json, out, indent=1)
         print(f"\nwrote {args.json}")
     return out
 

@@ -18,7 +18,6 @@ Usage: python benchmarks/bench_texture_bake.py [--presets draft,balanced,product
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import subprocess
@@ -40,9 +39,9 @@ def bench_preset(name: str, size: str, truth: int, tmp: str) -> dict:
     import bpy
 
     from relightable_textures import samples
-    from relightable_textures.lt_addon.steerable_texture import SteerableTexture
-    from relightable_textures.lt_addon.storage import reconstruction_error
-    from relightable_textures.lt_addon.hemisphere import direction_from_az_el
+    from relightable_textures.lt_addon.steerable.texture import SteerableTexture
+    from relightable_textures.lt_addon.io.storage import reconstruction_error
+    from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
     from relightable_textures.operators import steerable_bake as sb
     from relightable_textures.operators.presets import settings_from_preset
 
@@ -86,8 +85,8 @@ def bench_preset(name: str, size: str, truth: int, tmp: str) -> dict:
 WORKER = r"""
 import sys, time, bpy
 from relightable_textures.operators.cycles_bake import EnvironmentBake
-from relightable_textures.lt_addon.sampled_basis import build_sampled_basis
-from relightable_textures.lt_addon.steerable import paper_basis
+from relightable_textures.lt_addon.steerable.sampled_basis import build_sampled_basis
+from relightable_textures.lt_addon.steerable.basis import paper_basis
 blend, first, count, threads, res, spp = sys.argv[1], *map(int, sys.argv[2:7])
 bpy.ops.wm.open_mainfile(filepath=blend, load_ui=False)
 scene = bpy.context.scene
@@ -161,8 +160,9 @@ def main() -> None:
                   f"1 process x 2 threads {w['one_process_two_threads_seconds']} s, "
                   f"2 processes x 1 thread {w['two_processes_one_thread_seconds']} s "
                   f"(speed-up {w['speedup_of_workers']})")
-    with open(args.json, "w") as fh:
-        json.dump(out, fh, indent=2)
+    from relightable_textures.lt_addon.io import atomic
+
+    atomic.write_json(args.json, out)
     print(f"\nwrote {args.json}")
 
 

@@ -9,7 +9,6 @@ Prints figures (not a test) and writes JSON. Usage:
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import tempfile
 import time
@@ -24,9 +23,9 @@ def bench_scene(name: str, size: str, spec: str, bounces: int) -> dict:
     import bpy
 
     from relightable_textures import samples
-    from relightable_textures.lt_addon.directions import parse_direction_spec
-    from relightable_textures.lt_addon.eigentransport import fit_eigentransport, project_environment
-    from relightable_textures.lt_addon.transport_error import error_curves, sun_sky_environment
+    from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
+    from relightable_textures.lt_addon.transport.eigentransport import fit_eigentransport, project_environment
+    from relightable_textures.lt_addon.transport.error import error_curves, sun_sky_environment
     from relightable_textures.operators import transport_bake as tb
     from relightable_textures.operators.steerable_bake import run
 
@@ -64,9 +63,9 @@ def bench_update(n_vertices: int = 40000, d: int = 48, spec: str = "cube:16",
     import bmesh
     import bpy
 
-    from relightable_textures.lt_addon.directions import parse_direction_spec
-    from relightable_textures.lt_addon.eigentransport import Eigentransport
-    from relightable_textures.lt_addon.transport_error import sun_sky_environment
+    from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
+    from relightable_textures.lt_addon.transport.eigentransport import Eigentransport
+    from relightable_textures.lt_addon.transport.error import sun_sky_environment
     from relightable_textures.operators import vertex_relight as vr
     from relightable_textures.operators.meshes import object_from_bmesh
 
@@ -85,7 +84,7 @@ def bench_update(n_vertices: int = 40000, d: int = 48, spec: str = "cube:16",
     times = {"project_ms": [], "shade_ms": [], "write_ms": []}
     for _ in range(repeats):
         t0 = time.perf_counter()
-        from relightable_textures.lt_addon.eigentransport import project_environment
+        from relightable_textures.lt_addon.transport.eigentransport import project_environment
 
         lw = project_environment(env, ds.directions, ds.solid_angles, row_order="bottom_first")
         t1 = time.perf_counter()
@@ -143,8 +142,9 @@ def main() -> None:
     print(f"\n== viewport update at {u['vertices']} vertices, d = {u['d']}, {u['directions']} "
           f"directions: project {u['project_ms']} ms + shade {u['shade_ms']} ms + attribute "
           f"write {u['write_ms']} ms = {u['total_ms']} ms (median)")
-    with open(args.json, "w") as fh:
-        json.dump(out, fh, indent=2)
+    from relightable_textures.lt_addon.io import atomic
+
+    atomic.write_json(args.json, out)
     print(f"\nwrote {args.json}")
 
 

@@ -70,7 +70,7 @@ def truths(scene, objects, R, spp):
 
 def single_bake_seconds(scene, objects, R):
     """Wall time of one 64-spp Cycles radiance bake of the same textures (2 bounces, a Sun)."""
-    from relightable_textures.lt_addon.hemisphere import direction_from_az_el
+    from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
     from relightable_textures.operators.cycles_bake import EnvironmentBake
 
     with EnvironmentBake(scene, objects, R, 64, 2, (8, 16), mode="radiance",
@@ -89,7 +89,7 @@ def _up(img, R):
 
 def errors_for(relight_fn, truth, R):
     """{angle: combined rel. RMSE over lights and objects} for relight_fn(obj_index, d, angle)."""
-    from relightable_textures.lt_addon.hemisphere import direction_from_az_el
+    from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
     from relightable_textures.operators import texture_transport as tx
 
     out = {}
@@ -105,7 +105,7 @@ def errors_for(relight_fn, truth, R):
 
 def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder):
     """Bake once at (S, ind_spp, res); one row per model fitted from that store."""
-    from relightable_textures.lt_addon import transport_texture as tt
+    from relightable_textures.lt_addon.transport import texture as tt
     from relightable_textures.operators import texture_transport as tx
     from relightable_textures.operators.steerable_bake import run
 
@@ -201,7 +201,7 @@ def lobes_points(scene, objects, truth, R):
 
 
 def front(rows, key="err_10deg"):
-    from relightable_textures.lt_addon.pareto import pareto_mask
+    from relightable_textures.devtools.pareto import pareto_mask
 
     mask = pareto_mask([r["bake_seconds"] for r in rows], [r[key] for r in rows])
     return [bool(m) for m in mask]
@@ -227,8 +227,8 @@ def table(rows, title):
 
 def write_presets(report, scene):
     """Presets from the measured front of PCA points (they have a live preview): cheapest,
-    knee and most accurate by the 10-degree error (lt_addon.pareto.choose_presets)."""
-    from relightable_textures.lt_addon.pareto import choose_presets
+    knee and most accurate by the 10-degree error (devtools.pareto.choose_presets)."""
+    from relightable_textures.devtools.pareto import choose_presets
 
     rows = [r for r in report["scenes"][scene]["rows"]
             if r["method"] == "transport" and r["model"] == "pca"]
@@ -246,10 +246,9 @@ def write_presets(report, scene):
                          "why": r["why"]}}
     path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
                         "operators", "transport_presets.json")
-    tmp = path + ".tmp"
-    with open(tmp, "w") as fh:
-        json.dump(out, fh, indent=1)
-    os.replace(tmp, path)
+    from relightable_textures.lt_addon.io import atomic
+
+    atomic.write_json(path, out, indent=1)
     print(f"presets written to {path}")
 
 
@@ -312,7 +311,7 @@ def main(argv=None):
     tag = args.scenes.replace(",", "_")
     with open(os.path.join(args.out, f"transport_textures_{tag}.md"), "w") as fh:
         fh.write("\n\n".join(md) + "\n")
-    from relightable_textures.lt_addon.pareto import write_csv
+    from relightable_textures.devtools.pareto import write_csv
 
     if args.write_presets:
         write_presets(report, next(iter(report["scenes"])))

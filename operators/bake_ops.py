@@ -232,7 +232,7 @@ def show_preview(scene, obj, kind: str) -> str:
         raise ValueError(f"unknown bake kind {kind!r}")
     path = bake_file(obj, kind, what)
     if kind == "steerable_texture":
-        from ..lt_addon.steerable_texture import SteerableTexture
+        from ..lt_addon.steerable.texture import SteerableTexture
 
         preview_nodes.install_preview(scene, obj, path, SteerableTexture.load(path),
                                       sun=scene.relight.sun)

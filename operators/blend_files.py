@@ -19,10 +19,11 @@ from __future__ import annotations
 
 import contextlib
 import os
-import secrets
 import sys
 
 import bpy
+
+from ..lt_addon.io import atomic
 
 BAKES_KEY = "relightable_bakes"
 
@@ -55,18 +56,12 @@ def save_atomically(path: str) -> None:
 
     A failure leaves ``path`` as it was (absent or the previous file) and no temporary behind.
     """
-    folder, base = os.path.split(os.path.abspath(path))
-    # A name that does not exist yet: Blender would keep a .blend1 backup of an existing one.
-    tmp = os.path.join(folder, f".{base}.{os.getpid()}-{secrets.token_hex(4)}.tmp.blend")
-    try:
+    # A fresh temporary name: Blender would keep a .blend1 backup of an existing file.
+    with atomic.atomic_path(path) as tmp:
         with blender_log_to_stderr():
             result = bpy.ops.wm.save_as_mainfile(filepath=tmp, copy=True, check_existing=False)
-        if "FINISHED" not in result or not os.path.getsize(tmp):
+        if "FINISHED" not in result or not os.path.exists(tmp) or not os.path.getsize(tmp):
             raise RuntimeError(f"Blender could not save {tmp}")
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
 
 
 def write_sample_scene(name: str, size: str, path: str) -> dict:

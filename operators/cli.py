@@ -22,6 +22,7 @@ import time
 import numpy as np
 
 from .. import __version__
+from ..lt_addon.io import atomic
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
 
@@ -38,11 +39,10 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from ..lt_addon.calibration import METHODS as CALIBRATIONS
-    from ..lt_addon.steerable_texture import FRAMES, STORAGE_MODES
+    from ..lt_addon.steerable.calibration import METHODS as CALIBRATIONS
+    from ..lt_addon.steerable.texture import FRAMES, STORAGE_MODES
     from ..samples import DESCRIPTIONS, SIZES
     from .cycles_bake import BAKE_MODES, WORLD_SAMPLING
-    from .presets import PRESETS
 
     parser = _Parser(
         prog="relight",
@@ -199,12 +199,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_bake_transport)
 
     p = sub.add_parser("analyze", help="how many CPCA clusters an object's transport needs "
-                       "(Mahajan 2007): JSON + PNG charts",
+                       "(Mahajan 2007): JSON (+ charts in a source checkout)",
                        description="Bakes the object's per-vertex transport (as bake-transport), "
                                    "measures patch dimensionality vs size (log-log slope, mu, "
                                    "p*), the CPCA cost per vertex over cluster counts and the "
-                                   "adaptive subdivision. Writes <object>_analysis.json, "
-                                   "<object>_dimensionality.png and <object>_cost.png; the "
+                                   "adaptive subdivision. Writes <object>_analysis.json (and, "
+                                   "from a source checkout with matplotlib, "
+                                   "<object>_dimensionality.png and <object>_cost.png); the "
                                    ".blend is not changed.")
     _add_transport_source_args(p)
     p.add_argument("--tol", type=float, default=1e-3, help="CPCA per-cluster unexplained "
@@ -216,25 +217,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="replace an existing analysis of the same object in --out")
     p.set_defaults(func=_cmd_analyze)
 
-    p = sub.add_parser("bench", help="sweep the knobs that cost time or bytes; JSON, CSV and "
-                       "PNG charts with the Pareto-optimal points",
-                       description="Texture scenes (bumps, noise): a grid over basis order, "
-                                   "samples and resolution, each stored at every precision, "
-                                   "against Cycles Sun-lamp references. Transport scenes "
-                                   "(statue, room): direction sets x eigentransport d x CPCA "
-                                   "clusters against a Cycles environment bake. Per point: bake "
-                                   "time (Cycles vs own), peak memory, stored bytes, preview "
-                                   "cost, rel. RMSE / PSNR / max error. --quick: test-size "
-                                   "scenes, a few minutes; default: demo-size scenes (tens of "
-                                   "minutes).")
-    p.add_argument("--scene", action="append", choices=("bumps", "noise", "statue", "room"),
-                   help="scene to sweep (repeatable; default: all four)")
-    p.add_argument("--quick", action="store_true", help="the small sweep (make bench)")
-    p.add_argument("--out", default="out/bench", metavar="DIR",
-                   help="output folder (default out/bench)")
-    p.add_argument("--write-presets", action="store_true", help="store the draft / balanced / "
-                   "production presets chosen from the bumps sweep's Pareto front")
-    p.set_defaults(func=_cmd_bench)
+    try:   # development verbs (bench) exist in a source checkout only, not in the extension
+        from ..devtools import bench_cli
+    except ImportError:
+        pass
+    else:
+        bench_cli.add_parser(sub)
 
     p = sub.add_parser("relight-vertices", help="shade a stored eigentransport bake (NumPy)")
     p.add_argument("file", metavar="FILE.blend")
@@ -340,8 +328,8 @@ def _cmd_info(args) -> int:
 
 
 #: paper name -> (module in lt_addon, report function)
-PAPER_CHECKS = {"ashikhmin2002": ("paper_checks", "ashikhmin2002_report"),
-                "mahajan2007": ("paper_checks_mahajan", "mahajan2007_report")}
+PAPER_CHECKS = {"ashikhmin2002": ("checks.ashikhmin2002", "ashikhmin2002_report"),
+                "mahajan2007": ("checks.mahajan2007", "mahajan2007_report")}
 
 
 def _cmd_validate(args) -> int:
@@ -512,7 +500,7 @@ def _cmd_bake_textures(args) -> int:
     # summary said 14 s for a 52 s run)
     t["truth_seconds"] = round(truth_seconds, 4)
     t["wall_total"] = round(time.perf_counter() - started, 4)
-    _write_json_atomically(os.path.splitext(report["exr"])[0] + ".json", report)
+    atomic.write_json(os.path.splitext(report["exr"])[0] + ".json", report)
     print(f"baked {obj.name}: {report['exr']} ({report['bytes']['exr_file']} bytes); "
           f"{t['wall_total']:.2f} s in all: bake {t['total_seconds']:.2f} s "
           f"({t['cycles_bake_seconds']:.2f} s in Cycles), truth {truth_seconds:.2f} s")
@@ -659,7 +647,7 @@ def _cmd_bake_transport(args) -> int:
     if args.truth:
         env = vertex_relight.world_environment(scene)
         if env is None or np.ptp(env) == 0:
-            from ..lt_addon.transport_error import sun_sky_environment
+            from ..lt_addon.transport.error import sun_sky_environment
 
             env = sun_sky_environment(64, [0.4, -0.3, 0.8], row_order="bottom_first")
         truth = transport_bake.truth_errors(scene, obj, model, direction_set, env,
@@ -736,44 +724,6 @@ def _cmd_analyze(args) -> int:
     return EXIT_OK
 
 
-def _cmd_bench(args) -> int:
-    from . import bench
-
-    out_dir = os.path.abspath(args.out)
-    parent = os.path.dirname(out_dir)
-    if not os.path.isdir(out_dir):
-        if not os.path.isdir(parent):
-            raise CliError(f"output folder's parent does not exist: {parent}")
-        os.makedirs(out_dir)
-    if not _can_create_in(out_dir):
-        raise CliError(f"output folder is not writable: {out_dir}")
-    scenes = args.scene or ["bumps", "noise", "statue", "room"]
-    if args.write_presets and "bumps" not in scenes:
-        raise CliError("--write-presets chooses the presets from the bumps sweep; add "
-                       "--scene bumps")
-    mode = "quick" if args.quick else "standard"
-    if args.write_presets and args.quick:
-        raise CliError("--write-presets needs the standard (demo-size) sweep; drop --quick")
-    show = _progress_printer("bench")
-    for name in scenes:
-        try:
-            report = bench.bench_scene(name, mode, out_dir, on_progress=show)
-        except KeyboardInterrupt:
-            print(f"bench: cancelled during {name}; finished scenes are in {out_dir}",
-                  file=sys.stderr)
-            return 130
-        print(bench.format_report(report))
-        if args.write_presets and name == "bumps":
-            from .presets import write_presets
-
-            try:
-                path = write_presets(report)
-            except ValueError as exc:
-                raise CliError(str(exc)) from None
-            print(f"  presets written to {path}")
-    return EXIT_OK
-
-
 def _check_output_dir(out: str | None, blend_path: str) -> str:
     """The output folder (default next to the .blend), checked creatable and writable."""
     from .steerable_bake import default_output_dir
@@ -789,15 +739,8 @@ def _check_output_dir(out: str | None, blend_path: str) -> str:
     return out_dir
 
 
-def _write_json_atomically(path: str, data: dict) -> None:
-    tmp = os.path.join(os.path.dirname(path), f".{os.path.basename(path)}.{os.getpid()}.tmp")
-    with open(tmp, "w") as fh:
-        json.dump(data, fh, indent=2)
-    os.replace(tmp, path)
-
-
 def _rewrite_report(report: dict) -> None:
-    _write_json_atomically(os.path.splitext(report["sidecar"])[0] + ".json", report)
+    atomic.write_json(os.path.splitext(report["sidecar"])[0] + ".json", report)
 
 
 def _cmd_relight_vertices(args) -> int:
@@ -805,6 +748,7 @@ def _cmd_relight_vertices(args) -> int:
 
     import bpy
 
+    from ..lt_addon.transport.sidecar import read_environment_exr
     from . import vertex_relight
 
     path = _check_input_blend(args.file)
@@ -814,7 +758,7 @@ def _cmd_relight_vertices(args) -> int:
         if not os.path.isfile(args.env):
             raise CliError(f"environment file not found: {args.env}")
         try:
-            env = vertex_relight.read_environment_exr(args.env)
+            env = read_environment_exr(args.env)
         except (ValueError, OSError) as exc:
             raise CliError(str(exc)) from None
     obj = _open_object(path, args.object)
@@ -834,17 +778,16 @@ def _cmd_relight_vertices(args) -> int:
         values = data.shade(env, args.rotate, 1.0, light).astype(np.float32)
     for w in caught:
         print(f"relight: warning: {w.message}", file=sys.stderr)
-    tmp = out + f".{os.getpid()}.tmp.npy"
-    np.save(tmp, values)
-    os.replace(tmp, out)
+    with atomic.atomic_path(out) as tmp:
+        np.save(tmp, values)
     print(json.dumps({"object": obj.name, "vertices": int(values.shape[0]), "d": data.model.d,
                       "mean": [float(v) for v in values.mean(axis=0)], "out": out}))
     return EXIT_OK
 
 
 def _cmd_relight(args) -> int:
-    from ..lt_addon import exrio
-    from ..lt_addon.hemisphere import direction_from_az_el
+    from ..lt_addon.io import exrio
+    from ..lt_addon.sphere.hemisphere import direction_from_az_el
     from . import steerable_bake
 
     path = _check_input_blend(args.file)
@@ -879,8 +822,8 @@ def _cmd_relight(args) -> int:
 
 
 def _relight_transport(args, obj, out) -> int:
-    from ..lt_addon import exrio
-    from ..lt_addon.hemisphere import direction_from_az_el
+    from ..lt_addon.io import exrio
+    from ..lt_addon.sphere.hemisphere import direction_from_az_el
     from . import texture_transport as tx
     from .blend_files import bake_file
 
@@ -947,11 +890,11 @@ def _cmd_compare(args) -> int:
 
 
 def _cmd_light_env(args) -> int:
-    from ..lt_addon import exrio
-    from ..lt_addon.hemisphere import direction_from_az_el
-    from ..lt_addon.steerable import environment_image, paper_basis
-    from ..lt_addon.calibration import make_calibration
-    from ..lt_addon.hemisphere import hemisphere_to_disk
+    from ..lt_addon.io import exrio
+    from ..lt_addon.sphere.hemisphere import direction_from_az_el
+    from ..lt_addon.steerable.basis import environment_image, paper_basis
+    from ..lt_addon.steerable.calibration import make_calibration
+    from ..lt_addon.sphere.hemisphere import hemisphere_to_disk
 
     if not 2 <= args.order <= 12:
         raise CliError(f"--order must be in 2..12, got {args.order}")

@@ -17,7 +17,7 @@ import tempfile
 import bpy
 import numpy as np
 
-from ..lt_addon import exrio
+from ..lt_addon.io import atomic, exrio
 from .cycles_bake import BakeInputError
 
 
@@ -68,12 +68,10 @@ def write_png(path: str, rgb: np.ndarray) -> None:
         px = np.ones((h, w, 4), np.float32)
         px[..., :3] = _srgb(rgb)
         img.pixels.foreach_set(px.ravel())
-        tmp = os.path.join(os.path.dirname(os.path.abspath(path)),
-                           f".{os.path.basename(path)}.{os.getpid()}.tmp.png")
-        img.filepath_raw = tmp
-        img.file_format = "PNG"
-        img.save()
-        os.replace(tmp, path)
+        with atomic.atomic_path(path) as tmp:
+            img.filepath_raw = tmp
+            img.file_format = "PNG"
+            img.save()
     finally:
         bpy.data.images.remove(img)
 
@@ -81,7 +79,7 @@ def write_png(path: str, rgb: np.ndarray) -> None:
 def compare(scene, objects, azimuth: float, elevation: float, sun_angle: float, out_png: str,
             samples: int = 128, resolution: int | None = None) -> dict:
     """Render preview vs Cycles Sun from the scene camera; write the PNG; return figures."""
-    from ..lt_addon.hemisphere import direction_from_az_el
+    from ..lt_addon.sphere.hemisphere import direction_from_az_el
     from mathutils import Vector
 
     from .texture_transport import refresh_preview_tables

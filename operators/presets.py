@@ -3,7 +3,7 @@
 ``presets.json`` next to this file holds, per preset, the settings chosen from the Pareto front
 of bake time vs error that ``relight bench --scene bumps --write-presets`` measured (draft: the
 cheapest front point; production: the most accurate; balanced: the knee, see
-:func:`..lt_addon.pareto.choose_presets`), the figures measured for it and the rule that chose
+:func:`..devtools.pareto.choose_presets`), the figures measured for it and the rule that chose
 it. The panel and ``relight bake-textures --preset`` read it. ``FALLBACK`` is used only if the
 file is missing or unreadable, and the panel then says the presets are not measured.
 """
@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import os
-import time
 from dataclasses import replace
 
 from .steerable_bake import TextureBakeSettings
@@ -68,22 +67,3 @@ def preset_figures() -> dict:
     return {name: {**p["figures"], "why": p["why"], "scene": source.get("scene", "?"),
                    "machine": source.get("machine", "?")}
             for name, p in data["presets"].items()}
-
-
-def write_presets(report: dict, path: str = PRESETS_PATH) -> str:
-    """Store the presets a ``standard`` bench report of a texture scene chose (atomically).
-
-    Raises ValueError for a quick (test-size) sweep: its tiny resolutions are not presets."""
-    if report.get("mode") != "standard":
-        raise ValueError("presets come from the standard (demo-size) sweep, not --quick")
-    data = {"source": {"command": f"relight bench --scene {report['scene']} --write-presets",
-                       "scene": f"{report['scene']}-{report['size']}",
-                       "machine": report["machine"], "date": time.strftime("%Y-%m-%d"),
-                       "reference": {k: v for k, v in report["reference"].items()
-                                     if k != "images"}},
-            "presets": report["presets"]}
-    tmp = f"{path}.{os.getpid()}.tmp"
-    with open(tmp, "w") as fh:
-        json.dump(data, fh, indent=2)
-    os.replace(tmp, path)
-    return path

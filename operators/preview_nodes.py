@@ -8,9 +8,9 @@ so moving a slider (or the Sun lamp) needs no Python at all:
 2. disk point ``(x0, y0) = (dx, dy) / sqrt(1 + dz)`` (Ashikhmin & Shirley eq. 7);
 3. 1D coefficients ``c_i(x) = a_i cos(i w x + 3 (i - 1) pi / 2)``, products ``c_ij = c_i(x0) c_j(y0)``;
 4. ``S = sum_ij c_ij * tile_ij`` from one padded atlas image (one GPU sampler, see
-   :mod:`..lt_addon.atlas`), clamped at 0 (sec. 7.1);
+   :mod:`..lt_addon.io.atlas`), clamped at 0 (sec. 7.1);
 5. calibration gain ``max(dz, 0) / max(E(w0), floor * E_zenith)`` with
-   ``E(w0) = sum_ij c_ij E_ij`` (:mod:`..lt_addon.calibration`, steerable cos-law);
+   ``E(w0) = sum_ij c_ij E_ij`` (:mod:`..lt_addon.steerable.calibration`, steerable cos-law);
 6. output ``S * gain * intensity * colour`` (times an albedo input in irradiance mode).
 
 This equals :meth:`SteerableTexture.relight` up to float32 rounding and the half-float atlas
@@ -28,10 +28,9 @@ import math
 import os
 
 import bpy
-import numpy as np
 
-from ..lt_addon import exrio
-from ..lt_addon.atlas import atlas_layout, pack_atlas
+from ..lt_addon.io import exrio
+from ..lt_addon.io.atlas import atlas_layout, pack_atlas
 from .compat import ensure_node_tree
 
 GROUP_PREFIX = "Steerable Illumination"

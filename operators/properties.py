@@ -5,7 +5,7 @@ from __future__ import annotations
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
-from ..lt_addon.steerable_texture import STORAGE_MODES
+from ..lt_addon.steerable.texture import STORAGE_MODES
 from ..samples import DESCRIPTIONS, SIZES
 from .compat import path_options
 from .presets import PRESETS, settings_from_preset

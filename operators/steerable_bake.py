@@ -9,7 +9,6 @@ until :func:`write_bake` runs on a finished result.
 
 from __future__ import annotations
 
-import json
 import os
 import time
 from dataclasses import asdict, dataclass, field
@@ -18,9 +17,10 @@ import bpy
 import numpy as np
 
 from .. import __version__
-from ..lt_addon.sampled_basis import build_sampled_basis
-from ..lt_addon.steerable import paper_basis
-from ..lt_addon.steerable_texture import FRAMES, STORAGE_MODES, SteerableTexture
+from ..lt_addon.io import atomic
+from ..lt_addon.steerable.sampled_basis import build_sampled_basis
+from ..lt_addon.steerable.basis import paper_basis
+from ..lt_addon.steerable.texture import FRAMES, STORAGE_MODES, SteerableTexture
 from .cycles_bake import (BAKE_MODES, WORLD_SAMPLING, BakeInputError, EnvironmentBake,
                           check_bakeable, check_memory)
 
@@ -99,7 +99,7 @@ def bake_steerable_texture(scene, obj, settings: TextureBakeSettings):
     settings.validate()
     check_bakeable(obj)
     start = time.perf_counter()
-    from ..lt_addon.uv_layout import uv_overlap_report
+    from ..lt_addon.geometry.uv_layout import uv_overlap_report
     from .meshes import uv_triangles
 
     uv_tris = uv_triangles(obj)
@@ -210,10 +210,7 @@ def write_bake(result: BakeResult, obj, out_dir: str, settings: TextureBakeSetti
         "preview_cost": {"basis_images": n, "multiply_adds_per_texel": n * 3},
         **result.figures,
     }
-    tmp = json_path + f".{os.getpid()}.tmp"
-    with open(tmp, "w") as fh:
-        json.dump(report, fh, indent=2)
-    os.replace(tmp, json_path)
+    atomic.write_json(json_path, report)
     record_bake(obj, exr_path, report)
     return report
 
@@ -255,7 +252,7 @@ def truth_directions(texture, count: int = 5) -> list:
     -------
     list of ndarray, shape (3,)
     """
-    from ..lt_addon.hemisphere import direction_from_az_el, hemisphere_to_disk
+    from ..lt_addon.sphere.hemisphere import direction_from_az_el, hemisphere_to_disk
 
     elevations = np.linspace(5.0, 85.0, max(count, 2))[:count] if count > 1 else np.array([45.0])
     out = []

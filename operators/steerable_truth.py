@@ -17,9 +17,9 @@ import math
 
 import numpy as np
 
-from ..lt_addon.hemisphere import hemisphere_to_disk, normalize_directions
-from ..lt_addon.storage import reconstruction_error
-from ..lt_addon.steerable import environment_image, light_profile_2d
+from ..lt_addon.sphere.hemisphere import hemisphere_to_disk, normalize_directions
+from ..lt_addon.io.storage import reconstruction_error
+from ..lt_addon.steerable.basis import environment_image, light_profile_2d
 from .cycles_bake import EnvironmentBake
 
 
@@ -52,7 +52,7 @@ def ground_truth(scene, obj, texture, directions, samples: int, bounces: int, mo
 
     Each dict has ``direction``, ``azimuth``/``elevation`` (degrees) and ``errors``:
     ``{"same_light": {...}, "same_light_4x": {...}, "sun": {...}}`` with the metrics of
-    :func:`..lt_addon.storage.reconstruction_error` (``rel_fro`` is the relative RMSE), plus
+    :func:`..lt_addon.io.storage.reconstruction_error` (``rel_fro`` is the relative RMSE), plus
     ``images``: relit (clamped), same_light (the 4x-sample truth when computed) and sun arrays.
     """
     r = texture.resolution
@@ -103,7 +103,7 @@ def contact_sheet(rows: list[dict], path: str, max_rows: int = 4) -> dict:
     ``rows`` are the per-direction dicts of :func:`ground_truth` (with ``images``). One
     exposure for the whole sheet maps the 99th percentile of the truths to white.
     """
-    from ..lt_addon.contact_sheet import linear_to_srgb8, tile, write_png
+    from ..lt_addon.io.contact_sheet import linear_to_srgb8, tile, write_png
 
     rows = rows[:max_rows]
     truths = np.concatenate([r["images"]["same_light"].ravel() for r in rows])

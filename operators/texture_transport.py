@@ -5,7 +5,7 @@ For every selected object, in the same Cycles calls:
 1. an **albedo** texture (DIFFUSE colour pass, no light);
 2. the **direct transport** ``T[s]``: one irradiance bake per direction ``w_s`` of a hemisphere
    set under a hard Sun (angle 0, strength 1, 1 sample: noise-free apart from anti-aliasing),
-   streamed to a float16 store on disk (:class:`..lt_addon.transport_texture.TransportStore`)
+   streamed to a float16 store on disk (:class:`..lt_addon.transport.texture.TransportStore`)
    one direction at a time, so memory holds one image, never ``T``;
 3. the **indirect** light as its own term, when the scene has bounces: a low-order steerable
    bake of the indirect pass only (Ashikhmin & Shirley's lobes are accurate for light that is
@@ -31,9 +31,9 @@ import bpy
 import numpy as np
 
 from .. import __version__
-from ..lt_addon import exrio
-from ..lt_addon import transport_texture as tt
-from ..lt_addon.hemisphere import direction_from_az_el
+from ..lt_addon.io import atomic, exrio
+from ..lt_addon.transport import texture as tt
+from ..lt_addon.sphere.hemisphere import direction_from_az_el
 from .cycles_bake import BakeInputError, EnvironmentBake, check_bakeable, check_memory
 from .steerable_bake import Progress
 
@@ -252,9 +252,9 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
     # 3. indirect light: a low-order steerable bake of the indirect pass
     indirects = [None] * len(objects)
     if do_indirect:
-        from ..lt_addon.sampled_basis import build_sampled_basis
-        from ..lt_addon.steerable import paper_basis
-        from ..lt_addon.steerable_texture import SteerableTexture
+        from ..lt_addon.steerable.sampled_basis import build_sampled_basis
+        from ..lt_addon.steerable.basis import paper_basis
+        from ..lt_addon.steerable.texture import SteerableTexture
 
         t0 = time.perf_counter()
         basis = paper_basis(settings.indirect_order)
@@ -272,7 +272,7 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
                 yield Progress(step + k, total, f"indirect bake {k + 1}/{sampled.n_lights}")
             seconds["indirect_cycles"] = session.bake_seconds
             calls += session.bake_calls
-        from ..lt_addon.uv_layout import uv_coverage
+        from ..lt_addon.geometry.uv_layout import uv_coverage
         from .meshes import uv_triangles
 
         for i, o in enumerate(objects):
@@ -319,9 +319,9 @@ def fit_model(store, settings: TransportTextureSettings, albedo):
 def steerable_from_store(store, albedo, order: int = 7):
     """The steerable basis of Ashikhmin & Shirley by quadrature over the baked directions:
     noise-free, any order, radiance of the direct light (albedo applied)."""
-    from ..lt_addon.sampled_basis import build_sampled_basis
-    from ..lt_addon.steerable import paper_basis
-    from ..lt_addon.steerable_texture import SteerableTexture
+    from ..lt_addon.steerable.sampled_basis import build_sampled_basis
+    from ..lt_addon.steerable.basis import paper_basis
+    from ..lt_addon.steerable.texture import SteerableTexture
 
     basis = paper_basis(order)
     sampled = build_sampled_basis(basis)
@@ -442,7 +442,7 @@ def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: d
                started: float | None = None) -> list:
     """Write per object: albedo + indirect EXRs, the model (NPZ) and the report JSON; record the
     bake on the object. Returns the reports."""
-    from ..lt_addon.steerable_texture import SteerableTexture
+    from ..lt_addon.steerable.texture import SteerableTexture
     from .steerable_bake import record_kind
 
     t0 = time.perf_counter()
@@ -453,10 +453,8 @@ def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: d
             b.store_path = b.store.commit()
         files = {"transport": b.store_path}
         files["albedo"] = base + "_albedo.exr"
-        tmp = base + f"_albedo.{os.getpid()}.tmp.exr"
-        exrio.write_exr(tmp, {c: b.albedo[..., i] for i, c in enumerate("RGB")},
+        exrio.write_exr(files["albedo"], {c: b.albedo[..., i] for i, c in enumerate("RGB")},
                         {"format": "relightable_textures.albedo"}, pixel_type="half")
-        os.replace(tmp, files["albedo"])
         if b.indirect is not None:
             files["indirect"] = base + "_indirect.exr"
             b.indirect.save(files["indirect"], "half")
@@ -489,10 +487,7 @@ def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: d
         if started is not None:
             report["timings"]["wall_total"] = round(time.perf_counter() - started, 3)
         path = base + "_texture_report.json"
-        tmp = path + f".{os.getpid()}.tmp"
-        with open(tmp, "w") as fh:
-            json.dump(report, fh, indent=2, default=float)
-        os.replace(tmp, path)
+        atomic.write_json(path, report, default=float)
         report["report"] = os.path.abspath(path)
         record_kind(obj, KIND, path, {"directions": result.directions.spec,
                                       "resolution": s.resolution, "model": s.model,
@@ -536,9 +531,8 @@ def save_model(path: str, model, result: TransportTextureResult) -> None:
                       resolution=np.array(model.resolution), residual=np.array(model.residual),
                       dims=model.dims, V=np.concatenate(model.V, axis=1),
                       U=np.concatenate([u.ravel() for u in model.U]).astype(np.float16))
-    tmp = path + f".{os.getpid()}.tmp.npz"
-    np.savez(tmp, **arrays)
-    os.replace(tmp, path)
+    with atomic.atomic_path(path) as tmp:
+        np.savez(tmp, **arrays)
 
 
 def load_model(path: str):
@@ -562,7 +556,7 @@ def load_model(path: str):
 
 def load_bake(report_path: str) -> tuple:
     """(ObjectBake, TransportStore, report) from a report written by :func:`write_bake`."""
-    from ..lt_addon.steerable_texture import SteerableTexture
+    from ..lt_addon.steerable.texture import SteerableTexture
 
     with open(report_path) as fh:
         report = json.load(fh)
@@ -722,9 +716,8 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
     wall = round(time.perf_counter() - started, 3)
     for rep in reports:   # the wall time of everything the verb did, in the file too
         rep["timings"]["wall_total"] = wall
-        with open(rep["report"] + ".tmp", "w") as fh:
-            json.dump({k: v for k, v in rep.items() if k != "report"}, fh, indent=2, default=float)
-        os.replace(rep["report"] + ".tmp", rep["report"])
+        atomic.write_json(rep["report"], {k: v for k, v in rep.items() if k != "report"},
+                          default=float)
     return reports
 
 

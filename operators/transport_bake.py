@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..lt_addon.io import atomic
 from .cycles_bake import BakeInputError, EnvironmentBake, check_bakeable, check_memory
 
 
@@ -104,7 +105,7 @@ class TransportSettings:
 
     ``clusters``: None = one global eigentransport (Nowrouzezahrai 2008); an int k = CPCA with k
     clusters; "auto" = Mahajan 2007's adaptive subdivision, started from the count predicted by
-    the dimensionality analysis (:func:`..lt_addon.cluster_analysis.auto_cpca`), keeping a
+    the dimensionality analysis (:func:`..lt_addon.transport.cluster_analysis.auto_cpca`), keeping a
     split only when the cost falls. With clusters, ``energy`` E is a per-cluster tolerance: each
     cluster keeps the fewest vectors leaving at most 1 - E of its energy (``coeffs`` = a fixed
     count per cluster; "auto" needs ``energy``)."""
@@ -118,7 +119,7 @@ class TransportSettings:
     clusters: int | str | None = None
 
     def validate(self):
-        from ..lt_addon.directions import parse_direction_spec
+        from ..lt_addon.sphere.directions import parse_direction_spec
 
         try:
             ds = parse_direction_spec(self.directions)
@@ -155,8 +156,9 @@ def fit_model(T: np.ndarray, settings: TransportSettings, metadata: dict, edges=
     ``edges`` (E, 2): the mesh edges, needed by ``clusters="auto"`` (the dimensionality
     analysis that picks the starting count grows patches along them).
     Raises BakeInputError when a fixed cluster count exceeds the vertex count."""
-    from ..lt_addon import cluster_analysis, cpca
-    from ..lt_addon.eigentransport import fit_eigentransport
+    from ..lt_addon.transport import cluster_analysis
+    from ..lt_addon.transport import cpca
+    from ..lt_addon.transport.eigentransport import fit_eigentransport
 
     T = np.asarray(T, dtype=np.float64)
     if settings.clusters is None:
@@ -191,13 +193,13 @@ def fit_and_write(result: TransportBakeResult, obj, direction_set, settings: Tra
 
     Returns the report dict.
     """
-    import json
     import os
 
-    from ..lt_addon.cpca import CPCA
+    from ..lt_addon.transport.cpca import CPCA
     from .meshes import mesh_edges
     from .steerable_bake import record_kind
-    from .vertex_relight import KIND, mesh_positions_normals, save_sidecar
+    from ..lt_addon.transport.sidecar import save_sidecar
+    from .vertex_relight import KIND, mesh_positions_normals
 
     t0 = time.perf_counter()
     model = fit_model(result.transport, settings, {"directions": direction_set.spec,
@@ -232,10 +234,7 @@ def fit_and_write(result: TransportBakeResult, obj, direction_set, settings: Tra
         "bytes": {"sidecar_file": nbytes, **model.storage_bytes()},
         **(figures or {}),
     }
-    tmp = os.path.join(out_dir, f".{safe}_transport.json.{os.getpid()}.tmp")
-    with open(tmp, "w") as fh:
-        json.dump(report, fh, indent=2)
-    os.replace(tmp, os.path.join(out_dir, f"{safe}_transport.json"))
+    atomic.write_json(os.path.join(out_dir, f"{safe}_transport.json"), report)
     record_kind(obj, KIND, path, {"d": model.d, "directions": direction_set.spec,
                                   "model": report["model"],
                                   "clusters": model.n_clusters if clustered else 1,
@@ -253,8 +252,8 @@ def truth_errors(scene, obj, model, direction_set, environment, bounces: int, sa
 
     With ``transport`` (the full (V, S) bake) the error of shading with *all* S directions is
     reported too: the floor that the direction sampling alone leaves, whatever d is."""
-    from ..lt_addon.cpca import CPCA
-    from ..lt_addon.eigentransport import project_environment, relative_rms_error
+    from ..lt_addon.transport.cpca import CPCA
+    from ..lt_addon.transport.eigentransport import project_environment, relative_rms_error
 
     t0 = time.perf_counter()
     truth = bake_environment_truth(scene, obj, environment, bounces, samples)

@@ -1,7 +1,7 @@
 """Live viewport preview of a transport-texture PCA model: no Python per light change (bpy).
 
 The model relights a sun from ``w0`` as ``albedo * sum_k c_k(w0) U_k`` (+ the indirect term).
-``c_k`` is tabulated over the hemisphere disk (:func:`..lt_addon.transport_texture.
+``c_k`` is tabulated over the hemisphere disk (:func:`..lt_addon.transport.texture.
 coefficient_tables`), so the node group only needs texture lookups:
 
 1. the light's disk point ``(x0, y0) = (dx, dy) / sqrt(1 + dz)`` -> table coordinate
@@ -25,9 +25,9 @@ import os
 import bpy
 import numpy as np
 
-from ..lt_addon import exrio
-from ..lt_addon import transport_texture as tt
-from ..lt_addon.atlas import atlas_layout, pack_atlas
+from ..lt_addon.io import exrio
+from ..lt_addon.transport import texture as tt
+from ..lt_addon.io.atlas import atlas_layout, pack_atlas
 from . import preview_nodes as pn
 
 GROUP_PREFIX = "Relight Transport"

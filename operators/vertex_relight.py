@@ -1,125 +1,27 @@
 """Eigentransport relighting of baked per-vertex transport (bpy side).
 
-Storage: one ``.npz`` sidecar per object (``<object>_transport.npz``) holding the mean, the d
-eigentransports, the per-vertex coefficients (float32), the sample directions and solid angles,
-and the vertices' world positions and normals at bake time (for local lights), plus JSON
-metadata. Coefficients are not stored as mesh attributes: a GPU material reads at most ~15
-vertex attributes (DESIGN.md sec. 4) and d is typically 20-150, and the shading is a NumPy dot
-product on the CPU anyway; only its result goes to the GPU as one colour attribute.
-
-Shading (white Lambertian, so values are irradiance / pi, comparable with a Cycles DIFFUSE bake
-without the colour pass): ``B = 1/pi (m . Lw + C (E Lw))`` with ``Lw_j = L(w_j) dw_j`` from the
-environment (optionally rotated, paper sec. 5) and/or a point light (sec. 4.2.1).
-
-A bake with ``--clusters`` stores a CPCA model (Mahajan 2007) in the same sidecar slot instead;
-both models have the same ``shade`` / ``shade_local`` interface, so the preview path is one. With
-the scene's ``show_clusters`` toggle the preview colours each vertex by its CPCA cluster.
+The sidecar format and the shading are bpy-free (:mod:`..lt_addon.transport.sidecar`); this
+module reads what Blender holds (the world's environment, the evaluated mesh, the point lamp)
+and writes the result: one colour attribute per object, the only thing that goes to the GPU.
+Coefficients are not stored as mesh attributes: a GPU material reads at most ~15 vertex
+attributes (DESIGN.md sec. 4) and d is typically 20-150. With the scene's ``show_clusters``
+toggle the preview colours each vertex by its CPCA cluster.
 """
 
 from __future__ import annotations
 
-import json
-import math
 import os
-import secrets
 import time
 
 import bpy
 import numpy as np
 
-from ..lt_addon import cpca as cpca_mod
-from ..lt_addon import eigentransport as et_mod
-from ..lt_addon import exrio
-from ..lt_addon.directions import DirectionSet
+from ..lt_addon.transport.sidecar import TransportData
 
 KIND = "eigentransport"
 SHADING_ATTRIBUTE = "relight_shading"
 #: Scene property holding the last vertex-preview warning (e.g. a lamp inside the hull).
 WARNING_KEY = "relight_vertex_warning"
-
-
-# ---------------------------------------------------------------------------------------------
-# sidecar files
-
-
-def save_sidecar(path: str, model, direction_set: DirectionSet, positions, normals,
-                 metadata: dict) -> int:
-    """Write the ``.npz`` sidecar atomically; returns its size in bytes."""
-    arrays = model.to_arrays()
-    arrays.update(
-        directions=np.asarray(direction_set.directions, np.float64),
-        solid_angles=np.asarray(direction_set.solid_angles, np.float64),
-        direction_set=np.array(json.dumps(direction_set.to_dict())),
-        positions=np.asarray(positions, np.float32), normals=np.asarray(normals, np.float32),
-        bake=np.array(json.dumps(metadata)))
-    folder, base = os.path.split(os.path.abspath(path))
-    tmp = os.path.join(folder, f".{base}.{os.getpid()}-{secrets.token_hex(4)}.tmp.npz")
-    try:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **arrays)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-    return os.path.getsize(path)
-
-
-class TransportData:
-    """A loaded sidecar: the model (an Eigentransport or a CPCA), its direction set, vertex
-    positions/normals and metadata."""
-
-    def __init__(self, path: str):
-        if not os.path.isfile(path):
-            raise FileNotFoundError(f"transport sidecar not found: {path}")
-        with np.load(path, allow_pickle=False) as z:
-            self.model = cpca_mod.model_from_arrays(z)
-            params = json.loads(str(z["direction_set"][()]))
-            self.direction_set = DirectionSet(z["directions"], z["solid_angles"],
-                                              params.get("kind", "custom"),
-                                              params.get("params", {}))
-            self.positions = np.asarray(z["positions"], np.float64)
-            self.normals = np.asarray(z["normals"], np.float64)
-            self.bake = json.loads(str(z["bake"][()]))
-        self.path = path
-
-    def weighted_environment(self, env, rotate_deg: float = 0.0) -> np.ndarray:
-        """``Lw`` (S, 3) of an equirect environment (bottom row first), rotated about +z."""
-        ds = self.direction_set
-        if not rotate_deg % 360.0:
-            return et_mod.project_environment(env, ds.directions, ds.solid_angles,
-                                              row_order="bottom_first")
-        radiance = et_mod.sample_equirect(env, ds.directions, row_order="bottom_first")
-        R = et_mod.rotation_about_axis([0.0, 0.0, 1.0], rotate_deg)
-        return et_mod.rotate_environment_samples(radiance, ds, R)
-
-    def shade(self, env=None, rotate_deg: float = 0.0, strength: float = 1.0,
-              point_light=None) -> np.ndarray:
-        """Per-vertex outgoing radiance of a white Lambertian surface, shape (V, 3), float64,
-        never negative (a truncated eigentransport or the point light's nearest-direction
-        approximation can dip below 0 -- measured -0.157 with a lamp inside the hull -- and
-        light cannot).
-
-        ``point_light`` = (position (3,), power W, colour (3,)).
-        """
-        out = np.zeros((self.model.n_vertices, 3))
-        if env is not None:
-            out += self.model.shade(strength * self.weighted_environment(env, rotate_deg))
-        if point_light is not None:
-            pos, power, color = point_light
-            W = et_mod.point_light_weights(self.positions, self.normals, self.direction_set,
-                                           pos, power)
-            out += self.model.shade_local(W)[:, None] * np.asarray(color, np.float64)[None, :]
-        return np.maximum(out, 0.0)
-
-    @property
-    def is_clustered(self) -> bool:
-        return isinstance(self.model, cpca_mod.CPCA)
-
-    def cluster_colors(self) -> np.ndarray:
-        """(V, 3) linear RGB: one colour per CPCA cluster (one colour for eigentransport)."""
-        labels = (self.model.labels if self.is_clustered
-                  else np.zeros(self.model.n_vertices, dtype=np.int64))
-        return cpca_mod.cluster_colors(labels)
 
 
 def world_environment(scene):
@@ -146,16 +48,6 @@ def world_environment(scene):
     img.pixels.foreach_get(px)
     rgb = px.reshape(h, w, img.channels)[..., :3].astype(np.float64)
     return rgb * strength
-
-
-def read_environment_exr(path: str) -> np.ndarray:
-    """An equirect EXR (R, G, B channels) as (H, W, 3) float64, bottom row first."""
-    channels, _ = exrio.read_exr(path)
-    missing = [c for c in "RGB" if c not in channels]
-    if missing:
-        raise ValueError(f"{path} has no {'/'.join(missing)} channel(s); need an RGB "
-                         "equirectangular EXR")
-    return np.stack([channels[c] for c in "RGB"], -1).astype(np.float64)
 
 
 def mesh_positions_normals(obj) -> tuple[np.ndarray, np.ndarray]:

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from relightable_textures.lt_addon import exrio
+from relightable_textures.lt_addon.io import exrio
 
 
 def render_rgb(scene, tmp_path, resolution: int, engine: str = "CYCLES") -> np.ndarray:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from relight_cli import assert_refused, relight
 
-from relightable_textures.lt_addon import exrio
+from relightable_textures.lt_addon.io import exrio
 
 TINY = ["--method", "lobes", "--resolution", "16", "--samples", "4", "--order", "3",
         "--bounces", "0"]
@@ -76,9 +76,9 @@ def test_preview_survives_save_and_reopen(baked, tmp_path):
 
 
 def test_relight_and_light_env_write_float_exrs(baked, tmp_path):
-    from relightable_textures.lt_addon.calibration import make_calibration
-    from relightable_textures.lt_addon.hemisphere import direction_from_az_el, hemisphere_to_disk
-    from relightable_textures.lt_addon.steerable import environment_image, paper_basis
+    from relightable_textures.lt_addon.steerable.calibration import make_calibration
+    from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el, hemisphere_to_disk
+    from relightable_textures.lt_addon.steerable.basis import environment_image, paper_basis
 
     folder, blend, _ = baked
     out = tmp_path / "relit.exr"

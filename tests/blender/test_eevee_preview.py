@@ -10,7 +10,7 @@ import numpy as np
 from render_check import render_rgb
 
 from relightable_textures import samples
-from relightable_textures.lt_addon.hemisphere import direction_from_az_el
+from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
 
 
 def test_eevee_renders_the_preview_group_like_numpy(fresh_scene, tmp_path):
@@ -43,9 +43,10 @@ def test_eevee_renders_the_transport_preview_like_its_numpy_twin(fresh_scene, tm
     the GPU's filter precision; eigen lookups are Closest as above."""
     import bpy
 
-    from relightable_textures.lt_addon import exrio, transport_texture as tt
-    from relightable_textures.lt_addon.atlas import unpack_atlas
-    from relightable_textures.lt_addon.hemisphere import az_el_from_direction, disk_to_hemisphere
+    from relightable_textures.lt_addon.io import exrio
+    from relightable_textures.lt_addon.transport import texture as tt
+    from relightable_textures.lt_addon.io.atlas import unpack_atlas
+    from relightable_textures.lt_addon.sphere.hemisphere import az_el_from_direction, disk_to_hemisphere
     from relightable_textures.operators import texture_transport as tx, transport_preview as tp
 
     samples.build("bumps", fresh_scene, "test")

@@ -1,6 +1,7 @@
 """The real extension zip: built and validated by Blender's own tool, installed into a temporary
 Blender user directory through bpy, enabled, exercised, disabled and removed."""
 
+import ast
 import json
 import os
 import pathlib
@@ -75,6 +76,7 @@ INSTALL_SCRIPT = textwrap.dedent(r"""
     # dispatch --command, so call the registered function itself.
     from bl_ext.user_default.relightable_textures.operators import cli, registration
     report["cli_registered"] = len(registration._cli_handles)
+    report["cli_verbs"] = sorted(cli.build_parser()._subparsers._group_actions[0].choices)
     report["cli_scene"] = cli.run(["scene", "noise", "--out", blend_out])
     report["cli_bad"] = cli.run(["scene", "castle", "--out", blend_out + "2.blend"])
     report["enabled_after_cli"] = mod in bpy.context.preferences.addons
@@ -117,7 +119,26 @@ def test_zip_contents(extension_zip):
     for required in ("blender_manifest.toml", "__init__.py", "lt_addon/__init__.py",
                      "operators/registration.py", "samples/__init__.py"):
         assert required in names
-    assert not any(n.startswith(("tests/", ".venv/", ".git/", "tools/")) for n in names)
+    assert not any(n.startswith(("tests/", ".venv/", ".git/", "tools/", "benchmarks/",
+                                 "devtools/")) for n in names)
+    # only the product: no benchmark, Pareto or chart code anywhere in the zip, and no module
+    # that imports matplotlib (Blender does not ship it)
+    modules = sorted(n for n in names if n.endswith(".py"))
+    assert not [n for n in modules if any(w in pathlib.PurePosixPath(n).stem
+                                          for w in ("bench", "pareto", "plot", "chart"))]
+    z = zipfile.ZipFile(extension_zip)
+    imported = {(n, node.module if isinstance(node, ast.ImportFrom) else alias.name)
+                for n in modules for node in ast.walk(ast.parse(z.read(n)))
+                if isinstance(node, (ast.Import, ast.ImportFrom))
+                for alias in node.names}
+    assert not [(n, m) for n, m in imported if m and m.split(".")[0] == "matplotlib"]
+    # the one optional hook into the development tools is guarded (ImportError -> no charts)
+    assert sorted(n for n, m in imported if m and "devtools" in m) == [
+        "operators/analyze.py", "operators/cli.py"]
+    # every module of the checkout's product folders is in the zip (nothing dropped by mistake)
+    product = sorted(str(p.relative_to(ROOT)) for d in ("lt_addon", "operators", "samples")
+                     for p in (ROOT / d).rglob("*.py") if "__pycache__" not in p.parts)
+    assert set(product) <= names
     # This platform's SciPy and OpenEXR for both Pythons Blender uses (3.11 and 3.13), no other.
     wheels = sorted(n.split("-")[0] + "-" + n.split("-")[2] for n in names
                     if n.startswith("wheels/") and n.endswith(".whl"))
@@ -156,6 +177,9 @@ def test_install_enable_use_uninstall_in_temporary_user_dir(extension_zip, tmp_p
                                  "Bumps_steerable_atlas.exr"]
     assert rep["op_result"] == ["FINISHED"] and rep["op_vertices"] == 33 * 33
     assert rep["cli_registered"] == 1
+    # the development verb `bench` is not in the extension; every product verb is
+    assert "bench" not in rep["cli_verbs"] and {"scene", "bake-textures", "bake-transport",
+                                                "analyze", "relight"} <= set(rep["cli_verbs"])
     assert rep["cli_scene"] == 0 and blend_out.exists()
     assert rep["cli_bad"] == 2 and not pathlib.Path(str(blend_out) + "2.blend").exists()
     assert rep["enabled_after_cli"]

@@ -18,8 +18,8 @@ import os
 import numpy as np
 
 from reference_bake import SETTINGS, bake_reference, reference_for
-from relightable_textures.lt_addon.hemisphere import direction_from_az_el
-from relightable_textures.lt_addon.steerable_texture import SteerableTexture
+from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
+from relightable_textures.lt_addon.steerable.texture import SteerableTexture
 
 LIGHTS = ((20.0, 30.0), (140.0, 60.0), (260.0, 85.0))
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from relightable_textures import samples
-from relightable_textures.lt_addon import heightfield
+from relightable_textures.lt_addon.geometry import heightfield
 
 EXPECTED_VERTICES = {  # (test, demo) vertex counts of the object to relight
     "bumps": (33 * 33, 129 * 129),

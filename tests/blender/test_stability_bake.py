@@ -19,7 +19,7 @@ import json
 import numpy as np
 import pytest
 
-from relightable_textures.lt_addon.hemisphere import direction_from_az_el
+from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
 
 R = 16
 
@@ -161,7 +161,7 @@ def test_duplicate_loose_and_coincident_vertices_get_defined_transport(fresh_sce
     """Duplicate ridge vertices each get the clamped cosine of their own face (convex: no
     shadow), a loose vertex and the vertices of a triangle with two coincident corners get 0;
     the fit of such a bake is exact and finite; no UV map is needed for transport."""
-    from relightable_textures.lt_addon.eigentransport import fit_eigentransport
+    from relightable_textures.lt_addon.transport.eigentransport import fit_eigentransport
 
     obj, normals = _roof(fresh_scene, extra_verts=[[5, 0, 0], [5, 0, 0], [6, 0, 0], [7, 7, 7]],
                          extra_faces=[[8, 9, 10]])
@@ -411,7 +411,7 @@ def test_hdr_scales_stay_linear_on_shadowed_interreflecting_geometry(fresh_scene
 
 
 def test_black_albedo_bakes_exactly_zero_and_round_trips_in_every_storage(fresh_scene, tmp_path):
-    from relightable_textures.lt_addon.steerable_texture import SteerableTexture
+    from relightable_textures.lt_addon.steerable.texture import SteerableTexture
     from relightable_textures.operators import steerable_bake as sb
 
     plane = flat_plane(fresh_scene, albedo=0.0)
@@ -468,7 +468,7 @@ def test_hdr_albedo_overflowing_half_storage_is_refused_and_the_previous_bake_ke
     half is refused with a message naming the channel, and the previous bake's EXR, JSON and
     record on the object stay byte-identical; float storage then writes them exactly. The
     values are the albedo-1 bake times 3e5 (linear in the albedo, same seed)."""
-    from relightable_textures.lt_addon.steerable_texture import SteerableTexture
+    from relightable_textures.lt_addon.steerable.texture import SteerableTexture
     from relightable_textures.operators import steerable_bake as sb
     from relightable_textures.operators.blend_files import object_bakes
 

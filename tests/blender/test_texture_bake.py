@@ -11,8 +11,8 @@ import pytest
 from render_check import render_rgb
 
 from relightable_textures import samples
-from relightable_textures.lt_addon.hemisphere import direction_from_az_el, disk_to_hemisphere
-from relightable_textures.lt_addon.storage import reconstruction_error
+from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el, disk_to_hemisphere
+from relightable_textures.lt_addon.io.storage import reconstruction_error
 
 R, ORDER, SPP, ENV_H = 32, 5, 64, 64
 
@@ -66,7 +66,7 @@ def env_bake(scene, obj, env, spp, seed, sampling="importance"):
 def test_sampled_centre_light_reproduces_its_own_bake(bumps):
     """Steering to a sampled centre gives the bake of that light (exact with the same seed and
     world sampling 'none', where a Cycles bake is a fixed linear function of the image)."""
-    from relightable_textures.lt_addon.sampled_basis import build_sampled_basis
+    from relightable_textures.lt_addon.steerable.sampled_basis import build_sampled_basis
 
     scene, obj = bumps
     _, result = bake(scene, obj, world_sampling="none")
@@ -118,7 +118,7 @@ def test_preview_node_group_rendered_by_cycles_equals_numpy_relight(bumps, tmp_p
     half-float precision. The tangent frame is checked on a flat plane carrying the patch UVs."""
     import bpy
 
-    from relightable_textures.lt_addon import heightfield
+    from relightable_textures.lt_addon.geometry import heightfield
     from relightable_textures.operators.meshes import grid_faces, mesh_object
 
     scene, obj = bumps
@@ -238,7 +238,7 @@ def test_calibrated_flat_plane_follows_the_cosine_law_in_cycles(fresh_scene):
     Monte Carlo noise at 64 spp measured below 0.5%."""
     import bpy
 
-    from relightable_textures.lt_addon import heightfield
+    from relightable_textures.lt_addon.geometry import heightfield
     from relightable_textures.operators.cycles_bake import EnvironmentBake
     from relightable_textures.operators.meshes import grid_faces, mesh_object
     from relightable_textures.samples.scene_setup import diffuse_material

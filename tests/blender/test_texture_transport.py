@@ -12,8 +12,8 @@ import pytest
 from render_check import render_rgb
 
 from relightable_textures import samples
-from relightable_textures.lt_addon import transport_texture as tt
-from relightable_textures.lt_addon.hemisphere import direction_from_az_el
+from relightable_textures.lt_addon.transport import texture as tt
+from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
 
 R = 16
 
@@ -96,8 +96,8 @@ def test_stores_are_streamed_and_cancel_leaves_nothing(bumps, tmp_path):
 def test_quadrature_steerable_light_equals_its_environment_bake(bumps, tmp_path):
     """Sampled steerable light k by quadrature over 600 hard suns vs Cycles baking the same
     light as an environment (direct light): agreement to the environment bake's own noise."""
-    from relightable_textures.lt_addon.sampled_basis import build_sampled_basis
-    from relightable_textures.lt_addon.steerable import paper_basis
+    from relightable_textures.lt_addon.steerable.sampled_basis import build_sampled_basis
+    from relightable_textures.lt_addon.steerable.basis import paper_basis
     from relightable_textures.operators.cycles_bake import EnvironmentBake
 
     scene, obj = bumps
@@ -136,7 +136,7 @@ def test_pca_model_is_exact_at_full_rank_and_viewport_twin_matches(bumps, tmp_pa
         assert rel(b.model.relight(idx, w), full) < 1e-5
     # tables sampled at a texel centre equal the kernel weights applied to the loadings
     eig, tab = tp.preview_arrays(b.model, b.albedo, store.directions, 3.0, 16)
-    from relightable_textures.lt_addon.hemisphere import disk_to_hemisphere
+    from relightable_textures.lt_addon.sphere.hemisphere import disk_to_hemisphere
 
     d = disk_to_hemisphere(tt.disk_grid(16)[9, 6][None])[0]
     idx, w = tt.sun_weights(store.directions, d, 3.0)
@@ -147,8 +147,8 @@ def test_pca_model_is_exact_at_full_rank_and_viewport_twin_matches(bumps, tmp_pa
 def test_preview_group_rendered_by_cycles_equals_numpy_twin(bumps, tmp_path):
     """The node group (disk point, table and eigen atlases, albedo tile, half floats) rendered by
     Cycles through the top camera equals viewport_relight of the half-float atlases."""
-    from relightable_textures.lt_addon import exrio
-    from relightable_textures.lt_addon.atlas import unpack_atlas
+    from relightable_textures.lt_addon.io import exrio
+    from relightable_textures.lt_addon.io.atlas import unpack_atlas
     from relightable_textures.operators import texture_transport as tx
     from relightable_textures.operators import transport_preview as tp
     from relightable_textures.operators.steerable_bake import run
@@ -296,7 +296,7 @@ def test_panel_operator_bakes_selected_objects_and_sun_size_retabulates(statue, 
     import bpy
 
     import relightable_textures
-    from relightable_textures.lt_addon import exrio
+    from relightable_textures.lt_addon.io import exrio
     from relightable_textures.operators.blend_files import object_bakes
 
     scene, statue_obj, ground = statue

@@ -84,9 +84,9 @@ def test_eigentransport_matches_a_cycles_bake_of_the_same_hdri(ball_on_floor):
     floor, itself mostly truth noise at 256 spp: 0.0024 at 1024 spp), d at 99.9% energy
     0.0054. Tolerances: 0.01 for the floor, 0.02 at 99.9% energy, and the error must fall
     as d grows (d = 2 vs 8 vs full)."""
-    from relightable_textures.lt_addon.directions import parse_direction_spec
-    from relightable_textures.lt_addon.eigentransport import fit_eigentransport
-    from relightable_textures.lt_addon.transport_error import sun_sky_environment
+    from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
+    from relightable_textures.lt_addon.transport.eigentransport import fit_eigentransport
+    from relightable_textures.lt_addon.transport.error import sun_sky_environment
     from relightable_textures.operators import transport_bake as tb
     from relightable_textures.operators.steerable_bake import run
 
@@ -110,7 +110,7 @@ def test_vertex_preview_updates_from_sliders_and_a_moving_point_lamp(ball_on_flo
     import bpy
 
     import relightable_textures
-    from relightable_textures.lt_addon.directions import parse_direction_spec
+    from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
     from relightable_textures.operators import transport_bake as tb, vertex_relight as vr
     from relightable_textures.operators.steerable_bake import run
 
@@ -158,7 +158,7 @@ def test_point_light_shading_matches_a_cycles_point_lamp(fresh_scene, tmp_path):
     bake of the lamp on average within 3% (per vertex it is off by the direction sampling)."""
     import bpy
 
-    from relightable_textures.lt_addon.directions import parse_direction_spec
+    from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
     from relightable_textures.operators import transport_bake as tb, vertex_relight as vr
     from relightable_textures.operators.cycles_bake import EnvironmentBake
     from relightable_textures.operators.meshes import grid_faces, mesh_object
@@ -195,9 +195,9 @@ def test_interreflected_transport_matches_cycles_with_the_same_bounces(ball_on_f
     """--bounces 1: the grey floor lights the ball's underside. Against a 1-bounce Cycles
     truth, measured: direct-only transport 0.39 off, 1-bounce transport at 16 spp 0.054
     (0.025 at 64 spp). Tolerances 0.1 and > 0.2."""
-    from relightable_textures.lt_addon.directions import parse_direction_spec
-    from relightable_textures.lt_addon.eigentransport import fit_eigentransport
-    from relightable_textures.lt_addon.transport_error import sun_sky_environment
+    from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
+    from relightable_textures.lt_addon.transport.eigentransport import fit_eigentransport
+    from relightable_textures.lt_addon.transport.error import sun_sky_environment
     from relightable_textures.operators import transport_bake as tb
     from relightable_textures.operators.steerable_bake import run
 
@@ -221,9 +221,9 @@ def test_cpca_bake_shades_like_cycles_and_the_toggle_colours_clusters(ball_on_fl
     leaves < 1 % of the transport); the show_clusters toggle writes exactly the cluster colours
     and switching it off restores the shading."""
     import relightable_textures
-    from relightable_textures.lt_addon.cpca import CPCA, cluster_colors
-    from relightable_textures.lt_addon.directions import parse_direction_spec
-    from relightable_textures.lt_addon.transport_error import sun_sky_environment
+    from relightable_textures.lt_addon.transport.cpca import CPCA, cluster_colors
+    from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
+    from relightable_textures.lt_addon.transport.error import sun_sky_environment
     from relightable_textures.operators import transport_bake as tb, vertex_relight as vr
     from relightable_textures.operators.steerable_bake import run
 
@@ -303,7 +303,7 @@ def test_panel_bakes_vertex_transport_and_shows_it(fresh_scene, tmp_path):
         assert np.all(np.isfinite(shade)) and shade.min() >= -1e-6
         # the unoccluded bound with the bake's own quadrature over its 96 directions (the
         # cube:4 rule integrates the clamped cosine to within ~2%, so compare with it, not pi)
-        from relightable_textures.lt_addon.directions import parse_direction_spec
+        from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
 
         ds = parse_direction_spec("cube:4")
         n = np.empty(len(obj.data.vertices) * 3)

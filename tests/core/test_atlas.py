@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from relightable_textures.lt_addon.atlas import atlas_layout, pack_atlas, unpack_atlas
+from relightable_textures.lt_addon.io.atlas import atlas_layout, pack_atlas, unpack_atlas
 
 
 def bilinear(img, U, V):

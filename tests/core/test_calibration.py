@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from relightable_textures.lt_addon import calibration as cal
-from relightable_textures.lt_addon import hemisphere as hs
-from relightable_textures.lt_addon import steerable as sb
+from relightable_textures.lt_addon.steerable import calibration as cal
+from relightable_textures.lt_addon.sphere import hemisphere as hs
+from relightable_textures.lt_addon.steerable import basis as sb
 
 
 @pytest.fixture(scope="module")

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from relightable_textures.lt_addon import clamp
-from relightable_textures.lt_addon import hemisphere as hs
-from relightable_textures.lt_addon import sampled_basis as sbm
-from relightable_textures.lt_addon import steerable as sb
+from relightable_textures.lt_addon.steerable import clamp
+from relightable_textures.lt_addon.sphere import hemisphere as hs
+from relightable_textures.lt_addon.steerable import sampled_basis as sbm
+from relightable_textures.lt_addon.steerable import basis as sb
 
 
 def test_offset_trick_recovers_the_negative_light_bake():

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from relightable_textures.lt_addon import cluster_analysis as CA
-from relightable_textures.lt_addon import cpca as CP
+from relightable_textures.lt_addon.transport import cluster_analysis as CA
+from relightable_textures.lt_addon.transport import cpca as CP
 
 
 def _strip(n_vertices=120, S=48, seed=0):

@@ -5,7 +5,7 @@ import zlib
 import numpy as np
 import pytest
 
-from relightable_textures.lt_addon.contact_sheet import linear_to_srgb8, read_png, tile, write_png
+from relightable_textures.lt_addon.io.contact_sheet import linear_to_srgb8, read_png, tile, write_png
 
 
 def test_srgb_encoding_known_values():

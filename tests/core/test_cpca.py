@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from relightable_textures.lt_addon import cpca as CP
-from relightable_textures.lt_addon import eigentransport as ET
+from relightable_textures.lt_addon.transport import cpca as CP
+from relightable_textures.lt_addon.transport import eigentransport as ET
 
 FEW = settings(max_examples=10, deadline=None)
 
@@ -259,7 +259,7 @@ def test_storage_bytes_count_the_stored_arrays():
 
 
 def test_model_from_arrays_dispatches_on_the_format():
-    from relightable_textures.lt_addon.eigentransport import Eigentransport, fit_eigentransport
+    from relightable_textures.lt_addon.transport.eigentransport import Eigentransport, fit_eigentransport
 
     T = np.random.default_rng(7).random((20, 6))
     assert isinstance(CP.model_from_arrays(CP.fit_cpca(T, 2, dims=1, N=3).to_arrays()), CP.CPCA)

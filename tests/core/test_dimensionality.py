@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from relightable_textures.lt_addon import dimensionality as DM
+from relightable_textures.lt_addon.transport import dimensionality as DM
 
 FEW = settings(max_examples=25, deadline=None)
 

@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from relightable_textures.lt_addon import directions as D
-from relightable_textures.lt_addon.hemisphere import equirect_pixel_directions
+from relightable_textures.lt_addon.sphere import directions as D
+from relightable_textures.lt_addon.sphere.hemisphere import equirect_pixel_directions
 
 
 @pytest.mark.parametrize("spec,tol", [("halton:1000", 1e-12), ("latlong:16x32", 1e-12),

@@ -9,10 +9,10 @@ import pytest
 import scipy.spatial
 from hypothesis import given, settings, strategies as st
 
-from relightable_textures.lt_addon import directions as D
-from relightable_textures.lt_addon import eigentransport as ET
-from relightable_textures.lt_addon import transport_error as TE
-from relightable_textures.lt_addon.hemisphere import equirect_pixel_directions
+from relightable_textures.lt_addon.sphere import directions as D
+from relightable_textures.lt_addon.transport import eigentransport as ET
+from relightable_textures.lt_addon.transport import error as TE
+from relightable_textures.lt_addon.sphere.hemisphere import equirect_pixel_directions
 
 FEW = settings(max_examples=15, deadline=None)
 

@@ -5,7 +5,7 @@ import os
 import numpy as np
 import pytest
 
-from relightable_textures.lt_addon import exrio
+from relightable_textures.lt_addon.io import exrio
 
 
 def test_round_trip_float_exact_and_half_within_half_precision(tmp_path):

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from relightable_textures.lt_addon import directions as D
-from relightable_textures.lt_addon import haar_baseline as H
-from relightable_textures.lt_addon import transport_error as TE
+from relightable_textures.lt_addon.sphere import directions as D
+from relightable_textures.lt_addon.sphere import haar_baseline as H
+from relightable_textures.lt_addon.transport import error as TE
 
 
 def test_hand_computed_transform():

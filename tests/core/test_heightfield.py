@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from relightable_textures.lt_addon import heightfield
+from relightable_textures.lt_addon.geometry import heightfield
 
 
 def test_bumps_cap_heights_match_sphere_geometry():

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from relightable_textures.lt_addon import hemisphere as hs
+from relightable_textures.lt_addon.sphere import hemisphere as hs
 
 FAST = settings(max_examples=60, deadline=None)
 

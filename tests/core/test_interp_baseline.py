@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from relightable_textures.lt_addon import interp_baseline as ib
-from relightable_textures.lt_addon import sampled_basis as sbm
-from relightable_textures.lt_addon import steerable as sb
+from relightable_textures.lt_addon.steerable import interp_baseline as ib
+from relightable_textures.lt_addon.steerable import sampled_basis as sbm
+from relightable_textures.lt_addon.steerable import basis as sb
 
 FAST = settings(max_examples=60, deadline=None)
 G = np.linspace(-0.81, 0.81, 7)

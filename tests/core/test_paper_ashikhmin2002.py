@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from relightable_textures.lt_addon import paper_checks
+from relightable_textures.lt_addon.checks import ashikhmin2002 as paper_checks
 
 
 @pytest.fixture(scope="module")

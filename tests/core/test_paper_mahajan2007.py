@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from relightable_textures.lt_addon import cpca as CP
-from relightable_textures.lt_addon import dimensionality as DM
-from relightable_textures.lt_addon import paper_checks_mahajan as PM
+from relightable_textures.lt_addon.transport import cpca as CP
+from relightable_textures.lt_addon.transport import dimensionality as DM
+from relightable_textures.lt_addon.checks import mahajan2007 as PM
 
 
 @pytest.fixture(scope="module")

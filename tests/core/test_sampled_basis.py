@@ -1,14 +1,13 @@
 """Sampled basis (paper sec. 3 eq. 3, sec. 6.1): centres, cond(C), transform and steering."""
 
-import warnings
 
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from relightable_textures.lt_addon import hemisphere as hs
-from relightable_textures.lt_addon import sampled_basis as sbm
-from relightable_textures.lt_addon import steerable as sb
+from relightable_textures.lt_addon.sphere import hemisphere as hs
+from relightable_textures.lt_addon.steerable import sampled_basis as sbm
+from relightable_textures.lt_addon.steerable import basis as sb
 
 FAST = settings(max_examples=25, deadline=None)
 

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from scipy.special import sph_harm_y
 
-from relightable_textures.lt_addon import directions as D
-from relightable_textures.lt_addon import sh_baseline as SH
+from relightable_textures.lt_addon.sphere import directions as D
+from relightable_textures.lt_addon.sphere import sh_baseline as SH
 
 
 def _reference(d, order, bands=None):

@@ -17,15 +17,15 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from relightable_textures.lt_addon import cpca as CP
-from relightable_textures.lt_addon import directions as D
-from relightable_textures.lt_addon import eigentransport as ET
-from relightable_textures.lt_addon import hemisphere as hs
-from relightable_textures.lt_addon import steerable as sb
-from relightable_textures.lt_addon import storage as sto
-from relightable_textures.lt_addon.calibration import DEFAULT_FLOOR, make_calibration
-from relightable_textures.lt_addon.sampled_basis import build_sampled_basis
-from relightable_textures.lt_addon.steerable_texture import (SteerableTexture,
+from relightable_textures.lt_addon.transport import cpca as CP
+from relightable_textures.lt_addon.sphere import directions as D
+from relightable_textures.lt_addon.transport import eigentransport as ET
+from relightable_textures.lt_addon.sphere import hemisphere as hs
+from relightable_textures.lt_addon.steerable import basis as sb
+from relightable_textures.lt_addon.io import storage as sto
+from relightable_textures.lt_addon.steerable.calibration import DEFAULT_FLOOR, make_calibration
+from relightable_textures.lt_addon.steerable.sampled_basis import build_sampled_basis
+from relightable_textures.lt_addon.steerable.texture import (SteerableTexture,
                                                              build_from_sampled_bakes)
 
 FEW = settings(max_examples=20, deadline=None)

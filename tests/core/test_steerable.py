@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from relightable_textures.lt_addon import hemisphere as hs
-from relightable_textures.lt_addon import steerable as sb
+from relightable_textures.lt_addon.sphere import hemisphere as hs
+from relightable_textures.lt_addon.steerable import basis as sb
 
 FAST = settings(max_examples=40, deadline=None)
 

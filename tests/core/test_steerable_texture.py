@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from relightable_textures.lt_addon.hemisphere import disk_to_hemisphere, direction_from_az_el
-from relightable_textures.lt_addon.steerable import steering_coefficients
-from relightable_textures.lt_addon.steerable_texture import (
+from relightable_textures.lt_addon.sphere.hemisphere import disk_to_hemisphere, direction_from_az_el
+from relightable_textures.lt_addon.steerable.basis import steering_coefficients
+from relightable_textures.lt_addon.steerable.texture import (
     SteerableTexture,
     build_from_sampled_bakes,
 )
@@ -48,7 +48,7 @@ def test_below_horizon_is_dark_and_coefficients_match_steering(texture):
     assert np.all(tex.relight(direction_from_az_el(10.0, -5.0)) == 0)
     d = direction_from_az_el(10.0, 60.0)
     c, _ = tex.steering_weights(d)
-    from relightable_textures.lt_addon.hemisphere import hemisphere_to_disk
+    from relightable_textures.lt_addon.sphere.hemisphere import hemisphere_to_disk
 
     np.testing.assert_allclose(c, steering_coefficients(tex.basis, hemisphere_to_disk(d)))
 
@@ -76,7 +76,7 @@ def test_bad_shapes_and_files_are_refused(tmp_path, texture):
         SteerableTexture(tex.basis_images[:3], 5, 0.01, tex.centres)
     with pytest.raises(ValueError, match="storage"):
         tex.save(str(tmp_path / "x.exr"), "jpeg")
-    from relightable_textures.lt_addon import exrio
+    from relightable_textures.lt_addon.io import exrio
 
     exrio.write_exr(str(tmp_path / "other.exr"), {"Y": np.zeros((2, 2))})
     with pytest.raises(ValueError, match="not a steerable texture"):

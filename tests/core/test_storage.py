@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from relightable_textures.lt_addon import storage as sto
+from relightable_textures.lt_addon.io import storage as sto
 
 FAST = settings(max_examples=40, deadline=None)
 

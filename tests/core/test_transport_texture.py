@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from relightable_textures.lt_addon import transport_texture as tt
-from relightable_textures.lt_addon.directions import hemisphere_fibonacci, parse_direction_spec
-from relightable_textures.lt_addon.hemisphere import direction_from_az_el
+from relightable_textures.lt_addon.transport import texture as tt
+from relightable_textures.lt_addon.sphere.directions import hemisphere_fibonacci, parse_direction_spec
+from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
 
 
 def test_hemisphere_set_covers_the_upper_hemisphere():
@@ -123,7 +123,7 @@ def test_coefficient_tables_match_direct_weights_at_texel_centres():
     D = 16
     tab = tt.coefficient_tables(V, d, D, 4.0)
     xy = tt.disk_grid(D)
-    from relightable_textures.lt_addon.hemisphere import disk_to_hemisphere
+    from relightable_textures.lt_addon.sphere.hemisphere import disk_to_hemisphere
     i, j = 9, 7       # a texel well inside the disk
     w_dir = disk_to_hemisphere(xy[i, j][None])[0]
     idx, w = tt.sun_weights(d, w_dir, 4.0)

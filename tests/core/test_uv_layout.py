@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from relightable_textures.lt_addon.uv_layout import uv_coverage, uv_overlap_report
+from relightable_textures.lt_addon.geometry.uv_layout import uv_coverage, uv_overlap_report
 
 
 def grid_triangles(n):

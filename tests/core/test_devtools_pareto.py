@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from relightable_textures.lt_addon.pareto import (
+from relightable_textures.devtools.pareto import (
     choose_presets,
     error_metrics,
     pareto_mask,

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .calibration import flat_plane_calibration_error
-from .sampled_basis import build_sampled_basis, coefficient_matrix, default_centres, ring_centres
-from .steerable import (
+from ..steerable.calibration import flat_plane_calibration_error
+from ..steerable.sampled_basis import build_sampled_basis, coefficient_matrix, default_centres, ring_centres
+from ..steerable.basis import (
     PAPER_ORDER,
     PAPER_SAMPLES,
     PAPER_WIDTH,

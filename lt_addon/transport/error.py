@@ -28,11 +28,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .directions import DirectionSet
+from ..sphere.directions import DirectionSet
 from .eigentransport import fit_eigentransport
-from .haar_baseline import haar_approximate
-from .hemisphere import equirect_pixel_directions, normalize_directions
-from .sh_baseline import sh_order_for_count, sh_project, sh_reconstruct
+from ..sphere.haar_baseline import haar_approximate
+from ..sphere.hemisphere import equirect_pixel_directions, normalize_directions
+from ..sphere.sh_baseline import sh_order_for_count, sh_project, sh_reconstruct
 
 BASES = ("eigentransport", "sh", "haar")
 

@@ -40,8 +40,8 @@ import scipy.linalg
 import scipy.sparse
 import scipy.spatial
 
-from .directions import DirectionSet, interpolation_weights, nearest_directions
-from .hemisphere import direction_to_equirect_uv, equirect_pixel_directions, normalize_directions
+from ..sphere.directions import DirectionSet, interpolation_weights, nearest_directions
+from ..sphere.hemisphere import direction_to_equirect_uv, equirect_pixel_directions, normalize_directions
 
 FORMAT = "relightable_textures.eigentransport"
 FORMAT_VERSION = 1

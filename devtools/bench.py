@@ -12,7 +12,7 @@ For each sample scene a sweep bakes a grid of settings and measures, per point:
   eigentransport; ``3 sum_i n_i (p_i + S) / V`` for CPCA, which projects the S-sample lighting
   onto each cluster's basis at run time);
 * error vs a high-sample Cycles reference that no knob touches (``rel_rmse``, ``psnr_db``,
-  ``max_abs_error``; :func:`..lt_addon.pareto.error_metrics`).
+  ``max_abs_error``; :func:`.pareto.error_metrics`).
 
 Texture scenes (bumps, noise): a grid over basis order N1, samples and resolution, each bake
 stored at every storage precision. The reference is a Cycles Sun lamp (angle ``sun_angle_deg``,
@@ -30,7 +30,6 @@ with the Pareto-optimal points ringed.
 
 from __future__ import annotations
 
-import json
 import os
 import tempfile
 import threading
@@ -40,7 +39,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..lt_addon import pareto, plot
+from ..lt_addon.io import atomic
+from . import charts, pareto
 
 TEXTURE_SCENES = ("bumps", "noise")
 TRANSPORT_SCENES = ("statue", "room")
@@ -158,8 +158,8 @@ def _fresh_scene(name: str, size: str):
 
 def texture_reference(scene, obj, sweep: TextureSweep, on_progress=None) -> dict:
     """Cycles Sun-lamp bakes at the sweep's largest resolution: {"images": [(R, R, 3)], ...}."""
-    from ..lt_addon.hemisphere import direction_from_az_el
-    from .cycles_bake import EnvironmentBake
+    from ..lt_addon.sphere.hemisphere import direction_from_az_el
+    from ..operators.cycles_bake import EnvironmentBake
 
     R = max(sweep.resolutions)
     t0 = time.perf_counter()
@@ -178,9 +178,9 @@ def texture_reference(scene, obj, sweep: TextureSweep, on_progress=None) -> dict
 def texture_points(scene, obj, sweep: TextureSweep, reference: dict, tmp: str,
                    on_progress=None) -> list:
     """Bake every (order, samples, resolution) and measure it at every storage precision."""
-    from ..lt_addon.hemisphere import direction_from_az_el
-    from ..lt_addon.steerable_texture import SteerableTexture
-    from .steerable_bake import TextureBakeSettings, bake_steerable_texture, run
+    from ..lt_addon.sphere.hemisphere import direction_from_az_el
+    from ..lt_addon.steerable.texture import SteerableTexture
+    from ..operators.steerable_bake import TextureBakeSettings, bake_steerable_texture, run
 
     lights = [direction_from_az_el(az, el) for az, el in REFERENCE_LIGHTS]
     R = reference["resolution"]
@@ -223,7 +223,7 @@ def texture_points(scene, obj, sweep: TextureSweep, reference: dict, tmp: str,
 
 
 def _model_madds(model, S: int) -> float:
-    from ..lt_addon.cpca import CPCA
+    from ..lt_addon.transport.cpca import CPCA
 
     if isinstance(model, CPCA):
         n = model.dims()
@@ -234,15 +234,15 @@ def _model_madds(model, S: int) -> float:
 
 def transport_points(scene, obj, sweep: TransportSweep, tmp: str, on_progress=None) -> tuple:
     """Bake per direction set, fit every d / clustering, compare with a Cycles reference."""
-    from ..lt_addon import cpca
-    from ..lt_addon.cluster_analysis import auto_cpca
-    from ..lt_addon.directions import parse_direction_spec
-    from ..lt_addon.eigentransport import fit_eigentransport, project_environment
-    from ..lt_addon.transport_error import sun_sky_environment
-    from .steerable_bake import run
-    from .transport_bake import bake_environment_truth, bake_transport
-    from .meshes import mesh_edges
-    from .vertex_relight import write_shading
+    from ..lt_addon.transport import cpca
+    from ..lt_addon.transport.cluster_analysis import auto_cpca
+    from ..lt_addon.sphere.directions import parse_direction_spec
+    from ..lt_addon.transport.eigentransport import fit_eigentransport, project_environment
+    from ..lt_addon.transport.error import sun_sky_environment
+    from ..operators.steerable_bake import run
+    from ..operators.transport_bake import bake_environment_truth, bake_transport
+    from ..operators.meshes import mesh_edges
+    from ..operators.vertex_relight import write_shading
 
     edges = mesh_edges(obj)
     env = sun_sky_environment(64, [0.4, -0.3, 0.8], row_order="bottom_first",
@@ -328,12 +328,12 @@ def write_charts(scene_name: str, points: list, out_dir: str) -> dict:
         series = []
         for g in groups:
             pts = sorted((p for p in points if _group(p) == g), key=lambda p: p[key])
-            series.append(plot.Series(np.array([p[key] for p in pts], float),
+            series.append(charts.Series(np.array([p[key] for p in pts], float),
                                       np.array([p["rel_rmse"] for p in pts], float), g,
                                       line=False,
                                       highlight=np.array([p[f"pareto_{name}"] for p in pts])))
         paths[name] = os.path.join(out_dir, f"{scene_name}_error_vs_{name}.png")
-        plot.write_chart(paths[name], series, title=f"{scene_name}: error vs {label} "
+        charts.write_chart(paths[name], series, title=f"{scene_name}: error vs {label} "
                          "(ringed: Pareto-optimal)", xlabel=label,
                          ylabel="rel. RMSE vs Cycles reference", logx=True, logy=True)
     return paths
@@ -392,10 +392,7 @@ def bench_scene(name: str, mode: str, out_dir: str, on_progress=None) -> dict:
     report["charts"] = write_charts(name, points, out_dir)
     pareto.write_csv(os.path.join(out_dir, f"{name}.csv"), points)
     path = os.path.join(out_dir, f"{name}.json")
-    tmp_path = path + f".{os.getpid()}.tmp"
-    with open(tmp_path, "w") as fh:
-        json.dump(report, fh, indent=2, default=str)
-    os.replace(tmp_path, path)
+    atomic.write_json(path, report, default=str)
     report["json"] = path
     return report
 

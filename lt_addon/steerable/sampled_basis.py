@@ -31,8 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from .hemisphere import direction_from_az_el, hemisphere_to_disk
-from .steerable import (
+from ..sphere.hemisphere import direction_from_az_el, hemisphere_to_disk
+from .basis import (
     SteerableBasis1D,
     environment_image,
     paper_basis,

@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from .hemisphere import (
+from ..sphere.hemisphere import (
     equirect_pixel_directions,
     hemisphere_to_disk,
     is_upper_hemisphere,

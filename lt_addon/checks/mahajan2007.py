@@ -22,20 +22,20 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from .cpca import (
+from ..transport.cpca import (
     adaptive_cpca,
     energy_dimension,
     fit_cpca,
     global_dimension,
     singular_values,
 )
-from .dimensionality import (
+from ..transport.dimensionality import (
     grid_dimensionality_curve,
     loglog_slope,
     mu_from_slope,
     optimal_patch_size,
 )
-from .paper_checks import _entry, all_ok  # noqa: F401  (one report format for every paper)
+from .ashikhmin2002 import _entry, all_ok  # noqa: F401  (one report format for every paper)
 
 
 # ----------------------------------------------------------------------------------------------

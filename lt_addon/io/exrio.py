@@ -13,9 +13,10 @@ from __future__ import annotations
 
 import json
 import os
-import secrets
 
 import numpy as np
+
+from . import atomic
 
 HALF_MAX = 65504.0
 METADATA_KEY = "relight:metadata"
@@ -74,15 +75,8 @@ def write_exr(path: str, channels: dict, metadata: dict | None = None,
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     if metadata is not None:
         header[METADATA_KEY] = json.dumps(metadata, sort_keys=True)
-    folder, base = os.path.split(os.path.abspath(path))
-    tmp = os.path.join(folder, f".{base}.{os.getpid()}-{secrets.token_hex(4)}.tmp.exr")
-    try:
-        with OpenEXR.File(header, data) as exr:
-            exr.write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+    with atomic.atomic_path(path) as tmp, OpenEXR.File(header, data) as exr:
+        exr.write(tmp)
     return os.path.getsize(path)
 
 

@@ -6,11 +6,12 @@ the demo and tests without Pillow.
 
 from __future__ import annotations
 
-import os
 import struct
 import zlib
 
 import numpy as np
+
+from . import atomic
 
 
 def linear_to_srgb8(image: np.ndarray, exposure: float = 1.0) -> np.ndarray:
@@ -56,11 +57,7 @@ def write_png(path: str, rgb8: np.ndarray) -> int:
 
     png = (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
            + chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b""))
-    tmp = f"{path}.{os.getpid()}.tmp"
-    with open(tmp, "wb") as fh:
-        fh.write(png)
-    os.replace(tmp, path)
-    return len(png)
+    return atomic.write_bytes(path, png)
 
 
 def read_png(path: str) -> np.ndarray:

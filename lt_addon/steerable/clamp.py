@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .hemisphere import equirect_pixel_directions, is_upper_hemisphere
+from ..sphere.hemisphere import equirect_pixel_directions, is_upper_hemisphere
 
 
 def uniform_hemisphere_environment(height: int, width: int | None = None, *, row_order: str,

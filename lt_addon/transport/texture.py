@@ -39,8 +39,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.spatial
 
-from .directions import DirectionSet, hull_barycentric, parse_direction_spec
-from .hemisphere import disk_to_hemisphere, hemisphere_to_disk, normalize_directions
+from ..sphere.directions import DirectionSet, hull_barycentric, parse_direction_spec
+from ..sphere.hemisphere import disk_to_hemisphere, hemisphere_to_disk, normalize_directions
 
 KERNELS = ("gauss", "linear")
 #: Bytes of float64 working array per chunk when streaming over the store's texels.
@@ -503,7 +503,7 @@ def quadrature_sampled_lights(store: TransportStore, sampled_basis) -> np.ndarra
     """Images of the K sampled steerable lights by quadrature over the baked directions:
     ``S_k = sum_s L_k(w_s) dw_s T[s]`` (noise-free; equals an environment bake of light k up to
     the quadrature error). Returns (K, R, R) float32 (white albedo, direct light)."""
-    from .steerable import evaluate_light
+    from ..steerable.basis import evaluate_light
 
     d = store.directions
     L = np.stack([evaluate_light(sampled_basis.basis, d.directions, c) for c in

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .hemisphere import equirect_pixel_directions, hemisphere_to_disk, is_upper_hemisphere
-from .steerable import steer_images
+from ..sphere.hemisphere import equirect_pixel_directions, hemisphere_to_disk, is_upper_hemisphere
+from .basis import steer_images
 
 #: Sharpness of the paper's interpolation light, eq. 12.
 PAPER_SHARPNESS = 29.0

@@ -33,14 +33,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .hemisphere import normalize_directions
-from .steerable import (
+from ..sphere.hemisphere import normalize_directions
+from .basis import (
     SOLID_ANGLE_PER_DISK_AREA,
     SteerableBasis1D,
     basis_2d,
     steering_coefficients_for_direction,
 )
-from .hemisphere import direction_from_az_el
+from ..sphere.hemisphere import direction_from_az_el
 
 #: Calibration method names.
 METHODS = ("paper_linear", "steerable_cos")

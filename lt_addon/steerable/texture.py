@@ -27,14 +27,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import exrio
+from ..io import exrio
 from .calibration import METHODS as CALIBRATION_METHODS
 from .calibration import make_calibration
 from .clamp import clamp_steered
-from .hemisphere import hemisphere_to_disk, normalize_directions
+from ..sphere.hemisphere import hemisphere_to_disk, normalize_directions
 from .sampled_basis import build_sampled_basis
-from .steerable import paper_basis, steering_coefficients
-from .storage import Uint8Encoded, encode_uint8
+from .basis import paper_basis, steering_coefficients
+from ..io.storage import Uint8Encoded, encode_uint8
 
 FRAMES = ("world", "tangent")
 STORAGE_MODES = ("float", "half", "u8")

@@ -1,0 +1,1 @@
+"""Files: atomic writes, OpenEXR with JSON metadata, storage codecs, atlases and PNGs."""

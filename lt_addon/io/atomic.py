@@ -1,0 +1,73 @@
+"""Atomic file writes: every file this package writes goes through :func:`atomic_path`.
+
+A reader (or a user whose bake was cancelled) sees either the old file or the whole new one,
+never a half-written file, and a failed write leaves no temporary file behind:
+
+* the data go to a hidden temporary name in the destination's own folder (so the final
+  :func:`os.replace` is a rename on one file system, atomic on POSIX and Windows);
+* the temporary name keeps the destination's extension, for writers that choose the format
+  by it (OpenEXR, NumPy's ``.npz``, Blender's image and .blend savers);
+* the rename happens only when the ``with`` block finished without an exception; otherwise the
+  temporary file is removed and an existing destination is untouched.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import secrets
+from contextlib import contextmanager
+from typing import Iterator
+
+__all__ = ["atomic_path", "write_bytes", "write_text", "write_json"]
+
+
+def _temporary_name(path: str) -> str:
+    folder, base = os.path.split(os.path.abspath(path))
+    stem, ext = os.path.splitext(base)
+    if stem.endswith(".tar"):   # keep two-part extensions whole
+        stem, ext = stem[:-4], ".tar" + ext
+    return os.path.join(folder, f".{stem}.{os.getpid()}-{secrets.token_hex(4)}.tmp{ext}")
+
+
+@contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[str]:
+    """Yield a temporary path next to ``path``; on a clean exit rename it onto ``path``.
+
+    The body writes the temporary file by any means (``open``, ``np.savez``, a library that
+    takes a file name). If the body raises, or writes nothing, the temporary file is removed,
+    ``path`` is not touched and the exception propagates (``FileNotFoundError`` when nothing
+    was written)."""
+    path = os.fspath(path)
+    tmp = _temporary_name(path)
+    try:
+        yield tmp
+        if not os.path.exists(tmp):
+            raise FileNotFoundError(f"nothing was written to {tmp} for {path}")
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def write_bytes(path: str | os.PathLike, data: bytes) -> int:
+    """Write ``data`` to ``path`` atomically (flushed and fsynced); returns its size."""
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+    return len(data)
+
+
+def write_text(path: str | os.PathLike, text: str) -> int:
+    """Write UTF-8 ``text`` to ``path`` atomically; returns the size in bytes."""
+    return write_bytes(path, text.encode("utf-8"))
+
+
+def write_json(path: str | os.PathLike, data, **dump_kw) -> int:
+    """Write ``data`` as indented JSON to ``path`` atomically; returns the size in bytes.
+    ``dump_kw`` goes to :func:`json.dumps` (e.g. ``default=float`` for NumPy scalars). The
+    text is made before the file is opened, so data that cannot be encoded changes nothing."""
+    dump_kw.setdefault("indent", 2)
+    return write_text(path, json.dumps(data, **dump_kw))

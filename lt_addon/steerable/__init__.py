@@ -1,0 +1,1 @@
+"""Steerable illumination textures (Ashikhmin & Shirley 2002): basis lights and textures."""

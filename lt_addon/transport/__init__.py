@@ -1,0 +1,1 @@
+"""Sampled light transport: textures, eigentransport, CPCA and its cost theory, sidecars."""
