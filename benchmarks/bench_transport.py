@@ -27,7 +27,7 @@ def bench_scene(name: str, size: str, spec: str, bounces: int) -> dict:
     from relightable_textures.lt_addon.transport.eigentransport import fit_eigentransport, project_environment
     from relightable_textures.lt_addon.transport.error import error_curves, sun_sky_environment
     from relightable_textures.operators import transport_bake as tb
-    from relightable_textures.operators.steerable_bake import run
+    from relightable_textures.operators.jobs import run
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = bpy.context.scene

@@ -58,7 +58,7 @@ def build(name, size):
 
 def truths(scene, objects, R, spp):
     from relightable_textures.operators import texture_transport as tx
-    from relightable_textures.operators.steerable_bake import run
+    from relightable_textures.operators.jobs import run
 
     out = {}
     for a in ANGLES:
@@ -107,7 +107,7 @@ def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder):
     """Bake once at (S, ind_spp, res); one row per model fitted from that store."""
     from relightable_textures.lt_addon.transport import texture as tt
     from relightable_textures.operators import texture_transport as tx
-    from relightable_textures.operators.steerable_bake import run
+    from relightable_textures.operators.jobs import run
 
     st = tx.TransportTextureSettings(directions=f"hemi:{S}:1.5", resolution=res, bounces=2,
                                      indirect_resolution=max(8, res // 2),

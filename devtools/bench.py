@@ -180,7 +180,8 @@ def texture_points(scene, obj, sweep: TextureSweep, reference: dict, tmp: str,
     """Bake every (order, samples, resolution) and measure it at every storage precision."""
     from ..lt_addon.sphere.hemisphere import direction_from_az_el
     from ..lt_addon.steerable.texture import SteerableTexture
-    from ..operators.steerable_bake import TextureBakeSettings, bake_steerable_texture, run
+    from ..operators.jobs import run
+    from ..operators.steerable_bake import TextureBakeSettings, bake_steerable_texture
 
     lights = [direction_from_az_el(az, el) for az, el in REFERENCE_LIGHTS]
     R = reference["resolution"]
@@ -239,7 +240,7 @@ def transport_points(scene, obj, sweep: TransportSweep, tmp: str, on_progress=No
     from ..lt_addon.sphere.directions import parse_direction_spec
     from ..lt_addon.transport.eigentransport import fit_eigentransport, project_environment
     from ..lt_addon.transport.error import sun_sky_environment
-    from ..operators.steerable_bake import run
+    from ..operators.jobs import run
     from ..operators.transport_bake import bake_environment_truth, bake_transport
     from ..operators.meshes import mesh_edges
     from ..operators.vertex_relight import write_shading

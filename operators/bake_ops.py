@@ -14,7 +14,7 @@ import os
 
 import bpy
 
-from . import preview_nodes, steerable_bake
+from . import jobs, preview_nodes, steerable_bake
 from .cycles_bake import BakeInputError, check_bakeable
 from .properties import settings_from_scene
 
@@ -86,7 +86,7 @@ class _ModalBake:
                 if step.message.startswith("warning:"):
                     self.report({"WARNING"}, step.message[len("warning: "):])
 
-            result = steerable_bake.run(gen, on_progress=warn)
+            result = jobs.run(gen, on_progress=warn)
             self._finish(context, result)
         except (BakeInputError, OSError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))
@@ -219,6 +219,35 @@ class RELIGHT_OT_bake_transport(_ModalBake, bpy.types.Operator):
                               f"preview {timings.get(obj.name, {}).get('shade_ms', 0):.0f} ms")
 
 
+class RELIGHT_OT_analyze(_ModalBake, bpy.types.Operator):
+    """How many CPCA clusters the active object's transport needs (Mahajan 2007): reuses the
+    samples of its vertex transport bake when the directions and bounces match, bakes them
+    otherwise, and writes <object>_analysis.json into the output folder (Esc cancels the bake)"""
+
+    bl_idname = "relight.analyze"
+    bl_label = "Analyze Clusters"
+    bl_options = {"REGISTER"}
+
+    def _prepare(self, context):
+        from . import analyze, transport_bake
+
+        props = context.scene.relight
+        obj = context.active_object
+        check_bakeable(obj, need_uv=False)
+        direction_set = transport_bake.TransportSettings(
+            directions=props.vertex_directions, bounces=props.vertex_bounces).validate()
+        self._make_out_dir(props)
+        return analyze.analysis_job(context.scene, obj, direction_set, props.vertex_bounces)
+
+    def _finish(self, context, result):
+        from . import analyze
+
+        analyze.write_analysis(result, self.out_dir)
+        text = analyze.summary(result)
+        context.scene[analyze.SUMMARY_KEY] = text   # the panel shows the last analysis
+        self.report({"INFO"}, text)
+
+
 def show_preview(scene, obj, kind: str) -> str:
     """Install the preview of ``obj``'s existing bake of ``kind`` from its files (no bake):
     ``steerable_texture``, ``transport_texture`` or ``eigentransport``. Replaces the preview the
@@ -318,5 +347,5 @@ class RELIGHT_OT_remove_preview(bpy.types.Operator):
         return {"FINISHED"}
 
 
-CLASSES = (RELIGHT_OT_bake_textures, RELIGHT_OT_bake_transport, RELIGHT_OT_show_preview,
-           RELIGHT_OT_follow_sun, RELIGHT_OT_remove_preview)
+CLASSES = (RELIGHT_OT_bake_textures, RELIGHT_OT_bake_transport, RELIGHT_OT_analyze,
+           RELIGHT_OT_show_preview, RELIGHT_OT_follow_sun, RELIGHT_OT_remove_preview)

@@ -212,6 +212,10 @@ def build_parser() -> argparse.ArgumentParser:
                    "energy fraction (default 1e-3: the paper's 99.9%%)")
     p.add_argument("--seeds", type=int, default=8, help="seed vertices of the dimensionality "
                    "curves (default 8)")
+    p.add_argument("--rebake", action="store_true",
+                   help="bake the transport again even when the object's bake-transport made "
+                        "with the same directions and bounces kept its samples (reused by "
+                        "default)")
     p.add_argument("--out", metavar="DIR", help="output folder (default <blend>_relight/)")
     p.add_argument("--force", action="store_true",
                    help="replace an existing analysis of the same object in --out")
@@ -449,7 +453,7 @@ def _cmd_bake_textures(args) -> int:
     args.object = args.object[0]
     import bpy
 
-    from . import blend_files, preview_nodes, steerable_bake
+    from . import blend_files, jobs, preview_nodes, steerable_bake
     from .cycles_bake import BakeInputError
     from .presets import settings_from_preset
 
@@ -480,7 +484,7 @@ def _cmd_bake_textures(args) -> int:
     truth_seconds = 0.0
     try:
         gen = steerable_bake.bake_steerable_texture(bpy.context.scene, obj, settings)
-        result = steerable_bake.run(gen, on_progress=show)
+        result = jobs.run(gen, on_progress=show)
         if args.truth:
             t_truth = time.perf_counter()
             result.figures["ground_truth"] = steerable_bake.run_ground_truth(
@@ -518,7 +522,7 @@ def _cmd_bake_texture_transport(args) -> int:
 
     from . import blend_files, texture_transport as tx
     from .cycles_bake import BakeInputError
-    from .steerable_bake import run
+    from .jobs import run
 
     lobes_only = [f"--{k.replace('_', '-')}" for k in ("frame", "order", "samples", "storage",
                                                        "mode", "world_sampling", "contact_sheet")
@@ -603,7 +607,7 @@ def _cmd_bake_texture_transport(args) -> int:
 def _cmd_bake_transport(args) -> int:
     import bpy
 
-    from . import blend_files, preview_nodes, steerable_bake, transport_bake, vertex_relight
+    from . import blend_files, jobs, preview_nodes, transport_bake, vertex_relight
     from .cycles_bake import BakeInputError
 
     path = _check_input_blend(args.file)
@@ -622,7 +626,8 @@ def _cmd_bake_transport(args) -> int:
         raise CliError(f"cannot update {path}: its folder is not writable")
     started = time.perf_counter()
     obj = _open_object(path, args.object)
-    _refuse_existing(out_dir, obj.name, ("_transport.npz", "_transport.json"), args.force,
+    _refuse_existing(out_dir, obj.name, ("_transport.npz", "_transport.json",
+                                          "_transport_samples.npy"), args.force,
                      "a transport bake")
     n_vertices = len(obj.data.vertices) if obj.type == "MESH" else 0
     if isinstance(settings.clusters, int) and settings.clusters > n_vertices > 0:
@@ -633,7 +638,7 @@ def _cmd_bake_transport(args) -> int:
     try:
         gen = transport_bake.bake_transport(scene, obj, direction_set.directions,
                                             settings.bounces, settings.samples)
-        result = steerable_bake.run(gen, on_progress=show)
+        result = jobs.run(gen, on_progress=show)
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
     except KeyboardInterrupt:
@@ -695,18 +700,21 @@ def _cmd_analyze(args) -> int:
     if args.seeds < 1:
         raise CliError(f"--seeds must be >= 1, got {args.seeds}")
     out_dir = _check_output_dir(args.out, path)
+    started = time.perf_counter()
     obj = _open_object(path, args.object)
     _refuse_existing(out_dir, obj.name, ("_analysis.json", "_dimensionality.png", "_cost.png"),
                      args.force, "an analysis")
     show = _progress_printer("analyze")
     try:
         report = analyze.analyse_object(bpy.context.scene, obj, ds, args.bounces, None,
-                                        args.tol, args.seeds, on_progress=show)
+                                        args.tol, args.seeds, on_progress=show,
+                                        reuse=not args.rebake)
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
     except KeyboardInterrupt:
         print("analyze: cancelled; nothing was written", file=sys.stderr)
         return 130
+    report["timings"]["wall_total"] = round(time.perf_counter() - started, 3)  # file opening too
     paths = analyze.write_analysis(report, out_dir)
     dim, best, ad, au = (report["dimensionality"], report["optimum"], report["adaptive"],
                          report["auto"])
@@ -714,8 +722,13 @@ def _cmd_analyze(args) -> int:
     prediction = (f"slope {dim['slope']:.3f}, mu {dim['mu']:.3f}, p* {dim['p_star']:.1f} -> "
                   f"predicted {report['predicted_clusters']} clusters" if dim["mu"] is not None
                   else "no slope (patches too small or saturated): no prediction")
+    src = report["transport_source"]
     print(f"analyzed {obj.name}: {report['vertices']} vertices x {report['samples']} directions, "
           f"N = {report['N']}; {prediction}")
+    print("  transport: " + (f"reused {src['file']} ({src['why']})" if src["kind"] == "reused"
+                              else f"baked in {report['timings']['bake_seconds']:.1f} s "
+                                   f"({src['why']})")
+          + f"; {report['timings']['wall_total']:.1f} s in all")
     print(f"  cost per vertex: global PCA {one['cost_per_vertex']:.1f}, best fixed CPCA "
           f"{best['cost_per_vertex']:.1f} at {best['clusters']} clusters, adaptive (paper) "
           f"{ad['cost_per_vertex']:.1f} at {ad['clusters']} clusters, auto "

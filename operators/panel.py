@@ -150,6 +150,10 @@ class VIEW3D_PT_relight_vertex(_RelightSubPanel, bpy.types.Panel):
         col.prop(props, "vertex_bounces")
         col.prop(props, "vertex_energy")
         self.layout.operator("relight.bake_transport", icon="RENDER_STILL")
+        self.layout.operator("relight.analyze", icon="GRAPH")
+        summary = context.scene.get("relight_analysis")
+        if summary:
+            self.layout.label(text=summary, icon="INFO")
 
 
 class VIEW3D_PT_relight_samples(_RelightSubPanel, bpy.types.Panel):

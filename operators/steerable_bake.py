@@ -21,6 +21,7 @@ from ..lt_addon.io import atomic
 from ..lt_addon.steerable.sampled_basis import build_sampled_basis
 from ..lt_addon.steerable.basis import paper_basis
 from ..lt_addon.steerable.texture import FRAMES, STORAGE_MODES, SteerableTexture
+from .jobs import Progress, run  # noqa: F401  (the bake's job primitives)
 from .cycles_bake import (BAKE_MODES, WORLD_SAMPLING, BakeInputError, EnvironmentBake,
                           check_bakeable, check_memory)
 
@@ -69,13 +70,6 @@ class TextureBakeSettings:
         check_memory(2 * self.order ** 2 * self.resolution ** 2 * 3 * 4,
                      f"order {self.order} at {self.resolution}^2",
                      "lower the resolution or the order")
-
-
-@dataclass
-class Progress:
-    done: int
-    total: int
-    message: str
 
 
 @dataclass
@@ -143,24 +137,6 @@ def bake_steerable_texture(scene, obj, settings: TextureBakeSettings):
     yield Progress(k_total + 1, k_total + 1, "basis solve done")
     return BakeResult(texture, cycles_seconds, total, calls, float(sampled.condition_number),
                       figures={"uv_layout": uv_report})
-
-
-def run(generator, on_progress=None, should_cancel=None):
-    """Drive a bake generator to the end; returns its result or None if cancelled.
-
-    ``on_progress(progress)`` is called for every step; ``should_cancel()`` is checked after
-    each step and closes the generator (restoring the scene) when it returns True.
-    """
-    try:
-        while True:
-            step = next(generator)
-            if on_progress is not None:
-                on_progress(step)
-            if should_cancel is not None and should_cancel():
-                generator.close()
-                return None
-    except StopIteration as stop:
-        return stop.value
 
 
 def default_output_dir(blend_path: str) -> str:

@@ -35,7 +35,7 @@ from ..lt_addon.io import atomic, exrio
 from ..lt_addon.transport import texture as tt
 from ..lt_addon.sphere.hemisphere import direction_from_az_el
 from .cycles_bake import BakeInputError, EnvironmentBake, check_bakeable, check_memory
-from .steerable_bake import Progress
+from .jobs import Progress
 
 KIND = "transport_texture"
 MODELS = ("pca", "blocks", "steerable", "none")
@@ -613,13 +613,6 @@ PRESETS = _measured_presets()
 
 #: Direction counts the pilot tries for ``--target-error``, cheapest first.
 PILOT_COUNTS = (64, 100, 200, 400, 800, 1600)
-
-
-def steerable_bake_run(generator, on_progress=None, should_cancel=None):
-    """Drive a job generator to its end (the same driver as every bake; see steerable_bake.run)."""
-    from .steerable_bake import run
-
-    return run(generator, on_progress, should_cancel)
 
 
 def truth_lights(count: int) -> list:

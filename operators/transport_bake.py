@@ -25,6 +25,7 @@ import numpy as np
 
 from ..lt_addon.io import atomic
 from .cycles_bake import BakeInputError, EnvironmentBake, check_bakeable, check_memory
+from .jobs import Progress
 
 
 @dataclass
@@ -34,13 +35,6 @@ class TransportBakeResult:
     cycles_seconds: float
     total_seconds: float
     bake_calls: int
-
-
-@dataclass
-class Progress:
-    done: int
-    total: int
-    message: str
 
 
 def bake_transport(scene, obj, directions, bounces: int = 0, samples: int | None = None,
@@ -215,6 +209,14 @@ def fit_and_write(result: TransportBakeResult, obj, direction_set, settings: Tra
             "samples": settings.samples or (1 if settings.bounces == 0 else 64),
             "seed": settings.seed}
     nbytes = save_sidecar(path, model, direction_set, pos, nrm, meta)
+    # The samples themselves, kept so `relight analyze` / Analyze Clusters need not bake them
+    # again. Half floats: T <= ~1 (visibility x cosine plus bounces), and fp16's 2^-11 relative
+    # rounding is ~1e-7 of the energy, far below the analysis' 1e-3 tolerance.
+    from .analyze import samples_path
+
+    with atomic.atomic_path(samples_path(path)) as tmp:
+        np.save(tmp, np.asarray(result.transport, np.float16))
+    samples_bytes = os.path.getsize(samples_path(path))
     V, S = result.transport.shape
     report = {
         "kind": KIND, "object": obj.name, "sidecar": os.path.abspath(path),
@@ -231,7 +233,8 @@ def fit_and_write(result: TransportBakeResult, obj, direction_set, settings: Tra
                     "fit_seconds": round(fit_seconds, 4),
                     "seconds_per_direction": round(result.cycles_seconds / max(S, 1), 5),
                     "directions_per_second": round(S / max(result.total_seconds, 1e-9), 2)},
-        "bytes": {"sidecar_file": nbytes, **model.storage_bytes()},
+        "bytes": {"sidecar_file": nbytes, "samples_file": samples_bytes,
+                  **model.storage_bytes()},
         **(figures or {}),
     }
     atomic.write_json(os.path.join(out_dir, f"{safe}_transport.json"), report)

@@ -67,6 +67,25 @@ def test_analysis_cost_agrees_with_a_one_cluster_cpca_bake(analyzed, tmp_path):
     assert model.N == rep["N"]
     assert rep["global_pca"]["cost_per_vertex"] == pytest.approx(n * (507 + rep["N"]) / 507,
                                                                  rel=1e-9)
+    # the bake kept its samples: analyze now reuses them instead of baking 384 directions again,
+    # and finds what the fresh bake found (exact 1-sample bakes; half-float rounding only)
+    r = relight("analyze", blend, "--object", "Statue", "--directions", "cube:8", "--seeds", "4",
+                "--out", tmp_path / "again")
+    assert r.returncode == 0, r.stderr[-2000:]
+    again = json.loads((tmp_path / "again" / "Statue_analysis.json").read_text())
+    assert again["transport_source"] == {"kind": "reused",
+                                         "file": str(tmp_path / "Statue_transport_samples.npy"),
+                                         "why": "same directions and bounces"}
+    assert again["timings"]["bake_seconds"] == 0.0 and "reused" in r.stdout
+    assert again["N"] == rep["N"] and again["optimum"]["clusters"] == rep["optimum"]["clusters"]
+    assert again["dimensionality"]["slope"] == pytest.approx(rep["dimensionality"]["slope"],
+                                                             abs=0.02)
+    # --rebake bakes anyway
+    r = relight("analyze", blend, "--object", "Statue", "--directions", "cube:8", "--seeds", "4",
+                "--rebake", "--out", tmp_path / "rebaked")
+    assert r.returncode == 0, r.stderr[-2000:]
+    rebaked = json.loads((tmp_path / "rebaked" / "Statue_analysis.json").read_text())
+    assert rebaked["transport_source"] == {"kind": "baked", "why": "--rebake"}
 
 
 @pytest.mark.parametrize("args, message", [

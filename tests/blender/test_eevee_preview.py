@@ -48,13 +48,14 @@ def test_eevee_renders_the_transport_preview_like_its_numpy_twin(fresh_scene, tm
     from relightable_textures.lt_addon.io.atlas import unpack_atlas
     from relightable_textures.lt_addon.sphere.hemisphere import az_el_from_direction, disk_to_hemisphere
     from relightable_textures.operators import texture_transport as tx, transport_preview as tp
+    from relightable_textures.operators.jobs import run
 
     samples.build("bumps", fresh_scene, "test")
     obj = bpy.data.objects["Bumps"]
     r, d_tab = 16, 16
     s = tx.TransportTextureSettings(directions="hemi:48:1.5", resolution=r, bounces=0,
                                     components=9, table_size=d_tab)
-    reports = tx.steerable_bake_run(tx.bake_job(fresh_scene, [obj], s, str(tmp_path), truth=0))
+    reports = run(tx.bake_job(fresh_scene, [obj], s, str(tmp_path), truth=0))
     prev = reports[0]["preview"]
     group = bpy.data.node_groups[prev["group"]]
     lookups = [n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]

@@ -42,11 +42,12 @@ INSTALL_SCRIPT = textwrap.dedent(r"""
     report["wheels_installed"] = sorted(n for n in os.listdir(site) if not n.startswith("_")) \
         if os.path.isdir(site) else []
     # hasattr() on bpy.ops.relight is true for any name; dir() lists registered operators.
-    report["operators"] = [n for n in ("add_sample_scene", "bake_textures", "bake_transport",
-                                       "follow_sun", "remove_preview", "show_preview")
+    report["operators"] = [n for n in ("add_sample_scene", "analyze", "bake_textures",
+                                       "bake_transport", "follow_sun", "remove_preview",
+                                       "show_preview")
                            if n in dir(bpy.ops.relight)]
     report["operator_types"] = [n for n in ("RELIGHT_OT_add_sample_scene",
-                                            "RELIGHT_OT_bake_textures",
+                                            "RELIGHT_OT_analyze", "RELIGHT_OT_bake_textures",
                                             "RELIGHT_OT_bake_transport", "RELIGHT_OT_follow_sun",
                                             "RELIGHT_OT_remove_preview",
                                             "RELIGHT_OT_show_preview") if n in dir(bpy.types)]
@@ -163,9 +164,9 @@ def test_install_enable_use_uninstall_in_temporary_user_dir(extension_zip, tmp_p
     assert rep["install"] == ["FINISHED"] and rep["enabled"]
     assert "scipy" in rep["wheels_installed"] and any(
         n.lower().startswith("openexr") for n in rep["wheels_installed"])
-    assert rep["operators"] == ["add_sample_scene", "bake_textures", "bake_transport",
-                                "follow_sun", "remove_preview", "show_preview"]
-    assert len(rep["operator_types"]) == 6
+    assert rep["operators"] == ["add_sample_scene", "analyze", "bake_textures",
+                                "bake_transport", "follow_sun", "remove_preview", "show_preview"]
+    assert len(rep["operator_types"]) == 7
     for name, path in rep["imported_from"].items():
         assert path.startswith(rep["site"]), f"{name} imported from {path}, not the extension"
     assert rep["property"]

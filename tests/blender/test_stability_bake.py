@@ -439,7 +439,7 @@ def test_transport_is_geometry_whatever_the_material(fresh_scene, surface):
     from relightable_textures.operators import transport_bake as tb
     from relightable_textures.operators.compat import ensure_node_tree
     from relightable_textures.operators.cycles_bake import BakeInputError
-    from relightable_textures.operators.steerable_bake import run
+    from relightable_textures.operators.jobs import run
 
     plane = flat_plane(fresh_scene)
     mat = bpy.data.materials.new("Surface")

@@ -50,7 +50,7 @@ def settings(**kw):
 
 def bake(scene, objects, out, **kw):
     from relightable_textures.operators import texture_transport as tx
-    from relightable_textures.operators.steerable_bake import run
+    from relightable_textures.operators.jobs import run
 
     return run(tx.bake_transport_textures(scene, objects, settings(**kw), str(out)))
 
@@ -151,7 +151,7 @@ def test_preview_group_rendered_by_cycles_equals_numpy_twin(bumps, tmp_path):
     from relightable_textures.lt_addon.io.atlas import unpack_atlas
     from relightable_textures.operators import texture_transport as tx
     from relightable_textures.operators import transport_preview as tp
-    from relightable_textures.operators.steerable_bake import run
+    from relightable_textures.operators.jobs import run
 
     scene, obj = bumps
     s = settings(components=12, sun_angle=4.0)
@@ -403,11 +403,12 @@ def test_target_error_pilot_chooses_directions_and_reports_what_it_achieved(bump
     meets the target on its small bake, and the report states the choice and the error the
     real bake achieved against its own truths."""
     from relightable_textures.operators import texture_transport as tx
+    from relightable_textures.operators.jobs import run
 
     scene, obj = bumps
     s = settings(components=None, tol=0.02, bounces=1, indirect_resolution=8,
                  indirect_samples=4)
-    reports = tx.steerable_bake_run(tx.bake_job(scene, [obj], s, str(tmp_path), truth=0,
+    reports = run(tx.bake_job(scene, [obj], s, str(tmp_path), truth=0,
                                                 truth_samples=16, target_error=0.35,
                                                 preview=False))
     te = reports[0]["target_error"]

@@ -26,7 +26,7 @@ def _normals(obj):
 def test_convex_transport_is_the_clamped_cosine(ball):
     """No occluder: T[v, s] = max(0, n_v . w_s), which Cycles reproduces to float precision."""
     from relightable_textures.operators import transport_bake as tb
-    from relightable_textures.operators.steerable_bake import run
+    from relightable_textures.operators.jobs import run
 
     scene, obj = ball
     rng = np.random.default_rng(0)
@@ -46,7 +46,7 @@ def test_an_occluder_casts_a_shadow_and_cancel_restores_attributes(ball):
 
     from relightable_textures.operators import transport_bake as tb
     from relightable_textures.operators.meshes import grid_faces, mesh_object
-    from relightable_textures.operators.steerable_bake import run
+    from relightable_textures.operators.jobs import run
 
     scene, obj = ball
     t = np.linspace(-3, 3, 3)
@@ -88,7 +88,7 @@ def test_eigentransport_matches_a_cycles_bake_of_the_same_hdri(ball_on_floor):
     from relightable_textures.lt_addon.transport.eigentransport import fit_eigentransport
     from relightable_textures.lt_addon.transport.error import sun_sky_environment
     from relightable_textures.operators import transport_bake as tb
-    from relightable_textures.operators.steerable_bake import run
+    from relightable_textures.operators.jobs import run
 
     scene, obj = ball_on_floor
     ds = parse_direction_spec("cube:8")
@@ -112,7 +112,7 @@ def test_vertex_preview_updates_from_sliders_and_a_moving_point_lamp(ball_on_flo
     import relightable_textures
     from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
     from relightable_textures.operators import transport_bake as tb, vertex_relight as vr
-    from relightable_textures.operators.steerable_bake import run
+    from relightable_textures.operators.jobs import run
 
     scene, obj = ball_on_floor
     ds = parse_direction_spec("cube:4")
@@ -162,7 +162,7 @@ def test_point_light_shading_matches_a_cycles_point_lamp(fresh_scene, tmp_path):
     from relightable_textures.operators import transport_bake as tb, vertex_relight as vr
     from relightable_textures.operators.cycles_bake import EnvironmentBake
     from relightable_textures.operators.meshes import grid_faces, mesh_object
-    from relightable_textures.operators.steerable_bake import run
+    from relightable_textures.operators.jobs import run
 
     t = np.linspace(-1.0, 1.0, 9)
     Y, X = np.meshgrid(t, t, indexing="ij")
@@ -199,7 +199,7 @@ def test_interreflected_transport_matches_cycles_with_the_same_bounces(ball_on_f
     from relightable_textures.lt_addon.transport.eigentransport import fit_eigentransport
     from relightable_textures.lt_addon.transport.error import sun_sky_environment
     from relightable_textures.operators import transport_bake as tb
-    from relightable_textures.operators.steerable_bake import run
+    from relightable_textures.operators.jobs import run
 
     scene, obj = ball_on_floor
     ds = parse_direction_spec("cube:6")
@@ -225,7 +225,7 @@ def test_cpca_bake_shades_like_cycles_and_the_toggle_colours_clusters(ball_on_fl
     from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
     from relightable_textures.lt_addon.transport.error import sun_sky_environment
     from relightable_textures.operators import transport_bake as tb, vertex_relight as vr
-    from relightable_textures.operators.steerable_bake import run
+    from relightable_textures.operators.jobs import run
 
     scene, obj = ball_on_floor
     ds = parse_direction_spec("cube:4")
@@ -289,7 +289,8 @@ def test_panel_bakes_vertex_transport_and_shows_it(fresh_scene, tmp_path):
         props.output_dir = str(tmp_path) + os.sep
         bpy.context.view_layer.objects.active = obj
         assert bpy.ops.relight.bake_transport() == {"FINISHED"}
-        assert sorted(os.listdir(tmp_path)) == ["Statue_transport.json", "Statue_transport.npz"]
+        assert sorted(os.listdir(tmp_path)) == ["Statue_transport.json", "Statue_transport.npz",
+                                                "Statue_transport_samples.npy"]
         rep = json.loads((tmp_path / "Statue_transport.json").read_text())
         assert rep["directions"] == 96 and rep["vertices"] == len(obj.data.vertices)
         assert [b["kind"] for b in object_bakes(obj)] == ["eigentransport"]
@@ -343,5 +344,70 @@ def test_panel_bakes_vertex_transport_and_shows_it(fresh_scene, tmp_path):
         assert "inside the convex hull" in fresh_scene["relight_vertex_warning"]
         attr.data.foreach_get("color", px)
         assert px.reshape(-1, 4)[:, :3].min() >= 0.0
+        # the samples kept next to the sidecar are the bake's own transport, in half floats:
+        # the sidecar's model was fitted at energy 1.0, so it reproduces them to fp16 rounding
+        from relightable_textures.lt_addon.transport.sidecar import TransportData
+
+        T = np.load(tmp_path / "Statue_transport_samples.npy")
+        assert T.dtype == np.float16 and T.shape == (len(obj.data.vertices), 96)
+        model = TransportData(str(tmp_path / "Statue_transport.npz")).model
+        full = model.mean[None, :] + model.coefficients @ model.basis
+        np.testing.assert_allclose(T.astype(np.float64), full, rtol=0,
+                                   atol=2.0 ** -11 * float(np.abs(full).max()) + 1e-4)
+    finally:
+        relightable_textures.unregister()
+
+
+def test_panel_analyze_reuses_the_vertex_bake_and_reports_in_the_panel(fresh_scene, tmp_path):
+    """Issue 12: the analysis was CLI-only and re-baked the transport (239 s on a torus). The
+    panel's Analyze Clusters reuses the samples of the object's vertex bake when directions and
+    bounces match (no Cycles call: the report says so and its bake time is 0), bakes otherwise,
+    writes the JSON and shows a one-line summary in the panel. Both sources give the same
+    analysis: 1-sample hard-sun bakes without bounces are exact, so the reused samples differ
+    from a fresh bake by half-float rounding only."""
+    import json
+
+    import bpy
+
+    import relightable_textures
+    from relightable_textures import samples
+
+    samples.build("statue", fresh_scene, "test")
+    obj = bpy.data.objects["Statue"]
+    relightable_textures.register()
+    try:
+        props = fresh_scene.relight
+        props.vertex_directions, props.vertex_energy = "cube:4", 0.99
+        props.output_dir = str(tmp_path / "a") + os.sep
+        bpy.context.view_layer.objects.active = obj
+        # no transport bake yet: the operator bakes
+        assert bpy.ops.relight.analyze() == {"FINISHED"}
+        baked = json.loads((tmp_path / "a" / "Statue_analysis.json").read_text())
+        assert baked["transport_source"]["kind"] == "baked"
+        assert baked["transport_source"]["why"] == "no vertex transport bake"
+        assert baked["timings"]["bake_seconds"] > 0
+        assert fresh_scene["relight_analysis"].startswith("Statue: best ")
+        # after a vertex bake with the same directions: reused, no bake
+        props.output_dir = str(tmp_path / "b") + os.sep
+        assert bpy.ops.relight.bake_transport() == {"FINISHED"}
+        assert bpy.ops.relight.analyze() == {"FINISHED"}
+        reused = json.loads((tmp_path / "b" / "Statue_analysis.json").read_text())
+        assert reused["transport_source"]["kind"] == "reused"
+        assert reused["transport_source"]["file"] == str(tmp_path / "b" /
+                                                         "Statue_transport_samples.npy")
+        assert reused["timings"]["bake_seconds"] == 0.0
+        assert "reused bake" in fresh_scene["relight_analysis"]
+        for key in ("N", "vertices", "samples", "predicted_clusters"):
+            assert reused[key] == baked[key], key
+        assert reused["optimum"]["clusters"] == baked["optimum"]["clusters"]
+        assert reused["optimum"]["cost_per_vertex"] == pytest.approx(
+            baked["optimum"]["cost_per_vertex"], rel=0.02)
+        # other directions than the bake's: baked again, and the report says why
+        props.vertex_directions = "cube:2"
+        props.output_dir = str(tmp_path / "c") + os.sep
+        assert bpy.ops.relight.analyze() == {"FINISHED"}
+        other = json.loads((tmp_path / "c" / "Statue_analysis.json").read_text())
+        assert other["transport_source"]["kind"] == "baked"
+        assert "not cube:2" in other["transport_source"]["why"]
     finally:
         relightable_textures.unregister()
