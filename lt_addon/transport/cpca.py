@@ -423,20 +423,37 @@ def kmeans(X, k: int, n_iter: int = 20, seed: int = 0) -> np.ndarray:
         if it and np.array_equal(new, labels):
             break
         labels = new
-        for j in range(C.shape[0]):
-            sel = labels == j
-            if sel.any():
-                C[j] = X[sel].mean(axis=0)
+        # centroids of all clusters at once (one pass over the rows, not one mask per cluster);
+        # a cluster that lost every row keeps its centre
+        order = np.argsort(labels, kind="stable")
+        counts = np.bincount(labels, minlength=C.shape[0])
+        used = np.nonzero(counts)[0]
+        starts = np.concatenate([[0], np.cumsum(counts[used])[:-1]])
+        C[used] = np.add.reduceat(X[order], starts, axis=0) / counts[used, None]
     return np.unique(labels, return_inverse=True)[1].astype(np.int64)
 
 
 def _assignment_errors(X: np.ndarray, clusters) -> np.ndarray:
-    """Squared reconstruction error of every row in every cluster's affine subspace; (V, k)."""
-    err = np.empty((X.shape[0], len(clusters)))
-    for j, c in enumerate(clusters):
-        Y = X - c.mean
-        proj = Y @ c.basis.T
-        err[:, j] = np.einsum("ij,ij->i", Y, Y) - np.einsum("ij,ij->i", proj, proj)
+    """Squared reconstruction error of every row in every cluster's affine subspace; (V, k).
+
+    ``||x - m_j||^2 - ||E_j (x - m_j)||^2`` (orthonormal rows ``E_j``), expanded so that all
+    clusters take two matrix products, ``X M^T`` (V, k) and ``X E^T`` (V, sum n_j), instead
+    of a centred (V, S) copy of ``X`` per cluster (measured: the analysis of a 4421 x 384
+    statue spent 57 of its 128 s here). The expansion loses at most ~eps ||x||^2 per entry,
+    far below the per-cluster tolerances it decides between.
+    """
+    M = np.stack([c.mean for c in clusters])                          # (k, S)
+    sq = np.einsum("ij,ij->i", X, X)
+    err = sq[:, None] - 2.0 * (X @ M.T) + np.einsum("ij,ij->i", M, M)[None, :]
+    dims = np.array([c.basis.shape[0] for c in clusters])
+    if dims.sum():
+        E = np.concatenate([c.basis for c in clusters], axis=0)        # (sum n_j, S)
+        offsets = np.concatenate([c.basis @ c.mean for c in clusters])  # E_j m_j, stacked
+        P = X @ E.T - offsets[None, :]                                # E_j (x - m_j)
+        P *= P
+        starts = np.concatenate([[0], np.cumsum(dims)[:-1]])
+        has = dims > 0
+        err[:, has] -= np.add.reduceat(P, starts[has], axis=1)
     return err
 
 

@@ -305,3 +305,32 @@ def test_adaptive_lookahead_never_costs_more_than_its_start_and_records_the_arit
         assert m.info["relative_rms_error"] <= np.sqrt(1e-3) + 1e-12
     with pytest.raises(ValueError, match="arities >= 2"):
         CP.adaptive_cpca(T, ways=(1,))
+
+
+def test_batched_assignment_errors_equal_the_centred_projection_per_cluster():
+    """_assignment_errors expands ||x - m||^2 - ||E (x - m)||^2 into two matrix products for
+    all clusters; it must agree with the direct per-cluster computation to rounding at the
+    scale of ||x||^2, including clusters with no basis vectors (mean only)."""
+    rng = np.random.default_rng(7)
+    T = np.maximum(rng.normal(size=(300, 5)) @ rng.normal(size=(5, 48)), 0.0) + 0.3
+    model = CP.fit_cpca(T, 9, tol=1e-2, n_iter=0)
+    clusters = list(model.clusters) + [model.clusters[0].truncate(0)]   # a mean-only cluster
+    got = CP._assignment_errors(T, clusters)
+    for j, c in enumerate(clusters):
+        Y = T - c.mean
+        P = Y @ c.basis.T
+        want = np.sum(Y * Y, axis=1) - np.sum(P * P, axis=1)
+        np.testing.assert_allclose(got[:, j], want, rtol=0,
+                                   atol=1e-12 * np.max(np.sum(T * T, axis=1)))
+
+
+def test_kmeans_returns_a_lloyd_fixed_point_with_every_label_used():
+    """After convergence every row is nearest to the mean of its own cluster (the centroid
+    update is batched; this checks it against the definition)."""
+    rng = np.random.default_rng(2)
+    X = np.concatenate([rng.normal(loc=c, scale=0.3, size=(50, 4)) for c in (0.0, 3.0, 6.0)])
+    labels = CP.kmeans(X, 3, n_iter=50, seed=1)
+    assert sorted(np.unique(labels)) == [0, 1, 2]
+    means = np.stack([X[labels == j].mean(axis=0) for j in range(3)])
+    d = ((X[:, None, :] - means[None]) ** 2).sum(axis=2)
+    assert np.array_equal(d.argmin(axis=1), labels)
