@@ -139,7 +139,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--env", metavar="HDR.exr", help="transport bakes: relight under this "
                    "equirectangular environment instead of a sun (direct light)")
     p.add_argument("--rotate", type=float, default=0.0, metavar="DEG",
-                   help="with --env: rotate the environment about +z")
+                   help="with --env: rotate the environment about +z like a world Mapping "
+                        "node's Z rotation (Point type)")
     p.add_argument("--source", choices=("model", "transport"), default="model",
                    help="transport bakes: relight from the fitted model or from T itself")
     p.add_argument("--out", metavar="IMG.exr", help="write the relit texture (float RGB EXR)")
@@ -233,7 +234,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--object", required=True, metavar="NAME")
     p.add_argument("--env", metavar="HDR.exr", help="equirect RGB EXR (default: the scene world)")
     p.add_argument("--rotate", type=float, default=0.0, metavar="DEG",
-                   help="rotate the environment about +z (paper sec. 5: lattice rotation)")
+                   help="rotate the environment about +z like a world Mapping node's Z "
+                        "rotation (Point type), added to the world's own Mapping rotation")
     p.add_argument("--point-light", type=_point_light, metavar="X,Y,Z,POWER",
                    help="add an isotropic point light (W); valid outside the convex hull")
     p.add_argument("--out", required=True, metavar="shading.npy",
@@ -659,8 +661,7 @@ def _cmd_bake_transport(args) -> int:
                                             settings.bounces, samples=256,
                                             transport=result.transport)
         report["ground_truth"] = truth
-    vertex_relight.write_shading(obj, vertex_relight.TransportData(report["sidecar"]).shade(
-        vertex_relight.world_environment(scene)))
+    vertex_relight.update_preview(scene)      # the panel's preview path: world, its Mapping
     preview_nodes.install_attribute_preview(obj, vertex_relight.SHADING_ATTRIBUTE)
     blend_files.save_atomically(path)
     t = report["timings"]
@@ -775,10 +776,14 @@ def _cmd_relight_vertices(args) -> int:
         except (ValueError, OSError) as exc:
             raise CliError(str(exc)) from None
     obj = _open_object(path, args.object)
+    world_z = 0.0
     if env is None and args.point_light is None:
         env = vertex_relight.world_environment(bpy.context.scene)
         if env is None:
             raise CliError("the scene world has no environment image or colour; pass --env")
+        world_z, note = vertex_relight.world_rotation(bpy.context.scene)
+        if note:
+            print(f"relight: warning: {note}", file=sys.stderr)
     try:
         data = vertex_relight.transport_data(obj)
     except (ValueError, FileNotFoundError) as exc:
@@ -788,7 +793,8 @@ def _cmd_relight_vertices(args) -> int:
         light = (np.array(args.point_light[0]), args.point_light[1], (1.0, 1.0, 1.0))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        values = data.shade(env, args.rotate, 1.0, light).astype(np.float32)
+        values = data.shade(env, vertex_relight.shade_rotation(world_z + args.rotate), 1.0,
+                            light).astype(np.float32)
     for w in caught:
         print(f"relight: warning: {w.message}", file=sys.stderr)
     with atomic.atomic_path(out) as tmp:
@@ -857,7 +863,8 @@ def _relight_transport(args, obj, out) -> int:
         if not {"R", "G", "B"} <= set(ch):
             raise CliError(f"{env_path} has no R, G, B channels")
         env = np.stack([ch[c] for c in "RGB"], axis=-1)   # row 0 at the bottom (exrio)
-        img = tx.relight_environment(bake, store, env, args.rotate, row_order="bottom_first")
+        img = tx.relight_environment(bake, store, env, -args.rotate,   # Mapping convention
+                                     row_order="bottom_first")
         img = img * args.intensity * np.asarray(args.color, np.float32)
         info.update(env=env_path, rotate=args.rotate, indirect="not included (direct light)")
     else:

@@ -124,8 +124,9 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         update=_refresh_vertex_preview)
     env_rotation: FloatProperty(
         name="Environment Rotation", default=0.0, soft_min=-180.0, soft_max=180.0,
-        description="Rotation of the environment about +z in degrees (lattice rotation, "
-                    "Nowrouzezahrai 2008 sec. 5)", update=_refresh_vertex_preview)
+        description="Rotation of the environment about +z in degrees, the same way as a world "
+                    "Mapping node's Z rotation, added to it (lattice rotation, Nowrouzezahrai "
+                    "2008 sec. 5)", update=_refresh_vertex_preview)
     point_light: PointerProperty(
         name="Point Light", type=bpy.types.Object, poll=_point_poll,
         description="A point lamp added to the vertex preview (nearest sample direction, "

@@ -50,6 +50,52 @@ def world_environment(scene):
     return rgb * strength
 
 
+def world_rotation(scene) -> tuple[float, str]:
+    """(degrees, note): the Z rotation of the Mapping node that feeds the world's Environment
+    Texture, in that node's own convention for the Point type (0 without one), and a note
+    saying what the preview cannot follow ("" when it follows everything).
+
+    Vector and Normal mappings rotate like Point; a Texture mapping applies the inverse, so its
+    rotation counts negated. X/Y rotation, location and scale are not followed (the note says
+    so): the eigentransport preview rotates its lighting about +z only (paper sec. 5)."""
+    world = scene.world
+    if world is None or world.node_tree is None:
+        return 0.0, ""
+    tex = next((n for n in world.node_tree.nodes
+                if n.bl_idname == "ShaderNodeTexEnvironment" and n.image is not None), None)
+    if tex is None or not tex.inputs["Vector"].is_linked:
+        return 0.0, ""
+    node = tex.inputs["Vector"].links[0].from_node
+    if node.bl_idname != "ShaderNodeMapping":
+        return 0.0, (f"the world's {node.name} node feeding the environment is not followed; "
+                     "the preview uses the image unrotated")
+    rot = node.inputs["Rotation"]
+    if rot.is_linked:
+        return 0.0, "the world Mapping rotation is driven by a link; the preview ignores it"
+    x, y, z = (float(np.degrees(a)) for a in rot.default_value)
+    notes = []
+    if abs(x) > 1e-6 or abs(y) > 1e-6:
+        notes.append("X/Y rotation")
+    if node.vector_type == "POINT" and np.any(np.abs(node.inputs["Location"].default_value)
+                                              > 1e-9):
+        notes.append("location")
+    if node.vector_type in ("POINT", "TEXTURE") and np.any(
+            np.abs(np.asarray(node.inputs["Scale"].default_value) - 1.0) > 1e-9):
+        notes.append("scale")
+    note = ("the world Mapping's " + ", ".join(notes) + " are not followed by the preview "
+            "(Z rotation only)") if notes else ""
+    return (-z if node.vector_type == "TEXTURE" else z), note
+
+
+def shade_rotation(mapping_deg: float) -> float:
+    """The rotation :meth:`TransportData.shade` takes (environment content turned
+    counter-clockwise seen from above: ``L(R^T w)``) for a Mapping node (Point type) Z rotation
+    of ``mapping_deg``: its negative. A Point mapping rotates the *lookup* direction, so the
+    picture turns the other way -- measured in a Cycles vertex bake: a Mapping Z rotation of
+    +90 deg moved a bright spot of the environment from azimuth 112.5 to 22.5 deg."""
+    return -float(mapping_deg)
+
+
 def mesh_positions_normals(obj) -> tuple[np.ndarray, np.ndarray]:
     """World-space positions (V, 3) and unit normals (V, 3) of the base vertices where the bake
     saw them: on the evaluated mesh (modifiers applied), as the transport was baked.
@@ -124,6 +170,9 @@ def update_preview(scene) -> dict:
     With ``scene.relight.show_clusters`` the vertices get their CPCA cluster colours instead."""
     props = getattr(scene, "relight", None)
     env = world_environment(scene)
+    world_z, note = world_rotation(scene)
+    # the slider adds to the world's own Mapping rotation, in the same (Mapping) convention
+    rotation = shade_rotation(world_z + (props.env_rotation if props else 0.0))
     timings = {}
     messages = []
     for obj in scene.objects:
@@ -147,13 +196,14 @@ def update_preview(scene) -> dict:
 
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            values = data.shade(env, props.env_rotation if props else 0.0,
-                                props.env_strength if props else 1.0, light)
+            values = data.shade(env, rotation, props.env_strength if props else 1.0, light)
         messages += [f"{obj.name}: {w.message}" for w in caught]
         t1 = time.perf_counter()
         write_shading(obj, values)
         timings[obj.name] = {"shade_ms": 1e3 * (t1 - t0),
                              "write_ms": 1e3 * (time.perf_counter() - t1)}
+    if note and env is not None and timings:
+        messages.insert(0, note)
     # the panel shows it (a property callback or handler has no operator to report to)
     text = "; ".join(messages)
     if scene.get(WARNING_KEY, "") != text:

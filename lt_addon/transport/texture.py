@@ -183,9 +183,11 @@ def environment_weights(dset: DirectionSet, env_image, *, row_order: str,
         Radiance (W m^-2 sr^-1).
     row_order : {"top_first", "bottom_first"}
     rotation_deg : float
-        Rotation of the environment about +z (degrees, counter-clockwise seen from above, the
-        sign of a Mapping node's Z rotation in the world tree): the relit light from direction
-        ``w`` is ``L(R^T w)``.
+        Rotation of the environment's picture about +z (degrees, counter-clockwise seen from
+        above): the relit light from direction ``w`` is ``L(R^T w)``. A world Mapping node
+        (Point type) with Z rotation ``phi`` turns the picture the other way, so it equals
+        ``rotation_deg = -phi`` (measured in a Cycles bake, see
+        ``operators/vertex_relight.shade_rotation``).
 
     Returns
     -------

@@ -24,7 +24,8 @@ def baked(tmp_path_factory):
 def test_bake_transport_writes_sidecar_report_and_record(baked):
     folder, blend, r = baked
     out = folder / "statue_relight"
-    assert sorted(os.listdir(out)) == ["Statue_transport.json", "Statue_transport.npz"]
+    assert sorted(os.listdir(out)) == ["Statue_transport.json", "Statue_transport.npz",
+                                       "Statue_transport_samples.npy"]
     rep = json.loads((out / "Statue_transport.json").read_text())
     assert rep["vertices"] == 507 and rep["directions"] == 96 and rep["d"] == 12
     t = rep["timings"]   # the wall time covers the fit and the truth bake too

@@ -133,8 +133,8 @@ def test_vertex_preview_updates_from_sliders_and_a_moving_point_lamp(ball_on_flo
         env = vr.world_environment(scene)
         props.env_strength = 2.0  # update callback
         np.testing.assert_allclose(shading(), data.shade(env, 0.0, 2.0), rtol=1e-5, atol=1e-6)
-        props.env_rotation = 90.0
-        np.testing.assert_allclose(shading(), data.shade(env, 90.0, 2.0), rtol=1e-5, atol=1e-6)
+        props.env_rotation = 90.0   # Mapping convention: the picture turns clockwise from above
+        np.testing.assert_allclose(shading(), data.shade(env, -90.0, 2.0), rtol=1e-5, atol=1e-6)
         lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
         lamp.data.energy = 500.0
         scene.collection.objects.link(lamp)
@@ -146,7 +146,7 @@ def test_vertex_preview_updates_from_sliders_and_a_moving_point_lamp(ball_on_flo
         bpy.context.view_layer.update()
         moved = shading()
         assert not np.allclose(first, moved)
-        want = data.shade(env, 90.0, 2.0, ((0.0, 4.0, 3.0), 500.0, (1.0, 1.0, 1.0)))
+        want = data.shade(env, -90.0, 2.0, ((0.0, 4.0, 3.0), 500.0, (1.0, 1.0, 1.0)))
         np.testing.assert_allclose(moved, want, rtol=1e-5, atol=1e-6)
     finally:
         relightable_textures.unregister()
@@ -409,5 +409,128 @@ def test_panel_analyze_reuses_the_vertex_bake_and_reports_in_the_panel(fresh_sce
         other = json.loads((tmp_path / "c" / "Statue_analysis.json").read_text())
         assert other["transport_source"]["kind"] == "baked"
         assert "not cube:2" in other["transport_source"]["why"]
+    finally:
+        relightable_textures.unregister()
+
+
+def _world_with_mapping(scene, env_bottom_first, rotation_deg: float):
+    """The scene world: an Environment Texture of ``env`` through a Point Mapping node."""
+    import math
+
+    import bpy
+
+    h, w = env_bottom_first.shape[:2]
+    img = bpy.data.images.new("relight_test_env", w, h, float_buffer=True)
+    px = np.ones((h, w, 4), np.float32)
+    px[..., :3] = env_bottom_first
+    img.pixels.foreach_set(px.ravel())
+    world = bpy.data.worlds.new("MappedWorld")
+    scene.world = world
+    world.use_nodes = True
+    nt = world.node_tree
+    bg = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBackground")
+    tex = nt.nodes.new("ShaderNodeTexEnvironment")
+    tex.image = img
+    mapping = nt.nodes.new("ShaderNodeMapping")
+    mapping.vector_type = "POINT"
+    mapping.inputs["Rotation"].default_value[2] = math.radians(rotation_deg)
+    nt.links.new(nt.nodes.new("ShaderNodeTexCoord").outputs["Generated"],
+                 mapping.inputs["Vector"])
+    nt.links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
+    nt.links.new(tex.outputs["Color"], bg.inputs["Color"])
+    return mapping
+
+
+def _cycles_vertex_bake_under_the_world(scene, obj, samples: int) -> np.ndarray:
+    """E / pi per vertex (V, 3) from Cycles' own DIFFUSE direct bake under the scene's world as
+    it is (Mapping node included): independent of this package's bake code."""
+    import bpy
+
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = samples
+    scene.cycles.seed = 3
+    attr = obj.data.color_attributes.new("truth", "FLOAT_COLOR", "POINT")
+    obj.data.color_attributes.active_color = attr
+    bake = scene.render.bake
+    bake.target = "VERTEX_COLORS"
+    bake.use_pass_direct, bake.use_pass_indirect, bake.use_pass_color = True, False, False
+    for o in scene.objects:
+        o.select_set(False)
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    assert bpy.ops.object.bake(type="DIFFUSE") == {"FINISHED"}
+    px = np.empty(len(attr.data) * 4, np.float32)
+    attr.data.foreach_get("color", px)
+    obj.data.color_attributes.remove(obj.data.color_attributes["truth"])
+    return px.reshape(-1, 4)[:, :3].astype(np.float64)
+
+
+def test_vertex_preview_follows_the_world_mapping_rotation_like_cycles(fresh_scene, tmp_path):
+    """Issue 12: the vertex preview ignored the world's Mapping node and its rotation slider
+    turned the other way. A sky bright toward one azimuth, turned by a Point Mapping node of
+    Z 90 deg: the preview must match Cycles' own bake under that world (error at the level of
+    the 384-direction sampling), a preview that ignores the Mapping or turns it the other way
+    must not, and the slider at 90 deg on an unrotated world must equal the Mapping's 90 deg."""
+    import bpy
+
+    import relightable_textures
+    from relightable_textures import samples
+    from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
+    from relightable_textures.operators import vertex_relight as vr
+
+    samples.build("statue", fresh_scene, "test")
+    obj = bpy.data.objects["Statue"]
+    # radiance by azimuth: bright toward 30 deg, dim elsewhere, dark below the horizon
+    h, w = 32, 64
+    el = (np.arange(h) + 0.5) / h * np.pi - np.pi / 2          # bottom row first
+    env = np.zeros((h, w, 3))
+    # each pixel gets the wanted sky at its own direction (Blender's equirect: azimuth
+    # pi - 2 pi u, u = 0 at the left edge)
+    u = (np.arange(w) + 0.5) / w
+    pix_az = np.pi - 2 * np.pi * u
+    key = direction_from_az_el(30.0, 0.0)
+    for i in range(h):
+        d = np.stack([np.cos(el[i]) * np.cos(pix_az), np.cos(el[i]) * np.sin(pix_az),
+                      np.full(w, np.sin(el[i]))], axis=1)
+        env[i] = (0.2 + 4.0 * np.maximum(d @ key, 0.0) ** 2)[:, None] * (el[i] > 0)
+    mapping = _world_with_mapping(fresh_scene, env, 90.0)
+    truth = _cycles_vertex_bake_under_the_world(fresh_scene, obj, samples=128)
+    relightable_textures.register()
+    try:
+        props = fresh_scene.relight
+        props.vertex_directions, props.vertex_energy = "cube:8", 1.0
+        props.output_dir = str(tmp_path) + os.sep
+        bpy.context.view_layer.objects.active = obj
+        assert bpy.ops.relight.bake_transport() == {"FINISHED"}
+        assert fresh_scene.get("relight_vertex_warning", "") == ""   # Z rotation: followed
+
+        def shading():
+            attr = obj.data.color_attributes[vr.SHADING_ATTRIBUTE]
+            px = np.empty(len(attr.data) * 4, np.float32)
+            attr.data.foreach_get("color", px)
+            return px.reshape(-1, 4)[:, :3].astype(np.float64)
+
+        def rel(a):
+            return float(np.linalg.norm(a - truth) / np.linalg.norm(truth))
+
+        followed = shading()
+        data = vr.transport_data(obj)
+        world_env = vr.world_environment(fresh_scene)
+        ignored = data.shade(world_env, 0.0)
+        turned_wrong = data.shade(world_env, 90.0)
+        err, err_ignored, err_wrong = rel(followed), rel(ignored), rel(turned_wrong)
+        print(f"vs Cycles: followed {err:.4f}, Mapping ignored {err_ignored:.4f}, "
+              f"turned the other way {err_wrong:.4f}")
+        assert err < 0.1
+        assert err_ignored > 3 * err and err_wrong > 3 * err
+        # the slider uses the Mapping's convention: slider 90 on an unrotated world = Mapping 90
+        mapping.inputs["Rotation"].default_value[2] = 0.0
+        props.env_rotation = 90.0                    # update callback re-shades
+        np.testing.assert_allclose(shading(), followed, rtol=1e-5, atol=1e-6)
+        # what the preview cannot follow, it says (X rotation here)
+        mapping.inputs["Rotation"].default_value[0] = 0.3
+        props.env_rotation = 0.0
+        assert "X/Y rotation" in fresh_scene["relight_vertex_warning"]
     finally:
         relightable_textures.unregister()
