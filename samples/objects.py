@@ -48,7 +48,7 @@ def build_statue(scene, size: str) -> dict:
     cuts, quads = DETAIL[size]
     coll = scene.collection
     scene_setup.configure_cycles(scene, size)
-    scene_setup.uniform_world(scene, "StatueWorld", strength=1.0)
+    scene_setup.sky_world(scene, "StatueWorld")
     white = scene_setup.diffuse_material("StatueMaterial", (0.8, 0.8, 0.8))
     ground_mat = scene_setup.diffuse_material("GroundMaterial", (0.5, 0.5, 0.5))
     # Suzanne spans z in about [-0.98, 0.98] once stood up; lift it onto the ground.
@@ -67,7 +67,7 @@ def build_room(scene, size: str) -> dict:
     cuts, quads = DETAIL[size]
     coll = scene.collection
     scene_setup.configure_cycles(scene, size)
-    scene_setup.uniform_world(scene, "RoomWorld", strength=1.0)
+    scene_setup.sky_world(scene, "RoomWorld", sun_az_el=(250.0, 40.0))
     mats = {
         "Floor": scene_setup.diffuse_material("FloorMaterial", (0.7, 0.7, 0.7)),
         "WallLeft": scene_setup.diffuse_material("RedMaterial", (0.8, 0.1, 0.1)),

@@ -51,6 +51,48 @@ def uniform_world(scene, name: str, strength: float = 1.0, color=(1.0, 1.0, 1.0)
     return world
 
 
+def sky_world(scene, name: str, sun_az_el=(200.0, 35.0)):
+    """A sun-and-sky HDR environment (packed into the .blend as OpenEXR) behind a Point Mapping
+    node, for the object scenes: the vertex preview follows the node's Z rotation, and its
+    Environment Rotation slider visibly turns the sun and its shadows (a constant sky does not
+    change when rotated). Sampling off, as for :func:`uniform_world`: our bakes replace the
+    world with their own lights, so this world lights only the previews and renders."""
+    import numpy as np
+
+    from ..lt_addon.sphere.hemisphere import direction_from_az_el
+    from ..lt_addon.transport.error import sun_sky_environment
+
+    # a soft sun (10 deg Gaussian radius): 384 transport directions resolve its shadows
+    env = sun_sky_environment(64, direction_from_az_el(*sun_az_el), row_order="bottom_first",
+                              sun_radiance=120.0, sun_radius_deg=10.0)
+    h, w = env.shape[:2]
+    img = bpy.data.images.new(f"{name}Sky", w, h, float_buffer=True)
+    px = np.ones((h, w, 4), np.float32)
+    px[..., :3] = env
+    img.pixels.foreach_set(px.ravel())
+    img.file_format = "OPEN_EXR"           # packed as float, not as an 8-bit PNG
+    img.pack()
+    world = bpy.data.worlds.new(name)
+    tree = ensure_node_tree(world)
+    nodes, links = tree.nodes, tree.links
+    background = nodes.get("Background") or nodes.new("ShaderNodeBackground")
+    background.inputs["Strength"].default_value = 1.0
+    tex = nodes.new("ShaderNodeTexEnvironment")
+    tex.image = img
+    tex.location = (-300, 300)
+    mapping = nodes.new("ShaderNodeMapping")
+    mapping.vector_type = "POINT"
+    mapping.location = (-500, 300)
+    coords = nodes.new("ShaderNodeTexCoord")
+    coords.location = (-700, 300)
+    links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
+    links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
+    links.new(tex.outputs["Color"], background.inputs["Color"])
+    world.cycles.sampling_method = "NONE"
+    scene.world = world
+    return world
+
+
 def diffuse_material(name: str, color) -> bpy.types.Material:
     """A pure Lambertian material (Diffuse BSDF, roughness 0) of the given linear RGB albedo."""
     mat = bpy.data.materials.new(name)

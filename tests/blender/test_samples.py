@@ -114,3 +114,32 @@ def test_unknown_scene_and_size_raise(fresh_scene):
         samples.build("castle", fresh_scene, "test")
     with pytest.raises(ValueError, match="unknown size"):
         samples.build("bumps", fresh_scene, "huge")
+
+
+@pytest.mark.parametrize("name", ["statue", "room"])
+def test_object_scenes_have_a_sky_whose_rotation_shows(fresh_scene, tmp_path, name):
+    """Issue 12: the demo's constant white world made the Environment Rotation slider look
+    broken (a constant sky is the same when rotated). The object scenes get a sun-and-sky HDR,
+    packed into the .blend as float (it survives saving), behind a Mapping node the preview
+    follows; turning it by 90 degrees moves most of the light."""
+    import bpy
+
+    from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
+    from relightable_textures.lt_addon.transport.eigentransport import (
+        project_environment, rotate_environment_samples, sample_equirect)
+    from relightable_textures.operators import vertex_relight as vr
+
+    samples.build(name, fresh_scene, "test")
+    path = str(tmp_path / "s.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    scene = bpy.context.scene
+    env = vr.world_environment(scene)
+    assert env is not None and env.max() > 50 * np.median(env)      # a sun brighter than sky
+    assert vr.world_rotation(scene) == (0.0, "")                    # a Mapping the preview follows
+    assert scene.world.cycles.sampling_method == "NONE"
+    ds = parse_direction_spec("cube:8")
+    Lw = project_environment(env, ds.directions, ds.solid_angles, row_order="bottom_first")
+    L = sample_equirect(env, ds.directions, row_order="bottom_first")
+    turned = rotate_environment_samples(L, ds, np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]))
+    assert np.linalg.norm(turned - Lw) > 0.5 * np.linalg.norm(Lw)

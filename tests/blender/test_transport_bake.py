@@ -281,6 +281,7 @@ def test_panel_bakes_vertex_transport_and_shows_it(fresh_scene, tmp_path):
     from relightable_textures.operators.vertex_relight import SHADING_ATTRIBUTE, world_environment
 
     samples.build("statue", fresh_scene, "test")
+    samples.scene_setup.uniform_world(fresh_scene, "ConstantSky")   # the bound needs one
     obj = bpy.data.objects["Statue"]
     relightable_textures.register()
     try:
@@ -424,10 +425,11 @@ def _world_with_mapping(scene, env_bottom_first, rotation_deg: float):
     px = np.ones((h, w, 4), np.float32)
     px[..., :3] = env_bottom_first
     img.pixels.foreach_set(px.ravel())
+    from relightable_textures.operators.compat import ensure_node_tree
+
     world = bpy.data.worlds.new("MappedWorld")
     scene.world = world
-    world.use_nodes = True
-    nt = world.node_tree
+    nt = ensure_node_tree(world)
     bg = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBackground")
     tex = nt.nodes.new("ShaderNodeTexEnvironment")
     tex.image = img
