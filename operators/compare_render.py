@@ -4,8 +4,9 @@ rendered from the scene camera (bpy).
 :func:`compare` renders the open scene twice with Cycles -- once through the preview materials
 (emission: exactly what the viewport preview computes), once with the user's own materials under a
 real Sun lamp of the same direction, size and strength with the scene's bounces -- and writes
-``preview | Cycles | |difference| x 4`` side by side as a PNG (sRGB, values clipped at 1), plus
-the relative RMSE over the pixels the relit objects cover.
+``preview | Cycles | |difference| x 4`` side by side as a PNG (sRGB, values clipped at 1), each
+panel captioned with what it is (light, sun size, samples, the error), plus the relative RMSE
+over the pixels the relit objects cover.
 """
 
 from __future__ import annotations
@@ -17,7 +18,9 @@ import tempfile
 import bpy
 import numpy as np
 
-from ..lt_addon.io import atomic, exrio
+from ..lt_addon.io import exrio
+from ..lt_addon.io.contact_sheet import linear_to_srgb8, write_png
+from ..lt_addon.io.label import labelled_row
 from .cycles_bake import BakeInputError
 
 
@@ -52,28 +55,6 @@ def _set_preview_outputs(objects, on: bool) -> list:
             undo.append(lambda n=active: setattr(n, "is_active_output", True))
             (ours[0] if on else theirs[0]).is_active_output = True
     return undo
-
-
-def _srgb(x):
-    x = np.clip(x, 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-
-
-def write_png(path: str, rgb: np.ndarray) -> None:
-    """(H, W, 3) linear RGB, row 0 at the bottom -> sRGB PNG through Blender, atomically."""
-    h, w = rgb.shape[:2]
-    img = bpy.data.images.new("relight_compare", w, h, alpha=False)
-    try:
-        img.colorspace_settings.name = "Non-Color"   # values below are already sRGB-encoded
-        px = np.ones((h, w, 4), np.float32)
-        px[..., :3] = _srgb(rgb)
-        img.pixels.foreach_set(px.ravel())
-        with atomic.atomic_path(path) as tmp:
-            img.filepath_raw = tmp
-            img.file_format = "PNG"
-            img.save()
-    finally:
-        bpy.data.images.remove(img)
 
 
 def compare(scene, objects, azimuth: float, elevation: float, sun_angle: float, out_png: str,
@@ -125,11 +106,16 @@ def compare(scene, objects, azimuth: float, elevation: float, sun_angle: float, 
         mask = preview.sum(-1) > 0
         err = (float(np.linalg.norm((preview - truth)[mask]) / np.linalg.norm(truth[mask]))
                if mask.any() else float("nan"))
-        sheet = np.concatenate([preview, truth, 4.0 * diff], axis=1)
+        captions = [f"preview (baked, relit) az {azimuth:g} el {elevation:g}",
+                    f"Cycles Sun {sun_angle:g} deg, {samples} spp",
+                    f"|difference| x4, rel. RMSE {err:.3f}"]
+        # renders come bottom row first; PNG rows go top first
+        sheet = labelled_row([(linear_to_srgb8(img[::-1]), text) for img, text in
+                              zip((preview, truth, 4.0 * diff), captions)])
         write_png(out_png, sheet)
         return {"png": os.path.abspath(out_png), "azimuth": azimuth, "elevation": elevation,
                 "sun_angle": sun_angle, "truth_samples": samples,
-                "rel_rmse_covered_pixels": err, "panels": "preview | Cycles Sun | |diff| x 4"}
+                "rel_rmse_covered_pixels": err, "panels": " | ".join(captions)}
     finally:
         for f in reversed(undo):
             f()

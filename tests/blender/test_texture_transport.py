@@ -283,6 +283,22 @@ def test_cli_bake_textures_default_method_relight_and_force(tmp_path):
     assert cli.run(["relight", blend, "--object", "Bumps", "--light", "30,20",
                     "--sun-angle", "5", "--out", out]) == 0
     assert os.path.getsize(out) > 0
+    # compare: preview | Cycles Sun | difference, from the scene camera, each panel captioned
+    from matplotlib.image import imread
+
+    from relightable_textures.lt_addon.io.label import GLYPH_H
+
+    png = tmp_path / "cmp.png"
+    assert cli.run(["compare", blend, "--light", "30,20", "--sun-angle", "2", "--samples", "4",
+                    "--resolution", "48", "--out", str(png)]) == 0
+    img = imread(str(png))[..., :3]
+    band = (GLYPH_H + 4) * 2
+    assert img.shape == (48 + band, 3 * 48 + 2 * 4, 3)
+    for col in range(3):                                      # white text on each dark band
+        x0 = col * (48 + 4)
+        caption = img[:band, x0:x0 + 48]
+        assert np.any(np.all(caption > 0.99, axis=2)) and np.median(caption) < 0.2
+    assert cli.run(["compare", blend, "--light", "30,20", "--out", str(png)]) == 2   # exists
     # lobes-only options are refused for the transport method, and vice versa
     assert cli.run(args + ["--order", "3"]) == 2
     assert cli.run(["bake-textures", blend, "--object", "Bumps", "--method", "lobes",
