@@ -510,7 +510,10 @@ def _cmd_bake_textures(args) -> int:
     print(f"baked {obj.name}: {report['exr']} ({report['bytes']['exr_file']} bytes); "
           f"{t['wall_total']:.2f} s in all: bake {t['total_seconds']:.2f} s "
           f"({t['cycles_bake_seconds']:.2f} s in Cycles), truth {truth_seconds:.2f} s")
-    for row in report.get("ground_truth", {}).get("directions", []):
+    gt = report.get("ground_truth", {})
+    if "headline_rel_rmse" in gt:
+        print(f"  error: {gt['headline_rel_rmse']:.3f} ({gt['headline_meaning']})")
+    for row in gt.get("directions", []):
         e = row["errors"]
         print(f"  light az {row['azimuth']:6.1f} el {row['elevation']:5.1f}: rel. RMSE vs same "
               f"light {e['same_light']['rel_fro']:.4f}"

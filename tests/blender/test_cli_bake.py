@@ -47,6 +47,13 @@ def test_bake_writes_exr_report_atlas_and_records_a_relative_path(baked):
     assert len(report["ground_truth"]["directions"]) == 2
     for row in report["ground_truth"]["directions"]:
         assert set(row["errors"]) == {"same_light", "same_light_4x", "sun"}
+    # one headline, recomputed here from the per-light figures, and said on stdout
+    gt = report["ground_truth"]
+    rel = [row["errors"]["sun"]["rel_fro"] for row in gt["directions"]]
+    assert gt["headline_of"] == "sun"
+    assert gt["headline_rel_rmse"] == pytest.approx(np.sqrt(np.mean(np.square(rel))), rel=1e-12)
+    assert "held-out light directions" in gt["headline_meaning"]
+    assert f"error: {gt['headline_rel_rmse']:.3f} (relative RMSE" in r.stdout
     _, meta = exrio.read_exr(str(out / "Bumps_steerable.exr"))
     for key in ("order", "w", "a", "frame", "centres", "calibration", "resolution", "settings"):
         assert key in meta
