@@ -192,31 +192,22 @@ class RELIGHT_OT_bake_transport(_ModalBake, bpy.types.Operator):
         props = context.scene.relight
         obj = context.active_object
         check_bakeable(obj, need_uv=False)
-        self.settings = transport_bake.TransportSettings(
+        settings = transport_bake.TransportSettings(
             directions=props.vertex_directions, bounces=props.vertex_bounces,
             energy=props.vertex_energy)
-        self.direction_set = self.settings.validate()
+        settings.validate()
         self._make_out_dir(props)
-        return transport_bake.bake_transport(context.scene, obj,
-                                             self.direction_set.directions,
-                                             self.settings.bounces, self.settings.samples)
+        # the same job as `relight bake-transport`: bake, fit, files, preview
+        return transport_bake.transport_job(context.scene, obj, settings, self.out_dir)
 
     def _finish(self, context, result):
-        from . import transport_bake, vertex_relight
-
-        obj = context.active_object
-        report = transport_bake.fit_and_write(result, obj, self.direction_set, self.settings,
-                                              self.out_dir)
-        report.pop("fitted", None)
-        timings = vertex_relight.update_preview(context.scene)
-        preview_nodes.install_attribute_preview(obj, vertex_relight.SHADING_ATTRIBUTE)
-        for message in timings.get("warnings", []):
+        report, t = result.report, result.report["timings"]
+        for message in report.get("preview", {}).get("warnings", []):
             self.report({"WARNING"}, message)
-        t = report["timings"]
-        self.report({"INFO"}, f"Baked {obj.name}: {report['vertices']} vertices x "
-                              f"{report['directions']} directions in "
-                              f"{t['total_bake_seconds']:.1f} s, d = {report.get('d', '?')}, "
-                              f"preview {timings.get(obj.name, {}).get('shade_ms', 0):.0f} ms")
+        self.report({"INFO"}, f"Baked {report['object']}: {report['vertices']} vertices x "
+                              f"{report['directions']} directions in {t['wall_total']:.1f} s "
+                              f"in all, d = {report.get('d', '?')}, preview "
+                              f"{report.get('preview', {}).get('shade_ms', 0):.0f} ms")
 
 
 class RELIGHT_OT_analyze(_ModalBake, bpy.types.Operator):

@@ -612,7 +612,7 @@ def _cmd_bake_texture_transport(args) -> int:
 def _cmd_bake_transport(args) -> int:
     import bpy
 
-    from . import blend_files, jobs, preview_nodes, transport_bake, vertex_relight
+    from . import blend_files, jobs, transport_bake
     from .cycles_bake import BakeInputError
 
     path = _check_input_blend(args.file)
@@ -623,7 +623,7 @@ def _cmd_bake_transport(args) -> int:
     if settings.energy is None and settings.coeffs is None:
         settings.energy = 0.99
     try:
-        direction_set = settings.validate()
+        settings.validate()
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
     out_dir = _check_output_dir(args.out, path)
@@ -638,41 +638,26 @@ def _cmd_bake_transport(args) -> int:
     if isinstance(settings.clusters, int) and settings.clusters > n_vertices > 0:
         raise CliError(f"--clusters {settings.clusters} exceeds {obj.name}'s {n_vertices} "
                        f"vertices; use at most {n_vertices} or 'auto'")
-    scene = bpy.context.scene
     show = _progress_printer("bake-transport")
     try:
-        gen = transport_bake.bake_transport(scene, obj, direction_set.directions,
-                                            settings.bounces, settings.samples)
-        result = jobs.run(gen, on_progress=show)
-    except BakeInputError as exc:
-        raise CliError(str(exc)) from None
+        out = jobs.run(transport_bake.transport_job(bpy.context.scene, obj, settings, out_dir,
+                                                    truth_samples=256 if args.truth else 0),
+                       on_progress=show)
+    except (BakeInputError, ValueError) as exc:
+        raise CliError(f"nothing was written: {exc}") from None
     except KeyboardInterrupt:
         print("bake-transport: cancelled; nothing was written", file=sys.stderr)
         return 130
-    try:
-        report = transport_bake.fit_and_write(result, obj, direction_set, settings, out_dir)
-    except (BakeInputError, ValueError) as exc:
-        raise CliError(f"fitting failed, nothing was written: {exc}") from None
-    model = report.pop("fitted")
-    if args.truth:
-        env = vertex_relight.world_environment(scene)
-        if env is None or np.ptp(env) == 0:
-            from ..lt_addon.transport.error import sun_sky_environment
-
-            env = sun_sky_environment(64, [0.4, -0.3, 0.8], row_order="bottom_first")
-        truth = transport_bake.truth_errors(scene, obj, model, direction_set, env,
-                                            settings.bounces, samples=256,
-                                            transport=result.transport)
-        report["ground_truth"] = truth
-    vertex_relight.update_preview(scene)      # the panel's preview path: world, its Mapping
-    preview_nodes.install_attribute_preview(obj, vertex_relight.SHADING_ATTRIBUTE)
     blend_files.save_atomically(path)
-    t = report["timings"]
-    t["wall_total"] = round(time.perf_counter() - started, 4)   # fit, truth, saving included
-    _rewrite_report(report)
+    report, t = out.report, out.report["timings"]
+    for w in report.get("preview", {}).get("warnings", []):
+        print(f"relight: warning: {w}", file=sys.stderr)
     print(f"baked {obj.name}: {report['vertices']} vertices x {report['directions']} directions "
           f"in {t['wall_total']:.2f} s in all (bake {t['total_bake_seconds']:.2f} s, "
-          f"{t['directions_per_second']:.1f} directions/s; fit {t['fit_seconds']:.2f} s); "
+          f"{t['directions_per_second']:.1f} directions/s; fit {t['fit_seconds']:.2f} s"
+          + (f"; truth {report['ground_truth']['truth_seconds']:.2f} s" if args.truth else "")
+          + f"; {time.perf_counter() - started - t['wall_total']:.2f} s more to open and save "
+            "the .blend); "
           + (f"CPCA {report['cpca']['clusters']} clusters, {report['cpca']['cost_per_vertex']:.1f}"
              f" multiply-adds per vertex (N = {report['cpca']['N']}), rel. RMS error "
              f"{report['relative_rms_error']:.4f}; " if "cpca" in report else
@@ -754,10 +739,6 @@ def _check_output_dir(out: str | None, blend_path: str) -> str:
     if not _can_create_in(out_dir if os.path.isdir(out_dir) else parent):
         raise CliError(f"output folder is not writable: {out_dir}")
     return out_dir
-
-
-def _rewrite_report(report: dict) -> None:
-    atomic.write_json(os.path.splitext(report["sidecar"])[0] + ".json", report)
 
 
 def _cmd_relight_vertices(args) -> int:

@@ -110,8 +110,11 @@ def compare(scene, objects, azimuth: float, elevation: float, sun_angle: float, 
                     f"Cycles Sun {sun_angle:g} deg, {samples} spp",
                     f"|difference| x4, rel. RMSE {err:.3f}"]
         # renders come bottom row first; PNG rows go top first
+        # captions readable at any size: about 40 characters across a panel
+        scale = max(2, preview.shape[1] // 256)
         sheet = labelled_row([(linear_to_srgb8(img[::-1]), text) for img, text in
-                              zip((preview, truth, 4.0 * diff), captions)])
+                              zip((preview, truth, 4.0 * diff), captions)],
+                             gap=2 * scale, scale=scale)
         write_png(out_png, sheet)
         return {"png": os.path.abspath(out_png), "azimuth": azimuth, "elevation": elevation,
                 "sun_angle": sun_angle, "truth_samples": samples,

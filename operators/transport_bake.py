@@ -180,30 +180,31 @@ def cluster_summary(model) -> dict:
             "fit": info}
 
 
-def fit_and_write(result: TransportBakeResult, obj, direction_set, settings: TransportSettings,
-                  out_dir: str, figures: dict | None = None) -> dict:
-    """Fit eigentransport or CPCA to a bake, write the sidecar + JSON report, record the bake on
-    ``obj``.
+@dataclass
+class TransportBakeOutput:
+    """What a per-vertex transport bake produced: the JSON-safe report (as written next to the
+    sidecar) and the fitted model (an Eigentransport or a CPCA) -- an object, not a report
+    entry."""
+    report: dict
+    model: object
 
-    Returns the report dict.
-    """
+
+def write_transport(result: TransportBakeResult, model, fit_seconds: float, obj, direction_set,
+                    settings: TransportSettings, out_dir: str, figures: dict | None = None
+                    ) -> dict:
+    """Write the sidecar and the samples file, record the bake on ``obj``; returns the report
+    (the caller writes it, once, when everything it reports is known)."""
     import os
 
     from ..lt_addon.transport.cpca import CPCA
-    from .meshes import mesh_edges
-    from .steerable_bake import record_kind
     from ..lt_addon.transport.sidecar import save_sidecar
+    from .analyze import samples_path
+    from .steerable_bake import record_kind
     from .vertex_relight import KIND, mesh_positions_normals
 
-    t0 = time.perf_counter()
-    model = fit_model(result.transport, settings, {"directions": direction_set.spec,
-                                                    "bounces": settings.bounces},
-                      edges=mesh_edges(obj))
-    fit_seconds = time.perf_counter() - t0
     clustered = isinstance(model, CPCA)
     os.makedirs(out_dir, exist_ok=True)
-    safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in obj.name)
-    path = os.path.join(out_dir, f"{safe}_transport.npz")
+    path = report_path(out_dir, obj).replace("_transport.json", "_transport.npz")
     pos, nrm = mesh_positions_normals(obj)
     meta = {"object": obj.name, "directions": direction_set.spec, "bounces": settings.bounces,
             "samples": settings.samples or (1 if settings.bounces == 0 else 64),
@@ -212,8 +213,6 @@ def fit_and_write(result: TransportBakeResult, obj, direction_set, settings: Tra
     # The samples themselves, kept so `relight analyze` / Analyze Clusters need not bake them
     # again. Half floats: T <= ~1 (visibility x cosine plus bounces), and fp16's 2^-11 relative
     # rounding is ~1e-7 of the energy, far below the analysis' 1e-3 tolerance.
-    from .analyze import samples_path
-
     with atomic.atomic_path(samples_path(path)) as tmp:
         np.save(tmp, np.asarray(result.transport, np.float16))
     samples_bytes = os.path.getsize(samples_path(path))
@@ -237,15 +236,88 @@ def fit_and_write(result: TransportBakeResult, obj, direction_set, settings: Tra
                   **model.storage_bytes()},
         **(figures or {}),
     }
-    atomic.write_json(os.path.join(out_dir, f"{safe}_transport.json"), report)
     record_kind(obj, KIND, path, {"d": model.d, "directions": direction_set.spec,
                                   "model": report["model"],
                                   "clusters": model.n_clusters if clustered else 1,
                                   "bounces": settings.bounces, "vertices": V,
                                   "bytes": nbytes,
                                   "bake_seconds": round(result.total_seconds, 2)})
-    report["fitted"] = model
     return report
+
+
+def report_path(out_dir: str, obj) -> str:
+    """``<out_dir>/<object>_transport.json`` (the object name made file-safe)."""
+    import os
+
+    safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in obj.name)
+    return os.path.join(out_dir, f"{safe}_transport.json")
+
+
+def fit(result: TransportBakeResult, obj, direction_set, settings: TransportSettings):
+    """(model, seconds): eigentransport or CPCA of a bake (:func:`fit_model`)."""
+    from .meshes import mesh_edges
+
+    t0 = time.perf_counter()
+    model = fit_model(result.transport, settings, {"directions": direction_set.spec,
+                                                    "bounces": settings.bounces},
+                      edges=mesh_edges(obj))
+    return model, time.perf_counter() - t0
+
+
+def fit_and_write(result: TransportBakeResult, obj, direction_set, settings: TransportSettings,
+                  out_dir: str, figures: dict | None = None) -> TransportBakeOutput:
+    """Fit a finished bake and write everything (sidecar, samples, record, JSON report)."""
+    model, seconds = fit(result, obj, direction_set, settings)
+    report = write_transport(result, model, seconds, obj, direction_set, settings, out_dir,
+                             figures)
+    atomic.write_json(report_path(out_dir, obj), report)
+    return TransportBakeOutput(report, model)
+
+
+def truth_environment(scene) -> np.ndarray:
+    """The light a transport bake's ``--truth`` is checked under: the scene world's
+    environment when it varies, else a sun-and-sky (a constant sky hides direction errors)."""
+    from ..lt_addon.transport.error import sun_sky_environment
+    from .vertex_relight import world_environment
+
+    env = world_environment(scene)
+    if env is None or np.ptp(env) == 0:
+        env = sun_sky_environment(64, [0.4, -0.3, 0.8], row_order="bottom_first")
+    return env
+
+
+def transport_job(scene, obj, settings: TransportSettings, out_dir: str, *,
+                  truth_samples: int = 0, preview: bool = True):
+    """The whole ``bake-transport`` verb as one job (a generator of :class:`.jobs.Progress`):
+    bake, fit, optional Cycles truth (``truth_samples`` > 0), files, and the vertex preview.
+    Nothing is written before the bake, fit and truth are done, so cancelling leaves the
+    previous bake as it was; the JSON report is written once, at the end, with
+    ``timings.wall_total`` covering all of it. Returns a :class:`TransportBakeOutput`."""
+    started = time.perf_counter()
+    direction_set = settings.validate()
+    result = yield from bake_transport(scene, obj, direction_set.directions, settings.bounces,
+                                       settings.samples, settings.seed)
+    yield Progress(0, 1, "fitting")
+    model, fit_seconds = fit(result, obj, direction_set, settings)
+    figures = {}
+    if truth_samples:
+        yield Progress(0, 1, f"Cycles truth ({truth_samples} spp)")
+        figures["ground_truth"] = truth_errors(scene, obj, model, direction_set,
+                                               truth_environment(scene), settings.bounces,
+                                               samples=truth_samples,
+                                               transport=result.transport)
+    report = write_transport(result, model, fit_seconds, obj, direction_set, settings, out_dir,
+                             figures)
+    if preview:
+        from . import preview_nodes, vertex_relight
+
+        timings = vertex_relight.update_preview(scene)
+        preview_nodes.install_attribute_preview(obj, vertex_relight.SHADING_ATTRIBUTE)
+        report["preview"] = {"shade_ms": round(timings.get(obj.name, {}).get("shade_ms", 0), 3),
+                             "warnings": timings.get("warnings", [])}
+    report["timings"]["wall_total"] = round(time.perf_counter() - started, 4)
+    atomic.write_json(report_path(out_dir, obj), report)
+    return TransportBakeOutput(report, model)
 
 
 def truth_errors(scene, obj, model, direction_set, environment, bounces: int, samples: int,

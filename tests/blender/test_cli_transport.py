@@ -47,7 +47,7 @@ def test_relight_vertices_rotation_and_point_light(baked, tmp_path):
     assert relight("relight-vertices", blend, "--object", "Statue", "--out", a).returncode == 0
     r = relight("relight-vertices", blend, "--object", "Statue", "--rotate", "360", "--out", b)
     assert r.returncode == 0, r.stderr
-    # the statue's world is a constant sky: any rotation, 360 in particular, changes nothing
+    # a full turn changes nothing
     np.testing.assert_allclose(np.load(b), np.load(a), rtol=1e-5, atol=1e-7)
     assert np.load(a).shape == (507, 3)
     inside = tmp_path / "inside.npy"

@@ -118,7 +118,7 @@ def test_vertex_preview_updates_from_sliders_and_a_moving_point_lamp(ball_on_flo
     ds = parse_direction_spec("cube:4")
     settings = tb.TransportSettings(directions="cube:4", coeffs=8, energy=None)
     res = run(tb.bake_transport(scene, obj, ds.directions))
-    report = tb.fit_and_write(res, obj, ds, settings, str(tmp_path))
+    report = tb.fit_and_write(res, obj, ds, settings, str(tmp_path)).report
     relightable_textures.register()
     try:
         props = scene.relight
@@ -171,7 +171,7 @@ def test_point_light_shading_matches_a_cycles_point_lamp(fresh_scene, tmp_path):
     ds = parse_direction_spec("cube:8")
     res = run(tb.bake_transport(fresh_scene, plane, ds.directions))
     settings = tb.TransportSettings(directions="cube:8", coeffs=40, energy=None)
-    report = tb.fit_and_write(res, plane, ds, settings, str(tmp_path))
+    report = tb.fit_and_write(res, plane, ds, settings, str(tmp_path)).report
     data = vr.TransportData(report["sidecar"])
     light = (np.array([0.3, -0.2, 3.0]), 1000.0, (1.0, 1.0, 1.0))
     ours = data.shade(None, 0.0, 1.0, light)[:, 0]
@@ -232,8 +232,8 @@ def test_cpca_bake_shades_like_cycles_and_the_toggle_colours_clusters(ball_on_fl
     settings = tb.TransportSettings(directions="cube:4", energy=0.9999, clusters=4)
     settings.validate()
     res = run(tb.bake_transport(scene, obj, ds.directions))
-    report = tb.fit_and_write(res, obj, ds, settings, str(tmp_path))
-    model = report["fitted"]
+    out = tb.fit_and_write(res, obj, ds, settings, str(tmp_path))
+    report, model = out.report, out.model
     assert report["model"] == "cpca" and isinstance(model, CPCA)
     assert report["cpca"]["clusters"] == 4 and report["relative_rms_error"] <= 0.01 + 1e-9
     assert report["cpca"]["cost_per_vertex"] == pytest.approx(model.cost() / model.n_vertices)
