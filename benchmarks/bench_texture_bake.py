@@ -71,7 +71,7 @@ def bench_preset(name: str, size: str, truth: int, tmp: str) -> dict:
                 for d in ref_dirs]
         row["storage_modes"][mode] = {"exr_bytes": nbytes, "relight_rel_error": max(errs)}
     if truth:
-        gt = sb.run_ground_truth(scene, obj, result.texture, s, truth)
+        gt = sb.run(sb.ground_truth_job(scene, obj, result.texture, s, truth))
         row["sun_angle_deg"] = round(gt["sun_angle_deg"], 2)
         row["directions"] = [
             {"azimuth": round(r["azimuth"], 1), "elevation": round(r["elevation"], 1),

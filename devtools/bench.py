@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..lt_addon.io import atomic
+from ..operators.jobs import Progress
 from . import charts, pareto
 
 TEXTURE_SCENES = ("bumps", "noise")
@@ -170,7 +171,7 @@ def texture_reference(scene, obj, sweep: TextureSweep, on_progress=None) -> dict
             images.append(session.bake_sun(direction_from_az_el(az, el), 1.0,
                                            sweep.sun_angle_deg))
             if on_progress:
-                on_progress(f"reference {i + 1}/{len(REFERENCE_LIGHTS)}")
+                on_progress(Progress(i + 1, len(REFERENCE_LIGHTS), "reference"))
     return {"images": images, "resolution": R, "samples": sweep.reference_samples,
             "seconds": round(time.perf_counter() - t0, 2), "sun_angle_deg": sweep.sun_angle_deg}
 
@@ -214,8 +215,8 @@ def texture_points(scene, obj, sweep: TextureSweep, reference: dict, tmp: str,
                 "max_abs_error": float(max(m["max_abs_error"] for m in metrics))})
         if on_progress:
             p = points[-3]
-            on_progress(f"[{i + 1}/{len(grid)}] N1 {order}, {spp} spp, {res}^2: "
-                        f"{p['bake_seconds']:.1f} s, rel. RMSE {p['rel_rmse']:.4f}")
+            on_progress(Progress(i + 1, len(grid), f"N1 {order}, {spp} spp, {res}^2: "
+                                 f"{p['bake_seconds']:.1f} s, rel. RMSE {p['rel_rmse']:.4f}"))
     return points
 
 
@@ -293,8 +294,8 @@ def transport_points(scene, obj, sweep: TransportSweep, tmp: str, on_progress=No
                 "max_abs_error": m["max_abs_error"]})
         if on_progress:
             best = min(p["rel_rmse"] for p in points if p["direction_set"] == spec)
-            on_progress(f"{spec}: {S} directions in {res.total_seconds:.1f} s, "
-                        f"best rel. RMSE {best:.4f}")
+            on_progress(Progress(len(points), len(points), f"{spec}: {S} directions in "
+                                 f"{res.total_seconds:.1f} s, best rel. RMSE {best:.4f}"))
     return points, reference
 
 

@@ -33,7 +33,8 @@ def _transport_objects(context):
     return [active] + sorted(others, key=lambda o: o.name)
 
 
-def _finish(operator, context, result, settings, out_dir):
+def _finish(operator, result):
+    """Report what a texture bake job (transport: a list of reports; lobes: one) did."""
     if isinstance(result, list):   # transport bake: bake_job wrote everything already
         for rep in result:
             gt = rep.get("ground_truth")
@@ -44,14 +45,10 @@ def _finish(operator, context, result, settings, out_dir):
             if rep["glossy"]["materials"]:
                 operator.report({"WARNING"}, rep["glossy"]["note"])
         return
-    obj = context.active_object
-    report = steerable_bake.write_bake(result, obj, out_dir, settings)
-    sun = context.scene.relight.sun
-    preview_nodes.install_preview(context.scene, obj, report["exr"], result.texture, sun=sun)
-    t = report["timings"]
-    operator.report({"INFO"}, f"Baked {obj.name}: {t['total_seconds']:.1f} s "
+    t = result["timings"]   # lobes: lobes_job wrote everything already
+    operator.report({"INFO"}, f"Baked {result['object']}: {t['wall_total']:.1f} s in all "
                               f"({t['cycles_bake_seconds']:.1f} s in Cycles), "
-                              f"{report['bytes']['exr_file'] / 1e6:.1f} MB")
+                              f"{result['bytes']['exr_file'] / 1e6:.1f} MB")
 
 
 class _ModalBake:
@@ -172,10 +169,11 @@ class RELIGHT_OT_bake_textures(_ModalBake, bpy.types.Operator):
         self.settings = settings_from_scene(props)
         self.settings.validate()
         self._make_out_dir(props)
-        return steerable_bake.bake_steerable_texture(context.scene, obj, self.settings)
+        return steerable_bake.lobes_job(context.scene, obj, self.settings, self.out_dir,
+                                        sun=props.sun)
 
     def _finish(self, context, result):
-        _finish(self, context, result, self.settings, self.out_dir)
+        _finish(self, result)
 
 
 class RELIGHT_OT_bake_transport(_ModalBake, bpy.types.Operator):

@@ -383,13 +383,9 @@ def _point_light(text: str):
 
 
 def _progress_printer(prefix: str):
-    def show(step):
-        if isinstance(step, str):  # a stage without a count (e.g. fitting)
-            print(f"{prefix}: {step}", file=sys.stderr, flush=True)
-            return
-        done, total, message = step if isinstance(step, tuple) else (step.done, step.total,
-                                                                     step.message)
-        print(f"{prefix} [{done}/{total}] {message}", file=sys.stderr, flush=True)
+    def show(step):   # a jobs.Progress
+        print(f"{prefix} [{step.done}/{step.total}] {step.message}", file=sys.stderr,
+              flush=True)
     return show
 
 
@@ -455,7 +451,7 @@ def _cmd_bake_textures(args) -> int:
     args.object = args.object[0]
     import bpy
 
-    from . import blend_files, jobs, preview_nodes, steerable_bake
+    from . import blend_files, jobs, steerable_bake
     from .cycles_bake import BakeInputError
     from .presets import settings_from_preset
 
@@ -483,33 +479,22 @@ def _cmd_bake_textures(args) -> int:
     _refuse_existing(out_dir, obj.name, ("_steerable.exr", "_steerable.json"), args.force,
                      "a steerable bake")
     show = _progress_printer("bake-textures")
-    truth_seconds = 0.0
-    try:
-        gen = steerable_bake.bake_steerable_texture(bpy.context.scene, obj, settings)
-        result = jobs.run(gen, on_progress=show)
-        if args.truth:
-            t_truth = time.perf_counter()
-            result.figures["ground_truth"] = steerable_bake.run_ground_truth(
-                bpy.context.scene, obj, result.texture, settings, args.truth, on_progress=show,
-                sheet_path=sheet)
-            truth_seconds = time.perf_counter() - t_truth
+    try:   # the same job as the panel's Bake: bake, truths, files, preview
+        report = jobs.run(steerable_bake.lobes_job(bpy.context.scene, obj, settings, out_dir,
+                                                   truth=args.truth, sheet_path=sheet),
+                          on_progress=show)
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
     except KeyboardInterrupt:
         print("bake-textures: cancelled; nothing was written", file=sys.stderr)
         return 130
-    report = steerable_bake.write_bake(result, obj, out_dir, settings)
-    preview_nodes.install_preview(bpy.context.scene, obj, report["exr"], result.texture)
     blend_files.save_atomically(path)
     t = report["timings"]
-    # everything the verb did, file opening, truth bakes and saving included (issue 12: the
-    # summary said 14 s for a 52 s run)
-    t["truth_seconds"] = round(truth_seconds, 4)
-    t["wall_total"] = round(time.perf_counter() - started, 4)
-    atomic.write_json(os.path.splitext(report["exr"])[0] + ".json", report)
     print(f"baked {obj.name}: {report['exr']} ({report['bytes']['exr_file']} bytes); "
           f"{t['wall_total']:.2f} s in all: bake {t['total_seconds']:.2f} s "
-          f"({t['cycles_bake_seconds']:.2f} s in Cycles), truth {truth_seconds:.2f} s")
+          f"({t['cycles_bake_seconds']:.2f} s in Cycles), truth {t['truth_seconds']:.2f} s; "
+          f"{time.perf_counter() - started - t['wall_total']:.2f} s more to open and save the "
+          ".blend")
     gt = report.get("ground_truth", {})
     if "headline_rel_rmse" in gt:
         print(f"  error: {gt['headline_rel_rmse']:.3f} ({gt['headline_meaning']})")

@@ -147,11 +147,14 @@ def default_output_dir(blend_path: str) -> str:
     return os.path.abspath("relight_output")
 
 
-def write_bake(result: BakeResult, obj, out_dir: str, settings: TextureBakeSettings) -> dict:
-    """Write the EXR and the JSON report atomically and record the bake on ``obj``.
+def write_bake(result: BakeResult, obj, out_dir: str, settings: TextureBakeSettings,
+               write_json: bool = True) -> dict:
+    """Write the EXR (and, with ``write_json``, the JSON report) atomically and record the bake
+    on ``obj``.
 
-    Returns the report dict. The EXR goes to ``<out_dir>/<object>_steerable.exr`` and the
-    report next to it as ``.json``; both replace earlier files only once complete.
+    Returns the report dict, with ``json``: the report's path. The EXR goes to
+    ``<out_dir>/<object>_steerable.exr`` and the report next to it as ``.json``; both replace
+    earlier files only once complete.
     """
     os.makedirs(out_dir, exist_ok=True)
     safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in obj.name)
@@ -186,9 +189,10 @@ def write_bake(result: BakeResult, obj, out_dir: str, settings: TextureBakeSetti
         "preview_cost": {"basis_images": n, "multiply_adds_per_texel": n * 3},
         **result.figures,
     }
-    atomic.write_json(json_path, report)
+    if write_json:
+        atomic.write_json(json_path, report)
     record_bake(obj, exr_path, report)
-    return report
+    return dict(report, json=os.path.abspath(json_path))
 
 
 def record_kind(obj, kind: str, file_path: str, fields: dict) -> None:
@@ -244,24 +248,50 @@ def truth_directions(texture, count: int = 5) -> list:
     return out
 
 
-def run_ground_truth(scene, obj, texture, settings: TextureBakeSettings, count: int,
-                     on_progress=None, sheet_path: str | None = None) -> dict:
-    """Cycles ground truth for ``count`` directions (see :mod:`.steerable_truth`); JSON-safe.
-
-    With ``sheet_path`` a PNG contact sheet of the first four directions is written there.
-    """
+def ground_truth_job(scene, obj, texture, settings: TextureBakeSettings, count: int,
+                     sheet_path: str | None = None):
+    """Job: Cycles ground truth for ``count`` directions (see :mod:`.steerable_truth`), with
+    the headline error; returns the JSON-safe figures. With ``sheet_path`` a PNG contact sheet
+    of the first four directions is written there."""
     from .steerable_truth import contact_sheet, ground_truth
 
-    gen = ground_truth(scene, obj, texture, truth_directions(texture, count), settings.samples,
-                       settings.bounces, settings.mode, settings.env_height, seed=settings.seed,
-                       world_sampling=settings.world_sampling)
-    result = run(gen, on_progress=on_progress)
+    result = yield from ground_truth(scene, obj, texture, truth_directions(texture, count),
+                                     settings.samples, settings.bounces, settings.mode,
+                                     settings.env_height, seed=settings.seed,
+                                     world_sampling=settings.world_sampling)
     if sheet_path:
         result["contact_sheet"] = contact_sheet(result["directions"], sheet_path)
     for row in result["directions"]:
         row.pop("images")
     result.update(headline(result, settings))
     return result
+
+
+def lobes_job(scene, obj, settings: TextureBakeSettings, out_dir: str, *, truth: int = 0,
+              sheet_path: str | None = None, preview: bool = True, sun=None):
+    """The whole ``bake-textures --method lobes`` verb as one job (a generator of
+    :class:`.jobs.Progress`): the steerable bake, ``truth`` held-out Cycles truths (with their
+    headline error; a contact sheet at ``sheet_path``), the EXR, report and bake record, and
+    the preview. Nothing is written before the bakes are done, so cancelling keeps the previous
+    bake; the report is written once, ``timings.wall_total`` covering all of it. Returns the
+    report."""
+    from .preview_nodes import install_preview
+
+    started = time.perf_counter()
+    result = yield from bake_steerable_texture(scene, obj, settings)
+    truth_seconds = 0.0
+    if truth:
+        t0 = time.perf_counter()
+        gen = ground_truth_job(scene, obj, result.texture, settings, truth, sheet_path)
+        result.figures["ground_truth"] = yield from gen
+        truth_seconds = time.perf_counter() - t0
+    report = write_bake(result, obj, out_dir, settings, write_json=False)
+    if preview:
+        install_preview(scene, obj, report["exr"], result.texture, sun=sun)
+    report["timings"]["truth_seconds"] = round(truth_seconds, 4)
+    report["timings"]["wall_total"] = round(time.perf_counter() - started, 4)
+    atomic.write_json(report["json"], {k: v for k, v in report.items() if k != "json"})
+    return report
 
 
 def headline(truth: dict, settings: TextureBakeSettings) -> dict:

@@ -21,6 +21,7 @@ from ..lt_addon.sphere.hemisphere import hemisphere_to_disk, normalize_direction
 from ..lt_addon.io.storage import reconstruction_error
 from ..lt_addon.steerable.basis import environment_image, light_profile_2d
 from .cycles_bake import EnvironmentBake
+from .jobs import Progress
 
 
 def equivalent_sun_angle_deg(texture) -> float:
@@ -48,7 +49,7 @@ def steered_light_environment(texture, direction, env_height: int, intensity: fl
 def ground_truth(scene, obj, texture, directions, samples: int, bounces: int, mode: str,
                  env_height: int, seed: int = 0, world_sampling: str = "importance",
                  with_4x: bool = True, with_sun: bool = True):
-    """Generator: yields (done, total, message); returns a list of per-direction dicts.
+    """Generator: yields :class:`.jobs.Progress`; returns a list of per-direction dicts.
 
     Each dict has ``direction``, ``azimuth``/``elevation`` (degrees) and ``errors``:
     ``{"same_light": {...}, "same_light_4x": {...}, "sun": {...}}`` with the metrics of
@@ -69,7 +70,7 @@ def ground_truth(scene, obj, texture, directions, samples: int, bounces: int, mo
             for d in directions:
                 images[name].append(session.bake(steered_light_environment(texture, d, env_height)))
                 done += 1
-                yield done, steps, f"{name} truth {len(images[name])}/{len(directions)}"
+                yield Progress(done, steps, f"{name} truth {len(images[name])}/{len(directions)}")
     suns = []
     if with_sun:
         with EnvironmentBake(scene, obj, r, 4 * samples, bounces, (env_height, 2 * env_height),
@@ -77,7 +78,7 @@ def ground_truth(scene, obj, texture, directions, samples: int, bounces: int, mo
             for d in directions:
                 suns.append(session.bake_sun(d, 1.0, sun_angle))
                 done += 1
-                yield done, steps, f"sun truth {len(suns)}/{len(directions)}"
+                yield Progress(done, steps, f"sun truth {len(suns)}/{len(directions)}")
     for i, d in enumerate(directions):
         d = normalize_directions(np.asarray(d, dtype=np.float64))
         relit_raw = texture.relight(d, clamp=False)
