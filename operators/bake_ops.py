@@ -237,10 +237,11 @@ class RELIGHT_OT_analyze(_ModalBake, bpy.types.Operator):
         self.report({"INFO"}, text)
 
 
-def show_preview(scene, obj, kind: str) -> str:
-    """Install the preview of ``obj``'s existing bake of ``kind`` from its files (no bake):
-    ``steerable_texture``, ``transport_texture`` or ``eigentransport``. Replaces the preview the
-    object shows now, so bakes of different kinds can be switched. Returns the file used.
+def show_preview(scene, obj, kind: str, reinstall: bool = False) -> str:
+    """Show the preview of ``obj``'s existing bake of ``kind`` (no bake):
+    ``steerable_texture``, ``transport_texture`` or ``eigentransport``. Previews of different
+    kinds coexist in the object's materials: when one of ``kind`` is there it is switched on,
+    otherwise (or with ``reinstall``) it is installed from the bake's files. Returns the file.
     Raises ValueError / FileNotFoundError with what to do."""
     from .blend_files import bake_file
 
@@ -249,6 +250,12 @@ def show_preview(scene, obj, kind: str) -> str:
     if what is None:
         raise ValueError(f"unknown bake kind {kind!r}")
     path = bake_file(obj, kind, what)
+    if not reinstall and preview_nodes.activate_preview(obj, kind):
+        if kind == "eigentransport":      # the colour attribute follows the current lighting
+            from . import vertex_relight
+
+            vertex_relight.update_preview(scene)
+        return path
     if kind == "steerable_texture":
         from ..lt_addon.steerable.texture import SteerableTexture
 
@@ -269,8 +276,9 @@ def show_preview(scene, obj, kind: str) -> str:
 
 
 class RELIGHT_OT_show_preview(bpy.types.Operator):
-    """Show the preview of one of the active object's existing bakes (from its files, no
-    re-bake); replaces the preview shown now"""
+    """Show the preview of one of the active object's existing bakes (no re-bake): switches to
+    it when the material already holds it (previews of different bakes coexist), else installs
+    it from the bake's files"""
 
     bl_idname = "relight.show_preview"
     bl_label = "Show Preview"
@@ -280,6 +288,9 @@ class RELIGHT_OT_show_preview(bpy.types.Operator):
         ("transport_texture", "Transport texture", ""),
         ("steerable_texture", "Steerable texture", ""),
         ("eigentransport", "Vertex transport", "")])
+    reinstall: bpy.props.BoolProperty(name="Reinstall", default=False,
+                                      description="Rebuild the preview from the bake's files "
+                                                  "even when the material holds it")
 
     @classmethod
     def poll(cls, context):
@@ -287,7 +298,7 @@ class RELIGHT_OT_show_preview(bpy.types.Operator):
 
     def execute(self, context):
         try:
-            path = show_preview(context.scene, context.active_object, self.kind)
+            path = show_preview(context.scene, context.active_object, self.kind, self.reinstall)
         except (ValueError, OSError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}

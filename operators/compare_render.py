@@ -47,7 +47,11 @@ def _set_preview_outputs(objects, on: bool) -> list:
             if tree is None:
                 continue
             outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
-            ours = [n for n in outs if n.get("relight_preview")]
+            # a texture preview (lit by the Sun, like the truth), the one shown now first;
+            # a vertex transport preview in the same material is lit by the world instead
+            ours = sorted((n for n in outs if n.get("relight_preview")
+                           and n.get("relight_preview_kind") != "eigentransport"),
+                          key=lambda n: not n.is_active_output)
             theirs = [n for n in outs if not n.get("relight_preview")]
             if not ours or not theirs:
                 continue

@@ -35,6 +35,8 @@ from .compat import ensure_node_tree
 
 GROUP_PREFIX = "Steerable Illumination"
 FRAME_NAME = "Relight Preview"
+#: the bake kinds with a preview; a material holds at most one preview of each
+PREVIEW_KINDS = ("steerable_texture", "transport_texture", "eigentransport")
 _TAG = "relight_preview"  # custom property marking our nodes
 
 #: Scene slider properties: name -> (default, min, max, description)
@@ -319,11 +321,50 @@ def set_sun_drivers(sun_dir_node, sun) -> None:
 # material wiring
 
 
-def _preview_nodes(tree):
-    return [n for n in tree.nodes if n.get(_TAG)] if tree is not None else []
+#: custom property naming the bake kind a preview node belongs to (its frame, nodes and output)
+_KIND = "relight_preview_kind"
 
 
-def remove_preview(obj, scene=None, purge: bool = True) -> int:
+def _preview_nodes(tree, kind: str | None = None):
+    """Our nodes in ``tree`` (of one bake ``kind``, or all)."""
+    if tree is None:
+        return []
+    return [n for n in tree.nodes if n.get(_TAG) and (kind is None or n.get(_KIND) == kind)]
+
+
+def preview_kinds(obj) -> list:
+    """The bake kinds whose previews the object's materials hold, the shown one first."""
+    kinds, shown = [], None
+    for mat in {s.material for s in obj.material_slots if s.material}:
+        for n in _preview_nodes(mat.node_tree):
+            if n.bl_idname == "ShaderNodeOutputMaterial" and n.get(_KIND):
+                kinds.append(n[_KIND])
+                if n.is_active_output:
+                    shown = n[_KIND]
+    kinds = sorted(set(kinds))
+    return ([shown] if shown else []) + [k for k in kinds if k != shown]
+
+
+def activate_preview(obj, kind: str) -> bool:
+    """Show the object's existing preview of ``kind`` (previews of different bakes coexist in
+    a material, each with its own output; this makes its output the active one). False when a
+    material of the object holds no preview of that kind (nothing changed then)."""
+    mats = [m for m in {s.material for s in obj.material_slots if s.material}]
+    outs = []
+    for mat in mats:
+        ours = [n for n in _preview_nodes(mat.node_tree, kind)
+                if n.bl_idname == "ShaderNodeOutputMaterial"]
+        if not ours:
+            return False
+        outs.append((mat, ours[0]))
+    for mat, out in outs:
+        for node in mat.node_tree.nodes:
+            if node.bl_idname == "ShaderNodeOutputMaterial":
+                node.is_active_output = node == out
+    return bool(outs)
+
+
+def remove_preview(obj, scene=None, purge: bool = True, kind: str | None = None) -> int:
     """Remove our preview from the object's materials completely: the tagged nodes and the
     drivers on them, then our node groups and atlas images nothing uses any more, and -- given
     ``scene`` and when no material shows a preview any more -- the scene's light sliders (so the
@@ -333,7 +374,7 @@ def remove_preview(obj, scene=None, purge: bool = True) -> int:
     changed = 0
     for mat in {s.material for s in obj.material_slots if s.material}:
         tree = mat.node_tree
-        ours = _preview_nodes(tree)
+        ours = _preview_nodes(tree, kind)
         if not ours:
             continue
         names = {f'nodes["{n.name}"]' for n in ours}
@@ -345,7 +386,8 @@ def remove_preview(obj, scene=None, purge: bool = True) -> int:
             tree.nodes.remove(node)
         outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
         if outputs and not any(n.is_active_output for n in outputs):
-            outputs[0].is_active_output = True
+            # the user's own output, not another bake's preview
+            (next((n for n in outputs if not n.get(_TAG)), outputs[0])).is_active_output = True
         changed += 1
     if not purge:
         return changed
@@ -361,19 +403,20 @@ def remove_preview(obj, scene=None, purge: bool = True) -> int:
     return changed
 
 
-def _wire_preview(obj, build_color) -> None:
-    """Put a preview into every material of ``obj``: ``build_color(builder)`` adds the nodes
-    computing the preview colour and returns its socket; it is shown through an Emission and
-    our own Material Output, made active. All new nodes are tagged and framed, so
-    :func:`remove_preview` can take them out again; the user's nodes are not touched."""
-    remove_preview(obj, purge=False)
+def _wire_preview(obj, build_color, kind: str) -> None:
+    """Put a preview of bake ``kind`` into every material of ``obj``: ``build_color(builder)``
+    adds the nodes computing the preview colour and returns its socket; it is shown through an
+    Emission and our own Material Output, made active. All new nodes are tagged with the kind
+    and framed, so :func:`remove_preview` can take them out again and previews of other kinds
+    stay (switched by :func:`activate_preview`); the user's nodes are not touched."""
+    remove_preview(obj, purge=False, kind=kind)
     if not obj.material_slots or not any(s.material for s in obj.material_slots):
         obj.data.materials.append(bpy.data.materials.new(f"{obj.name} Relight"))
     for mat in {s.material for s in obj.material_slots if s.material}:
         tree = ensure_node_tree(mat)
         before = {nd.name for nd in tree.nodes}
         b = _Builder(tree)
-        frame = b.node("NodeFrame", -200, 900, label=FRAME_NAME)
+        frame = b.node("NodeFrame", -200, 900, label=f"{FRAME_NAME}: {kind.replace('_', ' ')}")
         color = build_color(b)
         emission = b.node("ShaderNodeEmission", 1100, 700)
         emission.inputs["Strength"].default_value = 1.0
@@ -387,8 +430,12 @@ def _wire_preview(obj, build_color) -> None:
         for nd in tree.nodes:
             if nd.name not in before:
                 nd[_TAG] = True
+                nd[_KIND] = kind
                 if nd != frame:
                     nd.parent = frame
+        # each kind's frame in its own band of the node editor, so coexisting previews
+        # do not overlap
+        frame.location.y -= 1600 * PREVIEW_KINDS.index(kind)
 
 
 def install_preview(scene, obj, exr_path: str, texture, sun=None) -> dict:
@@ -419,7 +466,7 @@ def install_preview(scene, obj, exr_path: str, texture, sun=None) -> dict:
         b.links.new(color, gnode.inputs["Color"])
         return gnode.outputs["Color"]
 
-    _wire_preview(obj, steered_color)
+    _wire_preview(obj, steered_color, "steerable_texture")
     return {"atlas": atlas_path, "atlas_bytes": atlas_bytes, "group": group.name,
             "group_nodes": len(group.nodes)}
 
@@ -477,4 +524,4 @@ def install_attribute_preview(obj, attribute: str) -> None:
         b.links.new(base, mul.inputs[1])
         return mul.outputs[0]
 
-    _wire_preview(obj, build)
+    _wire_preview(obj, build, "eigentransport")

@@ -192,7 +192,7 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
             out = b.vmath("ADD", out, gi.outputs["Color"], x=900, y=700)
         return out
 
-    pn._wire_preview(obj, color)
+    pn._wire_preview(obj, color, "transport_texture")
     return {**files, "group": gname, "group_nodes": len(group.nodes), "sun_angle": angle,
             "tiles": len(tables)}
 

@@ -343,6 +343,25 @@ def test_panel_operator_bakes_selected_objects_and_sun_size_retabulates(statue, 
         after = tables()
         assert not np.allclose(before, after)
         assert sorted(os.listdir(tmp_path)) == files
+        # previews of different bakes coexist in one material (issue 12: a vertex transport
+        # bake silently replaced the texture preview) and Show Preview switches between them
+        from relightable_textures.operators.preview_nodes import preview_kinds
+
+        bpy.context.view_layer.objects.active = statue_obj
+        props.vertex_directions, props.output_dir = "cube:2", str(tmp_path / "vt") + os.sep
+        assert bpy.ops.relight.bake_transport() == {"FINISHED"}
+        assert preview_kinds(statue_obj) == ["eigentransport", "transport_texture"]
+        group_before = [n.node_tree.name for n in statue_obj.active_material.node_tree.nodes
+                        if n.bl_idname == "ShaderNodeGroup" and n.get("relight_preview")]
+        assert bpy.ops.relight.show_preview(kind="transport_texture") == {"FINISHED"}
+        assert preview_kinds(statue_obj) == ["transport_texture", "eigentransport"]
+        # switched, not rebuilt: the same node group, and the vertex preview's nodes stay
+        assert [n.node_tree.name for n in statue_obj.active_material.node_tree.nodes
+                if n.bl_idname == "ShaderNodeGroup" and n.get("relight_preview")] == group_before
+        assert bpy.ops.relight.show_preview(kind="eigentransport") == {"FINISHED"}
+        assert preview_kinds(statue_obj)[0] == "eigentransport"
+        assert sorted(os.listdir(tmp_path)) == sorted(files + ["vt"])
+        files = sorted(files + ["vt"])
         # Remove Preview takes everything out (issue 12: group, atlas images and sliders
         # were left behind): the tagged nodes and their drivers, our unused groups and images,
         # and the sliders once no material shows a preview; the user's nodes stay
