@@ -24,20 +24,12 @@ import numpy as np
 
 from ..lt_addon.io import atomic
 from ..lt_addon.transport import cluster_analysis
+from ..lt_addon.transport.sidecar import samples_path
 from .jobs import Progress
 from .meshes import mesh_edges
 
-#: suffix of the transport samples a vertex transport bake keeps next to its sidecar
-SAMPLES_SUFFIX = "_transport_samples.npy"
 #: scene property with the one-line summary of the last analysis (shown in the panel)
 SUMMARY_KEY = "relight_analysis"
-
-
-def samples_path(sidecar_path: str) -> str:
-    """The samples file that belongs to a ``<object>_transport.npz`` sidecar."""
-    stem = sidecar_path[:-len("_transport.npz")] if sidecar_path.endswith(
-        "_transport.npz") else os.path.splitext(sidecar_path)[0]
-    return stem + SAMPLES_SUFFIX
 
 
 def reusable_samples(obj, direction_set, bounces: int) -> tuple[str | None, str]:

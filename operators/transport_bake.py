@@ -197,14 +197,13 @@ def write_transport(result: TransportBakeResult, model, fit_seconds: float, obj,
     import os
 
     from ..lt_addon.transport.cpca import CPCA
-    from ..lt_addon.transport.sidecar import save_sidecar
-    from .analyze import samples_path
+    from ..lt_addon.transport.sidecar import samples_path, save_sidecar
     from .steerable_bake import record_kind
     from .vertex_relight import KIND, mesh_positions_normals
 
     clustered = isinstance(model, CPCA)
     os.makedirs(out_dir, exist_ok=True)
-    path = report_path(out_dir, obj).replace("_transport.json", "_transport.npz")
+    path = _stem(out_dir, obj) + "_transport.npz"
     pos, nrm = mesh_positions_normals(obj)
     meta = {"object": obj.name, "directions": direction_set.spec, "bounces": settings.bounces,
             "samples": settings.samples or (1 if settings.bounces == 0 else 64),
@@ -245,12 +244,17 @@ def write_transport(result: TransportBakeResult, model, fit_seconds: float, obj,
     return report
 
 
-def report_path(out_dir: str, obj) -> str:
-    """``<out_dir>/<object>_transport.json`` (the object name made file-safe)."""
+def _stem(out_dir: str, obj) -> str:
+    """``<out_dir>/<object>``, the object name made file-safe: every file of the bake starts so."""
     import os
 
     safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in obj.name)
-    return os.path.join(out_dir, f"{safe}_transport.json")
+    return os.path.join(out_dir, safe)
+
+
+def report_path(out_dir: str, obj) -> str:
+    """``<out_dir>/<object>_transport.json``."""
+    return _stem(out_dir, obj) + "_transport.json"
 
 
 def fit(result: TransportBakeResult, obj, direction_set, settings: TransportSettings):

@@ -23,6 +23,17 @@ from ..sphere.directions import DirectionSet
 from . import cpca as cpca_mod
 from . import eigentransport as et_mod
 
+#: suffix of the raw (V, S) transport samples kept next to a ``<object>_transport.npz`` sidecar
+#: (half floats, ``np.save``), so an analysis can reuse them instead of baking again
+SAMPLES_SUFFIX = "_transport_samples.npy"
+
+
+def samples_path(sidecar_path: str) -> str:
+    """The samples file that belongs to a ``<object>_transport.npz`` sidecar."""
+    stem = sidecar_path[:-len("_transport.npz")] if sidecar_path.endswith(
+        "_transport.npz") else os.path.splitext(sidecar_path)[0]
+    return stem + SAMPLES_SUFFIX
+
 
 def save_sidecar(path: str, model, direction_set: DirectionSet, positions, normals,
                  metadata: dict) -> int:

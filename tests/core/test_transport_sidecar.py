@@ -47,3 +47,10 @@ def test_missing_sidecar_and_non_rgb_environment_are_clear_errors(tmp_path, save
     exrio.write_exr(str(grey), {"Y": np.ones((4, 8), np.float32)})
     with pytest.raises(ValueError, match="no R/G/B channel"):
         read_environment_exr(str(grey))
+
+
+def test_samples_file_sits_next_to_its_sidecar():
+    from relightable_textures.lt_addon.transport.sidecar import samples_path
+
+    assert samples_path("/out/Statue_transport.npz") == "/out/Statue_transport_samples.npy"
+    assert samples_path("/out/odd.npz") == "/out/odd_transport_samples.npy"
