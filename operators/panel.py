@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import bpy
 
+from .analyze import SUMMARY_KEY
 from .blend_files import object_bakes
 from .presets import preset_figures
 from .properties import preset_differences
@@ -151,7 +152,7 @@ class VIEW3D_PT_relight_vertex(_RelightSubPanel, bpy.types.Panel):
         col.prop(props, "vertex_energy")
         self.layout.operator("relight.bake_transport", icon="RENDER_STILL")
         self.layout.operator("relight.analyze", icon="GRAPH")
-        summary = context.scene.get("relight_analysis")
+        summary = context.scene.get(SUMMARY_KEY)
         if summary:
             self.layout.label(text=summary, icon="INFO")
 

@@ -152,9 +152,8 @@ def write_bake(result: BakeResult, obj, out_dir: str, settings: TextureBakeSetti
     """Write the EXR (and, with ``write_json``, the JSON report) atomically and record the bake
     on ``obj``.
 
-    Returns the report dict, with ``json``: the report's path. The EXR goes to
-    ``<out_dir>/<object>_steerable.exr`` and the report next to it as ``.json``; both replace
-    earlier files only once complete.
+    Returns the report dict. The EXR goes to ``<out_dir>/<object>_steerable.exr`` and the
+    report next to it as ``.json``; both replace earlier files only once complete.
     """
     os.makedirs(out_dir, exist_ok=True)
     safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in obj.name)
@@ -192,7 +191,7 @@ def write_bake(result: BakeResult, obj, out_dir: str, settings: TextureBakeSetti
     if write_json:
         atomic.write_json(json_path, report)
     record_bake(obj, exr_path, report)
-    return dict(report, json=os.path.abspath(json_path))
+    return report
 
 
 def record_kind(obj, kind: str, file_path: str, fields: dict) -> None:
@@ -290,7 +289,7 @@ def lobes_job(scene, obj, settings: TextureBakeSettings, out_dir: str, *, truth:
         install_preview(scene, obj, report["exr"], result.texture, sun=sun)
     report["timings"]["truth_seconds"] = round(truth_seconds, 4)
     report["timings"]["wall_total"] = round(time.perf_counter() - started, 4)
-    atomic.write_json(report["json"], {k: v for k, v in report.items() if k != "json"})
+    atomic.write_json(os.path.splitext(report["exr"])[0] + ".json", report)
     return report
 
 
