@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import os
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -55,12 +56,22 @@ def reusable_samples(obj, direction_set, bounces: int) -> tuple[str | None, str]
     return path, "same directions and bounces"
 
 
-def analysis_job(scene, obj, direction_set, bounces: int = 0, samples: int | None = None,
-                 tol: float = 1e-3, n_seeds: int = 8, seed: int = 0, reuse: bool = True):
+@dataclass
+class AnalysisOutput:
+    """What :func:`analysis_job` produced: the JSON-safe report (as written) and the paths of
+    the files it wrote (``json``; the two charts too where the development tools are)."""
+    report: dict
+    paths: dict
+
+
+def analysis_job(scene, obj, direction_set, out_dir: str, bounces: int = 0,
+                 samples: int | None = None, tol: float = 1e-3, n_seeds: int = 8,
+                 seed: int = 0, reuse: bool = True):
     """Job (a generator yielding :class:`.jobs.Progress`): the object's transport -- reused from
-    its bake where possible (``reuse``), baked otherwise -- and its cluster analysis; returns
-    the JSON-safe report, whose ``transport_source`` says which it was and why, and whose
-    ``timings`` hold the bake, the analysis and the whole job's wall seconds."""
+    its bake where possible (``reuse``), baked otherwise -- its cluster analysis, and the report
+    written into ``out_dir`` (:func:`write_analysis`); returns an :class:`AnalysisOutput`. The
+    report's ``transport_source`` says where the transport came from and why, its ``timings``
+    hold the bake, the analysis and the whole job's wall seconds."""
     from .transport_bake import bake_transport
 
     started = time.perf_counter()
@@ -90,17 +101,18 @@ def analysis_job(scene, obj, direction_set, bounces: int = 0, samples: int | Non
                   transport_source=source,
                   timings={**bake, "analysis_seconds": round(now - t0, 3),
                            "wall_total": round(now - started, 3)})
-    return report
+    return AnalysisOutput(report, write_analysis(report, out_dir))
 
 
-def analyse_object(scene, obj, direction_set, bounces: int = 0, samples: int | None = None,
-                   tol: float = 1e-3, n_seeds: int = 8, seed: int = 0, on_progress=None,
-                   reuse: bool = True) -> dict | None:
+def analyse_object(scene, obj, direction_set, out_dir: str, bounces: int = 0,
+                   samples: int | None = None, tol: float = 1e-3, n_seeds: int = 8,
+                   seed: int = 0, on_progress=None, reuse: bool = True
+                   ) -> AnalysisOutput | None:
     """:func:`analysis_job` driven to the end (scripts, tests); None if cancelled."""
     from .jobs import run
 
-    return run(analysis_job(scene, obj, direction_set, bounces, samples, tol, n_seeds, seed,
-                            reuse), on_progress=on_progress)
+    return run(analysis_job(scene, obj, direction_set, out_dir, bounces, samples, tol,
+                            n_seeds, seed, reuse), on_progress=on_progress)
 
 
 def summary(report: dict) -> str:

@@ -33,22 +33,32 @@ def _transport_objects(context):
     return [active] + sorted(others, key=lambda o: o.name)
 
 
-def _finish(operator, result):
-    """Report what a texture bake job (transport: a list of reports; lobes: one) did."""
-    if isinstance(result, list):   # transport bake: bake_job wrote everything already
-        for rep in result:
-            gt = rep.get("ground_truth")
-            operator.report({"INFO"}, f"Baked {rep['object']}: {rep['directions']} directions, "
-                            f"{rep['timings']['wall_total']:.1f} s in all, "
-                            f"{rep['bytes']['total'] / 2**20:.1f} MiB"
-                            + (f", error vs Cycles {gt['headline_rel_rmse']:.3f}" if gt else ""))
-            if rep["glossy"]["materials"]:
-                operator.report({"WARNING"}, rep["glossy"]["note"])
-        return
-    t = result["timings"]   # lobes: lobes_job wrote everything already
-    operator.report({"INFO"}, f"Baked {result['object']}: {t['wall_total']:.1f} s in all "
-                              f"({t['cycles_bake_seconds']:.1f} s in Cycles), "
-                              f"{result['bytes']['exr_file'] / 1e6:.1f} MB")
+#: Scene property holding the last texture bake's summary lines, shown in the panel.
+LAST_BAKE_KEY = "relight_last_bake"
+
+
+def _finish(operator, scene, result):
+    """Report what a texture bake job did (it wrote everything already) -- a
+    :class:`.texture_transport.TextureBakeOutput` or a :class:`.steerable_bake.LobesBakeOutput`
+    -- and keep the lines for the panel."""
+    reports = result.reports if hasattr(result, "reports") else [result.report]
+    lines = []
+    for rep in reports:
+        t, gt = rep["timings"], rep.get("ground_truth") or {}
+        size = rep["bytes"].get("total", rep["bytes"].get("exr_file", 0))
+        lines.append(f"Baked {rep['object']}: {t['wall_total']:.1f} s in all, "
+                     f"{size / 2**20:.1f} MiB"
+                     + (f", error vs Cycles {gt['headline_rel_rmse']:.3f}"
+                        if "headline_rel_rmse" in gt else ""))
+        if rep.get("glossy", {}).get("materials"):
+            operator.report({"WARNING"}, rep["glossy"]["note"])
+    cmp = reports[0].get("comparison", {})
+    if "png" in cmp:
+        lines.append(f"Camera comparison: {os.path.basename(cmp['png'])} (rel. RMSE "
+                     f"{cmp['rel_rmse_covered_pixels']:.3f})")
+    for line in lines:
+        operator.report({"INFO"}, line)
+    scene[LAST_BAKE_KEY] = "\n".join(lines)
 
 
 class _ModalBake:
@@ -170,10 +180,10 @@ class RELIGHT_OT_bake_textures(_ModalBake, bpy.types.Operator):
         self.settings.validate()
         self._make_out_dir(props)
         return steerable_bake.lobes_job(context.scene, obj, self.settings, self.out_dir,
-                                        sun=props.sun)
+                                        truth=props.truth_lights, sun=props.sun)
 
     def _finish(self, context, result):
-        _finish(self, result)
+        _finish(self, context.scene, result)
 
 
 class RELIGHT_OT_bake_transport(_ModalBake, bpy.types.Operator):
@@ -226,13 +236,13 @@ class RELIGHT_OT_analyze(_ModalBake, bpy.types.Operator):
         direction_set = transport_bake.TransportSettings(
             directions=props.vertex_directions, bounces=props.vertex_bounces).validate()
         self._make_out_dir(props)
-        return analyze.analysis_job(context.scene, obj, direction_set, props.vertex_bounces)
+        return analyze.analysis_job(context.scene, obj, direction_set, self.out_dir,
+                                    props.vertex_bounces)
 
     def _finish(self, context, result):
         from . import analyze
 
-        analyze.write_analysis(result, self.out_dir)
-        text = analyze.summary(result)
+        text = analyze.summary(result.report)
         context.scene[analyze.SUMMARY_KEY] = text   # the panel shows the last analysis
         self.report({"INFO"}, text)
 

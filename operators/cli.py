@@ -122,6 +122,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "degrees, none a sample centre) and put the errors in the report")
     p.add_argument("--contact-sheet", metavar="PNG", help="with --truth: write a PNG of steered | "
                    "Cycles truth | difference x4 | Cycles Sun for up to 4 directions")
+    p.add_argument("--no-compare", action="store_true",
+                   help="with --truth and a scene camera, the bake also renders "
+                        "<object>[_steerable]_compare.png (preview | Cycles Sun | difference x4 "
+                        "from the camera at the lowest held-out light; in the report's timings "
+                        "as compare_seconds); this skips it")
     p.add_argument("--out", metavar="DIR", help="output folder (default: next to the .blend, "
                    "<name>_relight/)")
     p.set_defaults(func=_cmd_bake_textures)
@@ -481,8 +486,9 @@ def _cmd_bake_textures(args) -> int:
     show = _progress_printer("bake-textures")
     try:   # the same job as the panel's Bake: bake, truths, files, preview
         report = jobs.run(steerable_bake.lobes_job(bpy.context.scene, obj, settings, out_dir,
-                                                   truth=args.truth, sheet_path=sheet),
-                          on_progress=show)
+                                                   truth=args.truth, sheet_path=sheet,
+                                                   compare=not args.no_compare),
+                          on_progress=show).report
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
     except KeyboardInterrupt:
@@ -492,12 +498,14 @@ def _cmd_bake_textures(args) -> int:
     t = report["timings"]
     print(f"baked {obj.name}: {report['exr']} ({report['bytes']['exr_file']} bytes); "
           f"{t['wall_total']:.2f} s in all: bake {t['total_seconds']:.2f} s "
-          f"({t['cycles_bake_seconds']:.2f} s in Cycles), truth {t['truth_seconds']:.2f} s; "
+          f"({t['cycles_bake_seconds']:.2f} s in Cycles), truth {t['truth_seconds']:.2f} s, "
+          f"camera comparison {t.get('compare_seconds', 0.0):.2f} s; "
           f"{time.perf_counter() - started - t['wall_total']:.2f} s more to open and save the "
           ".blend")
     gt = report.get("ground_truth", {})
     if "headline_rel_rmse" in gt:
         print(f"  error: {gt['headline_rel_rmse']:.3f} ({gt['headline_meaning']})")
+    _print_comparison(report.get("comparison"))
     for row in gt.get("directions", []):
         e = row["errors"]
         print(f"  light az {row['azimuth']:6.1f} el {row['elevation']:5.1f}: rel. RMSE vs same "
@@ -505,6 +513,18 @@ def _cmd_bake_textures(args) -> int:
               + (f", 4x samples {e['same_light_4x']['rel_fro']:.4f}" if "same_light_4x" in e else "")
               + (f", vs Sun lamp {e['sun']['rel_fro']:.4f}" if "sun" in e else ""))
     return EXIT_OK
+
+
+def _print_comparison(cmp: dict | None) -> None:
+    """The bake report's camera-space comparison, in one line (or why there is none)."""
+    if not cmp:
+        return
+    if "png" in cmp:
+        print(f"  camera comparison at light az {cmp['azimuth']:g} el {cmp['elevation']:g}: "
+              f"{cmp['png']} (rel. RMSE {cmp['rel_rmse_covered_pixels']:.3f} over the "
+              f"object's pixels, {cmp['seconds']:.1f} s)")
+    else:
+        print(f"  no camera comparison: {cmp['skipped']}")
 
 
 def _cmd_bake_texture_transport(args) -> int:
@@ -562,7 +582,8 @@ def _cmd_bake_texture_transport(args) -> int:
     try:
         reports = run(tx.bake_job(bpy.context.scene, objects, settings, out_dir,
                                   truth=args.truth, truth_samples=args.truth_samples,
-                                  target_error=args.target_error), on_progress=show)
+                                  target_error=args.target_error,
+                                  compare=not args.no_compare), on_progress=show).reports
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
     except KeyboardInterrupt:
@@ -575,14 +596,16 @@ def _cmd_bake_texture_transport(args) -> int:
               f"{rep['settings']['resolution']}^2, model {rep['model']['kind']}, "
               f"{rep['bytes']['total'] / 2**20:.1f} MiB; {t['wall_total']:.1f} s in all "
               f"(bake {t['bake_total']:.1f} s: Cycles direct {t.get('direct_cycles', 0):.1f} s, "
-              f"indirect {t.get('indirect_cycles', 0):.1f} s; fit {t['fit']:.1f} s); "
-              f"report {rep['report']}")
+              f"indirect {t.get('indirect_cycles', 0):.1f} s; fit {t['fit']:.1f} s; camera "
+              f"comparison {t.get('compare_seconds', 0.0):.1f} s); report {rep['report']}")
         gt = rep.get("ground_truth")
         if gt and rep is reports[0]:   # one headline over all objects baked together
             print(f"  error vs Cycles Sun ({gt['sun_angle']:g} deg, {gt['truth_samples']} spp, "
                   f"{rep['settings']['bounces']} bounces) at {len(gt['lights']) // len(reports)}"
                   f" held-out lights: {gt['headline_rel_rmse']:.3f} relative RMSE "
                   f"({gt['headline_of']}; from T directly {gt['transport_rel_rmse']:.3f})")
+        if rep is reports[0]:
+            _print_comparison(rep.get("comparison"))
         te = rep.get("target_error")
         if te:
             print(f"  target {te['target_error']}: chose {te['chosen_directions']}, tol "
@@ -680,16 +703,15 @@ def _cmd_analyze(args) -> int:
                      args.force, "an analysis")
     show = _progress_printer("analyze")
     try:
-        report = analyze.analyse_object(bpy.context.scene, obj, ds, args.bounces, None,
-                                        args.tol, args.seeds, on_progress=show,
-                                        reuse=not args.rebake)
+        out = analyze.analyse_object(bpy.context.scene, obj, ds, out_dir, args.bounces, None,
+                                     args.tol, args.seeds, on_progress=show,
+                                     reuse=not args.rebake)
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
     except KeyboardInterrupt:
         print("analyze: cancelled; nothing was written", file=sys.stderr)
         return 130
-    report["timings"]["wall_total"] = round(time.perf_counter() - started, 3)  # file opening too
-    paths = analyze.write_analysis(report, out_dir)
+    report, paths = out.report, out.paths
     dim, best, ad, au = (report["dimensionality"], report["optimum"], report["adaptive"],
                          report["auto"])
     one = report["global_pca"]
@@ -702,7 +724,9 @@ def _cmd_analyze(args) -> int:
     print("  transport: " + (f"reused {src['file']} ({src['why']})" if src["kind"] == "reused"
                               else f"baked in {report['timings']['bake_seconds']:.1f} s "
                                    f"({src['why']})")
-          + f"; {report['timings']['wall_total']:.1f} s in all")
+          + f"; {report['timings']['wall_total']:.1f} s in all, "
+            f"{time.perf_counter() - started - report['timings']['wall_total']:.1f} s more to "
+            "open the .blend")
     print(f"  cost per vertex: global PCA {one['cost_per_vertex']:.1f}, best fixed CPCA "
           f"{best['cost_per_vertex']:.1f} at {best['clusters']} clusters, adaptive (paper) "
           f"{ad['cost_per_vertex']:.1f} at {ad['clusters']} clusters, auto "

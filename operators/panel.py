@@ -88,10 +88,11 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
             if n > 1:
                 layout.label(text=f"{n} selected meshes are baked together", icon="INFO")
             layout.operator("relight.bake_textures", icon="RENDER_STILL")
+            _last_bake(layout, context.scene)
             return
         fig = preset_figures().get(props.preset)
         if changed:
-            pass
+            pass   # the preset's figures do not describe these values
         elif fig:
             layout.label(text=f"measured: {fig['bake_seconds']:.1f} s, rel. RMSE "
                               f"{fig['rel_rmse']:.3f} ({fig['scene']}, {fig['machine']})")
@@ -99,9 +100,18 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
             layout.label(text="preset not measured yet (make bench)", icon="INFO")
         col = layout.column(align=True)
         for name in ("frame", "order", "resolution", "samples", "bounces", "storage", "mode",
-                     "world_sampling", "output_dir"):
+                     "world_sampling", "truth_lights", "output_dir"):
             col.prop(props, name)
         layout.operator("relight.bake_textures", icon="RENDER_STILL")
+        _last_bake(layout, context.scene)
+
+
+def _last_bake(layout, scene):
+    """The last texture bake's one-line summary (cost, error vs Cycles, comparison image)."""
+    from .bake_ops import LAST_BAKE_KEY
+
+    for line in str(scene.get(LAST_BAKE_KEY, "")).splitlines():
+        layout.label(text=line, icon="INFO")
 
 
 class VIEW3D_PT_relight_light(_RelightSubPanel, bpy.types.Panel):

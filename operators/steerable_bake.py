@@ -266,14 +266,25 @@ def ground_truth_job(scene, obj, texture, settings: TextureBakeSettings, count: 
     return result
 
 
+@dataclass
+class LobesBakeOutput:
+    """What :func:`lobes_job` produced: the JSON-safe report (as written next to the EXR) and
+    the steerable texture itself -- an object, not a report entry."""
+    report: dict
+    texture: SteerableTexture
+
+
 def lobes_job(scene, obj, settings: TextureBakeSettings, out_dir: str, *, truth: int = 0,
-              sheet_path: str | None = None, preview: bool = True, sun=None):
+              sheet_path: str | None = None, preview: bool = True, sun=None,
+              compare: bool = True):
     """The whole ``bake-textures --method lobes`` verb as one job (a generator of
     :class:`.jobs.Progress`): the steerable bake, ``truth`` held-out Cycles truths (with their
-    headline error; a contact sheet at ``sheet_path``), the EXR, report and bake record, and
-    the preview. Nothing is written before the bakes are done, so cancelling keeps the previous
-    bake; the report is written once, ``timings.wall_total`` covering all of it. Returns the
-    report."""
+    headline error; a labelled UV-space contact sheet at ``sheet_path``), the EXR, report and
+    bake record, the preview and -- with ``truth``, ``preview`` and ``compare`` and a scene
+    camera -- ``<object>_steerable_compare.png``: the preview next to a Cycles Sun render from
+    the camera at the lowest held-out light. Nothing is written before the bakes are done, so
+    cancelling keeps the previous bake; the report is written once, ``timings.wall_total``
+    covering all of it. Returns a :class:`LobesBakeOutput`."""
     from .preview_nodes import install_preview
 
     started = time.perf_counter()
@@ -288,9 +299,19 @@ def lobes_job(scene, obj, settings: TextureBakeSettings, out_dir: str, *, truth:
     if preview:
         install_preview(scene, obj, report["exr"], result.texture, sun=sun)
     report["timings"]["truth_seconds"] = round(truth_seconds, 4)
+    if truth and preview and compare:
+        from .compare_render import report_comparison
+
+        gt = report["ground_truth"]
+        yield Progress(1, 1, "rendering the comparison from the scene camera")
+        report["comparison"] = report_comparison(
+            scene, [obj], [(r["azimuth"], r["elevation"]) for r in gt["directions"]],
+            gt["sun_angle_deg"], os.path.splitext(report["exr"])[0] + "_compare.png",
+            4 * settings.samples)
+        report["timings"]["compare_seconds"] = report["comparison"].get("seconds", 0.0)
     report["timings"]["wall_total"] = round(time.perf_counter() - started, 4)
     atomic.write_json(os.path.splitext(report["exr"])[0] + ".json", report)
-    return report
+    return LobesBakeOutput(report, result.texture)
 
 
 def headline(truth: dict, settings: TextureBakeSettings) -> dict:

@@ -99,23 +99,30 @@ def ground_truth(scene, obj, texture, directions, samples: int, bounces: int, mo
 
 
 def contact_sheet(rows: list[dict], path: str, max_rows: int = 4) -> dict:
-    """PNG: per light direction, steered | Cycles truth (same light) | |difference| x 4 | Sun.
+    """PNG: per light direction, steered | Cycles truth (same light) | |difference| x 4 | Sun,
+    each panel captioned (light, error) -- in UV space, the fallback picture where the scene
+    has no camera (:func:`.compare_render.report_comparison` is the camera-space one).
 
     ``rows`` are the per-direction dicts of :func:`ground_truth` (with ``images``). One
     exposure for the whole sheet maps the 99th percentile of the truths to white.
     """
-    from ..lt_addon.io.contact_sheet import linear_to_srgb8, tile, write_png
+    from ..lt_addon.io.contact_sheet import linear_to_srgb8, write_png
+    from ..lt_addon.io.label import labelled_grid
 
     rows = rows[:max_rows]
     truths = np.concatenate([r["images"]["same_light"].ravel() for r in rows])
     exposure = 1.0 / max(float(np.percentile(truths, 99)), 1e-12)
     grid = []
     for r in rows:
-        im = r["images"]
-        line = [im["relit"], im["same_light"], 4.0 * np.abs(im["relit"] - im["same_light"])]
+        im, e = r["images"], r["errors"]
+        line = [(im["relit"], f"steered az {r['azimuth']:.0f} el {r['elevation']:.0f}"),
+                (im["same_light"], "Cycles, same light"),
+                (4.0 * np.abs(im["relit"] - im["same_light"]),
+                 f"|diff| x4 rel {e['same_light']['rel_fro']:.3f}")]
         if "sun" in im:
-            line.append(im["sun"])
-        grid.append(line)
-    nbytes = write_png(path, linear_to_srgb8(tile(grid), exposure))
+            line.append((im["sun"], f"Cycles Sun rel {e['sun']['rel_fro']:.3f}"))
+        # bake images come bottom row first; PNG rows go top first
+        grid.append([(linear_to_srgb8(img[::-1], exposure), text) for img, text in line])
+    nbytes = write_png(path, labelled_grid(grid))
     return {"path": path, "bytes": nbytes, "exposure": exposure,
             "columns": ["steered", "cycles_same_light", "abs_difference_x4", "cycles_sun"]}

@@ -671,12 +671,24 @@ def pilot(scene, objects, settings: TransportTextureSettings, target: float, out
     return out
 
 
+@dataclass
+class TextureBakeOutput:
+    """What :func:`bake_job` produced: per object baked together, the JSON-safe report (as
+    written to its ``report`` path) and the fitted model (TexturePCA, BlockPCA, steerable
+    texture, or None for ``--model none``) -- objects, not report entries."""
+    reports: list
+    models: list
+
+
 def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *,
              truth: int = 4, truth_samples: int = 256, target_error: float | None = None,
-             preview: bool = True):
+             preview: bool = True, compare: bool = True):
     """The whole ``bake-textures --method transport`` verb as one generator: optional pilot
-    (``target_error``), the bake, Cycles truths at held-out lights, files, preview. Returns
-    the list of per-object reports (their ``timings.wall_total`` covers all of it)."""
+    (``target_error``), the bake, Cycles truths at held-out lights, files, preview and -- with
+    ``truth``, a preview and ``compare`` and a scene camera -- ``<object>_compare.png`` (the
+    first object's name): the previews next to a Cycles Sun render from the camera at the
+    lowest held-out light. Returns a :class:`TextureBakeOutput` (the reports'
+    ``timings.wall_total`` covers all of it)."""
     from dataclasses import replace
 
     started = time.perf_counter()
@@ -702,16 +714,27 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
     figures["glossy"] = glossy_note(objects)
     reports = write_bake(result, objects, out_dir, figures)
 
-    if preview and settings.model == "pca":
+    previewed = preview and settings.model == "pca"
+    if previewed:
         for rep, b, obj in zip(reports, result.objects, objects):
             store = tt.TransportStore.open(b.store_path)
             rep["preview"] = install_transport_preview(scene, obj, rep, b, store)
+    if truth and previewed and compare:
+        from .compare_render import report_comparison
+
+        yield Progress(1, 1, "rendering the comparison from the scene camera")
+        cmp = report_comparison(scene, objects, truth_lights(truth), settings.sun_angle,
+                                os.path.join(out_dir, f"{_safe(objects[0].name)}_compare.png"),
+                                truth_samples)
+        for rep in reports:
+            rep["comparison"] = cmp
+            rep["timings"]["compare_seconds"] = cmp.get("seconds", 0.0)
     wall = round(time.perf_counter() - started, 3)
     for rep in reports:   # the wall time of everything the verb did, in the file too
         rep["timings"]["wall_total"] = wall
         atomic.write_json(rep["report"], {k: v for k, v in rep.items() if k != "report"},
                           default=float)
-    return reports
+    return TextureBakeOutput(reports, [b.model for b in result.objects])
 
 
 def _truth_figures(scene, objects, settings, result, truth, truth_samples, target_error,

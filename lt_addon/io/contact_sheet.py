@@ -1,4 +1,5 @@
-"""Contact sheets: rows of same-sized linear images tiled into one 8-bit sRGB PNG.
+"""Contact sheets: linear images to 8-bit sRGB, and a PNG writer (captioned layouts are in
+:mod:`.label`).
 
 The PNG writer uses only the standard library (zlib), so sheets can be written from the CLI,
 the demo and tests without Pillow.
@@ -19,28 +20,6 @@ def linear_to_srgb8(image: np.ndarray, exposure: float = 1.0) -> np.ndarray:
     x = np.clip(np.asarray(image, dtype=np.float64) * exposure, 0.0, 1.0)
     srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
     return np.rint(srgb * 255.0).astype(np.uint8)
-
-
-def tile(rows: list[list[np.ndarray]], gap: int = 2) -> np.ndarray:
-    """Tile ``rows`` of (H, W, 3) images (row 0 at the bottom) into one image, top row first.
-
-    Returns
-    -------
-    sheet : ndarray, shape (rows * (H + gap) - gap, cols * (W + gap) - gap, 3), float64
-        Row 0 at the top (PNG order); gaps are 0.
-    """
-    if not rows or not rows[0]:
-        raise ValueError("nothing to tile")
-    h, w = np.shape(rows[0][0])[:2]
-    cols = max(len(r) for r in rows)
-    sheet = np.zeros((len(rows) * (h + gap) - gap, cols * (w + gap) - gap, 3))
-    for i, row in enumerate(rows):
-        for j, img in enumerate(row):
-            img = np.asarray(img, dtype=np.float64)
-            if img.shape[:2] != (h, w):
-                raise ValueError(f"all images must be {h}x{w}, got {img.shape[:2]}")
-            sheet[i * (h + gap):i * (h + gap) + h, j * (w + gap):j * (w + gap) + w] = img[::-1, :, :3]
-    return sheet
 
 
 def write_png(path: str, rgb8: np.ndarray) -> int:

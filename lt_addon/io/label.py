@@ -90,3 +90,28 @@ def labelled_row(panels, gap: int = 4, scale: int = 2) -> np.ndarray:
     if len(heights) != 1:
         raise ValueError(f"panels must share one height, got {sorted(heights)}")
     return np.concatenate(out, axis=1)
+
+
+def labelled_grid(rows, gap: int = 4, min_width: int = 256, scale: int = 2) -> np.ndarray:
+    """Rows of panels ``[[(image8, text), ...], ...]`` (all panels one shape, top row first)
+    as one captioned grid: each panel enlarged by a whole factor (nearest texel) to at least
+    ``min_width`` px wide so its caption reads, rows separated by ``gap`` black rows.
+
+    Returns
+    -------
+    ndarray, uint8, shape (rows * (k H + band) + gaps, cols * k W + gaps, 3)
+    """
+    if not rows or not rows[0]:
+        raise ValueError("nothing to lay out")
+    w = np.shape(rows[0][0][0])[1]
+    k = max(1, -(-int(min_width) // max(w, 1)))
+    lines = [labelled_row([(np.asarray(img, np.uint8).repeat(k, 0).repeat(k, 1), text)
+                           for img, text in row], gap=gap, scale=scale) for row in rows]
+    width = max(line.shape[1] for line in lines)
+    out = []
+    for i, line in enumerate(lines):
+        if i:
+            out.append(np.zeros((gap, width, 3), np.uint8))
+        pad = np.zeros((line.shape[0], width - line.shape[1], 3), np.uint8)
+        out.append(np.concatenate([line, pad], axis=1))
+    return np.concatenate(out, axis=0)

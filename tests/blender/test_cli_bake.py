@@ -33,14 +33,18 @@ def test_bake_writes_exr_report_atlas_and_records_a_relative_path(baked):
     folder, blend, r = baked
     out = folder / "bumps_relight"
     assert sorted(os.listdir(out)) == ["Bumps_steerable.exr", "Bumps_steerable.json",
-                                       "Bumps_steerable_atlas.exr"]
+                                       "Bumps_steerable_atlas.exr",
+                                       "Bumps_steerable_compare.png"]
     assert "[9/10]" in r.stderr  # progress: 9 bakes + the solve
     report = json.loads((out / "Bumps_steerable.json").read_text())
     t = report["timings"]
     assert t["bake_calls"] == 9 and 0 < t["cycles_bake_seconds"] <= t["total_seconds"]
     # the wall time covers everything the verb did, truth bakes included, and a stopwatch
     # around the process (Python and bpy start-up on top) is never shorter
-    assert t["wall_total"] >= t["total_seconds"] + t["truth_seconds"] and t["truth_seconds"] > 0
+    assert t["wall_total"] >= t["total_seconds"] + t["truth_seconds"] + t["compare_seconds"]
+    assert t["truth_seconds"] > 0 and t["compare_seconds"] > 0
+    assert report["comparison"]["png"] == str(out / "Bumps_steerable_compare.png")
+    assert f"camera comparison {t['compare_seconds']:.2f} s" in r.stdout
     assert r.stopwatch >= t["wall_total"]
     assert f"{t['wall_total']:.2f} s in all" in r.stdout
     assert report["bytes"]["exr_file"] == os.path.getsize(out / "Bumps_steerable.exr")

@@ -55,7 +55,7 @@ def test_eevee_renders_the_transport_preview_like_its_numpy_twin(fresh_scene, tm
     r, d_tab = 16, 16
     s = tx.TransportTextureSettings(directions="hemi:48:1.5", resolution=r, bounces=0,
                                     components=9, table_size=d_tab)
-    reports = run(tx.bake_job(fresh_scene, [obj], s, str(tmp_path), truth=0))
+    reports = run(tx.bake_job(fresh_scene, [obj], s, str(tmp_path), truth=0)).reports
     prev = reports[0]["preview"]
     group = bpy.data.node_groups[prev["group"]]
     lookups = [n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]

@@ -278,3 +278,41 @@ def test_overlapping_uvs_are_reported_before_baking(fresh_scene):
     assert steps[0].message.startswith("warning:") and "overlapping UVs" in steps[0].message
     assert result.figures["uv_layout"]["overlapping"] == pytest.approx(1.0)
     assert result.figures["uv_layout"]["covered"] == pytest.approx(1.0)
+
+
+def test_lobes_job_reports_a_camera_comparison_or_says_why_not(bumps, tmp_path):
+    """The report's picture (issue 12): with a scene camera, the preview next to a Cycles Sun
+    render of the lowest held-out light, captioned, its own rel. RMSE recomputed here from the
+    PNG's panels being different pictures; without a camera, a line saying so (the labelled
+    UV contact sheet is the fallback) and no PNG."""
+    from matplotlib.image import imread
+
+    from relightable_textures.lt_addon.io.label import GLYPH_H
+    from relightable_textures.operators import steerable_bake as sb
+
+    scene, obj = bumps
+    s = settings(order=3, resolution=16, samples=4, bounces=0)
+    out = sb.run(sb.lobes_job(scene, obj, s, str(tmp_path), truth=2,
+                              sheet_path=str(tmp_path / "sheet.png")))
+    assert isinstance(out.texture, sb.SteerableTexture) and out.report["object"] == "Bumps"
+    cmp = out.report["comparison"]
+    low = min(out.report["ground_truth"]["directions"], key=lambda r: r["elevation"])
+    assert (cmp["azimuth"], cmp["elevation"]) == (low["azimuth"], low["elevation"])
+    assert cmp["truth_samples"] == 16 and 0 < cmp["rel_rmse_covered_pixels"] < 2
+    img = imread(cmp["png"])[..., :3]
+    band = (GLYPH_H + 4) * 2
+    w = (img.shape[1] - 2 * 4) // 3
+    assert max(img.shape[0] - band, w) == 256                 # longer side 256 px
+    preview, truth = img[band:, :w], img[band:, w + 4:2 * w + 4]
+    assert np.abs(preview - truth).mean() > 0                # two renders, not one twice
+    sheet = imread(str(tmp_path / "sheet.png"))
+    assert sheet.shape[1] >= 4 * 256                          # 16 texels enlarged to be read
+    assert out.report["timings"]["wall_total"] >= out.report["timings"]["compare_seconds"] > 0
+
+    camera, scene.camera = scene.camera, None
+    try:
+        again = sb.run(sb.lobes_job(scene, obj, s, str(tmp_path / "nocam"), truth=1))
+    finally:
+        scene.camera = camera
+    assert "no camera" in again.report["comparison"]["skipped"]
+    assert not [n for n in os.listdir(tmp_path / "nocam") if n.endswith(".png")]

@@ -155,7 +155,7 @@ def test_preview_group_rendered_by_cycles_equals_numpy_twin(bumps, tmp_path):
 
     scene, obj = bumps
     s = settings(components=12, sun_angle=4.0)
-    reports = run(tx.bake_job(scene, [obj], s, str(tmp_path), truth=0))
+    reports = run(tx.bake_job(scene, [obj], s, str(tmp_path), truth=0)).reports
     prev = reports[0]["preview"]
     ntile = prev["tiles"]
     eig = unpack_atlas(np.stack([exrio.read_exr(prev["eigen"])[0][c] for c in "RGB"], -1),
@@ -327,6 +327,7 @@ def test_panel_operator_bakes_selected_objects_and_sun_size_retabulates(statue, 
         for o in scene.objects:
             o.select_set(o in (statue_obj, ground))
         bpy.context.view_layer.objects.active = statue_obj
+        engine, filepath = scene.render.engine, scene.render.filepath
         assert bpy.ops.relight.bake_textures() == {"FINISHED"}
         files = sorted(os.listdir(tmp_path))
         for name in ("Statue", "Ground"):
@@ -336,6 +337,14 @@ def test_panel_operator_bakes_selected_objects_and_sun_size_retabulates(statue, 
         rep = json.loads((tmp_path / "Ground_texture_report.json").read_text())
         assert rep["objects_baked_together"] == ["Statue", "Ground"]
         assert rep["directions"] == 24 and "ground_truth" in rep
+        # the report's picture: preview | Cycles Sun | difference from the scene camera at the
+        # held-out light, captioned, its cost in the report and its line in the panel
+        cmp = rep["comparison"]
+        assert cmp["png"] == str(tmp_path / "Statue_compare.png") and "Statue_compare.png" in files
+        assert cmp["elevation"] == 10.0 and 0 < cmp["rel_rmse_covered_pixels"] < 1
+        assert rep["timings"]["wall_total"] >= rep["timings"]["compare_seconds"] > 0
+        assert "Camera comparison: Statue_compare.png" in scene["relight_last_bake"]
+        assert scene.render.engine == engine and scene.render.filepath == filepath   # restored
         assert [b["kind"] for b in object_bakes(ground)] == ["transport_texture"]
         tables = lambda: exrio.read_exr(str(tmp_path / "Statue_preview_tables.exr"))[0]["R"]
         before = tables().copy()
@@ -443,9 +452,8 @@ def test_target_error_pilot_chooses_directions_and_reports_what_it_achieved(bump
     scene, obj = bumps
     s = settings(components=None, tol=0.02, bounces=1, indirect_resolution=8,
                  indirect_samples=4)
-    reports = run(tx.bake_job(scene, [obj], s, str(tmp_path), truth=0,
-                                                truth_samples=16, target_error=0.35,
-                                                preview=False))
+    reports = run(tx.bake_job(scene, [obj], s, str(tmp_path), truth=0, truth_samples=16,
+                              target_error=0.35, preview=False)).reports
     te = reports[0]["target_error"]
     tried = te["tried"]
     assert tried[0]["directions"].startswith("hemi:64")

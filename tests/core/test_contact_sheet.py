@@ -1,11 +1,10 @@
-"""Contact sheet tiling, sRGB encoding and the stdlib PNG writer."""
+"""Contact sheet sRGB encoding and the stdlib PNG writer."""
 
 import zlib
 
 import numpy as np
-import pytest
 
-from relightable_textures.lt_addon.io.contact_sheet import linear_to_srgb8, read_png, tile, write_png
+from relightable_textures.lt_addon.io.contact_sheet import linear_to_srgb8, read_png, write_png
 
 
 def test_srgb_encoding_known_values():
@@ -21,14 +20,3 @@ def test_png_round_trip_and_crc(tmp_path):
     assert len(data) == n and data[12:16] == b"IHDR"
     assert int.from_bytes(data[29:33], "big") == zlib.crc32(data[12:29])
     np.testing.assert_array_equal(read_png(str(tmp_path / "a.png")), img)
-
-
-def test_tile_puts_bottom_first_images_upright():
-    a = np.zeros((2, 3, 3))
-    a[0] = 1.0  # bottom row of the image
-    sheet = tile([[a, 2 * a]], gap=1)
-    assert sheet.shape == (2, 7, 3)
-    assert sheet[1, 0, 0] == 1.0 and sheet[0, 0, 0] == 0.0  # bottom row stays at the bottom
-    assert sheet[1, 4, 0] == 2.0 and np.all(sheet[:, 3] == 0)  # gap column
-    with pytest.raises(ValueError, match="all images"):
-        tile([[a, np.zeros((3, 3, 3))]])

@@ -39,3 +39,22 @@ def test_labelled_row_puts_captioned_panels_side_by_side():
     assert row.shape == (16 + label.GLYPH_H + 4, 30 + 4 + 40, 3)
     with pytest.raises(ValueError, match="one height"):
         label.labelled_row([(a, "a"), (np.zeros((8, 8, 3), np.uint8), "c")])
+
+
+def test_labelled_grid_enlarges_small_panels_so_captions_fit_and_keeps_row_order():
+    """A 32-texel bake would fit 3 letters per caption; the grid enlarges it by a whole factor
+    (nearest texel, so the picture's values are kept exactly) to >= min_width."""
+    top, bottom = np.full((8, 32, 3), 10, np.uint8), np.full((8, 32, 3), 250, np.uint8)
+    grid = label.labelled_grid([[(top, "top a"), (top, "top b")],
+                                [(bottom, "bottom a"), (bottom, "bottom b")]],
+                               gap=4, min_width=100, scale=1)
+    k = 4                                                  # ceil(100 / 32)
+    band = label.GLYPH_H + 4
+    assert grid.shape == (2 * (band + 8 * k) + 4, 2 * 32 * k + 4, 3)
+    np.testing.assert_array_equal(grid[band:band + 8 * k, :32 * k], 10)      # top row first
+    y = band + 8 * k + 4 + band
+    np.testing.assert_array_equal(grid[y:y + 8 * k, :32 * k], 250)
+    caption = grid[band + 8 * k + 4:y, :32 * k]                            # 2nd row's band
+    assert np.all(caption == 255, axis=2).sum() == label.text_mask("bottom a", 1).sum()
+    with pytest.raises(ValueError, match="nothing"):
+        label.labelled_grid([])
