@@ -247,7 +247,6 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
 def _indirect_and_models(scene, objects, settings, dset, albedos, readers, seconds, calls,
                          t_start, rss0, peak, first, step, total):
     """Steps 3 and 4 of :func:`bake_transport_textures` (the stores are not committed yet)."""
-    S = dset.size
     do_indirect = settings.bounces > 0 and settings.indirect == "steerable"
     # 3. indirect light: a low-order steerable bake of the indirect pass
     indirects = [None] * len(objects)
@@ -464,7 +463,7 @@ def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: d
                 b.model.save(files["model"], "half")
             else:
                 files["model"] = base + "_transport_model.npz"
-                save_model(files["model"], b.model, result)
+                tt.save_model(files["model"], b.model, result.directions.spec)
         nbytes = {k: os.path.getsize(v) for k, v in files.items()}
         s = result.settings
         report = {
@@ -498,60 +497,18 @@ def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: d
 
 
 def model_summary(model, S: int) -> dict:
+    """The report's model entry; a steerable quadrature model or none have no PCA summary."""
     if model is None:
         return {"kind": "none"}
-    if isinstance(model, tt.TexturePCA):
-        return {"kind": "pca", "components": model.k, "residual": model.residual}
-    if isinstance(model, tt.BlockPCA):
-        d = model.dims
-        return {"kind": "blocks", "block": model.block, "blocks": model.n_blocks,
-                "dims_min": int(d.min()), "dims_mean": float(d.mean()), "dims_max": int(d.max()),
-                "residual": model.residual, "cost_per_texel": model.cost_per_texel(S)}
+    if hasattr(model, "summary"):
+        return model.summary(S)
     return {"kind": "steerable", "order": model.order}
 
 
 def preview_cost(model, settings) -> dict:
-    if isinstance(model, tt.TexturePCA):
-        tiles = -(-model.k // 3)
-        return {"texture_lookups_per_pixel": 2 * tiles + 1 + (settings.indirect_order ** 2
-                                                            if settings.bounces else 0),
-                "multiply_adds_per_texel": 3 * model.k, "python_per_light_change": False}
-    if isinstance(model, tt.BlockPCA):
-        return {"multiply_adds_per_texel": int(model.dims.max()), "viewport": "NumPy only"}
-    return {}
-
-
-def save_model(path: str, model, result: TransportTextureResult) -> None:
-    arrays = {"directions_spec": np.array(result.directions.spec)}
-    if isinstance(model, tt.TexturePCA):
-        arrays.update(kind=np.array("pca"), V=model.V, U=model.U.astype(np.float16),
-                      resolution=np.array(model.resolution), residual=np.array(model.residual))
-    else:
-        arrays.update(kind=np.array("blocks"), block=np.array(model.block),
-                      resolution=np.array(model.resolution), residual=np.array(model.residual),
-                      dims=model.dims, V=np.concatenate(model.V, axis=1),
-                      U=np.concatenate([u.ravel() for u in model.U]).astype(np.float16))
-    with atomic.atomic_path(path) as tmp:
-        np.savez(tmp, **arrays)
-
-
-def load_model(path: str):
-    z = np.load(path)
-    kind = str(z["kind"])
-    R = int(z["resolution"])
-    if kind == "pca":
-        V = z["V"]
-        return tt.TexturePCA(V, z["U"].astype(np.float32), R, float(z["residual"]),
-                             np.zeros(V.shape[1]))
-    B = int(z["block"])
-    dims = z["dims"]
-    Vs, Us, a, u0 = [], [], 0, 0
-    for n in dims:
-        Vs.append(z["V"][:, a:a + n])
-        Us.append(z["U"][u0:u0 + n * B * B].astype(np.float32).reshape(n, B * B))
-        a += n
-        u0 += n * B * B
-    return tt.BlockPCA(Vs, Us, R, B, float(z["residual"]))
+    if not hasattr(model, "preview_cost"):
+        return {}
+    return model.preview_cost(settings.indirect_order ** 2 if settings.bounces else 0)
 
 
 def load_bake(report_path: str) -> tuple:
@@ -574,7 +531,7 @@ def load_bake(report_path: str) -> tuple:
     model = None
     if "model" in files:
         m = where(files["model"])
-        model = SteerableTexture.load(m) if m.endswith(".exr") else load_model(m)
+        model = SteerableTexture.load(m) if m.endswith(".exr") else tt.load_model(m)
     return ObjectBake(report["object"], store.path, albedo, indirect, model), store, report
 
 
@@ -804,7 +761,7 @@ def refresh_preview_tables(scene, obj, sun_angle: float) -> dict | None:
         return None
     t0 = time.perf_counter()
     bake, store, report = load_bake(bpy.path.abspath(records[-1]["path"]))
-    if not isinstance(bake.model, tt.TexturePCA):
+    if not getattr(bake.model, "live_preview", False):
         return None
     rewrite_tables(obj, report, bake, store, sun_angle)
     return {"seconds": time.perf_counter() - t0}

@@ -144,7 +144,7 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
     s = report["settings"]
     angle = float(s["sun_angle"] if sun_angle is None else sun_angle)
     model = bake.model
-    if not isinstance(model, tt.TexturePCA):
+    if not getattr(model, "live_preview", False):
         raise ValueError("the live preview shows PCA models (model 'pca'); this bake has "
                          f"{report['model']['kind']!r}")
     eig, tables = preview_arrays(model, bake.albedo, store.directions, angle, s["table_size"],

@@ -404,6 +404,32 @@ class TexturePCA:
     def storage_bytes(self) -> dict:
         return {"eigen_textures_half": int(self.U.size * 2), "loadings_float32": int(self.V.size * 4)}
 
+    # -- the model protocol shared with BlockPCA (summary, preview cost, file arrays) --
+    kind = "pca"
+    live_preview = True   # the node preview reads the eigen-textures through lookup tables
+
+    def summary(self, S: int) -> dict:
+        """JSON-safe description for the bake report (``S`` directions)."""
+        return {"kind": self.kind, "components": self.k, "residual": self.residual}
+
+    def preview_cost(self, extra_lookups: int = 0) -> dict:
+        """Per-pixel cost of the live preview: two table lookups and one eigen-texture fetch
+        per three components, plus ``extra_lookups`` (the indirect term's)."""
+        tiles = -(-self.k // 3)
+        return {"texture_lookups_per_pixel": 2 * tiles + 1 + int(extra_lookups),
+                "multiply_adds_per_texel": 3 * self.k, "python_per_light_change": False}
+
+    def to_arrays(self) -> dict:
+        """The arrays of the model file (eigen-textures stored as half floats)."""
+        return {"kind": np.array(self.kind), "V": self.V, "U": self.U.astype(np.float16),
+                "resolution": np.array(self.resolution), "residual": np.array(self.residual)}
+
+    @classmethod
+    def from_arrays(cls, z) -> "TexturePCA":
+        V = np.asarray(z["V"])
+        return cls(V, np.asarray(z["U"], np.float32), int(z["resolution"]),
+                   float(z["residual"]), np.zeros(V.shape[1]))
+
 
 def fit_texture_pca(store: TransportStore, *, k: int | None = None, tol: float | None = None,
                     max_k: int = 96) -> TexturePCA:
@@ -476,6 +502,38 @@ class BlockPCA:
         p = self.block ** 2
         return float(sum(n * (p + S) for n in self.dims) / (self.n_blocks * p))
 
+    kind = "blocks"
+    live_preview = False   # relit in NumPy only (one set of loadings per block)
+
+    def summary(self, S: int) -> dict:
+        """JSON-safe description for the bake report (``S`` directions)."""
+        d = self.dims
+        return {"kind": self.kind, "block": self.block, "blocks": self.n_blocks,
+                "dims_min": int(d.min()), "dims_mean": float(d.mean()), "dims_max": int(d.max()),
+                "residual": self.residual, "cost_per_texel": self.cost_per_texel(S)}
+
+    def preview_cost(self, extra_lookups: int = 0) -> dict:
+        return {"multiply_adds_per_texel": int(self.dims.max()), "viewport": "NumPy only"}
+
+    def to_arrays(self) -> dict:
+        """The arrays of the model file: loadings side by side, eigen-textures flattened
+        (half floats), ``dims`` to split them again."""
+        return {"kind": np.array(self.kind), "block": np.array(self.block),
+                "resolution": np.array(self.resolution), "residual": np.array(self.residual),
+                "dims": self.dims, "V": np.concatenate(self.V, axis=1),
+                "U": np.concatenate([u.ravel() for u in self.U]).astype(np.float16)}
+
+    @classmethod
+    def from_arrays(cls, z) -> "BlockPCA":
+        B, V, U = int(z["block"]), np.asarray(z["V"]), np.asarray(z["U"])
+        Vs, Us, a, u0 = [], [], 0, 0
+        for n in np.asarray(z["dims"]):
+            Vs.append(V[:, a:a + n])
+            Us.append(U[u0:u0 + n * B * B].astype(np.float32).reshape(n, B * B))
+            a += n
+            u0 += n * B * B
+        return cls(Vs, Us, int(z["resolution"]), B, float(z["residual"]))
+
 
 def fit_block_pca(store: TransportStore, *, block: int = 16, tol: float = 0.02) -> BlockPCA:
     """Per-block uncentred PCA; each block keeps the fewest components with relative residual
@@ -499,6 +557,29 @@ def fit_block_pca(store: TransportStore, *, block: int = 16, tol: float = 0.02) 
             tot2 += lam.sum()
             err2 += lam[n:].sum()
     return BlockPCA(Vs, Us, R, block, float(np.sqrt(err2 / tot2)) if tot2 > 0 else 0.0)
+
+
+#: Model classes of the NPZ model file, by their ``kind``.
+MODEL_KINDS = {cls.kind: cls for cls in (TexturePCA, BlockPCA)}
+
+
+def save_model(path: str, model, directions_spec: str) -> None:
+    """Write a :data:`MODEL_KINDS` model and the spec of the directions it was fitted on to
+    ``path`` (NPZ; written under a temporary name and renamed)."""
+    from ..io import atomic
+
+    with atomic.atomic_path(path) as tmp:
+        np.savez(tmp, directions_spec=np.array(directions_spec), **model.to_arrays())
+
+
+def load_model(path: str):
+    """The model written by :func:`save_model`; a clear ValueError for an unknown kind."""
+    with np.load(path, allow_pickle=False) as z:
+        kind = str(z["kind"])
+        if kind not in MODEL_KINDS:
+            raise ValueError(f"{path}: unknown model kind {kind!r} "
+                             f"(known: {', '.join(MODEL_KINDS)})")
+        return MODEL_KINDS[kind].from_arrays(z)
 
 
 def quadrature_sampled_lights(store: TransportStore, sampled_basis) -> np.ndarray:

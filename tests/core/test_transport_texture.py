@@ -117,6 +117,28 @@ def test_pca_and_block_pca_are_exact_at_full_rank(tmp_path):
     assert tt.fit_texture_pca(st, tol=p8.residual + 1e-9).k <= 8
 
 
+def test_model_files_round_trip_through_one_protocol(tmp_path):
+    """Both PCA models save and load through ``kind`` (no isinstance dispatch); the reloaded
+    model relights like the fitted one within the half-float storage of its eigen-textures
+    (relative 2^-11 per value, so 1e-3 of the image's scale covers sums of a few dozen)."""
+    d = hemisphere_fibonacci(40, 1.5)
+    R = 8
+    st = _store(tmp_path, _synthetic(d, R, seed=4), d, R)
+    idx, w = tt.sun_weights(d, direction_from_az_el(120.0, 30.0), 5.0, "linear")
+    for model in (tt.fit_texture_pca(st, k=6), tt.fit_block_pca(st, block=4, tol=0.05)):
+        path = str(tmp_path / f"{model.kind}.npz")
+        tt.save_model(path, model, d.spec)
+        back = tt.load_model(path)
+        assert type(back) is type(model) and back.summary(40) == model.summary(40)
+        ref = model.relight(idx, w)
+        np.testing.assert_allclose(back.relight(idx, w), ref, atol=1e-3 * np.abs(ref).max())
+        assert str(np.load(path)["directions_spec"]) == d.spec
+    assert tt.MODEL_KINDS["pca"].live_preview and not tt.MODEL_KINDS["blocks"].live_preview
+    np.savez(str(tmp_path / "odd.npz"), kind=np.array("wavelet"))
+    with pytest.raises(ValueError, match="unknown model kind 'wavelet'"):
+        tt.load_model(str(tmp_path / "odd.npz"))
+
+
 def test_coefficient_tables_match_direct_weights_at_texel_centres():
     d = hemisphere_fibonacci(120, 1.5)
     V = np.random.default_rng(1).normal(size=(120, 3))
