@@ -23,6 +23,8 @@ import bpy
 import numpy as np
 
 from .compat import ensure_node_tree
+from .meshes import (color_attribute, corner_vertices, image_pixels, polygon_arrays,
+                     set_image_pixels)
 
 BAKE_MODES = ("radiance", "irradiance")
 #: Light paths a bake keeps: everything, direct only, indirect only, or the diffuse colour alone
@@ -113,14 +115,8 @@ def _vertices_with_area(mesh) -> np.ndarray:
     lit = np.zeros(len(mesh.vertices), dtype=bool)
     if n_faces == 0:
         return lit
-    area = np.empty(n_faces, dtype=np.float32)
-    mesh.polygons.foreach_get("area", area)
-    sizes = np.empty(n_faces, dtype=np.int32)
-    mesh.polygons.foreach_get("loop_total", sizes)
-    loop_verts = np.empty(len(mesh.loops), dtype=np.int32)
-    mesh.loops.foreach_get("vertex_index", loop_verts)
-    starts = np.empty(n_faces, dtype=np.int32)
-    mesh.polygons.foreach_get("loop_start", starts)
+    area, starts, sizes = polygon_arrays(mesh)
+    loop_verts = corner_vertices(mesh)
     by_start = np.argsort(starts, kind="stable")  # a face's loops are contiguous
     face_of_loop = np.repeat(by_start, sizes[by_start])
     lit[loop_verts[area[face_of_loop] > 0]] = True
@@ -433,9 +429,7 @@ class EnvironmentBake:
             raise BakeInputError(f"environment must have shape {(h, w)} or {(h, w, 3)}, got {env.shape}")
         if not np.all(np.isfinite(env)):
             raise BakeInputError("environment has NaN or inf texels")
-        rgba = np.ones((h, w, 4), dtype=np.float32)
-        rgba[..., :3] = env[..., None] if env.ndim == 2 else env
-        self.env_image.pixels.foreach_set(rgba.ravel())
+        set_image_pixels(self.env_image, env)
         self.env_image.update()
         start = time.perf_counter()
         result = bpy.ops.object.bake(type="DIFFUSE", use_clear=True, margin=self.margin)
@@ -444,18 +438,10 @@ class EnvironmentBake:
         if "FINISHED" not in result:
             raise RuntimeError(f"Cycles bake did not finish: {result}")
         if self.per_vertex:
-            px = np.empty(len(self.target.data) * 4, dtype=np.float32)
-            self.target.data.foreach_get("color", px)
-            values = px.reshape(-1, 4)[:, :3].copy()
+            values = color_attribute(self.target)[:, :3].copy()
             values[~self._lit_vertices] = 0.0
             return [values]
-        r = self.resolution
-        out = []
-        for target in self.targets:
-            px = np.empty(r * r * 4, dtype=np.float32)
-            target.pixels.foreach_get(px)
-            out.append(px.reshape(r, r, 4)[..., :3].copy())
-        return out
+        return [image_pixels(target)[..., :3].copy() for target in self.targets]
 
     def bake_sun(self, direction, strength: float, angle_deg: float) -> np.ndarray:
         """Bake under a Cycles Sun lamp only (the environment set to black).

@@ -62,9 +62,10 @@ def _link_object(name: str, mesh, collection, smooth: bool):
 
 
 def vertex_positions(obj) -> np.ndarray:
-    """Object-space vertex positions, shape (V, 3), float64."""
-    co = np.empty(len(obj.data.vertices) * 3, dtype=np.float64)
-    obj.data.vertices.foreach_get("co", co)
+    """Object-space vertex positions of a mesh object or datablock, shape (V, 3), float64."""
+    mesh = obj.data if isinstance(obj, bpy.types.Object) else obj
+    co = np.empty(len(mesh.vertices) * 3, dtype=np.float64)
+    mesh.vertices.foreach_get("co", co)
     return co.reshape(-1, 3)
 
 
@@ -88,12 +89,9 @@ def uv_triangles(obj) -> np.ndarray:
     """UV coordinates of the mesh's triangulated faces (active render UV map), shape (T, 3, 2)."""
     mesh = obj.data
     mesh.calc_loop_triangles()
-    layer = next((uv for uv in mesh.uv_layers if uv.active_render), mesh.uv_layers[0])
-    uv = np.empty(len(mesh.loops) * 2, dtype=np.float64)
-    layer.data.foreach_get("uv", uv)
     loops = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int64)
     mesh.loop_triangles.foreach_get("loops", loops)
-    return uv.reshape(-1, 2)[loops].reshape(-1, 3, 2)
+    return uv_corners(mesh)[loops].reshape(-1, 3, 2)
 
 
 def mesh_edges(obj) -> np.ndarray:
@@ -101,3 +99,71 @@ def mesh_edges(obj) -> np.ndarray:
     e = np.empty(len(obj.data.edges) * 2, dtype=np.int64)
     obj.data.edges.foreach_get("vertices", e)
     return e.reshape(-1, 2)
+
+
+def vertex_normals(mesh) -> np.ndarray:
+    """Object-space vertex normals of a mesh datablock, shape (V, 3), float64 (unit)."""
+    n = np.empty(len(mesh.vertices) * 3, dtype=np.float64)
+    mesh.vertices.foreach_get("normal", n)
+    return n.reshape(-1, 3)
+
+
+def corner_vertices(mesh) -> np.ndarray:
+    """The vertex of every face corner (loop), shape (L,), int64."""
+    v = np.empty(len(mesh.loops), dtype=np.int64)
+    mesh.loops.foreach_get("vertex_index", v)
+    return v
+
+
+def polygon_arrays(mesh) -> tuple:
+    """Per face: area (m^2 in object space), first corner and corner count; each shape (F,)."""
+    f = len(mesh.polygons)
+    area, start, total = (np.empty(f, np.float64), np.empty(f, np.int64), np.empty(f, np.int64))
+    mesh.polygons.foreach_get("area", area)
+    mesh.polygons.foreach_get("loop_start", start)
+    mesh.polygons.foreach_get("loop_total", total)
+    return area, start, total
+
+
+def uv_corners(mesh, layer=None) -> np.ndarray:
+    """UVs per face corner of ``layer`` (default: the active render map), shape (L, 2)."""
+    layer = layer or next((uv for uv in mesh.uv_layers if uv.active_render), mesh.uv_layers[0])
+    uv = np.empty(len(mesh.loops) * 2, dtype=np.float64)
+    layer.data.foreach_get("uv", uv)
+    return uv.reshape(-1, 2)
+
+
+def set_uv_corners(layer, uv) -> None:
+    """Write (L, 2) UVs into a UV layer."""
+    layer.data.foreach_set("uv", np.asarray(uv, np.float32).ravel())
+
+
+def color_attribute(attr) -> np.ndarray:
+    """RGBA of a colour attribute (any domain), shape (N, 4), float32 (linear)."""
+    px = np.empty(len(attr.data) * 4, dtype=np.float32)
+    attr.data.foreach_get("color", px)
+    return px.reshape(-1, 4)
+
+
+def set_color_attribute(attr, rgb) -> None:
+    """Write (N, 3) linear RGB (alpha 1) into a colour attribute."""
+    rgba = np.ones((len(attr.data), 4), dtype=np.float32)
+    rgba[:, :3] = rgb
+    attr.data.foreach_set("color", rgba.ravel())
+
+
+def image_pixels(img) -> np.ndarray:
+    """An image's pixels, shape (H, W, channels), float32, bottom row first (Blender order)."""
+    w, h = img.size
+    px = np.empty(w * h * img.channels, dtype=np.float32)
+    img.pixels.foreach_get(px)
+    return px.reshape(h, w, img.channels)
+
+
+def set_image_pixels(img, rgb) -> None:
+    """Write (H, W, 3) or (H, W) linear values (alpha 1) into an RGBA image, bottom row first."""
+    rgb = np.asarray(rgb, np.float32)
+    w, h = img.size
+    rgba = np.ones((h, w, 4), dtype=np.float32)
+    rgba[..., :3] = rgb[..., None] if rgb.ndim == 2 else rgb
+    img.pixels.foreach_set(rgba.ravel())

@@ -17,6 +17,8 @@ import bpy
 import numpy as np
 
 from ..lt_addon.transport.sidecar import TransportData
+from .meshes import (image_pixels, set_color_attribute, vertex_normals,
+                     vertex_positions)
 
 KIND = "eigentransport"
 SHADING_ATTRIBUTE = "relight_shading"
@@ -44,10 +46,7 @@ def world_environment(scene):
     w, h = img.size
     if not w or not h:
         return None
-    px = np.empty(w * h * img.channels, dtype=np.float32)
-    img.pixels.foreach_get(px)
-    rgb = px.reshape(h, w, img.channels)[..., :3].astype(np.float64)
-    return rgb * strength
+    return image_pixels(img)[..., :3].astype(np.float64) * strength
 
 
 def world_rotation(scene) -> tuple[float, str]:
@@ -115,14 +114,10 @@ def mesh_positions_normals(obj) -> tuple[np.ndarray, np.ndarray]:
     except (RuntimeError, AttributeError):
         evaluated = None
     try:
-        co = np.empty(len(mesh.vertices) * 3)
-        mesh.vertices.foreach_get("co", co)
-        n = np.empty(len(mesh.vertices) * 3)
-        mesh.vertices.foreach_get("normal", n)
+        co, n = vertex_positions(mesh)[:V], vertex_normals(mesh)[:V]
     finally:
         if evaluated is not None:
             evaluated.to_mesh_clear()
-    co, n = co.reshape(-1, 3)[:V], n.reshape(-1, 3)[:V]
     m = np.array(obj.matrix_world, dtype=np.float64)
     pos = co @ m[:3, :3].T + m[:3, 3]
     nrm = n @ np.linalg.inv(m[:3, :3])  # inverse transpose for normals
@@ -142,9 +137,7 @@ def write_shading(obj, values: np.ndarray) -> None:
         if attr is not None:
             mesh.color_attributes.remove(attr)
         attr = mesh.color_attributes.new(SHADING_ATTRIBUTE, "FLOAT_COLOR", "POINT")
-    rgba = np.ones((len(mesh.vertices), 4), dtype=np.float32)
-    rgba[:, :3] = values
-    attr.data.foreach_set("color", rgba.ravel())
+    set_color_attribute(attr, values)
     mesh.update()
 
 

@@ -11,6 +11,7 @@ import math
 import bpy
 
 from ..operators.compat import ensure_node_tree
+from ..operators.meshes import set_image_pixels
 
 #: Samples per pixel written into each sample scene, by size.
 SAMPLES = {"test": 16, "demo": 64}
@@ -57,7 +58,6 @@ def sky_world(scene, name: str, sun_az_el=(200.0, 35.0)):
     Environment Rotation slider visibly turns the sun and its shadows (a constant sky does not
     change when rotated). Sampling off, as for :func:`uniform_world`: our bakes replace the
     world with their own lights, so this world lights only the previews and renders."""
-    import numpy as np
 
     from ..lt_addon.sphere.hemisphere import direction_from_az_el
     from ..lt_addon.transport.error import sun_sky_environment
@@ -67,9 +67,7 @@ def sky_world(scene, name: str, sun_az_el=(200.0, 35.0)):
                               sun_radiance=120.0, sun_radius_deg=10.0)
     h, w = env.shape[:2]
     img = bpy.data.images.new(f"{name}Sky", w, h, float_buffer=True)
-    px = np.ones((h, w, 4), np.float32)
-    px[..., :3] = env
-    img.pixels.foreach_set(px.ravel())
+    set_image_pixels(img, env)
     img.file_format = "OPEN_EXR"           # packed as float, not as an 8-bit PNG
     img.pack()
     world = bpy.data.worlds.new(name)

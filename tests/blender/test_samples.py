@@ -63,17 +63,13 @@ def test_bumps_vertices_follow_the_height_field(fresh_scene):
     """Each vertex height equals the analytic field at its UV (an independent evaluation)."""
     import bpy
 
-    from relightable_textures.operators.meshes import vertex_positions
+    from relightable_textures.operators.meshes import corner_vertices, uv_corners, vertex_positions
 
     samples.build("bumps", fresh_scene, "test")
     mesh = bpy.data.objects["Bumps"].data
     co = vertex_positions(bpy.data.objects["Bumps"])
-    uv = np.empty(len(mesh.loops) * 2, dtype=np.float32)
-    mesh.uv_layers["UVMap"].data.foreach_get("uv", uv)
-    corner_vertex = np.empty(len(mesh.loops), dtype=np.int64)
-    mesh.loops.foreach_get("vertex_index", corner_vertex)
     vertex_uv = np.zeros((len(co), 2))
-    vertex_uv[corner_vertex] = uv.reshape(-1, 2)
+    vertex_uv[corner_vertices(mesh)] = uv_corners(mesh, mesh.uv_layers["UVMap"])
     expected = 2.0 * heightfield.bumps_and_dents(vertex_uv[:, 0], vertex_uv[:, 1])
     np.testing.assert_allclose(co[:, 2], expected, atol=1e-5)  # float32 UV / position storage
     np.testing.assert_allclose(co[:, :2], (vertex_uv - 0.5) * 2.0, atol=1e-6)

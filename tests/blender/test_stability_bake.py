@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
+from relightable_textures.operators.meshes import corner_vertices, set_uv_corners, vertex_positions
 
 R = 16
 
@@ -36,9 +37,7 @@ def mesh(name, verts, faces, scene, uv=None, smooth=True, material=None):
     m.from_pydata(np.asarray(verts, float).tolist(), [], [list(f) for f in faces])
     if uv is not None:
         layer = m.uv_layers.new(name="UVMap")
-        corner = np.empty(len(m.loops), dtype=np.int64)
-        m.loops.foreach_get("vertex_index", corner)
-        layer.data.foreach_set("uv", np.asarray(uv, np.float32)[corner].ravel())
+        set_uv_corners(layer, np.asarray(uv)[corner_vertices(m)])
     m.validate()
     m.update()
     m.shade_smooth() if smooth else m.shade_flat()
@@ -305,9 +304,7 @@ def test_modifiers_are_baked_on_the_evaluated_mesh_and_left_untouched(fresh_scen
     np.testing.assert_array_equal(T, np.ones(16))
     np.testing.assert_allclose(img, 1 / np.pi, rtol=1e-6)
     assert [(m.name, m.type, m.strength) for m in plane.modifiers] == [("Lift", "DISPLACE", 2.0)]
-    co = np.empty(16 * 3)
-    plane.data.vertices.foreach_get("co", co)
-    np.testing.assert_array_equal(co.reshape(-1, 3), verts.astype(np.float32))
+    np.testing.assert_array_equal(vertex_positions(plane), verts.astype(np.float32))
 
 
 def test_subdivided_cube_vertices_get_the_limit_surface_cosine(fresh_scene):
@@ -322,9 +319,7 @@ def test_subdivided_cube_vertices_get_the_limit_surface_cosine(fresh_scene):
     cube = object_from_bmesh("Cube", bm, fresh_scene.collection, smooth=True)
     sub = cube.modifiers.new("Sub", "SUBSURF")
     sub.levels = sub.render_levels = 2
-    co = np.empty(8 * 3)
-    cube.data.vertices.foreach_get("co", co)
-    n = co.reshape(-1, 3) / np.sqrt(3.0)
+    n = vertex_positions(cube) / np.sqrt(3.0)
     T = bake_transport(fresh_scene, cube, DIRS)
     assert T.shape == (8, len(DIRS))
     lit = n @ DIRS.T

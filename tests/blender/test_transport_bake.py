@@ -5,6 +5,9 @@ import os
 import numpy as np
 import pytest
 
+from relightable_textures.operators.meshes import (color_attribute, set_image_pixels,
+                                                   vertex_normals, vertex_positions)
+
 
 @pytest.fixture
 def ball(fresh_scene):
@@ -18,9 +21,7 @@ def ball(fresh_scene):
 
 
 def _normals(obj):
-    n = np.empty(len(obj.data.vertices) * 3)
-    obj.data.vertices.foreach_get("normal", n)
-    return n.reshape(-1, 3)
+    return vertex_normals(obj.data)
 
 
 def test_convex_transport_is_the_clamped_cosine(ball):
@@ -124,10 +125,7 @@ def test_vertex_preview_updates_from_sliders_and_a_moving_point_lamp(ball_on_flo
         props = scene.relight
 
         def shading():
-            attr = obj.data.color_attributes[vr.SHADING_ATTRIBUTE]
-            px = np.empty(len(attr.data) * 4, np.float32)
-            attr.data.foreach_get("color", px)
-            return px.reshape(-1, 4)[:, :3]
+            return color_attribute(obj.data.color_attributes[vr.SHADING_ATTRIBUTE])[:, :3]
 
         data = vr.TransportData(report["sidecar"])
         env = vr.world_environment(scene)
@@ -248,10 +246,7 @@ def test_cpca_bake_shades_like_cycles_and_the_toggle_colours_clusters(ball_on_fl
     relightable_textures.register()
     try:
         def attribute():
-            attr = obj.data.color_attributes[vr.SHADING_ATTRIBUTE]
-            px = np.empty(len(attr.data) * 4, np.float32)
-            attr.data.foreach_get("color", px)
-            return px.reshape(-1, 4)[:, :3]
+            return color_attribute(obj.data.color_attributes[vr.SHADING_ATTRIBUTE])[:, :3]
 
         scene.relight.show_clusters = True
         shown = attribute()
@@ -296,9 +291,7 @@ def test_panel_bakes_vertex_transport_and_shows_it(fresh_scene, tmp_path):
         assert rep["directions"] == 96 and rep["vertices"] == len(obj.data.vertices)
         assert [b["kind"] for b in object_bakes(obj)] == ["eigentransport"]
         attr = obj.data.color_attributes[SHADING_ATTRIBUTE]
-        px = np.empty(len(attr.data) * 4, dtype=np.float32)
-        attr.data.foreach_get("color", px)
-        shade = px.reshape(-1, 4)[:, :3]
+        shade = color_attribute(attr)[:, :3]
         env = world_environment(fresh_scene)
         L = float(np.asarray(env).mean())
         assert np.ptp(np.asarray(env)) < 1e-6 * max(L, 1e-12)   # a constant sky
@@ -308,10 +301,8 @@ def test_panel_bakes_vertex_transport_and_shows_it(fresh_scene, tmp_path):
         from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
 
         ds = parse_direction_spec("cube:4")
-        n = np.empty(len(obj.data.vertices) * 3)
-        obj.data.vertices.foreach_get("normal", n)
         m = np.array(obj.matrix_world.to_3x3().inverted().transposed())   # normal matrix
-        n = n.reshape(-1, 3) @ m.T
+        n = vertex_normals(obj.data) @ m.T
         n /= np.linalg.norm(n, axis=1, keepdims=True)
         bound = L * np.maximum(n @ ds.directions.T, 0.0) @ ds.solid_angles / np.pi
         ratio = shade[:, 0] / bound
@@ -337,14 +328,11 @@ def test_panel_bakes_vertex_transport_and_shows_it(fresh_scene, tmp_path):
         lamp = bpy.data.objects.new("Inside", bpy.data.lights.new("Inside", "POINT"))
         lamp.data.energy = 500.0
         fresh_scene.collection.objects.link(lamp)
-        co = np.empty(len(obj.data.vertices) * 3)
-        obj.data.vertices.foreach_get("co", co)
-        lamp.location = obj.matrix_world @ Vector(co.reshape(-1, 3).mean(axis=0))
+        lamp.location = obj.matrix_world @ Vector(vertex_positions(obj).mean(axis=0))
         bpy.context.view_layer.update()            # matrix_world follows the location
         props.point_light = lamp                   # update callback re-shades
         assert "inside the convex hull" in fresh_scene["relight_vertex_warning"]
-        attr.data.foreach_get("color", px)
-        assert px.reshape(-1, 4)[:, :3].min() >= 0.0
+        assert color_attribute(attr)[:, :3].min() >= 0.0
         # the samples kept next to the sidecar are the bake's own transport, in half floats:
         # the sidecar's model was fitted at energy 1.0, so it reproduces them to fp16 rounding
         from relightable_textures.lt_addon.transport.sidecar import TransportData
@@ -422,9 +410,7 @@ def _world_with_mapping(scene, env_bottom_first, rotation_deg: float):
 
     h, w = env_bottom_first.shape[:2]
     img = bpy.data.images.new("relight_test_env", w, h, float_buffer=True)
-    px = np.ones((h, w, 4), np.float32)
-    px[..., :3] = env_bottom_first
-    img.pixels.foreach_set(px.ravel())
+    set_image_pixels(img, env_bottom_first)
     from relightable_textures.operators.compat import ensure_node_tree
 
     world = bpy.data.worlds.new("MappedWorld")
@@ -462,10 +448,9 @@ def _cycles_vertex_bake_under_the_world(scene, obj, samples: int) -> np.ndarray:
     obj.select_set(True)
     bpy.context.view_layer.objects.active = obj
     assert bpy.ops.object.bake(type="DIFFUSE") == {"FINISHED"}
-    px = np.empty(len(attr.data) * 4, np.float32)
-    attr.data.foreach_get("color", px)
+    rgb = color_attribute(attr)[:, :3].astype(np.float64)
     obj.data.color_attributes.remove(obj.data.color_attributes["truth"])
-    return px.reshape(-1, 4)[:, :3].astype(np.float64)
+    return rgb
 
 
 def test_vertex_preview_follows_the_world_mapping_rotation_like_cycles(fresh_scene, tmp_path):
@@ -509,9 +494,7 @@ def test_vertex_preview_follows_the_world_mapping_rotation_like_cycles(fresh_sce
 
         def shading():
             attr = obj.data.color_attributes[vr.SHADING_ATTRIBUTE]
-            px = np.empty(len(attr.data) * 4, np.float32)
-            attr.data.foreach_get("color", px)
-            return px.reshape(-1, 4)[:, :3].astype(np.float64)
+            return color_attribute(attr)[:, :3].astype(np.float64)
 
         def rel(a):
             return float(np.linalg.norm(a - truth) / np.linalg.norm(truth))
