@@ -104,17 +104,6 @@ def analysis_job(scene, obj, direction_set, out_dir: str, bounces: int = 0,
     return AnalysisOutput(report, write_analysis(report, out_dir))
 
 
-def analyse_object(scene, obj, direction_set, out_dir: str, bounces: int = 0,
-                   samples: int | None = None, tol: float = 1e-3, n_seeds: int = 8,
-                   seed: int = 0, on_progress=None, reuse: bool = True
-                   ) -> AnalysisOutput | None:
-    """:func:`analysis_job` driven to the end (scripts, tests); None if cancelled."""
-    from .jobs import run
-
-    return run(analysis_job(scene, obj, direction_set, out_dir, bounces, samples, tol,
-                            n_seeds, seed, reuse), on_progress=on_progress)
-
-
 def summary(report: dict) -> str:
     """One line for the panel and the operator report."""
     best, one = report["optimum"], report["global_pca"]

@@ -78,6 +78,10 @@ class _ModalBake:
     def _prepare(self, context):
         raise NotImplementedError
 
+    def _cancel_note(self, context) -> str:
+        """What a cancelled run of this operator keeps for the next one."""
+        return ""
+
     def _finish(self, context, result):
         raise NotImplementedError
 
@@ -127,7 +131,8 @@ class _ModalBake:
         if event.type == "ESC":
             self._gen.close()  # restores the scene; nothing was written
             self._end(context)
-            self.report({"WARNING"}, "Bake cancelled; the previous bake is unchanged")
+            self.report({"WARNING"}, "Bake cancelled; the previous bake is unchanged"
+                                     + self._cancel_note(context))
             return {"CANCELLED"}
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
@@ -184,6 +189,11 @@ class RELIGHT_OT_bake_textures(_ModalBake, bpy.types.Operator):
 
     def _finish(self, context, result):
         _finish(self, context.scene, result)
+
+    def _cancel_note(self, context) -> str:
+        if context.scene.relight.method != "transport":
+            return ""
+        return "; its finished chunks of directions are kept, so baking again resumes"
 
 
 class RELIGHT_OT_bake_transport(_ModalBake, bpy.types.Operator):

@@ -122,6 +122,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "degrees, none a sample centre) and put the errors in the report")
     p.add_argument("--contact-sheet", metavar="PNG", help="with --truth: write a PNG of steered | "
                    "Cycles truth | difference x4 | Cycles Sun for up to 4 directions")
+    p.add_argument("--no-resume", action="store_true",
+                   help="transport: keep no chunks of the direct bakes (by default each "
+                        "finished chunk of 16 directions is kept in <out>/.relight_cache/ until "
+                        "the bake completes, so a cancelled or crashed bake run again redoes only "
+                        "the missing ones; needs T's size again on disk)")
     p.add_argument("--no-compare", action="store_true",
                    help="with --truth and a scene camera, the bake also renders "
                         "<object>[_steerable]_compare.png (preview | Cycles Sun | difference x4 "
@@ -387,6 +392,40 @@ def _point_light(text: str):
     return (x, y, z), power
 
 
+def _run_job(job, verb: str):
+    """Drive ``job`` (a :mod:`.jobs` generator) to the end, printing its progress; returns its
+    result. Ctrl-C (SIGINT) cancels it between two steps -- Cycles runs Python callbacks that
+    would swallow a KeyboardInterrupt raised in the middle of a bake -- so the job closes
+    cleanly (its ``finally`` blocks restore the scene and drop temporary files); a second
+    Ctrl-C stops at once. A cancelled job raises KeyboardInterrupt here."""
+    import signal
+
+    from . import jobs
+
+    asked = []
+
+    def on_sigint(signum, frame):
+        if asked:
+            raise KeyboardInterrupt
+        asked.append(True)
+        print(f"{verb}: cancelling after the current step (Ctrl-C again to stop at once)",
+              file=sys.stderr, flush=True)
+
+    try:
+        previous = signal.signal(signal.SIGINT, on_sigint)
+    except ValueError:   # not the main thread (Blender's own console, say): Ctrl-C as before
+        previous = None
+    try:
+        result = jobs.run(job, on_progress=_progress_printer(verb),
+                          should_cancel=lambda: bool(asked))
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+    if asked and result is None:
+        raise KeyboardInterrupt
+    return result
+
+
 def _progress_printer(prefix: str):
     def show(step):   # a jobs.Progress
         print(f"{prefix} [{step.done}/{step.total}] {step.message}", file=sys.stderr,
@@ -447,7 +486,7 @@ def _cmd_bake_textures(args) -> int:
     lobes_only = [f"--{k.replace('_', '-')}" for k in ("directions", "sun_angle", "model",
                                                        "components", "tol", "indirect_samples",
                                                        "indirect_resolution", "target_error")
-                  if getattr(args, k) is not None]
+                  if getattr(args, k) is not None] + (["--no-resume"] if args.no_resume else [])
     if lobes_only:
         raise CliError(f"{', '.join(lobes_only)} apply to --method transport, not lobes")
     if len(args.object) > 1:
@@ -456,7 +495,7 @@ def _cmd_bake_textures(args) -> int:
     args.object = args.object[0]
     import bpy
 
-    from . import blend_files, jobs, steerable_bake
+    from . import blend_files, steerable_bake
     from .cycles_bake import BakeInputError
     from .presets import settings_from_preset
 
@@ -483,12 +522,11 @@ def _cmd_bake_textures(args) -> int:
     obj = _open_object(path, args.object)
     _refuse_existing(out_dir, obj.name, ("_steerable.exr", "_steerable.json"), args.force,
                      "a steerable bake")
-    show = _progress_printer("bake-textures")
     try:   # the same job as the panel's Bake: bake, truths, files, preview
-        report = jobs.run(steerable_bake.lobes_job(bpy.context.scene, obj, settings, out_dir,
+        report = _run_job(steerable_bake.lobes_job(bpy.context.scene, obj, settings, out_dir,
                                                    truth=args.truth, sheet_path=sheet,
                                                    compare=not args.no_compare),
-                          on_progress=show).report
+                          "bake-textures").report
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
     except KeyboardInterrupt:
@@ -532,7 +570,6 @@ def _cmd_bake_texture_transport(args) -> int:
 
     from . import blend_files, texture_transport as tx
     from .cycles_bake import BakeInputError
-    from .jobs import run
 
     lobes_only = [f"--{k.replace('_', '-')}" for k in ("frame", "order", "samples", "storage",
                                                        "mode", "world_sampling", "contact_sheet")
@@ -578,16 +615,19 @@ def _cmd_bake_texture_transport(args) -> int:
             if os.path.exists(rp):
                 raise CliError(f"a bake of {o.name} exists in {out_dir} (use --force to "
                                "replace it)")
-    show = _progress_printer("bake-textures")
     try:
-        reports = run(tx.bake_job(bpy.context.scene, objects, settings, out_dir,
-                                  truth=args.truth, truth_samples=args.truth_samples,
-                                  target_error=args.target_error,
-                                  compare=not args.no_compare), on_progress=show).reports
+        reports = _run_job(tx.bake_job(bpy.context.scene, objects, settings, out_dir,
+                                       truth=args.truth, truth_samples=args.truth_samples,
+                                       target_error=args.target_error,
+                                       compare=not args.no_compare, resume=not args.no_resume),
+                           "bake-textures").reports
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
     except KeyboardInterrupt:
-        print("bake-textures: cancelled; nothing was written", file=sys.stderr)
+        kept = "" if args.no_resume else (
+            f"; the finished chunks are kept in {os.path.join(out_dir, tx.CACHE_FOLDER)} and "
+            "the same command resumes from them")
+        print(f"bake-textures: cancelled; no bake file was written{kept}", file=sys.stderr)
         return 130
     blend_files.save_atomically(path)
     for rep in reports:
@@ -598,6 +638,9 @@ def _cmd_bake_texture_transport(args) -> int:
               f"(bake {t['bake_total']:.1f} s: Cycles direct {t.get('direct_cycles', 0):.1f} s, "
               f"indirect {t.get('indirect_cycles', 0):.1f} s; fit {t['fit']:.1f} s; camera "
               f"comparison {t.get('compare_seconds', 0.0):.1f} s); report {rep['report']}")
+        if rep.get("chunks_reused"):
+            print(f"  resumed: {rep['chunks_reused']} of {rep['chunks_total']} chunks of "
+                  f"{rep['chunk_directions']} directions reused from an interrupted bake")
         gt = rep.get("ground_truth")
         if gt and rep is reports[0]:   # one headline over all objects baked together
             print(f"  error vs Cycles Sun ({gt['sun_angle']:g} deg, {gt['truth_samples']} spp, "
@@ -620,7 +663,7 @@ def _cmd_bake_texture_transport(args) -> int:
 def _cmd_bake_transport(args) -> int:
     import bpy
 
-    from . import blend_files, jobs, transport_bake
+    from . import blend_files, transport_bake
     from .cycles_bake import BakeInputError
 
     path = _check_input_blend(args.file)
@@ -646,11 +689,10 @@ def _cmd_bake_transport(args) -> int:
     if isinstance(settings.clusters, int) and settings.clusters > n_vertices > 0:
         raise CliError(f"--clusters {settings.clusters} exceeds {obj.name}'s {n_vertices} "
                        f"vertices; use at most {n_vertices} or 'auto'")
-    show = _progress_printer("bake-transport")
     try:
-        out = jobs.run(transport_bake.transport_job(bpy.context.scene, obj, settings, out_dir,
+        out = _run_job(transport_bake.transport_job(bpy.context.scene, obj, settings, out_dir,
                                                     truth_samples=256 if args.truth else 0),
-                       on_progress=show)
+                       "bake-transport")
     except (BakeInputError, ValueError) as exc:
         raise CliError(f"nothing was written: {exc}") from None
     except KeyboardInterrupt:
@@ -701,11 +743,10 @@ def _cmd_analyze(args) -> int:
     obj = _open_object(path, args.object)
     _refuse_existing(out_dir, obj.name, ("_analysis.json", "_dimensionality.png", "_cost.png"),
                      args.force, "an analysis")
-    show = _progress_printer("analyze")
     try:
-        out = analyze.analyse_object(bpy.context.scene, obj, ds, out_dir, args.bounces, None,
-                                     args.tol, args.seeds, on_progress=show,
-                                     reuse=not args.rebake)
+        out = _run_job(analyze.analysis_job(bpy.context.scene, obj, ds, out_dir, args.bounces,
+                                            None, args.tol, args.seeds,
+                                            reuse=not args.rebake), "analyze")
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
     except KeyboardInterrupt:

@@ -21,6 +21,7 @@ returning the result; stopping it restores the scene and deletes the partial sto
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -38,6 +39,11 @@ from .cycles_bake import BakeInputError, EnvironmentBake, check_bakeable, check_
 from .jobs import Progress
 
 KIND = "transport_texture"
+#: Directions per chunk of the direct stage: the unit a cancelled bake resumes from (16 hard-sun
+#: bakes at 256^2 are about 2 s here; a chunk of 16 x 256^2 half floats is 2 MiB per object).
+CHUNK_DIRECTIONS = 16
+#: The chunk cache's folder inside the output folder (hidden; removed when the bake completes).
+CACHE_FOLDER = ".relight_cache"
 MODELS = ("pca", "blocks", "steerable", "none")
 INDIRECT = ("steerable", "none")
 #: Held-out truth lights (azimuth, elevation in degrees): the four elevations of issue 13.
@@ -131,6 +137,8 @@ class TransportTextureResult:
     bake_calls: int = 0
     peak_rss_mb: float = 0.0         # anonymous memory above the level before the bake
     growth_after_first_mb: float = 0.0   # ... above the level after the first direction
+    cache: object = None             # the direct stage's ChunkCache (None: resume off)
+    chunks: dict = field(default_factory=dict)   # chunks_total, chunks_reused, chunk_directions
 
 
 def _safe(name: str) -> str:
@@ -150,11 +158,12 @@ def _rss_mb() -> float:
     return 0.0
 
 
-def check_space(n_objects: int, dset, settings: TransportTextureSettings, out_dir: str) -> int:
-    """Refuse up front, with the figure, when T would not fit on disk (and the fit's working
-    set in memory). Returns the bytes T will take on disk."""
+def check_space(n_objects: int, dset, settings: TransportTextureSettings, out_dir: str,
+                resume: bool = True) -> int:
+    """Refuse up front, with the figure, when T would not fit on disk -- twice, with the chunk
+    cache of ``resume`` -- (and the fit's working set in memory). Returns the bytes needed."""
     P = settings.resolution ** 2
-    need = n_objects * tt.transport_bytes(dset.size, P)
+    need = n_objects * tt.transport_bytes(dset.size, P) * (2 if resume else 1)
     folder = out_dir
     while folder and not os.path.isdir(folder):
         folder = os.path.dirname(folder)
@@ -162,9 +171,10 @@ def check_space(n_objects: int, dset, settings: TransportTextureSettings, out_di
     if need > 0.9 * free:
         raise BakeInputError(
             f"the transport textures need {need / 2**20:.0f} MiB on disk ({n_objects} object(s) "
-            f"x {dset.size} directions x {settings.resolution}^2 texels, half floats) but "
+            f"x {dset.size} directions x {settings.resolution}^2 texels, half floats"
+            f"{', and as much again for the resumable chunks' if resume else ''}) but "
             f"{free / 2**20:.0f} MiB are free in {folder}; use fewer directions or a lower "
-            "resolution")
+            "resolution" + (" (or --no-resume)" if resume else ""))
     # in memory: one chunk of T in float64, the eigen-textures and a few images
     k = settings.components or 48
     check_memory(tt.CHUNK_BYTES + k * P * 4 + 8 * P * 3 * 4,
@@ -173,17 +183,21 @@ def check_space(n_objects: int, dset, settings: TransportTextureSettings, out_di
     return need
 
 
-def bake_transport_textures(scene, objects, settings: TransportTextureSettings, out_dir: str):
+def bake_transport_textures(scene, objects, settings: TransportTextureSettings, out_dir: str,
+                            resume: bool = True):
     """Generator: bake albedo, direct transport and indirect light of ``objects``; fit models.
 
     Writes the stores (temporary names until complete) into ``out_dir``; the models and
-    reports are written by :func:`write_bake`. Returns a TransportTextureResult.
+    reports are written by :func:`write_bake`. With ``resume``, the direct bakes' finished
+    chunks of :data:`CHUNK_DIRECTIONS` directions are kept in ``<out_dir>/.relight_cache/`` and
+    reused by a rerun of the same bake of the same scene (:func:`direct_chunk_cache`);
+    :func:`write_bake` removes them. Returns a TransportTextureResult.
     """
     dset = settings.validate()
     objects = list(objects)
     for o in objects:
         check_bakeable(o)
-    check_space(len(objects), dset, settings, out_dir)
+    check_space(len(objects), dset, settings, out_dir, resume)
     t_start = time.perf_counter()
     rss0 = _rss_mb()
     peak = rss0
@@ -203,29 +217,49 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
         calls += session.bake_calls
     yield Progress(1, total, "albedo baked")
 
-    # 2. direct transport, streamed to disk
+    # 2. direct transport, streamed to disk in chunks of directions; each finished chunk is
+    # also kept in the chunk cache, so a cancelled or killed bake run again redoes only the
+    # chunks it is missing (the cache goes once the bake's files are written)
     os.makedirs(out_dir, exist_ok=True)
+    cache = direct_chunk_cache(scene, objects, settings, out_dir) if resume else None
     stores = [tt.TransportStore.create(
         os.path.join(out_dir, f"{_safe(o.name)}_transport_texture.npy"), dset, R,
         {"object": o.name, "kind": "direct_irradiance_over_pi", "samples": 1,
          "seed": settings.seed,
          "texel_sampling": "1 sample at the texel centre (Cycles' first bake sample)",
          "addon_version": __version__}) for o in objects]
+    chunks = [range(a, min(a + CHUNK_DIRECTIONS, S)) for a in range(0, S, CHUNK_DIRECTIONS)]
+    cached = [cache.get(f"direct_{c.start:05d}") if cache else None for c in chunks]
     finished = False
+    first = peak
+    seconds["direct_cycles"] = 0.0
     try:
-        with EnvironmentBake(scene, objects, R, 1, 0, (8, 16), mode="irradiance",
-                             seed=settings.seed, world_sampling="none",
-                             passes="direct") as session:
-            for s, d in enumerate(dset.directions):
-                images = session.bake_sun_all(d, 1.0, 0.0)
-                for store, img in zip(stores, images):
-                    store.write(s, img[..., 0])
-                peak = max(peak, _rss_mb())
-                if s == 0:
-                    first = peak   # Cycles' own session memory is allocated by now
-                yield Progress(2 + s, total, f"direction {s + 1}/{S}")
-            seconds["direct_cycles"] = session.bake_seconds
-            calls += session.bake_calls
+        missing = any(c is None for c in cached)
+        with (EnvironmentBake(scene, objects, R, 1, 0, (8, 16), mode="irradiance",
+                              seed=settings.seed, world_sampling="none", passes="direct")
+              if missing else contextlib.nullcontext()) as session:
+            for chunk, kept in zip(chunks, cached):
+                if kept is not None:     # (objects, directions in the chunk, texels), half
+                    for s in chunk:
+                        for store, row in zip(stores, kept[:, s - chunk.start]):
+                            store.write(s, row)
+                        yield Progress(2 + s, total, f"direction {s + 1}/{S} (reused)")
+                    continue
+                for s in chunk:
+                    images = session.bake_sun_all(dset.directions[s], 1.0, 0.0)
+                    for store, img in zip(stores, images):
+                        store.write(s, img[..., 0])
+                    peak = max(peak, _rss_mb())
+                    if s == 0:
+                        first = peak   # Cycles' own session memory is allocated by now
+                    yield Progress(2 + s, total, f"direction {s + 1}/{S}")
+                if cache:
+                    cache.put(f"direct_{chunk.start:05d}",
+                              np.stack([np.asarray(st._array[chunk.start:chunk.stop])
+                                        for st in stores]))
+            if session is not None:
+                seconds["direct_cycles"] = session.bake_seconds
+                calls += session.bake_calls
         readers = [store.finish() for store in stores]
         finished = True
     finally:
@@ -235,13 +269,34 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
     seconds["direct_total"] = time.perf_counter() - t_start
 
     try:
-        return (yield from _indirect_and_models(scene, objects, settings, dset, albedos,
-                                                readers, seconds, calls, t_start, rss0, peak,
-                                                first, 2 + S, total))
+        result = yield from _indirect_and_models(scene, objects, settings, dset, albedos,
+                                                 readers, seconds, calls, t_start, rss0, peak,
+                                                 first, 2 + S, total)
     except BaseException:   # cancelled or failed after the directions: drop the stores too
         for r in readers:
             r.abort()
         raise
+    result.cache = cache
+    result.chunks = {"chunks_total": len(chunks),
+                     "chunks_reused": sum(c is not None for c in cached),
+                     "chunk_directions": CHUNK_DIRECTIONS}
+    return result
+
+
+def direct_chunk_cache(scene, objects, settings: TransportTextureSettings, out_dir: str):
+    """The chunk cache of the direct stage of a bake of ``objects`` into ``out_dir``: keyed
+    by the scene content the bake depends on (:func:`.bake_inputs.scene_key`) and the settings
+    the direct bakes use; the folders of other keys (stale chunks) are removed."""
+    from ..lt_addon.io.chunk_cache import ChunkCache
+    from .bake_inputs import scene_key
+
+    key = {"stage": "direct", "scene": scene_key(scene, objects),
+           "directions": settings.directions, "resolution": settings.resolution,
+           "seed": settings.seed, "chunk_directions": CHUNK_DIRECTIONS}
+    root = os.path.join(out_dir, CACHE_FOLDER, "+".join(_safe(o.name) for o in objects))
+    cache = ChunkCache(root, key)
+    cache.prune_others()
+    return cache
 
 
 def _indirect_and_models(scene, objects, settings, dset, albedos, readers, seconds, calls,
@@ -480,6 +535,7 @@ def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: d
             "peak_rss_above_start_mb": round(result.peak_rss_mb, 1),
             "rss_growth_while_streaming_mb": round(result.growth_after_first_mb, 1),
             "preview_cost": preview_cost(b.model, s),
+            **result.chunks,
             **(figures or {}),
         }
         report["timings"]["write"] = round(time.perf_counter() - t0, 3)
@@ -493,6 +549,8 @@ def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: d
                                       "bytes": report["bytes"]["total"],
                                       "bake_seconds": round(result.seconds.get("bake_total", 0), 2)})
         reports.append(report)
+    if result.cache is not None:   # every file is written: the chunks have served
+        result.cache.clear()
     return reports
 
 
@@ -614,7 +672,7 @@ def pilot(scene, objects, settings: TransportTextureSettings, target: float, out
             s = replace(settings, directions=f"hemi:{n}:{power}", resolution=resolution,
                         indirect_resolution=min(settings.indirect_resolution, resolution),
                         model="none")
-            res = yield from bake_transport_textures(scene, objects, s, tmp)
+            res = yield from bake_transport_textures(scene, objects, s, tmp, resume=False)
             err = truth_errors(res, truths, settings.sun_angle)["transport_rel_rmse"]
             tried.append({"directions": s.directions, "rel_rmse": err,
                           "bake_seconds": round(res.seconds["bake_total"], 2)})
@@ -639,13 +697,14 @@ class TextureBakeOutput:
 
 def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *,
              truth: int = 4, truth_samples: int = 256, target_error: float | None = None,
-             preview: bool = True, compare: bool = True):
+             preview: bool = True, compare: bool = True, resume: bool = True):
     """The whole ``bake-textures --method transport`` verb as one generator: optional pilot
     (``target_error``), the bake, Cycles truths at held-out lights, files, preview and -- with
     ``truth``, a preview and ``compare`` and a scene camera -- ``<object>_compare.png`` (the
     first object's name): the previews next to a Cycles Sun render from the camera at the
-    lowest held-out light. Returns a :class:`TextureBakeOutput` (the reports'
-    ``timings.wall_total`` covers all of it)."""
+    lowest held-out light. With ``resume`` a rerun after a cancel or crash reuses the direct
+    bakes' finished chunks (``chunks_reused`` in the reports). Returns a
+    :class:`TextureBakeOutput` (the reports' ``timings.wall_total`` covers all of it)."""
     from dataclasses import replace
 
     started = time.perf_counter()
@@ -659,7 +718,7 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
         settings = replace(settings, directions=chosen["chosen_directions"], tol=chosen["tol"])
         figures["target_error"] = chosen
         truth = max(truth, 4)
-    result = yield from bake_transport_textures(scene, objects, settings, out_dir)
+    result = yield from bake_transport_textures(scene, objects, settings, out_dir, resume)
     try:
         figures.update((yield from _truth_figures(scene, objects, settings, result, truth,
                                                   truth_samples, target_error, figures)))

@@ -48,11 +48,11 @@ def settings(**kw):
     return TransportTextureSettings(**base)
 
 
-def bake(scene, objects, out, **kw):
+def bake(scene, objects, out, resume=True, **kw):
     from relightable_textures.operators import texture_transport as tx
     from relightable_textures.operators.jobs import run
 
-    return run(tx.bake_transport_textures(scene, objects, settings(**kw), str(out)))
+    return run(tx.bake_transport_textures(scene, objects, settings(**kw), str(out), resume))
 
 
 def sun_bake(scene, objects, direction, angle=0.0, spp=1, bounces=0, passes="direct",
@@ -91,6 +91,72 @@ def test_stores_are_streamed_and_cancel_leaves_nothing(bumps, tmp_path):
     gen.close()
     assert os.listdir(tmp_path) == []
     assert not any(o.name.startswith("RelightBake") for o in scene.objects)
+
+
+def test_a_cancelled_bake_resumes_from_its_finished_chunks_bit_for_bit(bumps, tmp_path):
+    """Issue 15's chunk cache: a bake cancelled after 2 of its 3 chunks of 16 directions keeps
+    those chunks (and nothing else); the rerun reuses them and its T equals an uninterrupted
+    bake's bit for bit (1 spp, fixed seed: Cycles is deterministic here); writing the bake
+    removes the cache; moving an object invalidates it (nothing reused, the stale folder
+    pruned)."""
+    from relightable_textures.operators import texture_transport as tx
+
+    scene, obj = bumps
+    ref = bake(scene, [obj], tmp_path / "ref", resume=False, model="none")
+    assert ref.chunks == {} or ref.chunks["chunks_reused"] == 0
+    T_ref = np.load(ref.objects[0].store_path)
+    out = tmp_path / "out"
+
+    def cancel_after(directions):
+        gen = tx.bake_transport_textures(scene, [obj], settings(model="none"), str(out))
+        for _ in range(1 + directions):            # the albedo, then the directions
+            next(gen)
+        gen.close()
+
+    cancel_after(40)
+    assert os.listdir(out) == [tx.CACHE_FOLDER]     # no store, no report: only the chunks
+    (folder,) = list((out / tx.CACHE_FOLDER / "Bumps").iterdir())
+    assert sorted(p.name for p in folder.iterdir()) == ["direct_00000.npy", "direct_00016.npy",
+                                                        "key.json"]
+    res = bake(scene, [obj], out, model="none")
+    assert res.chunks == {"chunks_total": 3, "chunks_reused": 2, "chunk_directions": 16}
+    np.testing.assert_array_equal(np.load(res.objects[0].store_path), T_ref)
+    reports = tx.write_bake(res, [obj], str(out))
+    assert reports[0]["chunks_reused"] == 2 and tx.CACHE_FOLDER not in os.listdir(out)
+
+    cancel_after(20)
+    obj.location.x += 0.01                          # the scene changed: no chunk may be reused
+    res = bake(scene, [obj], out, model="none")
+    assert res.chunks["chunks_reused"] == 0
+    assert len(list((out / tx.CACHE_FOLDER / "Bumps").iterdir())) == 1   # the stale one pruned
+    obj.location.x -= 0.01
+
+
+def test_the_cache_key_follows_shading_not_layout(bumps):
+    """What invalidates the chunks: geometry, transforms, material values and links; what does
+    not: a node moved in the editor, our own preview nodes."""
+    from relightable_textures.lt_addon.io.chunk_cache import digest
+    from relightable_textures.operators.bake_inputs import scene_key
+
+    scene, obj = bumps
+    key = lambda: digest(scene_key(scene, [obj]))
+    k0 = key()
+    tree = obj.active_material.node_tree
+    bsdf = next(n for n in tree.nodes if "Roughness" in n.inputs)   # the diffuse BSDF
+    bsdf.location.x += 300.0
+    assert key() == k0
+    preview = tree.nodes.new("ShaderNodeEmission")
+    preview["relight_preview"] = True
+    assert key() == k0
+    tree.nodes.remove(preview)
+    old = bsdf.inputs["Roughness"].default_value
+    bsdf.inputs["Roughness"].default_value = old + 0.1
+    assert key() != k0
+    bsdf.inputs["Roughness"].default_value = old
+    assert key() == k0
+    obj.data.vertices[0].co.z += 1e-3
+    obj.data.update()
+    assert key() != k0
 
 
 def test_quadrature_steerable_light_equals_its_environment_bake(bumps, tmp_path):
@@ -489,3 +555,42 @@ def test_cli_bakes_an_object_of_a_scene_that_is_not_the_active_one(tmp_path):
     rep = json.loads((tmp_path / "m_relight" / "Bumps_texture_report.json").read_text())
     assert rep["directions"] == 16
     assert cli.run(args + ["--object", "Lone", "--force"]) == 2
+
+
+def test_cli_bake_interrupted_by_sigint_resumes_with_the_same_command(tmp_path):
+    """Ctrl-C (SIGINT) during `relight bake-textures`: exit 130, no bake file, the finished
+    chunks kept; the same command again reuses them (``chunks_reused`` > 0 in the report and on
+    stdout) and its T equals an uninterrupted bake's (``--no-resume``, another folder)."""
+    import signal
+    import subprocess
+    import time
+
+    from relight_cli import BIN, relight
+
+    blend = tmp_path / "b.blend"
+    assert relight("scene", "bumps", "--out", blend).returncode == 0
+    args = ["bake-textures", str(blend), "--object", "Bumps", "--directions", "hemi:400",
+            "--resolution", "16", "--bounces", "0", "--model", "none", "--no-compare"]
+    out = tmp_path / "b_relight"
+    proc = subprocess.Popen([str(BIN / "relight"), *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and proc.poll() is None:
+        if list(out.glob(".relight_cache/Bumps/*/direct_*.npy")):
+            break
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err[-2000:]
+    assert "resumes from them" in err
+    assert sorted(os.listdir(out)) == [".relight_cache"]        # no bake file was written
+    r = relight(*args)
+    assert r.returncode == 0, r.stderr[-2000:]
+    rep = json.loads((out / "Bumps_texture_report.json").read_text())
+    assert rep["chunks_total"] == 25 and 0 < rep["chunks_reused"] < 25
+    assert f"resumed: {rep['chunks_reused']} of 25 chunks" in r.stdout
+    assert ".relight_cache" not in os.listdir(out)
+    ref = tmp_path / "ref"
+    assert relight(*args, "--no-resume", "--out", ref).returncode == 0
+    np.testing.assert_array_equal(np.load(out / "Bumps_transport_texture.npy"),
+                                  np.load(ref / "Bumps_transport_texture.npy"))

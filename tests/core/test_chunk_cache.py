@@ -1,0 +1,39 @@
+"""The chunk cache of resumable bakes: keys, atomic chunks, stale folders (no Blender)."""
+
+import os
+
+import numpy as np
+
+from relightable_textures.lt_addon.io.chunk_cache import ChunkCache, digest
+
+
+def test_digest_is_canonical_and_changes_with_any_value():
+    assert digest({"a": 1, "b": [1.5, "x"]}) == digest({"b": [1.5, "x"], "a": 1})
+    assert digest({"a": 1}) != digest({"a": 2}) != digest({"a": 1, "c": None})
+
+
+def test_chunks_round_trip_bit_for_bit_and_a_new_key_sees_none(tmp_path):
+    rng = np.random.default_rng(0)
+    half = rng.normal(size=(2, 16, 64)).astype(np.float16)
+    c = ChunkCache(str(tmp_path / "out" / "cache"), {"scene": "s1", "res": 8})
+    assert c.get("direct_00000") is None
+    c.put("direct_00000", half)
+    back = ChunkCache(str(tmp_path / "out" / "cache"), {"res": 8, "scene": "s1"}).get("direct_00000")
+    assert back.dtype == np.float16 and np.array_equal(back.view(np.uint16), half.view(np.uint16))
+    assert not [n for n in os.listdir(c.folder) if n.startswith(".")]   # no temporaries left
+    other = ChunkCache(str(tmp_path / "out" / "cache"), {"scene": "s2", "res": 8})
+    assert other.get("direct_00000") is None
+    other.put("direct_00000", half)
+    assert other.prune_others() == 1 and sorted(os.listdir(tmp_path / "out" / "cache")) == [
+        os.path.basename(other.folder)]
+    other.clear()
+    assert not os.path.exists(tmp_path / "out")        # the empty root and its parent go
+
+
+def test_a_truncated_chunk_counts_as_missing_and_is_removed(tmp_path):
+    c = ChunkCache(str(tmp_path), {"k": 1})
+    c.put("x", np.arange(1000, dtype=np.float16))
+    with open(c.path("x"), "r+b") as fh:                # a crash of the file system, say
+        fh.truncate(100)
+    assert c.get("x") is None and not os.path.exists(c.path("x"))
+    assert c.reused == 0 and c.written == 1
