@@ -127,6 +127,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "finished chunk of 16 directions is kept in <out>/.relight_cache/ until "
                         "the bake completes, so a cancelled or crashed bake run again redoes only "
                         "the missing ones; needs T's size again on disk)")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="transport: bake the chunks of directions on a local Dask cluster of N "
+                        "worker processes (needs dask[distributed])")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="transport: bake the chunks on the Dask cluster at ADDRESS (e.g. "
+                        "tcp://host:8786); its workers need this package and bpy, and must read "
+                        "the .blend and --out at the same paths")
     p.add_argument("--no-compare", action="store_true",
                    help="with --truth and a scene camera, the bake also renders "
                         "<object>[_steerable]_compare.png (preview | Cycles Sun | difference x4 "
@@ -487,6 +494,7 @@ def _cmd_bake_textures(args) -> int:
                                                        "components", "tol", "indirect_samples",
                                                        "indirect_resolution", "target_error")
                   if getattr(args, k) is not None] + (["--no-resume"] if args.no_resume else [])
+    lobes_only += [f"--{k}" for k in ("workers", "scheduler") if getattr(args, k) is not None]
     if lobes_only:
         raise CliError(f"{', '.join(lobes_only)} apply to --method transport, not lobes")
     if len(args.object) > 1:
@@ -615,32 +623,61 @@ def _cmd_bake_texture_transport(args) -> int:
             if os.path.exists(rp):
                 raise CliError(f"a bake of {o.name} exists in {out_dir} (use --force to "
                                "replace it)")
+    client = None
+    if args.workers is not None or args.scheduler:
+        from . import distributed
+
+        if args.workers is not None and args.scheduler:
+            raise CliError("give --workers N (a local cluster) or --scheduler ADDRESS, not both")
+        if args.no_resume:
+            raise CliError("--workers / --scheduler hand chunks to the workers through the "
+                           "chunk cache; drop --no-resume")
+        try:
+            client = distributed.connect(args.workers, args.scheduler)
+        except distributed.DistributedError as exc:
+            raise CliError(str(exc)) from None
     try:
         reports = _run_job(tx.bake_job(bpy.context.scene, objects, settings, out_dir,
                                        truth=args.truth, truth_samples=args.truth_samples,
                                        target_error=args.target_error,
-                                       compare=not args.no_compare, resume=not args.no_resume),
+                                       compare=not args.no_compare, resume=not args.no_resume,
+                                       client=client, blend_path=path),
                            "bake-textures").reports
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
+    except RuntimeError as exc:
+        if type(exc).__name__ != "DistributedError":
+            raise
+        raise CliError(f"{exc}; the finished chunks are kept, the same command resumes") from None
     except KeyboardInterrupt:
         kept = "" if args.no_resume else (
             f"; the finished chunks are kept in {os.path.join(out_dir, tx.CACHE_FOLDER)} and "
             "the same command resumes from them")
         print(f"bake-textures: cancelled; no bake file was written{kept}", file=sys.stderr)
         return 130
+    finally:
+        if client is not None:
+            distributed.close(client)
     blend_files.save_atomically(path)
     for rep in reports:
         t = rep["timings"]
         print(f"baked {rep['object']}: {rep['directions']} directions at "
               f"{rep['settings']['resolution']}^2, model {rep['model']['kind']}, "
               f"{rep['bytes']['total'] / 2**20:.1f} MiB; {t['wall_total']:.1f} s in all "
-              f"(bake {t['bake_total']:.1f} s: Cycles direct {t.get('direct_cycles', 0):.1f} s, "
-              f"indirect {t.get('indirect_cycles', 0):.1f} s; fit {t['fit']:.1f} s; camera "
+              f"(bake {t['bake_total']:.1f} s: "
+              + (f"direct on the workers {t['distributed_wall']:.1f} s, "
+                 if "distributed_wall" in t else
+                 f"Cycles direct {t.get('direct_cycles', 0):.1f} s, ")
+              + f"indirect {t.get('indirect_cycles', 0):.1f} s; fit {t['fit']:.1f} s; camera "
               f"comparison {t.get('compare_seconds', 0.0):.1f} s); report {rep['report']}")
         if rep.get("chunks_reused"):
             print(f"  resumed: {rep['chunks_reused']} of {rep['chunks_total']} chunks of "
                   f"{rep['chunk_directions']} directions reused from an interrupted bake")
+        dist = rep.get("distributed")
+        if dist and rep is reports[0]:
+            print(f"  distributed: {dist['chunks']} chunks on {len(dist['workers'])} worker "
+                  f"processes in {dist['wall_seconds']:.1f} s ({dist['cycles_seconds']:.1f} s "
+                  f"of Cycles, {dist['file_loads']} .blend loads)")
         gt = rep.get("ground_truth")
         if gt and rep is reports[0]:   # one headline over all objects baked together
             print(f"  error vs Cycles Sun ({gt['sun_angle']:g} deg, {gt['truth_samples']} spp, "

@@ -184,16 +184,21 @@ def check_space(n_objects: int, dset, settings: TransportTextureSettings, out_di
 
 
 def bake_transport_textures(scene, objects, settings: TransportTextureSettings, out_dir: str,
-                            resume: bool = True):
+                            resume: bool = True, client=None, blend_path: str | None = None):
     """Generator: bake albedo, direct transport and indirect light of ``objects``; fit models.
 
     Writes the stores (temporary names until complete) into ``out_dir``; the models and
     reports are written by :func:`write_bake`. With ``resume``, the direct bakes' finished
     chunks of :data:`CHUNK_DIRECTIONS` directions are kept in ``<out_dir>/.relight_cache/`` and
     reused by a rerun of the same bake of the same scene (:func:`direct_chunk_cache`);
-    :func:`write_bake` removes them. Returns a TransportTextureResult.
+    :func:`write_bake` removes them. With a Dask ``client`` the missing chunks are baked on
+    its workers from the saved ``blend_path`` first (:mod:`.distributed`); the result is the
+    same bit for bit. Returns a TransportTextureResult.
     """
     dset = settings.validate()
+    if client is not None and (not resume or not blend_path):
+        raise BakeInputError("a distributed bake needs the chunk cache (no --no-resume) and a "
+                             "saved .blend the workers can open")
     objects = list(objects)
     for o in objects:
         check_bakeable(o)
@@ -230,6 +235,22 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
          "addon_version": __version__}) for o in objects]
     chunks = [range(a, min(a + CHUNK_DIRECTIONS, S)) for a in range(0, S, CHUNK_DIRECTIONS)]
     cached = [cache.get(f"direct_{c.start:05d}") if cache else None for c in chunks]
+    reused = sum(c is not None for c in cached)
+    distributed = None
+    if client is not None and reused < len(chunks):   # the workers fill the cache first
+        from .distributed import fill_chunks
+
+        try:
+            distributed = yield from fill_chunks(
+                client, blend_path, objects, settings, cache,
+                [c for c, kept in zip(chunks, cached) if kept is None], 1, total)
+        except BaseException:
+            for store in stores:
+                store.abort()
+            raise
+        seconds["distributed_wall"] = distributed["wall_seconds"]
+        cached = [kept if kept is not None else cache.get(f"direct_{c.start:05d}")
+                  for c, kept in zip(chunks, cached)]
     finished = False
     first = peak
     seconds["direct_cycles"] = 0.0
@@ -277,9 +298,10 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
             r.abort()
         raise
     result.cache = cache
-    result.chunks = {"chunks_total": len(chunks),
-                     "chunks_reused": sum(c is not None for c in cached),
+    result.chunks = {"chunks_total": len(chunks), "chunks_reused": reused,
                      "chunk_directions": CHUNK_DIRECTIONS}
+    if distributed is not None:
+        result.chunks["distributed"] = distributed
     return result
 
 
@@ -697,13 +719,15 @@ class TextureBakeOutput:
 
 def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *,
              truth: int = 4, truth_samples: int = 256, target_error: float | None = None,
-             preview: bool = True, compare: bool = True, resume: bool = True):
+             preview: bool = True, compare: bool = True, resume: bool = True, client=None,
+             blend_path: str | None = None):
     """The whole ``bake-textures --method transport`` verb as one generator: optional pilot
     (``target_error``), the bake, Cycles truths at held-out lights, files, preview and -- with
     ``truth``, a preview and ``compare`` and a scene camera -- ``<object>_compare.png`` (the
     first object's name): the previews next to a Cycles Sun render from the camera at the
     lowest held-out light. With ``resume`` a rerun after a cancel or crash reuses the direct
-    bakes' finished chunks (``chunks_reused`` in the reports). Returns a
+    bakes' finished chunks (``chunks_reused`` in the reports); a Dask ``client`` bakes the
+    missing ones on its workers from ``blend_path``. Returns a
     :class:`TextureBakeOutput` (the reports' ``timings.wall_total`` covers all of it)."""
     from dataclasses import replace
 
@@ -718,7 +742,8 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
         settings = replace(settings, directions=chosen["chosen_directions"], tol=chosen["tol"])
         figures["target_error"] = chosen
         truth = max(truth, 4)
-    result = yield from bake_transport_textures(scene, objects, settings, out_dir, resume)
+    result = yield from bake_transport_textures(scene, objects, settings, out_dir, resume,
+                                                client, blend_path)
     try:
         figures.update((yield from _truth_figures(scene, objects, settings, result, truth,
                                                   truth_samples, target_error, figures)))

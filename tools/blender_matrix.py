@@ -70,7 +70,7 @@ def judge_suite(stdout: str) -> tuple[bool, list[str]]:
 
 #: Extra packages of the full-suite venv (bpy brings numpy; scipy/OpenEXR as in the zip).
 SUITE_PACKAGES = ["scipy==1.17.1", "OpenEXR==3.5.3", "pytest==9.2.0", "hypothesis==6.170.17",
-                  "matplotlib==3.11.2"]
+                  "matplotlib==3.11.2", "dask==2026.8.0", "distributed==2026.8.0"]
 
 CHECK = r'''
 import json, os, platform, sys, traceback
