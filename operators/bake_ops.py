@@ -218,6 +218,9 @@ class RELIGHT_OT_bake_transport(_ModalBake, bpy.types.Operator):
         # the same job as `relight bake-transport`: bake, fit, files, preview
         return transport_bake.transport_job(context.scene, obj, settings, self.out_dir)
 
+    def _cancel_note(self, context) -> str:
+        return "; its finished chunks of directions are kept, so baking again resumes"
+
     def _finish(self, context, result):
         report, t = result.report, result.report["timings"]
         for message in report.get("preview", {}).get("warnings", []):

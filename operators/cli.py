@@ -122,18 +122,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "degrees, none a sample centre) and put the errors in the report")
     p.add_argument("--contact-sheet", metavar="PNG", help="with --truth: write a PNG of steered | "
                    "Cycles truth | difference x4 | Cycles Sun for up to 4 directions")
-    p.add_argument("--no-resume", action="store_true",
-                   help="transport: keep no chunks of the direct bakes (by default each "
-                        "finished chunk of 16 directions is kept in <out>/.relight_cache/ until "
-                        "the bake completes, so a cancelled or crashed bake run again redoes only "
-                        "the missing ones; needs T's size again on disk)")
-    p.add_argument("--workers", type=int, metavar="N",
-                   help="transport: bake the chunks of directions on a local Dask cluster of N "
-                        "worker processes (needs dask[distributed])")
-    p.add_argument("--scheduler", metavar="ADDRESS",
-                   help="transport: bake the chunks on the Dask cluster at ADDRESS (e.g. "
-                        "tcp://host:8786); its workers need this package and bpy, and must read "
-                        "the .blend and --out at the same paths")
+    _add_distribution_options(p, "transport: ")
     p.add_argument("--no-compare", action="store_true",
                    help="with --truth and a scene camera, the bake also renders "
                         "<object>[_steerable]_compare.png (preview | Cycles Sun | difference x4 "
@@ -142,6 +131,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", help="output folder (default: next to the .blend, "
                    "<name>_relight/)")
     p.set_defaults(func=_cmd_bake_textures)
+
+    p = sub.add_parser("bake-chunk", help="bake one chunk of a transport bake's directions into "
+                                          "its chunk cache (render farms)",
+                       description="Bake chunk K (directions 16K..16K+15) of `bake-textures "
+                                   "--method transport` with the same objects and settings into "
+                                   "<out>/.relight_cache, as a farm task; `bake-textures` with "
+                                   "the same arguments then finds every chunk and only fits and "
+                                   "writes. A chunk already there is not baked again.")
+    p.add_argument("file", metavar="FILE.blend")
+    p.add_argument("--object", required=True, action="append", metavar="NAME")
+    p.add_argument("--chunk", required=True, type=int, metavar="K")
+    p.add_argument("--preset", choices=("draft", "balanced", "production"), default="balanced")
+    p.add_argument("--directions", metavar="SPEC")
+    p.add_argument("--resolution", type=int)
+    p.add_argument("--seed", type=int)
+    p.add_argument("--threads", type=int, default=0,
+                   help="Cycles threads (default 0: all cores)")
+    p.add_argument("--out", metavar="DIR", help="the bake's output folder (default: next to "
+                   "the .blend, <name>_relight/)")
+    p.set_defaults(func=_cmd_bake_chunk)
 
     p = sub.add_parser("relight", help="relight a stored steerable texture for one light (NumPy)")
     p.add_argument("file", metavar="FILE.blend")
@@ -214,6 +223,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", help="output folder (default <blend>_relight/)")
     p.add_argument("--force", action="store_true",
                    help="replace an existing transport bake of the same object in --out")
+    _add_distribution_options(p, "")
     p.set_defaults(func=_cmd_bake_transport)
 
     p = sub.add_parser("analyze", help="how many CPCA clusters an object's transport needs "
@@ -433,6 +443,38 @@ def _run_job(job, verb: str):
     return result
 
 
+def _add_distribution_options(p, what: str) -> None:
+    """--no-resume / --workers / --scheduler, shared by the verbs that bake in chunks."""
+    p.add_argument("--no-resume", action="store_true",
+                   help=f"{what}keep no chunks (by default each finished chunk of 16 directions "
+                        "is kept in <out>/.relight_cache/ until the bake completes, so a "
+                        "cancelled or crashed bake run again redoes only the missing ones)")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help=f"{what}bake the chunks on a local Dask cluster of N worker processes "
+                        "(needs dask[distributed])")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help=f"{what}bake the chunks on the Dask cluster at ADDRESS (e.g. "
+                        "tcp://host:8786); its workers need this package and bpy, and must "
+                        "read the .blend and --out at the same paths")
+
+
+def _dask_client(args):
+    """The Dask client the options ask for (None: bake here); the caller closes it."""
+    if args.workers is None and not args.scheduler:
+        return None
+    from . import distributed
+
+    if args.workers is not None and args.scheduler:
+        raise CliError("give --workers N (a local cluster) or --scheduler ADDRESS, not both")
+    if args.no_resume:
+        raise CliError("--workers / --scheduler hand chunks to the workers through the chunk "
+                       "cache; drop --no-resume")
+    try:
+        return distributed.connect(args.workers, args.scheduler)
+    except distributed.DistributedError as exc:
+        raise CliError(str(exc)) from None
+
+
 def _progress_printer(prefix: str):
     def show(step):   # a jobs.Progress
         print(f"{prefix} [{step.done}/{step.total}] {step.message}", file=sys.stderr,
@@ -454,6 +496,26 @@ def _open_object(path: str, name: str):
         raise CliError(f"no object {name!r} in {path}; mesh objects: {', '.join(meshes) or 'none'}")
     _activate_scene_of(obj, path)
     return obj
+
+
+def _open_objects(path: str, names: list) -> list:
+    """Open ``path`` and return its objects ``names``, all in the first one's scene (objects
+    baked together share one scene); a CliError names what is wrong."""
+    import bpy
+
+    if len(set(names)) != len(names):
+        raise CliError("an --object is given twice")
+    objects = [_open_object(path, names[0])]
+    for name in names[1:]:
+        obj = bpy.data.objects.get(name)
+        if obj is None:
+            meshes = sorted(o.name for o in bpy.data.objects if o.type == "MESH")
+            raise CliError(f"no object {name!r} in {path}; mesh objects: {', '.join(meshes)}")
+        if obj.name not in bpy.context.view_layer.objects:
+            raise CliError(f"{obj.name!r} is not in scene {bpy.context.scene.name!r} with "
+                           f"{objects[0].name!r}; objects baked together share one scene")
+        objects.append(obj)
+    return objects
 
 
 def _activate_scene_of(obj, path: str) -> None:
@@ -561,6 +623,18 @@ def _cmd_bake_textures(args) -> int:
     return EXIT_OK
 
 
+def _print_chunks(rep: dict) -> None:
+    """A chunked bake's resume and distribution figures, when there are any."""
+    if rep.get("chunks_reused"):
+        print(f"  resumed: {rep['chunks_reused']} of {rep['chunks_total']} chunks of "
+              f"{rep['chunk_directions']} directions reused from an interrupted bake")
+    dist = rep.get("distributed")
+    if dist:
+        print(f"  distributed: {dist['chunks']} chunks on {len(dist['workers'])} worker "
+              f"processes in {dist['wall_seconds']:.1f} s ({dist['cycles_seconds']:.1f} s "
+              f"of Cycles, {dist['file_loads']} .blend loads)")
+
+
 def _print_comparison(cmp: dict | None) -> None:
     """The bake report's camera-space comparison, in one line (or why there is none)."""
     if not cmp:
@@ -605,37 +679,14 @@ def _cmd_bake_texture_transport(args) -> int:
     out_dir = _check_output_dir(args.out, path)
     if not _can_create_in(os.path.dirname(path)):
         raise CliError(f"cannot update {path}: its folder is not writable")
-    if len(set(args.object)) != len(args.object):
-        raise CliError("an --object is given twice")
-    objects = [_open_object(path, args.object[0])]
-    for name in args.object[1:]:
-        obj = bpy.data.objects.get(name)
-        if obj is None:
-            meshes = sorted(o.name for o in bpy.data.objects if o.type == "MESH")
-            raise CliError(f"no object {name!r} in {path}; mesh objects: {', '.join(meshes)}")
-        if obj.name not in bpy.context.view_layer.objects:
-            raise CliError(f"{obj.name!r} is not in scene {bpy.context.scene.name!r} with "
-                           f"{objects[0].name!r}; objects baked together share one scene")
-        objects.append(obj)
+    objects = _open_objects(path, args.object)
     if not args.force:
         for o in objects:
             rp = os.path.join(out_dir, f"{tx._safe(o.name)}_texture_report.json")
             if os.path.exists(rp):
                 raise CliError(f"a bake of {o.name} exists in {out_dir} (use --force to "
                                "replace it)")
-    client = None
-    if args.workers is not None or args.scheduler:
-        from . import distributed
-
-        if args.workers is not None and args.scheduler:
-            raise CliError("give --workers N (a local cluster) or --scheduler ADDRESS, not both")
-        if args.no_resume:
-            raise CliError("--workers / --scheduler hand chunks to the workers through the "
-                           "chunk cache; drop --no-resume")
-        try:
-            client = distributed.connect(args.workers, args.scheduler)
-        except distributed.DistributedError as exc:
-            raise CliError(str(exc)) from None
+    client = _dask_client(args)
     try:
         reports = _run_job(tx.bake_job(bpy.context.scene, objects, settings, out_dir,
                                        truth=args.truth, truth_samples=args.truth_samples,
@@ -657,7 +708,8 @@ def _cmd_bake_texture_transport(args) -> int:
         return 130
     finally:
         if client is not None:
-            distributed.close(client)
+            from .distributed import close
+            close(client)
     blend_files.save_atomically(path)
     for rep in reports:
         t = rep["timings"]
@@ -670,14 +722,8 @@ def _cmd_bake_texture_transport(args) -> int:
                  f"Cycles direct {t.get('direct_cycles', 0):.1f} s, ")
               + f"indirect {t.get('indirect_cycles', 0):.1f} s; fit {t['fit']:.1f} s; camera "
               f"comparison {t.get('compare_seconds', 0.0):.1f} s); report {rep['report']}")
-        if rep.get("chunks_reused"):
-            print(f"  resumed: {rep['chunks_reused']} of {rep['chunks_total']} chunks of "
-                  f"{rep['chunk_directions']} directions reused from an interrupted bake")
-        dist = rep.get("distributed")
-        if dist and rep is reports[0]:
-            print(f"  distributed: {dist['chunks']} chunks on {len(dist['workers'])} worker "
-                  f"processes in {dist['wall_seconds']:.1f} s ({dist['cycles_seconds']:.1f} s "
-                  f"of Cycles, {dist['file_loads']} .blend loads)")
+        if rep is reports[0]:
+            _print_chunks(rep)
         gt = rep.get("ground_truth")
         if gt and rep is reports[0]:   # one headline over all objects baked together
             print(f"  error vs Cycles Sun ({gt['sun_angle']:g} deg, {gt['truth_samples']} spp, "
@@ -694,6 +740,52 @@ def _cmd_bake_texture_transport(args) -> int:
         if rep["glossy"]["materials"]:
             print(f"  note: {rep['glossy']['note']}: "
                   + ", ".join(m["material"] for m in rep["glossy"]["materials"]))
+    return EXIT_OK
+
+
+def _cmd_bake_chunk(args) -> int:
+    import bpy
+
+    from . import texture_transport as tx
+    from .cycles_bake import BakeInputError, check_bakeable
+    from .distributed import bake_directions
+
+    path = _check_input_blend(args.file)
+    overrides = {k: getattr(args, k) for k in ("directions", "resolution", "seed")
+                 if getattr(args, k) is not None}
+    try:
+        settings = tx.settings_from_preset(args.preset, **overrides)
+        dset = settings.validate()
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    n = -(-dset.size // tx.CHUNK_DIRECTIONS)
+    if not 0 <= args.chunk < n:
+        raise CliError(f"--chunk must be in 0..{n - 1} ({dset.size} directions in chunks of "
+                       f"{tx.CHUNK_DIRECTIONS}), got {args.chunk}")
+    if args.threads < 0:
+        raise CliError(f"--threads must be >= 0, got {args.threads}")
+    out_dir = _check_output_dir(args.out, path)
+    objects = _open_objects(path, args.object)
+    try:
+        for o in objects:
+            check_bakeable(o)
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    start = args.chunk * tx.CHUNK_DIRECTIONS
+    stop = min(start + tx.CHUNK_DIRECTIONS, dset.size)
+    cache = tx.direct_chunk_cache(bpy.context.scene, objects, settings, out_dir)
+    name = f"direct_{start:05d}"
+    if os.path.exists(cache.path(name)):
+        print(f"chunk {args.chunk}: directions {start}-{stop - 1} are already in {cache.folder}")
+        return EXIT_OK
+    t0 = time.perf_counter()
+    try:
+        cycles = bake_directions(bpy.context.scene, objects, settings, start, stop, cache,
+                                 args.threads)
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    print(f"chunk {args.chunk} of {n}: directions {start}-{stop - 1} baked in "
+          f"{time.perf_counter() - t0:.2f} s ({cycles:.2f} s in Cycles) into {cache.path(name)}")
     return EXIT_OK
 
 
@@ -726,15 +818,26 @@ def _cmd_bake_transport(args) -> int:
     if isinstance(settings.clusters, int) and settings.clusters > n_vertices > 0:
         raise CliError(f"--clusters {settings.clusters} exceeds {obj.name}'s {n_vertices} "
                        f"vertices; use at most {n_vertices} or 'auto'")
+    client = _dask_client(args)
     try:
-        out = _run_job(transport_bake.transport_job(bpy.context.scene, obj, settings, out_dir,
-                                                    truth_samples=256 if args.truth else 0),
-                       "bake-transport")
+        out = _run_job(transport_bake.transport_job(
+            bpy.context.scene, obj, settings, out_dir, truth_samples=256 if args.truth else 0,
+            resume=not args.no_resume, client=client, blend_path=path), "bake-transport")
     except (BakeInputError, ValueError) as exc:
         raise CliError(f"nothing was written: {exc}") from None
+    except RuntimeError as exc:
+        if type(exc).__name__ != "DistributedError":
+            raise
+        raise CliError(f"{exc}; the finished chunks are kept, the same command resumes") from None
     except KeyboardInterrupt:
-        print("bake-transport: cancelled; nothing was written", file=sys.stderr)
+        kept = "" if args.no_resume else (
+            "; the finished chunks are kept and the same command resumes from them")
+        print(f"bake-transport: cancelled; no bake file was written{kept}", file=sys.stderr)
         return 130
+    finally:
+        if client is not None:
+            from .distributed import close
+            close(client)
     blend_files.save_atomically(path)
     report, t = out.report, out.report["timings"]
     for w in report.get("preview", {}).get("warnings", []):
@@ -756,6 +859,7 @@ def _cmd_bake_transport(args) -> int:
     if "all_directions_rel_rms_error" in report.get("ground_truth", {}):
         print(f"  all {report['directions']} directions, no PCA: "
               f"{report['ground_truth']['all_directions_rel_rms_error']:.4f} (sampling floor)")
+    _print_chunks(report)
     return EXIT_OK
 
 

@@ -111,61 +111,93 @@ def _open_in_worker(blend_path: str, object_names: list):
     return bpy.context.scene, objects
 
 
-def bake_chunk(blend_path: str, object_names: list, settings: dict, start: int, stop: int,
-               cache_root: str, cache_key: dict, threads: int = 0) -> dict:
-    """Worker task: bake directions ``start:stop`` of the bake described by ``settings`` (a
-    TransportTextureSettings as a dict) into the chunk cache with ``threads`` Cycles threads
-    (0: Cycles' own choice, all cores); returns the chunk's figures. Raises DistributedError
-    when the worker's scene does not have ``cache_key``."""
-    t0 = time.perf_counter()
-    loads = _OPENED.get("loads", 0)
+def _worker_scene(blend_path: str, object_names: list, cache_key: dict):
+    """The worker's scene and objects, checked against the coordinator's ``cache_key``."""
     _import_bpy()
-    import numpy as np
-
-    from ..lt_addon.io.chunk_cache import ChunkCache, digest
+    from ..lt_addon.io.chunk_cache import digest
     from .bake_inputs import scene_key
-    from .cycles_bake import EnvironmentBake
-    from .texture_transport import TransportTextureSettings
 
     scene, objects = _open_in_worker(blend_path, object_names)
-    opened = time.perf_counter() - t0
     if digest(scene_key(scene, objects)) != digest(cache_key["scene"]):
         raise DistributedError(f"the worker's {blend_path} is not the scene being baked (an "
                                "unsaved change, or another file at that path): save the .blend "
                                "where the workers read it")
-    s = TransportTextureSettings(**settings)
-    dset = s.validate()
-    if threads:   # workers sharing a machine: no more Cycles threads than their share of cores
-        scene.render.threads_mode, scene.render.threads = "FIXED", int(threads)
-    rows = [[] for _ in objects]
-    with EnvironmentBake(scene, objects, s.resolution, 1, 0, (8, 16), mode="irradiance",
-                         seed=s.seed, world_sampling="none", passes="direct") as session:
-        for i in range(start, stop):
-            for row, img in zip(rows, session.bake_sun_all(dset.directions[i], 1.0, 0.0)):
-                row.append(np.asarray(img[..., 0], np.float32).reshape(-1).astype(np.float16))
-        cycles = session.bake_seconds
-    ChunkCache(cache_root, cache_key).put(f"direct_{start:05d}", np.stack(
-        [np.stack(r) for r in rows]))
+    return scene, objects
+
+
+def bake_chunk(blend_path: str, object_names: list, settings: dict, start: int, stop: int,
+               cache_root: str, cache_key: dict, threads: int = 0, stage: str = "texture"
+               ) -> dict:
+    """Worker task: bake directions ``start:stop`` into the chunk cache with ``threads`` Cycles
+    threads (0: Cycles' own choice, all cores); returns the chunk's figures. ``stage``
+    "texture": ``settings`` is a TransportTextureSettings as a dict (:func:`bake_directions`);
+    "vertex": a dict of ``directions`` (S, 3), ``bounces``, ``samples``, ``seed`` for the
+    per-vertex bake (:func:`.transport_bake.bake_vertex_directions`). Raises DistributedError
+    when the worker's scene does not have ``cache_key``."""
+    t0 = time.perf_counter()
+    loads = _OPENED.get("loads", 0)
+    scene, objects = _worker_scene(blend_path, object_names, cache_key)
+    opened = time.perf_counter() - t0
+    from ..lt_addon.io.chunk_cache import ChunkCache
+
+    cache = ChunkCache(cache_root, cache_key)
+    if stage == "vertex":
+        from .transport_bake import bake_vertex_directions
+
+        cycles = bake_vertex_directions(scene, objects[0], settings, start, stop, cache, threads)
+    else:
+        from .texture_transport import TransportTextureSettings
+
+        cycles = bake_directions(scene, objects, TransportTextureSettings(**settings), start,
+                                 stop, cache, threads)
     return {"start": start, "pid": os.getpid(), "open_seconds": round(opened, 3),
             "opened_file": _OPENED.get("loads", 0) > loads, "cycles_seconds": round(cycles, 3),
             "seconds": round(time.perf_counter() - t0, 3)}
 
 
+def bake_directions(scene, objects, settings, start: int, stop: int, cache,
+                    threads: int = 0) -> float:
+    """Bake directions ``start:stop`` of ``settings``' direction set for ``objects`` exactly as
+    the single-process bake does (1 spp hard suns, same seed) and put them into ``cache`` as the
+    chunk ``direct_<start>`` ((objects, directions, texels), half floats); ``threads`` Cycles
+    threads (0: all cores). Returns Cycles' seconds. Used by the Dask task and ``relight
+    bake-chunk`` (farms)."""
+    import numpy as np
+
+    from .cycles_bake import EnvironmentBake
+
+    dset = settings.validate()
+    if threads:   # workers sharing a machine: no more Cycles threads than their share of cores
+        scene.render.threads_mode, scene.render.threads = "FIXED", int(threads)
+    rows = [[] for _ in objects]
+    with EnvironmentBake(scene, objects, settings.resolution, 1, 0, (8, 16), mode="irradiance",
+                         seed=settings.seed, world_sampling="none", passes="direct") as session:
+        for i in range(start, stop):
+            for row, img in zip(rows, session.bake_sun_all(dset.directions[i], 1.0, 0.0)):
+                row.append(np.asarray(img[..., 0], np.float32).reshape(-1).astype(np.float16))
+        seconds = session.bake_seconds
+    cache.put(f"direct_{start:05d}", np.stack([np.stack(r) for r in rows]))
+    return seconds
+
+
 def fill_chunks(client, blend_path: str, objects, settings, cache, chunks, step0: int,
-                total: int):
+                total: int, stage: str = "texture"):
     """Generator (a job step source): bake the ``chunks`` (ranges of directions) the cache is
-    missing on ``client``'s workers; yields Progress as chunks finish; returns the figures
+    missing on ``client``'s workers (``settings`` and ``stage`` as :func:`bake_chunk` takes
+    them; a dataclass is sent as a dict); yields Progress as chunks finish; returns the figures
     (per-chunk seconds, file loads, wall time). Closing it cancels the outstanding tasks."""
-    from dataclasses import asdict
+    import dataclasses
 
     from distributed import as_completed
 
     t0 = time.perf_counter()
     names = [o.name for o in objects]
     threads = local_threads(client)
-    futures = {client.submit(bake_chunk, blend_path, names, asdict(settings), c.start, c.stop,
-                             cache.root, cache.key, threads, retries=1, pure=False,
-                             key=f"relight-chunk-{cache.digest[:12]}-{c.start:05d}"): c
+    if dataclasses.is_dataclass(settings):
+        settings = dataclasses.asdict(settings)
+    futures = {client.submit(bake_chunk, blend_path, names, settings, c.start, c.stop,
+                             cache.root, cache.key, threads, stage, retries=1, pure=False,
+                             key=f"relight-{stage}-{cache.digest[:12]}-{c.start:05d}"): c
                for c in chunks}
     done, rows = 0, []
     try:

@@ -18,6 +18,7 @@ operator, CLI and tests drive the same code, and stopping it restores the scene.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import dataclass
 
@@ -28,6 +29,10 @@ from .cycles_bake import BakeInputError, EnvironmentBake, check_bakeable, check_
 from .jobs import Progress
 
 
+#: Directions per chunk: the unit a cancelled bake resumes from and a Dask worker bakes.
+CHUNK_DIRECTIONS = 16
+
+
 @dataclass
 class TransportBakeResult:
     transport: np.ndarray  # (V, S) float32
@@ -35,11 +40,62 @@ class TransportBakeResult:
     cycles_seconds: float
     total_seconds: float
     bake_calls: int
+    chunks: dict = None     # chunks_total, chunks_reused (, distributed) with a chunk cache
+
+
+def _default_samples(samples, bounces: int) -> int:
+    return samples if samples is not None else (1 if bounces == 0 else 64)
+
+
+def bake_vertex_directions(scene, obj, spec: dict, start: int, stop: int, cache,
+                           threads: int = 0) -> float:
+    """Bake directions ``start:stop`` of ``spec`` (``directions`` (S, 3), ``bounces``,
+    ``samples``, ``seed``) for ``obj``'s vertices exactly as :func:`bake_transport` does, into
+    ``cache`` as the chunk ``vertex_<start>`` ((V, n) float32); returns Cycles' seconds. The
+    Dask task of a distributed bake (:mod:`.distributed`)."""
+    dirs = np.asarray(spec["directions"], dtype=np.float64)
+    if threads:
+        scene.render.threads_mode, scene.render.threads = "FIXED", int(threads)
+    out = np.empty((len(obj.data.vertices), stop - start), dtype=np.float32)
+    with EnvironmentBake(scene, obj, None, _default_samples(spec["samples"], spec["bounces"]),
+                         spec["bounces"], (8, 16), mode="irradiance", seed=spec["seed"],
+                         world_sampling="none") as session:
+        for j, s in enumerate(range(start, stop)):
+            out[:, j] = np.pi * session.bake_sun(dirs[s], 1.0, 0.0)[:, 0]
+        seconds = session.bake_seconds
+    cache.put(f"vertex_{start:05d}", out)
+    return seconds
+
+
+def vertex_chunk_cache(scene, obj, directions, bounces: int, samples, seed: int,
+                       out_dir: str):
+    """The chunk cache of a per-vertex bake of ``obj`` into ``out_dir``, keyed by the scene
+    content (:func:`.bake_inputs.scene_key`), the directions' bytes, bounces, samples and
+    seed; stale keys are removed."""
+    import hashlib
+    import os
+
+    from ..lt_addon.io.chunk_cache import ChunkCache
+    from .bake_inputs import scene_key
+
+    dirs = np.ascontiguousarray(directions, dtype=np.float64)
+    key = {"stage": "vertex", "scene": scene_key(scene, [obj]),
+           "directions": hashlib.sha256(dirs.tobytes()).hexdigest(), "count": len(dirs),
+           "bounces": int(bounces), "samples": _default_samples(samples, bounces),
+           "seed": int(seed), "chunk_directions": CHUNK_DIRECTIONS}
+    safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in obj.name)
+    cache = ChunkCache(os.path.join(out_dir, ".relight_cache", safe + "_vertex"), key)
+    cache.prune_others()
+    return cache
 
 
 def bake_transport(scene, obj, directions, bounces: int = 0, samples: int | None = None,
-                   seed: int = 0):
+                   seed: int = 0, cache=None, client=None, blend_path: str | None = None):
     """Generator: bake ``T`` of ``obj`` for every direction; returns a TransportBakeResult.
+
+    With a chunk ``cache`` (:func:`vertex_chunk_cache`) every finished chunk of
+    :data:`CHUNK_DIRECTIONS` directions is kept and a rerun reuses it (bit for bit); with a Dask
+    ``client`` too, the missing chunks are baked on its workers from the saved ``blend_path``.
 
     Parameters
     ----------
@@ -61,21 +117,57 @@ def bake_transport(scene, obj, directions, bounces: int = 0, samples: int | None
     if not np.all(np.isfinite(dirs)):
         raise BakeInputError("directions contain NaN or inf")
     dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
-    if samples is None:
-        samples = 1 if bounces == 0 else 64
+    samples = _default_samples(samples, bounces)
     n_vertices = len(obj.data.vertices)
+    if client is not None and (cache is None or not blend_path):
+        raise BakeInputError("a distributed bake needs the chunk cache and a saved .blend the "
+                             "workers can open")
     # T (float32) plus the float64 copy the fit makes
     check_memory(n_vertices * len(dirs) * 12, f"{n_vertices} vertices x {len(dirs)} directions",
                  "use fewer directions")
     start = time.perf_counter()
-    T = np.empty((n_vertices, len(dirs)), dtype=np.float32)
-    with EnvironmentBake(scene, obj, None, samples, bounces, (8, 16), mode="irradiance",
-                         seed=seed, world_sampling="none") as session:
-        for s, d in enumerate(dirs):
-            T[:, s] = np.pi * session.bake_sun(d, 1.0, 0.0)[:, 0]
-            yield Progress(s + 1, len(dirs), f"direction {s + 1}/{len(dirs)}")
-        cycles, calls = session.bake_seconds, session.bake_calls
-    return TransportBakeResult(T, dirs, cycles, time.perf_counter() - start, calls)
+    S = len(dirs)
+    T = np.empty((n_vertices, S), dtype=np.float32)
+    chunks = [range(a, min(a + CHUNK_DIRECTIONS, S)) for a in range(0, S, CHUNK_DIRECTIONS)]
+    kept = [cache.get(f"vertex_{c.start:05d}") if cache else None for c in chunks]
+    kept = [k if k is None or k.shape == (n_vertices, len(c)) else None
+            for k, c in zip(kept, chunks)]
+    reused = sum(k is not None for k in kept)
+    distributed = None
+    if client is not None and reused < len(chunks):
+        from .distributed import fill_chunks
+
+        distributed = yield from fill_chunks(
+            client, blend_path, [obj], {"directions": dirs.tolist(), "bounces": bounces,
+                                        "samples": samples, "seed": seed},
+            cache, [c for c, k in zip(chunks, kept) if k is None], 0, S, stage="vertex")
+        kept = [k if k is not None else cache.get(f"vertex_{c.start:05d}")
+                for c, k in zip(chunks, kept)]
+    cycles, calls = 0.0, 0
+    missing = any(k is None for k in kept)
+    with (EnvironmentBake(scene, obj, None, samples, bounces, (8, 16), mode="irradiance",
+                          seed=seed, world_sampling="none")
+          if missing else contextlib.nullcontext()) as session:
+        for chunk, k in zip(chunks, kept):
+            if k is not None:
+                T[:, chunk.start:chunk.stop] = k
+                yield Progress(chunk.stop, S, f"directions {chunk.start + 1}-{chunk.stop}/{S} "
+                                              "(reused)")
+                continue
+            for s in chunk:
+                T[:, s] = np.pi * session.bake_sun(dirs[s], 1.0, 0.0)[:, 0]
+                yield Progress(s + 1, S, f"direction {s + 1}/{S}")
+            if cache is not None:
+                cache.put(f"vertex_{chunk.start:05d}", T[:, chunk.start:chunk.stop])
+        if session is not None:
+            cycles, calls = session.bake_seconds, session.bake_calls
+    figures = None
+    if cache is not None:
+        figures = {"chunks_total": len(chunks), "chunks_reused": reused,
+                   "chunk_directions": CHUNK_DIRECTIONS}
+        if distributed is not None:
+            figures["distributed"] = distributed
+    return TransportBakeResult(T, dirs, cycles, time.perf_counter() - start, calls, figures)
 
 
 def bake_environment_truth(scene, obj, environment, bounces: int, samples: int,
@@ -291,16 +383,23 @@ def truth_environment(scene) -> np.ndarray:
 
 
 def transport_job(scene, obj, settings: TransportSettings, out_dir: str, *,
-                  truth_samples: int = 0, preview: bool = True):
+                  truth_samples: int = 0, preview: bool = True, resume: bool = True,
+                  client=None, blend_path: str | None = None):
     """The whole ``bake-transport`` verb as one job (a generator of :class:`.jobs.Progress`):
     bake, fit, optional Cycles truth (``truth_samples`` > 0), files, and the vertex preview.
     Nothing is written before the bake, fit and truth are done, so cancelling leaves the
     previous bake as it was; the JSON report is written once, at the end, with
-    ``timings.wall_total`` covering all of it. Returns a :class:`TransportBakeOutput`."""
+    ``timings.wall_total`` covering all of it. With ``resume`` the bake's finished chunks
+    are kept in ``<out_dir>/.relight_cache`` until the files are written, so a rerun after a
+    cancel or crash redoes only the missing ones; a Dask ``client`` bakes them on its workers
+    from ``blend_path``. Returns a :class:`TransportBakeOutput`."""
     started = time.perf_counter()
     direction_set = settings.validate()
+    cache = (vertex_chunk_cache(scene, obj, direction_set.directions, settings.bounces,
+                                settings.samples, settings.seed, out_dir) if resume else None)
     result = yield from bake_transport(scene, obj, direction_set.directions, settings.bounces,
-                                       settings.samples, settings.seed)
+                                       settings.samples, settings.seed, cache, client,
+                                       blend_path)
     yield Progress(0, 1, "fitting")
     model, fit_seconds = fit(result, obj, direction_set, settings)
     figures = {}
@@ -312,6 +411,10 @@ def transport_job(scene, obj, settings: TransportSettings, out_dir: str, *,
                                                transport=result.transport)
     report = write_transport(result, model, fit_seconds, obj, direction_set, settings, out_dir,
                              figures)
+    if result.chunks:
+        report.update(result.chunks)
+    if cache is not None:   # the files are written: the chunks have served
+        cache.clear()
     if preview:
         from . import preview_nodes, vertex_relight
 

@@ -100,3 +100,88 @@ def test_a_worker_refuses_a_scene_that_is_not_the_one_being_baked(blend, tmp_pat
         distributed.bake_chunk(str(path), ["Bumps"], s, 0, 16, str(tmp_path),
                                {"scene": {"objects": {}}})
     assert not list(tmp_path.iterdir())
+
+
+def test_the_flamenco_job_type_emits_chunk_commands_that_bake_the_same_bits(tmp_path):
+    """The farm path without a farm: our Flamenco job type (tools/flamenco) is compiled by
+    node with the Manager's task-authoring calls recorded as data (Flamenco itself is not run
+    here); every command it emits -- `blender -b FILE --command relight <args>` -- is run with
+    <args> through the real console script: the chunk tasks fill the cache (a repeated chunk is
+    not baked twice), the final task reuses every chunk, and T equals a one-process bake's."""
+    import json
+    import pathlib
+    import shutil
+
+    node = shutil.which("node")
+    assert node, "node is needed to compile the Flamenco job type"
+    root = pathlib.Path(__file__).resolve().parents[2]
+    blend = tmp_path / "b.blend"
+    assert relight("scene", "bumps", "--out", blend).returncode == 0
+    settings = {"objects": "Bumps", "preset": "draft", "directions": "hemi:48",
+                "resolution": 16, "force": False, "output_dir": str(tmp_path / "farm"),
+                "blendfile": str(blend)}
+    r = subprocess.run([node, str(pathlib.Path(__file__).with_name("flamenco_compile.js")),
+                        str(root / "tools" / "flamenco" / "relight_transport_bake.js"),
+                        json.dumps(settings)], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    compiled = json.loads(r.stdout)
+    tasks = compiled["tasks"]
+    assert [t["name"] for t in tasks] == [f"relight-chunk-{k}" for k in range(3)] + [
+        "relight-fit-and-write"]
+    assert tasks[-1]["deps"] == [f"relight-chunk-{k}" for k in range(3)]
+    for t in tasks:
+        (cmd,) = t["commands"]
+        p = cmd["params"]
+        assert cmd["name"] == "blender-render" and p["blendfile"] == str(blend)
+        assert p["args"][:2] == ["--command", "relight"]
+        r = relight(*p["args"][2:])
+        assert r.returncode == 0, (p["args"], r.stderr[-2000:])
+        if t["name"] == "relight-chunk-1":           # a requeued task: nothing baked again
+            again = relight(*p["args"][2:])
+            assert again.returncode == 0 and "already in" in again.stdout
+    rep = json.loads((tmp_path / "farm" / "Bumps_texture_report.json").read_text())
+    assert rep["chunks_total"] == rep["chunks_reused"] == 3
+    ref = tmp_path / "ref"
+    args = [a if a != str(tmp_path / "farm") else str(ref) for a in tasks[-1]["commands"][0]
+            ["params"]["args"][2:]]
+    assert relight(*args, "--no-resume").returncode == 0
+    assert _same_bits(np.load(tmp_path / "farm" / "Bumps_transport_texture.npy"),
+                      np.load(ref / "Bumps_transport_texture.npy"))
+
+
+def test_vertex_transport_bakes_distribute_and_resume_bit_for_bit(tmp_path):
+    """`bake-transport --workers 2` gives the one-process samples bit for bit; an in-process
+    bake cancelled after its first chunk keeps it, and the rerun reuses it (same T)."""
+    import json
+
+    blend = tmp_path / "s.blend"
+    assert relight("scene", "statue", "--out", blend).returncode == 0
+    args = ["bake-transport", blend, "--object", "Statue", "--directions", "cube:6"]
+    assert relight(*args, "--no-resume", "--out", tmp_path / "ref").returncode == 0
+    r = relight(*args, "--workers", "2", "--out", tmp_path / "dist")
+    assert r.returncode == 0, r.stderr[-2000:]
+    rep = json.loads((tmp_path / "dist" / "Statue_transport.json").read_text())
+    assert rep["chunks_total"] == 14 and rep["distributed"]["chunks"] == 14   # 216 / 16
+    assert "distributed: 14 chunks on 2 worker processes" in r.stdout
+    ref = np.load(tmp_path / "ref" / "Statue_transport_samples.npy")
+    assert _same_bits(np.load(tmp_path / "dist" / "Statue_transport_samples.npy"), ref)
+    assert ".relight_cache" not in os.listdir(tmp_path / "dist")
+
+    import bpy
+
+    from relightable_textures.operators import transport_bake as tb
+    from relightable_textures.operators.jobs import run
+
+    bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False)
+    obj, scene = bpy.data.objects["Statue"], bpy.context.scene
+    s = tb.TransportSettings(directions="cube:6")
+    out = tmp_path / "resume"
+    gen = tb.transport_job(scene, obj, s, str(out), preview=False)
+    for _ in range(20):                       # directions 1..20: chunk 0 finished
+        next(gen)
+    gen.close()
+    assert os.listdir(out) == [".relight_cache"]
+    again = run(tb.transport_job(scene, obj, s, str(out), preview=False))
+    assert again.report["chunks_reused"] == 1 and again.report["chunks_total"] == 14
+    assert _same_bits(np.load(out / "Statue_transport_samples.npy"), ref)
+    assert ".relight_cache" not in os.listdir(out)
