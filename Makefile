@@ -54,12 +54,15 @@ test-core: $(STAMP)
 ## bench: the sweeps that print figures (not part of `make test`; ~1 h on 2 cores): the
 ##   transport bake vs the lobes presets on bumps, noise and statue+ground at demo size
 ##   (out/bench/transport_textures.*), relight bench --quick on all four scenes (JSON, CSV,
-##   Pareto charts in out/bench) and the CPCA comparison on statue and room (out/bench/cpca.*)
+##   Pareto charts in out/bench), the CPCA comparison on statue and room (out/bench/cpca.*),
+##   distributed and resumed bakes (1, 2, 4 local workers) and the horizon-model experiment
 bench: $(STAMP)
 	mkdir -p $(OUT)/bench $(BLENDER_USER_RESOURCES)
 	$(PY) benchmarks/bench_transport_textures.py --out $(OUT)/bench
 	$(VENV)/bin/relight bench --quick --out $(OUT)/bench
 	$(PY) benchmarks/bench_cpca.py --scenes statue,room --out $(OUT)/bench
+	$(PY) benchmarks/bench_distributed.py
+	$(PY) benchmarks/bench_horizon_model.py
 
 ## bench-full: the standard (demo-size) sweeps behind the README tables and the presets
 ##   (~2 h): writes docs/bench and operators/presets.json, plus the deeper per-method benchmarks
