@@ -159,7 +159,7 @@ class SteerableTexture:
         scale64 = gain * intensity * color64
         top = float(np.max(np.abs(scale64), initial=0.0))
         peak = max(top, top * float(np.max(np.abs(steered), initial=0.0)))
-        if peak > np.finfo(np.float32).max:
+        if peak > float(np.finfo(np.float32).max):   # a float compare: no float32 cast
             raise ValueError(f"relit values would reach {peak:.3g}, beyond the float32 range "
                              f"({np.finfo(np.float32).max:.3g}); lower the intensity")
         scale = scale64.astype(np.float32)
