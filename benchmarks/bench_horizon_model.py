@@ -14,6 +14,10 @@ relights each light three ways and prints the relative RMSE ``||relit - truth|| 
   fewest misclassified), interpolated between sector centres; the sun's visibility is a linear
   step of the sun's width across that horizon.
 
+Also, for the viewport preview, what the coefficient tables cost at low suns: a PCA of T (96
+components, as the balanced preset) relit through tables of 32, 64 and 128 texels across the
+hemisphere disk (bilinear, as the node tree samples them) against the same PCA relit directly.
+
 Usage: python benchmarks/bench_horizon_model.py [--directions hemi:400:1.5] [--resolution 256]
            [--spp 64] [--sectors 16,32,64]
 """
@@ -121,6 +125,28 @@ def main(argv=None):
             hor = [err(horizon_relight(*models[K], d, ang)) for K in models]
             print(f"{ang:4.0f} {el:4.0f}  | {kernel:.4f}  {factored:.4f}   | "
                   + "  ".join(f"{h:10.4f}" for h in hor), flush=True)
+
+    pca = tt.fit_texture_pca(store, k=96)
+    U = pca.U.astype(np.float64)
+    print("\nthe preview's coefficient tables (PCA 96): relative RMSE, same truths")
+    print("sun   el  | PCA direct | table 32  table 64  table 128")
+    tables = {}
+    for ang in (2.0, 10.0):
+        for D in (32, 64, 128):
+            t0 = time.perf_counter()
+            tables[ang, D] = tt.coefficient_tables(pca.V, store.directions, D, ang, "linear")
+            print(f"  tabulating {D}^2 for a {ang:g} deg sun: {time.perf_counter() - t0:.2f} s")
+        for i, (az, el) in enumerate(LIGHTS):
+            d = direction_from_az_el(az, el)
+            truth = truths[ang][i]
+            n = np.linalg.norm(truth)
+            err = lambda c: np.linalg.norm((c @ U).reshape(R, R)[..., None] * b.albedo
+                                           - truth) / n
+            idx, w = tt.sun_weights(store.directions, d, ang, "linear")
+            direct = err(w @ pca.V[idx].astype(np.float64))
+            via = [err(tt.table_lookup(tables[ang, D], d)) for D in (32, 64, 128)]
+            print(f"{ang:4.0f} {el:4.0f}  | {direct:.4f}     | "
+                  + "  ".join(f"{x:.4f}" for x in via), flush=True)
 
 
 if __name__ == "__main__":
