@@ -159,3 +159,28 @@ def format_listing(listing: dict) -> str:
             extra = ", ".join(f"{k}={v}" for k, v in b.items() if k not in ("kind", "path"))
             lines.append(f"    {b.get('kind', '?')}: {b.get('path', '?')}" + (f" ({extra})" if extra else ""))
     return "\n".join(lines)
+
+
+def activate_scene_of(obj, path: str) -> None:
+    """Make the scene holding ``obj`` the context scene: a file saved with another scene active
+    (e.g. after *Add Sample Scene*) must still bake the object where it lives. Raises
+    BakeInputError (one line) when that cannot be done."""
+    from .cycles_bake import BakeInputError
+
+    if obj.name in bpy.context.view_layer.objects:
+        return
+    homes = list(obj.users_scene)
+    if not homes:
+        raise BakeInputError(f"object {obj.name!r} is in no scene of {path}; link it to a "
+                             "scene first")
+    wm = bpy.context.window_manager
+    window = bpy.context.window or (wm.windows[0] if wm.windows else None)
+    if window is None:
+        raise BakeInputError(f"object {obj.name!r} is in scene {homes[0].name!r}, not the "
+                             f"active one, and {path} has no window to switch scenes; save it "
+                             "with that scene active")
+    window.scene = homes[0]
+    if obj.name not in bpy.context.view_layer.objects:
+        raise BakeInputError(f"object {obj.name!r} is not in view layer "
+                             f"{bpy.context.view_layer.name!r} of scene {homes[0].name!r} (its "
+                             "collection is excluded); include it")

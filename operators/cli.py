@@ -494,7 +494,13 @@ def _open_object(path: str, name: str):
     if obj is None:
         meshes = sorted(o.name for o in bpy.data.objects if o.type == "MESH")
         raise CliError(f"no object {name!r} in {path}; mesh objects: {', '.join(meshes) or 'none'}")
-    _activate_scene_of(obj, path)
+    from .blend_files import activate_scene_of
+    from .cycles_bake import BakeInputError
+
+    try:
+        activate_scene_of(obj, path)
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
     return obj
 
 
@@ -516,27 +522,6 @@ def _open_objects(path: str, names: list) -> list:
                            f"{objects[0].name!r}; objects baked together share one scene")
         objects.append(obj)
     return objects
-
-
-def _activate_scene_of(obj, path: str) -> None:
-    """Make the scene holding ``obj`` the context scene: a file saved with another scene active
-    (e.g. after *Add Sample Scene*) must still bake the object where it lives."""
-    import bpy
-
-    if obj.name in bpy.context.view_layer.objects:
-        return
-    homes = list(obj.users_scene)
-    if not homes:
-        raise CliError(f"object {obj.name!r} is in no scene of {path}; link it to a scene first")
-    wm = bpy.context.window_manager
-    window = bpy.context.window or (wm.windows[0] if wm.windows else None)
-    if window is None:
-        raise CliError(f"object {obj.name!r} is in scene {homes[0].name!r}, not the active one, "
-                       f"and {path} has no window to switch scenes; save it with that scene active")
-    window.scene = homes[0]
-    if obj.name not in bpy.context.view_layer.objects:
-        raise CliError(f"object {obj.name!r} is not in view layer {bpy.context.view_layer.name!r} "
-                       f"of scene {homes[0].name!r} (its collection is excluded); include it")
 
 
 def _refuse_existing(out_dir: str, obj_name: str, suffixes, force: bool, what: str) -> None:

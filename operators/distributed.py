@@ -105,9 +105,9 @@ def _open_in_worker(blend_path: str, object_names: list):
         _OPENED["stamp"] = stamp
         _OPENED["loads"] = _OPENED.get("loads", 0) + 1
     objects = [bpy.data.objects[name] for name in object_names]
-    from .cli import _activate_scene_of
+    from .blend_files import activate_scene_of
 
-    _activate_scene_of(objects[0], blend_path)
+    activate_scene_of(objects[0], blend_path)
     return bpy.context.scene, objects
 
 
