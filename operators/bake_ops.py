@@ -370,5 +370,54 @@ class RELIGHT_OT_remove_preview(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def kept_chunks(context) -> list:
+    """The chunk folders that cancelled or failed bakes of the active object (its texture bake,
+    alone or with other meshes, or its vertex bake) keep in the output folder, as
+    ``[(folder, chunk count)]``; [] when there are none or no output folder yet."""
+    import glob
+
+    from .texture_transport import CACHE_FOLDER, _safe
+
+    obj = context.active_object
+    try:
+        root = os.path.join(_output_dir(context.scene.relight), CACHE_FOLDER)
+    except BakeInputError:
+        return []
+    if obj is None or not os.path.isdir(root):
+        return []
+    active = _safe(obj.name)
+    out = []
+    for folder in sorted(glob.glob(os.path.join(root, "*"))):
+        base = os.path.basename(folder)   # "A+B" (objects baked together) or "A_vertex"
+        if base == active + "_vertex" or (not base.endswith("_vertex")
+                                          and active in base.split("+")):
+            n = len(glob.glob(os.path.join(folder, "*", "*_[0-9][0-9][0-9][0-9][0-9].npy")))
+            if n:
+                out.append((folder, n))
+    return out
+
+
+class RELIGHT_OT_discard_chunks(bpy.types.Operator):
+    """Delete the finished chunks that a cancelled bake of the active object kept (the next
+    bake then starts from nothing)"""
+
+    bl_idname = "relight.discard_chunks"
+    bl_label = "Discard Kept Chunks"
+    bl_options = {"REGISTER"}
+
+    def execute(self, context):
+        import shutil
+
+        kept = kept_chunks(context)
+        for folder, _ in kept:
+            shutil.rmtree(folder, ignore_errors=True)
+        root = os.path.dirname(kept[0][0]) if kept else None
+        if root and os.path.isdir(root) and not os.listdir(root):
+            os.rmdir(root)
+        self.report({"INFO"}, f"Discarded {sum(n for _, n in kept)} kept chunk(s)")
+        return {"FINISHED"}
+
+
 CLASSES = (RELIGHT_OT_bake_textures, RELIGHT_OT_bake_transport, RELIGHT_OT_analyze,
-           RELIGHT_OT_show_preview, RELIGHT_OT_follow_sun, RELIGHT_OT_remove_preview)
+           RELIGHT_OT_show_preview, RELIGHT_OT_follow_sun, RELIGHT_OT_remove_preview,
+           RELIGHT_OT_discard_chunks)

@@ -88,6 +88,7 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
             if n > 1:
                 layout.label(text=f"{n} selected meshes are baked together", icon="INFO")
             layout.operator("relight.bake_textures", icon="RENDER_STILL")
+            _kept_chunks(layout, context, vertex=False)
             _last_bake(layout, context.scene)
             return
         fig = preset_figures().get(props.preset)
@@ -112,6 +113,17 @@ def _last_bake(layout, scene):
 
     for line in str(scene.get(LAST_BAKE_KEY, "")).splitlines():
         layout.label(text=line, icon="INFO")
+
+
+def _kept_chunks(layout, context, vertex: bool):
+    """What a cancelled bake kept for the next one, and the button that discards it."""
+    from .bake_ops import kept_chunks
+
+    kept = [(f, n) for f, n in kept_chunks(context) if f.endswith("_vertex") == vertex]
+    if kept:
+        layout.label(text=f"{sum(n for _, n in kept)} chunks of a cancelled bake are kept: "
+                          "Bake resumes from them", icon="RECOVER_LAST")
+        layout.operator("relight.discard_chunks", icon="TRASH")
 
 
 class VIEW3D_PT_relight_light(_RelightSubPanel, bpy.types.Panel):
@@ -161,6 +173,7 @@ class VIEW3D_PT_relight_vertex(_RelightSubPanel, bpy.types.Panel):
         col.prop(props, "vertex_bounces")
         col.prop(props, "vertex_energy")
         self.layout.operator("relight.bake_transport", icon="RENDER_STILL")
+        _kept_chunks(self.layout, context, vertex=True)
         self.layout.operator("relight.analyze", icon="GRAPH")
         summary = context.scene.get(SUMMARY_KEY)
         if summary:

@@ -43,12 +43,13 @@ INSTALL_SCRIPT = textwrap.dedent(r"""
         if os.path.isdir(site) else []
     # hasattr() on bpy.ops.relight is true for any name; dir() lists registered operators.
     report["operators"] = [n for n in ("add_sample_scene", "analyze", "bake_textures",
-                                       "bake_transport", "follow_sun", "remove_preview",
-                                       "show_preview")
+                                       "bake_transport", "discard_chunks", "follow_sun",
+                                       "remove_preview", "show_preview")
                            if n in dir(bpy.ops.relight)]
     report["operator_types"] = [n for n in ("RELIGHT_OT_add_sample_scene",
                                             "RELIGHT_OT_analyze", "RELIGHT_OT_bake_textures",
-                                            "RELIGHT_OT_bake_transport", "RELIGHT_OT_follow_sun",
+                                            "RELIGHT_OT_bake_transport",
+                                            "RELIGHT_OT_discard_chunks", "RELIGHT_OT_follow_sun",
                                             "RELIGHT_OT_remove_preview",
                                             "RELIGHT_OT_show_preview") if n in dir(bpy.types)]
     # The bundled wheels import from the extension's own site-packages.
@@ -165,8 +166,9 @@ def test_install_enable_use_uninstall_in_temporary_user_dir(extension_zip, tmp_p
     assert "scipy" in rep["wheels_installed"] and any(
         n.lower().startswith("openexr") for n in rep["wheels_installed"])
     assert rep["operators"] == ["add_sample_scene", "analyze", "bake_textures",
-                                "bake_transport", "follow_sun", "remove_preview", "show_preview"]
-    assert len(rep["operator_types"]) == 7
+                                "bake_transport", "discard_chunks", "follow_sun",
+                                "remove_preview", "show_preview"]
+    assert len(rep["operator_types"]) == 8
     for name, path in rep["imported_from"].items():
         assert path.startswith(rep["site"]), f"{name} imported from {path}, not the extension"
     assert rep["property"]

@@ -594,3 +594,29 @@ def test_cli_bake_interrupted_by_sigint_resumes_with_the_same_command(tmp_path):
     assert relight(*args, "--no-resume", "--out", ref).returncode == 0
     np.testing.assert_array_equal(np.load(out / "Bumps_transport_texture.npy"),
                                   np.load(ref / "Bumps_transport_texture.npy"))
+
+
+def test_panel_lists_the_chunks_a_cancelled_bake_kept_and_discards_them(bumps, tmp_path):
+    """After a cancelled bake the panel says how many chunks the next Bake resumes from
+    (bake_ops.kept_chunks, drawn by the Bake panels) and *Discard Kept Chunks* deletes them."""
+    import bpy
+
+    import relightable_textures
+    from relightable_textures.operators import bake_ops, texture_transport as tx
+
+    scene, obj = bumps
+    relightable_textures.register()
+    try:
+        scene.relight.output_dir = str(tmp_path) + os.sep
+        bpy.context.view_layer.objects.active = obj
+        assert bake_ops.kept_chunks(bpy.context) == []
+        gen = tx.bake_transport_textures(scene, [obj], settings(model="none"), str(tmp_path))
+        for _ in range(1 + 20):                     # the albedo and 20 directions: 1 chunk
+            next(gen)
+        gen.close()
+        ((folder, n),) = bake_ops.kept_chunks(bpy.context)
+        assert n == 1 and folder == str(tmp_path / tx.CACHE_FOLDER / "Bumps")
+        assert bpy.ops.relight.discard_chunks() == {"FINISHED"}
+        assert bake_ops.kept_chunks(bpy.context) == [] and os.listdir(tmp_path) == []
+    finally:
+        relightable_textures.unregister()
