@@ -270,6 +270,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true")
     p.set_defaults(func=_cmd_relight_vertices)
 
+    from . import cli_materials
+    cli_materials.add_parsers(sub)
+
     p = sub.add_parser("validate", help="reproduce a paper's figures and check them")
     p.add_argument("--paper", required=True, choices=sorted(PAPER_CHECKS),
                    help="which paper's figures to reproduce")

@@ -131,9 +131,9 @@ class EnvironmentBake:
     scene : bpy.types.Scene
     obj : bpy.types.Object or list of them
         Mesh(es) with a UV map (the active render UV map is used). Several objects are baked
-        in the same Cycles calls, each into its own texture (:meth:`bake_all`), so shadows and
-        light fall between them; a material shared by two of them is replaced by a temporary
-        copy on the second during the bake.
+        in the same Cycles calls, each into its own texture or per-vertex colour attribute
+        (:meth:`bake_all`), so shadows and light fall between them; for textures, a material
+        shared by two of them is replaced by a temporary copy on the second during the bake.
     resolution : int or None
         Baked texture side in texels; ``None`` bakes per vertex instead (into a temporary
         FLOAT_COLOR point attribute; no UV map needed).
@@ -161,8 +161,6 @@ class EnvironmentBake:
         self.objects = list(obj) if isinstance(obj, (list, tuple)) else [obj]
         if not self.objects:
             raise BakeInputError("no object given")
-        if self.per_vertex and len(self.objects) > 1:
-            raise BakeInputError("per-vertex bakes take one object")
         for o in self.objects:
             check_bakeable(o, need_uv=not self.per_vertex)
         meshes = [o.data for o in self.objects]
@@ -206,7 +204,7 @@ class EnvironmentBake:
         return self
 
     def _setup(self):
-        scene, obj = self.scene, self.obj
+        scene = self.scene
         cyc = scene.cycles
         self._save_attr(scene.render, "engine", "CYCLES")
         for name, value in (("device", "CPU"), ("samples", self.samples), ("seed", self.seed),
@@ -262,7 +260,8 @@ class EnvironmentBake:
             if self.mode == "irradiance" and self.passes != "color":
                 self._whiten_dark_materials(o)
         if self.per_vertex:
-            self._setup_vertex_target(obj)
+            self.targets = [self._setup_vertex_target(o) for o in self.objects]
+            self.target = self.targets[0]
         else:
             self._unshare_materials()
             self.targets = [self._setup_image_target(o) for o in self.objects]
@@ -314,10 +313,10 @@ class EnvironmentBake:
         attrs = obj.data.color_attributes
         old_active = attrs.active_color_name
         old_render = attrs.render_color_index
-        self.target = attrs.new(f"{_PREFIX}Target", "FLOAT_COLOR", "POINT")
-        self._lit_vertices = _vertices_with_area(obj.data)
-        name = self.target.name
-        attrs.active_color = self.target
+        target = attrs.new(f"{_PREFIX}Target", "FLOAT_COLOR", "POINT")
+        self._lit_vertices = getattr(self, "_lit_vertices", []) + [_vertices_with_area(obj.data)]
+        name = target.name
+        attrs.active_color = target
 
         def restore(mesh=obj.data):
             attrs = mesh.color_attributes
@@ -328,6 +327,7 @@ class EnvironmentBake:
                 attrs.render_color_index = old_render
 
         self._restore.append(restore)
+        return target
 
     def _unshare_materials(self):
         """Give every later object that uses an earlier object's material a temporary copy, so
@@ -438,9 +438,12 @@ class EnvironmentBake:
         if "FINISHED" not in result:
             raise RuntimeError(f"Cycles bake did not finish: {result}")
         if self.per_vertex:
-            values = color_attribute(self.target)[:, :3].copy()
-            values[~self._lit_vertices] = 0.0
-            return [values]
+            out = []
+            for target, lit in zip(self.targets, self._lit_vertices):
+                values = color_attribute(target)[:, :3].copy()
+                values[~lit] = 0.0
+                out.append(values)
+            return out
         return [image_pixels(target)[..., :3].copy() for target in self.targets]
 
     def bake_sun(self, direction, strength: float, angle_deg: float) -> np.ndarray:

@@ -1,0 +1,214 @@
+"""The material-editing verbs of the ``relight`` CLI: ``bake-materials`` and
+``relight-materials`` (precomputed transfer tensors, Sun et al. 2007). Parsing and printing
+only; the work is :func:`.material_bake.materials_job` and
+:class:`..lt_addon.transport.ptt.TransferTensors`."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+from ..lt_addon.io import atomic
+
+
+def _set_edit(text: str):
+    """``MATERIAL.color=R,G,B`` (or ``.roughness=X``, refused later: no anchors for it)."""
+    name, sep, value = text.rpartition("=")
+    mat, dot, prop = name.rpartition(".")
+    if not sep or not dot or not mat:
+        raise argparse.ArgumentTypeError(f"expected MATERIAL.color=R,G,B, got {text!r}")
+    if prop == "color":
+        from .cli import _rgb
+        return mat, prop, _rgb(value)
+    if prop in ("roughness", "metallic"):
+        try:
+            return mat, prop, float(value)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {mat}.{prop}=X, got {text!r}") from None
+    raise argparse.ArgumentTypeError(f"{prop!r} is not editable: use MATERIAL.color=R,G,B")
+
+
+def add_parsers(sub) -> None:
+    from .cli import _az_el, _rgb
+
+    p = sub.add_parser(
+        "bake-materials", help="bake per-vertex transfer tensors so material colours can be "
+        "edited with interreflection following (Sun 2007)",
+        description="Bakes, per vertex of the objects, the direct light and the light that "
+                    "reflected once off each editable material (region) and twice off each "
+                    "ordered pair, under hard suns over direction sets (finer for lower "
+                    "orders). Every rendered mesh of the scene reflects light; materials not "
+                    "named with --region keep their colour. Diffuse only: the materials' "
+                    "specular and textures are not modelled. Writes <object>_materials.npz "
+                    "and a JSON report; the .blend records where.")
+    p.add_argument("file", metavar="FILE.blend")
+    p.add_argument("--object", required=True, action="append", metavar="NAME",
+                   help="a receiver mesh (repeat for several: their vertices are stacked in "
+                        "this order)")
+    p.add_argument("--region", required=True, action="append", metavar="MATERIAL",
+                   help="an editable material (repeat for several)")
+    p.add_argument("--anchors", default="diffuse",
+                   help="material anchors per region: 'diffuse' (colour edits; the only one "
+                        "built)")
+    p.add_argument("--bounces", type=int, default=2, choices=(1, 2))
+    p.add_argument("--directions", default="hemi:64:1.5", metavar="SPEC",
+                   help="direct-light directions (default hemi:64:1.5)")
+    p.add_argument("--one-bounce-directions", default="hemi:32", metavar="SPEC")
+    p.add_argument("--two-bounce-directions", default="hemi:8", metavar="SPEC")
+    p.add_argument("--samples", type=int, default=128,
+                   help="Cycles samples per vertex of the bounce terms (default 128)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--truth", action="store_true",
+                   help="also bake Cycles truths (two seeds) under the scene's Sun with the "
+                        "file's colours and report the error next to their noise floor")
+    p.add_argument("--out", metavar="DIR", help="output folder (default <blend>_relight/)")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing material bake of the same object in --out")
+    p.set_defaults(func=_cmd_bake_materials)
+
+    p = sub.add_parser("relight-materials", help="shade a material bake with edited colours "
+                       "and any light (NumPy)")
+    p.add_argument("file", metavar="FILE.blend")
+    p.add_argument("--object", required=True, action="append", metavar="NAME",
+                   help="the bake's first object (as given to bake-materials)")
+    p.add_argument("--set", action="append", type=_set_edit, default=[],
+                   metavar="MATERIAL.color=R,G,B",
+                   help="edit a region's colour (linear RGB); without it, the file's colours")
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("--sun", type=_az_el, metavar="AZ,EL",
+                       help="a hard distant light (azimuth from +x toward +y, degrees)")
+    group.add_argument("--env", metavar="HDR.exr", help="an equirect RGB EXR environment")
+    p.add_argument("--rotate", type=float, default=0.0, metavar="DEG",
+                   help="--env rotation about +z, like a world Mapping node's Z rotation")
+    p.add_argument("--sun-angle", type=float, default=0.0, metavar="DEG")
+    p.add_argument("--strength", type=float, default=1.0,
+                   help="sun normal irradiance or environment multiplier (default 1)")
+    p.add_argument("--color", type=_rgb, default=(1.0, 1.0, 1.0), metavar="R,G,B",
+                   help="sun colour")
+    p.add_argument("--out", required=True, metavar="shading.npy",
+                   help="outgoing radiance per stacked vertex, shape (V, 3), float32")
+    p.add_argument("--force", action="store_true")
+    p.set_defaults(func=_cmd_relight_materials)
+
+
+def _cmd_bake_materials(args) -> int:
+    import bpy
+
+    from . import blend_files, material_bake
+    from .cli import (CliError, _check_input_blend, _check_output_dir, _can_create_in,
+                      _open_objects, _refuse_existing, _run_job)
+    from .cycles_bake import BakeInputError
+
+    path = _check_input_blend(args.file)
+    settings = material_bake.MaterialBakeSettings(
+        regions=list(args.region), anchors=args.anchors, bounces=args.bounces,
+        directions=(args.directions, args.one_bounce_directions, args.two_bounce_directions),
+        samples=args.samples, seed=args.seed)
+    try:
+        settings.validate()
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    out_dir = _check_output_dir(args.out, path)
+    if not _can_create_in(os.path.dirname(path)):
+        raise CliError(f"cannot update {path}: its folder is not writable")
+    started = time.perf_counter()
+    objects = _open_objects(path, args.object)
+    for o in objects:
+        if o.type != "MESH":
+            raise CliError(f"{o.name!r} is a {o.type.lower()}, not a mesh")
+    _refuse_existing(out_dir, objects[0].name, ("_materials.npz", "_materials.json"),
+                     args.force, "a material bake")
+    try:
+        out = _run_job(material_bake.materials_job(
+            bpy.context.scene, objects, settings, out_dir,
+            truth_samples=args.samples if args.truth else 0), "bake-materials")
+    except (BakeInputError, ValueError) as exc:
+        raise CliError(f"nothing was written: {exc}") from None
+    except KeyboardInterrupt:
+        print("bake-materials: cancelled; nothing was written", file=sys.stderr)
+        return 130
+    blend_files.save_atomically(path)
+    rep, t = out.report, out.report["timings"]
+    shares = rep["energy_shares"]
+    print(f"baked {', '.join(rep['objects'])}: {rep['vertices']} vertices, regions "
+          f"{', '.join(rep['regions'])}, {rep['bake_calls']} Cycles bakes in "
+          f"{t['wall_total']:.2f} s ({time.perf_counter() - started - t['wall_total']:.2f} s "
+          f"more to open and save the .blend); {rep['bytes']['tensors'] / 2**20:.2f} MiB; "
+          f"light shares direct {shares['direct']:.3f}, one bounce {shares['one_bounce']:.3f}"
+          f", two bounces {shares['two_bounce']:.3f} -> {rep['tensors']}")
+    truth = rep.get("ground_truth")
+    if truth:
+        print(f"  vs Cycles ({truth['samples']} spp, {truth['light']}): rel. error "
+              f"{truth['rel_error']:.4f}, noise floor {truth['noise_floor']:.4f} (two truth "
+              f"seeds); without the two-bounce term {truth['rel_error_without_two_bounce']:.4f}")
+    for note in rep["notes"]:
+        print(f"relight: warning: {note}", file=sys.stderr)
+    return 0
+
+
+def _cmd_relight_materials(args) -> int:
+    import bpy
+
+    from ..lt_addon.transport import ptt
+    from ..lt_addon.transport.sidecar import read_environment_exr
+    from ..lt_addon.sphere.hemisphere import direction_from_az_el
+    from . import material_bake
+    from .cli import CliError, _check_input_blend, _check_output_path, _open_objects
+
+    path = _check_input_blend(args.file)
+    out = _check_output_path(args.out, ".npy", args.force)
+    for mat, prop, _ in args.set:
+        if prop != "color":
+            raise CliError(f"{mat}.{prop}: only colour edits are baked (anchors 'diffuse'); "
+                           "roughness / metallic anchors are not built yet")
+    if not np.isfinite(args.strength) or args.strength < 0:
+        raise CliError(f"--strength must be >= 0, got {args.strength}")
+    if not 0.0 <= args.sun_angle <= 90.0:
+        raise CliError(f"--sun-angle must be in 0..90 degrees, got {args.sun_angle}")
+    env = None
+    if args.env:
+        if not os.path.isfile(args.env):
+            raise CliError(f"environment file not found: {args.env}")
+        try:
+            env = read_environment_exr(args.env)
+        except (ValueError, OSError) as exc:
+            raise CliError(str(exc)) from None
+    objects = _open_objects(path, args.object[:1])
+    try:
+        tensors = material_bake.load_tensors(bpy.context.scene, objects[0])
+    except (FileNotFoundError, ValueError) as exc:
+        raise CliError(str(exc)) from None
+    edits = material_bake.file_colours(tensors)
+    for mat, _, rgb in args.set:
+        if mat not in tensors.regions:
+            raise CliError(f"{mat!r} is not an editable region of this bake (regions: "
+                           f"{', '.join(tensors.regions)}); bake it with --region {mat}")
+        edits[mat] = rgb
+    if env is not None:
+        light = ptt.Environment(env, "bottom_first", -args.rotate, args.strength)
+        what = {"env": os.path.abspath(args.env), "rotate": args.rotate}
+    elif args.sun is not None:
+        light = ptt.Sun(tuple(direction_from_az_el(*args.sun)), args.sun_angle, args.strength,
+                        args.color)
+        what = {"sun": list(args.sun), "sun_angle": args.sun_angle}
+    else:
+        sun = material_bake.reference_sun(bpy.context.scene)
+        if sun is None:
+            raise CliError("the scene has no Sun lamp: give --sun AZ,EL or --env HDR.exr")
+        light = ptt.Sun(tuple(sun[0]), sun[1], sun[2] * args.strength, args.color)
+        what = {"sun": "the scene's Sun lamp", "sun_angle": sun[1]}
+    t = time.perf_counter()
+    values = tensors.shade(light, edits).astype(np.float32)
+    ms = (time.perf_counter() - t) * 1e3
+    with atomic.atomic_path(out) as tmp:
+        np.save(tmp, values)
+    print(json.dumps({"objects": [n for n, _ in tensors.objects], "vertices": int(len(values)),
+                      **what, "edits": {k: [float(x) for x in v] for k, v in edits.items()},
+                      "update_ms": round(ms, 3),
+                      "mean": [float(v) for v in values.mean(axis=0)], "out": out}))
+    return 0

@@ -1,0 +1,493 @@
+"""Bake per-vertex transfer tensors for material edits with Cycles (bpy), Sun et al. 2007.
+
+Each term of :mod:`..lt_addon.transport.ptt` is an ordinary Cycles per-vertex DIFFUSE bake
+(irradiance mode: no colour pass, so ``E / pi``) under one hard Sun lamp, with every material
+in the scene temporarily replaced by a *gated* Diffuse BSDF whose colour depends on the
+Light Path node's Ray Depth:
+
+* depth 0 (the bake's receiver, a camera ray to Cycles): white, so the bake is irradiance;
+* depth 1 (the surface the light reflects off last): the material's colour times ``g1``;
+* depth 2 (the surface before it): the colour times ``g2``; deeper: black.
+
+Editable regions take colour 1 (white) and fixed materials their own colour. With Cycles'
+bounces capped at 2 and the indirect pass only:
+
+* one bounce off region ``r``: ``g1 = [region == r]``, ``g2 = 0``;
+* two bounces ``r1 -> r2``: ``g1 = [region == r2]``, ``g2 = [region == r1]``, minus the same
+  bake with ``g2 = 0`` (the one-bounce light of ``r2``). Both use the same seed, so every path
+  makes the same random choices up to the second surface and the difference is exactly the
+  light that took the second bounce (it is >= 0; measured: the two bakes of a floor's one-bounce
+  light off a wall were equal to the last bit).
+
+Measured (bpy 5.0.1, room test scene): the floor's indirect irradiance off the back wall alone
+was 0.0187 (x pi), the pair back wall <- floor added 0.0040; a wall cannot light itself (0).
+The materials' specular and textures are not modelled: the bake uses each material's base
+colour (Principled Base Color or Diffuse Color; otherwise its viewport colour, reported).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+
+from ..lt_addon.io import atomic
+from ..lt_addon.transport import ptt
+from ..lt_addon.transport.texture import parse_directions
+from .compat import ensure_node_tree
+from .cycles_bake import BakeInputError, EnvironmentBake, check_memory
+from .jobs import Progress
+from .meshes import corner_vertices, polygon_arrays
+
+_PREFIX = "RelightGate"
+ANCHORS = ("diffuse",)
+#: Kind of the bake record on the first object (:func:`.steerable_bake.record_kind`).
+KIND = "material_tensors"
+
+
+def material_colour(mat) -> tuple[np.ndarray, str | None]:
+    """The diffuse colour a material bakes with (RGB float64) and, when it is not an unlinked
+    Base Color / Color of the active output's BSDF, why the viewport colour stands in."""
+    tree = mat.node_tree if mat is not None else None
+    if mat is None:
+        return np.full(3, 0.8), "no material: grey 0.8"
+    out = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"
+                and n.is_active_output), None) if tree else None
+    node = (out.inputs["Surface"].links[0].from_node
+            if out is not None and out.inputs["Surface"].is_linked else None)
+    socket = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}.get(
+        getattr(node, "bl_idname", ""))
+    if socket and not node.inputs[socket].is_linked:
+        return np.array(node.inputs[socket].default_value[:3], dtype=np.float64), None
+    what = "a texture or node input" if socket else "not a Principled or Diffuse BSDF"
+    return (np.array(mat.diffuse_color[:3], dtype=np.float64),
+            f"{mat.name!r}'s colour is {what}: its viewport colour stands in")
+
+
+def scene_materials(scene) -> list:
+    """Every material (or None for an empty slot list) on the scene's rendered meshes."""
+    seen, out = set(), []
+    for o in scene.objects:
+        if o.type != "MESH" or o.hide_render:
+            continue
+        mats = [s.material for s in o.material_slots] or [None]
+        for m in mats:
+            key = m.name if m is not None else None
+            if key not in seen:
+                seen.add(key)
+                out.append(m)
+    return out
+
+
+class GatedMaterials:
+    """Context manager: every rendered mesh of ``scene`` gets gated Diffuse materials (module
+    docstring), restored on exit.
+
+    Parameters
+    ----------
+    regions : list of str
+        Editable material names, region ``i + 1``; every other material is region 0.
+    colours : dict, optional
+        ``{material name: RGB}`` overriding a material's colour (a truth bake of an edit); by
+        default editable regions are white and fixed ones keep their colour.
+    """
+
+    def __init__(self, scene, regions: list, colours: dict | None = None):
+        self.scene, self.regions = scene, list(regions)
+        self.colours = dict(colours or {})
+        self.notes: list[str] = []
+        self._restore, self._created = [], []
+        self._gates: dict = {}   # region index -> [(g1 socket, g2 socket)]
+
+    def __enter__(self):
+        try:
+            self._setup()
+        except BaseException:
+            self._teardown()
+            raise
+        return self
+
+    def _gate_for(self, mat):
+        name = mat.name if mat is not None else None
+        if name in self._made:
+            return self._made[name]
+        region = self.regions.index(name) + 1 if name in self.regions else 0
+        if name in self.colours:
+            colour = np.asarray(self.colours[name], dtype=np.float64)
+        elif region:
+            colour = np.ones(3)
+        else:
+            colour, note = material_colour(mat)
+            if note:
+                self.notes.append(note)
+        gate = bpy.data.materials.new(f"{_PREFIX}_{name or 'none'}")
+        self._created.append(gate)
+        tree = ensure_node_tree(gate)
+        nodes, links = tree.nodes, tree.links
+        for n in list(nodes):
+            nodes.remove(n)
+        path = nodes.new("ShaderNodeLightPath")
+        depth = []
+        for d in range(3):
+            c = nodes.new("ShaderNodeMath")
+            c.operation = "COMPARE"
+            links.new(path.outputs["Ray Depth"], c.inputs[0])
+            c.inputs[1].default_value, c.inputs[2].default_value = float(d), 0.5
+            depth.append(c)
+        g1, g2 = nodes.new("ShaderNodeValue"), nodes.new("ShaderNodeValue")
+        g1.outputs[0].default_value = g2.outputs[0].default_value = 0.0
+        m1 = nodes.new("ShaderNodeMath")
+        m1.operation = "MULTIPLY"
+        links.new(depth[1].outputs[0], m1.inputs[0])
+        links.new(g1.outputs[0], m1.inputs[1])
+        m2 = nodes.new("ShaderNodeMath")
+        m2.operation = "MULTIPLY_ADD"
+        links.new(depth[2].outputs[0], m2.inputs[0])
+        links.new(g2.outputs[0], m2.inputs[1])
+        links.new(m1.outputs[0], m2.inputs[2])
+        mix = nodes.new("ShaderNodeVectorMath")   # colour * gate + [depth == 0]
+        mix.operation = "MULTIPLY_ADD"
+        mix.inputs[0].default_value = [float(v) for v in colour]
+        links.new(m2.outputs[0], mix.inputs[1])
+        links.new(depth[0].outputs[0], mix.inputs[2])
+        bsdf = nodes.new("ShaderNodeBsdfDiffuse")
+        bsdf.inputs["Roughness"].default_value = 0.0
+        links.new(mix.outputs[0], bsdf.inputs["Color"])
+        out = nodes.new("ShaderNodeOutputMaterial")
+        links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
+        self._gates.setdefault(region, []).append((g1.outputs[0], g2.outputs[0]))
+        self._made[name] = gate
+        return gate
+
+    def _setup(self):
+        self._made = {}
+        present = {m.name for m in scene_materials(self.scene) if m is not None}
+        missing = [r for r in self.regions if r not in present]
+        if missing:
+            raise BakeInputError(f"no rendered mesh in scene {self.scene.name!r} uses material "
+                                 f"{missing[0]!r}; materials: {', '.join(sorted(present))}")
+        for o in self.scene.objects:
+            if o.type != "MESH" or o.hide_render:
+                continue
+            if not o.material_slots:
+                o.data.materials.append(self._gate_for(None))
+                self._restore.append(lambda m=o.data: m.materials.pop(index=len(m.materials) - 1))
+                continue
+            for slot in o.material_slots:
+                old = slot.material
+                if old is not None and old in self._created:
+                    continue   # a mesh shared with an object already gated
+                self._restore.append(lambda s=slot, m=old: setattr(s, "material", m))
+                slot.material = self._gate_for(old)
+        self.set_gates(None, None)
+
+    def set_gates(self, last: int | None, before: int | None = None) -> None:
+        """Let light reflect last off region ``last`` and before that off region ``before``
+        (None: off nothing; ``"all"``: off every region)."""
+        for region, sockets in self._gates.items():
+            for g1, g2 in sockets:
+                g1.default_value = float(last == "all" or last == region)
+                g2.default_value = float(before == "all" or before == region)
+
+    def _teardown(self):
+        errors = []
+        while self._restore:
+            try:
+                self._restore.pop()()
+            except Exception as exc:
+                errors.append(exc)
+        while self._created:
+            try:
+                bpy.data.materials.remove(self._created.pop())
+            except Exception as exc:
+                errors.append(exc)
+        if errors:
+            raise RuntimeError(f"could not fully restore the materials: {errors[0]}")
+
+    def __exit__(self, exc_type, exc, tb):
+        try:
+            self._teardown()
+        except RuntimeError:
+            if exc_type is None:
+                raise
+        return False
+
+
+def receivers(objects, regions: list) -> tuple[np.ndarray, np.ndarray, list]:
+    """Per stacked vertex: region (V,) int16 of the face material it belongs to (the largest
+    face area wins at a shared vertex) and the diffuse colour (V, 3) float32 that material
+    bakes with; plus the notes of :func:`material_colour`."""
+    region_of, colour_of, notes = [], [], []
+    for o in objects:
+        mesh = o.data
+        mats = [s.material for s in o.material_slots] or [None]
+        reg = np.array([regions.index(m.name) + 1 if m is not None and m.name in regions else 0
+                        for m in mats], dtype=np.int16)
+        col = []
+        for m in mats:
+            c, note = material_colour(m)
+            col.append(c)
+            if note and note not in notes:
+                notes.append(note)
+        col = np.array(col, dtype=np.float32)
+        F = len(mesh.polygons)
+        mi = np.zeros(F, dtype=np.int64)
+        if F:
+            mesh.polygons.foreach_get("material_index", mi)
+        mi = np.clip(mi, 0, len(mats) - 1)
+        area, start, total = polygon_arrays(mesh)
+        loops = corner_vertices(mesh)
+        face_of_loop = np.repeat(np.arange(F), total)
+        best = np.full(len(mesh.vertices), -1.0)
+        slot = np.zeros(len(mesh.vertices), dtype=np.int64)
+        order = np.argsort(area[face_of_loop], kind="stable")   # larger faces write last
+        v, f = loops[order], face_of_loop[order]
+        best[v], slot[v] = area[f], mi[f]
+        region_of.append(reg[slot])
+        colour_of.append(col[slot])
+    return np.concatenate(region_of), np.concatenate(colour_of), notes
+
+
+@dataclass
+class MaterialBakeSettings:
+    """What ``bake-materials`` bakes.
+
+    regions : editable material names; anchors : only "diffuse" (albedo edits) is built;
+    bounces : 1 or 2; directions : specs of the direct, one- and two-bounce direction sets
+    (``hemi:N[:P]``); samples : Cycles samples per vertex for the bounce terms (the direct term
+    takes 1: exact under a hard Sun); seed : Cycles seed of every term.
+    """
+
+    regions: list = field(default_factory=list)
+    anchors: str = "diffuse"
+    bounces: int = 2
+    directions: tuple = ("hemi:64:1.5", "hemi:32", "hemi:8")
+    samples: int = 128
+    seed: int = 0
+
+    def validate(self) -> list:
+        if not self.regions:
+            raise BakeInputError("name at least one editable material (--region MATERIAL)")
+        if len(set(self.regions)) != len(self.regions):
+            raise BakeInputError("a --region is given twice")
+        if self.anchors not in ANCHORS:
+            raise BakeInputError(f"anchors {self.anchors!r} are not built yet: only 'diffuse' "
+                                 "(albedo edits); roughness / metallic anchors are future work")
+        if self.bounces not in (1, 2):
+            raise BakeInputError(f"bounces must be 1 or 2, got {self.bounces}")
+        if self.samples < 1:
+            raise BakeInputError(f"samples must be >= 1, got {self.samples}")
+        try:
+            return [parse_directions(s) for s in self.directions]
+        except ValueError as exc:
+            raise BakeInputError(f"bad direction set: {exc}") from None
+
+
+def bake_materials(scene, objects, settings: MaterialBakeSettings):
+    """Generator: bake the transfer tensors of ``objects`` (receivers; every rendered mesh of
+    the scene reflects light); yields Progress per Cycles call, returns a
+    :class:`..lt_addon.transport.ptt.TransferTensors`."""
+    d0, d1, d2 = settings.validate()
+    objects = list(objects)
+    started = time.perf_counter()
+    V = sum(len(o.data.vertices) for o in objects)
+    R1 = len(settings.regions) + 1
+    S1 = d1.size if settings.bounces >= 1 else 0
+    S2 = d2.size if settings.bounces >= 2 else 0
+    floats = V * (d0.size + 3 * R1 * S1 + 3 * R1 * R1 * S2)
+    check_memory(floats * 4 * 2, f"{V} vertices x {floats // max(V, 1)} term values",
+                 "use fewer regions or coarser direction sets")
+    total = ptt.bake_count(d0.size, S1, S2, R1 - 1, settings.bounces)
+    done = 0
+    direct = np.empty((d0.size, V), dtype=np.float32)
+    one = np.zeros((S1, 3, R1 if S1 else 0, V), dtype=np.float32)
+    two = np.zeros((S2, 3, R1 if S2 else 0, R1 if S2 else 0, V), dtype=np.float32)
+    seconds = {}
+
+    def stack(values):
+        return np.pi * np.concatenate(values, axis=0)   # E per unit normal irradiance
+
+    with GatedMaterials(scene, settings.regions) as gates:
+        t = time.perf_counter()
+        with EnvironmentBake(scene, objects, None, 1, 0, (8, 16), mode="irradiance",
+                             seed=settings.seed, world_sampling="none") as session:
+            for s, w in enumerate(d0.directions):
+                direct[s] = stack(session.bake_sun_all(w, 1.0, 0.0))[:, 0]
+                done += 1
+                yield Progress(done, total, f"direct {s + 1}/{d0.size}")
+        seconds["direct"] = time.perf_counter() - t
+        if settings.bounces >= 1:
+            t = time.perf_counter()
+            with EnvironmentBake(scene, objects, None, settings.samples, settings.bounces,
+                                 (8, 16), mode="irradiance", seed=settings.seed,
+                                 world_sampling="none", passes="indirect") as session:
+                # gates outside, directions inside: a gate change makes Cycles sync the
+                # shaders again (about 0.25 s a call here), a new sun direction does not
+                for r in range(R1 if S1 else 0):
+                    gates.set_gates(r, None)
+                    for s, w in enumerate(d1.directions):
+                        one[s, :, r] = stack(session.bake_sun_all(w, 1.0, 0.0)).T
+                        done += 1
+                        yield Progress(done, total, f"one bounce off region {r}, direction "
+                                                    f"{s + 1}/{S1}")
+                seconds["one_bounce"] = time.perf_counter() - t
+                t = time.perf_counter()
+                ref = np.zeros((R1, V, S2, 3), dtype=np.float32) if S2 else None
+                for r2 in range(R1 if S2 else 0):
+                    gates.set_gates(r2, None)
+                    for s, w in enumerate(d2.directions):
+                        ref[r2, :, s] = stack(session.bake_sun_all(w, 1.0, 0.0))
+                        done += 1
+                        yield Progress(done, total, f"two bounces: reference {r2}, direction "
+                                                    f"{s + 1}/{S2}")
+                    for r1 in range(R1):
+                        gates.set_gates(r2, r1)
+                        for s, w in enumerate(d2.directions):
+                            two[s, :, r1, r2] = np.maximum(
+                                stack(session.bake_sun_all(w, 1.0, 0.0)) - ref[r2, :, s],
+                                0.0).T
+                            done += 1
+                            yield Progress(done, total, f"two bounces {r1}->{r2}, direction "
+                                                        f"{s + 1}/{S2}")
+                if S2:
+                    seconds["two_bounce"] = time.perf_counter() - t
+        notes = list(gates.notes)
+    region_of, colour_of, more = receivers(objects, settings.regions)
+    base = np.array([material_colour(bpy.data.materials[r])[0] for r in settings.regions])
+    meta = {"anchors": settings.anchors, "bounces": settings.bounces,
+            "samples": settings.samples, "seed": settings.seed, "bake_calls": total,
+            "seconds": {k: round(v, 3) for k, v in seconds.items()},
+            "bake_seconds": round(time.perf_counter() - started, 3),
+            "notes": notes + [n for n in more if n not in notes]}
+    return ptt.TransferTensors(direct, one, two, tuple(d.spec for d in (d0, d1, d2)),
+                               list(settings.regions), base, region_of, colour_of,
+                               [(o.name, len(o.data.vertices)) for o in objects], meta)
+
+
+def truth_irradiance(scene, objects, colours: dict, direction, bounces: int, samples: int,
+                     seed: int = 1, angle_deg: float = 0.0) -> np.ndarray:
+    """Cycles ground truth of an edit: irradiance E (V, 3) (per unit normal irradiance) of the
+    stacked vertices of ``objects`` under a Sun from ``direction``, with every material a
+    Diffuse BSDF of its colour (``colours[name]`` where given, else its own) and ``bounces``
+    diffuse bounces -- the same diffuse scene the tensors model, without any gating."""
+    with GatedMaterials(scene, [], colours) as gates:
+        gates.set_gates("all", "all")
+        with EnvironmentBake(scene, list(objects), None, samples, bounces, (8, 16),
+                             mode="irradiance", seed=seed, world_sampling="none") as session:
+            values = session.bake_sun_all(direction, 1.0, angle_deg)
+    return np.pi * np.concatenate(values, axis=0)
+
+
+@dataclass
+class MaterialsBakeOutput:
+    """A ``bake-materials`` run: its JSON-safe report and the tensors."""
+    report: dict
+    tensors: ptt.TransferTensors
+
+
+def tensors_path(out_dir: str, objects) -> str:
+    safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in objects[0].name)
+    return os.path.join(out_dir, safe + "_materials.npz")
+
+
+def report_path(out_dir: str, objects) -> str:
+    return tensors_path(out_dir, objects)[:-4] + ".json"
+
+
+def reference_sun(scene):
+    """Direction (towards it), angular diameter (degrees) and strength of the scene's Sun lamp
+    (a rendered one first; the sample scenes keep theirs hidden for the preview to follow),
+    or None."""
+    from mathutils import Vector
+
+    suns = [o for o in scene.objects if o.type == "LIGHT" and o.data.type == "SUN"]
+    suns.sort(key=lambda o: o.hide_render)
+    for o in suns:
+        d = (o.matrix_world.to_quaternion() @ Vector((0.0, 0.0, 1.0))).normalized()
+        return np.array(d[:]), float(np.degrees(o.data.angle)), float(o.data.energy)
+    return None
+
+
+def load_tensors(scene, obj) -> ptt.TransferTensors:
+    """The material bake recorded on ``obj`` (its first object); ValueError / FileNotFoundError
+    say which command fixes it."""
+    from .blend_files import bake_file
+
+    return ptt.TransferTensors.load(bake_file(obj, KIND, "material (bake-materials)"))
+
+
+def file_colours(tensors: ptt.TransferTensors) -> dict:
+    """The editable regions' colours as the open file has them now (the edit-free state)."""
+    out = {}
+    for i, name in enumerate(tensors.regions):
+        mat = bpy.data.materials.get(name)
+        out[name] = (tuple(material_colour(mat)[0]) if mat is not None
+                     else tuple(tensors.base_colors[i]))
+    return out
+
+
+def ground_truth(scene, objects, tensors: ptt.TransferTensors, direction, samples: int) -> dict:
+    """Relative error of the tensors against a Cycles bake of the file's colours under a hard
+    sun from ``direction``, next to the noise floor (two truth seeds), and without the
+    two-bounce term; errors are ``||E - E_cycles|| / ||E_cycles||`` over vertices and RGB."""
+    colours = file_colours(tensors)
+    t = time.perf_counter()
+    a = truth_irradiance(scene, objects, colours, direction, tensors.bounces, samples, seed=1)
+    b = truth_irradiance(scene, objects, colours, direction, tensors.bounces, samples, seed=2)
+    seconds = time.perf_counter() - t
+    light = ptt.Sun(tuple(float(v) for v in direction))
+    est = tensors.irradiance(light, colours)
+    low = tensors.irradiance(light, colours, orders=(0, 1))
+
+    def rel(x, y):
+        return float(np.linalg.norm(x - y) / max(np.linalg.norm(y), 1e-30))
+
+    return {"samples": samples, "light": [round(float(v), 5) for v in direction],
+            "rel_error": rel(est, a), "noise_floor": rel(b, a),
+            "rel_error_without_two_bounce": rel(low, a), "truth_seconds": round(seconds, 3)}
+
+
+def materials_job(scene, objects, settings: MaterialBakeSettings, out_dir: str,
+                  truth_samples: int = 0):
+    """The ``bake-materials`` verb as one job: bake, then write ``<object>_materials.npz`` and
+    its JSON report (bake count, seconds, bytes, each path order's share of the light under
+    the scene's Sun, or a 45-degree sun; with ``truth_samples`` the error against Cycles
+    there) and record the file on the first object. Nothing is written if it is cancelled."""
+    from .steerable_bake import record_kind
+
+    started = time.perf_counter()
+    tensors = yield from bake_materials(scene, objects, settings)
+    sun = reference_sun(scene)
+    direction = (sun[0] if sun is not None and sun[0][2] > 0
+                 else np.array([0.5, 0.5, np.sqrt(0.5)]))
+    light = ptt.Sun(tuple(float(v) for v in direction))
+    shares = tensors.term_shares(light, file_colours(tensors))
+    d0, d1, d2 = tensors.direction_sets()
+    report = {"objects": [o.name for o in objects], "vertices": tensors.vertices,
+              "regions": tensors.regions, "anchors": settings.anchors,
+              "bounces": settings.bounces, "samples": settings.samples, "seed": settings.seed,
+              "directions": {"direct": d0.spec, "one_bounce": d1.spec, "two_bounce": d2.spec},
+              "bake_calls": tensors.metadata["bake_calls"],
+              "bytes": {"tensors": tensors.nbytes},
+              "energy_shares": {k: round(v, 5) for k, v in shares.items()},
+              "energy_light": {"direction": [round(float(v), 5) for v in direction],
+                               "from": "scene Sun" if sun is not None else "45-degree sun"},
+              "notes": tensors.metadata["notes"],
+              "timings": {"bake_seconds": tensors.metadata["bake_seconds"],
+                          **{f"{k}_seconds": v for k, v in tensors.metadata["seconds"].items()}}}
+    if truth_samples:
+        yield Progress(0, 1, f"Cycles truths ({truth_samples} spp, 2 seeds)")
+        report["ground_truth"] = ground_truth(scene, objects, tensors, direction, truth_samples)
+    os.makedirs(out_dir, exist_ok=True)
+    path = tensors_path(out_dir, objects)
+    tensors.save(path)
+    record_kind(objects[0], KIND, path, {"regions": list(tensors.regions),
+                                         "objects": [o.name for o in objects]})
+    report["tensors"] = path
+    report["bytes"]["file"] = os.path.getsize(path)
+    report["timings"]["wall_total"] = round(time.perf_counter() - started, 4)
+    atomic.write_json(report_path(out_dir, objects), report)
+    return MaterialsBakeOutput(report, tensors)

@@ -1,0 +1,138 @@
+"""Material edits with transfer tensors (Sun et al. 2007) against Cycles bakes of the edit.
+
+One bake of the sample room at test size (350 vertices on five meshes, the red and green walls
+editable), every path order over the same 4 directions so that the light can sit exactly on a
+baked direction: what is compared is then the tensors' algebra and noise, not the
+interpolation between directions (the bench measures that at held-out suns).
+
+Tolerances, measured on this scene (bpy 5.0.1, 128 spp, the light 61 degrees up): the tensors'
+error against one truth seed was about 0.9 of the difference between two truth seeds (the
+noise floor, 0.03-0.04) for the edits below, so 1.5x the floor holds with margin; without the
+two-bounce term the white room erred 2.4x the floor (1.6x at 64 spp: too close to test)."""
+
+import numpy as np
+import pytest
+
+SPEC = "hemi:4"
+SAMPLES = 128
+OBJECTS = ("Floor", "WallLeft", "WallRight", "WallBack", "Box")
+EDITS = {
+    "file colours": {},
+    "red wall blue": {"RedMaterial": (0.1, 0.1, 0.8)},
+    "both walls yellow": {"RedMaterial": (0.8, 0.7, 0.1), "GreenMaterial": (0.8, 0.7, 0.1)},
+}
+WHITE = {"RedMaterial": (0.8, 0.8, 0.8), "GreenMaterial": (0.8, 0.8, 0.8)}
+
+
+def rel(x, y):
+    return float(np.linalg.norm(x - y) / np.linalg.norm(y))
+
+
+@pytest.fixture(scope="module")
+def room():
+    import bpy
+
+    from relightable_textures import samples
+    from relightable_textures.lt_addon.transport.texture import parse_directions
+    from relightable_textures.operators import material_bake as mb
+    from relightable_textures.operators.jobs import run
+
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = bpy.context.scene
+    samples.build("room", scene, "test")
+    objs = [bpy.data.objects[n] for n in OBJECTS]
+    settings = mb.MaterialBakeSettings(regions=["RedMaterial", "GreenMaterial"],
+                                       directions=(SPEC, SPEC, SPEC), samples=SAMPLES)
+    tensors = run(mb.bake_materials(scene, objs, settings))
+    d = parse_directions(SPEC).directions
+    light = d[int(np.argmax(d[:, 2]))]   # a baked direction, 60 degrees up
+    return scene, objs, tensors, light
+
+
+def truths(room, edit, bounces=2):
+    from relightable_textures.operators import material_bake as mb
+
+    scene, objs, tensors, light = room
+    colours = {**mb.file_colours(tensors), **edit}
+    return [mb.truth_irradiance(scene, objs, colours, light, bounces, SAMPLES, seed=s)
+            for s in (1, 2)]
+
+
+def test_bake_shapes_and_counts(room):
+    _, objs, t, _ = room
+    assert t.vertices == sum(len(o.data.vertices) for o in objs) == 350
+    assert t.direct.shape == (4, 350) and t.one.shape == (4, 3, 3, 350)
+    assert t.two.shape == (4, 3, 3, 3, 350)
+    assert t.metadata["bake_calls"] == 4 + 4 * 3 + 4 * (3 + 9)
+    assert [n for n, _ in t.objects] == list(OBJECTS)
+    # each wall's vertices belong to its region; the floor and box to the fixed one
+    sl = t.object_slices()
+    assert set(t.receiver_region[sl["WallLeft"]]) == {1}
+    assert set(t.receiver_region[sl["WallRight"]]) == {2}
+    assert set(t.receiver_region[sl["Floor"]]) == {0}
+    np.testing.assert_allclose(t.receiver_albedo[sl["Floor"]], 0.7, rtol=1e-6)
+    assert (t.two >= 0).all() and (t.one >= 0).all()
+
+
+@pytest.mark.parametrize("name", sorted(EDITS))
+def test_edit_matches_a_cycles_bake_of_it_within_the_noise(room, name):
+    from relightable_textures.lt_addon.transport import ptt
+
+    _, _, tensors, light = room
+    a, b = truths(room, EDITS[name])
+    est = tensors.irradiance(ptt.Sun(tuple(light)), EDITS[name])
+    floor = rel(b, a)
+    assert 0.005 < floor < 0.1
+    assert rel(est, a) <= 1.5 * floor, (rel(est, a), floor)
+
+
+def test_two_bounce_term_matters_in_a_white_room(room):
+    from relightable_textures.lt_addon.transport import ptt
+
+    _, _, tensors, light = room
+    a, b = truths(room, WHITE)
+    sun = ptt.Sun(tuple(light))
+    floor = rel(b, a)
+    assert rel(tensors.irradiance(sun, WHITE), a) <= 1.5 * floor
+    # the issue's criterion: dropping the term must fail the 1.5x tolerance (measured: 2.4x)
+    assert rel(tensors.irradiance(sun, WHITE, orders=(0, 1)), a) > 1.5 * floor
+
+
+def test_direct_term_equals_a_bounce_free_cycles_bake(room):
+    from relightable_textures.lt_addon.transport import ptt
+    from relightable_textures.operators import material_bake as mb
+
+    scene, objs, tensors, light = room
+    direct = mb.truth_irradiance(scene, objs, {}, light, 0, 1)
+    zero = {"RedMaterial": (0, 0, 0), "GreenMaterial": (0, 0, 0)}
+    est = tensors.irradiance(ptt.Sun(tuple(light)), zero, orders=(0,))
+    np.testing.assert_allclose(est, direct, rtol=1e-5, atol=1e-6)
+
+
+def test_two_bounce_order_matters(room):
+    """Light off the red wall then the green differs from green then red: the terms are not
+    symmetric, which is why the paper keeps ordered pairs."""
+    _, _, t, _ = room
+    ab, ba = t.two[:, :, 1, 2], t.two[:, :, 2, 1]
+    assert np.linalg.norm(ab - ba) > 0.3 * np.linalg.norm(ab + ba), (
+        np.linalg.norm(ab - ba), np.linalg.norm(ab + ba))
+
+
+def test_gated_materials_restore_the_scene(room):
+    import bpy
+
+    from relightable_textures.operators import material_bake as mb
+
+    scene, objs, _, _ = room
+    before = {o.name: [s.material.name for s in o.material_slots] for o in objs}
+    n_materials = len(bpy.data.materials)
+    with mb.GatedMaterials(scene, ["RedMaterial"]) as gates:
+        assert all(s.material.name.startswith("RelightGate") for o in objs
+                   for s in o.material_slots)
+        gates.set_gates(1, 0)
+    assert {o.name: [s.material.name for s in o.material_slots] for o in objs} == before
+    assert len(bpy.data.materials) == n_materials
+    with pytest.raises(mb.BakeInputError, match="no rendered mesh .* uses material 'Nope'"):
+        with mb.GatedMaterials(scene, ["Nope"]):
+            pass
+    assert len(bpy.data.materials) == n_materials

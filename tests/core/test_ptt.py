@@ -1,0 +1,140 @@
+"""Transfer tensors (Sun et al. 2007) in NumPy: the polynomial in the albedos, lighting weights,
+files. Checked against brute-force loops over the terms, not against the same einsum."""
+
+import json
+
+import numpy as np
+import pytest
+
+from relightable_textures.lt_addon.transport import ptt
+from relightable_textures.lt_addon.transport.texture import parse_directions
+
+SPECS = ("hemi:16", "hemi:8", "hemi:4")
+
+
+def make(V=40, regions=2, seed=0, specs=SPECS):
+    rng = np.random.default_rng(seed)
+    S = [parse_directions(s).size for s in specs]
+    R1 = regions + 1
+    return ptt.TransferTensors(
+        rng.random((S[0], V), dtype=np.float32), rng.random((S[1], 3, R1, V), dtype=np.float32),
+        rng.random((S[2], 3, R1, R1, V), dtype=np.float32), specs,
+        [f"M{i}" for i in range(regions)], rng.random((regions, 3)),
+        rng.integers(0, R1, V).astype(np.int16), rng.random((V, 3), dtype=np.float32),
+        [("a", V - 10), ("b", 10)], {"note": "synthetic"})
+
+
+def brute_force(t, w, c):
+    """E (V, 3) by explicit loops over directions, regions and pairs."""
+    w0, w1, w2 = w
+    E = np.zeros((t.vertices, 3))
+    R1 = len(t.regions) + 1
+    for ch in range(3):
+        for s in range(t.direct.shape[0]):
+            E[:, ch] += w0[s, ch] * t.direct[s]
+        for r in range(R1):
+            for s in range(t.one.shape[0]):
+                E[:, ch] += c[r, ch] * w1[s, ch] * t.one[s, ch, r]
+        for a in range(R1):
+            for b in range(R1):
+                for s in range(t.two.shape[0]):
+                    E[:, ch] += c[a, ch] * c[b, ch] * w2[s, ch] * t.two[s, ch, a, b]
+    return E
+
+
+@pytest.mark.parametrize("light", [ptt.Sun((0.3, -0.2, 0.9), 3.0, 2.5, (1.0, 0.5, 0.25)),
+                                   ptt.Environment(np.random.default_rng(1).random((16, 32, 3)),
+                                                   "bottom_first", 40.0, 0.7)])
+def test_irradiance_is_the_polynomial_in_the_albedos(light):
+    t = make()
+    edits = {"M0": (0.2, 0.4, 0.9)}
+    w = [ptt.light_weights(d, light) for d in t.direction_sets()]
+    c = t.albedos(edits)
+    np.testing.assert_allclose(t.irradiance(light, edits), brute_force(t, w, c), rtol=2e-5)
+    # radiance: the receiver's own (edited) colour over pi
+    col = t.receiver_albedo.astype(np.float64).copy()
+    col[t.receiver_region == 1] = edits["M0"]
+    col[t.receiver_region == 2] = t.base_colors[1]
+    np.testing.assert_allclose(t.shade(light, edits), col / np.pi * brute_force(t, w, c),
+                               rtol=2e-5)
+
+
+def test_albedo_scaling_is_linear_in_one_bounce_and_quadratic_in_its_own_pair():
+    t = make()
+    light = ptt.Sun((0.1, 0.4, 0.8))
+    p = t.project(light)
+    c = t.albedos({"M0": (0.3, 0.3, 0.3), "M1": (0.0, 0.0, 0.0)})
+    a = 2.5
+    c2 = c.copy()
+    c2[1] *= a
+    # only region 1 contributes besides the fixed region; separate its terms
+    one = t.combine(p, c2, (1,)) - t.combine(p, c, (1,))
+    own_one = np.einsum("c,cv->vc", c[1].astype(np.float32), p.one[:, 1])
+    np.testing.assert_allclose(one, (a - 1) * own_one, rtol=1e-4, atol=1e-6)
+    own_two = np.einsum("c,cv->vc", (c[1] ** 2).astype(np.float32), p.two[:, 1, 1])
+    cross = np.einsum("c,cv->vc", c[1].astype(np.float32), p.two[:, 0, 1] + p.two[:, 1, 0])
+    two = t.combine(p, c2, (2,)) - t.combine(p, c, (2,))
+    np.testing.assert_allclose(two, (a * a - 1) * own_two + (a - 1) * cross, rtol=1e-4,
+                               atol=1e-6)
+
+
+def test_zero_weights_leave_the_direct_term():
+    t = make()
+    light = ptt.Sun((0.0, 0.5, 0.8))
+    p = t.project(light)
+    zero = np.zeros((3, 3))
+    np.testing.assert_array_equal(t.combine(p, zero), t.combine(p, zero, (0,)))
+    np.testing.assert_array_equal(t.combine(p, zero), t.irradiance(light, orders=(0,)))
+
+
+def test_sun_at_a_baked_direction_picks_that_direction_only():
+    t = make(specs=("hemi:8", "hemi:8", "hemi:8"))
+    d = parse_directions("hemi:8")
+    k = int(np.argmax(d.directions[:, 2]))
+    w = ptt.light_weights(d, ptt.Sun(tuple(d.directions[k]), 0.0, 2.0))
+    assert np.count_nonzero(w[:, 0]) == 1 and w[k, 0] == pytest.approx(2.0)
+    E = t.irradiance(ptt.Sun(tuple(d.directions[k]), 0.0, 2.0), orders=(0,))
+    np.testing.assert_allclose(E[:, 0], 2.0 * t.direct[k], rtol=1e-6)
+    below = ptt.light_weights(d, ptt.Sun((0.0, 0.6, -0.8)))
+    assert not below.any()
+
+
+def test_environment_weights_are_radiance_times_solid_angle():
+    d = parse_directions("hemi:8")
+    env = np.ones((8, 16, 3)) * np.array([1.0, 2.0, 3.0])
+    w = ptt.light_weights(d, ptt.Environment(env, "bottom_first", 0.0, 0.5))
+    np.testing.assert_allclose(w, 0.5 * d.solid_angles[:, None] * [1.0, 2.0, 3.0])
+
+
+def test_save_load_round_trip_and_refusals(tmp_path):
+    t = make()
+    path = str(tmp_path / "m.npz")
+    t.save(path)
+    u = ptt.TransferTensors.load(path)
+    for name in ("direct", "one", "two", "receiver_region", "receiver_albedo", "base_colors"):
+        np.testing.assert_array_equal(getattr(u, name), getattr(t, name))
+    assert u.regions == t.regions and u.objects == t.objects and u.specs == t.specs
+    assert u.metadata == {"note": "synthetic"} and u.bounces == 2
+    assert u.object_slices() == {"a": slice(0, 30), "b": slice(30, 40)}
+    with np.load(path) as z:
+        header = json.loads(bytes(z["header"]).decode())
+        arrays = {k: z[k] for k in z.files}
+    header["version"] = 99
+    arrays["header"] = np.frombuffer(json.dumps(header).encode(), np.uint8)
+    np.savez(str(tmp_path / "old.npz"), **arrays)
+    with pytest.raises(ValueError, match="bake the materials again"):
+        ptt.TransferTensors.load(str(tmp_path / "old.npz"))
+    with pytest.raises(KeyError, match="not an editable region: Nope"):
+        t.albedos({"Nope": (1, 1, 1)})
+    with pytest.raises(ValueError, match="non-negative"):
+        t.albedos({"M0": (1, -1, 1)})
+    with pytest.raises(ValueError, match="one-bounce term has shape"):
+        ptt.TransferTensors(t.direct, t.one[:, :, :2], t.two, t.specs, t.regions, t.base_colors,
+                            t.receiver_region, t.receiver_albedo, t.objects)
+
+
+def test_bake_count_matches_the_paper_formula_with_references():
+    # S0 + S1 (R+1) + S2 ((R+1) + (R+1)^2): the two-bounce terms subtract a reference per r2
+    assert ptt.bake_count(64, 16, 4, 3, 2) == 64 + 16 * 4 + 4 * (4 + 16)
+    assert ptt.bake_count(64, 16, 4, 3, 1) == 64 + 16 * 4
+    assert ptt.bake_count(64, 16, 4, 3, 0) == 64
