@@ -269,10 +269,23 @@ def show_preview(scene, obj, kind: str, reinstall: bool = False) -> str:
     from .blend_files import bake_file
 
     what = {"steerable_texture": "steerable texture", "transport_texture": "transport texture",
-            "eigentransport": "vertex transport"}.get(kind)
+            "eigentransport": "vertex transport", "material_tensors": "material"}.get(kind)
     if what is None:
         raise ValueError(f"unknown bake kind {kind!r}")
     path = bake_file(obj, kind, what)
+    if kind == "material_tensors":     # one bake, several receivers: all of them
+        from . import material_edit
+
+        tensors = dict(material_edit.scene_bakes(scene)).get(obj)
+        if tensors is None:
+            raise FileNotFoundError(f"{obj.name}'s material bake file cannot be read: {path}")
+        receivers = [scene.objects.get(n) for n, _ in tensors.objects]
+        if reinstall or not all(o is not None and preview_nodes.activate_preview(o, kind)
+                                for o in receivers):
+            material_edit.install_preview(scene, tensors)
+        else:
+            material_edit.update_preview(scene)
+        return path
     if not reinstall and preview_nodes.activate_preview(obj, kind):
         if kind == "eigentransport":      # the colour attribute follows the current lighting
             from . import vertex_relight
@@ -310,7 +323,8 @@ class RELIGHT_OT_show_preview(bpy.types.Operator):
     kind: bpy.props.EnumProperty(name="Bake", items=[
         ("transport_texture", "Transport texture", ""),
         ("steerable_texture", "Steerable texture", ""),
-        ("eigentransport", "Vertex transport", "")])
+        ("eigentransport", "Vertex transport", ""),
+        ("material_tensors", "Material edits", "")])
     reinstall: bpy.props.BoolProperty(name="Reinstall", default=False,
                                       description="Rebuild the preview from the bake's files "
                                                   "even when the material holds it")

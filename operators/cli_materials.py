@@ -99,7 +99,7 @@ def add_parsers(sub) -> None:
 def _cmd_bake_materials(args) -> int:
     import bpy
 
-    from . import blend_files, material_bake
+    from . import blend_files, material_bake, material_edit
     from .cli import (CliError, _check_input_blend, _check_output_dir, _can_create_in,
                       _open_objects, _refuse_existing, _run_job)
     from .cycles_bake import BakeInputError
@@ -124,7 +124,7 @@ def _cmd_bake_materials(args) -> int:
     _refuse_existing(out_dir, objects[0].name, ("_materials.npz", "_materials.json"),
                      args.force, "a material bake")
     try:
-        out = _run_job(material_bake.materials_job(
+        out = _run_job(material_edit.bake_job(
             bpy.context.scene, objects, settings, out_dir,
             truth_samples=args.samples if args.truth else 0), "bake-materials")
     except (BakeInputError, ValueError) as exc:

@@ -48,23 +48,31 @@ ANCHORS = ("diffuse",)
 KIND = "material_tensors"
 
 
-def material_colour(mat) -> tuple[np.ndarray, str | None]:
-    """The diffuse colour a material bakes with (RGB float64) and, when it is not an unlinked
-    Base Color / Color of the active output's BSDF, why the viewport colour stands in."""
+def material_colour_socket(mat):
+    """The unlinked Base Color / Color socket of the BSDF on the material's own active output
+    (the colour an edit changes), or None."""
     tree = mat.node_tree if mat is not None else None
-    if mat is None:
-        return np.full(3, 0.8), "no material: grey 0.8"
-    out = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"
-                and n.is_active_output), None) if tree else None
+    outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"
+            and not n.get("relight_preview")] if tree else []
+    out = next((n for n in outs if n.is_active_output), outs[0] if outs else None)
     node = (out.inputs["Surface"].links[0].from_node
             if out is not None and out.inputs["Surface"].is_linked else None)
     socket = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}.get(
         getattr(node, "bl_idname", ""))
-    if socket and not node.inputs[socket].is_linked:
-        return np.array(node.inputs[socket].default_value[:3], dtype=np.float64), None
-    what = "a texture or node input" if socket else "not a Principled or Diffuse BSDF"
+    return node.inputs[socket] if socket and not node.inputs[socket].is_linked else None
+
+
+def material_colour(mat) -> tuple[np.ndarray, str | None]:
+    """The diffuse colour a material bakes with (RGB float64) and, when it is not an unlinked
+    Base Color / Color of its own output's BSDF, why the viewport colour stands in."""
+    if mat is None:
+        return np.full(3, 0.8), "no material: grey 0.8"
+    socket = material_colour_socket(mat)
+    if socket is not None:
+        return np.array(socket.default_value[:3], dtype=np.float64), None
     return (np.array(mat.diffuse_color[:3], dtype=np.float64),
-            f"{mat.name!r}'s colour is {what}: its viewport colour stands in")
+            f"{mat.name!r}'s colour is not an unlinked Principled Base Color or Diffuse Color "
+            "(a texture, another node): its viewport colour stands in")
 
 
 def scene_materials(scene) -> list:

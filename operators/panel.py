@@ -49,7 +49,8 @@ class VIEW3D_PT_relight(_RelightTab, bpy.types.Panel):
             col = box.column(align=True)
             row = col.row()
             row.label(text=f"{bake.get('kind', '?')}: {bake.get('path', '?')}", icon="IMAGE_DATA")
-            if bake.get("kind") in ("steerable_texture", "transport_texture", "eigentransport"):
+            if bake.get("kind") in ("steerable_texture", "transport_texture", "eigentransport",
+                                    "material_tensors"):
                 row.operator("relight.show_preview", text="Show").kind = bake["kind"]
             if "order" in bake:
                 col.label(text=f"order {bake['order']}, {bake['resolution']} px, "
@@ -180,6 +181,42 @@ class VIEW3D_PT_relight_vertex(_RelightSubPanel, bpy.types.Panel):
             self.layout.label(text=summary, icon="INFO")
 
 
+class VIEW3D_PT_relight_materials(_RelightSubPanel, bpy.types.Panel):
+    """Material edits with interreflection (precomputed transfer tensors, Sun 2007)"""
+
+    bl_label = "Material Edits"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        from .material_bake import material_colour_socket
+        from .material_edit import SUMMARY_KEY
+
+        layout, props = self.layout, context.scene.relight
+        meshes = [o for o in context.selected_objects if o.type == "MESH"]
+        mats = sorted({s.material for o in meshes for s in o.material_slots if s.material},
+                      key=lambda m: m.name)
+        if not mats:
+            layout.label(text="Select the meshes that receive light")
+        col = layout.column(align=True)
+        for mat in mats:
+            row = col.row(align=True)
+            row.prop(mat, "relight_editable", text=mat.name)
+            socket = material_colour_socket(mat)
+            if socket is not None:   # the material's own colour: edits show live after a bake
+                row.prop(socket, "default_value", text="")
+        col = layout.column(align=True)
+        col.prop(props, "material_bounces")
+        col.prop(props, "material_samples")
+        col.prop(props, "material_directions")
+        col.prop(props, "material_one_directions")
+        if props.material_bounces >= 2:
+            col.prop(props, "material_two_directions")
+        layout.operator("relight.bake_materials", icon="RENDER_STILL")
+        for key in (SUMMARY_KEY, SUMMARY_KEY + "_update"):
+            if context.scene.get(key):
+                layout.label(text=context.scene[key], icon="INFO")
+
+
 class VIEW3D_PT_relight_samples(_RelightSubPanel, bpy.types.Panel):
     """Add the paper sample scenes"""
 
@@ -197,4 +234,4 @@ class VIEW3D_PT_relight_samples(_RelightSubPanel, bpy.types.Panel):
 
 
 CLASSES = (VIEW3D_PT_relight, VIEW3D_PT_relight_bake, VIEW3D_PT_relight_light,
-           VIEW3D_PT_relight_vertex, VIEW3D_PT_relight_samples)
+           VIEW3D_PT_relight_vertex, VIEW3D_PT_relight_materials, VIEW3D_PT_relight_samples)

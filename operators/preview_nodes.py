@@ -36,7 +36,7 @@ from .compat import ensure_node_tree
 GROUP_PREFIX = "Steerable Illumination"
 FRAME_NAME = "Relight Preview"
 #: the bake kinds with a preview; a material holds at most one preview of each
-PREVIEW_KINDS = ("steerable_texture", "transport_texture", "eigentransport")
+PREVIEW_KINDS = ("steerable_texture", "transport_texture", "eigentransport", "material_tensors")
 _TAG = "relight_preview"  # custom property marking our nodes
 
 #: Scene slider properties: name -> (default, min, max, description)
@@ -509,13 +509,15 @@ def _base_color(b):
     return None
 
 
-def install_attribute_preview(obj, attribute: str) -> None:
-    """Show a colour attribute (white-surface radiance, the per-vertex eigentransport preview)
-    as emission, multiplied by the material's own base colour (issue 12: an orange object
-    previewed grey)."""
+def install_attribute_preview(obj, attribute: str, kind: str = "eigentransport",
+                              base_color: bool = True) -> None:
+    """Show a colour attribute as emission: white-surface radiance (the per-vertex
+    eigentransport preview) multiplied by the material's own base colour (issue 12: an orange
+    object previewed grey), or with ``base_color=False`` the attribute as it is (the material
+    edits' preview, which holds the edited colours already)."""
     def build(b):
         light = b.node("ShaderNodeVertexColor", 900, 900, layer_name=attribute).outputs["Color"]
-        base = _base_color(b)
+        base = _base_color(b) if base_color else None
         if base is None:
             return light
         mul = b.node("ShaderNodeVectorMath", 1000, 1000, operation="MULTIPLY",
@@ -524,4 +526,4 @@ def install_attribute_preview(obj, attribute: str) -> None:
         b.links.new(base, mul.inputs[1])
         return mul.outputs[0]
 
-    _wire_preview(obj, build, "eigentransport")
+    _wire_preview(obj, build, kind)

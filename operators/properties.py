@@ -183,6 +183,24 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
     indirect_samples: IntProperty(
         name="Indirect Samples", default=_TRANSPORT["indirect_samples"], min=1, max=65536,
         description="Samples of the low-order steerable bake of the indirect light")
+    # material edits (transfer tensors, Sun 2007)
+    material_bounces: IntProperty(
+        name="Bounces", default=2, min=1, max=2,
+        description="Path orders baked per editable material: 1 = one bounce, 2 = also "
+                    "ordered pairs (the colour bleeding between two edited walls)")
+    material_samples: IntProperty(
+        name="Samples", default=128, min=1, max=65536,
+        description="Cycles samples per vertex of each bounce term")
+    material_directions: IntProperty(
+        name="Direct Directions", default=400, min=4, max=100000,
+        description="Hard-sun directions of the direct light (1 sample each: exact)")
+    material_one_directions: IntProperty(
+        name="1-Bounce Directions", default=32, min=2, max=10000,
+        description="Sun directions of the one-bounce terms (one bake per region each)")
+    material_two_directions: IntProperty(
+        name="2-Bounce Directions", default=8, min=2, max=10000,
+        description="Sun directions of the two-bounce terms ((R+1) + (R+1)^2 bakes each)")
+
     truth_lights: IntProperty(
         name="Check vs Cycles", default=0, min=0, max=12,
         description="Also bake Cycles Sun truths for this many held-out lights and report the "

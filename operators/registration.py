@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import bpy
 
-from . import bake_ops, cli, panel, properties, scene_ops
+from . import bake_ops, cli, material_edit, panel, properties, scene_ops
 
-CLASSES = properties.CLASSES + scene_ops.CLASSES + bake_ops.CLASSES + panel.CLASSES
+CLASSES = (properties.CLASSES + scene_ops.CLASSES + bake_ops.CLASSES + material_edit.CLASSES
+           + panel.CLASSES)
 CLI_COMMAND = "relight"
 _cli_handles = []
 
@@ -19,12 +20,14 @@ def register() -> None:
     for cls in CLASSES:
         bpy.utils.register_class(cls)
     properties.register()
+    material_edit.register()
     _cli_handles.append(bpy.utils.register_cli_command(CLI_COMMAND, cli.run))
 
 
 def unregister() -> None:
     while _cli_handles:
         bpy.utils.unregister_cli_command(_cli_handles.pop())
+    material_edit.unregister()
     properties.unregister()
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)

@@ -15,7 +15,7 @@ def relight(*args, cwd=None):
 
 #: Blender's own log lines (``00:00.035  color_management | Using OCIO=...``): the relight CLI
 #: sends file descriptor 1 to stderr, so Blender 5.2+ logs them there when ``$OCIO`` is set.
-BLENDER_LOG = re.compile(r"^\d\d:\d\d\.\d{3}\s+\S+ \| ")
+BLENDER_LOG = re.compile(r"^\d\d:\d\d\.\d{3}\s+\S+\s+\| ")
 
 
 def our_lines(stderr: str) -> list:

@@ -42,12 +42,13 @@ INSTALL_SCRIPT = textwrap.dedent(r"""
     report["wheels_installed"] = sorted(n for n in os.listdir(site) if not n.startswith("_")) \
         if os.path.isdir(site) else []
     # hasattr() on bpy.ops.relight is true for any name; dir() lists registered operators.
-    report["operators"] = [n for n in ("add_sample_scene", "analyze", "bake_textures",
-                                       "bake_transport", "discard_chunks", "follow_sun",
-                                       "remove_preview", "show_preview")
+    report["operators"] = [n for n in ("add_sample_scene", "analyze", "bake_materials",
+                                       "bake_textures", "bake_transport", "discard_chunks",
+                                       "follow_sun", "remove_preview", "show_preview")
                            if n in dir(bpy.ops.relight)]
     report["operator_types"] = [n for n in ("RELIGHT_OT_add_sample_scene",
-                                            "RELIGHT_OT_analyze", "RELIGHT_OT_bake_textures",
+                                            "RELIGHT_OT_analyze", "RELIGHT_OT_bake_materials",
+                                            "RELIGHT_OT_bake_textures",
                                             "RELIGHT_OT_bake_transport",
                                             "RELIGHT_OT_discard_chunks", "RELIGHT_OT_follow_sun",
                                             "RELIGHT_OT_remove_preview",
@@ -60,7 +61,7 @@ INSTALL_SCRIPT = textwrap.dedent(r"""
         bpy.context.scene.relight.preset == "balanced"
     report["panels"] = [n for n in ("VIEW3D_PT_relight", "VIEW3D_PT_relight_bake",
                                     "VIEW3D_PT_relight_light", "VIEW3D_PT_relight_vertex",
-                                    "VIEW3D_PT_relight_samples")
+                                    "VIEW3D_PT_relight_materials", "VIEW3D_PT_relight_samples")
                         if n in dir(bpy.types)]
     # The operator really builds a scene into the open file.
     report["op_result"] = list(bpy.ops.relight.add_sample_scene(name="bumps", size="test"))
@@ -165,24 +166,25 @@ def test_install_enable_use_uninstall_in_temporary_user_dir(extension_zip, tmp_p
     assert rep["install"] == ["FINISHED"] and rep["enabled"]
     assert "scipy" in rep["wheels_installed"] and any(
         n.lower().startswith("openexr") for n in rep["wheels_installed"])
-    assert rep["operators"] == ["add_sample_scene", "analyze", "bake_textures",
-                                "bake_transport", "discard_chunks", "follow_sun",
-                                "remove_preview", "show_preview"]
-    assert len(rep["operator_types"]) == 8
+    assert rep["operators"] == ["add_sample_scene", "analyze", "bake_materials",
+                                "bake_textures", "bake_transport", "discard_chunks",
+                                "follow_sun", "remove_preview", "show_preview"]
+    assert len(rep["operator_types"]) == 9
     for name, path in rep["imported_from"].items():
         assert path.startswith(rep["site"]), f"{name} imported from {path}, not the extension"
     assert rep["property"]
     assert rep["panels"] == ["VIEW3D_PT_relight", "VIEW3D_PT_relight_bake",
                              "VIEW3D_PT_relight_light", "VIEW3D_PT_relight_vertex",
-                             "VIEW3D_PT_relight_samples"]
+                             "VIEW3D_PT_relight_materials", "VIEW3D_PT_relight_samples"]
     assert rep["bake"] == ["FINISHED"]
     assert rep["bake_files"] == ["Bumps_steerable.exr", "Bumps_steerable.json",
                                  "Bumps_steerable_atlas.exr"]
     assert rep["op_result"] == ["FINISHED"] and rep["op_vertices"] == 33 * 33
     assert rep["cli_registered"] == 1
     # the development verb `bench` is not in the extension; every product verb is
-    assert "bench" not in rep["cli_verbs"] and {"scene", "bake-textures", "bake-transport",
-                                                "analyze", "relight"} <= set(rep["cli_verbs"])
+    assert "bench" not in rep["cli_verbs"] and {
+        "scene", "bake-textures", "bake-transport", "analyze", "relight", "bake-materials",
+        "relight-materials"} <= set(rep["cli_verbs"])
     assert rep["cli_scene"] == 0 and blend_out.exists()
     assert rep["cli_bad"] == 2 and not pathlib.Path(str(blend_out) + "2.blend").exists()
     assert rep["enabled_after_cli"]

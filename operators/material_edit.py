@@ -1,0 +1,201 @@
+"""Material edits in the viewport (bpy): the bake operator, the live per-vertex preview and
+what keeps it live (Sun et al. 2007's run time).
+
+After ``bake-materials`` (CLI or the panel's *Bake Materials*), every receiver shows the
+colour attribute :data:`ATTRIBUTE` -- outgoing diffuse radiance ``albedo / pi * E`` with the
+editable materials' *current* colours and the scene's Sun lamp -- as emission. Changing an
+editable material's Base Color (or moving the Sun) recomputes it in NumPy: a depsgraph handler
+(:func:`on_depsgraph_update`) calls :func:`update_preview`, a few milliseconds at 13K vertices
+(``benchmarks/bench_materials.py``). The materials' own specular stays out of the preview: the
+bake is diffuse.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import bpy
+import numpy as np
+
+from ..lt_addon.transport import ptt
+from . import material_bake
+from .bake_ops import _ModalBake, _transport_objects
+from .cycles_bake import BakeInputError
+from .meshes import set_color_attribute
+
+ATTRIBUTE = "RelightMaterials"
+#: Scene property: the last material bake's and update's summary (the panel shows it).
+SUMMARY_KEY = "relight_material_summary"
+_CACHE: dict = {}
+
+
+def scene_bakes(scene) -> list:
+    """``(first object, tensors)`` of every material bake recorded in ``scene`` (cached by file
+    and modification time); bakes whose file is missing are skipped."""
+    from .blend_files import object_bakes
+
+    out = []
+    for obj in scene.objects:
+        if obj.type != "MESH" or not any(b.get("kind") == material_bake.KIND
+                                         for b in object_bakes(obj)):
+            continue
+        try:
+            from .blend_files import bake_file
+
+            path = bake_file(obj, material_bake.KIND, "material")
+        except (ValueError, FileNotFoundError):
+            continue
+        key = (obj.name, path, os.path.getmtime(path))
+        if key not in _CACHE:
+            for k in [k for k in _CACHE if k[0] == obj.name]:
+                del _CACHE[k]
+            _CACHE[key] = ptt.TransferTensors.load(path)
+        out.append((obj, _CACHE[key]))
+    return out
+
+
+def preview_light(scene):
+    """The light the preview shows: the panel's Sun lamp, else the scene's first Sun lamp
+    (direction, angular size, strength, colour); None without one."""
+    props = getattr(scene, "relight", None)
+    lamp = props.sun if props is not None and props.sun is not None else None
+    if lamp is None:
+        suns = [o for o in scene.objects if o.type == "LIGHT" and o.data.type == "SUN"]
+        lamp = min(suns, key=lambda o: o.hide_render) if suns else None
+    if lamp is None:
+        return None
+    from mathutils import Vector
+
+    d = (lamp.matrix_world.to_quaternion() @ Vector((0.0, 0.0, 1.0))).normalized()
+    return ptt.Sun(tuple(d), float(np.degrees(lamp.data.angle)), float(lamp.data.energy),
+                   tuple(lamp.data.color))
+
+
+def update_preview(scene) -> dict:
+    """Shade every material bake of ``scene`` with the current colours and Sun and write the
+    receivers' :data:`ATTRIBUTE`; returns ``{"update_ms": ..., "write_ms": ...}`` (empty
+    without a bake or a Sun)."""
+    bakes = scene_bakes(scene)
+    light = preview_light(scene) if bakes else None
+    if light is None:
+        return {}
+    shade_ms = write_ms = 0.0
+    for _, tensors in bakes:
+        t0 = time.perf_counter()
+        values = tensors.shade(light, material_bake.file_colours(tensors))
+        t1 = time.perf_counter()
+        for name, rows in tensors.object_slices().items():
+            obj = scene.objects.get(name)
+            if obj is None or obj.type != "MESH" or len(obj.data.vertices) != rows.stop - rows.start:
+                continue
+            attrs = obj.data.color_attributes
+            attr = attrs.get(ATTRIBUTE) or attrs.new(ATTRIBUTE, "FLOAT_COLOR", "POINT")
+            set_color_attribute(attr, values[rows])
+            obj.data.update()
+        shade_ms += 1e3 * (t1 - t0)
+        write_ms += 1e3 * (time.perf_counter() - t1)
+    return {"update_ms": round(shade_ms, 3), "write_ms": round(write_ms, 3)}
+
+
+def install_preview(scene, tensors) -> None:
+    """Wire :data:`ATTRIBUTE` into every receiver's materials and fill it."""
+    from . import preview_nodes
+
+    update_preview(scene)
+    for name, _ in tensors.objects:
+        obj = scene.objects.get(name)
+        if obj is not None and obj.type == "MESH":
+            preview_nodes.install_attribute_preview(obj, ATTRIBUTE, kind=material_bake.KIND,
+                                                    base_color=False)
+
+
+def bake_job(scene, objects, settings, out_dir: str, truth_samples: int = 0,
+             preview: bool = True):
+    """``bake-materials`` as one job (:func:`.material_bake.materials_job`), then the live
+    preview on every receiver; returns the :class:`.material_bake.MaterialsBakeOutput`."""
+    out = yield from material_bake.materials_job(scene, objects, settings, out_dir,
+                                                 truth_samples=truth_samples)
+    if preview:
+        install_preview(scene, out.tensors)
+    return out
+
+
+_busy = []
+
+
+@bpy.app.handlers.persistent
+def on_depsgraph_update(scene, depsgraph):
+    """Re-shade when a material, node tree or Sun lamp changed and the scene has a material
+    bake (our own attribute writes change meshes only, so they do not come back here)."""
+    if _busy:
+        return
+    kinds = (bpy.types.Material, bpy.types.NodeTree, bpy.types.Light)
+    hit = any(isinstance(u.id, kinds) or (isinstance(u.id, bpy.types.Object)
+                                          and u.id.type == "LIGHT" and u.is_updated_transform)
+              for u in depsgraph.updates)
+    if not hit:
+        return
+    _busy.append(True)
+    try:
+        timings = update_preview(scene)
+    finally:
+        _busy.pop()
+    if timings:
+        scene[SUMMARY_KEY + "_update"] = f"Last update {timings['update_ms']:.1f} ms"
+
+
+class RELIGHT_OT_bake_materials(_ModalBake, bpy.types.Operator):
+    """Bake transfer tensors of the selected meshes (Sun 2007) so the materials marked Editable
+    can be recoloured with their interreflection following live (Esc cancels)"""
+
+    bl_idname = "relight.bake_materials"
+    bl_label = "Bake Materials"
+    bl_options = {"REGISTER"}
+
+    def _prepare(self, context):
+        scene, props = context.scene, context.scene.relight
+        objects = _transport_objects(context)
+        regions = [m.name for m in material_bake.scene_materials(scene)
+                   if m is not None and m.relight_editable]
+        if not regions:
+            raise BakeInputError("mark at least one material Editable in the Material Edits "
+                                 "panel")
+        settings = material_bake.MaterialBakeSettings(
+            regions=regions, bounces=props.material_bounces, samples=props.material_samples,
+            directions=(f"hemi:{props.material_directions}:1.5",
+                        f"hemi:{props.material_one_directions}",
+                        f"hemi:{props.material_two_directions}"))
+        settings.validate()
+        self._make_out_dir(props)
+        return bake_job(scene, objects, settings, self.out_dir)
+
+    def _finish(self, context, result):
+        rep = result.report
+        s = rep["energy_shares"]
+        text = (f"Baked {len(rep['objects'])} objects, {rep['vertices']} vertices: "
+                f"{rep['bake_calls']} Cycles bakes in {rep['timings']['wall_total']:.1f} s, "
+                f"{rep['bytes']['tensors'] / 2**20:.1f} MiB; light direct {s['direct']:.2f}, "
+                f"1 bounce {s['one_bounce']:.2f}, 2 bounces {s['two_bounce']:.2f}")
+        context.scene[SUMMARY_KEY] = text
+        for note in rep["notes"]:
+            self.report({"WARNING"}, note)
+        self.report({"INFO"}, text)
+
+
+CLASSES = (RELIGHT_OT_bake_materials,)
+
+
+def register() -> None:
+    bpy.types.Material.relight_editable = bpy.props.BoolProperty(
+        name="Editable", default=False,
+        description="Bake Materials keeps this material's colour editable, with the light it "
+                    "throws on the rest of the scene following (Sun 2007)")
+    bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
+
+
+def unregister() -> None:
+    if on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
+    del bpy.types.Material.relight_editable
+

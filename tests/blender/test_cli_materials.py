@@ -1,0 +1,103 @@
+"""bake-materials / relight-materials from the venv console script: files, report, the
+record in the .blend, the NumPy relight of an edit, and one clear line for bad input."""
+
+import json
+
+import numpy as np
+import pytest
+from relight_cli import folder_state, our_lines, relight
+
+OBJECTS = ("Floor", "WallLeft", "WallRight", "WallBack", "Box")
+
+
+@pytest.fixture(scope="module")
+def baked(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("materials")
+    blend = folder / "room.blend"
+    assert relight("scene", "room", "--out", blend).returncode == 0
+    args = ["bake-materials", blend]
+    for name in OBJECTS:
+        args += ["--object", name]
+    args += ["--region", "RedMaterial", "--region", "GreenMaterial", "--directions", "hemi:16",
+             "--one-bounce-directions", "hemi:4", "--two-bounce-directions", "hemi:4",
+             "--samples", "16", "--truth"]
+    r = relight(*args)
+    assert r.returncode == 0, r.stderr[-2000:]
+    return folder, blend, r, args
+
+
+def test_bake_writes_tensors_report_and_record(baked):
+    folder, blend, r, _ = baked
+    out = folder / "room_relight"
+    assert sorted(p.name for p in out.iterdir()) == ["Floor_materials.json",
+                                                     "Floor_materials.npz"]
+    rep = json.loads((out / "Floor_materials.json").read_text())
+    assert rep["vertices"] == 350 and rep["regions"] == ["RedMaterial", "GreenMaterial"]
+    assert rep["bake_calls"] == 16 + 4 * 3 + 4 * (3 + 9)
+    shares = rep["energy_shares"]
+    assert sum(shares.values()) == pytest.approx(1.0, abs=1e-4)
+    assert 0.5 < shares["direct"] < 1.0 and shares["two_bounce"] > 0
+    gt = rep["ground_truth"]
+    assert gt["noise_floor"] > 0 and gt["rel_error"] > 0 and gt["samples"] == 16
+    assert rep["timings"]["wall_total"] >= rep["timings"]["bake_seconds"]
+    assert "352 Cycles bakes" not in r.stdout and f"{rep['bake_calls']} Cycles bakes" in r.stdout
+    listing = json.loads(relight("info", blend, "--json").stdout)
+    (floor,) = [o for o in listing["objects"] if o["name"] == "Floor"]
+    assert floor["bakes"][0]["kind"] == "material_tensors"
+    assert floor["bakes"][0]["path"] == "//room_relight/Floor_materials.npz"
+
+
+def test_relight_materials_applies_the_edit(baked, tmp_path):
+    from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
+    from relightable_textures.lt_addon.transport import ptt
+
+    folder, blend, _, _ = baked
+    a, b = tmp_path / "a.npy", tmp_path / "b.npy"
+    r = relight("relight-materials", blend, "--object", "Floor", "--sun", "30,50", "--out", a)
+    assert r.returncode == 0, r.stderr
+    r = relight("relight-materials", blend, "--object", "Floor", "--sun", "30,50",
+                "--set", "RedMaterial.color=0.1,0.1,0.9", "--out", b)
+    assert r.returncode == 0, r.stderr
+    info = json.loads(r.stdout)
+    assert info["edits"]["RedMaterial"] == pytest.approx([0.1, 0.1, 0.9])
+    t = ptt.TransferTensors.load(str(folder / "room_relight" / "Floor_materials.npz"))
+    sun = ptt.Sun(tuple(direction_from_az_el(30, 50)))
+    np.testing.assert_allclose(np.load(a), t.shade(sun, {}), rtol=1e-6)
+    np.testing.assert_allclose(np.load(b), t.shade(sun, {"RedMaterial": (0.1, 0.1, 0.9)}),
+                               rtol=1e-6)
+    # without --sun / --env: the scene's Sun lamp
+    r = relight("relight-materials", blend, "--object", "Floor", "--out", tmp_path / "c.npy")
+    assert r.returncode == 0 and json.loads(r.stdout)["sun"] == "the scene's Sun lamp"
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--set", "Nope.color=1,1,1"], "'Nope' is not an editable region of this bake"),
+    (["--set", "RedMaterial.roughness=0.5"], "only colour edits are baked"),
+    (["--set", "RedMaterial.color=1,1"], "expected R,G,B"),
+    (["--sun", "30,95"], "elevation must be in [-90, 90]"),
+])
+def test_relight_materials_refuses_bad_input_in_one_line(baked, tmp_path, extra, message):
+    _, blend, _, _ = baked
+    r = relight("relight-materials", blend, "--object", "Floor", *extra,
+                "--out", tmp_path / "x.npy")
+    assert r.returncode == 2
+    (line,) = our_lines(r.stderr)
+    assert line.startswith("relight: error:") and message in line
+    assert not (tmp_path / "x.npy").exists()
+
+
+def test_bake_materials_refuses_without_force_and_bad_regions(baked):
+    folder, blend, _, args = baked
+    before = folder_state(folder / "room_relight")
+    r = relight(*args)
+    assert r.returncode == 2 and "exists" in r.stderr and "--force" in r.stderr
+    r = relight("bake-materials", blend, "--object", "Floor", "--region", "Nope", "--force",
+                "--directions", "hemi:4", "--one-bounce-directions", "hemi:4",
+                "--two-bounce-directions", "hemi:4", "--samples", "4")
+    assert r.returncode == 2
+    (line,) = our_lines(r.stderr)
+    assert "uses material 'Nope'" in line and "nothing was written" in line
+    r = relight("bake-materials", blend, "--object", "Floor", "--region", "RedMaterial",
+                "--anchors", "roughness:0.2,0.5", "--force")
+    assert r.returncode == 2 and "not built yet" in r.stderr
+    assert folder_state(folder / "room_relight") == before

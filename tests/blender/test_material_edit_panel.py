@@ -1,0 +1,79 @@
+"""The panel's material edits: Bake Materials (the operator, run as a script would), the
+live preview it installs, and the handler that re-shades when a colour or the Sun changes."""
+
+import numpy as np
+import pytest
+
+
+def test_bake_materials_operator_and_live_colour_edit(fresh_scene, tmp_path):
+    import bpy
+
+    import relightable_textures
+    from relightable_textures import samples
+    from relightable_textures.operators import material_bake as mb, material_edit as me
+    from relightable_textures.operators.meshes import color_attribute
+
+    scene = fresh_scene
+    samples.build("room", scene, "test")
+    names = ("Floor", "WallLeft", "WallRight", "WallBack", "Box")
+    relightable_textures.register()
+    try:
+        props = scene.relight
+        props.output_dir = str(tmp_path)
+        props.material_samples, props.material_directions = 16, 16
+        props.material_one_directions = props.material_two_directions = 4
+        red = bpy.data.materials["RedMaterial"]
+        view_layer = bpy.context.view_layer
+        for o in bpy.data.objects:
+            o.select_set(o.name in names)
+        view_layer.objects.active = bpy.data.objects["Floor"]
+        # nothing editable: one clear error, nothing baked
+        with pytest.raises(RuntimeError, match="mark at least one material Editable"):
+            bpy.ops.relight.bake_materials()
+        assert not any(tmp_path.iterdir())
+        red.relight_editable = True
+        assert bpy.ops.relight.bake_materials() == {"FINISHED"}
+        assert (tmp_path / "Floor_materials.npz").is_file()
+        assert "Baked 5 objects, 350 vertices" in scene[me.SUMMARY_KEY]
+        ((first, tensors),) = me.scene_bakes(scene)
+        assert first.name == "Floor" and tensors.regions == ["RedMaterial"]
+        light = me.preview_light(scene)   # the sample's (hidden) Sun lamp
+
+        # the active object first, then the other selected meshes by name
+        assert [n for n, _ in tensors.objects] == ["Floor", "Box", "WallBack", "WallLeft",
+                                                   "WallRight"]
+
+        def shown():   # stacked like the tensors' vertices
+            return np.concatenate([color_attribute(
+                bpy.data.objects[n].data.color_attributes[me.ATTRIBUTE])[:, :3]
+                for n, _ in tensors.objects])
+
+        np.testing.assert_allclose(shown(), tensors.shade(light, {}), rtol=1e-5, atol=1e-7)
+        # the preview is the active output of every receiver's material
+        for n in names:
+            mat = bpy.data.objects[n].material_slots[0].material
+            active = [x for x in mat.node_tree.nodes
+                      if x.bl_idname == "ShaderNodeOutputMaterial" and x.is_active_output]
+            assert active[0].get("relight_preview_kind") == mb.KIND
+        before = shown().copy()
+        # a colour edit in the material re-shades through the depsgraph handler
+        socket = mb.material_colour_socket(red)
+        socket.default_value = (0.1, 0.2, 0.9, 1.0)
+        view_layer.update()
+        after = shown()
+        want = tensors.shade(light, {"RedMaterial": (0.1, 0.2, 0.9)})
+        np.testing.assert_allclose(after, want, rtol=1e-5, atol=1e-7)
+        sl = tensors.object_slices()
+        # the floor took on less red and more blue from the wall; the box too
+        assert after[sl["Floor"], 0].sum() < before[sl["Floor"], 0].sum()
+        assert after[sl["Floor"], 2].sum() > before[sl["Floor"], 2].sum()
+        # moving the Sun re-shades too
+        sun = next(o for o in scene.objects if o.type == "LIGHT")
+        sun.rotation_euler[2] += 0.5
+        view_layer.update()
+        np.testing.assert_allclose(shown(), tensors.shade(me.preview_light(scene),
+                                                          {"RedMaterial": (0.1, 0.2, 0.9)}),
+                                   rtol=1e-5, atol=1e-7)
+        assert not np.allclose(shown(), after)
+    finally:
+        relightable_textures.unregister()
