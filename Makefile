@@ -36,12 +36,21 @@ demo: $(STAMP)
 	  --out $(OUT)/statue-compare-low-sun.png --force
 	$(VENV)/bin/relight bake-transport $(OUT)/statue.blend --object Statue --directions cube:8 \
 	  --energy 0.99 --truth --force
+	$(VENV)/bin/relight bake-materials $(OUT)/room.blend --object Floor --object WallLeft \
+	  --object WallRight --object WallBack --object Box --region RedMaterial \
+	  --region GreenMaterial --directions hemi:256:1.5 --one-bounce-directions hemi:16 \
+	  --two-bounce-directions hemi:4 --samples 32 --force
+	$(VENV)/bin/relight relight-materials $(OUT)/room.blend --object Floor \
+	  --set RedMaterial.color=0.1,0.2,0.8 --compare $(OUT)/room-edit-vs-cycles.png \
+	  --out $(OUT)/room_edit_shading.npy --force
 	$(VENV)/bin/relight info $(OUT)/bumps.blend
 	$(VENV)/bin/relight info $(OUT)/statue.blend
 	@echo "demo: open $(OUT)/bumps.blend or $(OUT)/statue.blend in Blender (Relight tab, Preview"
 	@echo "      Light sliders); reports $(OUT)/*_relight/*_texture_report.json; pictures"
 	@echo "      $(OUT)/*-compare-low-sun.png (preview | Cycles Sun | difference x4)"
 	@echo "      open $(OUT)/statue.blend (Vertex Transport Preview); report $(OUT)/statue_relight/"
+	@echo "      open $(OUT)/room.blend (Material Edits: recolour the red wall, the light"
+	@echo "      it throws follows); $(OUT)/room-edit-vs-cycles.png (preview before/after vs Cycles)"
 
 ## test: the full default test suite (core + real Blender/Cycles), a few minutes on 2 cores
 test: $(STAMP)
@@ -55,7 +64,8 @@ test-core: $(STAMP)
 ##   transport bake vs the lobes presets on bumps, noise and statue+ground at demo size
 ##   (out/bench/transport_textures.*), relight bench --quick on all four scenes (JSON, CSV,
 ##   Pareto charts in out/bench), the CPCA comparison on statue and room (out/bench/cpca.*),
-##   distributed and resumed bakes (1, 2, 4 local workers) and the horizon-model experiment
+##   distributed and resumed bakes (1, 2, 4 local workers), the horizon-model experiment and
+##   the material edits' transfer tensors on the demo room (~25 min of it)
 bench: $(STAMP)
 	mkdir -p $(OUT)/bench $(BLENDER_USER_RESOURCES)
 	$(PY) benchmarks/bench_transport_textures.py --out $(OUT)/bench
@@ -63,6 +73,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_cpca.py --scenes statue,room --out $(OUT)/bench
 	$(PY) benchmarks/bench_distributed.py
 	$(PY) benchmarks/bench_horizon_model.py
+	$(PY) benchmarks/bench_materials.py --size demo
 
 ## bench-full: the standard (demo-size) sweeps behind the README tables and the presets
 ##   (~2 h): writes docs/bench and operators/presets.json, plus the deeper per-method benchmarks

@@ -56,12 +56,12 @@ def add_parsers(sub) -> None:
                    help="material anchors per region: 'diffuse' (colour edits; the only one "
                         "built)")
     p.add_argument("--bounces", type=int, default=2, choices=(1, 2))
-    p.add_argument("--directions", default="hemi:64:1.5", metavar="SPEC",
-                   help="direct-light directions (default hemi:64:1.5)")
+    p.add_argument("--directions", default="hemi:400:1.5", metavar="SPEC",
+                   help="direct-light directions (default hemi:400:1.5; 1 sample each)")
     p.add_argument("--one-bounce-directions", default="hemi:32", metavar="SPEC")
     p.add_argument("--two-bounce-directions", default="hemi:8", metavar="SPEC")
-    p.add_argument("--samples", type=int, default=128,
-                   help="Cycles samples per vertex of the bounce terms (default 128)")
+    p.add_argument("--samples", type=int, default=64,
+                   help="Cycles samples per vertex of the bounce terms (default 64)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--truth", action="store_true",
                    help="also bake Cycles truths (two seeds) under the scene's Sun with the "
@@ -92,6 +92,11 @@ def add_parsers(sub) -> None:
                    help="sun colour")
     p.add_argument("--out", required=True, metavar="shading.npy",
                    help="outgoing radiance per stacked vertex, shape (V, 3), float32")
+    p.add_argument("--compare", metavar="PNG",
+                   help="also render, from the scene camera under the scene's Sun, the preview "
+                        "before and after the --set edits next to Cycles renders of the same "
+                        "colours (2 bounces) and their differences")
+    p.add_argument("--compare-samples", type=int, default=64, metavar="N")
     p.add_argument("--force", action="store_true")
     p.set_defaults(func=_cmd_relight_materials)
 
@@ -162,6 +167,11 @@ def _cmd_relight_materials(args) -> int:
 
     path = _check_input_blend(args.file)
     out = _check_output_path(args.out, ".npy", args.force)
+    png = _check_output_path(args.compare, ".png", args.force) if args.compare else None
+    if png and (args.sun is not None or args.env):
+        raise CliError("--compare renders under the scene's Sun lamp: drop --sun / --env")
+    if args.compare_samples < 1:
+        raise CliError(f"--compare-samples must be >= 1, got {args.compare_samples}")
     for mat, prop, _ in args.set:
         if prop != "color":
             raise CliError(f"{mat}.{prop}: only colour edits are baked (anchors 'diffuse'); "
@@ -207,8 +217,21 @@ def _cmd_relight_materials(args) -> int:
     ms = (time.perf_counter() - t) * 1e3
     with atomic.atomic_path(out) as tmp:
         np.save(tmp, values)
-    print(json.dumps({"objects": [n for n, _ in tensors.objects], "vertices": int(len(values)),
-                      **what, "edits": {k: [float(x) for x in v] for k, v in edits.items()},
-                      "update_ms": round(ms, 3),
-                      "mean": [float(v) for v in values.mean(axis=0)], "out": out}))
+    info = {"objects": [n for n, _ in tensors.objects], "vertices": int(len(values)), **what,
+            "edits": {k: [float(x) for x in v] for k, v in edits.items()},
+            "update_ms": round(ms, 3), "mean": [float(v) for v in values.mean(axis=0)],
+            "out": out}
+    if png:
+        from . import material_edit
+        from .cycles_bake import BakeInputError
+
+        changed = {m: rgb for m, _, rgb in args.set}
+        try:
+            with atomic.atomic_path(png) as tmp:
+                info["compare"] = material_edit.compare_edit(
+                    bpy.context.scene, tensors, changed, tmp, args.compare_samples)
+        except BakeInputError as exc:
+            raise CliError(str(exc)) from None
+        info["compare"]["png"] = png
+    print(json.dumps(info))
     return 0

@@ -103,9 +103,11 @@ class GatedMaterials:
         default editable regions are white and fixed ones keep their colour.
     """
 
-    def __init__(self, scene, regions: list, colours: dict | None = None):
+    def __init__(self, scene, regions: list, colours: dict | None = None,
+                 camera_colour: bool = False):
         self.scene, self.regions = scene, list(regions)
         self.colours = dict(colours or {})
+        self.camera_colour = camera_colour   # depth 0 in colour too: a render, not a bake
         self.notes: list[str] = []
         self._restore, self._created = [], []
         self._gates: dict = {}   # region index -> [(g1 socket, g2 socket)]
@@ -159,8 +161,16 @@ class GatedMaterials:
         mix = nodes.new("ShaderNodeVectorMath")   # colour * gate + [depth == 0]
         mix.operation = "MULTIPLY_ADD"
         mix.inputs[0].default_value = [float(v) for v in colour]
-        links.new(m2.outputs[0], mix.inputs[1])
-        links.new(depth[0].outputs[0], mix.inputs[2])
+        if self.camera_colour:      # colour * (gate + [depth == 0])
+            both = nodes.new("ShaderNodeMath")
+            both.operation = "ADD"
+            links.new(m2.outputs[0], both.inputs[0])
+            links.new(depth[0].outputs[0], both.inputs[1])
+            links.new(both.outputs[0], mix.inputs[1])
+            mix.inputs[2].default_value = (0.0, 0.0, 0.0)
+        else:
+            links.new(m2.outputs[0], mix.inputs[1])
+            links.new(depth[0].outputs[0], mix.inputs[2])
         bsdf = nodes.new("ShaderNodeBsdfDiffuse")
         bsdf.inputs["Roughness"].default_value = 0.0
         links.new(mix.outputs[0], bsdf.inputs["Color"])
@@ -272,8 +282,8 @@ class MaterialBakeSettings:
     regions: list = field(default_factory=list)
     anchors: str = "diffuse"
     bounces: int = 2
-    directions: tuple = ("hemi:64:1.5", "hemi:32", "hemi:8")
-    samples: int = 128
+    directions: tuple = ("hemi:400:1.5", "hemi:32", "hemi:8")
+    samples: int = 64
     seed: int = 0
 
     def validate(self) -> list:

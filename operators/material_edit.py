@@ -121,6 +121,98 @@ def bake_job(scene, objects, settings, out_dir: str, truth_samples: int = 0,
     return out
 
 
+def compare_edit(scene, tensors, edits: dict, out_png: str, samples: int = 64,
+                 resolution: int = 256) -> dict:
+    """Look at an edit the way a user does: render the preview before and after ``edits``
+    (``{material: RGB}``) and Cycles renders of the same diffuse scene with the same colours,
+    lit by the preview's Sun with 2 bounces, from the scene camera; write a captioned 2 x 3
+    PNG (preview | Cycles | |difference| x 4; before on top) and return the relative RMSE of
+    each row over the receivers' pixels. The scene is restored afterwards."""
+    import math
+    import tempfile
+
+    from mathutils import Vector
+
+    from ..lt_addon.io.contact_sheet import linear_to_srgb8, write_png
+    from ..lt_addon.io.label import labelled_grid
+    from .compare_render import _render, _saved_render_settings
+
+    light = preview_light(scene)
+    if scene.camera is None or light is None:
+        raise BakeInputError("the comparison needs a scene camera and a Sun lamp")
+    receivers = [scene.objects[n] for n, _ in tensors.objects]
+    cyc = scene.cycles
+    saved = [(cyc, k, getattr(cyc, k)) for k in ("max_bounces", "diffuse_bounces",
+                                                  "glossy_bounces", "transmission_bounces")]
+    res = (scene.render.resolution_x, scene.render.resolution_y,
+           scene.render.resolution_percentage)
+    world, render = scene.world, _saved_render_settings(scene)
+    hidden = [(o, o.hide_render) for o in scene.objects if o.type == "LIGHT"]
+    sockets = {r: material_bake.material_colour_socket(bpy.data.materials[r])
+               for r in tensors.regions}
+    before = {r: tuple(s.default_value) for r, s in sockets.items() if s is not None}
+    data = bpy.data.lights.new("RelightEditSun", type="SUN")
+    sun = bpy.data.objects.new("RelightEditSun", data)
+    rows, errors = [], []
+    try:
+        f = int(resolution) / max(res[0], res[1])
+        scene.render.resolution_x = max(1, round(res[0] * f))
+        scene.render.resolution_y = max(1, round(res[1] * f))
+        scene.render.resolution_percentage = 100
+        scene.world = None
+        for o, _ in hidden:
+            o.hide_render = True
+        cyc.max_bounces = cyc.diffuse_bounces = tensors.bounces
+        cyc.glossy_bounces = cyc.transmission_bounces = 0
+        data.energy, data.angle = light.strength, math.radians(light.angle_deg)
+        data.color = light.color
+        sun.rotation_euler = (-Vector(light.direction)).to_track_quat("-Z", "Y").to_euler()
+        with tempfile.TemporaryDirectory() as tmp:
+            for label, edit in (("before", {}), ("after", edits)):
+                for r, rgb in edit.items():
+                    if sockets.get(r) is not None:
+                        sockets[r].default_value = (*rgb, 1.0)
+                update_preview(scene)
+                bpy.context.view_layer.update()
+                preview = _render(scene, os.path.join(tmp, f"p_{label}.exr"), 1)
+                colours = {**material_bake.file_colours(tensors), **edit}
+                scene.collection.objects.link(sun)
+                try:
+                    with material_bake.GatedMaterials(scene, [], colours,
+                                                      camera_colour=True) as gates:
+                        gates.set_gates("all", "all")
+                        truth = _render(scene, os.path.join(tmp, f"t_{label}.exr"), samples)
+                finally:
+                    scene.collection.objects.unlink(sun)
+                mask = preview.sum(-1) > 0
+                err = float(np.linalg.norm((preview - truth)[mask])
+                            / max(np.linalg.norm(truth[mask]), 1e-30))
+                errors.append(err)
+                what = "file colours" if not edit else "edited"
+                rows.append([(linear_to_srgb8(preview[::-1]), f"preview, {what}"),
+                             (linear_to_srgb8(truth[::-1]), f"Cycles {samples} spp"),
+                             (linear_to_srgb8(4.0 * np.abs(preview - truth)[::-1]),
+                              f"|diff| x4, rel {err:.3f}")])
+        write_png(out_png, labelled_grid(rows))
+    finally:
+        for r, rgb in before.items():
+            sockets[r].default_value = rgb
+        bpy.data.objects.remove(sun)
+        bpy.data.lights.remove(data)
+        for o, h in hidden:
+            o.hide_render = h
+        for owner, k, v in saved:
+            setattr(owner, k, v)
+        scene.world = world
+        scene.render.resolution_x, scene.render.resolution_y, \
+            scene.render.resolution_percentage = res
+        render()
+        update_preview(scene)
+    return {"png": os.path.abspath(out_png), "rel_rmse_before": errors[0],
+            "rel_rmse_after": errors[1], "truth_samples": samples,
+            "edits": {k: list(v) for k, v in edits.items()}}
+
+
 _busy = []
 
 

@@ -189,7 +189,7 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         description="Path orders baked per editable material: 1 = one bounce, 2 = also "
                     "ordered pairs (the colour bleeding between two edited walls)")
     material_samples: IntProperty(
-        name="Samples", default=128, min=1, max=65536,
+        name="Samples", default=64, min=1, max=65536,
         description="Cycles samples per vertex of each bounce term")
     material_directions: IntProperty(
         name="Direct Directions", default=400, min=4, max=100000,
