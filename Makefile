@@ -18,7 +18,7 @@ $(STAMP): requirements.txt pyproject.toml
 	$(PY) -m pip install --quiet --no-deps -e .
 	touch $(STAMP)
 
-## demo: set up the venv and run the main job on the bundled sample scenes (writes out/; 462 s
+## demo: set up the venv and run the main job on the bundled sample scenes (writes out/; 468 s
 ##   measured on 2 cores with the venv in place)
 demo: $(STAMP)
 	mkdir -p $(OUT) $(BLENDER_USER_RESOURCES)

@@ -783,20 +783,13 @@ def _cmd_bake_transport(args) -> int:
     from . import blend_files, transport_bake
     from .cycles_bake import BakeInputError
 
-    path = _check_input_blend(args.file)
     settings = transport_bake.TransportSettings(
         directions=args.directions, bounces=args.bounces, samples=args.samples,
         energy=args.energy if args.coeffs is None else None, coeffs=args.coeffs,
         clusters=args.clusters)
     if settings.energy is None and settings.coeffs is None:
         settings.energy = 0.99
-    try:
-        settings.validate()
-    except BakeInputError as exc:
-        raise CliError(str(exc)) from None
-    out_dir = _check_output_dir(args.out, path)
-    if not _can_create_in(os.path.dirname(path)):
-        raise CliError(f"cannot update {path}: its folder is not writable")
+    path, out_dir = _check_bake_inputs(args, settings)
     started = time.perf_counter()
     obj = _open_object(path, args.object)
     _refuse_existing(out_dir, obj.name, ("_transport.npz", "_transport.json",
@@ -903,6 +896,23 @@ def _cmd_analyze(args) -> int:
           f"{au['cost_per_vertex']:.1f} at {au['clusters']} clusters")
     print("  wrote " + ", ".join(paths.values()))
     return EXIT_OK
+
+
+def _check_bake_inputs(args, settings) -> tuple[str, str]:
+    """What every bake verb checks before opening the file: the input .blend, the settings
+    (``settings.validate()``; a BakeInputError becomes one CLI line), the output folder and
+    that the .blend can be saved again. Returns ``(blend path, output folder)``."""
+    from .cycles_bake import BakeInputError
+
+    path = _check_input_blend(args.file)
+    try:
+        settings.validate()
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    out_dir = _check_output_dir(args.out, path)
+    if not _can_create_in(os.path.dirname(path)):
+        raise CliError(f"cannot update {path}: its folder is not writable")
+    return path, out_dir
 
 
 def _check_output_dir(out: str | None, blend_path: str) -> str:

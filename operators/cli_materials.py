@@ -105,22 +105,14 @@ def _cmd_bake_materials(args) -> int:
     import bpy
 
     from . import blend_files, material_bake, material_edit
-    from .cli import (CliError, _check_input_blend, _check_output_dir, _can_create_in,
-                      _open_objects, _refuse_existing, _run_job)
+    from .cli import CliError, _check_bake_inputs, _open_objects, _refuse_existing, _run_job
     from .cycles_bake import BakeInputError
 
-    path = _check_input_blend(args.file)
     settings = material_bake.MaterialBakeSettings(
         regions=list(args.region), anchors=args.anchors, bounces=args.bounces,
         directions=(args.directions, args.one_bounce_directions, args.two_bounce_directions),
         samples=args.samples, seed=args.seed)
-    try:
-        settings.validate()
-    except BakeInputError as exc:
-        raise CliError(str(exc)) from None
-    out_dir = _check_output_dir(args.out, path)
-    if not _can_create_in(os.path.dirname(path)):
-        raise CliError(f"cannot update {path}: its folder is not writable")
+    path, out_dir = _check_bake_inputs(args, settings)
     started = time.perf_counter()
     objects = _open_objects(path, args.object)
     for o in objects:

@@ -123,7 +123,52 @@ def _vertices_with_area(mesh) -> np.ndarray:
     return lit
 
 
-class EnvironmentBake:
+class SceneChanges:
+    """Base of the context managers that change the scene for a while: ``_setup()`` makes the
+    changes, recording an undo callable in ``self._restore`` for each and every datablock it
+    creates as ``(collection, block)`` in ``self._created``; on exit (or a failed setup) they
+    are undone in reverse order, all of them even when one fails."""
+
+    what = "the scene"
+
+    def _setup(self):
+        raise NotImplementedError
+
+    def __enter__(self):
+        try:
+            self._setup()
+        except BaseException:
+            self._teardown()
+            raise
+        return self
+
+    def _teardown(self):
+        errors = []
+        while self._restore:
+            try:
+                self._restore.pop()()
+            except Exception as exc:  # keep restoring the rest
+                errors.append(exc)
+        while self._created:
+            collection, block = self._created.pop()
+            try:
+                collection.remove(block)
+            except Exception as exc:
+                errors.append(exc)
+        if errors:
+            raise RuntimeError(f"could not fully restore {self.what}: {errors[0]}")
+
+    def __exit__(self, exc_type, exc, tb):
+        try:
+            self._teardown()
+        except RuntimeError:
+            if exc_type is None:
+                raise
+            # keep the original error visible; the restore problem is secondary
+        return False
+
+
+class EnvironmentBake(SceneChanges):
     """Context manager: bake ``obj`` under environment images, restoring the scene on exit.
 
     Parameters
@@ -195,13 +240,7 @@ class EnvironmentBake:
         self._restore.append(lambda: setattr(owner, name, old))
         setattr(owner, name, value)
 
-    def __enter__(self):
-        try:
-            self._setup()
-        except BaseException:
-            self._teardown()
-            raise
-        return self
+    what = "the scene after baking"
 
     def _setup(self):
         scene = self.scene
@@ -494,28 +533,3 @@ class EnvironmentBake:
         finally:
             sun.data.energy = 0.0
 
-    # -- teardown --------------------------------------------------------------------------------
-    def _teardown(self):
-        errors = []
-        while self._restore:
-            try:
-                self._restore.pop()()
-            except Exception as exc:  # keep restoring the rest
-                errors.append(exc)
-        while self._created:
-            collection, block = self._created.pop()
-            try:
-                collection.remove(block)
-            except Exception as exc:
-                errors.append(exc)
-        if errors:
-            raise RuntimeError(f"could not fully restore the scene after baking: {errors[0]}")
-
-    def __exit__(self, exc_type, exc, tb):
-        try:
-            self._teardown()
-        except RuntimeError:
-            if exc_type is None:
-                raise
-            # keep the original error visible; the restore problem is secondary
-        return False

@@ -38,7 +38,7 @@ from ..lt_addon.io import atomic
 from ..lt_addon.transport import ptt
 from ..lt_addon.transport.texture import parse_directions
 from .compat import ensure_node_tree
-from .cycles_bake import BakeInputError, EnvironmentBake, check_memory
+from .cycles_bake import BakeInputError, EnvironmentBake, SceneChanges, check_memory
 from .jobs import Progress
 from .meshes import corner_vertices, polygon_arrays
 
@@ -90,7 +90,7 @@ def scene_materials(scene) -> list:
     return out
 
 
-class GatedMaterials:
+class GatedMaterials(SceneChanges):
     """Context manager: every rendered mesh of ``scene`` gets gated Diffuse materials (module
     docstring), restored on exit.
 
@@ -112,13 +112,7 @@ class GatedMaterials:
         self._restore, self._created = [], []
         self._gates: dict = {}   # region index -> [(g1 socket, g2 socket)]
 
-    def __enter__(self):
-        try:
-            self._setup()
-        except BaseException:
-            self._teardown()
-            raise
-        return self
+    what = "the materials"
 
     def _gate_for(self, mat):
         name = mat.name if mat is not None else None
@@ -134,7 +128,7 @@ class GatedMaterials:
             if note:
                 self.notes.append(note)
         gate = bpy.data.materials.new(f"{_PREFIX}_{name or 'none'}")
-        self._created.append(gate)
+        self._created.append((bpy.data.materials, gate))
         tree = ensure_node_tree(gate)
         nodes, links = tree.nodes, tree.links
         for n in list(nodes):
@@ -196,7 +190,7 @@ class GatedMaterials:
                 continue
             for slot in o.material_slots:
                 old = slot.material
-                if old is not None and old in self._created:
+                if old is not None and old in self._made.values():
                     continue   # a mesh shared with an object already gated
                 self._restore.append(lambda s=slot, m=old: setattr(s, "material", m))
                 slot.material = self._gate_for(old)
@@ -210,28 +204,6 @@ class GatedMaterials:
                 g1.default_value = float(last == "all" or last == region)
                 g2.default_value = float(before == "all" or before == region)
 
-    def _teardown(self):
-        errors = []
-        while self._restore:
-            try:
-                self._restore.pop()()
-            except Exception as exc:
-                errors.append(exc)
-        while self._created:
-            try:
-                bpy.data.materials.remove(self._created.pop())
-            except Exception as exc:
-                errors.append(exc)
-        if errors:
-            raise RuntimeError(f"could not fully restore the materials: {errors[0]}")
-
-    def __exit__(self, exc_type, exc, tb):
-        try:
-            self._teardown()
-        except RuntimeError:
-            if exc_type is None:
-                raise
-        return False
 
 
 def receivers(objects, regions: list) -> tuple[np.ndarray, np.ndarray, list]:
