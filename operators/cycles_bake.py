@@ -105,6 +105,20 @@ def check_bakeable(obj, need_uv: bool = True) -> None:
         raise BakeInputError(f"{obj.name} has no faces to bake")
 
 
+def _face_of_corner(mesh) -> np.ndarray:
+    """The face of every corner (loop), shape (L,), int64."""
+    area, starts, sizes = polygon_arrays(mesh)
+    by_start = np.argsort(starts, kind="stable")  # a face's loops are contiguous
+    return np.repeat(by_start, sizes[by_start])
+
+
+def _corners_with_area(mesh) -> np.ndarray:
+    """bool, shape (L,): the corners of faces of positive area (see :func:`_vertices_with_area`)."""
+    if len(mesh.polygons) == 0:
+        return np.zeros(len(mesh.loops), dtype=bool)
+    return polygon_arrays(mesh)[0][_face_of_corner(mesh)] > 0
+
+
 def _vertices_with_area(mesh) -> np.ndarray:
     """bool, shape (V,): the vertices of at least one face of positive area.
 
@@ -115,11 +129,7 @@ def _vertices_with_area(mesh) -> np.ndarray:
     lit = np.zeros(len(mesh.vertices), dtype=bool)
     if n_faces == 0:
         return lit
-    area, starts, sizes = polygon_arrays(mesh)
-    loop_verts = corner_vertices(mesh)
-    by_start = np.argsort(starts, kind="stable")  # a face's loops are contiguous
-    face_of_loop = np.repeat(by_start, sizes[by_start])
-    lit[loop_verts[area[face_of_loop] > 0]] = True
+    lit[corner_vertices(mesh)[_corners_with_area(mesh)]] = True
     return lit
 
 
@@ -181,7 +191,10 @@ class EnvironmentBake(SceneChanges):
         shared by two of them is replaced by a temporary copy on the second during the bake.
     resolution : int or None
         Baked texture side in texels; ``None`` bakes per vertex instead (into a temporary
-        FLOAT_COLOR point attribute; no UV map needed).
+        FLOAT_COLOR attribute; no UV map needed).
+    domain : {"POINT", "CORNER"}
+        Per-vertex bakes: one value per vertex (Cycles averages the vertex's corners), or one
+        per face corner (a hard edge keeps a value per side).
     samples : int
         Cycles samples per texel (fixed seed ``seed``, no adaptive sampling, no denoiser).
     bounces : int
@@ -201,8 +214,11 @@ class EnvironmentBake(SceneChanges):
     def __init__(self, scene, obj, resolution: int, samples: int, bounces: int,
                  env_size: tuple[int, int], mode: str = "radiance", seed: int = 0,
                  margin: int = 4, world_sampling: str = "importance", importance_map_size: int = 256,
-                 passes: str = "all"):
+                 passes: str = "all", domain: str = "POINT"):
         self.per_vertex = resolution is None
+        if domain not in ("POINT", "CORNER"):
+            raise BakeInputError(f"domain must be POINT or CORNER, got {domain!r}")
+        self.domain = domain
         self.objects = list(obj) if isinstance(obj, (list, tuple)) else [obj]
         if not self.objects:
             raise BakeInputError("no object given")
@@ -352,8 +368,9 @@ class EnvironmentBake(SceneChanges):
         attrs = obj.data.color_attributes
         old_active = attrs.active_color_name
         old_render = attrs.render_color_index
-        target = attrs.new(f"{_PREFIX}Target", "FLOAT_COLOR", "POINT")
-        self._lit_vertices = getattr(self, "_lit_vertices", []) + [_vertices_with_area(obj.data)]
+        target = attrs.new(f"{_PREFIX}Target", "FLOAT_COLOR", self.domain)
+        lit = (_corners_with_area if self.domain == "CORNER" else _vertices_with_area)(obj.data)
+        self._lit_vertices = getattr(self, "_lit_vertices", []) + [lit]
         name = target.name
         attrs.active_color = target
 

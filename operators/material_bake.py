@@ -206,10 +206,12 @@ class GatedMaterials(SceneChanges):
 
 
 
-def receivers(objects, regions: list) -> tuple[np.ndarray, np.ndarray, list]:
-    """Per stacked vertex: region (V,) int16 of the face material it belongs to (the largest
-    face area wins at a shared vertex) and the diffuse colour (V, 3) float32 that material
-    bakes with; plus the notes of :func:`material_colour`."""
+def receivers(objects, regions: list, domain: str = "POINT"
+              ) -> tuple[np.ndarray, np.ndarray, list]:
+    """Per stacked vertex (or face corner with ``domain="CORNER"``): region (V,) int16 of the
+    face material it belongs to (the largest face area wins at a shared vertex) and the
+    diffuse colour (V, 3) float32 that material bakes with; plus the notes of
+    :func:`material_colour`."""
     region_of, colour_of, notes = [], [], []
     for o in objects:
         mesh = o.data
@@ -230,7 +232,12 @@ def receivers(objects, regions: list) -> tuple[np.ndarray, np.ndarray, list]:
         mi = np.clip(mi, 0, len(mats) - 1)
         area, start, total = polygon_arrays(mesh)
         loops = corner_vertices(mesh)
-        face_of_loop = np.repeat(np.arange(F), total)
+        by_start = np.argsort(start, kind="stable")   # a face's corners are contiguous
+        face_of_loop = np.repeat(by_start, total[by_start])
+        if domain == "CORNER":
+            region_of.append(reg[mi[face_of_loop]])
+            colour_of.append(col[mi[face_of_loop]])
+            continue
         best = np.full(len(mesh.vertices), -1.0)
         slot = np.zeros(len(mesh.vertices), dtype=np.int64)
         order = np.argsort(area[face_of_loop], kind="stable")   # larger faces write last
@@ -248,7 +255,9 @@ class MaterialBakeSettings:
     regions : editable material names; anchors : only "diffuse" (albedo edits) is built;
     bounces : 1 or 2; directions : specs of the direct, one- and two-bounce direction sets
     (``hemi:N[:P]``); samples : Cycles samples per vertex for the bounce terms (the direct term
-    takes 1: exact under a hard Sun); seed : Cycles seed of every term.
+    takes 1: exact under a hard Sun); seed : Cycles seed of every term; domain : "POINT" (a
+    value per vertex) or "CORNER" (per face corner: hard edges stay hard, about 4x the data
+    on quad meshes).
     """
 
     regions: list = field(default_factory=list)
@@ -257,6 +266,7 @@ class MaterialBakeSettings:
     directions: tuple = ("hemi:400:1.5", "hemi:32", "hemi:8")
     samples: int = 64
     seed: int = 0
+    domain: str = "POINT"
 
     def validate(self) -> list:
         if not self.regions:
@@ -270,6 +280,8 @@ class MaterialBakeSettings:
             raise BakeInputError(f"bounces must be 1 or 2, got {self.bounces}")
         if self.samples < 1:
             raise BakeInputError(f"samples must be >= 1, got {self.samples}")
+        if self.domain not in ("POINT", "CORNER"):
+            raise BakeInputError(f"domain must be POINT or CORNER, got {self.domain!r}")
         try:
             return [parse_directions(s) for s in self.directions]
         except ValueError as exc:
@@ -283,7 +295,7 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings):
     d0, d1, d2 = settings.validate()
     objects = list(objects)
     started = time.perf_counter()
-    V = sum(len(o.data.vertices) for o in objects)
+    V = sum(element_count(o, settings.domain) for o in objects)
     R1 = len(settings.regions) + 1
     S1 = d1.size if settings.bounces >= 1 else 0
     S2 = d2.size if settings.bounces >= 2 else 0
@@ -303,7 +315,8 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings):
     with GatedMaterials(scene, settings.regions) as gates:
         t = time.perf_counter()
         with EnvironmentBake(scene, objects, None, 1, 0, (8, 16), mode="irradiance",
-                             seed=settings.seed, world_sampling="none") as session:
+                             seed=settings.seed, world_sampling="none",
+                             domain=settings.domain) as session:
             for s, w in enumerate(d0.directions):
                 direct[s] = stack(session.bake_sun_all(w, 1.0, 0.0))[:, 0]
                 done += 1
@@ -313,7 +326,8 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings):
             t = time.perf_counter()
             with EnvironmentBake(scene, objects, None, settings.samples, settings.bounces,
                                  (8, 16), mode="irradiance", seed=settings.seed,
-                                 world_sampling="none", passes="indirect") as session:
+                                 world_sampling="none", passes="indirect",
+                                 domain=settings.domain) as session:
                 # gates outside, directions inside: a gate change makes Cycles sync the
                 # shaders again (about 0.25 s a call here), a new sun direction does not
                 for r in range(R1 if S1 else 0):
@@ -345,20 +359,26 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings):
                 if S2:
                     seconds["two_bounce"] = time.perf_counter() - t
         notes = list(gates.notes)
-    region_of, colour_of, more = receivers(objects, settings.regions)
+    region_of, colour_of, more = receivers(objects, settings.regions, settings.domain)
     base = np.array([material_colour(bpy.data.materials[r])[0] for r in settings.regions])
-    meta = {"anchors": settings.anchors, "bounces": settings.bounces,
+    meta = {"anchors": settings.anchors, "bounces": settings.bounces, "domain": settings.domain,
             "samples": settings.samples, "seed": settings.seed, "bake_calls": total,
             "seconds": {k: round(v, 3) for k, v in seconds.items()},
             "bake_seconds": round(time.perf_counter() - started, 3),
             "notes": notes + [n for n in more if n not in notes]}
     return ptt.TransferTensors(direct, one, two, tuple(d.spec for d in (d0, d1, d2)),
                                list(settings.regions), base, region_of, colour_of,
-                               [(o.name, len(o.data.vertices)) for o in objects], meta)
+                               [(o.name, element_count(o, settings.domain)) for o in objects],
+                               meta)
+
+
+def element_count(obj, domain: str) -> int:
+    """Values a per-vertex bake of ``obj`` holds: vertices (POINT) or face corners (CORNER)."""
+    return len(obj.data.loops) if domain == "CORNER" else len(obj.data.vertices)
 
 
 def truth_irradiance(scene, objects, colours: dict, direction, bounces: int, samples: int,
-                     seed: int = 1, angle_deg: float = 0.0) -> np.ndarray:
+                     seed: int = 1, angle_deg: float = 0.0, domain: str = "POINT") -> np.ndarray:
     """Cycles ground truth of an edit: irradiance E (V, 3) (per unit normal irradiance) of the
     stacked vertices of ``objects`` under a Sun from ``direction``, with every material a
     Diffuse BSDF of its colour (``colours[name]`` where given, else its own) and ``bounces``
@@ -366,7 +386,8 @@ def truth_irradiance(scene, objects, colours: dict, direction, bounces: int, sam
     with GatedMaterials(scene, [], colours) as gates:
         gates.set_gates("all", "all")
         with EnvironmentBake(scene, list(objects), None, samples, bounces, (8, 16),
-                             mode="irradiance", seed=seed, world_sampling="none") as session:
+                             mode="irradiance", seed=seed, world_sampling="none",
+                             domain=domain) as session:
             values = session.bake_sun_all(direction, 1.0, angle_deg)
     return np.pi * np.concatenate(values, axis=0)
 
@@ -425,8 +446,11 @@ def ground_truth(scene, objects, tensors: ptt.TransferTensors, direction, sample
     two-bounce term; errors are ``||E - E_cycles|| / ||E_cycles||`` over vertices and RGB."""
     colours = file_colours(tensors)
     t = time.perf_counter()
-    a = truth_irradiance(scene, objects, colours, direction, tensors.bounces, samples, seed=1)
-    b = truth_irradiance(scene, objects, colours, direction, tensors.bounces, samples, seed=2)
+    domain = tensors.metadata.get("domain", "POINT")
+    a = truth_irradiance(scene, objects, colours, direction, tensors.bounces, samples, seed=1,
+                         domain=domain)
+    b = truth_irradiance(scene, objects, colours, direction, tensors.bounces, samples, seed=2,
+                         domain=domain)
     seconds = time.perf_counter() - t
     light = ptt.Sun(tuple(float(v) for v in direction))
     est = tensors.irradiance(light, colours)
@@ -457,6 +481,7 @@ def materials_job(scene, objects, settings: MaterialBakeSettings, out_dir: str,
     shares = tensors.term_shares(light, file_colours(tensors))
     d0, d1, d2 = tensors.direction_sets()
     report = {"objects": [o.name for o in objects], "vertices": tensors.vertices,
+              "domain": settings.domain,
               "regions": tensors.regions, "anchors": settings.anchors,
               "bounces": settings.bounces, "samples": settings.samples, "seed": settings.seed,
               "directions": {"direct": d0.spec, "one_bounce": d1.spec, "two_bounce": d2.spec},

@@ -85,12 +85,18 @@ def update_preview(scene) -> dict:
         t0 = time.perf_counter()
         values = tensors.shade(light, material_bake.file_colours(tensors))
         t1 = time.perf_counter()
+        domain = tensors.metadata.get("domain", "POINT")
         for name, rows in tensors.object_slices().items():
             obj = scene.objects.get(name)
-            if obj is None or obj.type != "MESH" or len(obj.data.vertices) != rows.stop - rows.start:
-                continue
+            if (obj is None or obj.type != "MESH"
+                    or material_bake.element_count(obj, domain) != rows.stop - rows.start):
+                continue   # the mesh changed since the bake: leave it
             attrs = obj.data.color_attributes
-            attr = attrs.get(ATTRIBUTE) or attrs.new(ATTRIBUTE, "FLOAT_COLOR", "POINT")
+            attr = attrs.get(ATTRIBUTE)
+            if attr is not None and attr.domain != domain:
+                attrs.remove(attr)
+                attr = None
+            attr = attr or attrs.new(ATTRIBUTE, "FLOAT_COLOR", domain)
             set_color_attribute(attr, values[rows])
             obj.data.update()
         shade_ms += 1e3 * (t1 - t0)
@@ -140,7 +146,6 @@ def compare_edit(scene, tensors, edits: dict, out_png: str, samples: int = 64,
     light = preview_light(scene)
     if scene.camera is None or light is None:
         raise BakeInputError("the comparison needs a scene camera and a Sun lamp")
-    receivers = [scene.objects[n] for n, _ in tensors.objects]
     cyc = scene.cycles
     saved = [(cyc, k, getattr(cyc, k)) for k in ("max_bounces", "diffuse_bounces",
                                                   "glossy_bounces", "transmission_bounces")]
@@ -255,6 +260,7 @@ class RELIGHT_OT_bake_materials(_ModalBake, bpy.types.Operator):
                                  "panel")
         settings = material_bake.MaterialBakeSettings(
             regions=regions, bounces=props.material_bounces, samples=props.material_samples,
+            domain="CORNER" if props.material_per_corner else "POINT",
             directions=(f"hemi:{props.material_directions}:1.5",
                         f"hemi:{props.material_one_directions}",
                         f"hemi:{props.material_two_directions}"))

@@ -207,6 +207,7 @@ class VIEW3D_PT_relight_materials(_RelightSubPanel, bpy.types.Panel):
         col = layout.column(align=True)
         col.prop(props, "material_bounces")
         col.prop(props, "material_samples")
+        col.prop(props, "material_per_corner")
         col.prop(props, "material_directions")
         col.prop(props, "material_one_directions")
         if props.material_bounces >= 2:

@@ -136,3 +136,39 @@ def test_gated_materials_restore_the_scene(room):
         with mb.GatedMaterials(scene, ["Nope"]):
             pass
     assert len(bpy.data.materials) == n_materials
+
+
+def test_per_corner_bake_keeps_hard_edges():
+    """``domain="CORNER"``: a value per face corner, so the box's lit top and dark side keep
+    their own values at the vertices they share (per vertex, Cycles averages them)."""
+    import bpy
+
+    from relightable_textures import samples
+    from relightable_textures.lt_addon.transport import ptt
+    from relightable_textures.lt_addon.transport.texture import parse_directions
+    from relightable_textures.operators import material_bake as mb
+    from relightable_textures.operators.meshes import corner_vertices
+    from relightable_textures.operators.jobs import run
+
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = bpy.context.scene
+    samples.build("room", scene, "test")
+    objs = [bpy.data.objects[n] for n in ("Box", "WallLeft")]
+    settings = mb.MaterialBakeSettings(regions=["RedMaterial"], directions=(SPEC, SPEC, SPEC),
+                                       samples=8, domain="CORNER")
+    t = run(mb.bake_materials(scene, objs, settings))
+    loops = [len(o.data.loops) for o in objs]
+    assert t.vertices == sum(loops) and t.metadata["domain"] == "CORNER"
+    sl = t.object_slices()
+    assert set(t.receiver_region[sl["WallLeft"]]) == {1}
+    assert set(t.receiver_region[sl["Box"]]) == {0}
+    d = parse_directions(SPEC).directions
+    light = d[int(np.argmax(d[:, 2]))]
+    est = t.irradiance(ptt.Sun(tuple(light)), orders=(0,))
+    direct = mb.truth_irradiance(scene, objs, {}, light, 0, 1, domain="CORNER")
+    np.testing.assert_allclose(est, direct, rtol=1e-5, atol=1e-6)
+    # at some box vertex the corners of its faces differ by more than half the sun's light
+    box = est[sl["Box"], 0]
+    verts = corner_vertices(objs[0].data)
+    spread = max(np.ptp(box[verts == v]) for v in np.unique(verts))
+    assert spread > 0.5, spread
