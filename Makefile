@@ -52,8 +52,18 @@ demo: $(STAMP)
 	@echo "      open $(OUT)/room.blend (Material Edits: recolour the red wall, the light"
 	@echo "      it throws follows); $(OUT)/room-edit-vs-cycles.png (preview before/after vs Cycles)"
 
+WEB_STAMP := tests/web/node_modules/.installed
+
+# The exported RTI page's browser test drives Debian's Chromium with playwright-core (from the
+# npm registry, pinned in tests/web/package-lock.json). Without npm the test skips (it fails
+# under CI=true, where .ci/run installs both).
+$(WEB_STAMP): tests/web/package.json tests/web/package-lock.json
+	@if command -v npm >/dev/null 2>&1; then \
+	  npm ci --prefix tests/web --no-audit --no-fund --silent && touch $(WEB_STAMP); \
+	else echo "make: npm not found; the web page test will skip" >&2; fi
+
 ## test: the full default test suite (core + real Blender/Cycles), a few minutes on 2 cores
-test: $(STAMP)
+test: $(STAMP) $(WEB_STAMP)
 	@$(PY) -m pytest -q; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests" >&2; fi; exit $$rc
 

@@ -272,6 +272,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     from . import cli_materials
     cli_materials.add_parsers(sub)
+    from . import cli_export
+    cli_export.add_parsers(sub)
 
     p = sub.add_parser("validate", help="reproduce a paper's figures and check them")
     p.add_argument("--paper", required=True, choices=sorted(PAPER_CHECKS),

@@ -550,3 +550,23 @@ class EnvironmentBake(SceneChanges):
         finally:
             sun.data.energy = 0.0
 
+
+    def bake_normals(self) -> list:
+        """Shading normals per texel of every object (Cycles' NORMAL bake, object space), as
+        unit vectors (R, R, 3) float64 in the object's frame; texels no UV island covers (nor
+        the margin) come back as zero vectors. Image targets only."""
+        if self.per_vertex:
+            raise BakeInputError("normals are baked into textures, not per vertex")
+        start = time.perf_counter()
+        result = bpy.ops.object.bake(type="NORMAL", normal_space="OBJECT", use_clear=True,
+                                     margin=self.margin)
+        self.bake_seconds += time.perf_counter() - start
+        self.bake_calls += 1
+        if "FINISHED" not in result:
+            raise RuntimeError(f"Cycles bake did not finish: {result}")
+        out = []
+        for target in self.targets:
+            n = image_pixels(target)[..., :3].astype(np.float64) * 2.0 - 1.0
+            length = np.linalg.norm(n, axis=-1, keepdims=True)
+            out.append(np.where(length > 0.5, n / np.maximum(length, 1e-12), 0.0))
+        return out

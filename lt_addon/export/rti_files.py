@@ -1,0 +1,127 @@
+"""RTI files on disk (bpy-free): the relight tools' layout plus a self-contained web page.
+
+A folder holds
+
+* ``info.json`` -- as the relight tools write it and OpenLIME reads it: ``width``,
+  ``height``, ``format`` ("png"), ``type`` ("ptm" or "hsh"), ``colorspace`` ("rgb"),
+  ``nplanes`` (3 x terms), ``materials[0].scale`` and ``.bias`` (one per plane, plane
+  ``3 k + c`` = coefficient ``k`` of channel ``c``); and ours: ``exposure``, ``values``
+  ("srgb display"), ``light_frame``;
+* ``plane_<k>.png`` -- coefficient ``k`` of R, G, B as an 8-bit RGB image, top row first
+  (texture v = 1), lossless so the only loss is the 8-bit quantisation
+  (``c = (q / 255 - bias) * scale``);
+* ``index.html`` -- a page that embeds the above and relights it with the mouse
+  (``web/viewer.js``): it opens from disk or any static host, no server or package needed.
+
+:func:`relight` is the viewer's arithmetic in NumPy (the test compares the two pixel by pixel).
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+import os
+import shutil
+
+import numpy as np
+
+from ..io import atomic
+from ..io.contact_sheet import read_png, write_png
+from . import rti
+
+FORMAT = "relightable_textures.rti"
+WEB = os.path.join(os.path.dirname(__file__), "web")
+
+
+def _png_bytes(rgb8: np.ndarray, scratch: str) -> bytes:
+    write_png(scratch, rgb8)
+    with open(scratch, "rb") as fh:
+        return fh.read()
+
+
+def write(folder: str, q, scale, bias, kind: str, *, exposure: float = 1.0,
+          title: str = "Relightable texture") -> str:
+    """Write an RTI folder atomically (built under a temporary name, renamed when complete;
+    an existing folder of that name is replaced).
+
+    Parameters
+    ----------
+    q : (R, R, K, 3) uint8, row 0 at texture v = 0 (as our textures)
+    scale, bias : (K, 3) float64 (see :func:`.rti.quantize`)
+    kind : "ptm" or "hsh"
+
+    Returns the folder's absolute path.
+    """
+    q = np.asarray(q, np.uint8)
+    H, W, K, C = q.shape
+    if C != 3:
+        raise ValueError(f"expected RGB coefficients, got {C} channels")
+    folder = os.path.abspath(folder)
+    tmp = folder + ".tmp-export"
+    if os.path.exists(tmp):
+        shutil.rmtree(tmp)
+    os.makedirs(tmp)
+    try:
+        info = {"width": W, "height": H, "format": "png", "type": kind, "colorspace": "rgb",
+                "nplanes": 3 * K,
+                "materials": [{"scale": [float(v) for v in np.asarray(scale).reshape(-1)],
+                               "bias": [float(v) for v in np.asarray(bias).reshape(-1)]}],
+                "exposure": float(exposure), "values": "srgb display",
+                "light_frame": "x right, y up (texture u, v), z out of the surface",
+                "writer": FORMAT}
+        atomic.write_json(os.path.join(tmp, "info.json"), info, indent=1)
+        uris = []
+        for k in range(K):
+            img = q[::-1, :, k, :]                                   # top row first
+            data = _png_bytes(img, os.path.join(tmp, f"plane_{k}.png"))
+            uris.append("data:image/png;base64," + base64.b64encode(data).decode("ascii"))
+        with open(os.path.join(WEB, "template.html")) as fh:
+            page = fh.read()
+        with open(os.path.join(WEB, "viewer.js")) as fh:
+            js = fh.read()
+        page = (page.replace("{{TITLE}}", html.escape(title))
+                .replace("{{INFO}}", json.dumps(info).replace("</", "<\\/"))
+                .replace("{{PLANES}}", json.dumps(uris))
+                .replace("{{VIEWER}}", js))
+        atomic.write_text(os.path.join(tmp, "index.html"), page)
+        if os.path.exists(folder):
+            old = folder + ".old-export"
+            if os.path.exists(old):
+                shutil.rmtree(old)
+            os.rename(folder, old)
+            os.rename(tmp, folder)
+            shutil.rmtree(old)
+        else:
+            os.rename(tmp, folder)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return folder
+
+
+def read(folder: str):
+    """(q (R, R, K, 3) uint8 with row 0 at v = 0, scale (K, 3), bias (K, 3), info) of a folder
+    written by :func:`write` (or any relight-layout rgb PTM/HSH folder with PNG planes)."""
+    with open(os.path.join(folder, "info.json")) as fh:
+        info = json.load(fh)
+    if info.get("colorspace") != "rgb" or info.get("type") not in ("ptm", "hsh"):
+        raise ValueError(f"{folder}: only rgb PTM/HSH planes are read, got "
+                         f"{info.get('type')}/{info.get('colorspace')}")
+    K = int(info["nplanes"]) // 3
+    planes = [read_png(os.path.join(folder, f"plane_{k}.png"))[::-1] for k in range(K)]
+    q = np.stack(planes, axis=2)
+    scale = np.asarray(info["materials"][0]["scale"], np.float64).reshape(K, 3)
+    bias = np.asarray(info["materials"][0]["bias"], np.float64).reshape(K, 3)
+    return q, scale, bias, info
+
+
+def relight(folder: str, light) -> np.ndarray:
+    """The page's picture at ``light`` (3,): (H, W, 3) uint8, top row first, computed as the
+    viewer does (float64 coefficients, clamp, round)."""
+    q, scale, bias, info = read(folder)
+    H, W, K, _ = q.shape
+    coef = rti.dequantize(q.reshape(H * W, K, 3), scale, bias)
+    v = rti.evaluate(coef, np.asarray(light, np.float64), info["type"])
+    img = np.rint(np.clip(v, 0.0, 1.0) * 255.0).astype(np.uint8).reshape(H, W, 3)
+    return img[::-1]

@@ -1,0 +1,201 @@
+"""relight export on real transport bakes: SH lightmaps read back through their decode formula,
+RTI folders read back, and the exported web page driven in headless Chromium."""
+
+import json
+import os
+import pathlib
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+from relight_cli import assert_refused, relight
+
+from relightable_textures.lt_addon.export import rti, rti_files
+from relightable_textures.lt_addon.io import exrio
+from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
+
+WEB = pathlib.Path(__file__).resolve().parents[1] / "web"
+TINY = ["--directions", "hemi:64:1.5", "--resolution", "16", "--no-compare"]
+
+
+def _plane_blend(path):
+    """A 2 m plane facing +z with the default UVs, nothing else in the scene."""
+    import bpy
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.mesh.primitive_plane_add(size=2.0)
+    bpy.context.object.name = "Plane"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+
+
+@pytest.fixture(scope="module")
+def plane(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("plane")
+    blend = folder / "plane.blend"
+    _plane_blend(blend)
+    r = relight("bake-textures", blend, "--object", "Plane", *TINY, "--bounces", "0")
+    assert r.returncode == 0, r.stderr[-2000:]
+    white = np.ones((8, 16), np.float32)
+    exrio.write_exr(str(folder / "white.exr"), {c: white for c in "RGB"}, pixel_type="float")
+    return folder, blend
+
+
+@pytest.fixture(scope="module")
+def bumps(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("bumps")
+    blend = folder / "bumps.blend"
+    assert relight("scene", "bumps", "--out", blend).returncode == 0
+    r = relight("bake-textures", blend, "--object", "Bumps", "--directions", "hemi:100:1.5",
+                "--resolution", "24", "--indirect-resolution", "12", "--indirect-samples",
+                "8", "--no-compare")
+    assert r.returncode == 0, r.stderr[-2000:]
+    return folder, blend
+
+
+def test_sh_l1_of_a_white_sky_on_an_open_plane_decodes_to_the_cosine_irradiance(plane):
+    """Constant radiance 1 over the sky on a bare plane: Godot's decode of the four layers
+    must give E/pi = 1 facing up and (1 + cos a)/2 at a normal tilted by a. The tolerance is
+    the direction set's own quadrature error for the clamped cosine (computed here) plus half
+    floats' 1e-3 (the transport store and the layers are half); a Cycles hard-sun bake of a
+    bare plane has no noise."""
+    folder, blend = plane
+    r = relight("export", blend, "--object", "Plane", "--format", "sh-l1", "--env",
+                folder / "white.exr")
+    assert r.returncode == 0, r.stderr[-2000:]
+    out = folder / "plane_relight"
+    layers = {}
+    for key in ("L0", "L1n1", "L1_0", "L1p1"):
+        ch, meta = exrio.read_exr(str(out / f"Plane_sh-l1_{key}.exr"))
+        layers[key] = np.stack([ch[c] for c in "RGB"], -1).astype(np.float64)
+        assert meta["layer"] == key and "Godot" in meta["axes"]
+    d = parse_direction_spec("hemi:64:1.5")
+    quad = abs(float(np.sum(d.solid_angles * d.directions[:, 2])) / np.pi - 1.0)
+    tol = quad + 2e-3
+    inner = (slice(2, -2), slice(2, -2))                 # away from the UV island's border
+
+    def decode(n_godot):
+        x, y, z = n_godot
+        return (0.282095 * layers["L0"] + 0.32573 * (layers["L1n1"] * y + layers["L1_0"] * z
+                                                      + layers["L1p1"] * x))[inner]
+
+    np.testing.assert_allclose(decode((0.0, 1.0, 0.0)), 1.0, atol=tol)       # +z in Godot: +y
+    for tilt in (20.0, 45.0):
+        a = np.radians(tilt)
+        want = (1 + np.cos(a)) / 2
+        # tilted towards Blender +x, then towards Blender +y (Godot -z)
+        np.testing.assert_allclose(decode((np.sin(a), np.cos(a), 0.0)), want, atol=tol)
+        np.testing.assert_allclose(decode((0.0, np.cos(a), -np.sin(a))), want, atol=tol)
+    rep = json.loads((out / "Plane_sh-l1.json").read_text())
+    assert rep["bytes_per_texel"] == 24
+    assert max(rep["error_vs_our_relight"].values()) < 0.01    # L1 holds a sky exactly
+
+
+def test_monosh_and_refusals(plane):
+    folder, blend = plane
+    r = relight("export", blend, "--object", "Plane", "--format", "monosh", "--sun", "0,60")
+    assert r.returncode == 0, r.stderr[-2000:]
+    out = folder / "plane_relight"
+    from relightable_textures.lt_addon.io.contact_sheet import read_png
+
+    ch, _ = exrio.read_exr(str(out / "Plane_monosh_L0.exr"))
+    L0 = np.stack([ch[c] for c in "RGB"], -1)
+    d = read_png(str(out / "Plane_monosh_L1.png")) / 255.0 * 2 - 1      # Unity axes
+    # a sun at 60 deg elevation, azimuth 0 (+x): facing it, E/pi = L0 + 2 L0 (d . n) and the
+    # L1 direction leans to +x and up (Unity +y); L1 of a delta keeps 3/4 facing the sun
+    n = np.array([0.5, np.sqrt(3) / 2, 0.0])
+    e = L0[4:-4, 4:-4] * (1 + 2 * (d[4:-4, 4:-4] @ n))[..., None]
+    np.testing.assert_allclose(e, 0.75 / np.pi, rtol=0.02)
+    assert np.all(d[4:-4, 4:-4, 0] > 0) and np.all(d[4:-4, 4:-4, 1] > 0)
+    # refused in one line, nothing touched
+    assert_refused(out, "exists", "export", blend, "--object", "Plane", "--format", "monosh",
+                   "--sun", "0,60")
+    assert_refused(out, "exactly one of --env", "export", blend, "--object", "Plane",
+                   "--format", "sh-l1")
+    assert_refused(out, "--env and --sun are for the SH formats", "export", blend,
+                   "--object", "Plane", "--format", "rti-ptm", "--sun", "0,60")
+    assert_refused(out, "4, 9 or 16", "export", blend, "--object", "Plane", "--format",
+                   "rti-hsh", "--terms", "7")
+
+
+def _chromium() -> str | None:
+    path = os.environ.get("CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
+    return path if os.path.exists(path) else None
+
+
+def test_rti_page_in_headless_chromium_matches_the_numpy_relight(bumps, tmp_path):
+    """Export HSH planes, open the page in Chromium, move the mouse, screenshot the picture:
+    every pixel equals the NumPy relight of the same 8-bit planes at the light the page set
+    (within 1 level: rounding of the same float64 sum), and stays within the planes'
+    quantisation bound of the unquantised fit."""
+    folder, blend = bumps
+    if not (WEB / "node_modules" / "playwright-core").is_dir() or _chromium() is None:
+        if os.environ.get("CI"):
+            pytest.fail("CI must install Chromium and tests/web's node modules (.ci/run)")
+        pytest.skip("needs Debian's chromium and `npm ci --prefix tests/web` (make test does "
+                    "the latter when npm is present)")
+    r = relight("export", blend, "--object", "Bumps", "--format", "rti-hsh")
+    assert r.returncode == 0, r.stderr[-2000:]
+    page_dir = folder / "bumps_relight" / "Bumps_rti-hsh9"
+    rep = json.loads((folder / "bumps_relight" / "Bumps_rti-hsh9.json").read_text())
+    assert rep["bytes_per_texel"] == 27 and rep["terms"] == 9
+    p = subprocess.run(["node", str(WEB / "shoot.mjs"), str(page_dir / "index.html"),
+                        str(tmp_path / "shot"), "0.8,0.3", "0.25,0.7", "0.5,0.5"],
+                       capture_output=True, text=True, timeout=300,
+                       env={**os.environ, "CHROMIUM": _chromium()})
+    assert p.returncode == 0, p.stderr[-3000:]
+    from matplotlib.image import imread
+
+    q, scale, bias, info = rti_files.read(str(page_dir))
+    H, W = q.shape[:2]
+    for line in p.stdout.strip().splitlines():
+        shot = json.loads(line)
+        light = np.asarray(shot["light"], np.float64)
+        want_light = [2 * shot["x"] - 1, 1 - 2 * shot["y"]]      # picture's disc, y up
+        np.testing.assert_allclose(light[:2], want_light, atol=2.0 / shot["width"])
+        img = imread(shot["png"])[..., :3]
+        zoom = img.shape[0] // H
+        assert img.shape[:2] == (H * zoom, W * zoom)
+        page = np.rint(img[zoom // 2::zoom, zoom // 2::zoom] * 255).astype(int)
+        ours = rti_files.relight(str(page_dir), light).astype(int)
+        assert np.max(np.abs(page - ours)) <= 1
+        assert np.mean(page != ours) < 0.01
+        b = rti.basis("hsh", light, 9)
+        bound = (np.abs(b)[:, None] * scale).sum(axis=0) / 510 + 0.5 / 255     # (3,)
+        assert np.all(np.abs(page / 255.0 - _float_fit_display(folder, light, H, W))
+                      <= bound + 1.5 / 255)
+
+
+def _float_fit_display(folder, light, H, W):
+    """The unquantised HSH fit at ``light`` as display values, top row first, refitted here
+    from the bake's transport with the same weights (independent of the exporter's loop)."""
+    from relightable_textures.operators import texture_transport as tx
+
+    bake, store, _ = tx.load_bake(str(folder / "bumps_relight" / "Bumps_texture_report.json"))
+    info = json.loads((folder / "bumps_relight" / "Bumps_rti-hsh9" / "info.json").read_text())
+    dset = store.directions
+    from relightable_textures.operators.export import _radiance_at
+
+    vals = np.stack([rti.to_display(_radiance_at(bake, store, s, store.array),
+                                    info["exposure"]) for s in range(dset.size)])
+    coef = rti.fit(vals, dset.directions, dset.solid_angles, "hsh", 9)
+    v = np.clip(rti.evaluate(coef, light, "hsh"), 0, 1).reshape(H, W, 3)
+    return v[::-1]
+
+
+def test_rti_errors_fall_with_more_terms_and_ptm_is_written_in_the_relight_layout(bumps):
+    folder, blend = bumps
+    out = folder / "bumps_relight"
+    for fmt, extra in (("rti-ptm", []), ("rti-hsh", ["--terms", "16"])):
+        r = relight("export", blend, "--object", "Bumps", "--format", fmt, *extra)
+        assert r.returncode == 0, r.stderr[-2000:]
+    ptm = json.loads((out / "Bumps_rti-ptm.json").read_text())
+    h16 = json.loads((out / "Bumps_rti-hsh16.json").read_text())
+    assert ptm["bytes_per_texel"] == 18 and h16["bytes_per_texel"] == 48
+    assert (h16["error_vs_our_relight"]["rmse_mean"]
+            < ptm["error_vs_our_relight"]["rmse_mean"])
+    info = json.loads((out / "Bumps_rti-ptm" / "info.json").read_text())
+    assert info["type"] == "ptm" and info["colorspace"] == "rgb" and info["nplanes"] == 18
+    assert len(info["materials"][0]["scale"]) == 18
+    assert sorted(os.listdir(out / "Bumps_rti-ptm")) == \
+        ["index.html", "info.json"] + [f"plane_{k}.png" for k in range(6)]
