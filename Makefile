@@ -75,7 +75,8 @@ test-core: $(STAMP)
 ##   (out/bench/transport_textures.*), relight bench --quick on all four scenes (JSON, CSV,
 ##   Pareto charts in out/bench), the CPCA comparison on statue and room (out/bench/cpca.*),
 ##   distributed and resumed bakes (1, 2, 4 local workers), the horizon-model experiment and
-##   the material edits' transfer tensors on the demo room (~25 min of it)
+##   the material edits' transfer tensors on the demo room (~25 min of it), and the exports
+##   of a balanced bumps bake (lightmaps, RTI, equal-coefficient comparison; ~5 min)
 bench: $(STAMP)
 	mkdir -p $(OUT)/bench $(BLENDER_USER_RESOURCES)
 	$(PY) benchmarks/bench_transport_textures.py --out $(OUT)/bench
@@ -83,6 +84,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_cpca.py --scenes statue,room --out $(OUT)/bench
 	$(PY) benchmarks/bench_distributed.py
 	$(PY) benchmarks/bench_horizon_model.py
+	$(PY) benchmarks/bench_export.py --out $(OUT)/bench
 	$(PY) benchmarks/bench_materials.py --size demo
 
 ## bench-full: the standard (demo-size) sweeps behind the README tables and the presets

@@ -218,6 +218,33 @@ class VIEW3D_PT_relight_materials(_RelightSubPanel, bpy.types.Panel):
                 layout.label(text=context.scene[key], icon="INFO")
 
 
+class VIEW3D_PT_relight_export(_RelightSubPanel, bpy.types.Panel):
+    """Export a transport-texture bake: RTI planes with a web page, or a directional lightmap"""
+
+    bl_label = "Export"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        from .export_ops import LAST_EXPORT_KEY
+
+        layout, props = self.layout, context.scene.relight
+        col = layout.column(align=True)
+        col.prop(props, "export_format")
+        if props.export_format == "rti-hsh":
+            col.prop(props, "export_terms")
+        if props.export_format in ("sh-l1", "monosh"):
+            col.prop(props, "export_light")
+            if props.export_light == "ENV":
+                col.prop(props, "export_env")
+                col.prop(props, "export_env_rotation")
+        col.prop(props, "output_dir")
+        col.prop(props, "export_force")
+        layout.operator("relight.export", icon="EXPORT")
+        layout.operator("relight.open_export_page", icon="URL")
+        for line in context.scene.get(LAST_EXPORT_KEY, "").splitlines():
+            layout.label(text=line, icon="INFO")
+
+
 class VIEW3D_PT_relight_samples(_RelightSubPanel, bpy.types.Panel):
     """Add the paper sample scenes"""
 
@@ -235,4 +262,5 @@ class VIEW3D_PT_relight_samples(_RelightSubPanel, bpy.types.Panel):
 
 
 CLASSES = (VIEW3D_PT_relight, VIEW3D_PT_relight_bake, VIEW3D_PT_relight_light,
-           VIEW3D_PT_relight_vertex, VIEW3D_PT_relight_materials, VIEW3D_PT_relight_samples)
+           VIEW3D_PT_relight_vertex, VIEW3D_PT_relight_materials, VIEW3D_PT_relight_export,
+           VIEW3D_PT_relight_samples)

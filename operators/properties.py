@@ -205,6 +205,30 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         name="2-Bounce Directions", default=8, min=2, max=10000,
         description="Sun directions of the two-bounce terms ((R+1) + (R+1)^2 bakes each)")
 
+    # export (relight export): directional lightmaps and RTI models of a transport bake
+    export_format: EnumProperty(name="Format", default="rti-hsh", items=[
+        ("rti-hsh", "RTI HSH", "Hemispherical harmonics planes + a relightable web page "
+                               "(relight tools' layout, as OpenLIME reads it)"),
+        ("rti-ptm", "RTI PTM", "Polynomial texture map planes (6 terms) + a web page"),
+        ("sh-l1", "L1 SH Lightmap", "Four half EXRs of L1 spherical harmonics (Godot's "
+                                    "directional lightmap layers and axes), for one lighting"),
+        ("monosh", "MonoSH Lightmap", "Bakery's MonoSH: L0 EXR + 8-bit direction (Unity axes), "
+                                      "for one lighting")])
+    export_terms: EnumProperty(name="Terms", default="9", items=[
+        ("4", "4", "HSH order 2"), ("9", "9", "HSH order 3 (OpenLIME's)"),
+        ("16", "16", "HSH order 4 (our viewer only)")])
+    export_light: EnumProperty(name="Lighting", default="SUN", items=[
+        ("SUN", "Preview Light", "A sun from the Preview Light sliders"),
+        ("ENV", "Environment", "An equirectangular EXR")])
+    export_env: StringProperty(name="Environment", subtype="FILE_PATH",
+                               options=path_options(),
+                               description="Equirectangular RGB EXR lighting the lightmap")
+    export_env_rotation: FloatProperty(
+        name="Rotation", default=0.0, soft_min=-180.0, soft_max=180.0,
+        description="The environment's rotation about +z, as a world Mapping node's Z")
+    export_force: BoolProperty(name="Replace Existing", default=False,
+                               description="Replace an earlier export of this object and format")
+
     truth_lights: IntProperty(
         name="Check vs Cycles", default=0, min=0, max=12,
         description="Also bake Cycles Sun truths for this many held-out lights and report the "

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import bpy
 
-from . import bake_ops, cli, material_edit, panel, properties, scene_ops
+from . import bake_ops, cli, export_ops, material_edit, panel, properties, scene_ops
 
 CLASSES = (properties.CLASSES + scene_ops.CLASSES + bake_ops.CLASSES + material_edit.CLASSES
-           + panel.CLASSES)
+           + export_ops.CLASSES + panel.CLASSES)
 CLI_COMMAND = "relight"
 _cli_handles = []
 

@@ -199,3 +199,49 @@ def test_rti_errors_fall_with_more_terms_and_ptm_is_written_in_the_relight_layou
     assert len(info["materials"][0]["scale"]) == 18
     assert sorted(os.listdir(out / "Bumps_rti-ptm")) == \
         ["index.html", "info.json"] + [f"plane_{k}.png" for k in range(6)]
+
+
+def test_panel_export_operator_writes_reports_and_refuses_to_overwrite(plane, tmp_path):
+    """The Export panel's operator (bpy.ops.relight.export): the same job as the CLI, its
+    summary kept for the panel, an existing export refused unless Replace Existing is on."""
+    import bpy
+
+    import relightable_textures
+
+    folder, blend = plane
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    relightable_textures.register()
+    try:
+        _panel_export(bpy, tmp_path)
+    finally:
+        relightable_textures.unregister()
+
+
+def _panel_export(bpy, tmp_path):
+    scene = bpy.context.scene
+    obj = bpy.data.objects["Plane"]
+    bpy.context.view_layer.objects.active = obj
+    props = scene.relight
+    props.output_dir = str(tmp_path) + os.sep
+    props.export_format = "rti-hsh"
+    props.export_terms = "4"
+    assert bpy.ops.relight.export() == {"FINISHED"}
+    page = tmp_path / "Plane_rti-hsh4" / "index.html"
+    assert page.is_file() and scene["relight_last_export_page"] == str(page)
+    assert "Exported Plane as rti-hsh" in scene["relight_last_export"]
+    info = json.loads((tmp_path / "Plane_rti-hsh4" / "info.json").read_text())
+    assert info["nplanes"] == 12
+    stamp = page.stat().st_mtime_ns
+    with pytest.raises(RuntimeError, match="exists"):
+        bpy.ops.relight.export()
+    assert page.stat().st_mtime_ns == stamp
+    props.export_force = True
+    assert bpy.ops.relight.export() == {"FINISHED"}
+    # lightmaps take their sun from the Preview Light sliders (here: their defaults)
+    props.export_format = "sh-l1"
+    assert bpy.ops.relight.export() == {"FINISHED"}
+    rep = json.loads((tmp_path / "Plane_sh-l1.json").read_text())
+    assert rep["lighting"] == {"sun": [30.0, 45.0], "sun_angle": 0.0}
+    props.export_light = "ENV"
+    with pytest.raises(RuntimeError, match="choose an environment"):
+        bpy.ops.relight.export()

@@ -44,13 +44,16 @@ INSTALL_SCRIPT = textwrap.dedent(r"""
     # hasattr() on bpy.ops.relight is true for any name; dir() lists registered operators.
     report["operators"] = [n for n in ("add_sample_scene", "analyze", "bake_materials",
                                        "bake_textures", "bake_transport", "discard_chunks",
-                                       "follow_sun", "remove_preview", "show_preview")
+                                       "export", "follow_sun", "open_export_page",
+                                       "remove_preview", "show_preview")
                            if n in dir(bpy.ops.relight)]
     report["operator_types"] = [n for n in ("RELIGHT_OT_add_sample_scene",
                                             "RELIGHT_OT_analyze", "RELIGHT_OT_bake_materials",
                                             "RELIGHT_OT_bake_textures",
                                             "RELIGHT_OT_bake_transport",
-                                            "RELIGHT_OT_discard_chunks", "RELIGHT_OT_follow_sun",
+                                            "RELIGHT_OT_discard_chunks", "RELIGHT_OT_export",
+                                            "RELIGHT_OT_follow_sun",
+                                            "RELIGHT_OT_open_export_page",
                                             "RELIGHT_OT_remove_preview",
                                             "RELIGHT_OT_show_preview") if n in dir(bpy.types)]
     # The bundled wheels import from the extension's own site-packages.
@@ -61,7 +64,8 @@ INSTALL_SCRIPT = textwrap.dedent(r"""
         bpy.context.scene.relight.preset == "balanced"
     report["panels"] = [n for n in ("VIEW3D_PT_relight", "VIEW3D_PT_relight_bake",
                                     "VIEW3D_PT_relight_light", "VIEW3D_PT_relight_vertex",
-                                    "VIEW3D_PT_relight_materials", "VIEW3D_PT_relight_samples")
+                                    "VIEW3D_PT_relight_materials", "VIEW3D_PT_relight_export",
+                                    "VIEW3D_PT_relight_samples")
                         if n in dir(bpy.types)]
     # The operator really builds a scene into the open file.
     report["op_result"] = list(bpy.ops.relight.add_sample_scene(name="bumps", size="test"))
@@ -142,6 +146,8 @@ def test_zip_contents(extension_zip):
     product = sorted(str(p.relative_to(ROOT)) for d in ("lt_addon", "operators", "samples")
                      for p in (ROOT / d).rglob("*.py") if "__pycache__" not in p.parts)
     assert set(product) <= names
+    # the exported RTI page's viewer travels with the extension
+    assert {"lt_addon/export/web/viewer.js", "lt_addon/export/web/template.html"} <= names
     # This platform's SciPy and OpenEXR for both Pythons Blender uses (3.11 and 3.13), no other.
     wheels = sorted(n.split("-")[0] + "-" + n.split("-")[2] for n in names
                     if n.startswith("wheels/") and n.endswith(".whl"))
@@ -168,14 +174,16 @@ def test_install_enable_use_uninstall_in_temporary_user_dir(extension_zip, tmp_p
         n.lower().startswith("openexr") for n in rep["wheels_installed"])
     assert rep["operators"] == ["add_sample_scene", "analyze", "bake_materials",
                                 "bake_textures", "bake_transport", "discard_chunks",
-                                "follow_sun", "remove_preview", "show_preview"]
-    assert len(rep["operator_types"]) == 9
+                                "export", "follow_sun", "open_export_page", "remove_preview",
+                                "show_preview"]
+    assert len(rep["operator_types"]) == 11
     for name, path in rep["imported_from"].items():
         assert path.startswith(rep["site"]), f"{name} imported from {path}, not the extension"
     assert rep["property"]
     assert rep["panels"] == ["VIEW3D_PT_relight", "VIEW3D_PT_relight_bake",
                              "VIEW3D_PT_relight_light", "VIEW3D_PT_relight_vertex",
-                             "VIEW3D_PT_relight_materials", "VIEW3D_PT_relight_samples"]
+                             "VIEW3D_PT_relight_materials", "VIEW3D_PT_relight_export",
+                             "VIEW3D_PT_relight_samples"]
     assert rep["bake"] == ["FINISHED"]
     assert rep["bake_files"] == ["Bumps_steerable.exr", "Bumps_steerable.json",
                                  "Bumps_steerable_atlas.exr"]
@@ -184,7 +192,7 @@ def test_install_enable_use_uninstall_in_temporary_user_dir(extension_zip, tmp_p
     # the development verb `bench` is not in the extension; every product verb is
     assert "bench" not in rep["cli_verbs"] and {
         "scene", "bake-textures", "bake-transport", "analyze", "relight", "bake-materials",
-        "relight-materials"} <= set(rep["cli_verbs"])
+        "relight-materials", "export"} <= set(rep["cli_verbs"])
     assert rep["cli_scene"] == 0 and blend_out.exists()
     assert rep["cli_bad"] == 2 and not pathlib.Path(str(blend_out) + "2.blend").exists()
     assert rep["enabled_after_cli"]
