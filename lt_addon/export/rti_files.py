@@ -85,15 +85,7 @@ def write(folder: str, q, scale, bias, kind: str, *, exposure: float = 1.0,
                 .replace("{{PLANES}}", json.dumps(uris))
                 .replace("{{VIEWER}}", js))
         atomic.write_text(os.path.join(tmp, "index.html"), page)
-        if os.path.exists(folder):
-            old = folder + ".old-export"
-            if os.path.exists(old):
-                shutil.rmtree(old)
-            os.rename(folder, old)
-            os.rename(tmp, folder)
-            shutil.rmtree(old)
-        else:
-            os.rename(tmp, folder)
+        atomic.replace_folder(tmp, folder)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

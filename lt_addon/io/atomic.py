@@ -71,3 +71,21 @@ def write_json(path: str | os.PathLike, data, **dump_kw) -> int:
     text is made before the file is opened, so data that cannot be encoded changes nothing."""
     dump_kw.setdefault("indent", 2)
     return write_text(path, json.dumps(data, **dump_kw))
+
+
+def replace_folder(built: str | os.PathLike, target: str | os.PathLike) -> None:
+    """Move the completed folder ``built`` to ``target`` (same file system). An existing
+    ``target`` is renamed aside first and removed only after the new one is in place, so
+    ``target`` never names a partial folder."""
+    import shutil
+
+    built, target = os.fspath(built), os.fspath(target)
+    if not os.path.exists(target):
+        os.rename(built, target)
+        return
+    old = target + ".old-replaced"
+    if os.path.exists(old):
+        shutil.rmtree(old)
+    os.rename(target, old)
+    os.rename(built, target)
+    shutil.rmtree(old)

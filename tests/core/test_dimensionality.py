@@ -103,7 +103,8 @@ def test_analyse_report():
     assert rep["mu"] == pytest.approx(2 ** -rep["slope"])
     assert rep["p_star"] == pytest.approx(DM.optimal_patch_size(17, rep["mu"]))
     rep2 = DM.analyse(np.eye(16), [0], edges=_grid_edges(4, 4), sizes=[1, 4, 16], N=16)
-    assert rep2["slope"] == pytest.approx(1.0) and rep2["p_star"] == 0.0
+    # p* is 0 up to rounding (7e-15 on some CPUs' SIMD paths)
+    assert rep2["slope"] == pytest.approx(1.0) and rep2["p_star"] == pytest.approx(0.0, abs=1e-9)
     assert rep2["recommended_clusters"] == 16
     with pytest.raises(ValueError, match="exactly one of edges"):
         DM.analyse(T, [0])

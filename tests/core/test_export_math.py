@@ -149,7 +149,7 @@ def test_rti_folder_round_trips_and_relights_like_the_coefficients(tmp_path):
     q4, s4, b4 = rti.quantize(coef[:, :4])
     rti_files.write(folder, q4.reshape(6, 5, 4, 3), s4, b4, "hsh")
     assert len(list((tmp_path / "obj_rti-hsh").glob("plane_*.png"))) == 4
-    assert not list(tmp_path.glob("*.tmp-export")) and not list(tmp_path.glob("*.old-export"))
+    assert not list(tmp_path.glob("*.tmp-export")) and not list(tmp_path.glob("*.old-replaced"))
 
 
 def test_ptm_and_hsh_fits_reproduce_data_in_their_span_and_quantise_within_half_a_step():
