@@ -1030,14 +1030,14 @@ def _relight_transport(args, obj, out) -> int:
         raise CliError(f"--sun-angle must be in 0..90 degrees, got {angle}")
     info = {"object": obj.name, "method": "transport"}
     if args.env:
+        from .cycles_bake import BakeInputError
+        from .export import read_environment
+
         env_path = os.path.abspath(args.env)
         try:
-            ch, _ = exrio.read_exr(env_path)
-        except Exception as exc:  # not an EXR, unreadable
-            raise CliError(f"cannot read {env_path} as an EXR environment: {exc}") from None
-        if not {"R", "G", "B"} <= set(ch):
-            raise CliError(f"{env_path} has no R, G, B channels")
-        env = np.stack([ch[c] for c in "RGB"], axis=-1)   # row 0 at the bottom (exrio)
+            env = read_environment(env_path)        # row 0 at the bottom (exrio)
+        except BakeInputError as exc:
+            raise CliError(str(exc)) from None
         img = tx.relight_environment(bake, store, env, -args.rotate,   # Mapping convention
                                      row_order="bottom_first")
         img = img * args.intensity * np.asarray(args.color, np.float32)
