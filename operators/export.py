@@ -273,17 +273,55 @@ def _radiance_at(bake, store, s_index: int, T) -> np.ndarray:
     return out
 
 
-def rti_export(bake, store, settings, kernel: str, progress_every=None):
-    """Fit ``settings.kind`` to the bake's display values at every baked light; returns the
-    coefficients (P, K, 3), the exposure used and the errors at held-out lights.
+@dataclass
+class RadianceSource:
+    """What an RTI fit samples: radiance (P, 3) of every texel under a unit white sun, at the
+    ``lights`` (a DirectionSet with solid angles) by index, and at any direction (for the
+    held-out lights); ``resolution`` R with P = R * R, row 0 at v = 0."""
+    lights: object
+    at_sample: object          # s -> (P, 3)
+    at_direction: object       # (3,) -> (P, 3)
+    resolution: int
+    what: str
+
+
+def transport_source(bake, store, kernel: str) -> RadianceSource:
+    """A transport-texture bake: the baked suns exactly, other lights by its own relight."""
+    from .texture_transport import relight
+
+    return RadianceSource(
+        store.directions, lambda s: _radiance_at(bake, store, s, store.array),
+        lambda d: relight(bake, store, d, 0.0, source="transport",
+                          kernel=kernel).reshape(-1, 3).astype(np.float64),
+        store.resolution, "transport texture (with its bounce term)")
+
+
+#: Lights a lobes bake is sampled at for an RTI fit (its relight is smooth in the light).
+LOBES_LIGHTS = "hemi:400:1.5"
+
+
+def lobes_source(texture) -> RadianceSource:
+    """A steerable (lobes) bake: its relight sampled at LOBES_LIGHTS."""
+    from ..lt_addon.sphere.directions import parse_direction_spec
+
+    dset = parse_direction_spec(LOBES_LIGHTS)
+
+    def at(d):
+        return np.asarray(texture.relight(np.asarray(d, np.float64)),
+                          np.float64).reshape(-1, 3)
+    return RadianceSource(dset, lambda s: at(dset.directions[s]), at,
+                          int(texture.basis_images.shape[1]), "steerable lobes bake")
+
+
+def rti_export(source: RadianceSource, settings, progress_every=None):
+    """Fit ``settings.kind`` to the source's display values at every one of its lights;
+    returns the 8-bit planes (P, K, 3) with scale and bias, the exposure used and the errors
+    at held-out lights.
 
     Radiance under a unit white sun is scaled by the exposure and sRGB-encoded (what a camera
     records; the RTI field fits its bases to such images), then fitted by weighted least
-    squares (weights: the baked directions' solid angles) one direction at a time."""
-    from .texture_transport import relight
-
-    dset = store.directions
-    T = store.array
+    squares (weights: the lights' solid angles) one light at a time."""
+    dset = source.lights
     terms = settings.terms or (6 if settings.kind == "ptm" else 9)
     B = rti.basis(settings.kind, dset.directions, terms)                 # (S, K)
     sw = np.sqrt(dset.solid_angles)
@@ -296,13 +334,13 @@ def rti_export(bake, store, settings, kernel: str, progress_every=None):
     exposure = settings.exposure
     if exposure is None:
         top = np.argsort(dset.directions[:, 2])[-8:]
-        sample = np.concatenate([_radiance_at(bake, store, int(s), T) for s in top])
+        sample = np.concatenate([source.at_sample(int(s)) for s in top])
         p = float(np.percentile(sample, 99.5))
         exposure = 1.0 / p if p > 0 else 1.0
-    P = store.n_texels
+    P = source.resolution ** 2
     coef = np.zeros((P, terms, 3))
     for s in range(dset.size):
-        v = rti.to_display(_radiance_at(bake, store, s, T), exposure)
+        v = rti.to_display(source.at_sample(s), exposure)
         coef += M[:, s][None, :, None] * v[:, None, :]
         if progress_every and s % progress_every == 0:
             yield Progress(s, dset.size, f"fitting {settings.format}: light {s + 1}/{dset.size}")
@@ -310,8 +348,7 @@ def rti_export(bake, store, settings, kernel: str, progress_every=None):
     deq = rti.dequantize(q, scale, bias)
     per_light = []
     for d in held_out_lights(settings.held_out):
-        truth = rti.to_display(relight(bake, store, d, 0.0, source="transport",
-                                       kernel=kernel).reshape(-1, 3), exposure)
+        truth = rti.to_display(source.at_direction(d), exposure)
         est = np.clip(rti.evaluate(deq, d, settings.kind), 0.0, 1.0)
         e, psnr = rti.rmse_psnr(est, truth)
         per_light.append({"light": [round(float(x), 4) for x in d], "rmse": round(e, 5),
@@ -329,11 +366,12 @@ def rti_export(bake, store, settings, kernel: str, progress_every=None):
 
 
 def export_job(scene, obj, settings: ExportSettings, out_dir: str, force: bool = False):
-    """Export ``obj``'s transport-texture bake (a job: yields Progress, returns ExportOutput).
+    """Export ``obj``'s latest texture bake (a job: yields Progress, returns ExportOutput): a
+    transport bake serves every format, a lobes bake the RTI ones.
 
     Refuses (BakeInputError) before any work when an output exists and ``force`` is False;
     every file is written to a temporary name and renamed when complete."""
-    from .blend_files import bake_file
+    from .blend_files import bake_file, object_bakes
     from .texture_transport import KIND as TT_KIND
     from .texture_transport import load_bake
 
@@ -345,12 +383,25 @@ def export_job(scene, obj, settings: ExportSettings, out_dir: str, force: bool =
             if os.path.exists(os.path.join(out_dir, n)):
                 raise BakeInputError(f"{os.path.join(out_dir, n)} exists; use --force to "
                                      "replace it")
+    kinds = [b.get("kind") for b in object_bakes(obj)]
+    lobes = "transport_texture" not in kinds and "steerable_texture" in kinds
     try:
-        bake, store, report = load_bake(bake_file(obj, TT_KIND, "transport texture"))
+        if lobes:
+            if settings.kind == "":
+                raise BakeInputError(f"{obj.name}'s bake is a lobes bake; {settings.format} "
+                                     "needs the visibility of a transport bake "
+                                     "(bake-textures --method transport)")
+            from .steerable_bake import load_texture
+
+            source = lobes_source(load_texture(obj))
+            report = {"report": bake_file(obj, "steerable_texture", "steerable texture")}
+        else:
+            bake, store, report = load_bake(bake_file(obj, TT_KIND, "transport texture"))
+            kernel = report["settings"].get("kernel", "linear")
+            source = transport_source(bake, store, kernel)
     except (FileNotFoundError, ValueError, KeyError) as exc:
         raise BakeInputError(str(exc)) from None
-    kernel = report["settings"].get("kernel", "linear")
-    R, S = store.resolution, store.directions.size
+    R, S = source.resolution, source.lights.size
     yield Progress(0, 3, f"{obj.name}: {settings.format} from {S} directions at {R}x{R}")
     base = os.path.join(out_dir, output_stem(obj.name, settings))
     files, figures = {}, {}
@@ -405,7 +456,7 @@ def export_job(scene, obj, settings: ExportSettings, out_dir: str, force: bool =
                                                   " (the bake has none)"))}
     else:
         t0 = time.perf_counter()
-        gen = rti_export(bake, store, settings, kernel, progress_every=max(1, S // 20))
+        gen = rti_export(source, settings, progress_every=max(1, S // 20))
         while True:
             try:
                 step = next(gen)
@@ -421,10 +472,10 @@ def export_job(scene, obj, settings: ExportSettings, out_dir: str, force: bool =
         files["folder"] = folder
         K = q.shape[1]
         figures = {"error_vs_our_relight": errors, "terms": K, "bytes_per_texel": 3 * K,
-                   "exposure": exposure,
+                   "exposure": exposure, "fitted_from": source.what,
                    "error_measure": "RMSE / PSNR of sRGB display values in [0, 1] at held-out "
-                                    "sun directions vs our relight from the transport (both "
-                                    "with the bake's bounce term)"}
+                                    "sun directions vs our relight of the same bake (a "
+                                    "transport bake: from T, with its bounce term)"}
     seconds["wall_total"] = time.perf_counter() - started
     rep = {"kind": KIND, "object": obj.name, "format": settings.format,
            "settings": asdict(settings), "source": report.get("report"),

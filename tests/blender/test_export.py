@@ -245,3 +245,24 @@ def _panel_export(bpy, tmp_path):
     props.export_light = "ENV"
     with pytest.raises(RuntimeError, match="choose an environment"):
         bpy.ops.relight.export()
+
+
+def test_a_lobes_bake_exports_rti_and_refuses_lightmaps(tmp_path):
+    """A steerable (lobes) bake is a source for RTI (its relight sampled at hemi:400:1.5);
+    the lightmaps need a transport bake's visibility and say so."""
+    blend = tmp_path / "bumps.blend"
+    assert relight("scene", "bumps", "--out", blend).returncode == 0
+    r = relight("bake-textures", blend, "--object", "Bumps", "--method", "lobes",
+                "--resolution", "16", "--samples", "4", "--order", "3", "--bounces", "0",
+                "--no-compare")
+    assert r.returncode == 0, r.stderr[-2000:]
+    r = relight("export", blend, "--object", "Bumps", "--format", "rti-ptm", "--held-out", "4")
+    assert r.returncode == 0, r.stderr[-2000:]
+    out = tmp_path / "bumps_relight"
+    rep = json.loads((out / "Bumps_rti-ptm.json").read_text())
+    assert rep["fitted_from"] == "steerable lobes bake" and rep["resolution"] == 16
+    assert 0 < rep["error_vs_our_relight"]["rmse_mean"] < 0.2
+    q, scale, bias, info = rti_files.read(str(out / "Bumps_rti-ptm"))
+    assert q.shape == (16, 16, 6, 3)
+    assert_refused(out, "needs the visibility of a transport bake", "export", blend,
+                   "--object", "Bumps", "--format", "sh-l1", "--sun", "30,40")
