@@ -137,7 +137,10 @@ def test_preview_node_group_rendered_by_cycles_equals_numpy_relight(bumps, tmp_p
     img = render_rgb(scene, tmp_path, R)
     want = result.texture.relight(direction_from_az_el(az, el), inten, color)
     assert want.max() > 0.1
-    assert np.abs(img - want).max() <= 2.0 ** -10 * want.max()
+    # half-float precision of the output, plus that of the unit-intensity sum where the clamp at
+    # 0 decides differently between the half atlas and float32 NumPy (a flat 1.16e-3 over such
+    # texels, measured on an AVX-512 machine; 2^-10 * intensity = 1.95e-3)
+    assert np.abs(img - want).max() <= 2.0 ** -10 * (want.max() + inten)
 
 
 def test_preview_follows_the_sun_lamp(bumps, tmp_path):
