@@ -118,7 +118,7 @@ def write_analysis(report: dict, out_dir: str) -> dict:
     """Write the JSON report (and, where the development tools are present, the two charts)
     into ``out_dir``; returns the paths written."""
     os.makedirs(out_dir, exist_ok=True)
-    safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in report["object"])
+    safe = atomic.safe_name(report["object"])
     paths = {"json": os.path.join(out_dir, f"{safe}_analysis.json")}
     try:   # charts need matplotlib, a development extra: the installed extension has neither
         from ..devtools import charts

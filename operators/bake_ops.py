@@ -390,7 +390,8 @@ def kept_chunks(context) -> list:
     ``[(folder, chunk count)]``; [] when there are none or no output folder yet."""
     import glob
 
-    from .texture_transport import CACHE_FOLDER, _safe
+    from ..lt_addon.io.atomic import safe_name
+    from .texture_transport import CACHE_FOLDER
 
     obj = context.active_object
     try:
@@ -399,7 +400,7 @@ def kept_chunks(context) -> list:
         return []
     if obj is None or not os.path.isdir(root):
         return []
-    active = _safe(obj.name)
+    active = safe_name(obj.name)
     out = []
     for folder in sorted(glob.glob(os.path.join(root, "*"))):
         base = os.path.basename(folder)   # "A+B" (objects baked together) or "A_vertex"

@@ -531,7 +531,7 @@ def _open_objects(path: str, names: list) -> list:
 
 def _refuse_existing(out_dir: str, obj_name: str, suffixes, force: bool, what: str) -> None:
     """Refuse (before any work) to replace ``<out_dir>/<object><suffix>`` without --force."""
-    safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in obj_name)
+    safe = atomic.safe_name(obj_name)
     if force:
         return
     for suffix in suffixes:
@@ -672,7 +672,7 @@ def _cmd_bake_texture_transport(args) -> int:
     objects = _open_objects(path, args.object)
     if not args.force:
         for o in objects:
-            rp = os.path.join(out_dir, f"{tx._safe(o.name)}_texture_report.json")
+            rp = os.path.join(out_dir, f"{atomic.safe_name(o.name)}_texture_report.json")
             if os.path.exists(rp):
                 raise CliError(f"a bake of {o.name} exists in {out_dir} (use --force to "
                                "replace it)")

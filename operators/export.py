@@ -105,16 +105,12 @@ class ExportOutput:
     files: dict = field(default_factory=dict)
 
 
-def _safe(name: str) -> str:
-    return "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in name)
-
-
 def output_stem(obj_name: str, settings: "ExportSettings") -> str:
     """``<object>_<format>``; HSH adds its term count (``_rti-hsh9``)."""
     fmt = settings.format
     if fmt == "rti-hsh":
         fmt += str(settings.terms or 9)
-    return f"{_safe(obj_name)}_{fmt}"
+    return f"{atomic.safe_name(obj_name)}_{fmt}"
 
 
 def output_names(obj_name: str, settings: "ExportSettings") -> list:

@@ -400,7 +400,7 @@ class MaterialsBakeOutput:
 
 
 def tensors_path(out_dir: str, objects) -> str:
-    safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in objects[0].name)
+    safe = atomic.safe_name(objects[0].name)
     return os.path.join(out_dir, safe + "_materials.npz")
 
 

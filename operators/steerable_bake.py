@@ -156,7 +156,7 @@ def write_bake(result: BakeResult, obj, out_dir: str, settings: TextureBakeSetti
     report next to it as ``.json``; both replace earlier files only once complete.
     """
     os.makedirs(out_dir, exist_ok=True)
-    safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in obj.name)
+    safe = atomic.safe_name(obj.name)
     exr_path = os.path.join(out_dir, f"{safe}_steerable.exr")
     json_path = os.path.join(out_dir, f"{safe}_steerable.json")
     t0 = time.perf_counter()

@@ -141,10 +141,6 @@ class TransportTextureResult:
     chunks: dict = field(default_factory=dict)   # chunks_total, chunks_reused, chunk_directions
 
 
-def _safe(name: str) -> str:
-    return "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in name)
-
-
 def _rss_mb() -> float:
     """Anonymous resident memory (MiB): what the process holds. File-backed pages of the store's
     memmap are page cache the kernel can drop, so they are not counted (VmRSS would)."""
@@ -228,7 +224,7 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
     os.makedirs(out_dir, exist_ok=True)
     cache = direct_chunk_cache(scene, objects, settings, out_dir) if resume else None
     stores = [tt.TransportStore.create(
-        os.path.join(out_dir, f"{_safe(o.name)}_transport_texture.npy"), dset, R,
+        os.path.join(out_dir, f"{atomic.safe_name(o.name)}_transport_texture.npy"), dset, R,
         {"object": o.name, "kind": "direct_irradiance_over_pi", "samples": 1,
          "seed": settings.seed,
          "texel_sampling": "1 sample at the texel centre (Cycles' first bake sample)",
@@ -315,7 +311,7 @@ def direct_chunk_cache(scene, objects, settings: TransportTextureSettings, out_d
     key = {"stage": "direct", "scene": scene_key(scene, objects),
            "directions": settings.directions, "resolution": settings.resolution,
            "seed": settings.seed, "chunk_directions": CHUNK_DIRECTIONS}
-    root = os.path.join(out_dir, CACHE_FOLDER, "+".join(_safe(o.name) for o in objects))
+    root = os.path.join(out_dir, CACHE_FOLDER, "+".join(atomic.safe_name(o.name) for o in objects))
     cache = ChunkCache(root, key)
     cache.prune_others()
     return cache
@@ -524,7 +520,7 @@ def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: d
     t0 = time.perf_counter()
     reports = []
     for b, obj in zip(result.objects, objects):
-        base = os.path.join(out_dir, _safe(b.name))
+        base = os.path.join(out_dir, atomic.safe_name(b.name))
         if b.store is not None and getattr(b.store, "_tmp", None):
             b.store_path = b.store.commit()
         files = {"transport": b.store_path}
@@ -764,8 +760,8 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
         from .compare_render import report_comparison
 
         yield Progress(1, 1, "rendering the comparison from the scene camera")
-        cmp = report_comparison(scene, objects, truth_lights(truth), settings.sun_angle,
-                                os.path.join(out_dir, f"{_safe(objects[0].name)}_compare.png"),
+        png = os.path.join(out_dir, f"{atomic.safe_name(objects[0].name)}_compare.png")
+        cmp = report_comparison(scene, objects, truth_lights(truth), settings.sun_angle, png,
                                 truth_samples)
         for rep in reports:
             rep["comparison"] = cmp

@@ -83,7 +83,7 @@ def vertex_chunk_cache(scene, obj, directions, bounces: int, samples, seed: int,
            "directions": hashlib.sha256(dirs.tobytes()).hexdigest(), "count": len(dirs),
            "bounces": int(bounces), "samples": _default_samples(samples, bounces),
            "seed": int(seed), "chunk_directions": CHUNK_DIRECTIONS}
-    safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in obj.name)
+    safe = atomic.safe_name(obj.name)
     cache = ChunkCache(os.path.join(out_dir, ".relight_cache", safe + "_vertex"), key)
     cache.prune_others()
     return cache
@@ -340,7 +340,7 @@ def _stem(out_dir: str, obj) -> str:
     """``<out_dir>/<object>``, the object name made file-safe: every file of the bake starts so."""
     import os
 
-    safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in obj.name)
+    safe = atomic.safe_name(obj.name)
     return os.path.join(out_dir, safe)
 
 

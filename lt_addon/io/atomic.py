@@ -89,3 +89,9 @@ def replace_folder(built: str | os.PathLike, target: str | os.PathLike) -> None:
     os.rename(target, old)
     os.rename(built, target)
     shutil.rmtree(old)
+
+
+def safe_name(name: str) -> str:
+    """``name`` (an object's, say) as a file-name stem: letters, digits, ``-`` and ``_`` kept,
+    anything else ``_``."""
+    return "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in name)
