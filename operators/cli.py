@@ -1039,9 +1039,11 @@ def _relight_transport(args, obj, out) -> int:
         except BakeInputError as exc:
             raise CliError(str(exc)) from None
         img = tx.relight_environment(bake, store, env, -args.rotate,   # Mapping convention
-                                     row_order="bottom_first")
+                                     row_order="bottom_first", source=args.source)
         img = img * args.intensity * np.asarray(args.color, np.float32)
-        info.update(env=env_path, rotate=args.rotate, indirect="not included (direct light)")
+        info.update(env=env_path, rotate=args.rotate, source=args.source,
+                    indirect=("steered by the environment" if bake.indirect is not None
+                              else "none baked (bounces 0)"))
     else:
         az, el = args.light
         img = tx.relight(bake, store, direction_from_az_el(az, el), angle, args.intensity,

@@ -138,6 +138,18 @@ class VIEW3D_PT_relight_light(_RelightSubPanel, bpy.types.Panel):
         if "relight_azimuth" not in scene:
             layout.label(text="Bake first: the sliders come with the preview")
             return
+        props = scene.relight
+        if any(g.name.startswith("Relight Transport (") for g in bpy.data.node_groups):
+            layout.row().prop(props, "texture_light", expand=True)
+        if props.texture_light == "WORLD":
+            col = layout.column(align=True)
+            col.prop(props, "env_strength")
+            col.prop(props, "env_rotation")
+            warning = scene.get("relight_texture_env_warning")
+            for line in (warning.split("; ") if warning else ()):
+                layout.label(text=line, icon="ERROR")
+            layout.label(text="Transport textures: the world; steerable previews: the sliders",
+                         icon="INFO")
         col = layout.column(align=True)
         for key in SLIDERS:
             if key != "relight_follow_sun":

@@ -38,6 +38,7 @@ FRAME_NAME = "Relight Preview"
 #: the bake kinds with a preview; a material holds at most one preview of each
 PREVIEW_KINDS = ("steerable_texture", "transport_texture", "eigentransport", "material_tensors")
 _TAG = "relight_preview"  # custom property marking our nodes
+OWNER = "relight_object"  # custom property: the object a preview's group belongs to
 
 #: Scene slider properties: name -> (default, min, max, description)
 SLIDERS = {
@@ -391,7 +392,12 @@ def remove_preview(obj, scene=None, purge: bool = True, kind: str | None = None)
         changed += 1
     if not purge:
         return changed
-    for group in [g for g in bpy.data.node_groups if g.get(_TAG) and g.users == 0]:
+    # A group only a fake user holds is the other light mode of a transport preview: unused
+    # once no group of the same object is in a material any more.
+    ours = [g for g in bpy.data.node_groups if g.get(_TAG)]
+    shown = {g.get(OWNER) for g in ours if g.users > int(g.use_fake_user)}
+    for group in [g for g in ours if g.users == 0
+                  or (g.use_fake_user and g.users == 1 and g.get(OWNER) not in shown)]:
         bpy.data.node_groups.remove(group)
     for image in [i for i in bpy.data.images if i.get(_TAG) and i.users == 0]:
         bpy.data.images.remove(image)

@@ -71,9 +71,19 @@ def _point_poll(self, obj):
 
 
 def _refresh_vertex_preview(self, context):
+    from .transport_preview import update_environment_previews
     from .vertex_relight import update_preview
 
     update_preview(context.scene)
+    update_environment_previews(context.scene)
+
+
+def _on_texture_light(self, context):
+    from .transport_preview import set_light_mode
+
+    for obj in context.scene.objects:
+        if obj.type == "MESH":
+            set_light_mode(context.scene, obj, self.texture_light)
 
 
 class RelightSceneSettings(bpy.types.PropertyGroup):
@@ -117,10 +127,20 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
     sun: PointerProperty(name="Sun", type=bpy.types.Object, poll=_sun_poll,
                          description="Sun lamp whose direction the preview follows")
 
+    texture_light: EnumProperty(
+        name="Light", default="SUN", update=_on_texture_light,
+        description="What lights the transport-texture previews",
+        items=[("SUN", "Sun", "The Preview Light sliders, or the followed Sun lamp (no Python "
+                              "per change)"),
+               ("WORLD", "World", "The world's Environment Texture, turned by its Mapping Z "
+                                  "rotation plus Environment Rotation, times Environment "
+                                  "Strength (a few ms of Python per change)")])
+
     # per-vertex (eigentransport) preview: NumPy shading written into one colour attribute
     env_strength: FloatProperty(
         name="Environment Strength", default=1.0, min=0.0, soft_max=10.0,
-        description="Scale of the world environment lighting the vertex preview",
+        description="Scale of the world environment lighting the vertex preview and the "
+                    "texture previews lit by the World",
         update=_refresh_vertex_preview)
     env_rotation: FloatProperty(
         name="Environment Rotation", default=0.0, soft_min=-180.0, soft_max=180.0,
@@ -259,17 +279,27 @@ def settings_from_scene(props):
 
 @bpy.app.handlers.persistent
 def _on_depsgraph_update(scene, depsgraph):
-    """Refresh the vertex preview when the chosen point lamp moves or changes power."""
+    """Refresh the vertex preview when the chosen point lamp moves or changes power, and the
+    texture previews lit by the World when the world changes (its image, strength, Mapping)."""
     props = getattr(scene, "relight", None)
-    lamp = props.point_light if props is not None else None
-    if lamp is None:
+    if props is None:
         return
+    lamp = props.point_light
+    lamp_moved = world_changed = False
     for update in depsgraph.updates:
-        if getattr(update.id, "original", None) in (lamp, lamp.data):
-            from .vertex_relight import update_preview
+        original = getattr(update.id, "original", None)
+        if lamp is not None and original in (lamp, lamp.data):
+            lamp_moved = True
+        if isinstance(update.id, bpy.types.World) and update.id.original == scene.world:
+            world_changed = True
+    if lamp_moved:
+        from .vertex_relight import update_preview
 
-            update_preview(scene)
-            return
+        update_preview(scene)
+    if world_changed and props.texture_light == "WORLD":
+        from .transport_preview import update_environment_previews
+
+        update_environment_previews(scene)
 
 
 def register() -> None:

@@ -446,13 +446,23 @@ def relight(bake: ObjectBake, store, direction, sun_angle: float = 0.0, intensit
 
 
 def relight_environment(bake: ObjectBake, store, env_image, rotation_deg: float = 0.0,
-                        *, row_order: str = "top_first") -> np.ndarray:
-    """Radiance (R, R, 3) under an equirectangular environment (upper hemisphere, direct
-    light from T; the indirect term is not included -- see the report)."""
+                        *, row_order: str = "top_first", source: str = "transport") -> np.ndarray:
+    """Radiance (R, R, 3) under an equirectangular environment (upper hemisphere): direct
+    light from T (``source="transport"``) or from the PCA model (``"model"``, what the
+    viewport shows), plus the indirect term steered by the same environment
+    (:func:`..lt_addon.transport.texture.steer_environment`)."""
     w = tt.environment_weights(store.directions, env_image, row_order=row_order,
                                rotation_deg=rotation_deg)
-    e = store.relight_dense(w)
-    return (e if e.ndim == 3 else e[..., None]) * bake.albedo
+    model = bake.model
+    if source == "model" and hasattr(model, "relight_dense") and hasattr(model, "V"):
+        e = model.relight_dense(w)
+    else:
+        e = store.relight_dense(w)
+    out = (e if e.ndim == 3 else e[..., None]) * bake.albedo
+    if bake.indirect is not None:
+        B = tt.steering_matrix(bake.indirect, store.directions)
+        out = out + _upsample(tt.steer_environment(bake.indirect, B, w), store.resolution)
+    return out.astype(np.float32)
 
 
 # ----------------------------------------------------------------------------------------------

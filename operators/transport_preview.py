@@ -16,6 +16,15 @@ coefficient_tables`), so the node group only needs texture lookups:
 :func:`viewport_relight` is the same computation in NumPy (bilinear table lookup, half-float
 atlases), which the tests compare with a Cycles render of the group. The sun size is baked
 into the tables; changing it rewrites them (:func:`install_transport_preview`, a few ms).
+
+**The world's environment** (the scene's *Texture Light* set to World): an environment is
+``sum_s L(w_s) dw_s T[s]``, so each component gets one RGB coefficient ``C[:, k] = sum_s L_s
+dw_s V[s, k]`` and each steerable indirect basis image one ``G[:, j] = sum_s L_s dw_s gain(w_s)
+c_j(w_s)``. The *environment groups* (:func:`build_env_group`, :func:`build_env_indirect_group`)
+have the sun groups' sockets, so switching swaps the groups' trees and keeps every link; they
+hold ``C`` and ``G`` as constants that Python rewrites when the world, its Mapping Z rotation or
+the Environment Rotation / Strength change (:func:`update_environment_previews`, one small
+matrix product: no re-bake, no texture rewrite). :func:`viewport_relight_env` is its NumPy twin.
 """
 
 from __future__ import annotations
@@ -25,12 +34,17 @@ import os
 import bpy
 import numpy as np
 
+import time
+
 from ..lt_addon.io import exrio
 from ..lt_addon.transport import texture as tt
 from ..lt_addon.io.atlas import atlas_layout, pack_atlas
 from . import preview_nodes as pn
 
 GROUP_PREFIX = "Relight Transport"
+ENV_PREFIX = "Relight Transport env"
+#: Scene property holding the last environment-preview warning (shown in the panel).
+ENV_WARNING_KEY = "relight_texture_env_warning"
 
 
 def _tiles3(arr):
@@ -162,6 +176,8 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
     if old is not None:
         bpy.data.node_groups.remove(old)
     group.name = gname
+    group["relight_report"] = report["report"]
+    group[pn.OWNER] = obj.name
     indirect_group = None
     if bake.indirect is not None:
         iname = f"{GROUP_PREFIX} indirect ({obj.name})"
@@ -173,6 +189,7 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
         if old is not None:
             bpy.data.node_groups.remove(old)
         indirect_group.name = iname
+        indirect_group[pn.OWNER] = obj.name
     pn.ensure_sliders(scene)
     if sun is None:
         sun = scene.get("relight_sun")
@@ -193,6 +210,15 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
         return out
 
     pn._wire_preview(obj, color, "transport_texture")
+    # environment groups of an earlier bake are stale: rebuilt from this one when shown
+    for name in (f"{ENV_PREFIX} ({obj.name})", f"{ENV_PREFIX} indirect ({obj.name})"):
+        stale = bpy.data.node_groups.get(name)
+        if stale is not None:
+            bpy.data.node_groups.remove(stale)
+    _ENV_CACHE.pop(obj.name, None)
+    props = getattr(scene, "relight", None)
+    if props is not None and props.texture_light == "WORLD":
+        set_light_mode(scene, obj, "WORLD")
     return {**files, "group": gname, "group_nodes": len(group.nodes), "sun_angle": angle,
             "tiles": len(tables)}
 
@@ -209,3 +235,304 @@ def rewrite_tables(obj, report: dict, bake, store, sun_angle: float) -> None:
                     {"format": "relightable_textures.transport_preview", "tiles": len(tables),
                      "resolution": tables.shape[1], "sun_angle": sun_angle}, pixel_type="half")
     pn.load_atlas_image(path, f"{obj.name} transport tables")
+
+
+# ---------------------------------------------------------------------------------------------
+# the world's environment: constant coefficients rewritten from Python per change
+
+
+def env_coefficients(V, B, directions, env, rotation_deg: float, strength: float = 1.0,
+                     row_order: str = "bottom_first", validate: bool = True):
+    """RGB coefficients of an environment for the environment groups.
+
+    Parameters
+    ----------
+    V : ndarray, shape (S, K)
+        The PCA's light loadings (T ~ V U).
+    B : ndarray, shape (S, J) or None
+        :func:`..lt_addon.transport.texture.steering_matrix` (None: no indirect term).
+    env : ndarray, shape (H, W, 3) or (H, W)
+        Equirectangular radiance (W m^-2 sr^-1), rows in ``row_order``.
+    rotation_deg : float
+        As :func:`..lt_addon.transport.texture.environment_weights` (``-`` the Mapping Z
+        rotation).
+
+    Returns
+    -------
+    C : ndarray, shape (3, K), float64 -- per colour channel, per component (W m^-2)
+    G : ndarray, shape (3, J), float64, or None
+    """
+    W = tt.environment_weights(directions, env, row_order=row_order, rotation_deg=rotation_deg,
+                               validate=validate)
+    if W.ndim == 1:
+        W = np.repeat(W[:, None], 3, axis=1)
+    W = float(strength) * W[:, :3]
+    C = W.T @ np.asarray(V, np.float64)
+    G = None if B is None else W.T @ B
+    return C, G
+
+
+def viewport_relight_env(eig_tiles, C, indirect_images=None, G=None) -> np.ndarray:
+    """NumPy twin of the environment groups: (R, R, 3). ``eig_tiles`` as
+    :func:`preview_arrays` (albedo last); ``indirect_images`` (J, R, R, 3) at the same
+    resolution (the node tree samples the indirect atlas at the texture's own texels)."""
+    eig = np.asarray(eig_tiles, np.float64)
+    n = eig.shape[0] - 1
+    Cp = np.zeros((3, 3 * n))
+    Cp[:, :C.shape[1]] = C
+    e = np.einsum("ctk,tyxk->yxc", Cp.reshape(3, n, 3), eig[:n])
+    out = e * eig[n]
+    if G is not None:
+        ind = np.einsum("cj,jyxc->yxc", G, np.asarray(indirect_images, np.float64))
+        out = out + np.maximum(ind, 0.0)
+    return out.astype(np.float32)
+
+
+def _env_interface(group):
+    group[pn._TAG] = True
+    iface = group.interface
+    # the sun groups' sockets, so that swapping a group node's tree keeps its links
+    s = iface.new_socket("Light Direction", in_out="INPUT", socket_type="NodeSocketVector")
+    s.default_value = (0.0, 0.0, 1.0)
+    s = iface.new_socket("Intensity", in_out="INPUT", socket_type="NodeSocketFloat")
+    s.default_value, s.min_value = 1.0, 0.0
+    s = iface.new_socket("Color", in_out="INPUT", socket_type="NodeSocketColor")
+    s.default_value = (1.0, 1.0, 1.0, 1.0)
+
+
+def build_env_group(n_tiles: int, resolution: int, eig_image, uv_map: str, name: str):
+    """Direct light under an environment: per tile of three components, the eigen lookup
+    dotted with three constant vectors (the components' R, G and B coefficients, nodes named
+    ``C{t}{R|G|B}``, driven from the group's :data:`ENV_VALUES`), summed per channel, times the
+    albedo tile."""
+    group = bpy.data.node_groups.new(name, "ShaderNodeTree")
+    _env_interface(group)
+    group.interface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
+    b = pn._Builder(group)
+    b.node("NodeGroupInput", -1400, 0)
+    gout = b.node("NodeGroupOutput", 1400, 0)
+    uv = b.node("ShaderNodeUVMap", -1200, -400, uv_map=uv_map).outputs["UV"]
+    lay = atlas_layout(n_tiles + 1, resolution)
+    acc = [None, None, None]
+    driven = []
+    for t in range(n_tiles):
+        y = 600 - 300 * t
+        e = _lookup(b, eig_image, uv, lay["tiles"][t], -1000, y)
+        for ch, cname in enumerate("RGB"):
+            const = b.node("ShaderNodeCombineXYZ", -500, y - 80 * ch)
+            const.name = const.label = f"C{t}{cname}"
+            driven += [(const, i) for i in range(3)]
+            dot = b.vmath("DOT_PRODUCT", const.outputs[0], e, x=-300, y=y - 80 * ch)
+            acc[ch] = dot if acc[ch] is None else b.math("ADD", acc[ch], dot, x=-100 + 60 * ch,
+                                                         y=y - 80 * ch)
+    rgb = b.node("ShaderNodeCombineXYZ", 300, 0)
+    for ch in range(3):
+        b.links.new(acc[ch], rgb.inputs[ch])
+    albedo = _lookup(b, eig_image, uv, lay["tiles"][n_tiles], -1000, -900)
+    color = b.vmath("MULTIPLY", rgb.outputs[0], albedo, x=600, y=0)
+    b.links.new(color, gout.inputs["Color"])
+    _drive_constants(group, driven)
+    return group
+
+
+def build_env_indirect_group(texture, atlas_image, uv_map: str, name: str):
+    """The steerable indirect term under an environment: ``max(0, sum_j G[:, j] * I_j)``
+    (constant RGB vectors named ``G{j}``, driven from :data:`ENV_VALUES`), times the Albedo input in irradiance mode -- the
+    sockets of :func:`.preview_nodes.build_group`."""
+    group = bpy.data.node_groups.new(name, "ShaderNodeTree")
+    _env_interface(group)
+    s = group.interface.new_socket("Albedo", in_out="INPUT", socket_type="NodeSocketColor")
+    s.default_value = (0.8, 0.8, 0.8, 1.0)
+    group.interface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
+    b = pn._Builder(group)
+    gin = b.node("NodeGroupInput", -1400, 0)
+    gout = b.node("NodeGroupOutput", 1000, 0)
+    uv = b.node("ShaderNodeUVMap", -1200, -400, uv_map=uv_map).outputs["UV"]
+    n = len(texture.basis_images)
+    lay = atlas_layout(n, texture.resolution)
+    acc = None
+    driven = []
+    for j in range(n):
+        y = 600 - 160 * j
+        img = _lookup(b, atlas_image, uv, lay["tiles"][j], -1000, y)
+        const = b.node("ShaderNodeCombineXYZ", -500, y)
+        const.name = const.label = f"G{j}"
+        driven += [(const, ch) for ch in range(3)]
+        term = b.vmath("MULTIPLY", const.outputs[0], img, x=-300, y=y)
+        acc = term if acc is None else b.vmath("ADD", acc, term, x=-100, y=y)
+    out = b.vmath("MAXIMUM", acc, (0.0, 0.0, 0.0), x=300, y=0)
+    if texture.settings.get("mode") == "irradiance":
+        out = b.vmath("MULTIPLY", out, gin.outputs["Albedo"], x=500, y=0)
+    b.links.new(out, gout.inputs["Color"])
+    _drive_constants(group, driven)
+    return group
+
+
+#: ID property of an environment group holding its constants (driven into its nodes)
+ENV_VALUES = "relight_env_values"
+
+
+def _drive_constants(group, nodes_inputs) -> None:
+    """Drive each (node, input index) from ``group[ENV_VALUES][k]`` in order (simple
+    expressions: no Python when they evaluate). Writing 300 socket values from Python costs
+    ~0.6 ms each (every write runs the node tree's update); one array property and one
+    depsgraph update cost about a millisecond in all."""
+    group[ENV_VALUES] = [0.0] * len(nodes_inputs)
+    for k, (node, i) in enumerate(nodes_inputs):
+        pn._drive(node.inputs[i], "default_value", -1, "NODETREE", group,
+                  f'["{ENV_VALUES}"][{k}]')
+
+
+def set_env_constants(group, prefix: str, values) -> None:
+    """Write (3, K) coefficients into the group's driven constants: ``C`` (per tile of three
+    components, the R, G, B rows; components beyond K get 0) or ``G`` (per basis image)."""
+    values = np.asarray(values, np.float64)
+    n = len(group[ENV_VALUES])
+    if prefix == "C":
+        tiles = n // 9
+        padded = np.zeros((3, 3 * tiles))
+        padded[:, :values.shape[1]] = values
+        flat = padded.reshape(3, tiles, 3).transpose(1, 0, 2).ravel()   # [t][ch][i]
+    else:
+        flat = values.T.ravel()                                         # [j][ch]
+    group[ENV_VALUES] = flat.tolist()
+    group.update_tag()
+
+
+_ENV_CACHE: dict = {}
+
+
+def _env_data(obj):
+    """The object's previewed transport bake as the environment preview needs it (loaded once
+    per file): {"V", "B", "directions", "bake"}, or None without a PCA preview."""
+    from .texture_transport import load_bake
+
+    group = bpy.data.node_groups.get(f"{GROUP_PREFIX} ({obj.name})")
+    path = None if group is None else group.get("relight_report")
+    if not path or not os.path.exists(path):
+        return None
+    key = (path, os.path.getmtime(path))
+    hit = _ENV_CACHE.get(obj.name)
+    if hit is not None and hit["key"] == key:
+        return hit
+    bake, store, _ = load_bake(path)
+    if not getattr(bake.model, "live_preview", False):
+        return None
+    B = None if bake.indirect is None else tt.steering_matrix(bake.indirect, store.directions)
+    data = {"key": key, "V": np.asarray(bake.model.V, np.float64), "B": B,
+            "directions": store.directions, "bake": bake}
+    _ENV_CACHE[obj.name] = data
+    return data
+
+
+def _group_nodes(obj, trees):
+    """Group nodes in ``obj``'s materials whose tree is one of ``trees``."""
+    out = []
+    for mat in {s.material for s in obj.material_slots if s.material}:
+        if mat.node_tree is None:
+            continue
+        out += [n for n in mat.node_tree.nodes
+                if n.bl_idname == "ShaderNodeGroup" and n.node_tree in trees]
+    return out
+
+
+def set_light_mode(scene, obj, mode: str) -> bool:
+    """Show ``obj``'s transport-texture preview lit by the sun sliders (``"SUN"``) or by the
+    world's environment (``"WORLD"``): swaps the preview's group trees (building the
+    environment groups the first time) and, for the world, writes its coefficients. False
+    when ``obj`` has no such preview."""
+    sun_g = bpy.data.node_groups.get(f"{GROUP_PREFIX} ({obj.name})")
+    sun_i = bpy.data.node_groups.get(f"{GROUP_PREFIX} indirect ({obj.name})")
+    env_name, envi_name = f"{ENV_PREFIX} ({obj.name})", f"{ENV_PREFIX} indirect ({obj.name})"
+    if sun_g is None:
+        return False
+    env_g, env_i = bpy.data.node_groups.get(env_name), bpy.data.node_groups.get(envi_name)
+    if mode == "WORLD":
+        data = _env_data(obj)
+        if data is None:
+            return False
+        if env_g is None:
+            bake = data["bake"]
+            n_tiles = -(-bake.model.k // 3)
+            eig_img = bpy.data.images.get(f"{obj.name} transport eigen atlas")
+            uv_map = next((uv.name for uv in obj.data.uv_layers if uv.active_render),
+                          obj.data.uv_layers[0].name)
+            env_g = build_env_group(n_tiles, bake.model.resolution, eig_img, uv_map, env_name)
+            env_g[pn.OWNER] = obj.name
+            if sun_i is not None and bake.indirect is not None:
+                iimg = bpy.data.images.get(f"{obj.name} indirect atlas")
+                env_i = build_env_indirect_group(bake.indirect, iimg, uv_map, envi_name)
+                env_i[pn.OWNER] = obj.name
+        swaps = ((sun_g, env_g), (sun_i, env_i))
+    else:
+        swaps = ((env_g, sun_g), (env_i, sun_i))
+    for old, new in swaps:
+        if old is None or new is None:
+            continue
+        for node in _group_nodes(obj, (old,)):
+            node.node_tree = new
+        # the group not shown is kept for switching back (Remove Preview purges both)
+        old.use_fake_user, new.use_fake_user = True, False
+    if mode == "WORLD":
+        update_environment_previews(scene, [obj])
+    return True
+
+
+_FINITE: list = [None, False]
+
+
+def _finite(env) -> bool:
+    """All texels finite? Checked once per image array (the world's pixels are cached)."""
+    if _FINITE[0] is not env:
+        _FINITE[:] = [env, bool(np.all(np.isfinite(env)))]
+    return _FINITE[1]
+
+
+def update_environment_previews(scene, objects=None) -> dict:
+    """Rewrite the environment coefficients of every object (or of ``objects``) whose
+    transport preview shows the world; returns {object: ms} and ``"warnings"`` (also kept in
+    ``scene[ENV_WARNING_KEY]`` for the panel)."""
+    from .vertex_relight import shade_rotation, world_light, world_rotation
+
+    props = getattr(scene, "relight", None)
+    timings, messages = {}, []
+    objs = [o for o in (objects if objects is not None else scene.objects)
+            if o.type == "MESH" and bpy.data.node_groups.get(f"{ENV_PREFIX} ({o.name})")]
+    objs = [o for o in objs
+            if _group_nodes(o, (bpy.data.node_groups[f"{ENV_PREFIX} ({o.name})"],))]
+    if objs:
+        t0 = time.perf_counter()
+        env, world_strength = world_light(scene)
+        world_z, note = world_rotation(scene)
+        rotation = shade_rotation(world_z + (props.env_rotation if props else 0.0))
+        strength = world_strength * (props.env_strength if props else 1.0)
+        read_ms = 1e3 * (time.perf_counter() - t0)
+        if env is not None and not _finite(env):
+            messages.append("the world's Environment Texture has NaN or inf texels: the "
+                            "environment preview is black")
+            env = None
+        if env is None and not messages:
+            messages.append("the world has no Environment Texture or plain Background colour "
+                            "the preview can read: the environment preview is black")
+        if env is None:
+            env = np.zeros((8, 16, 3))
+        elif note:
+            messages.append(note)
+        for o in objs:
+            t1 = time.perf_counter()
+            data = _env_data(o)
+            if data is None:
+                continue
+            C, G = env_coefficients(data["V"], data["B"], data["directions"], env, rotation,
+                                    strength, validate=False)
+            set_env_constants(bpy.data.node_groups[f"{ENV_PREFIX} ({o.name})"], "C", C)
+            gi = bpy.data.node_groups.get(f"{ENV_PREFIX} indirect ({o.name})")
+            if G is not None and gi is not None:
+                set_env_constants(gi, "G", G)
+            timings[o.name] = {"read_world_ms": read_ms,
+                               "update_ms": 1e3 * (time.perf_counter() - t1)}
+    text = "; ".join(messages)
+    if scene.get(ENV_WARNING_KEY, "") != text:
+        scene[ENV_WARNING_KEY] = text
+    timings["warnings"] = messages
+    return timings

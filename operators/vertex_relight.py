@@ -30,23 +30,38 @@ def world_environment(scene):
     """The scene world's light as an equirect (H, W, 3) radiance image, bottom row first: its
     Environment Texture (or else its constant Background colour) times the Background strength;
     None if neither can be read (e.g. a procedural sky)."""
+    pixels, strength = world_light(scene)
+    return None if pixels is None else pixels * strength
+
+
+_PIXELS: dict = {}
+
+
+def world_light(scene):
+    """(pixels (H, W, 3) float64 bottom row first, or None; Background strength): the world's
+    Environment Texture image -- read from Blender once per image and kept (an unsaved,
+    painted image is read again every time) -- or its constant Background colour."""
     world = scene.world
     if world is None or world.node_tree is None:
-        return None
+        return None, 1.0
     tex = next((n for n in world.node_tree.nodes
                 if n.bl_idname == "ShaderNodeTexEnvironment" and n.image is not None), None)
     bg = next((n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeBackground"), None)
-    strength = bg.inputs["Strength"].default_value if bg is not None else 1.0
+    strength = float(bg.inputs["Strength"].default_value) if bg is not None else 1.0
     if tex is None:
         if bg is None or bg.inputs["Color"].is_linked:
-            return None
+            return None, strength
         color = np.array(bg.inputs["Color"].default_value[:3], dtype=np.float64)
-        return np.broadcast_to(color * strength, (8, 16, 3)).copy()  # a constant sky
+        return np.broadcast_to(color, (8, 16, 3)).copy(), strength  # a constant sky
     img = tex.image
     w, h = img.size
     if not w or not h:
-        return None
-    return image_pixels(img)[..., :3].astype(np.float64) * strength
+        return None, strength
+    key = (img.name_full, w, h, img.filepath_raw, img.source)
+    hit = _PIXELS.get("image")
+    if hit is None or hit[0] != key or img.is_dirty:
+        hit = _PIXELS["image"] = (key, image_pixels(img)[..., :3].astype(np.float64))
+    return hit[1], strength
 
 
 def world_rotation(scene) -> tuple[float, str]:
@@ -162,19 +177,25 @@ def update_preview(scene) -> dict:
 
     With ``scene.relight.show_clusters`` the vertices get their CPCA cluster colours instead."""
     props = getattr(scene, "relight", None)
+    baked = []
+    for obj in scene.objects:
+        if obj.type != "MESH" or "relightable_bakes" not in obj:
+            continue
+        try:
+            baked.append((obj, transport_data(obj)))
+        except (ValueError, FileNotFoundError):
+            continue
+    if not baked:                   # nothing to shade: the world's pixels are not read
+        if scene.get(WARNING_KEY):
+            scene[WARNING_KEY] = ""
+        return {"warnings": []}
     env = world_environment(scene)
     world_z, note = world_rotation(scene)
     # the slider adds to the world's own Mapping rotation, in the same (Mapping) convention
     rotation = shade_rotation(world_z + (props.env_rotation if props else 0.0))
     timings = {}
     messages = []
-    for obj in scene.objects:
-        if obj.type != "MESH" or "relightable_bakes" not in obj:
-            continue
-        try:
-            data = transport_data(obj)
-        except (ValueError, FileNotFoundError):
-            continue
+    for obj, data in baked:
         t0 = time.perf_counter()
         if props is not None and props.show_clusters:
             write_shading(obj, data.cluster_colors())

@@ -174,7 +174,7 @@ def sun_weights(dset: DirectionSet, direction, sun_angle_deg: float = 0.0,
 
 
 def environment_weights(dset: DirectionSet, env_image, *, row_order: str,
-                        rotation_deg: float = 0.0) -> np.ndarray:
+                        rotation_deg: float = 0.0, validate: bool = True) -> np.ndarray:
     """Dense weights ``L(w_s) dw_s`` of an equirectangular environment (upper hemisphere).
 
     Parameters
@@ -188,6 +188,8 @@ def environment_weights(dset: DirectionSet, env_image, *, row_order: str,
         (Point type) with Z rotation ``phi`` turns the picture the other way, so it equals
         ``rotation_deg = -phi`` (measured in a Cycles bake, see
         ``operators/vertex_relight.shade_rotation``).
+    validate : bool
+        Check the image (finite values) -- see :func:`.eigentransport.sample_equirect`.
 
     Returns
     -------
@@ -198,9 +200,35 @@ def environment_weights(dset: DirectionSet, env_image, *, row_order: str,
     t = np.radians(float(rotation_deg))
     c, s = np.cos(t), np.sin(t)
     Rt = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-    L = sample_equirect(env_image, dset.directions @ Rt.T, row_order=row_order)
+    L = sample_equirect(env_image, dset.directions @ Rt.T, row_order=row_order,
+                        validate=validate)
     w = dset.solid_angles
     return L * (w if L.ndim == 1 else w[:, None])
+
+
+def steering_matrix(steerable, dset: DirectionSet) -> np.ndarray:
+    """(S, J) float64: a steerable texture (the indirect term) under a unit sun from ``w_s`` is
+    ``clamp(sum_j B[s, j] I_j)`` -- its steering coefficients times its calibration gain
+    (:meth:`..steerable.texture.SteerableTexture.steering_weights`); J = order^2 basis images.
+    An environment then steers with ``sum_s L(w_s) dw_s B[s]`` (:func:`environment_weights`),
+    the clamp applied to the sum."""
+    rows = []
+    for w in dset.directions:
+        c, gain = steerable.steering_weights(w)
+        rows.append(gain * c)
+    return np.asarray(rows, np.float64)
+
+
+def steer_environment(steerable, B: np.ndarray, weights) -> np.ndarray:
+    """The steerable texture under an environment: ``max(0, sum_j G_j * I_j)`` with
+    ``G = weights^T B``; ``weights`` (S,) or (S, 3) from :func:`environment_weights`.
+    Returns (R, R, 3) float32 at the steerable texture's resolution."""
+    W = np.asarray(weights, np.float64)
+    if W.ndim == 1:
+        W = np.repeat(W[:, None], 3, axis=1)
+    G = W[:, :3].T @ B                                              # (3, J)
+    images = np.asarray(steerable.basis_images, np.float64)        # (J, R, R, 3)
+    return np.maximum(np.einsum("cj,jyxc->yxc", G, images), 0.0).astype(np.float32)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -396,8 +424,10 @@ class TexturePCA:
             np.float32)
 
     def relight_dense(self, weights) -> np.ndarray:
-        c = np.asarray(weights, np.float64) @ self.V.astype(np.float64)   # (K,) or (C, K)
-        out = c @ self.U.astype(np.float64) if c.ndim == 1 else (c.T.T @ self.U).T
+        w = np.asarray(weights, np.float64)                  # (S,) or (S, C)
+        c = w.T @ self.V.astype(np.float64)                   # (K,) or (C, K)
+        out = c @ self.U.astype(np.float64)                   # (P,) or (C, P)
+        out = out if c.ndim == 1 else out.T
         return out.reshape((self.resolution, self.resolution) + np.shape(weights)[1:]).astype(
             np.float32)
 

@@ -620,3 +620,115 @@ def test_panel_lists_the_chunks_a_cancelled_bake_kept_and_discards_them(bumps, t
         assert bake_ops.kept_chunks(bpy.context) == [] and os.listdir(tmp_path) == []
     finally:
         relightable_textures.unregister()
+
+
+def _sky_world(scene, env, rotation_deg):
+    """A world lit by ``env`` (H, W, 3 bottom row first) through a Point Mapping turned about z."""
+    import math
+
+    import bpy
+
+    h, w = env.shape[:2]
+    img = bpy.data.images.new("test sky", w, h, float_buffer=True, alpha=False)
+    img.colorspace_settings.name = "Non-Color"
+    rgba = np.concatenate([env, np.ones((h, w, 1), np.float32)], -1)
+    img.pixels.foreach_set(rgba.ravel())
+    from relightable_textures.operators.compat import ensure_node_tree
+
+    world = bpy.data.worlds.new("test world")
+    nodes, links = ensure_node_tree(world).nodes, world.node_tree.links
+    tex = nodes.new("ShaderNodeTexEnvironment")
+    tex.image = img
+    coord = nodes.new("ShaderNodeTexCoord")
+    mapping = nodes.new("ShaderNodeMapping")
+    mapping.inputs["Rotation"].default_value = (0.0, 0.0, math.radians(rotation_deg))
+    links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
+    links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
+    links.new(tex.outputs["Color"], nodes["Background"].inputs["Color"])
+    scene.world = world
+    return world, mapping
+
+
+def _smooth_sky(h=32):
+    v = (np.arange(h) + 0.5) / h                      # bottom first
+    u = (np.arange(2 * h) + 0.5) / (2 * h)
+    el = (v - 0.5) * np.pi
+    sky = np.where(el[:, None] > 0, 1.0 + 0.8 * np.cos(2 * np.pi * u)[None, :]
+                   * np.cos(el)[:, None], 0.0)
+    return np.stack([sky, 0.7 * sky, 0.4 * sky], -1).astype(np.float32)
+
+
+def test_world_lit_preview_rendered_by_cycles_equals_numpy_relight(bumps, tmp_path):
+    """Texture Light = World: the environment groups (constant coefficients written from
+    Python, indirect steered by the environment) rendered by Cycles equal the NumPy twin of the
+    half-float atlases, and that twin equals relight_environment of the model to half-float
+    storage; turning the world's Mapping re-writes the coefficients through the depsgraph
+    handler; switching back to Sun restores the sun groups and their render."""
+    import bpy
+
+    import relightable_textures
+    from relightable_textures.lt_addon.io import exrio
+    from relightable_textures.lt_addon.io.atlas import unpack_atlas
+    from relightable_textures.operators import texture_transport as tx
+    from relightable_textures.operators import transport_preview as tp
+    from relightable_textures.operators.jobs import run
+
+    scene, obj = bumps
+    relightable_textures.register()
+    try:
+        s = settings(components=12, bounces=1, indirect_resolution=R, indirect_samples=4)
+        reports = run(tx.bake_job(scene, [obj], s, str(tmp_path), truth=0)).reports
+        prev = reports[0]["preview"]
+        bake, store, _ = tx.load_bake(reports[0]["report"])
+        assert bake.indirect is not None and bake.indirect.resolution == R
+        ntile = prev["tiles"]
+        eig = unpack_atlas(np.stack([exrio.read_exr(prev["eigen"])[0][c] for c in "RGB"], -1),
+                           ntile + 1, R)
+        env = _smooth_sky()
+        world, mapping = _sky_world(scene, env, 40.0)
+        sun_img = render_rgb(scene, tmp_path, R)
+        scene.world = world                       # render_rgb takes the world away
+        scene.relight.texture_light = "WORLD"
+        timings = tp.update_environment_previews(scene)
+        assert timings["warnings"] == [] and timings[obj.name]["update_ms"] < 50
+        assert {n.node_tree.name for n in tp._group_nodes(obj, list(bpy.data.node_groups))} == {
+            f"Relight Transport env ({obj.name})", f"Relight Transport env indirect ({obj.name})"}
+        # the NumPy twin from the half-float atlases against the model relit in NumPy
+        ind_atlas = exrio.read_exr(os.path.splitext(reports[0]["files"]["indirect"])[0]
+                                   + "_atlas.exr")[0]
+        ind = unpack_atlas(np.stack([ind_atlas[c] for c in "RGB"], -1),
+                           len(bake.indirect.basis_images), R)
+        for rot in (40.0, -75.0):
+            mapping.inputs["Rotation"].default_value[2] = np.radians(rot)
+            bpy.context.view_layer.update()       # the handler sees the world change
+            B = tt.steering_matrix(bake.indirect, store.directions)
+            C, G = tp.env_coefficients(bake.model.V, B, store.directions, env, -rot)
+            twin = tp.viewport_relight_env(eig, C, ind, G)
+            want = tx.relight_environment(bake, store, env, -rot, row_order="bottom_first",
+                                          source="model")
+            assert rel(twin, want) < 3e-3            # half-float atlases
+            img = render_rgb(scene, tmp_path, R)
+            scene.world = world
+            assert twin.max() > 0.05
+            assert np.abs(img - twin).max() <= 2.0 ** -10 * twin.max(), rot
+        # Environment Rotation adds to the Mapping's (its update callback rewrites the values)
+        group = bpy.data.node_groups[f"Relight Transport env ({obj.name})"]
+        scene.relight.env_rotation = 30.0
+        C, _ = tp.env_coefficients(bake.model.V, None, store.directions, env, -(rot + 30.0))
+        padded = np.zeros((3, 3 * ntile))
+        padded[:, :C.shape[1]] = C
+        np.testing.assert_allclose(np.array(group[tp.ENV_VALUES]),
+                                   padded.reshape(3, ntile, 3).transpose(1, 0, 2).ravel(),
+                                   rtol=1e-6, atol=1e-9)
+        # the rotation moved the light (the sky is brighter towards one azimuth)
+        assert rel(render_rgb(scene, tmp_path, R), sun_img) > 0.05
+        scene.world = world
+        scene.relight.texture_light = "SUN"
+        np.testing.assert_allclose(render_rgb(scene, tmp_path, R), sun_img, atol=1e-6)
+        # Remove Preview takes both light modes' groups away
+        from relightable_textures.operators import preview_nodes as pn
+
+        pn.remove_preview(obj, scene)
+        assert not [g for g in bpy.data.node_groups if g.name.startswith("Relight Transport")]
+    finally:
+        relightable_textures.unregister()
