@@ -84,6 +84,8 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_cpca.py --scenes statue,room --out $(OUT)/bench
 	$(PY) benchmarks/bench_distributed.py
 	$(PY) benchmarks/bench_horizon_model.py
+	$(PY) benchmarks/bench_env_preview.py
+	$(PY) benchmarks/bench_low_sun_floor.py
 	$(PY) benchmarks/bench_export.py --out $(OUT)/bench
 	$(PY) benchmarks/bench_materials.py --size demo
 

@@ -103,14 +103,17 @@ def errors_for(relight_fn, truth, R):
     return out
 
 
-def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder):
-    """Bake once at (S, ind_spp, res); one row per model fitted from that store."""
+def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder,
+                     ind_res=None, label=None):
+    """Bake once at (S, ind_spp, res; indirect at ``ind_res``, default res / 2); one row per
+    model fitted from that store."""
     from relightable_textures.lt_addon.transport import texture as tt
     from relightable_textures.operators import texture_transport as tx
     from relightable_textures.operators.jobs import run
 
+    ind_res = ind_res or max(8, res // 2)
     st = tx.TransportTextureSettings(directions=f"hemi:{S}:1.5", resolution=res, bounces=2,
-                                     indirect_resolution=max(8, res // 2),
+                                     indirect_resolution=ind_res,
                                      indirect_samples=ind_spp, model="none")
     t0 = time.perf_counter()
     result = run(tx.bake_transport_textures(scene, objects, st, folder))
@@ -122,7 +125,7 @@ def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder):
     ind_bytes = sum(b.indirect.basis_images.nbytes // 2 for b in result.objects if b.indirect)
     alb_bytes = sum(b.albedo.size * 2 for b in result.objects)
     rows = []
-    label = f"transport S {S}, {res}^2, indirect {ind_spp} spp"
+    label = label or f"transport S {S}, {res}^2, indirect {ind_res}^2 {ind_spp} spp"
     for kind, arg in models:
         t1 = time.perf_counter()
         if kind == "T":
@@ -156,7 +159,8 @@ def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder):
             name = f"block PCA tol {arg} (mean {dims.mean():.1f} comps)"
         rows.append({
             "method": "transport", "setting": f"{label}, {name}", "S": S, "resolution": res,
-            "indirect_samples": ind_spp, "model": kind, "model_arg": arg,
+            "indirect_samples": ind_spp, "indirect_resolution": ind_res, "model": kind,
+            "model_arg": arg,
             "bake_seconds": round(bake_s + fit_s, 2), "cycles_seconds": round(cycles, 2),
             "peak_mem_mb": round(result.peak_rss_mb, 1),
             "stored_bytes": int(model_bytes + ind_bytes + alb_bytes), "transport_bytes": t_bytes,
@@ -239,7 +243,8 @@ def write_presets(report, scene):
     for name, r in chosen.items():
         out["presets"][name] = {
             "directions": f"hemi:{r['S']}:1.5", "resolution": r["resolution"],
-            "indirect_resolution": max(8, r["resolution"] // 2),
+            "indirect_resolution": r.get("indirect_resolution") or max(8, r["resolution"] // 2),
+            "table_size": 64 if name == "production" else 32,
             "indirect_samples": r["indirect_samples"], "components": r["model_arg"],
             "measured": {"bake_seconds": r["bake_seconds"], "rel_rmse": r["err_10deg"],
                          "rel_rmse_2deg": r["err_2deg"], "scene": f"{scene} {report['size']}",
@@ -250,6 +255,50 @@ def write_presets(report, scene):
 
     atomic.write_json(path, out, indent=1)
     print(f"presets written to {path}")
+
+
+def measure_presets(out_dir, truth_spp=256):
+    """Bake each transport preset exactly as defined (operators/transport_presets.json) on the
+    bumps demo at 256^2, measure it as the sweep does (plus T itself and one 64-spp Cycles bake
+    in the same run) and write the figures into the presets file's ``measured`` blocks."""
+    from relightable_textures.lt_addon.io import atomic
+    from relightable_textures.lt_addon.transport.texture import parse_directions
+
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                        "operators", "transport_presets.json")
+    with open(path) as fh:
+        data = json.load(fh)
+    scene, objects = build("bumps", "demo")
+    R = 256
+    one = single_bake_seconds(scene, objects, R)
+    print(f"one 64-spp Cycles bake at {R}^2: {one:.2f} s", flush=True)
+    truth = truths(scene, objects, R, truth_spp)
+    rows = []
+    with tempfile.TemporaryDirectory(dir=out_dir) as folder:
+        for name, p in data["presets"].items():
+            S = parse_directions(p["directions"]).size
+            got = transport_points(scene, objects, truth, R, S, p["indirect_samples"],
+                                   p["resolution"], [("T", None), ("pca", p["components"])],
+                                   folder, ind_res=p["indirect_resolution"],
+                                   label=f"{name}: {p['directions']}, {p['resolution']}^2, "
+                                         f"indirect {p['indirect_resolution']}^2 "
+                                         f"{p['indirect_samples']} spp")
+            rows += got
+            t_row, m_row = got
+            p["measured"] = {
+                "bake_seconds": m_row["bake_seconds"], "rel_rmse": m_row["err_10deg"],
+                "rel_rmse_2deg": m_row["err_2deg"], "rel_rmse_from_T": t_row["err_10deg"],
+                "single_bakes": round(m_row["bake_seconds"] / one, 2),
+                "single_bake_seconds": round(one, 2), "peak_mem_mb": m_row["peak_mem_mb"],
+                "stored_bytes": m_row["stored_bytes"], "transport_bytes": m_row["transport_bytes"],
+                "preview_lookups": m_row["preview_lookups"], "scene": "bumps demo",
+                "truth_samples": truth_spp, "date": time.strftime("%Y-%m-%d"),
+                "why": p.get("measured", {}).get("why", "")}
+    atomic.write_json(path, data, indent=1)
+    print(table(rows, f"transport presets (bumps demo, {R}^2; one 64-spp bake {one:.2f} s; "
+                      f"truths {truth_spp} spp, 2 bounces)"))
+    print(f"measured figures written to {path}")
+    return rows
 
 
 def main(argv=None):
@@ -264,7 +313,14 @@ def main(argv=None):
     ap.add_argument("--write-presets", action="store_true",
                     help="choose draft / balanced / production from the first scene's front of "
                          "viewport (PCA) points and write operators/transport_presets.json")
+    ap.add_argument("--measure-presets", action="store_true",
+                    help="bake and measure the three transport presets as defined (bumps demo) "
+                         "and write their figures into operators/transport_presets.json")
     args = ap.parse_args(argv)
+    if args.measure_presets:
+        os.makedirs(args.out, exist_ok=True)
+        measure_presets(args.out)
+        return 0
     size = "test" if args.quick else args.size
     R = args.resolution or (64 if args.quick else 256)
     spp = 64 if args.quick else 256

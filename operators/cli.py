@@ -98,6 +98,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tol", type=float, help="transport: relative residual the PCA keeps")
     p.add_argument("--indirect-samples", type=int, help="transport: samples of the indirect bake")
     p.add_argument("--indirect-resolution", type=int, help="transport: indirect texture side")
+    p.add_argument("--table-size", type=int, help="transport: texels across the preview's "
+                   "coefficient tables (hemisphere disk; 8..256)")
     p.add_argument("--target-error", type=float, metavar="E", help="transport: a pilot bake "
                    "chooses the directions and the PCA tolerance to reach relative RMSE E on "
                    "held-out lights; the report says what it chose and achieved")
@@ -544,7 +546,8 @@ def _cmd_bake_textures(args) -> int:
         return _cmd_bake_texture_transport(args)
     lobes_only = [f"--{k.replace('_', '-')}" for k in ("directions", "sun_angle", "model",
                                                        "components", "tol", "indirect_samples",
-                                                       "indirect_resolution", "target_error")
+                                                       "indirect_resolution", "table_size",
+                                                       "target_error")
                   if getattr(args, k) is not None] + (["--no-resume"] if args.no_resume else [])
     lobes_only += [f"--{k}" for k in ("workers", "scheduler") if getattr(args, k) is not None]
     if lobes_only:
@@ -653,7 +656,7 @@ def _cmd_bake_texture_transport(args) -> int:
     names = {"directions": "directions", "resolution": "resolution", "bounces": "bounces",
              "seed": "seed", "sun_angle": "sun_angle", "model": "model",
              "components": "components", "tol": "tol", "indirect_samples": "indirect_samples",
-             "indirect_resolution": "indirect_resolution"}
+             "indirect_resolution": "indirect_resolution", "table_size": "table_size"}
     overrides = {v: getattr(args, k) for k, v in names.items() if getattr(args, k) is not None}
     try:
         settings = tx.settings_from_preset(args.preset, **overrides)

@@ -27,7 +27,9 @@ def preset_values(method: str, preset: str) -> dict:
     return {"directions": int(count), "horizon_power": float(power or 1.0),
             "resolution": t["resolution"], "transport_tol": t["tol"],
             "transport_components": int(t.get("components") or 0),
-            "indirect_samples": t["indirect_samples"]}
+            "indirect_samples": t["indirect_samples"],
+            "indirect_resolution": t["indirect_resolution"],
+            "table_size": t.get("table_size", 32)}
 
 
 def preset_differences(props) -> list:
@@ -197,12 +199,20 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         description="Relative residual of T the PCA keeps when Components is 0 (fewer "
                     "components when larger)")
     transport_components: IntProperty(
-        name="Components", default=_TRANSPORT["transport_components"], min=0, max=96,
+        name="Components", default=_TRANSPORT["transport_components"], min=0, max=512,
         description="PCA eigen-textures to keep (the presets' measured figures use a fixed "
                     "count); 0 = as many as the tolerance needs")
     indirect_samples: IntProperty(
         name="Indirect Samples", default=_TRANSPORT["indirect_samples"], min=1, max=65536,
         description="Samples of the low-order steerable bake of the indirect light")
+    indirect_resolution: IntProperty(
+        name="Indirect Resolution", default=_TRANSPORT["indirect_resolution"], min=4, max=8192,
+        description="Texture side of the indirect-light bake (interreflection is smooth: half "
+                    "the texture's is the cheap choice, the full one the accurate one)")
+    table_size: IntProperty(
+        name="Preview Table Size", default=_TRANSPORT["table_size"], min=8, max=256,
+        description="Texels across the hemisphere disk of the preview's coefficient tables "
+                    "(64 follows low suns more closely than 32; 4x the tabulation time)")
     # material edits (transfer tensors, Sun 2007)
     material_bounces: IntProperty(
         name="Bounces", default=2, min=1, max=2,
@@ -267,7 +277,8 @@ def transport_settings_from_scene(props):
         directions=f"hemi:{props.directions}{power}", resolution=props.resolution,
         bounces=props.bounces, model=props.transport_model, tol=props.transport_tol,
         components=props.transport_components or None, indirect_samples=props.indirect_samples,
-        indirect_resolution=max(4, props.resolution // 2), sun_angle=props.sun_angle)
+        indirect_resolution=props.indirect_resolution, sun_angle=props.sun_angle,
+        table_size=props.table_size)
 
 
 def settings_from_scene(props):

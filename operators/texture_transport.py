@@ -631,8 +631,8 @@ PRESETS = {
                   indirect_samples=16, tol=0.03),
     "balanced": dict(directions="hemi:400:1.5", resolution=256, indirect_resolution=128,
                      indirect_samples=64, tol=0.02),
-    "production": dict(directions="hemi:800:1.5", resolution=256, indirect_resolution=128,
-                       indirect_samples=256, tol=0.01),
+    "production": dict(directions="hemi:1600:1.5", resolution=256, indirect_resolution=256,
+                       indirect_samples=256, tol=0.01, table_size=64),
 }
 def _measured_presets() -> dict:
     """PRESETS updated from operators/transport_presets.json (written by

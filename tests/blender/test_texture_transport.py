@@ -492,9 +492,16 @@ def test_new_scene_holds_the_preset_it_names_and_edits_make_it_custom(fresh_scen
         assert pr.preset_differences(props) == []
         want = tx.settings_from_preset("balanced")
         got = pr.transport_settings_from_scene(props)
-        for name in ("directions", "resolution", "indirect_resolution", "indirect_samples",
-                     "components", "bounces"):
+        fields = ("directions", "resolution", "indirect_resolution", "indirect_samples",
+                  "components", "bounces", "table_size")
+        for name in fields:
             assert getattr(got, name) == getattr(want, name), name
+        props.preset = "production"          # its indirect resolution and table size too
+        got, want = pr.transport_settings_from_scene(props), tx.settings_from_preset("production")
+        assert pr.preset_differences(props) == []
+        for name in fields:
+            assert getattr(got, name) == getattr(want, name), name
+        props.preset = "balanced"
         props.resolution = 128
         assert pr.preset_differences(props) == ["resolution"]
         props.preset = "draft"                       # choosing a preset applies it
