@@ -313,17 +313,19 @@ def main(argv=None):
     ap.add_argument("--write-presets", action="store_true",
                     help="choose draft / balanced / production from the first scene's front of "
                          "viewport (PCA) points and write operators/transport_presets.json")
+    ap.add_argument("--truth-samples", type=int, help="Cycles samples of the truths (default "
+                    "256; 64 with --quick); one 256-spp truth's own noise is 0.011 here")
     ap.add_argument("--measure-presets", action="store_true",
                     help="bake and measure the three transport presets as defined (bumps demo) "
                          "and write their figures into operators/transport_presets.json")
     args = ap.parse_args(argv)
     if args.measure_presets:
         os.makedirs(args.out, exist_ok=True)
-        measure_presets(args.out)
+        measure_presets(args.out, args.truth_samples or 256)
         return 0
     size = "test" if args.quick else args.size
     R = args.resolution or (64 if args.quick else 256)
-    spp = 64 if args.quick else 256
+    spp = args.truth_samples or (64 if args.quick else 256)
     counts = (50, 100, 200) if args.quick else (100, 200, 400, 800)
     if args.counts:
         counts = tuple(int(c) for c in args.counts.split(","))
