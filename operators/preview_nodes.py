@@ -102,6 +102,22 @@ def _basis_constants(texture):
 # the node group
 
 
+def new_light_group(name: str):
+    """A new tagged shader node group with the preview groups' light inputs -- Light Direction
+    (towards the light), Intensity, Color -- so a group node can swap between such groups (sun
+    and environment) and keep its links; callers add further inputs and the output."""
+    group = bpy.data.node_groups.new(name, "ShaderNodeTree")
+    group[_TAG] = True
+    iface = group.interface
+    s = iface.new_socket("Light Direction", in_out="INPUT", socket_type="NodeSocketVector")
+    s.default_value = (0.0, 0.0, 1.0)
+    s = iface.new_socket("Intensity", in_out="INPUT", socket_type="NodeSocketFloat")
+    s.default_value, s.min_value = 1.0, 0.0
+    s = iface.new_socket("Color", in_out="INPUT", socket_type="NodeSocketColor")
+    s.default_value = (1.0, 1.0, 1.0, 1.0)
+    return group
+
+
 def build_group(texture, atlas_image, uv_map: str, name: str | None = None):
     """Create the "Steerable Illumination" node group for ``texture`` sampling ``atlas_image``.
 
@@ -112,16 +128,8 @@ def build_group(texture, atlas_image, uv_map: str, name: str | None = None):
         raise ValueError("the live preview implements the steerable_cos calibration only")
     basis, cal = _basis_constants(texture)
     n1, n = basis.order, basis.order ** 2
-    name = name or f"{GROUP_PREFIX}"
-    group = bpy.data.node_groups.new(name, "ShaderNodeTree")
-    group[_TAG] = True
+    group = new_light_group(name or f"{GROUP_PREFIX}")
     iface = group.interface
-    s_dir = iface.new_socket("Light Direction", in_out="INPUT", socket_type="NodeSocketVector")
-    s_dir.default_value = (0.0, 0.0, 1.0)
-    s_int = iface.new_socket("Intensity", in_out="INPUT", socket_type="NodeSocketFloat")
-    s_int.default_value, s_int.min_value = 1.0, 0.0
-    s_col = iface.new_socket("Color", in_out="INPUT", socket_type="NodeSocketColor")
-    s_col.default_value = (1.0, 1.0, 1.0, 1.0)
     s_alb = iface.new_socket("Albedo", in_out="INPUT", socket_type="NodeSocketColor")
     s_alb.default_value = (0.8, 0.8, 0.8, 1.0)
     iface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")

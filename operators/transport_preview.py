@@ -106,16 +106,8 @@ def _lookup(b, image, uv, tile, x, y):
 def build_group(n_tiles: int, resolution: int, table_size: int, eig_image, table_image,
                 uv_map: str, name: str):
     """The node group: inputs Light Direction, Intensity, Color; output Color (direct light)."""
-    group = bpy.data.node_groups.new(name, "ShaderNodeTree")
-    group[pn._TAG] = True
-    iface = group.interface
-    s = iface.new_socket("Light Direction", in_out="INPUT", socket_type="NodeSocketVector")
-    s.default_value = (0.0, 0.0, 1.0)
-    s = iface.new_socket("Intensity", in_out="INPUT", socket_type="NodeSocketFloat")
-    s.default_value, s.min_value = 1.0, 0.0
-    s = iface.new_socket("Color", in_out="INPUT", socket_type="NodeSocketColor")
-    s.default_value = (1.0, 1.0, 1.0, 1.0)
-    iface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
+    group = pn.new_light_group(name)
+    group.interface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
     b = pn._Builder(group)
     gin = b.node("NodeGroupInput", -1800, 0)
     gout = b.node("NodeGroupOutput", 1600, 0)
@@ -288,25 +280,12 @@ def viewport_relight_env(eig_tiles, C, indirect_images=None, G=None) -> np.ndarr
     return out.astype(np.float32)
 
 
-def _env_interface(group):
-    group[pn._TAG] = True
-    iface = group.interface
-    # the sun groups' sockets, so that swapping a group node's tree keeps its links
-    s = iface.new_socket("Light Direction", in_out="INPUT", socket_type="NodeSocketVector")
-    s.default_value = (0.0, 0.0, 1.0)
-    s = iface.new_socket("Intensity", in_out="INPUT", socket_type="NodeSocketFloat")
-    s.default_value, s.min_value = 1.0, 0.0
-    s = iface.new_socket("Color", in_out="INPUT", socket_type="NodeSocketColor")
-    s.default_value = (1.0, 1.0, 1.0, 1.0)
-
-
 def build_env_group(n_tiles: int, resolution: int, eig_image, uv_map: str, name: str):
     """Direct light under an environment: per tile of three components, the eigen lookup
     dotted with three constant vectors (the components' R, G and B coefficients, nodes named
     ``C{t}{R|G|B}``, driven from the group's :data:`ENV_VALUES`), summed per channel, times the
     albedo tile."""
-    group = bpy.data.node_groups.new(name, "ShaderNodeTree")
-    _env_interface(group)
+    group = pn.new_light_group(name)
     group.interface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
     b = pn._Builder(group)
     b.node("NodeGroupInput", -1400, 0)
@@ -339,8 +318,7 @@ def build_env_indirect_group(texture, atlas_image, uv_map: str, name: str):
     """The steerable indirect term under an environment: ``max(0, sum_j G[:, j] * I_j)``
     (constant RGB vectors named ``G{j}``, driven from :data:`ENV_VALUES`), times the Albedo input in irradiance mode -- the
     sockets of :func:`.preview_nodes.build_group`."""
-    group = bpy.data.node_groups.new(name, "ShaderNodeTree")
-    _env_interface(group)
+    group = pn.new_light_group(name)
     s = group.interface.new_socket("Albedo", in_out="INPUT", socket_type="NodeSocketColor")
     s.default_value = (0.8, 0.8, 0.8, 1.0)
     group.interface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
