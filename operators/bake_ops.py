@@ -52,6 +52,11 @@ def _finish(operator, scene, result):
                         if "headline_rel_rmse" in gt else ""))
         if rep.get("glossy", {}).get("materials"):
             operator.report({"WARNING"}, rep["glossy"]["note"])
+        fid = rep.get("model_vs_T") or {}
+        if "headline" in fid:
+            lines.append(f"{rep['object']}: the preview's model is {fid['headline']:.3f} from "
+                         f"the bake itself (worst {fid['worst']['rel']:.3f} at "
+                         f"{fid['worst']['elevation']:g} deg)")
     cmp = reports[0].get("comparison", {})
     if "png" in cmp:
         lines.append(f"Camera comparison: {os.path.basename(cmp['png'])} (rel. RMSE "

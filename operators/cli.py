@@ -715,6 +715,11 @@ def _cmd_bake_texture_transport(args) -> int:
                  f"Cycles direct {t.get('direct_cycles', 0):.1f} s, ")
               + f"indirect {t.get('indirect_cycles', 0):.1f} s; fit {t['fit']:.1f} s; camera "
               f"comparison {t.get('compare_seconds', 0.0):.1f} s); report {rep['report']}")
+        fid = rep.get("model_vs_T") or {}
+        if "headline" in fid:
+            print(f"  the viewport's model vs T itself at the held-out lights: "
+                  f"{fid['headline']:.3f} (worst {fid['worst']['rel']:.3f} at elevation "
+                  f"{fid['worst']['elevation']:g} deg; relight --source transport shows T)")
         if rep is reports[0]:
             _print_chunks(rep)
         gt = rep.get("ground_truth")

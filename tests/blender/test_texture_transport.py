@@ -739,3 +739,19 @@ def test_world_lit_preview_rendered_by_cycles_equals_numpy_relight(bumps, tmp_pa
         assert not [g for g in bpy.data.node_groups if g.name.startswith("Relight Transport")]
     finally:
         relightable_textures.unregister()
+
+
+def test_every_bake_reports_how_far_the_viewport_model_is_from_T(bumps, tmp_path):
+    """report["model_vs_T"]: the PCA at full rank is T (0 to half-float eigen-textures), a
+    2-component PCA is far from it; no Cycles truth is needed."""
+    from relightable_textures.operators import texture_transport as tx
+    from relightable_textures.operators.jobs import run
+
+    scene, obj = bumps
+    full = run(tx.bake_job(scene, [obj], settings(components=48), str(tmp_path / "full"),
+                           truth=0, preview=False)).reports[0]["model_vs_T"]
+    assert full["headline"] < 2e-3
+    assert [r["elevation"] for r in full["lights"]] == [10.0, 30.0, 55.0, 80.0]
+    low = run(tx.bake_job(scene, [obj], settings(components=2), str(tmp_path / "low"),
+                          truth=0, preview=False)).reports[0]["model_vs_T"]
+    assert low["headline"] > 0.05 and low["worst"]["rel"] >= low["headline"]
