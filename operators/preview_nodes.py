@@ -102,6 +102,19 @@ def _basis_constants(texture):
 # the node group
 
 
+def after_sum(b, vector, acc, x, y):
+    """``vector`` made to depend on the running (scalar) sum ``acc`` without changing it (adds
+    ``acc > 1e30``, 0 for any real sum, which constant folding cannot remove). Cycles' SVM
+    compiles a shader graph in waves of ready nodes, so without it every tile's lookups are
+    compiled, and held on its 255-float stack, before the first sum: "out of SVM stack space"
+    from about 40 tiles (measured: 32 tiles rendered, 50 did not). Chained through the sum,
+    each tile's lookups wait for the previous tile and the stack holds one tile at a time."""
+    if acc is None:
+        return vector
+    never = b.math("GREATER_THAN", acc, 1e30, x=x, y=y)
+    return b.vmath("ADD", vector, never, x=x + 100, y=y)
+
+
 def new_light_group(name: str):
     """A new tagged shader node group with the preview groups' light inputs -- Light Direction
     (towards the light), Intensity, Color -- so a group node can swap between such groups (sun
@@ -186,7 +199,9 @@ def build_group(texture, atlas_image, uv_map: str, name: str | None = None):
         c = b.math("MULTIPLY", cx[i], cy[j], x=-700, y=y_loc)
         su, sv, ou, ov = lay["tiles"][k]
         mapping = b.node("ShaderNodeMapping", -500, y_loc, vector_type="POINT")
-        b.links.new(uv, mapping.inputs["Vector"])
+        b.links.new(after_sum(b, uv, None if acc_color is None else b.vmath(
+            "DOT_PRODUCT", acc_color, (1.0, 0.0, 0.0), x=-900, y=y_loc), -800, y_loc),
+            mapping.inputs["Vector"])
         mapping.inputs["Location"].default_value = (ou, ov, 0.0)
         mapping.inputs["Scale"].default_value = (su, sv, 1.0)
         tex = b.node("ShaderNodeTexImage", -300, y_loc, image=atlas_image,

@@ -128,8 +128,10 @@ def build_group(n_tiles: int, resolution: int, table_size: int, eig_image, table
     acc = None
     for t in range(n_tiles):
         y = 600 - 220 * t
-        c = _lookup(b, table_image, table_uv.outputs[0], lay_t["tiles"][t], -500, y)
-        e = _lookup(b, eig_image, uv, lay_e["tiles"][t], -500, y - 100)
+        c = _lookup(b, table_image, pn.after_sum(b, table_uv.outputs[0], acc, -700, y), lay_t["tiles"][t],
+                    -500, y)
+        e = _lookup(b, eig_image, pn.after_sum(b, uv, acc, -700, y - 100), lay_e["tiles"][t], -500,
+                    y - 100)
         dot = b.vmath("DOT_PRODUCT", c, e, x=-50, y=y)
         acc = dot if acc is None else b.math("ADD", acc, dot, x=150, y=y)
     albedo = _lookup(b, eig_image, uv, lay_e["tiles"][n_tiles], -500, -600)
@@ -296,7 +298,7 @@ def build_env_group(n_tiles: int, resolution: int, eig_image, uv_map: str, name:
     driven = []
     for t in range(n_tiles):
         y = 600 - 300 * t
-        e = _lookup(b, eig_image, uv, lay["tiles"][t], -1000, y)
+        e = _lookup(b, eig_image, pn.after_sum(b, uv, acc[0], -1200, y), lay["tiles"][t], -1000, y)
         for ch, cname in enumerate("RGB"):
             const = b.node("ShaderNodeCombineXYZ", -500, y - 80 * ch)
             const.name = const.label = f"C{t}{cname}"
@@ -332,7 +334,9 @@ def build_env_indirect_group(texture, atlas_image, uv_map: str, name: str):
     driven = []
     for j in range(n):
         y = 600 - 160 * j
-        img = _lookup(b, atlas_image, uv, lay["tiles"][j], -1000, y)
+        img = _lookup(b, atlas_image, pn.after_sum(b, uv, None if acc is None else b.vmath(
+            "DOT_PRODUCT", acc, (1.0, 0.0, 0.0), x=-1300, y=y), -1200, y), lay["tiles"][j],
+            -1000, y)
         const = b.node("ShaderNodeCombineXYZ", -500, y)
         const.name = const.label = f"G{j}"
         driven += [(const, ch) for ch in range(3)]

@@ -755,3 +755,29 @@ def test_every_bake_reports_how_far_the_viewport_model_is_from_T(bumps, tmp_path
     low = run(tx.bake_job(scene, [obj], settings(components=2), str(tmp_path / "low"),
                           truth=0, preview=False)).reports[0]["model_vs_T"]
     assert low["headline"] > 0.05 and low["worst"]["rel"] >= low["headline"]
+
+
+def test_a_preview_of_many_components_fits_cycles_svm_stack(bumps, tmp_path):
+    """150 components (50 tiles, the production preset has 86): Cycles compiled every lookup
+    before the first sum and failed with "out of SVM stack space" from about 40 tiles (black
+    render). The group chains each tile's lookups after the previous sum; the render equals
+    the twin to half precision."""
+    from relightable_textures.lt_addon.io import exrio
+    from relightable_textures.lt_addon.io.atlas import unpack_atlas
+    from relightable_textures.operators import texture_transport as tx
+    from relightable_textures.operators import transport_preview as tp
+    from relightable_textures.operators.jobs import run
+
+    scene, obj = bumps
+    s = settings(directions="hemi:160:1.5", components=150)
+    prev = run(tx.bake_job(scene, [obj], s, str(tmp_path), truth=0)).reports[0]["preview"]
+    assert prev["tiles"] == 50
+    eig = unpack_atlas(np.stack([exrio.read_exr(prev["eigen"])[0][c] for c in "RGB"], -1),
+                       51, R)
+    tab = unpack_atlas(np.stack([exrio.read_exr(prev["tables"])[0][c] for c in "RGB"], -1),
+                       50, 16)
+    scene["relight_azimuth"], scene["relight_elevation"] = 40.0, 25.0
+    img = render_rgb(scene, tmp_path, R)
+    want = tp.viewport_relight(eig, tab, direction_from_az_el(40.0, 25.0))
+    assert want.max() > 0.05
+    assert np.abs(img - want).max() <= 2.0 ** -10 * want.max()
