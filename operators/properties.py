@@ -296,18 +296,22 @@ def _on_depsgraph_update(scene, depsgraph):
     if props is None:
         return
     lamp = props.point_light
+    watch_world = props.texture_light == "WORLD"
+    if lamp is None and not watch_world:
+        return                          # every depsgraph update passes here: nothing to watch
     lamp_moved = world_changed = False
     for update in depsgraph.updates:
         original = getattr(update.id, "original", None)
         if lamp is not None and original in (lamp, lamp.data):
             lamp_moved = True
-        if isinstance(update.id, bpy.types.World) and update.id.original == scene.world:
+        if watch_world and isinstance(update.id, bpy.types.World) and \
+                update.id.original == scene.world:
             world_changed = True
     if lamp_moved:
         from .vertex_relight import update_preview
 
         update_preview(scene)
-    if world_changed and props.texture_light == "WORLD":
+    if world_changed:
         from .transport_preview import update_environment_previews
 
         update_environment_previews(scene)
