@@ -54,7 +54,8 @@ def _finish(operator, scene, result):
             operator.report({"WARNING"}, rep["glossy"]["note"])
         fid = rep.get("model_vs_T") or {}
         if "headline" in fid:
-            lines.append(f"{rep['object']}: the preview's model is {fid['headline']:.3f} from "
+            via = "T" if fid.get("viewport") == "transport" else "PCA"
+            lines.append(f"{rep['object']}: the preview ({via}) is {fid['headline']:.3f} from "
                          f"the bake itself (worst {fid['worst']['rel']:.3f} at "
                          f"{fid['worst']['elevation']:g} deg)")
     cmp = reports[0].get("comparison", {})

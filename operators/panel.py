@@ -83,7 +83,8 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
             col = layout.column(align=True)
             for name in ("directions", "horizon_power", "resolution", "bounces",
                          "indirect_samples", "indirect_resolution", "transport_model",
-                         "transport_components", "transport_tol", "sun_angle", "table_size",
+                         "transport_components", "transport_tol", "transport_viewport",
+                         "sun_angle", "table_size",
                          "truth_lights", "output_dir"):
                 col.prop(props, name)
             n = len([o for o in context.selected_objects if o.type == "MESH"])

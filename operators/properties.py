@@ -194,6 +194,15 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
             ("blocks", "Block PCA", "Clustered PCA over texel blocks (CLI/NumPy relight only)"),
             ("steerable", "Steerable (quadrature)", "The paper's basis fitted noise-free from T"),
             ("none", "None", "Keep T only")])
+    transport_viewport: EnumProperty(
+        name="Viewport", default="auto", items=[
+            ("auto", "Auto", "T itself when its atlas takes at most 256 MiB (400 directions at "
+             "256^2: 146 MiB), else the PCA"),
+            ("transport", "Transport (T)", "Relight from T itself: a few baked directions per "
+             "pixel through sparse kernel tables; keeps cast shadows on large receivers; an "
+             "atlas of every direction in memory"),
+            ("pca", "PCA", "The fitted PCA's eigen-textures: small, smooths cast shadows on "
+             "large receivers")])
     transport_tol: FloatProperty(
         name="PCA Tolerance", default=_TRANSPORT["transport_tol"], min=0.001, max=0.5,
         description="Relative residual of T the PCA keeps when Components is 0 (fewer "
@@ -278,7 +287,7 @@ def transport_settings_from_scene(props):
         bounces=props.bounces, model=props.transport_model, tol=props.transport_tol,
         components=props.transport_components or None, indirect_samples=props.indirect_samples,
         indirect_resolution=props.indirect_resolution, sun_angle=props.sun_angle,
-        table_size=props.table_size)
+        table_size=props.table_size, viewport=props.transport_viewport)
 
 
 def settings_from_scene(props):

@@ -45,6 +45,9 @@ CHUNK_DIRECTIONS = 16
 #: The chunk cache's folder inside the output folder (hidden; removed when the bake completes).
 CACHE_FOLDER = ".relight_cache"
 MODELS = ("pca", "blocks", "steerable", "none")
+#: What the viewport shows (``auto``: T itself when its atlas fits, else the PCA; see
+#: :func:`..lt_addon.transport.sparse_tables.choose_viewport`).
+VIEWPORTS = ("auto", "transport", "pca")
 INDIRECT = ("steerable", "none")
 #: Held-out truth lights (azimuth, elevation in degrees): the four elevations of issue 13.
 TRUTH_LIGHTS = ((37.0, 10.0), (161.0, 30.0), (283.0, 55.0), (59.0, 80.0))
@@ -57,7 +60,10 @@ class TransportTextureSettings:
     ``bounces``: the scene's diffuse bounces for the indirect term (0 = direct light only).
     ``tol``: relative Frobenius residual of T the PCA models keep (or ``components``: a fixed
     count for ``pca``). ``sun_angle``: the sun size (degrees) the viewport tables are made
-    for (the NumPy relight takes any size).
+    for (the NumPy relight takes any size). ``viewport``: what the live preview shows --
+    ``transport`` relights from T itself (a few baked directions per pixel through sparse
+    kernel tables), ``pca`` from the fitted PCA, ``auto`` T when its preview atlas fits
+    :data:`..lt_addon.transport.sparse_tables.AUTO_BYTES`, else the PCA.
     """
 
     directions: str = "hemi:400:1.5"
@@ -76,6 +82,7 @@ class TransportTextureSettings:
     kernel: str = "linear"
     table_size: int = 32
     seed: int = 0
+    viewport: str = "auto"
 
     def validate(self):
         """Check ranges; returns the DirectionSet."""
@@ -112,6 +119,8 @@ class TransportTextureSettings:
             raise BakeInputError(f"kernel must be one of {tt.KERNELS}, got {self.kernel!r}")
         if not 8 <= self.table_size <= 256:
             raise BakeInputError(f"table size must be in 8..256, got {self.table_size}")
+        if self.viewport not in VIEWPORTS:
+            raise BakeInputError(f"viewport must be one of {VIEWPORTS}, got {self.viewport!r}")
         return dset
 
 
@@ -492,8 +501,11 @@ def truth_bakes(scene, objects, lights, sun_angle: float, bounces: int, samples:
 
 def truth_errors(result: TransportTextureResult, truths: dict, sun_angle: float,
                  lights=TRUTH_LIGHTS) -> dict:
-    """Relative RMSE of the transport relight and of the model against the truths, per object
-    and light, and one headline figure: ``sqrt(mean(rel^2))`` over lights (model)."""
+    """Relative RMSE of the transport relight, of the model and of the viewport (when it
+    relights from T through sparse tables) against the truths, per object and light, and one
+    headline figure: ``sqrt(mean(rel^2))`` over lights of what the viewport shows."""
+    from ..lt_addon.transport import sparse_tables as sp
+
     rows = []
     for oi, b in enumerate(result.objects):
         store = b.store or tt.TransportStore.open(b.store_path)
@@ -506,11 +518,19 @@ def truth_errors(result: TransportTextureResult, truths: dict, sun_angle: float,
             if b.model is not None:
                 row["model"] = rel_rmse(relight(b, store, d, sun_angle, source="model",
                                                 kernel=result.settings.kernel), truth)
+            tables = viewport_tables(result.settings, store, sun_angle)
+            if tables is not None:   # the viewport relights from T through sparse tables
+                e = store.relight(*sp.sparse_weights_at(tables[0], tables[1], d))
+                view = e[..., None] * b.albedo
+                if b.indirect is not None:
+                    view = view + _upsample(b.indirect.relight(d), store.resolution)
+                row["viewport"] = rel_rmse(view, truth)
             if b.indirect is not None:
                 ind = _upsample(b.indirect.relight(d), store.resolution)
                 row["indirect_share"] = float(np.sum(ind) / max(np.sum(truth), 1e-12))
             rows.append(row)
-    key = "model" if all("model" in r for r in rows) else "transport"
+    key = ("viewport" if all("viewport" in r for r in rows) else
+           "model" if all("model" in r for r in rows) else "transport")
     head = float(np.sqrt(np.mean([r[key] ** 2 for r in rows])))
     return {"sun_angle": sun_angle, "lights": rows, "headline_rel_rmse": head,
             "headline_of": key,
@@ -562,7 +582,7 @@ def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: d
             "bake_calls": result.bake_calls,
             "peak_rss_above_start_mb": round(result.peak_rss_mb, 1),
             "rss_growth_while_streaming_mb": round(result.growth_after_first_mb, 1),
-            "preview_cost": preview_cost(b.model, s),
+            "preview_cost": preview_cost(b.model, s, result.directions.size),
             "model_vs_T": model_fidelity(b, b.store or tt.TransportStore.open(b.store_path), s),
             **result.chunks,
             **(figures or {}),
@@ -583,33 +603,70 @@ def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: d
     return reports
 
 
+def viewport_tables(settings, store, sun_angle: float | None = None):
+    """The sparse kernel tables (indices, weights, kept) of the transport viewport when the
+    settings choose it for this store, else None."""
+    from ..lt_addon.transport import sparse_tables as sp
+
+    if settings.model != "pca":
+        return None
+    try:
+        viewport, _ = sp.choose_viewport(settings.viewport, store.directions.size,
+                                         store.resolution)
+    except ValueError:
+        return None
+    if viewport != "transport":
+        return None
+    return sp.cached_tables(store.directions, max(sp.TABLE_SIZE, settings.table_size),
+                            settings.sun_angle if sun_angle is None else sun_angle,
+                            settings.kernel)
+
+
 def model_fidelity(bake: ObjectBake, store, settings, lights=TRUTH_LIGHTS) -> dict | None:
-    """How far the fitted model (what the viewport shows) is from T itself (the offline
-    relight) at the held-out lights, for the preview's sun size: direct light only (both add the
-    same indirect term), relative RMSE per light and combined as ``sqrt(mean(rel^2))``. Needs
-    no Cycles truth, so every bake reports it. None without a PCA-like model."""
+    """How far what the viewport shows is from T itself (the offline relight) at the held-out
+    lights, for the preview's sun size: direct light only (both add the same indirect term),
+    relative RMSE per light and combined as ``sqrt(mean(rel^2))``. The viewport is T through
+    sparse kernel tables (``viewport`` transport) or the fitted model; ``model_headline`` is
+    the fitted model's figure either way. Needs no Cycles truth, so every bake reports it.
+    None without a PCA-like model."""
+    from ..lt_addon.transport import sparse_tables as sp
+
     model = bake.model
     if model is None or not (hasattr(model, "V") or hasattr(model, "n_blocks")):
         return None                     # none, or the steerable basis (no sparse relight)
+    viewport = "pca" if settings.model == "pca" else settings.model
+    if settings.model == "pca":
+        try:
+            viewport, _ = sp.choose_viewport(settings.viewport, store.directions.size,
+                                             store.resolution)
+        except ValueError:
+            viewport = "pca"
+    tables = viewport_tables(settings, store) if viewport == "transport" else None
     rows = []
     for az, el in lights:
-        idx, w = tt.sun_weights(store.directions, direction_from_az_el(az, el),
-                                settings.sun_angle, settings.kernel)
+        d = direction_from_az_el(az, el)
+        idx, w = tt.sun_weights(store.directions, d, settings.sun_angle, settings.kernel)
         full = store.relight(idx, w)
-        rows.append({"azimuth": az, "elevation": el,
-                     "rel": rel_rmse(model.relight(idx, w), full)})
+        row = {"azimuth": az, "elevation": el, "model": rel_rmse(model.relight(idx, w), full)}
+        row["rel"] = (row["model"] if tables is None else
+                      rel_rmse(store.relight(*sp.sparse_weights_at(tables[0], tables[1], d)),
+                               full))
+        rows.append(row)
     head = float(np.sqrt(np.mean([r["rel"] ** 2 for r in rows])))
+    mhead = float(np.sqrt(np.mean([r["model"] ** 2 for r in rows])))
     worst = max(rows, key=lambda r: r["rel"])
-    return {"headline": round(head, 4), "lights": rows, "sun_angle": settings.sun_angle,
+    return {"headline": round(head, 4), "viewport": viewport,
+            "model_headline": round(mhead, 4), "lights": rows, "sun_angle": settings.sun_angle,
             "worst": {"rel": round(worst["rel"], 4), "elevation": worst["elevation"]},
-            "meaning": "relative RMSE of the model's relight against T's (direct light, albedo "
-                       "left out) at the held-out lights: how far the viewport is from the "
-                       "bake's own relight (relight --source transport). Not an error against "
-                       "Cycles: T blends neighbouring directions' shadows, and a PCA that "
-                       "smooths them can even be closer to Cycles (bumps demo, 2-degree Sun: "
-                       "0.101 vs T's 0.103, while 0.056 apart); measured 0.064 on the statue "
-                       "demo's ground (0.102 at 10 degrees elevation), whose cast shadow the PCA 96 "
-                       "loses"}
+            "meaning": "relative RMSE of the viewport's relight against T's (direct light, "
+                       "albedo left out) at the held-out lights: how far the viewport is from "
+                       "the bake's own relight (relight --source transport); model_headline: "
+                       "the same for the fitted model. Not an error against Cycles: T blends "
+                       "neighbouring directions' shadows, and a PCA that smooths them can even "
+                       "be closer to Cycles (bumps demo, 2-degree Sun: 0.101 vs T's 0.103, "
+                       "while 0.056 apart). A global PCA loses cast shadows on large receivers "
+                       "(statue demo's ground, PCA 96: 0.064, 0.102 at 10 degrees elevation); "
+                       "the transport viewport keeps them (bumps demo, 64^2 tables: 0.005)"}
 
 
 def model_summary(model, S: int) -> dict:
@@ -621,10 +678,26 @@ def model_summary(model, S: int) -> dict:
     return {"kind": "steerable", "order": model.order}
 
 
-def preview_cost(model, settings) -> dict:
+def preview_cost(model, settings, n_directions: int | None = None) -> dict:
+    """Per-pixel cost of the live preview of ``model`` as ``settings.viewport`` shows it (the
+    transport viewport: 4 table texels x (index + weight lookups + 3 atlas lookups) + the
+    albedo, whatever the number of directions)."""
     if not hasattr(model, "preview_cost"):
         return {}
-    return model.preview_cost(settings.indirect_order ** 2 if settings.bounces else 0)
+    extra = settings.indirect_order ** 2 if settings.bounces else 0
+    if settings.model == "pca" and n_directions is not None:
+        from ..lt_addon.transport import sparse_tables as sp
+
+        try:
+            viewport, _ = sp.choose_viewport(settings.viewport, n_directions, model.resolution)
+        except ValueError:
+            viewport = "pca"
+        if viewport == "transport":
+            side, nbytes = sp.atlas_layout_bytes(n_directions, model.resolution)
+            return {"viewport": "transport", "texture_lookups_per_pixel": 4 * 5 + 1 + extra,
+                    "multiply_adds_per_texel": 12, "python_per_light_change": False,
+                    "atlas_side": side, "atlas_mib_float": round(nbytes / 2**20, 1)}
+    return {"viewport": "pca", **model.preview_cost(extra)}
 
 
 def load_bake(report_path: str) -> tuple:
@@ -769,6 +842,13 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
 
     started = time.perf_counter()
     figures = {}
+    if preview and settings.model == "pca":   # refuse an impossible viewport before baking
+        from ..lt_addon.transport import sparse_tables as sp
+
+        try:
+            sp.choose_viewport(settings.viewport, settings.validate().size, settings.resolution)
+        except ValueError as exc:
+            raise BakeInputError(str(exc)) from None
     if target_error is not None:
         if not 0.0 < target_error < 1.0:
             raise BakeInputError(f"--target-error must be in (0, 1), got {target_error}")

@@ -37,6 +37,7 @@ import numpy as np
 import time
 
 from ..lt_addon.io import exrio
+from ..lt_addon.transport import sparse_tables as sp
 from ..lt_addon.transport import texture as tt
 from ..lt_addon.io.atlas import atlas_layout, pack_atlas
 from . import preview_nodes as pn
@@ -144,6 +145,146 @@ def build_group(n_tiles: int, resolution: int, table_size: int, eig_image, table
     return group
 
 
+# ---------------------------------------------------------------------------------------------
+# the viewport from T itself: sparse kernel tables (lt_addon/transport/sparse_tables.py)
+
+
+def sparse_preview_arrays(store, albedo):
+    """T's preview tiles: (ceil(S/3) + 1, R, R, 3) float32, three directions per RGB tile and
+    the albedo last."""
+    R = store.resolution
+    T = np.asarray(store.array, np.float32).reshape(-1, R, R)
+    return np.concatenate([sp.pack_directions(T), np.asarray(albedo, np.float32)[None]], 0)
+
+
+def viewport_relight_sparse(tiles, indices, weights, direction) -> np.ndarray:
+    """NumPy twin of :func:`build_sparse_group` (direct light, intensity 1): (R, R, 3)."""
+    tiles = np.asarray(tiles, np.float64)
+    e = sp.viewport_relight(tiles[:-1], indices, weights, direction)
+    return (e[..., None] * tiles[-1]).astype(np.float32)
+
+
+def write_sparse_tables(base: str, indices, weights, sun_angle: float) -> dict:
+    """The index and weight tables as float EXRs (indices are exact integers)."""
+    out = {}
+    for name, arr in (("sparse_index", np.asarray(indices, np.float32)),
+                      ("sparse_weights", np.asarray(weights, np.float32))):
+        path = f"{base}_preview_{name}.exr"
+        out[name] = path
+        out[f"{name}_bytes"] = exrio.write_exr(
+            path, {c: arr[..., i] for i, c in enumerate("RGB")},
+            {"format": "relightable_textures.transport_sparse_table", "size": arr.shape[0],
+             "sun_angle": sun_angle}, pixel_type="float")
+    return out
+
+
+def write_sparse_atlas(base: str, tiles) -> dict:
+    path = f"{base}_preview_transport.exr"
+    atlas = pack_atlas(tiles, "edge")
+    nbytes = exrio.write_exr(path, {c: atlas[..., i] for i, c in enumerate("RGB")},
+                             {"format": "relightable_textures.transport_sparse_atlas",
+                              "tiles": len(tiles), "resolution": tiles.shape[1]},
+                             pixel_type="half")
+    return {"transport_atlas": path, "transport_atlas_bytes": nbytes}
+
+
+def _closest(b, image, vector, x, y):
+    tex = b.node("ShaderNodeTexImage", x, y, image=image, interpolation="Closest",
+                 extension="EXTEND")
+    b.links.new(vector, tex.inputs["Vector"])
+    sep = b.node("ShaderNodeSeparateColor", x + 200, y)
+    b.links.new(tex.outputs["Color"], sep.inputs[0])
+    return sep.outputs
+
+
+def build_sparse_group(n_directions: int, resolution: int, table_size: int, atlas_image,
+                       index_image, weight_image, uv_map: str, name: str):
+    """The sun group relighting from T: the sockets of :func:`build_group`.
+
+    At the light's disk point the four surrounding table texels are read with Closest lookups
+    (three direction indices, three weights each) and weighted bilinearly; each index ``i``
+    selects tile ``i // 3`` of the atlas (its offset computed in the tree) and channel
+    ``i % 3``. 4 x (2 + 3) lookups, plus the albedo tile."""
+    group = pn.new_light_group(name)
+    group.interface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
+    b = pn._Builder(group)
+    D = int(table_size)
+    gin = b.node("NodeGroupInput", -2600, 0)
+    gout = b.node("NodeGroupOutput", 2200, 0)
+    d = b.vmath("NORMALIZE", gin.outputs["Light Direction"], x=-2400, y=0)
+    sep = b.node("ShaderNodeSeparateXYZ", -2200, 0)
+    b.links.new(d, sep.inputs[0])
+    dx, dy, dz = sep.outputs["X"], sep.outputs["Y"], sep.outputs["Z"]
+    root = b.math("SQRT", b.math("MAXIMUM", b.math("ADD", dz, 1.0, x=-2000, y=-100), 1e-6,
+                                 x=-1900, y=-100), x=-1800, y=-100)
+    cell, frac = [], []
+    for axis, comp in enumerate((dx, dy)):
+        y = 200 - 200 * axis
+        p = b.math("DIVIDE", comp, root, x=-1700, y=y)
+        f = b.math("MULTIPLY_ADD", p, 0.5 * D, 0.5 * D - 0.5, x=-1600, y=y)
+        f = b.math("MINIMUM", b.math("MAXIMUM", f, 0.0, x=-1500, y=y), D - 1.0, x=-1400, y=y)
+        c0 = b.math("MINIMUM", b.math("FLOOR", f, x=-1300, y=y), D - 2.0, x=-1200, y=y)
+        cell.append(c0)
+        frac.append(b.math("SUBTRACT", f, c0, x=-1100, y=y))
+    uv = b.node("ShaderNodeUVMap", -1400, -600, uv_map=uv_map).outputs["UV"]
+    lay = atlas_layout(-(-n_directions // 3) + 1, resolution)
+    cols, stride, W, H = lay["cols"], lay["stride"], lay["width"], lay["height"]
+    acc = None
+    y = 1200
+    for cy in (0, 1):
+        for cx in (0, 1):
+            fu = frac[0] if cx else b.math("SUBTRACT", 1.0, frac[0], x=-1000, y=y)
+            fv = frac[1] if cy else b.math("SUBTRACT", 1.0, frac[1], x=-1000, y=y - 60)
+            factor = b.math("MULTIPLY", fu, fv, x=-900, y=y)
+            tuv = b.node("ShaderNodeCombineXYZ", -900, y - 120)
+            b.links.new(b.math("MULTIPLY_ADD", cell[0], 1.0 / D, (cx + 0.5) / D, x=-1000,
+                               y=y - 120), tuv.inputs[0])
+            b.links.new(b.math("MULTIPLY_ADD", cell[1], 1.0 / D, (cy + 0.5) / D, x=-1000,
+                               y=y - 180), tuv.inputs[1])
+            at = pn.after_sum(b, tuv.outputs[0], acc, -800, y - 120)
+            idx = _closest(b, index_image, at, -700, y)
+            wts = _closest(b, weight_image, at, -700, y - 200)
+            for k in range(3):
+                yk = y - 120 * k
+                i = idx[k]
+                tile = b.math("FLOOR", b.math("MULTIPLY_ADD", i, 1.0 / 3.0, 0.5 / 3.0, x=-300,
+                                              y=yk), x=-200, y=yk)
+                ch = b.math("MULTIPLY_ADD", tile, -3.0, i, x=-100, y=yk)
+                row = b.math("FLOOR", b.math("MULTIPLY_ADD", tile, 1.0 / cols, 0.5 / cols,
+                                             x=0, y=yk), x=100, y=yk)
+                col = b.math("MULTIPLY_ADD", row, -float(cols), tile, x=200, y=yk)
+                off = b.node("ShaderNodeCombineXYZ", 300, yk)
+                b.links.new(b.math("MULTIPLY_ADD", col, stride / W, 1.0 / W, x=250, y=yk),
+                            off.inputs[0])
+                b.links.new(b.math("MULTIPLY_ADD", row, stride / H, 1.0 / H, x=250, y=yk - 40),
+                            off.inputs[1])
+                m = b.node("ShaderNodeVectorMath", 400, yk, operation="MULTIPLY_ADD")
+                b.links.new(pn.after_sum(b, uv, acc, 350, yk), m.inputs[0])
+                m.inputs[1].default_value = (resolution / W, resolution / H, 0.0)
+                b.links.new(off.outputs[0], m.inputs[2])
+                tex = b.node("ShaderNodeTexImage", 500, yk, image=atlas_image,
+                             interpolation="Linear", extension="EXTEND")
+                b.links.new(m.outputs["Vector"], tex.inputs["Vector"])
+                onehot = b.node("ShaderNodeCombineXYZ", 600, yk - 40)
+                for c in range(3):
+                    b.links.new(b.math("COMPARE", ch, float(c), 0.5, x=550, y=yk - 40 * c),
+                                onehot.inputs[c])
+                value = b.vmath("DOT_PRODUCT", tex.outputs["Color"], onehot.outputs[0], x=700,
+                                y=yk)
+                term = b.math("MULTIPLY", value, b.math("MULTIPLY", wts[k], factor, x=700,
+                                                        y=yk - 60), x=800, y=yk)
+                acc = term if acc is None else b.math("ADD", acc, term, x=900, y=yk)
+            y -= 600
+    albedo = _lookup(b, atlas_image, uv, lay["tiles"][-1], 700, y - 200)
+    lit = b.math("GREATER_THAN", dz, 0.0, x=1100, y=-200)
+    scale = b.math("MULTIPLY", b.math("MULTIPLY", acc, lit, x=1300, y=-100),
+                   gin.outputs["Intensity"], x=1500, y=-100)
+    color = b.vmath("SCALE", albedo, x=1700, y=-300, scale=scale)
+    color = b.vmath("MULTIPLY", color, gin.outputs["Color"], x=1900, y=-300)
+    b.links.new(color, gout.inputs["Color"])
+    return group
+
+
 def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: float | None = None,
                               sun=None) -> dict:
     """Write the atlases, build the group(s) and wire them into ``obj``'s materials (replacing
@@ -165,11 +306,27 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
                   obj.data.uv_layers[0].name)
     gname = f"{GROUP_PREFIX} ({obj.name})"
     old = bpy.data.node_groups.get(gname)
-    group = build_group(len(tables), model.resolution, s["table_size"], eig_img, tab_img,
-                        uv_map, gname + " new")
+    viewport, why = sp.choose_viewport(s.get("viewport", "pca"), store.directions.size,
+                                       model.resolution)
+    sparse = {}
+    if viewport == "transport":
+        D = max(sp.TABLE_SIZE, int(s["table_size"]))
+        idx, wts, kept = sp.cached_tables(store.directions, D, angle, s.get("kernel", "linear"))
+        sparse = {**write_sparse_atlas(base, sparse_preview_arrays(store, bake.albedo)),
+                  **write_sparse_tables(base, idx, wts, angle), "sparse_table_size": D,
+                  "kernel_mass_kept": round(kept, 4)}
+        t_img = pn.load_atlas_image(sparse["transport_atlas"], f"{obj.name} transport T atlas")
+        i_img = pn.load_atlas_image(sparse["sparse_index"], f"{obj.name} transport T index")
+        w_img = pn.load_atlas_image(sparse["sparse_weights"], f"{obj.name} transport T weights")
+        group = build_sparse_group(store.directions.size, model.resolution, D, t_img, i_img,
+                                   w_img, uv_map, gname + " new")
+    else:
+        group = build_group(len(tables), model.resolution, s["table_size"], eig_img, tab_img,
+                            uv_map, gname + " new")
     if old is not None:
         bpy.data.node_groups.remove(old)
     group.name = gname
+    group["relight_viewport"] = viewport
     group["relight_report"] = report["report"]
     group[pn.OWNER] = obj.name
     indirect_group = None
@@ -213,8 +370,9 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
     props = getattr(scene, "relight", None)
     if props is not None and props.texture_light == "WORLD":
         set_light_mode(scene, obj, "WORLD")
-    return {**files, "group": gname, "group_nodes": len(group.nodes), "sun_angle": angle,
-            "tiles": len(tables)}
+    return {**files, **sparse, "group": gname, "group_nodes": len(group.nodes),
+            "sun_angle": angle, "tiles": len(tables), "viewport": viewport,
+            "viewport_why": why}
 
 
 def rewrite_tables(obj, report: dict, bake, store, sun_angle: float) -> None:
@@ -229,6 +387,13 @@ def rewrite_tables(obj, report: dict, bake, store, sun_angle: float) -> None:
                     {"format": "relightable_textures.transport_preview", "tiles": len(tables),
                      "resolution": tables.shape[1], "sun_angle": sun_angle}, pixel_type="half")
     pn.load_atlas_image(path, f"{obj.name} transport tables")
+    group = bpy.data.node_groups.get(f"{GROUP_PREFIX} ({obj.name})")
+    if group is not None and group.get("relight_viewport") == "transport":
+        D = max(sp.TABLE_SIZE, int(s["table_size"]))
+        idx, wts, _ = sp.cached_tables(store.directions, D, sun_angle, s.get("kernel", "linear"))
+        files = write_sparse_tables(base, idx, wts, sun_angle)
+        pn.load_atlas_image(files["sparse_index"], f"{obj.name} transport T index")
+        pn.load_atlas_image(files["sparse_weights"], f"{obj.name} transport T weights")
 
 
 # ---------------------------------------------------------------------------------------------
