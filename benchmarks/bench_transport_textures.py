@@ -107,6 +107,7 @@ def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder,
                      ind_res=None, label=None):
     """Bake once at (S, ind_spp, res; indirect at ``ind_res``, default res / 2); one row per
     model fitted from that store."""
+    from relightable_textures.lt_addon.transport import sparse_tables as sp
     from relightable_textures.lt_addon.transport import texture as tt
     from relightable_textures.operators import texture_transport as tx
     from relightable_textures.operators.jobs import run
@@ -128,7 +129,7 @@ def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder,
     label = label or f"transport S {S}, {res}^2, indirect {ind_res}^2 {ind_spp} spp"
     for kind, arg in models:
         t1 = time.perf_counter()
-        if kind == "T":
+        if kind in ("T", "viewport"):
             fitted = [None for _ in stores]
         elif kind == "pca":
             fitted = [tt.fit_texture_pca(s, k=arg) for s in stores]
@@ -142,8 +143,37 @@ def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder,
             b.model = fitted[oi]
             return tx.relight(b, stores[oi], d, a, source="model" if fitted[oi] else "transport")
 
-        err = errors_for(relight, truth, R)
-        if kind == "T":
+        def relight_viewport(oi, d, a):
+            """What the transport viewport shows: T through 64^2 sparse kernel tables."""
+            b, st_ = result.objects[oi], stores[oi]
+            tables = sp.cached_tables(st_.directions, sp.TABLE_SIZE, a, "linear")
+            out = tx.viewport_direct(st_, tables, d)[..., None] * b.albedo   # 8-bit atlas
+            if b.indirect is not None:
+                out = out + tx._upsample(b.indirect.relight(np.asarray(d, np.float64)),
+                                         st_.resolution)
+            return out
+
+        if kind == "viewport":
+            t1 = time.perf_counter()
+            for st_ in stores:     # the tables of both sun sizes the errors use
+                for a in (2.0, 10.0):
+                    sp.cached_tables(st_.directions, sp.TABLE_SIZE, a, "linear")
+            # the bake also fits the PCA the World light uses: its fit time counts too
+            pca_fit = (rows[-1]["bake_seconds"] - bake_s
+                       if rows and rows[-1]["model"] == "pca" else 0.0)
+            fit_s = pca_fit + time.perf_counter() - t1
+        err = errors_for(relight_viewport if kind == "viewport" else relight, truth, R)
+        if kind == "viewport":
+            side, nbytes = sp.atlas_layout_bytes(S, res)
+            # preview bytes: the 8-bit atlas as Blender holds it (RGBA), per object
+            model_bytes = nbytes * len(stores)
+            taps = max(sp.cached_tables(stores[0].directions, sp.TABLE_SIZE, a, "linear")[0]
+                       .shape[-1] for a in (2.0, 10.0))     # the wider sun's
+            lookups = 4 * (2 * taps // 3 + taps) + 1 + (9 if ind_spp else 0)
+            madds = 4 * taps + 27
+            name = (f"viewport from T (sparse {sp.TABLE_SIZE}^2 tables, up to {taps} taps, "
+                    f"8-bit atlas {side}^2)")
+        elif kind == "T":
             model_bytes, lookups, madds, name = t_bytes, None, None, "relight from T (offline)"
         elif kind == "pca":
             k = fitted[0].k
@@ -262,6 +292,7 @@ def measure_presets(out_dir, truth_spp=256):
     bumps demo at 256^2, measure it as the sweep does (plus T itself and one 64-spp Cycles bake
     in the same run) and write the figures into the presets file's ``measured`` blocks."""
     from relightable_textures.lt_addon.io import atomic
+    from relightable_textures.lt_addon.transport import sparse_tables as sp
     from relightable_textures.lt_addon.transport.texture import parse_directions
 
     path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
@@ -278,16 +309,21 @@ def measure_presets(out_dir, truth_spp=256):
         for name, p in data["presets"].items():
             S = parse_directions(p["directions"]).size
             got = transport_points(scene, objects, truth, R, S, p["indirect_samples"],
-                                   p["resolution"], [("T", None), ("pca", p["components"])],
+                                   p["resolution"], [("T", None), ("pca", p["components"]),
+                                                     ("viewport", None)],
                                    folder, ind_res=p["indirect_resolution"],
                                    label=f"{name}: {p['directions']}, {p['resolution']}^2, "
                                          f"indirect {p['indirect_resolution']}^2 "
                                          f"{p['indirect_samples']} spp")
             rows += got
-            t_row, m_row = got
+            t_row, pca_row, v_row = got
+            viewport, _ = sp.choose_viewport("auto", S, p["resolution"])
+            m_row = v_row if viewport == "transport" else pca_row
             p["measured"] = {
-                "bake_seconds": m_row["bake_seconds"], "rel_rmse": m_row["err_10deg"],
-                "rel_rmse_2deg": m_row["err_2deg"], "rel_rmse_from_T": t_row["err_10deg"],
+                "viewport": viewport, "bake_seconds": m_row["bake_seconds"],
+                "rel_rmse": m_row["err_10deg"], "rel_rmse_2deg": m_row["err_2deg"],
+                "rel_rmse_from_T": t_row["err_10deg"], "rel_rmse_pca": pca_row["err_10deg"],
+                "rel_rmse_transport_viewport": v_row["err_10deg"],
                 "single_bakes": round(m_row["bake_seconds"] / one, 2),
                 "single_bake_seconds": round(one, 2), "peak_mem_mb": m_row["peak_mem_mb"],
                 "stored_bytes": m_row["stored_bytes"], "transport_bytes": m_row["transport_bytes"],
@@ -342,7 +378,8 @@ def main(argv=None):
         print(f"  one 64-spp Cycles bake at {R}^2: {one:.2f} s", flush=True)
         truth = truths(scene, objects, R, spp)
         rows = []
-        models = [("T", None)] + [("pca", k) for k in ks] + [("blocks", 0.02)]
+        models = ([("T", None)] + [("pca", k) for k in ks] + [("viewport", None)]
+                  + [("blocks", 0.02)])
         with tempfile.TemporaryDirectory(dir=args.out) as folder:
             for S in counts:
                 rows += transport_points(scene, objects, truth, R, S, 64, R, models, folder)

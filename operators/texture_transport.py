@@ -504,8 +504,6 @@ def truth_errors(result: TransportTextureResult, truths: dict, sun_angle: float,
     """Relative RMSE of the transport relight, of the model and of the viewport (when it
     relights from T through sparse tables) against the truths, per object and light, and one
     headline figure: ``sqrt(mean(rel^2))`` over lights of what the viewport shows."""
-    from ..lt_addon.transport import sparse_tables as sp
-
     rows = []
     for oi, b in enumerate(result.objects):
         store = b.store or tt.TransportStore.open(b.store_path)
@@ -520,8 +518,7 @@ def truth_errors(result: TransportTextureResult, truths: dict, sun_angle: float,
                                                 kernel=result.settings.kernel), truth)
             tables = viewport_tables(result.settings, store, sun_angle)
             if tables is not None:   # the viewport relights from T through sparse tables
-                e = store.relight(*sp.sparse_weights_at(tables[0], tables[1], d))
-                view = e[..., None] * b.albedo
+                view = viewport_direct(store, tables, d)[..., None] * b.albedo
                 if b.indirect is not None:
                     view = view + _upsample(b.indirect.relight(d), store.resolution)
                 row["viewport"] = rel_rmse(view, truth)
@@ -569,6 +566,7 @@ def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: d
                 tt.save_model(files["model"], b.model, result.directions.spec)
         nbytes = {k: os.path.getsize(v) for k, v in files.items()}
         s = result.settings
+        store = b.store or tt.TransportStore.open(b.store_path)
         report = {
             "kind": KIND, "object": b.name, "method": "transport",
             "settings": asdict(s), "directions": result.directions.size,
@@ -582,8 +580,8 @@ def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: d
             "bake_calls": result.bake_calls,
             "peak_rss_above_start_mb": round(result.peak_rss_mb, 1),
             "rss_growth_while_streaming_mb": round(result.growth_after_first_mb, 1),
-            "preview_cost": preview_cost(b.model, s, result.directions.size),
-            "model_vs_T": model_fidelity(b, b.store or tt.TransportStore.open(b.store_path), s),
+            "preview_cost": preview_cost(b.model, s, store),
+            "model_vs_T": model_fidelity(b, store, s),
             **result.chunks,
             **(figures or {}),
         }
@@ -622,6 +620,34 @@ def viewport_tables(settings, store, sun_angle: float | None = None):
                             settings.kernel)
 
 
+_QUANTIZED: dict = {}
+
+
+def quantized(store):
+    """(tiles, scales) of :func:`..lt_addon.transport.sparse_tables.quantize_directions` for
+    ``store`` (cached per store file and its modification time)."""
+    from ..lt_addon.transport import sparse_tables as sp
+
+    path = getattr(store, "_tmp", None) or store.path
+    key = (os.path.abspath(path), os.path.getmtime(path) if os.path.exists(path) else 0.0,
+           store.directions.size)
+    if key not in _QUANTIZED:
+        if len(_QUANTIZED) >= 4:      # a few stores (objects baked together): S * R^2 bytes each
+            _QUANTIZED.clear()
+        _QUANTIZED[key] = sp.quantize_directions(store.array)
+    return _QUANTIZED[key]
+
+
+def viewport_direct(store, tables, direction) -> np.ndarray:
+    """What the transport viewport shows of the direct light (R, R), irradiance/pi: T through
+    the sparse tables, read from its 8-bit atlas."""
+    from ..lt_addon.transport import sparse_tables as sp
+
+    tiles, scales = quantized(store)
+    return sp.viewport_relight(tiles, tables[0], sp.scaled_weights(tables[0], tables[1], scales),
+                               direction, 1.0 / 255.0)
+
+
 def model_fidelity(bake: ObjectBake, store, settings, lights=TRUTH_LIGHTS) -> dict | None:
     """How far what the viewport shows is from T itself (the offline relight) at the held-out
     lights, for the preview's sun size: direct light only (both add the same indirect term),
@@ -649,8 +675,7 @@ def model_fidelity(bake: ObjectBake, store, settings, lights=TRUTH_LIGHTS) -> di
         full = store.relight(idx, w)
         row = {"azimuth": az, "elevation": el, "model": rel_rmse(model.relight(idx, w), full)}
         row["rel"] = (row["model"] if tables is None else
-                      rel_rmse(store.relight(*sp.sparse_weights_at(tables[0], tables[1], d)),
-                               full))
+                      rel_rmse(viewport_direct(store, tables, d), full))
         rows.append(row)
     head = float(np.sqrt(np.mean([r["rel"] ** 2 for r in rows])))
     mhead = float(np.sqrt(np.mean([r["model"] ** 2 for r in rows])))
@@ -678,25 +703,24 @@ def model_summary(model, S: int) -> dict:
     return {"kind": "steerable", "order": model.order}
 
 
-def preview_cost(model, settings, n_directions: int | None = None) -> dict:
+def preview_cost(model, settings, store=None) -> dict:
     """Per-pixel cost of the live preview of ``model`` as ``settings.viewport`` shows it (the
-    transport viewport: 4 table texels x (index + weight lookups + 3 atlas lookups) + the
-    albedo, whatever the number of directions)."""
+    transport viewport: 4 table texels x (2 K / 3 table lookups + K atlas lookups) + the
+    albedo, K the taps its tables need for the preview's sun size: 21 lookups for a point sun,
+    whatever the number of directions)."""
     if not hasattr(model, "preview_cost"):
         return {}
     extra = settings.indirect_order ** 2 if settings.bounces else 0
-    if settings.model == "pca" and n_directions is not None:
+    tables = viewport_tables(settings, store) if store is not None else None
+    if tables is not None:
         from ..lt_addon.transport import sparse_tables as sp
 
-        try:
-            viewport, _ = sp.choose_viewport(settings.viewport, n_directions, model.resolution)
-        except ValueError:
-            viewport = "pca"
-        if viewport == "transport":
-            side, nbytes = sp.atlas_layout_bytes(n_directions, model.resolution)
-            return {"viewport": "transport", "texture_lookups_per_pixel": 4 * 5 + 1 + extra,
-                    "multiply_adds_per_texel": 12, "python_per_light_change": False,
-                    "atlas_side": side, "atlas_mib_float": round(nbytes / 2**20, 1)}
+        taps = tables[0].shape[-1]
+        side, nbytes = sp.atlas_layout_bytes(store.directions.size, model.resolution)
+        return {"viewport": "transport", "taps": taps,
+                "texture_lookups_per_pixel": 4 * (2 * taps // 3 + taps) + 1 + extra,
+                "multiply_adds_per_texel": 4 * taps, "python_per_light_change": False,
+                "atlas_side": side, "atlas_mib_8bit": round(nbytes / 2**20, 1)}
     return {"viewport": "pca", **model.preview_cost(extra)}
 
 
@@ -874,8 +898,10 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
     previewed = preview and settings.model == "pca"
     if previewed:
         for rep, b, obj in zip(reports, result.objects, objects):
+            t_prev = time.perf_counter()
             store = tt.TransportStore.open(b.store_path)
             rep["preview"] = install_transport_preview(scene, obj, rep, b, store)
+            rep["timings"]["preview_seconds"] = round(time.perf_counter() - t_prev, 3)
     if truth and previewed and compare:
         from .compare_render import report_comparison
 

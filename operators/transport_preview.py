@@ -1,4 +1,13 @@
-"""Live viewport preview of a transport-texture PCA model: no Python per light change (bpy).
+"""Live viewport preview of a transport-texture bake: no Python per light change (bpy).
+
+Two sun groups, chosen by the bake's ``viewport`` setting (:func:`install_transport_preview`):
+
+* **from T itself** (:func:`build_sparse_group`): an 8-bit atlas of T, three directions per
+  RGB tile, and sparse kernel tables over the hemisphere disk
+  (:mod:`..lt_addon.transport.sparse_tables`): per pixel the four table texels around the
+  light's disk point, six directions each. Keeps cast shadows on large receivers; its NumPy
+  twin is :func:`viewport_relight_sparse`;
+* **from the PCA** (:func:`build_group`), described below; the World light always uses the PCA.
 
 The model relights a sun from ``w0`` as ``albedo * sum_k c_k(w0) U_k`` (+ the indirect term).
 ``c_k`` is tabulated over the hemisphere disk (:func:`..lt_addon.transport.texture.
@@ -104,20 +113,38 @@ def _lookup(b, image, uv, tile, x, y):
     return tex.outputs["Color"]
 
 
-def build_group(n_tiles: int, resolution: int, table_size: int, eig_image, table_image,
-                uv_map: str, name: str):
-    """The node group: inputs Light Direction, Intensity, Color; output Color (direct light)."""
+def _sun_group_head(name: str, x_in: float, x_out: float):
+    """A new sun group (light inputs, Color output) and the light's unit direction: returns
+    (group, builder, group input, group output, (dx, dy, dz) sockets, sqrt(1 + dz) socket --
+    the disk map's denominator)."""
     group = pn.new_light_group(name)
     group.interface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
     b = pn._Builder(group)
-    gin = b.node("NodeGroupInput", -1800, 0)
-    gout = b.node("NodeGroupOutput", 1600, 0)
-    d = b.vmath("NORMALIZE", gin.outputs["Light Direction"], x=-1600, y=0)
-    sep = b.node("ShaderNodeSeparateXYZ", -1400, 0)
+    gin = b.node("NodeGroupInput", x_in, 0)
+    gout = b.node("NodeGroupOutput", x_out, 0)
+    d = b.vmath("NORMALIZE", gin.outputs["Light Direction"], x=x_in + 200, y=0)
+    sep = b.node("ShaderNodeSeparateXYZ", x_in + 400, 0)
     b.links.new(d, sep.inputs[0])
-    dx, dy, dz = sep.outputs["X"], sep.outputs["Y"], sep.outputs["Z"]
-    root = b.math("SQRT", b.math("MAXIMUM", b.math("ADD", dz, 1.0, x=-1200, y=-100), 1e-6,
-                                 x=-1100, y=-100), x=-1000, y=-100)
+    dz = sep.outputs["Z"]
+    root = b.math("SQRT", b.math("MAXIMUM", b.math("ADD", dz, 1.0, x=x_in + 600, y=-100), 1e-6,
+                                 x=x_in + 700, y=-100), x=x_in + 800, y=-100)
+    return group, b, gin, gout, (sep.outputs["X"], sep.outputs["Y"], dz), root
+
+
+def _sun_group_tail(b, gin, gout, irradiance, albedo, dz, x: float) -> None:
+    """Output ``albedo * irradiance * Intensity * Color``, 0 with the light below the horizon."""
+    lit = b.math("GREATER_THAN", dz, 0.0, x=x, y=-200)
+    scale = b.math("MULTIPLY", b.math("MULTIPLY", irradiance, lit, x=x + 200, y=-100),
+                   gin.outputs["Intensity"], x=x + 400, y=-100)
+    color = b.vmath("SCALE", albedo, x=x + 600, y=-300, scale=scale)
+    color = b.vmath("MULTIPLY", color, gin.outputs["Color"], x=x + 800, y=-300)
+    b.links.new(color, gout.inputs["Color"])
+
+
+def build_group(n_tiles: int, resolution: int, table_size: int, eig_image, table_image,
+                uv_map: str, name: str):
+    """The node group: inputs Light Direction, Intensity, Color; output Color (direct light)."""
+    group, b, gin, gout, (dx, dy, dz), root = _sun_group_head(name, -1800, 1600)
     tx = b.math("MULTIPLY_ADD", b.math("DIVIDE", dx, root, x=-900, y=100), 0.5, 0.5, x=-800, y=100)
     ty = b.math("MULTIPLY_ADD", b.math("DIVIDE", dy, root, x=-900, y=0), 0.5, 0.5, x=-800, y=0)
     table_uv = b.node("ShaderNodeCombineXYZ", -700, 50)
@@ -136,12 +163,7 @@ def build_group(n_tiles: int, resolution: int, table_size: int, eig_image, table
         dot = b.vmath("DOT_PRODUCT", c, e, x=-50, y=y)
         acc = dot if acc is None else b.math("ADD", acc, dot, x=150, y=y)
     albedo = _lookup(b, eig_image, uv, lay_e["tiles"][n_tiles], -500, -600)
-    lit = b.math("GREATER_THAN", dz, 0.0, x=150, y=-200)
-    scale = b.math("MULTIPLY", b.math("MULTIPLY", acc, lit, x=350, y=-100),
-                   gin.outputs["Intensity"], x=550, y=-100)
-    color = b.vmath("SCALE", albedo, x=750, y=-300, scale=scale)
-    color = b.vmath("MULTIPLY", color, gin.outputs["Color"], x=950, y=-300)
-    b.links.new(color, gout.inputs["Color"])
+    _sun_group_tail(b, gin, gout, acc, albedo, dz, 150)
     return group
 
 
@@ -149,26 +171,34 @@ def build_group(n_tiles: int, resolution: int, table_size: int, eig_image, table
 # the viewport from T itself: sparse kernel tables (lt_addon/transport/sparse_tables.py)
 
 
-def sparse_preview_arrays(store, albedo):
-    """T's preview tiles: (ceil(S/3) + 1, R, R, 3) float32, three directions per RGB tile and
-    the albedo last."""
-    R = store.resolution
-    T = np.asarray(store.array, np.float32).reshape(-1, R, R)
-    return np.concatenate([sp.pack_directions(T), np.asarray(albedo, np.float32)[None]], 0)
+def viewport_relight_sparse(tiles, indices, weights, albedo, direction) -> np.ndarray:
+    """NumPy twin of :func:`build_sparse_group` (direct light, intensity 1): (R, R, 3) from the
+    8-bit atlas tiles (uint8, read as ``q / 255``), the scaled weights and the albedo tile."""
+    e = sp.viewport_relight(tiles, indices, weights, direction, 1.0 / 255.0)
+    return (e[..., None] * np.asarray(albedo, np.float64)).astype(np.float32)
 
 
-def viewport_relight_sparse(tiles, indices, weights, direction) -> np.ndarray:
-    """NumPy twin of :func:`build_sparse_group` (direct light, intensity 1): (R, R, 3)."""
-    tiles = np.asarray(tiles, np.float64)
-    e = sp.viewport_relight(tiles[:-1], indices, weights, direction)
-    return (e[..., None] * tiles[-1]).astype(np.float32)
+def table_parts(arr) -> np.ndarray:
+    """(D, D, K) -> (D, (K/3) D, 3): taps 0-2 in the first part, 3-5 in the next, ... (one
+    image, one sampler, one lookup per part and table texel)."""
+    a = np.asarray(arr)
+    return np.concatenate([a[..., i:i + 3] for i in range(0, a.shape[-1], 3)], axis=1)
 
 
-def write_sparse_tables(base: str, indices, weights, sun_angle: float) -> dict:
-    """The index and weight tables as float EXRs (indices are exact integers)."""
+def tables_from_parts(img) -> np.ndarray:
+    """Inverse of :func:`table_parts`: (D, (K/3) D, 3) -> (D, D, K)."""
+    a = np.asarray(img)
+    D = a.shape[0]
+    return np.concatenate([a[:, i:i + D] for i in range(0, a.shape[1], D)], axis=-1)
+
+
+def write_sparse_tables(base: str, indices, weights, scales, sun_angle: float) -> dict:
+    """The index table and the weight table (times the directions' atlas scales) as float
+    EXRs (indices are exact integers), each (D, (K/3) D) RGB: :func:`table_parts`."""
     out = {}
-    for name, arr in (("sparse_index", np.asarray(indices, np.float32)),
-                      ("sparse_weights", np.asarray(weights, np.float32))):
+    for name, arr in (("sparse_index", table_parts(np.asarray(indices, np.float32))),
+                      ("sparse_weights", table_parts(sp.scaled_weights(indices, weights,
+                                                                       scales)))):
         path = f"{base}_preview_{name}.exr"
         out[name] = path
         out[f"{name}_bytes"] = exrio.write_exr(
@@ -178,14 +208,32 @@ def write_sparse_tables(base: str, indices, weights, sun_angle: float) -> dict:
     return out
 
 
-def write_sparse_atlas(base: str, tiles) -> dict:
-    path = f"{base}_preview_transport.exr"
+def write_sparse_atlas(base: str, store) -> dict:
+    """T's 8-bit atlas (PNG, three directions per RGB tile) and its per-direction scales
+    (JSON beside it); returns paths, bytes and the scales."""
+    from ..lt_addon.io import atomic
+    from ..lt_addon.io.contact_sheet import write_png
+
+    from .texture_transport import quantized
+
+    tiles, scales = quantized(store)
+    path = f"{base}_preview_transport.png"
     atlas = pack_atlas(tiles, "edge")
-    nbytes = exrio.write_exr(path, {c: atlas[..., i] for i, c in enumerate("RGB")},
-                             {"format": "relightable_textures.transport_sparse_atlas",
-                              "tiles": len(tiles), "resolution": tiles.shape[1]},
-                             pixel_type="half")
-    return {"transport_atlas": path, "transport_atlas_bytes": nbytes}
+    nbytes = write_png(path, atlas[::-1])       # PNG rows top first, Blender's bottom first
+    meta = f"{base}_preview_transport.json"
+    atomic.write_json(meta, {"format": "relightable_textures.transport_sparse_atlas",
+                             "tiles": len(tiles), "resolution": tiles.shape[1],
+                             "directions": int(len(scales)), "scales": scales.tolist(),
+                             "meaning": "texel = q / 255 * scales[direction]"})
+    return {"transport_atlas": path, "transport_atlas_bytes": nbytes,
+            "transport_scales": meta}, scales
+
+
+def _scales(path: str) -> np.ndarray:
+    import json
+
+    with open(path) as fh:
+        return np.asarray(json.load(fh)["scales"], np.float64)
 
 
 def _closest(b, image, vector, x, y):
@@ -197,26 +245,20 @@ def _closest(b, image, vector, x, y):
     return sep.outputs
 
 
-def build_sparse_group(n_directions: int, resolution: int, table_size: int, atlas_image,
-                       index_image, weight_image, uv_map: str, name: str):
+def build_sparse_group(n_directions: int, resolution: int, table_size: int, taps: int,
+                       atlas_image, index_image, weight_image, albedo_image, albedo_tile,
+                       uv_map: str, name: str):
     """The sun group relighting from T: the sockets of :func:`build_group`.
 
     At the light's disk point the four surrounding table texels are read with Closest lookups
-    (three direction indices, three weights each) and weighted bilinearly; each index ``i``
-    selects tile ``i // 3`` of the atlas (its offset computed in the tree) and channel
-    ``i % 3``. 4 x (2 + 3) lookups, plus the albedo tile."""
-    group = pn.new_light_group(name)
-    group.interface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
-    b = pn._Builder(group)
+    (``taps`` direction indices, ``taps`` scaled weights each, in ``taps / 3`` parts of the
+    tables) and weighted bilinearly; each index ``i`` selects tile ``i // 3`` of the 8-bit atlas
+    (its offset computed in the tree) and channel ``i % 3``. 4 x (2 taps / 3 + taps) lookups,
+    plus the albedo
+    (``albedo_tile`` of the half-float ``albedo_image``: 8 bits would cost a dark albedo its
+    precision)."""
+    group, b, gin, gout, (dx, dy, dz), root = _sun_group_head(name, -2600, 2200)
     D = int(table_size)
-    gin = b.node("NodeGroupInput", -2600, 0)
-    gout = b.node("NodeGroupOutput", 2200, 0)
-    d = b.vmath("NORMALIZE", gin.outputs["Light Direction"], x=-2400, y=0)
-    sep = b.node("ShaderNodeSeparateXYZ", -2200, 0)
-    b.links.new(d, sep.inputs[0])
-    dx, dy, dz = sep.outputs["X"], sep.outputs["Y"], sep.outputs["Z"]
-    root = b.math("SQRT", b.math("MAXIMUM", b.math("ADD", dz, 1.0, x=-2000, y=-100), 1e-6,
-                                 x=-1900, y=-100), x=-1800, y=-100)
     cell, frac = [], []
     for axis, comp in enumerate((dx, dy)):
         y = 200 - 200 * axis
@@ -227,7 +269,7 @@ def build_sparse_group(n_directions: int, resolution: int, table_size: int, atla
         cell.append(c0)
         frac.append(b.math("SUBTRACT", f, c0, x=-1100, y=y))
     uv = b.node("ShaderNodeUVMap", -1400, -600, uv_map=uv_map).outputs["UV"]
-    lay = atlas_layout(-(-n_directions // 3) + 1, resolution)
+    lay = atlas_layout(-(-n_directions // 3), resolution)
     cols, stride, W, H = lay["cols"], lay["stride"], lay["width"], lay["height"]
     acc = None
     y = 1200
@@ -236,15 +278,20 @@ def build_sparse_group(n_directions: int, resolution: int, table_size: int, atla
             fu = frac[0] if cx else b.math("SUBTRACT", 1.0, frac[0], x=-1000, y=y)
             fv = frac[1] if cy else b.math("SUBTRACT", 1.0, frac[1], x=-1000, y=y - 60)
             factor = b.math("MULTIPLY", fu, fv, x=-900, y=y)
-            tuv = b.node("ShaderNodeCombineXYZ", -900, y - 120)
-            b.links.new(b.math("MULTIPLY_ADD", cell[0], 1.0 / D, (cx + 0.5) / D, x=-1000,
-                               y=y - 120), tuv.inputs[0])
-            b.links.new(b.math("MULTIPLY_ADD", cell[1], 1.0 / D, (cy + 0.5) / D, x=-1000,
-                               y=y - 180), tuv.inputs[1])
-            at = pn.after_sum(b, tuv.outputs[0], acc, -800, y - 120)
-            idx = _closest(b, index_image, at, -700, y)
-            wts = _closest(b, weight_image, at, -700, y - 200)
-            for k in range(3):
+            tv = b.math("MULTIPLY_ADD", cell[1], 1.0 / D, (cy + 0.5) / D, x=-1000, y=y - 180)
+            idx, wts = [], []
+            parts = taps // 3
+            for part in range(parts):   # part p of the tables holds taps 3p .. 3p + 2
+                yp = y - 400 * part
+                tuv = b.node("ShaderNodeCombineXYZ", -900, yp - 120)
+                b.links.new(b.math("MULTIPLY_ADD", cell[0], 1.0 / (parts * D),
+                                   (cx + 0.5 + part * D) / (parts * D), x=-1000, y=yp - 120),
+                            tuv.inputs[0])
+                b.links.new(tv, tuv.inputs[1])
+                at = pn.after_sum(b, tuv.outputs[0], acc, -800, yp - 120)
+                idx += list(_closest(b, index_image, at, -700, yp))[:3]
+                wts += list(_closest(b, weight_image, at, -700, yp - 200))[:3]
+            for k in range(len(idx)):
                 yk = y - 120 * k
                 i = idx[k]
                 tile = b.math("FLOOR", b.math("MULTIPLY_ADD", i, 1.0 / 3.0, 0.5 / 3.0, x=-300,
@@ -274,14 +321,9 @@ def build_sparse_group(n_directions: int, resolution: int, table_size: int, atla
                 term = b.math("MULTIPLY", value, b.math("MULTIPLY", wts[k], factor, x=700,
                                                         y=yk - 60), x=800, y=yk)
                 acc = term if acc is None else b.math("ADD", acc, term, x=900, y=yk)
-            y -= 600
-    albedo = _lookup(b, atlas_image, uv, lay["tiles"][-1], 700, y - 200)
-    lit = b.math("GREATER_THAN", dz, 0.0, x=1100, y=-200)
-    scale = b.math("MULTIPLY", b.math("MULTIPLY", acc, lit, x=1300, y=-100),
-                   gin.outputs["Intensity"], x=1500, y=-100)
-    color = b.vmath("SCALE", albedo, x=1700, y=-300, scale=scale)
-    color = b.vmath("MULTIPLY", color, gin.outputs["Color"], x=1900, y=-300)
-    b.links.new(color, gout.inputs["Color"])
+            y -= 400 * parts + 200
+    albedo = _lookup(b, albedo_image, uv, albedo_tile, 700, y - 200)
+    _sun_group_tail(b, gin, gout, acc, albedo, dz, 1100)
     return group
 
 
@@ -312,14 +354,18 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
     if viewport == "transport":
         D = max(sp.TABLE_SIZE, int(s["table_size"]))
         idx, wts, kept = sp.cached_tables(store.directions, D, angle, s.get("kernel", "linear"))
-        sparse = {**write_sparse_atlas(base, sparse_preview_arrays(store, bake.albedo)),
-                  **write_sparse_tables(base, idx, wts, angle), "sparse_table_size": D,
+        atlas_files, scales = write_sparse_atlas(base, store)
+        sparse = {**atlas_files, **write_sparse_tables(base, idx, wts, scales, angle),
+                  "sparse_table_size": D, "taps": int(idx.shape[-1]),
                   "kernel_mass_kept": round(kept, 4)}
         t_img = pn.load_atlas_image(sparse["transport_atlas"], f"{obj.name} transport T atlas")
         i_img = pn.load_atlas_image(sparse["sparse_index"], f"{obj.name} transport T index")
         w_img = pn.load_atlas_image(sparse["sparse_weights"], f"{obj.name} transport T weights")
-        group = build_sparse_group(store.directions.size, model.resolution, D, t_img, i_img,
-                                   w_img, uv_map, gname + " new")
+        group = build_sparse_group(store.directions.size, model.resolution, D, idx.shape[-1],
+                                   t_img, i_img, w_img, eig_img,
+                                   atlas_layout(len(eig), model.resolution)["tiles"][-1],
+                                   uv_map, gname + " new")
+        group["relight_taps"] = int(idx.shape[-1])
     else:
         group = build_group(len(tables), model.resolution, s["table_size"], eig_img, tab_img,
                             uv_map, gname + " new")
@@ -391,9 +437,28 @@ def rewrite_tables(obj, report: dict, bake, store, sun_angle: float) -> None:
     if group is not None and group.get("relight_viewport") == "transport":
         D = max(sp.TABLE_SIZE, int(s["table_size"]))
         idx, wts, _ = sp.cached_tables(store.directions, D, sun_angle, s.get("kernel", "linear"))
-        files = write_sparse_tables(base, idx, wts, sun_angle)
-        pn.load_atlas_image(files["sparse_index"], f"{obj.name} transport T index")
-        pn.load_atlas_image(files["sparse_weights"], f"{obj.name} transport T weights")
+        files = write_sparse_tables(base, idx, wts, _scales(f"{base}_preview_transport.json"),
+                                    sun_angle)
+        i_img = pn.load_atlas_image(files["sparse_index"], f"{obj.name} transport T index")
+        w_img = pn.load_atlas_image(files["sparse_weights"], f"{obj.name} transport T weights")
+        if group.get("relight_taps") != idx.shape[-1]:   # a wider sun needs more taps
+            uv_map = next((uv.name for uv in obj.data.uv_layers if uv.active_render),
+                          obj.data.uv_layers[0].name)
+            eig_img = bpy.data.images.get(f"{obj.name} transport eigen atlas")
+            new = build_sparse_group(
+                store.directions.size, bake.model.resolution, D, idx.shape[-1],
+                bpy.data.images.get(f"{obj.name} transport T atlas"), i_img, w_img, eig_img,
+                atlas_layout(-(-bake.model.k // 3) + 1, bake.model.resolution)["tiles"][-1],
+                uv_map, group.name + " new")
+            for key in group.keys():
+                new[key] = group[key]
+            new["relight_taps"] = int(idx.shape[-1])
+            for node in _group_nodes(obj, (group,)):
+                node.node_tree = new
+            new.use_fake_user = group.use_fake_user
+            name = group.name
+            bpy.data.node_groups.remove(group)
+            new.name = name
 
 
 # ---------------------------------------------------------------------------------------------

@@ -114,10 +114,16 @@ try:
         rep["bake_files"] = files
         rep["bake"] = (rep["bake_result"] == ["FINISHED"] and props.method == "transport"
                        and {"Bumps_texture_report.json", "Bumps_transport_texture.npy",
-                            "Bumps_preview_tables.exr"} <= set(files))
+                            "Bumps_preview_tables.exr", "Bumps_preview_transport.png",
+                            "Bumps_preview_sparse_index.exr"} <= set(files))
         if rep["bake"]:
             with open(os.path.join(props.output_dir, "Bumps_texture_report.json")) as fh:
-                rep["bake"] = json.load(fh)["directions"] == 24
+                bake_rep = json.load(fh)
+            # the viewport from T: its group is built with this Blender's nodes
+            group = bpy.data.node_groups.get("Relight Transport (Bumps)")
+            rep["bake"] = (bake_rep["directions"] == 24
+                           and bake_rep["preview"]["viewport"] == "transport"
+                           and group is not None and group.get("relight_viewport") == "transport")
 except Exception:
     rep["error"] = traceback.format_exc()[-1500:]
 out()

@@ -84,7 +84,8 @@ def test_eevee_renders_the_transport_preview_like_its_numpy_twin(fresh_scene, tm
 
 def test_eevee_renders_the_transport_viewport_of_T_like_its_numpy_twin(fresh_scene, tmp_path):
     """The viewport that relights from T itself (sparse index / weight tables read Closest,
-    atlas tiles and channels computed in the tree) in EEVEE: the light on a table texel centre
+    atlas tiles and channels computed in the tree, 8-bit atlas, albedo from the eigen atlas)
+    in EEVEE: the light on a table texel centre
     (bilinear factors 1, 0, 0, 0), atlas lookups Closest as above; within 1 % of the twin."""
     import bpy
 
@@ -101,15 +102,15 @@ def test_eevee_renders_the_transport_viewport_of_T_like_its_numpy_twin(fresh_sce
     prev = run(tx.bake_job(fresh_scene, [obj], s, str(tmp_path), truth=0)).reports[0]["preview"]
     group = bpy.data.node_groups[prev["group"]]
     lookups = [n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]
-    assert len(lookups) == 4 * (2 + 3) + 1 and len({n.image.name for n in lookups}) == 3
+    assert len(lookups) == 4 * (2 + 3) + 1 and len({n.image.name for n in lookups}) == 4
     for n in lookups:
         n.interpolation = "Closest"
     d = disk_to_hemisphere(tt.disk_grid(64)[40, 21][None])[0]
     az, el = (float(v[0]) for v in az_el_from_direction(d[None]))
     fresh_scene["relight_azimuth"], fresh_scene["relight_elevation"] = az, el
     img = render_rgb(fresh_scene, tmp_path, 16, engine="BLENDER_EEVEE")
-    tiles, idx, wts = _sparse_preview(prev)
-    want = tp.viewport_relight_sparse(tiles, idx, wts, d).astype(np.float64)
+    tiles, idx, wts, albedo = _sparse_preview(prev)
+    want = tp.viewport_relight_sparse(tiles, idx, wts, albedo, d).astype(np.float64)
     assert want.max() > 0.05
     assert np.abs(img - want).max() <= 0.01 * want.max()
     assert abs(img.mean() / want.mean() - 1.0) < 0.01

@@ -239,18 +239,26 @@ def test_preview_group_rendered_by_cycles_equals_numpy_twin(bumps, tmp_path):
     assert np.abs(render_rgb(scene, tmp_path, R)).max() == 0.0
 
 
-def _sparse_preview(prev):
-    """(tiles (n+1, R, R, 3) as Blender reads the half-float atlas, indices, weights)."""
+def _sparse_preview(prev, resolution=R):
+    """(8-bit tiles (n, R, R, 3) as in the PNG atlas, indices, scaled weights, albedo tile of
+    the half-float eigen atlas) -- what the sparse group reads."""
+    import json
+
     from relightable_textures.lt_addon.io import exrio
     from relightable_textures.lt_addon.io.atlas import unpack_atlas
+    from relightable_textures.lt_addon.io.contact_sheet import read_png
+    from relightable_textures.operators import transport_preview as tp
 
     def rgb(path):
         ch = exrio.read_exr(path)[0]
         return np.stack([ch[c] for c in "RGB"], -1)
 
-    n = exrio.read_exr(prev["transport_atlas"])[1]["tiles"]
-    tiles = unpack_atlas(rgb(prev["transport_atlas"]), n, R)
-    return tiles, rgb(prev["sparse_index"]).astype(np.int64), rgb(prev["sparse_weights"])
+    with open(prev["transport_scales"]) as fh:
+        n = json.load(fh)["tiles"]
+    tiles = unpack_atlas(read_png(prev["transport_atlas"])[::-1], n, resolution)
+    albedo = unpack_atlas(rgb(prev["eigen"]), prev["tiles"] + 1, resolution)[-1]
+    return (tiles, tp.tables_from_parts(rgb(prev["sparse_index"])).astype(np.int64),
+            tp.tables_from_parts(rgb(prev["sparse_weights"])), albedo)
 
 
 def test_transport_viewport_rendered_by_cycles_equals_its_twin_and_T(bumps, tmp_path):
@@ -271,20 +279,21 @@ def test_transport_viewport_rendered_by_cycles_equals_its_twin_and_T(bumps, tmp_
     prev = rep["preview"]
     assert prev["viewport"] == "transport" and rep["preview_cost"]["viewport"] == "transport"
     assert rep["model_vs_T"]["viewport"] == "transport"
-    tiles, idx, wts = _sparse_preview(prev)
-    assert idx.shape == (64, 64, 3) and tiles.shape[0] == 48 // 3 + 1
+    tiles, idx, wts, albedo = _sparse_preview(prev)
+    assert idx.shape == (64, 64, 3) and tiles.shape[0] == 48 // 3 and tiles.dtype == np.uint8
     store = tt.TransportStore.open(rep["files"]["transport"])
-    albedo = tiles[-1].astype(np.float64)
-    # at a table texel centre: exactly T's kernel relight (up to the half-float atlas)
+    albedo = albedo.astype(np.float64)
+    # at a table texel centre: exactly T's kernel relight up to the 8-bit atlas (half a step
+    # of each direction's own maximum, 1/510 of it at most per texel: 2e-3 relative)
     d = disk_to_hemisphere(tt.disk_grid(64)[40, 21][None])[0]
     want = store.sun(d, 0.0)[..., None] * albedo
-    assert rel(tp.viewport_relight_sparse(tiles, idx, wts, d), want) < 2e-3
+    assert rel(tp.viewport_relight_sparse(tiles, idx, wts, albedo, d), want) < 2e-3
     for az, el, inten in ((40.0, 35.0, 2.0), (250.0, 12.0, 1.0)):
         scene["relight_azimuth"], scene["relight_elevation"] = az, el
         scene["relight_intensity"] = inten
         img = render_rgb(scene, tmp_path, R)
         d = direction_from_az_el(az, el)
-        twin = inten * tp.viewport_relight_sparse(tiles, idx, wts, d)
+        twin = inten * tp.viewport_relight_sparse(tiles, idx, wts, albedo, d)
         assert twin.max() > 0.05
         assert np.abs(img - twin).max() <= 2.0 ** -10 * twin.max()
         # and the twin is T's relight within the 64^2 tables' bilinear error
@@ -292,15 +301,37 @@ def test_transport_viewport_rendered_by_cycles_equals_its_twin_and_T(bumps, tmp_
         assert rel(twin, full) < 0.05, rel(twin, full)
     scene["relight_elevation"] = -20.0         # below the horizon: off
     assert np.abs(render_rgb(scene, tmp_path, R)).max() == 0.0
+    # a 25-degree sun (the Sun Size slider re-tabulates in place): three taps per table texel
+    # no longer hold 85 % of its kernel, so the group is rebuilt with more (the tables' further
+    # parts), and the render still equals the twin
+    import bpy
+
+    bake_, store_, report_ = tx.load_bake(rep["report"])
+    tp.rewrite_tables(obj, report_, bake_, store_, 25.0)
+    _, idx25, wts25, _ = _sparse_preview(prev)
+    assert idx25.shape[-1] > 3 and np.count_nonzero(wts25[..., 3:]) > 1000
+    group = bpy.data.node_groups[prev["group"]]
+    assert group["relight_taps"] == idx25.shape[-1]
+    assert len([n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]) == \
+        4 * (2 * idx25.shape[-1] // 3 + idx25.shape[-1]) + 1
+    scene["relight_azimuth"], scene["relight_elevation"] = 130.0, 20.0
+    scene["relight_intensity"] = 1.0
+    img = render_rgb(scene, tmp_path, R)
+    twin = tp.viewport_relight_sparse(tiles, idx25, wts25, albedo, direction_from_az_el(130, 20))
+    assert np.abs(img - twin).max() <= 2.0 ** -10 * twin.max()
     # each table texel keeps its kernel's own mass (1 inside the baked directions' hull, less
     # towards the horizon, where the linear kernel fades the light out); indices are directions
-    sums = wts.sum(-1)
+    scales = np.asarray(json.load(open(prev["transport_scales"]))["scales"])
+    sums = np.where(wts != 0, wts / scales[idx], 0.0).sum(-1)
     for i, j in ((32, 32), (40, 21), (3, 30), (60, 50)):
         _, w = tt.sun_weights(store.directions, disk_to_hemisphere(
             tt.disk_grid(64)[i, j][None] * min(1.0, 0.999 / np.hypot(*tt.disk_grid(64)[i, j]))
         )[0], 0.0)
-        assert abs(sums[i, j] - w.sum()) < 1e-6
-    assert sums.max() <= 1.0 + 1e-6 and idx.max() < 48
+        assert abs(sums[i, j] - w.sum()) < 1e-5
+    assert sums.max() <= 1.0 + 1e-5 and idx.max() < 48
+    # the scales are the directions' maxima: every direction's brightest texel reads 255
+    T = np.asarray(store.array, np.float64)
+    assert np.allclose(scales, np.where(T.max(1) > 0, T.max(1), 1.0), rtol=1e-12)
     assert sp.choose_viewport("auto", 48, R)[0] == "transport"
 
 
