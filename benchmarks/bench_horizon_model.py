@@ -74,26 +74,17 @@ def main(argv=None):
     ap.add_argument("--sectors", default="16,32,64")
     args = ap.parse_args(argv)
 
-    import bpy
-
-    from relightable_textures import samples
+    from bench_transport_textures import build, truths as truth_bakes
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
     from relightable_textures.lt_addon.transport import texture as tt
     from relightable_textures.operators import texture_transport as tx
     from relightable_textures.operators.jobs import run
 
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    scene = bpy.context.scene
-    samples.build("bumps", scene, "demo")
-    objs = [bpy.data.objects["Bumps"]]
+    assert LIGHTS == tx.TRUTH_LIGHTS
+    scene, objs = build("bumps", "demo")
     R = args.resolution
-    truths = {}
-    for ang in (2.0, 10.0):
-        t0 = time.perf_counter()
-        got = run(tx.truth_bakes(scene, objs, LIGHTS, ang, 0, args.spp, R))
-        truths[ang] = [got[light][0] for light in LIGHTS]
-        print(f"direct truths, {ang:g} deg Sun, {args.spp} spp: {time.perf_counter() - t0:.1f} s",
-              flush=True)
+    got = truth_bakes(scene, objs, R, args.spp, bounces=0)     # direct light only
+    truths = {ang: [got[ang][light][0] for light in LIGHTS] for ang in (2.0, 10.0)}
     st = tx.TransportTextureSettings(directions=args.directions, resolution=R, bounces=0,
                                      model="none")
     t0 = time.perf_counter()

@@ -32,28 +32,21 @@ def main(argv=None):
     ap.add_argument("--counts", default="400,1600")
     args = ap.parse_args(argv)
 
-    import bpy
-
-    from relightable_textures import samples
+    from bench_transport_textures import build, truths as truth_bakes
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
     from relightable_textures.lt_addon.transport import texture as tt
     from relightable_textures.operators import texture_transport as tx
     from relightable_textures.operators.cycles_bake import EnvironmentBake
     from relightable_textures.operators.jobs import run
 
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    scene = bpy.context.scene
-    samples.build("bumps", scene, "demo")
-    objs = [bpy.data.objects["Bumps"]]
+    assert LIGHTS == tx.TRUTH_LIGHTS
+    scene, objs = build("bumps", "demo")
     R = args.resolution
     truths = {}
-    for ang in (2.0, 10.0):
-        t0 = time.perf_counter()
-        for seed in (1, 2):
-            got = run(tx.truth_bakes(scene, objs, LIGHTS, ang, 0, args.spp, R, seed=seed))
-            truths[ang, seed] = [got[light][0] for light in LIGHTS]
-        print(f"direct truths, {ang:g} deg Sun, {args.spp} spp, 2 seeds: "
-              f"{time.perf_counter() - t0:.1f} s", flush=True)
+    for seed in (1, 2):     # direct light only; two seeds for the truths' own noise
+        got = truth_bakes(scene, objs, R, args.spp, bounces=0, seed=seed)
+        for ang in (2.0, 10.0):
+            truths[ang, seed] = [got[ang][light][0] for light in LIGHTS]
     rel = tx.rel_rmse
 
     def line(label, errs):

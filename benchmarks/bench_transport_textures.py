@@ -56,15 +56,20 @@ def build(name, size):
     return scene, [bpy.data.objects[n] for n in SCENES[name]]
 
 
-def truths(scene, objects, R, spp):
+def truths(scene, objects, R, spp, bounces=2, seed=1):
+    """{angle: {light: [image per object]}}: Cycles Sun bakes at the held-out lights
+    (``tx.TRUTH_LIGHTS``) for each of :data:`ANGLES`; also used by the low-sun benchmarks
+    (``bounces=0``: direct light only)."""
     from relightable_textures.operators import texture_transport as tx
     from relightable_textures.operators.jobs import run
 
     out = {}
     for a in ANGLES:
         t0 = time.perf_counter()
-        out[a] = run(tx.truth_bakes(scene, objects, tx.TRUTH_LIGHTS, a, 2, spp, R))
-        print(f"  truth {a:g} deg: {time.perf_counter() - t0:.1f} s", flush=True)
+        out[a] = run(tx.truth_bakes(scene, objects, tx.TRUTH_LIGHTS, a, bounces, spp, R,
+                                    seed=seed))
+        print(f"  truth {a:g} deg, {spp} spp, {bounces} bounces, seed {seed}: "
+              f"{time.perf_counter() - t0:.1f} s", flush=True)
     return out
 
 

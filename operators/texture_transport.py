@@ -507,6 +507,7 @@ def truth_errors(result: TransportTextureResult, truths: dict, sun_angle: float,
     rows = []
     for oi, b in enumerate(result.objects):
         store = b.store or tt.TransportStore.open(b.store_path)
+        tables = viewport_tables(result.settings, store, sun_angle)
         for az, el in lights:
             truth = truths[(az, el)][oi]
             d = direction_from_az_el(az, el)
@@ -516,14 +517,12 @@ def truth_errors(result: TransportTextureResult, truths: dict, sun_angle: float,
             if b.model is not None:
                 row["model"] = rel_rmse(relight(b, store, d, sun_angle, source="model",
                                                 kernel=result.settings.kernel), truth)
-            tables = viewport_tables(result.settings, store, sun_angle)
+            ind = (None if b.indirect is None else
+                   _upsample(b.indirect.relight(d), store.resolution))
             if tables is not None:   # the viewport relights from T through sparse tables
                 view = viewport_direct(store, tables, d)[..., None] * b.albedo
-                if b.indirect is not None:
-                    view = view + _upsample(b.indirect.relight(d), store.resolution)
-                row["viewport"] = rel_rmse(view, truth)
-            if b.indirect is not None:
-                ind = _upsample(b.indirect.relight(d), store.resolution)
+                row["viewport"] = rel_rmse(view if ind is None else view + ind, truth)
+            if ind is not None:
                 row["indirect_share"] = float(np.sum(ind) / max(np.sum(truth), 1e-12))
             rows.append(row)
     key = ("viewport" if all("viewport" in r for r in rows) else
@@ -655,19 +654,11 @@ def model_fidelity(bake: ObjectBake, store, settings, lights=TRUTH_LIGHTS) -> di
     sparse kernel tables (``viewport`` transport) or the fitted model; ``model_headline`` is
     the fitted model's figure either way. Needs no Cycles truth, so every bake reports it.
     None without a PCA-like model."""
-    from ..lt_addon.transport import sparse_tables as sp
-
     model = bake.model
     if model is None or not (hasattr(model, "V") or hasattr(model, "n_blocks")):
         return None                     # none, or the steerable basis (no sparse relight)
-    viewport = "pca" if settings.model == "pca" else settings.model
-    if settings.model == "pca":
-        try:
-            viewport, _ = sp.choose_viewport(settings.viewport, store.directions.size,
-                                             store.resolution)
-        except ValueError:
-            viewport = "pca"
-    tables = viewport_tables(settings, store) if viewport == "transport" else None
+    tables = viewport_tables(settings, store)
+    viewport = settings.model if tables is None else "transport"
     rows = []
     for az, el in lights:
         d = direction_from_az_el(az, el)

@@ -239,21 +239,10 @@ def scaled_weights(indices, weights, scales) -> np.ndarray:
     return np.where(w != 0.0, w * np.asarray(scales, np.float64)[idx], 0.0).astype(np.float32)
 
 
-def pack_directions(T: np.ndarray) -> np.ndarray:
-    """(S, R, R) -> (ceil(S/3), R, R, 3): direction ``s`` in tile ``s // 3``, channel ``s % 3``
-    (zero-padded)."""
-    T = np.asarray(T)
-    S, R = T.shape[0], T.shape[1]
-    n = -(-S // 3)
-    out = np.zeros((n * 3, R, R), T.dtype)
-    out[:S] = T
-    return out.reshape(n, 3, R, R).transpose(0, 2, 3, 1)
-
-
 def viewport_relight(tiles, indices, weights, direction, unit: float = 1.0) -> np.ndarray:
     """NumPy twin of the sparse node group's direct irradiance/pi: (R, R) float64 from packed
-    tiles as the GPU reads them times ``unit`` -- :func:`pack_directions` of T with plain
-    weights, or the uint8 tiles of :func:`quantize_directions` with ``unit = 1/255`` and
+    tiles (direction ``s`` in tile ``s // 3``, channel ``s % 3``) as the GPU reads them times
+    ``unit`` -- the uint8 tiles of :func:`quantize_directions` with ``unit = 1/255`` and
     :func:`scaled_weights`. Reads only the tiles the light touches."""
     tiles = np.asarray(tiles)
     ii, ww = sparse_weights_at(indices, weights, direction)
