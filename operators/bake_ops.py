@@ -95,6 +95,30 @@ class _ModalBake:
         self.out_dir = _output_dir(props)
         os.makedirs(self.out_dir, exist_ok=True)
 
+    def _external(self, context, verb: str, args: list):
+        """The job of Run On Dask: ``relight VERB FILE ARGS --out DIR --force`` with the
+        panel's ``--workers`` / ``--scheduler``, run by the Relight Command on the saved file
+        (:mod:`.external_bake`)."""
+        from . import external_bake as eb
+
+        props = context.scene.relight
+        command = eb.relight_command(props)
+        path = eb.saved_blend()
+        self._make_out_dir(props)
+        return eb.external_job([command, verb, path, *args, "--out", self.out_dir, "--force",
+                                *eb.distribution_args(props)], path)
+
+    def _done(self, context, result):
+        """``_finish`` for a job of this process; for a Dask job, its summary, and the open file
+        reloaded to show what the command saved into it."""
+        from .external_bake import ExternalResult, reload_when_idle
+
+        if not isinstance(result, ExternalResult):
+            return self._finish(context, result)
+        self.report({"INFO"}, result.summary)
+        if not bpy.app.background:
+            reload_when_idle(result.blend_path)
+
     def execute(self, context):
         try:
             gen = self._prepare(context)
@@ -104,7 +128,7 @@ class _ModalBake:
                     self.report({"WARNING"}, step.message[len("warning: "):])
 
             result = jobs.run(gen, on_progress=warn)
-            self._finish(context, result)
+            self._done(context, result)
         except (BakeInputError, OSError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
@@ -147,7 +171,7 @@ class _ModalBake:
         except StopIteration as stop:
             self._end(context)
             try:
-                self._finish(context, stop.value)
+                self._done(context, stop.value)
             except (OSError, ValueError) as exc:
                 self.report({"ERROR"}, f"Could not write the bake: {exc}")
                 return {"CANCELLED"}
@@ -183,9 +207,21 @@ class RELIGHT_OT_bake_textures(_ModalBake, bpy.types.Operator):
                 check_bakeable(o)
             self.settings = transport_settings_from_scene(props)
             self.settings.validate()
+            if props.run_on != "HERE":
+                args = [a for o in objects for a in ("--object", o.name)]
+                for k in ("directions", "resolution", "bounces", "model", "tol", "components",
+                          "indirect_samples", "indirect_resolution", "sun_angle",
+                          "table_size", "viewport", "seed"):
+                    if getattr(self.settings, k) is not None:   # --tol: no preset components
+                        args += [f"--{k.replace('_', '-')}", str(getattr(self.settings, k))]
+                return self._external(context, "bake-textures",
+                                      args + ["--truth", str(props.truth_lights)])
             self._make_out_dir(props)
             return tx.bake_job(context.scene, objects, self.settings, self.out_dir,
                                truth=props.truth_lights)
+        if props.run_on != "HERE":
+            raise BakeInputError("Run On Dask bakes the transport method's chunks; the lobes "
+                                 "method bakes here (Run On: This Blender)")
         check_bakeable(obj)
         self.settings = settings_from_scene(props)
         self.settings.validate()
@@ -220,6 +256,10 @@ class RELIGHT_OT_bake_transport(_ModalBake, bpy.types.Operator):
             directions=props.vertex_directions, bounces=props.vertex_bounces,
             energy=props.vertex_energy)
         settings.validate()
+        if props.run_on != "HERE":
+            return self._external(context, "bake-transport", [
+                "--object", obj.name, "--directions", settings.directions, "--bounces",
+                str(settings.bounces), "--energy", repr(settings.energy)])
         self._make_out_dir(props)
         # the same job as `relight bake-transport`: bake, fit, files, preview
         return transport_bake.transport_job(context.scene, obj, settings, self.out_dir)
@@ -390,10 +430,11 @@ class RELIGHT_OT_remove_preview(bpy.types.Operator):
         return {"FINISHED"}
 
 
-def kept_chunks(context) -> list:
+def kept_chunks(context, kind: str | None = None) -> list:
     """The chunk folders that cancelled or failed bakes of the active object (its texture bake,
-    alone or with other meshes, or its vertex bake) keep in the output folder, as
-    ``[(folder, chunk count)]``; [] when there are none or no output folder yet."""
+    alone or with other meshes, its vertex bake or a material bake it comes first in) keep in
+    the output folder, as ``[(folder, chunk count)]``; [] when there are none or no output
+    folder yet. ``kind`` "texture", "vertex" or "materials" keeps only that bake's."""
     import glob
 
     from ..lt_addon.io.atomic import safe_name
@@ -409,9 +450,11 @@ def kept_chunks(context) -> list:
     active = safe_name(obj.name)
     out = []
     for folder in sorted(glob.glob(os.path.join(root, "*"))):
-        base = os.path.basename(folder)   # "A+B" (objects baked together) or "A_vertex"
-        if base == active + "_vertex" or (not base.endswith("_vertex")
-                                          and active in base.split("+")):
+        base = os.path.basename(folder)   # "A+B" (baked together), "A_vertex", "A_materials"
+        what = next((k for k in ("vertex", "materials") if base.endswith("_" + k)), "texture")
+        if kind not in (None, what):
+            continue
+        if (base == f"{active}_{what}" if what != "texture" else active in base.split("+")):
             n = len(glob.glob(os.path.join(folder, "*", "*_[0-9][0-9][0-9][0-9][0-9].npy")))
             if n:
                 out.append((folder, n))

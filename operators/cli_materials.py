@@ -72,6 +72,8 @@ def add_parsers(sub) -> None:
     p.add_argument("--out", metavar="DIR", help="output folder (default <blend>_relight/)")
     p.add_argument("--force", action="store_true",
                    help="replace an existing material bake of the same object in --out")
+    from .cli import _add_distribution_options
+    _add_distribution_options(p, "")
     p.set_defaults(func=_cmd_bake_materials)
 
     p = sub.add_parser("relight-materials", help="shade a material bake with edited colours "
@@ -108,7 +110,8 @@ def _cmd_bake_materials(args) -> int:
     import bpy
 
     from . import blend_files, material_bake, material_edit
-    from .cli import CliError, _check_bake_inputs, _open_objects, _refuse_existing, _run_job
+    from .cli import (CliError, _check_bake_inputs, _dask_client, _open_objects, _print_chunks,
+                      _refuse_existing, _run_job)
     from .cycles_bake import BakeInputError
 
     settings = material_bake.MaterialBakeSettings(
@@ -123,15 +126,27 @@ def _cmd_bake_materials(args) -> int:
             raise CliError(f"{o.name!r} is a {o.type.lower()}, not a mesh")
     _refuse_existing(out_dir, objects[0].name, ("_materials.npz", "_materials.json"),
                      args.force, "a material bake")
+    client = _dask_client(args)
     try:
         out = _run_job(material_edit.bake_job(
             bpy.context.scene, objects, settings, out_dir,
-            truth_samples=args.samples if args.truth else 0), "bake-materials")
+            truth_samples=args.samples if args.truth else 0, resume=not args.no_resume,
+            client=client, blend_path=path), "bake-materials")
     except (BakeInputError, ValueError) as exc:
         raise CliError(f"nothing was written: {exc}") from None
+    except RuntimeError as exc:
+        if type(exc).__name__ != "DistributedError":
+            raise
+        raise CliError(f"{exc}; the finished chunks are kept, the same command resumes") from None
     except KeyboardInterrupt:
-        print("bake-materials: cancelled; nothing was written", file=sys.stderr)
+        kept = "" if args.no_resume else (
+            "; the finished chunks are kept and the same command resumes from them")
+        print(f"bake-materials: cancelled; no bake file was written{kept}", file=sys.stderr)
         return 130
+    finally:
+        if client is not None:
+            from .distributed import close
+            close(client)
     blend_files.save_atomically(path)
     rep, t = out.report, out.report["timings"]
     shares = rep["energy_shares"]
@@ -147,6 +162,7 @@ def _cmd_bake_materials(args) -> int:
         print(f"  vs Cycles ({truth['samples']} spp, {truth['light']}): rel. error "
               f"{truth['rel_error']:.4f}, noise floor {truth['noise_floor']:.4f} (two truth "
               f"seeds); without the two-bounce term {truth['rel_error_without_two_bounce']:.4f}")
+    _print_chunks(rep)
     for note in rep["notes"]:
         print(f"relight: warning: {note}", file=sys.stderr)
     return 0

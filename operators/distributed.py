@@ -126,14 +126,16 @@ def _worker_scene(blend_path: str, object_names: list, cache_key: dict):
 
 
 def bake_chunk(blend_path: str, object_names: list, settings: dict, start: int, stop: int,
-               cache_root: str, cache_key: dict, threads: int = 0, stage: str = "texture"
-               ) -> dict:
+               cache_root: str, cache_key: dict, threads: int = 0, stage: str = "texture",
+               part: tuple | None = None) -> dict:
     """Worker task: bake directions ``start:stop`` into the chunk cache with ``threads`` Cycles
     threads (0: Cycles' own choice, all cores); returns the chunk's figures. ``stage``
     "texture": ``settings`` is a TransportTextureSettings as a dict (:func:`bake_directions`);
     "vertex": a dict of ``directions`` (S, 3), ``bounces``, ``samples``, ``seed`` for the
-    per-vertex bake (:func:`.transport_bake.bake_vertex_directions`). Raises DistributedError
-    when the worker's scene does not have ``cache_key``."""
+    per-vertex bake (:func:`.transport_bake.bake_vertex_directions`); "material": a
+    MaterialBakeSettings as a dict and ``part`` the chunk's ``(kind, last, before)``
+    (:class:`.material_bake.MaterialChunk`). Raises DistributedError when the worker's scene
+    does not have ``cache_key``."""
     t0 = time.perf_counter()
     loads = _OPENED.get("loads", 0)
     scene, objects = _worker_scene(blend_path, object_names, cache_key)
@@ -145,6 +147,12 @@ def bake_chunk(blend_path: str, object_names: list, settings: dict, start: int, 
         from .transport_bake import bake_vertex_directions
 
         cycles = bake_vertex_directions(scene, objects[0], settings, start, stop, cache, threads)
+    elif stage == "material":
+        from .material_bake import MaterialBakeSettings, MaterialChunk, bake_material_chunks
+
+        gen = bake_material_chunks(scene, objects, MaterialBakeSettings(**settings),
+                                   [MaterialChunk(*part, start, stop)], cache.put, threads)
+        cycles = _drain(gen)
     else:
         from .texture_transport import TransportTextureSettings
 
@@ -153,6 +161,15 @@ def bake_chunk(blend_path: str, object_names: list, settings: dict, start: int, 
     return {"start": start, "pid": os.getpid(), "open_seconds": round(opened, 3),
             "opened_file": _OPENED.get("loads", 0) > loads, "cycles_seconds": round(cycles, 3),
             "seconds": round(time.perf_counter() - t0, 3)}
+
+
+def _drain(gen):
+    """Run a generator to its end; its return value."""
+    while True:
+        try:
+            next(gen)
+        except StopIteration as stop:
+            return stop.value
 
 
 def bake_directions(scene, objects, settings, start: int, stop: int, cache,
@@ -180,6 +197,11 @@ def bake_directions(scene, objects, settings, start: int, stop: int, cache,
     return seconds
 
 
+def _label(chunk) -> str:
+    """A chunk's name: a material chunk's own, or the first direction of a range."""
+    return getattr(chunk, "name", f"{chunk.start:05d}")
+
+
 def fill_chunks(client, blend_path: str, objects, settings, cache, chunks, step0: int,
                 total: int, stage: str = "texture"):
     """Generator (a job step source): bake the ``chunks`` (ranges of directions) the cache is
@@ -196,8 +218,9 @@ def fill_chunks(client, blend_path: str, objects, settings, cache, chunks, step0
     if dataclasses.is_dataclass(settings):
         settings = dataclasses.asdict(settings)
     futures = {client.submit(bake_chunk, blend_path, names, settings, c.start, c.stop,
-                             cache.root, cache.key, threads, stage, retries=1, pure=False,
-                             key=f"relight-{stage}-{cache.digest[:12]}-{c.start:05d}"): c
+                             cache.root, cache.key, threads, stage, getattr(c, "part", None),
+                             retries=1, pure=False,
+                             key=f"relight-{stage}-{cache.digest[:12]}-{_label(c)}"): c
                for c in chunks}
     done, rows = 0, []
     try:
@@ -206,11 +229,12 @@ def fill_chunks(client, blend_path: str, objects, settings, cache, chunks, step0
             try:
                 rows.append(fut.result())
             except Exception as exc:   # KilledWorker after 3 deaths, or the chunk's own error
-                raise DistributedError(f"chunk of directions {c.start}-{c.stop - 1} failed: "
-                                       f"{type(exc).__name__}: {exc}") from None
+                raise DistributedError(f"chunk {_label(c)} (directions {c.start}-"
+                                       f"{c.stop - 1}) failed: {type(exc).__name__}: "
+                                       f"{exc}") from None
             done += len(c)
-            yield Progress(step0 + done, total, f"chunk {c.start}-{c.stop - 1} baked by "
-                                                f"worker {rows[-1]['pid']}")
+            yield Progress(step0 + done, total, f"chunk {_label(c)} baked by worker "
+                                                f"{rows[-1]['pid']}")
     finally:
         pending = [f for f in futures if not f.done()]
         if pending:

@@ -90,6 +90,15 @@ def scene_materials(scene) -> list:
     return out
 
 
+def check_regions(scene, regions) -> None:
+    """BakeInputError naming the first editable material no rendered mesh of ``scene`` uses."""
+    present = {m.name for m in scene_materials(scene) if m is not None}
+    missing = [r for r in regions if r not in present]
+    if missing:
+        raise BakeInputError(f"no rendered mesh in scene {scene.name!r} uses material "
+                             f"{missing[0]!r}; materials: {', '.join(sorted(present))}")
+
+
 class GatedMaterials(SceneChanges):
     """Context manager: every rendered mesh of ``scene`` gets gated Diffuse materials (module
     docstring), restored on exit.
@@ -176,11 +185,7 @@ class GatedMaterials(SceneChanges):
 
     def _setup(self):
         self._made = {}
-        present = {m.name for m in scene_materials(self.scene) if m is not None}
-        missing = [r for r in self.regions if r not in present]
-        if missing:
-            raise BakeInputError(f"no rendered mesh in scene {self.scene.name!r} uses material "
-                                 f"{missing[0]!r}; materials: {', '.join(sorted(present))}")
+        check_regions(self.scene, self.regions)
         for o in self.scene.objects:
             if o.type != "MESH" or o.hide_render:
                 continue
@@ -288,12 +293,145 @@ class MaterialBakeSettings:
             raise BakeInputError(f"bad direction set: {exc}") from None
 
 
-def bake_materials(scene, objects, settings: MaterialBakeSettings):
+#: Directions per chunk (as the transport bakes'): a cancelled bake resumes from its finished
+#: chunks, and a distributed one hands out pieces of similar Cycles time.
+CHUNK_DIRECTIONS = 16
+
+
+@dataclass(frozen=True)
+class MaterialChunk:
+    """Directions ``start:stop`` of one term of a material bake, baked with the gates open on
+    region ``last`` (the surface the light reflects off last) and ``before`` (the one before).
+
+    ``kind``: "direct" (gates closed; the direct set, 1 spp), "one" (one bounce off ``last``;
+    the one-bounce set), "ref" (one bounce off ``last`` over the two-bounce set: what the pairs
+    of ``last`` subtract) or "pair" (``before`` -> ``last``, raw: the "ref" of ``last`` is
+    subtracted when the tensors are assembled, so every chunk is a plain Cycles bake).
+    """
+
+    kind: str
+    last: int | None
+    before: int | None
+    start: int
+    stop: int
+
+    @property
+    def name(self) -> str:
+        """Chunk-cache name, e.g. ``pair_r1_r2_00016`` (light off region 1, then region 2)."""
+        regions = "".join(f"_r{r}" for r in (self.before, self.last) if r is not None)
+        return f"{self.kind}{regions}_{self.start:05d}"
+
+    @property
+    def part(self) -> tuple:
+        """What a worker needs besides ``start, stop``: ``(kind, last, before)``."""
+        return (self.kind, self.last, self.before)
+
+    def __len__(self) -> int:
+        return self.stop - self.start
+
+    def shape(self, V: int) -> tuple:
+        """The chunk's array: (n, V) irradiance for "direct", (n, V, 3) RGB otherwise
+        (float32, E per unit normal irradiance)."""
+        return (len(self), V) if self.kind == "direct" else (len(self), V, 3)
+
+
+def material_chunks(settings: MaterialBakeSettings, sizes: tuple) -> list:
+    """The chunks of a material bake in the order one process bakes them (a gate change makes
+    Cycles sync the shaders again, about 0.25 s a call here, a new direction does not: gates
+    outside, directions inside). ``sizes``: (S0, S1, S2) directions per path order (0: none)."""
+    S0, S1, S2 = sizes
+    R1 = len(settings.regions) + 1
+
+    def runs(kind, S, last=None, before=None):
+        return [MaterialChunk(kind, last, before, a, min(a + CHUNK_DIRECTIONS, S))
+                for a in range(0, S, CHUNK_DIRECTIONS)]
+
+    out = runs("direct", S0)
+    for r in range(R1 if S1 else 0):
+        out += runs("one", S1, r)
+    for r2 in range(R1 if S2 else 0):
+        out += runs("ref", S2, r2)
+        for r1 in range(R1):
+            out += runs("pair", S2, r2, r1)
+    return out
+
+
+def bake_material_chunks(scene, objects, settings: MaterialBakeSettings, chunks, put,
+                         threads: int = 0):
+    """Generator: bake ``chunks`` (:class:`MaterialChunk`, in :func:`material_chunks` order)
+    with gated materials, handing each finished one to ``put(name, array)``; yields
+    ``(chunk, direction index)`` after every Cycles call and returns Cycles' seconds.
+    ``threads``: Cycles threads (0: all cores). Used by the bake, the Dask task and farms."""
+    sets = dict(zip(("direct", "one", "ref"), settings.validate()))
+    sets["pair"] = sets["ref"]
+    if threads:   # workers sharing a machine: no more Cycles threads than their share of cores
+        scene.render.threads_mode, scene.render.threads = "FIXED", int(threads)
+    cycles = 0.0
+    with GatedMaterials(scene, settings.regions) as gates:
+        for direct in (True, False):
+            mine = [c for c in chunks if (c.kind == "direct") == direct]
+            if not mine:
+                continue
+            kw = ({} if direct else {"passes": "indirect"})
+            with EnvironmentBake(scene, objects, None, 1 if direct else settings.samples,
+                                 0 if direct else settings.bounces, (8, 16),
+                                 mode="irradiance", seed=settings.seed, world_sampling="none",
+                                 domain=settings.domain, **kw) as session:
+                for c in mine:
+                    gates.set_gates(c.last, c.before)
+                    rows = []
+                    for s in range(c.start, c.stop):
+                        e = np.pi * np.concatenate(
+                            session.bake_sun_all(sets[c.kind].directions[s], 1.0, 0.0), axis=0)
+                        rows.append(e[:, 0] if direct else e)   # E per unit irradiance
+                        yield c, s
+                    put(c.name, np.stack(rows).astype(np.float32, copy=False))
+                cycles += session.bake_seconds
+    return cycles
+
+
+def colour_notes(scene, regions) -> list:
+    """Why a fixed material of ``scene`` bakes with its viewport colour (see
+    :func:`material_colour`), one note per such material."""
+    return [note for m in scene_materials(scene)
+            if (m is None or m.name not in regions)
+            for note in [material_colour(m)[1]] if note]
+
+
+def material_chunk_cache(scene, objects, settings: MaterialBakeSettings, out_dir: str):
+    """The chunk cache of a material bake of ``objects`` into ``out_dir``: ``<out_dir>/
+    .relight_cache/<first object>_materials/``, keyed by the scene content (every rendered
+    mesh reflects light: :func:`.bake_inputs.scene_key`) and the settings; stale keys go."""
+    import dataclasses
+
+    from ..lt_addon.io.chunk_cache import ChunkCache
+    from .bake_inputs import scene_key
+    from .texture_transport import CACHE_FOLDER
+
+    key = {"stage": "materials", "scene": scene_key(scene, list(objects)),
+           "settings": dataclasses.asdict(settings), "chunk_directions": CHUNK_DIRECTIONS}
+    folder = atomic.safe_name(objects[0].name) + "_materials"
+    cache = ChunkCache(os.path.join(out_dir, CACHE_FOLDER, folder), key)
+    cache.prune_others()
+    return cache
+
+
+def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, client=None,
+                   blend_path: str | None = None):
     """Generator: bake the transfer tensors of ``objects`` (receivers; every rendered mesh of
     the scene reflects light); yields Progress per Cycles call, returns a
-    :class:`..lt_addon.transport.ptt.TransferTensors`."""
+    :class:`..lt_addon.transport.ptt.TransferTensors`.
+
+    The bake is the :func:`material_chunks` list. With a chunk ``cache``
+    (:func:`material_chunk_cache`) each finished chunk is kept and a rerun reuses it (bit for
+    bit: same seed, same Cycles calls); with a Dask ``client`` too, the missing chunks are baked
+    on its workers from the saved ``blend_path``. ``metadata["chunks"]`` has the figures."""
     d0, d1, d2 = settings.validate()
     objects = list(objects)
+    check_regions(scene, settings.regions)
+    if client is not None and (cache is None or not blend_path):
+        raise BakeInputError("a distributed bake needs the chunk cache and a saved .blend the "
+                             "workers can open")
     started = time.perf_counter()
     V = sum(element_count(o, settings.domain) for o in objects)
     R1 = len(settings.regions) + 1
@@ -302,69 +440,81 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings):
     floats = V * (d0.size + 3 * R1 * S1 + 3 * R1 * R1 * S2)
     check_memory(floats * 4 * 2, f"{V} vertices x {floats // max(V, 1)} term values",
                  "use fewer regions or coarser direction sets")
+    plan = material_chunks(settings, (d0.size, S1, S2))
     total = ptt.bake_count(d0.size, S1, S2, R1 - 1, settings.bounces)
-    done = 0
+    assert total == sum(len(c) for c in plan)
+    have = {}
+    for c in plan if cache is not None else ():
+        arr = cache.get(c.name)
+        if arr is not None and arr.shape == c.shape(V):
+            have[c.name] = arr
+    reused = len(have)
+    done = sum(len(c) for c in plan if c.name in have)
+    if reused:
+        yield Progress(done, total, f"{reused} of {len(plan)} chunks kept by an earlier bake")
+    distributed = None
+    if client is not None and reused < len(plan):
+        from .distributed import fill_chunks
+
+        todo = [c for c in plan if c.name not in have]
+        distributed = yield from fill_chunks(client, blend_path, objects, settings, cache,
+                                             todo, done, total, stage="material")
+        for c in todo:
+            arr = cache.get(c.name)
+            if arr is not None and arr.shape == c.shape(V):
+                have[c.name] = arr
+                done += len(c)
+    todo = [c for c in plan if c.name not in have]
+    seconds = {}
+
+    def put(name, arr):
+        have[name] = arr
+        if cache is not None:
+            cache.put(name, arr)
+
+    cycles = 0.0
+    if todo:
+        what = {"direct": "direct", "one": "one bounce off region {last}",
+                "ref": "two bounces: reference {last}", "pair": "two bounces {before}->{last}"}
+        stage = {"direct": "direct", "one": "one_bounce", "ref": "two_bounce",
+                 "pair": "two_bounce"}
+        gen = bake_material_chunks(scene, objects, settings, todo, put)
+        t = time.perf_counter()
+        try:
+            while True:
+                c, s = next(gen)
+                now = time.perf_counter()
+                seconds[stage[c.kind]] = seconds.get(stage[c.kind], 0.0) + now - t
+                done += 1
+                yield Progress(done, total, f"{what[c.kind].format(last=c.last, before=c.before)}"
+                                            f", direction {s + 1}")
+                t = time.perf_counter()
+        except StopIteration as stop:
+            cycles = stop.value
     direct = np.empty((d0.size, V), dtype=np.float32)
     one = np.zeros((S1, 3, R1 if S1 else 0, V), dtype=np.float32)
     two = np.zeros((S2, 3, R1 if S2 else 0, R1 if S2 else 0, V), dtype=np.float32)
-    seconds = {}
-
-    def stack(values):
-        return np.pi * np.concatenate(values, axis=0)   # E per unit normal irradiance
-
-    with GatedMaterials(scene, settings.regions) as gates:
-        t = time.perf_counter()
-        with EnvironmentBake(scene, objects, None, 1, 0, (8, 16), mode="irradiance",
-                             seed=settings.seed, world_sampling="none",
-                             domain=settings.domain) as session:
-            for s, w in enumerate(d0.directions):
-                direct[s] = stack(session.bake_sun_all(w, 1.0, 0.0))[:, 0]
-                done += 1
-                yield Progress(done, total, f"direct {s + 1}/{d0.size}")
-        seconds["direct"] = time.perf_counter() - t
-        if settings.bounces >= 1:
-            t = time.perf_counter()
-            with EnvironmentBake(scene, objects, None, settings.samples, settings.bounces,
-                                 (8, 16), mode="irradiance", seed=settings.seed,
-                                 world_sampling="none", passes="indirect",
-                                 domain=settings.domain) as session:
-                # gates outside, directions inside: a gate change makes Cycles sync the
-                # shaders again (about 0.25 s a call here), a new sun direction does not
-                for r in range(R1 if S1 else 0):
-                    gates.set_gates(r, None)
-                    for s, w in enumerate(d1.directions):
-                        one[s, :, r] = stack(session.bake_sun_all(w, 1.0, 0.0)).T
-                        done += 1
-                        yield Progress(done, total, f"one bounce off region {r}, direction "
-                                                    f"{s + 1}/{S1}")
-                seconds["one_bounce"] = time.perf_counter() - t
-                t = time.perf_counter()
-                ref = np.zeros((R1, V, S2, 3), dtype=np.float32) if S2 else None
-                for r2 in range(R1 if S2 else 0):
-                    gates.set_gates(r2, None)
-                    for s, w in enumerate(d2.directions):
-                        ref[r2, :, s] = stack(session.bake_sun_all(w, 1.0, 0.0))
-                        done += 1
-                        yield Progress(done, total, f"two bounces: reference {r2}, direction "
-                                                    f"{s + 1}/{S2}")
-                    for r1 in range(R1):
-                        gates.set_gates(r2, r1)
-                        for s, w in enumerate(d2.directions):
-                            two[s, :, r1, r2] = np.maximum(
-                                stack(session.bake_sun_all(w, 1.0, 0.0)) - ref[r2, :, s],
-                                0.0).T
-                            done += 1
-                            yield Progress(done, total, f"two bounces {r1}->{r2}, direction "
-                                                        f"{s + 1}/{S2}")
-                if S2:
-                    seconds["two_bounce"] = time.perf_counter() - t
-        notes = list(gates.notes)
+    for c in plan:
+        arr, rows = have[c.name], slice(c.start, c.stop)
+        if c.kind == "direct":
+            direct[rows] = arr
+        elif c.kind == "one":
+            one[rows, :, c.last] = arr.transpose(0, 2, 1)
+        elif c.kind == "pair":   # the light that took the second bounce (>= 0 up to noise)
+            ref = have[MaterialChunk("ref", c.last, None, c.start, c.stop).name]
+            two[rows, :, c.before, c.last] = np.maximum(arr - ref, 0.0).transpose(0, 2, 1)
+    notes = colour_notes(scene, settings.regions)
     region_of, colour_of, more = receivers(objects, settings.regions, settings.domain)
     base = np.array([material_colour(bpy.data.materials[r])[0] for r in settings.regions])
+    chunks = {"chunks_total": len(plan), "chunks_reused": reused,
+              "chunk_directions": CHUNK_DIRECTIONS}
+    if distributed is not None:
+        chunks["distributed"] = distributed
     meta = {"anchors": settings.anchors, "bounces": settings.bounces, "domain": settings.domain,
             "samples": settings.samples, "seed": settings.seed, "bake_calls": total,
             "seconds": {k: round(v, 3) for k, v in seconds.items()},
-            "bake_seconds": round(time.perf_counter() - started, 3),
+            "cycles_seconds": round(cycles, 3),
+            "bake_seconds": round(time.perf_counter() - started, 3), "chunks": chunks,
             "notes": notes + [n for n in more if n not in notes]}
     return ptt.TransferTensors(direct, one, two, tuple(d.spec for d in (d0, d1, d2)),
                                list(settings.regions), base, region_of, colour_of,
@@ -465,15 +615,22 @@ def ground_truth(scene, objects, tensors: ptt.TransferTensors, direction, sample
 
 
 def materials_job(scene, objects, settings: MaterialBakeSettings, out_dir: str,
-                  truth_samples: int = 0):
+                  truth_samples: int = 0, resume: bool = True, client=None,
+                  blend_path: str | None = None):
     """The ``bake-materials`` verb as one job: bake, then write ``<object>_materials.npz`` and
     its JSON report (bake count, seconds, bytes, each path order's share of the light under
     the scene's Sun, or a 45-degree sun; with ``truth_samples`` the error against Cycles
-    there) and record the file on the first object. Nothing is written if it is cancelled."""
+    there) and record the file on the first object. Nothing but the chunk cache is written if
+    it is cancelled: with ``resume`` the finished chunks are kept in
+    ``<out_dir>/.relight_cache`` until the files are written, so a rerun redoes only the
+    missing ones; a Dask ``client`` bakes them on its workers from ``blend_path``."""
     from .steerable_bake import record_kind
 
     started = time.perf_counter()
-    tensors = yield from bake_materials(scene, objects, settings)
+    settings.validate()
+    cache = material_chunk_cache(scene, objects, settings, out_dir) if resume else None
+    tensors = yield from bake_materials(scene, objects, settings, cache, client, blend_path)
+    chunks = tensors.metadata.pop("chunks")   # the run's figures: the report, not the file
     sun = reference_sun(scene)
     direction = (sun[0] if sun is not None and sun[0][2] > 0
                  else np.array([0.5, 0.5, np.sqrt(0.5)]))
@@ -492,6 +649,7 @@ def materials_job(scene, objects, settings: MaterialBakeSettings, out_dir: str,
                                "from": "scene Sun" if sun is not None else "45-degree sun"},
               "notes": tensors.metadata["notes"],
               "timings": {"bake_seconds": tensors.metadata["bake_seconds"],
+                          "cycles_seconds": tensors.metadata["cycles_seconds"],
                           **{f"{k}_seconds": v for k, v in tensors.metadata["seconds"].items()}}}
     if truth_samples:
         yield Progress(0, 1, f"Cycles truths ({truth_samples} spp, 2 seeds)")
@@ -503,6 +661,9 @@ def materials_job(scene, objects, settings: MaterialBakeSettings, out_dir: str,
                                          "objects": [o.name for o in objects]})
     report["tensors"] = path
     report["bytes"]["file"] = os.path.getsize(path)
+    report.update(chunks)
+    if cache is not None:   # the files are written: the chunks have served
+        cache.clear()
     report["timings"]["wall_total"] = round(time.perf_counter() - started, 4)
     atomic.write_json(report_path(out_dir, objects), report)
     return MaterialsBakeOutput(report, tensors)

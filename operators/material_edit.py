@@ -117,11 +117,14 @@ def install_preview(scene, tensors) -> None:
 
 
 def bake_job(scene, objects, settings, out_dir: str, truth_samples: int = 0,
-             preview: bool = True):
-    """``bake-materials`` as one job (:func:`.material_bake.materials_job`), then the live
-    preview on every receiver; returns the :class:`.material_bake.MaterialsBakeOutput`."""
+             preview: bool = True, resume: bool = True, client=None,
+             blend_path: str | None = None):
+    """``bake-materials`` as one job (:func:`.material_bake.materials_job`: chunk cache with
+    ``resume``, Dask workers with ``client``), then the live preview on every receiver;
+    returns the :class:`.material_bake.MaterialsBakeOutput`."""
     out = yield from material_bake.materials_job(scene, objects, settings, out_dir,
-                                                 truth_samples=truth_samples)
+                                                 truth_samples=truth_samples, resume=resume,
+                                                 client=client, blend_path=blend_path)
     if preview:
         install_preview(scene, out.tensors)
     return out
@@ -265,8 +268,19 @@ class RELIGHT_OT_bake_materials(_ModalBake, bpy.types.Operator):
                         f"hemi:{props.material_one_directions}",
                         f"hemi:{props.material_two_directions}"))
         settings.validate()
+        if props.run_on != "HERE":
+            d0, d1, d2 = settings.directions
+            args = [a for o in objects for a in ("--object", o.name)]
+            args += [a for r in regions for a in ("--region", r)]
+            return self._external(context, "bake-materials", args + [
+                "--bounces", str(settings.bounces), "--samples", str(settings.samples),
+                "--directions", d0, "--one-bounce-directions", d1, "--two-bounce-directions",
+                d2] + (["--per-corner"] if settings.domain == "CORNER" else []))
         self._make_out_dir(props)
         return bake_job(scene, objects, settings, self.out_dir)
+
+    def _cancel_note(self, context) -> str:
+        return "; its finished chunks are kept, so baking again resumes"
 
     def _finish(self, context, result):
         rep = result.report

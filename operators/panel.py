@@ -90,8 +90,9 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
             n = len([o for o in context.selected_objects if o.type == "MESH"])
             if n > 1:
                 layout.label(text=f"{n} selected meshes are baked together", icon="INFO")
+            _run_on(layout, props)
             layout.operator("relight.bake_textures", icon="RENDER_STILL")
-            _kept_chunks(layout, context, vertex=False)
+            _kept_chunks(layout, context, "texture")
             _last_bake(layout, context.scene)
             return
         fig = preset_figures().get(props.preset)
@@ -118,11 +119,24 @@ def _last_bake(layout, scene):
         layout.label(text=line, icon="INFO")
 
 
-def _kept_chunks(layout, context, vertex: bool):
-    """What a cancelled bake kept for the next one, and the button that discards it."""
+def _run_on(layout, props):
+    """Where the bake below runs: here, or on Dask through the Relight Command."""
+    col = layout.column(align=True)
+    col.prop(props, "run_on")
+    if props.run_on == "WORKERS":
+        col.prop(props, "dask_workers")
+    elif props.run_on == "SCHEDULER":
+        col.prop(props, "dask_scheduler")
+    if props.run_on != "HERE":
+        col.prop(props, "dask_command")
+
+
+def _kept_chunks(layout, context, kind: str):
+    """What a cancelled bake (``kind`` "texture", "vertex" or "materials") kept for the next
+    one, and the button that discards it."""
     from .bake_ops import kept_chunks
 
-    kept = [(f, n) for f, n in kept_chunks(context) if f.endswith("_vertex") == vertex]
+    kept = kept_chunks(context, kind)
     if kept:
         layout.label(text=f"{sum(n for _, n in kept)} chunks of a cancelled bake are kept: "
                           "Bake resumes from them", icon="RECOVER_LAST")
@@ -187,8 +201,9 @@ class VIEW3D_PT_relight_vertex(_RelightSubPanel, bpy.types.Panel):
         col.prop(props, "vertex_directions")
         col.prop(props, "vertex_bounces")
         col.prop(props, "vertex_energy")
+        _run_on(self.layout, props)
         self.layout.operator("relight.bake_transport", icon="RENDER_STILL")
-        _kept_chunks(self.layout, context, vertex=True)
+        _kept_chunks(self.layout, context, "vertex")
         self.layout.operator("relight.analyze", icon="GRAPH")
         summary = context.scene.get(SUMMARY_KEY)
         if summary:
@@ -226,7 +241,9 @@ class VIEW3D_PT_relight_materials(_RelightSubPanel, bpy.types.Panel):
         col.prop(props, "material_one_directions")
         if props.material_bounces >= 2:
             col.prop(props, "material_two_directions")
+        _run_on(layout, props)
         layout.operator("relight.bake_materials", icon="RENDER_STILL")
+        _kept_chunks(layout, context, "materials")
         for key in (SUMMARY_KEY, SUMMARY_KEY + "_update"):
             if context.scene.get(key):
                 layout.label(text=context.scene[key], icon="INFO")

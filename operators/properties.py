@@ -9,6 +9,7 @@ from ..lt_addon.steerable.texture import STORAGE_MODES
 from ..samples import DESCRIPTIONS, SIZES
 from .compat import path_options
 from .presets import PRESETS, settings_from_preset
+from .external_bake import RUN_ON as _RUN_ON
 
 _SETTING_NAMES = ("frame", "order", "resolution", "samples", "bounces", "storage", "mode",
                   "world_sampling")
@@ -267,6 +268,22 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         description="The environment's rotation about +z, as a world Mapping node's Z")
     export_force: BoolProperty(name="Replace Existing", default=False,
                                description="Replace an earlier export of this object and format")
+
+    # where a bake runs (operators/external_bake.py): here, or through `relight` on Dask
+    run_on: EnumProperty(name="Run On", default="HERE", items=[
+        (k, label, desc) for k, label, desc in _RUN_ON])
+    dask_workers: IntProperty(
+        name="Workers", default=2, min=1, max=256,
+        description="Worker processes of the local Dask cluster (each gets its share of the "
+                    "cores as Cycles threads)")
+    dask_scheduler: StringProperty(
+        name="Scheduler", default="tcp://127.0.0.1:8786",
+        description="Address of a running Dask scheduler whose workers have this package and "
+                    "bpy, and read the .blend and the output folder at the same paths")
+    dask_command: StringProperty(
+        name="Relight Command", subtype="FILE_PATH", default="", options=path_options(),
+        description="The `relight` console script of a Python environment with bpy and Dask "
+                    "(e.g. <repository>/.venv/bin/relight); empty: `relight` on PATH")
 
     truth_lights: IntProperty(
         name="Check vs Cycles", default=0, min=0, max=12,

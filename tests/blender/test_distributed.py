@@ -185,3 +185,68 @@ def test_vertex_transport_bakes_distribute_and_resume_bit_for_bit(tmp_path):
     assert again.report["chunks_reused"] == 1 and again.report["chunks_total"] == 14
     assert _same_bits(np.load(out / "Statue_transport_samples.npy"), ref)
     assert ".relight_cache" not in os.listdir(out)
+
+
+def test_material_bakes_distribute_and_resume_bit_for_bit(tmp_path):
+    """`bake-materials --workers 2` gives the one-process tensors bit for bit (every term is a
+    chunk: direct, one bounce per region, the two-bounce references and ordered pairs); an
+    in-process bake cancelled part way keeps its finished chunks, a rerun reuses them and gives
+    the same tensors, and a change to the scene gives another key (the stale chunks go)."""
+    import json
+
+    import bpy
+
+    from relightable_textures.lt_addon.transport import ptt
+    from relightable_textures.operators import material_bake as mb
+    from relightable_textures.operators.jobs import run
+
+    blend = tmp_path / "room.blend"
+    assert relight("scene", "room", "--out", blend).returncode == 0
+    objects, regions = ["Floor", "Box"], ["RedMaterial", "GreenMaterial"]
+    args = ["bake-materials", blend, "--object", "Floor", "--object", "Box", "--region",
+            "RedMaterial", "--region", "GreenMaterial", "--directions", "hemi:40",
+            "--one-bounce-directions", "hemi:20", "--two-bounce-directions", "hemi:4",
+            "--samples", "8"]
+    r = relight(*args, "--no-resume", "--out", tmp_path / "ref")
+    assert r.returncode == 0, r.stderr[-2000:]
+    ref = ptt.TransferTensors.load(str(tmp_path / "ref" / "Floor_materials.npz"))
+
+    def same(t):
+        return all(np.array_equal(getattr(t, k).view(np.uint32), getattr(ref, k).view(np.uint32))
+                   for k in ("direct", "one", "two"))
+
+    r = relight(*args, "--workers", "2", "--out", tmp_path / "dist")
+    assert r.returncode == 0, r.stderr[-2000:]
+    rep = json.loads((tmp_path / "dist" / "Floor_materials.json").read_text())
+    # 40/16 -> 3 direct chunks; 3 regions x 2 one-bounce; 3 references + 9 ordered pairs
+    assert rep["chunks_total"] == rep["distributed"]["chunks"] == 3 + 6 + 3 + 9
+    assert rep["chunks_reused"] == 0 and len(rep["distributed"]["workers"]) == 2
+    assert "distributed: 21 chunks on 2 worker processes" in r.stdout
+    assert same(ptt.TransferTensors.load(str(tmp_path / "dist" / "Floor_materials.npz")))
+    assert ".relight_cache" not in os.listdir(tmp_path / "dist")
+
+    bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False)
+    scene, objs = bpy.context.scene, [bpy.data.objects[n] for n in objects]
+    s = mb.MaterialBakeSettings(regions=regions, directions=("hemi:40", "hemi:20", "hemi:4"),
+                                samples=8)
+    out = tmp_path / "resume"
+    gen = mb.materials_job(scene, objs, s, str(out))
+    for _ in range(60):                     # direct (40) and the first one-bounce chunk (16)
+        next(gen)
+    gen.close()
+    assert os.listdir(out) == [".relight_cache"]
+    (folder,) = (out / ".relight_cache").iterdir()
+    assert folder.name == "Floor_materials" and len(list(folder.glob("*/*_0*.npy"))) == 4
+    again = run(mb.materials_job(scene, objs, s, str(out)))
+    assert again.report["chunks_reused"] == 4 and again.report["chunks_total"] == 21
+    assert same(again.tensors) and ".relight_cache" not in os.listdir(out)
+
+    gen = mb.materials_job(scene, objs, s, str(out))
+    for _ in range(20):
+        next(gen)
+    gen.close()
+    old = mb.material_chunk_cache(scene, objs, s, str(out)).folder
+    bpy.data.objects["Box"].location.x += 0.1    # the scene changed: another key
+    bpy.context.view_layer.update()
+    new = mb.material_chunk_cache(scene, objs, s, str(out))
+    assert new.folder != old and not os.path.exists(old)
