@@ -219,12 +219,16 @@ class RELIGHT_OT_bake_textures(_ModalBake, bpy.types.Operator):
             self._make_out_dir(props)
             return tx.bake_job(context.scene, objects, self.settings, self.out_dir,
                                truth=props.truth_lights)
-        if props.run_on != "HERE":
-            raise BakeInputError("Run On Dask bakes the transport method's chunks; the lobes "
-                                 "method bakes here (Run On: This Blender)")
         check_bakeable(obj)
         self.settings = settings_from_scene(props)
         self.settings.validate()
+        if props.run_on != "HERE":
+            args = ["--object", obj.name, "--method", "lobes"]
+            for k in ("frame", "order", "resolution", "samples", "bounces", "storage", "mode",
+                      "world_sampling", "seed"):
+                args += [f"--{k.replace('_', '-')}", str(getattr(self.settings, k))]
+            return self._external(context, "bake-textures",
+                                  args + ["--truth", str(props.truth_lights)])
         self._make_out_dir(props)
         return steerable_bake.lobes_job(context.scene, obj, self.settings, self.out_dir,
                                         truth=props.truth_lights, sun=props.sun)
@@ -234,8 +238,8 @@ class RELIGHT_OT_bake_textures(_ModalBake, bpy.types.Operator):
 
     def _cancel_note(self, context) -> str:
         if context.scene.relight.method != "transport":
-            return ""
-        return "; its finished chunks of directions are kept, so baking again resumes"
+            return "; its finished basis-light bakes are kept, so baking again resumes"
+        return "; its finished chunks are kept, so baking again resumes"
 
 
 class RELIGHT_OT_bake_transport(_ModalBake, bpy.types.Operator):
@@ -450,12 +454,14 @@ def kept_chunks(context, kind: str | None = None) -> list:
     active = safe_name(obj.name)
     out = []
     for folder in sorted(glob.glob(os.path.join(root, "*"))):
-        base = os.path.basename(folder)   # "A+B" (baked together), "A_vertex", "A_materials"
+        base = os.path.basename(folder)   # "A+B" (baked together), "A_vertex", "A_materials",
         what = next((k for k in ("vertex", "materials") if base.endswith("_" + k)), "texture")
-        if kind not in (None, what):
+        if kind not in (None, what):      # "A_lobes" (the lobes method: a texture bake)
             continue
-        if (base == f"{active}_{what}" if what != "texture" else active in base.split("+")):
-            n = len(glob.glob(os.path.join(folder, "*", "*_[0-9][0-9][0-9][0-9][0-9].npy")))
+        if (base == f"{active}_{what}" if what != "texture" else
+                base == f"{active}_lobes" or active in base.split("+")):
+            n = len(glob.glob(os.path.join(folder, "**", "*_[0-9][0-9][0-9][0-9][0-9].npy"),
+                              recursive=True))   # with stages nested: "A/indirect/<key>/"
             if n:
                 out.append((folder, n))
     return out

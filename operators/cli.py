@@ -128,7 +128,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "degrees, none a sample centre) and put the errors in the report")
     p.add_argument("--contact-sheet", metavar="PNG", help="with --truth: write a PNG of steered | "
                    "Cycles truth | difference x4 | Cycles Sun for up to 4 directions")
-    _add_distribution_options(p, "transport: ")
+    _add_distribution_options(p, "")
     p.add_argument("--no-compare", action="store_true",
                    help="with --truth and a scene camera, the bake also renders "
                         "<object>[_steerable]_compare.png (preview | Cycles Sun | difference x4 "
@@ -457,7 +457,8 @@ def _run_job(job, verb: str):
 def _add_distribution_options(p, what: str) -> None:
     """--no-resume / --workers / --scheduler, shared by the verbs that bake in chunks."""
     p.add_argument("--no-resume", action="store_true",
-                   help=f"{what}keep no chunks (by default each finished chunk of 16 directions "
+                   help=f"{what}keep no chunks (by default each finished chunk -- 16 "
+                        "directions, one basis light or one material term's 16 directions -- "
                         "is kept in <out>/.relight_cache/ until the bake completes, so a "
                         "cancelled or crashed bake run again redoes only the missing ones)")
     p.add_argument("--workers", type=int, metavar="N",
@@ -552,8 +553,7 @@ def _cmd_bake_textures(args) -> int:
                                                        "components", "tol", "indirect_samples",
                                                        "indirect_resolution", "table_size",
                                                        "viewport", "target_error")
-                  if getattr(args, k) is not None] + (["--no-resume"] if args.no_resume else [])
-    lobes_only += [f"--{k}" for k in ("workers", "scheduler") if getattr(args, k) is not None]
+                  if getattr(args, k) is not None]
     if lobes_only:
         raise CliError(f"{', '.join(lobes_only)} apply to --method transport, not lobes")
     if len(args.object) > 1:
@@ -589,16 +589,29 @@ def _cmd_bake_textures(args) -> int:
     obj = _open_object(path, args.object)
     _refuse_existing(out_dir, obj.name, ("_steerable.exr", "_steerable.json"), args.force,
                      "a steerable bake")
+    client = _dask_client(args)
     try:   # the same job as the panel's Bake: bake, truths, files, preview
         report = _run_job(steerable_bake.lobes_job(bpy.context.scene, obj, settings, out_dir,
                                                    truth=args.truth, sheet_path=sheet,
-                                                   compare=not args.no_compare),
+                                                   compare=not args.no_compare,
+                                                   resume=not args.no_resume, client=client,
+                                                   blend_path=path),
                           "bake-textures").report
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
+    except RuntimeError as exc:
+        if type(exc).__name__ != "DistributedError":
+            raise
+        raise CliError(f"{exc}; the finished chunks are kept, the same command resumes") from None
     except KeyboardInterrupt:
-        print("bake-textures: cancelled; nothing was written", file=sys.stderr)
+        kept = "" if args.no_resume else (
+            "; the finished basis lights are kept and the same command resumes from them")
+        print(f"bake-textures: cancelled; nothing was written{kept}", file=sys.stderr)
         return 130
+    finally:
+        if client is not None:
+            from .distributed import close
+            close(client)
     blend_files.save_atomically(path)
     t = report["timings"]
     print(f"baked {obj.name}: {report['exr']} ({report['bytes']['exr_file']} bytes); "
@@ -617,14 +630,17 @@ def _cmd_bake_textures(args) -> int:
               f"light {e['same_light']['rel_fro']:.4f}"
               + (f", 4x samples {e['same_light_4x']['rel_fro']:.4f}" if "same_light_4x" in e else "")
               + (f", vs Sun lamp {e['sun']['rel_fro']:.4f}" if "sun" in e else ""))
+    _print_chunks(report)
     return EXIT_OK
 
 
 def _print_chunks(rep: dict) -> None:
     """A chunked bake's resume and distribution figures, when there are any."""
     if rep.get("chunks_reused"):
-        print(f"  resumed: {rep['chunks_reused']} of {rep['chunks_total']} chunks of "
-              f"{rep['chunk_directions']} directions reused from an interrupted bake")
+        of = (f"chunks of {rep['chunk_directions']} directions" if "chunk_directions" in rep
+              else "chunks (one basis light each)")
+        print(f"  resumed: {rep['chunks_reused']} of {rep['chunks_total']} {of} reused from an "
+              "interrupted bake")
     dist = rep.get("distributed")
     if dist:
         print(f"  distributed: {dist['chunks']} chunks on {len(dist['workers'])} worker "

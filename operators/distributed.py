@@ -132,7 +132,8 @@ def bake_chunk(blend_path: str, object_names: list, settings: dict, start: int, 
     threads (0: Cycles' own choice, all cores); returns the chunk's figures. ``stage``
     "texture": ``settings`` is a TransportTextureSettings as a dict (:func:`bake_directions`);
     "vertex": a dict of ``directions`` (S, 3), ``bounces``, ``samples``, ``seed`` for the
-    per-vertex bake (:func:`.transport_bake.bake_vertex_directions`); "material": a
+    per-vertex bake (:func:`.transport_bake.bake_vertex_directions`); "lights": a
+    :func:`.light_chunks.light_spec` and ``start:stop`` its basis lights; "material": a
     MaterialBakeSettings as a dict and ``part`` the chunk's ``(kind, last, before)``
     (:class:`.material_bake.MaterialChunk`). Raises DistributedError when the worker's scene
     does not have ``cache_key``."""
@@ -147,6 +148,11 @@ def bake_chunk(blend_path: str, object_names: list, settings: dict, start: int, 
         from .transport_bake import bake_vertex_directions
 
         cycles = bake_vertex_directions(scene, objects[0], settings, start, stop, cache, threads)
+    elif stage == "lights":
+        from .light_chunks import bake_lights
+
+        cycles = _drain(bake_lights(scene, objects, settings, range(start, stop), cache.put,
+                                    threads))[0]
     elif stage == "material":
         from .material_bake import MaterialBakeSettings, MaterialChunk, bake_material_chunks
 

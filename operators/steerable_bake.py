@@ -82,8 +82,14 @@ class BakeResult:
     figures: dict = field(default_factory=dict)
 
 
-def bake_steerable_texture(scene, obj, settings: TextureBakeSettings):
+def bake_steerable_texture(scene, obj, settings: TextureBakeSettings, cache=None,
+                           client=None, blend_path: str | None = None):
     """Generator: bake ``obj`` under the K sampled steerable lights; returns a BakeResult.
+
+    Each light is a chunk (:mod:`.light_chunks`): with a chunk ``cache``
+    (:func:`lobes_chunk_cache`) a rerun reuses the lights a cancelled bake finished, and a
+    Dask ``client`` bakes the missing ones on its workers from the saved ``blend_path``; the
+    result is the same bit for bit. ``figures["chunks"]`` has the chunk figures.
 
     Yields
     ------
@@ -111,15 +117,12 @@ def bake_steerable_texture(scene, obj, settings: TextureBakeSettings):
     k_total = sampled.n_lights
     r = settings.resolution
     h = settings.env_height
-    stack = np.empty((k_total, r, r, 3), dtype=np.float32)
-    with EnvironmentBake(scene, obj, r, settings.samples, settings.bounces, (h, 2 * h),
-                         mode=settings.mode, seed=settings.seed,
-                         world_sampling=settings.world_sampling) as session:
-        for k in range(k_total):
-            env = sampled.light_environment(k, h, 2 * h, row_order="bottom_first")
-            stack[k] = session.bake(env)
-            yield Progress(k + 1, k_total + 1, f"Cycles bake {k + 1}/{k_total}")
-        cycles_seconds, calls = session.bake_seconds, session.bake_calls
+    from .light_chunks import light_stacks
+
+    (stack,), chunks = yield from light_stacks(scene, [obj], lobes_spec(settings), cache,
+                                               client if cache is not None else None,
+                                               blend_path, 0, k_total + 1, "Cycles bake")
+    cycles_seconds, calls = chunks["cycles_seconds"], chunks["calls"]
     if no_uv_area:
         stack[:] = 0.0
     basis_images = sampled.to_basis_images(stack, dtype=np.float32)
@@ -136,7 +139,26 @@ def bake_steerable_texture(scene, obj, settings: TextureBakeSettings):
                                settings=record)
     yield Progress(k_total + 1, k_total + 1, "basis solve done")
     return BakeResult(texture, cycles_seconds, total, calls, float(sampled.condition_number),
-                      figures={"uv_layout": uv_report})
+                      figures={"uv_layout": uv_report, "chunks": chunks})
+
+
+def lobes_spec(settings: TextureBakeSettings) -> dict:
+    """The lobes bake's basis lights (:func:`.light_chunks.light_spec`)."""
+    from .light_chunks import light_spec
+
+    return light_spec(settings.order, settings.env_height, settings.resolution,
+                      settings.samples, settings.bounces, settings.mode, settings.seed,
+                      settings.world_sampling)
+
+
+def lobes_chunk_cache(scene, obj, settings: TextureBakeSettings, out_dir: str):
+    """The chunk cache of a lobes bake of ``obj`` into ``out_dir``:
+    ``<out_dir>/.relight_cache/<object>_lobes/`` (:func:`.light_chunks.light_cache`)."""
+    from .light_chunks import light_cache
+    from .texture_transport import CACHE_FOLDER
+
+    return light_cache(scene, [obj], lobes_spec(settings),
+                       os.path.join(out_dir, CACHE_FOLDER, atomic.safe_name(obj.name) + "_lobes"))
 
 
 def default_output_dir(blend_path: str) -> str:
@@ -186,8 +208,12 @@ def write_bake(result: BakeResult, obj, out_dir: str, settings: TextureBakeSetti
             "per_texel_storage": {"float": n * 3 * 4, "half": n * 3 * 2, "u8": n * 3}[storage],
         },
         "preview_cost": {"basis_images": n, "multiply_adds_per_texel": n * 3},
-        **result.figures,
+        **{k: v for k, v in result.figures.items() if k != "chunks"},
     }
+    chunks = result.figures.get("chunks")
+    if chunks:   # each basis light is a chunk (light_chunks)
+        report.update({k: chunks[k] for k in ("chunks_total", "chunks_reused", "distributed")
+                       if k in chunks})
     if write_json:
         atomic.write_json(json_path, report)
     record_bake(obj, exr_path, report)
@@ -276,7 +302,8 @@ class LobesBakeOutput:
 
 def lobes_job(scene, obj, settings: TextureBakeSettings, out_dir: str, *, truth: int = 0,
               sheet_path: str | None = None, preview: bool = True, sun=None,
-              compare: bool = True):
+              compare: bool = True, resume: bool = True, client=None,
+              blend_path: str | None = None):
     """The whole ``bake-textures --method lobes`` verb as one job (a generator of
     :class:`.jobs.Progress`): the steerable bake, ``truth`` held-out Cycles truths (with their
     headline error; a labelled UV-space contact sheet at ``sheet_path``), the EXR, report and
@@ -284,11 +311,19 @@ def lobes_job(scene, obj, settings: TextureBakeSettings, out_dir: str, *, truth:
     camera -- ``<object>_steerable_compare.png``: the preview next to a Cycles Sun render from
     the camera at the lowest held-out light. Nothing is written before the bakes are done, so
     cancelling keeps the previous bake; the report is written once, ``timings.wall_total``
-    covering all of it. Returns a :class:`LobesBakeOutput`."""
+    covering all of it. With ``resume`` the finished basis-light bakes are kept in
+    ``<out_dir>/.relight_cache/<object>_lobes/`` until the files are written; a Dask ``client``
+    bakes the missing ones on its workers from ``blend_path``. Returns a
+    :class:`LobesBakeOutput`."""
     from .preview_nodes import install_preview
 
     started = time.perf_counter()
-    result = yield from bake_steerable_texture(scene, obj, settings)
+    settings.validate()
+    if client is not None and (not resume or not blend_path):
+        raise BakeInputError("a distributed bake needs the chunk cache (no --no-resume) and a "
+                             "saved .blend the workers can open")
+    cache = lobes_chunk_cache(scene, obj, settings, out_dir) if resume else None
+    result = yield from bake_steerable_texture(scene, obj, settings, cache, client, blend_path)
     truth_seconds = 0.0
     if truth:
         t0 = time.perf_counter()
@@ -309,6 +344,8 @@ def lobes_job(scene, obj, settings: TextureBakeSettings, out_dir: str, *, truth:
             gt["sun_angle_deg"], os.path.splitext(report["exr"])[0] + "_compare.png",
             4 * settings.samples)
         report["timings"]["compare_seconds"] = report["comparison"].get("seconds", 0.0)
+    if cache is not None:   # the files are written: the chunks have served
+        cache.clear()
     report["timings"]["wall_total"] = round(time.perf_counter() - started, 4)
     atomic.write_json(os.path.splitext(report["exr"])[0] + ".json", report)
     return LobesBakeOutput(report, result.texture)

@@ -146,8 +146,9 @@ class TransportTextureResult:
     bake_calls: int = 0
     peak_rss_mb: float = 0.0         # anonymous memory above the level before the bake
     growth_after_first_mb: float = 0.0   # ... above the level after the first direction
-    cache: object = None             # the direct stage's ChunkCache (None: resume off)
+    cache: object = None             # the stages' ChunkCaches, inner first (None: resume off)
     chunks: dict = field(default_factory=dict)   # chunks_total, chunks_reused, chunk_directions
+    indirect_chunks: dict = None     # the indirect stage's light chunks (light_stacks figures)
 
 
 def _rss_mb() -> float:
@@ -294,20 +295,48 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
                 store.abort()
     seconds["direct_total"] = time.perf_counter() - t_start
 
+    lights = None
+    if resume and settings.bounces > 0 and settings.indirect == "steerable":
+        from .light_chunks import light_cache
+
+        lights = light_cache(scene, objects, indirect_spec(settings),
+                             os.path.join(cache.root, "indirect"))
     try:
         result = yield from _indirect_and_models(scene, objects, settings, dset, albedos,
                                                  readers, seconds, calls, t_start, rss0, peak,
-                                                 first, 2 + S, total)
+                                                 first, 2 + S, total, lights, client,
+                                                 blend_path)
     except BaseException:   # cancelled or failed after the directions: drop the stores too
         for r in readers:
             r.abort()
         raise
-    result.cache = cache
-    result.chunks = {"chunks_total": len(chunks), "chunks_reused": reused,
-                     "chunk_directions": CHUNK_DIRECTIONS}
-    if distributed is not None:
-        result.chunks["distributed"] = distributed
+    result.cache = [c for c in (lights, cache) if c is not None]   # cleared in this order
+    ind = result.indirect_chunks or {}
+    result.chunks = {"chunks_total": len(chunks) + ind.get("chunks_total", 0),
+                     "chunks_reused": reused + ind.get("chunks_reused", 0),
+                     "chunk_directions": CHUNK_DIRECTIONS,
+                     "direct_chunks": len(chunks), "indirect_chunks": ind.get("chunks_total", 0)}
+    if distributed is not None or "distributed" in ind:
+        both = [d for d in (distributed, ind.get("distributed")) if d]
+        result.chunks["distributed"] = {
+            "chunks": sum(d["chunks"] for d in both),
+            "wall_seconds": round(sum(d["wall_seconds"] for d in both), 3),
+            "file_loads": sum(d["file_loads"] for d in both),
+            "chunk_seconds": [x for d in both for x in d["chunk_seconds"]],
+            "cycles_seconds": round(sum(d["cycles_seconds"] for d in both), 3),
+            "workers": sorted({w for d in both for w in d["workers"]}),
+            "cycles_threads_per_worker": both[0]["cycles_threads_per_worker"]}
     return result
+
+
+def indirect_spec(settings: TransportTextureSettings) -> dict:
+    """The indirect stage's basis lights (:func:`.light_chunks.light_spec`): the paper's
+    steerable basis of ``indirect_order`` on 64-row environments, the indirect pass only."""
+    from .light_chunks import light_spec
+
+    return light_spec(settings.indirect_order, 64, settings.indirect_resolution,
+                      settings.indirect_samples, settings.bounces, "radiance", settings.seed,
+                      "importance", passes="indirect")
 
 
 def direct_chunk_cache(scene, objects, settings: TransportTextureSettings, out_dir: str):
@@ -327,32 +356,30 @@ def direct_chunk_cache(scene, objects, settings: TransportTextureSettings, out_d
 
 
 def _indirect_and_models(scene, objects, settings, dset, albedos, readers, seconds, calls,
-                         t_start, rss0, peak, first, step, total):
-    """Steps 3 and 4 of :func:`bake_transport_textures` (the stores are not committed yet)."""
+                         t_start, rss0, peak, first, step, total, cache=None, client=None,
+                         blend_path=None):
+    """Steps 3 and 4 of :func:`bake_transport_textures` (the stores are not committed yet).
+    The indirect stage's basis lights are chunks (:mod:`.light_chunks`): from ``cache``, from
+    ``client``'s workers, or baked here."""
     do_indirect = settings.bounces > 0 and settings.indirect == "steerable"
     # 3. indirect light: a low-order steerable bake of the indirect pass
     indirects = [None] * len(objects)
+    indirect_chunks = None
     if do_indirect:
         from ..lt_addon.steerable.sampled_basis import build_sampled_basis
         from ..lt_addon.steerable.basis import paper_basis
         from ..lt_addon.steerable.texture import SteerableTexture
+        from .light_chunks import light_stacks
 
         t0 = time.perf_counter()
         basis = paper_basis(settings.indirect_order)
         sampled = build_sampled_basis(basis)
-        h = 64
         ri = settings.indirect_resolution
-        stacks = [np.empty((sampled.n_lights, ri, ri, 3), np.float32) for _ in objects]
-        with EnvironmentBake(scene, objects, ri, settings.indirect_samples, settings.bounces,
-                             (h, 2 * h), mode="radiance", seed=settings.seed,
-                             world_sampling="importance", passes="indirect") as session:
-            for k in range(sampled.n_lights):
-                env = sampled.light_environment(k, h, 2 * h, row_order="bottom_first")
-                for stack, img in zip(stacks, session.bake_all(env)):
-                    stack[k] = img
-                yield Progress(step + k, total, f"indirect bake {k + 1}/{sampled.n_lights}")
-            seconds["indirect_cycles"] = session.bake_seconds
-            calls += session.bake_calls
+        stacks, indirect_chunks = yield from light_stacks(
+            scene, objects, indirect_spec(settings), cache, client if cache else None,
+            blend_path, step - 1, total, "indirect bake")
+        seconds["indirect_cycles"] = indirect_chunks["cycles_seconds"]
+        calls += indirect_chunks["calls"]
         from ..lt_addon.geometry.uv_layout import uv_coverage
         from .meshes import uv_triangles
 
@@ -381,8 +408,10 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
     seconds["fit"] = sum(r.fit_seconds for r in results)
     seconds["bake_total"] = time.perf_counter() - t_start
     yield Progress(total, total, "models fitted")
-    return TransportTextureResult(results, dset, settings, seconds, calls, peak - rss0,
-                                  peak - first)
+    out = TransportTextureResult(results, dset, settings, seconds, calls, peak - rss0,
+                                 peak - first)
+    out.indirect_chunks = indirect_chunks
+    return out
 
 
 def fit_model(store, settings: TransportTextureSettings, albedo):
@@ -595,8 +624,8 @@ def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: d
                                       "bytes": report["bytes"]["total"],
                                       "bake_seconds": round(result.seconds.get("bake_total", 0), 2)})
         reports.append(report)
-    if result.cache is not None:   # every file is written: the chunks have served
-        result.cache.clear()
+    for cache in result.cache or ():   # every file is written: the chunks have served
+        cache.clear()
     return reports
 
 

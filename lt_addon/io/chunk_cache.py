@@ -80,13 +80,15 @@ class ChunkCache:
 
     def prune_others(self) -> int:
         """Remove the folders of other keys under ``root`` (stale after a scene or settings
-        change); returns how many were removed."""
+        change); returns how many were removed. Only key folders (20 hex digits) go: a
+        folder of another name is another stage's cache nested here, with its own key."""
         if not os.path.isdir(self.root):
             return 0
         gone = 0
         for name in os.listdir(self.root):
             p = os.path.join(self.root, name)
-            if os.path.isdir(p) and p != self.folder:
+            if (os.path.isdir(p) and p != self.folder and len(name) == 20
+                    and all(ch in "0123456789abcdef" for ch in name)):
                 shutil.rmtree(p, ignore_errors=True)
                 gone += 1
         return gone

@@ -250,3 +250,86 @@ def test_material_bakes_distribute_and_resume_bit_for_bit(tmp_path):
     bpy.context.view_layer.update()
     new = mb.material_chunk_cache(scene, objs, s, str(out))
     assert new.folder != old and not os.path.exists(old)
+
+
+def _exr_channels(path):
+    from relightable_textures.lt_addon.io.exrio import read_exr
+
+    return read_exr(str(path))[0]
+
+
+def _same_exr(a, b):
+    ca, cb = _exr_channels(a), _exr_channels(b)
+    return ca.keys() == cb.keys() and all(
+        np.array_equal(np.asarray(ca[k]).view(np.uint8), np.asarray(cb[k]).view(np.uint8))
+        for k in ca)
+
+
+def test_basis_light_stages_distribute_and_resume_bit_for_bit(blend, tmp_path):
+    """Every basis light is a chunk too: the transport method's indirect stage (9 lights of the
+    order-3 basis) and the lobes method's K = order^2 lights are baked on 2 workers bit for bit
+    as in one process; a lobes bake cancelled after 4 lights keeps them and its rerun reuses
+    them (same texture), and an indirect stage cancelled part way resumes the same way."""
+    import json
+
+    import bpy
+
+    from relightable_textures.operators import steerable_bake as sb, texture_transport as tx
+    from relightable_textures.operators.jobs import run
+
+    path, _ = blend
+    args = ["bake-textures", path, "--object", "Bumps", "--directions", "hemi:48",
+            "--resolution", "16", "--bounces", "1", "--indirect-samples", "4",
+            "--indirect-resolution", "8", "--model", "none", "--no-compare"]
+    assert relight(*args, "--no-resume", "--out", tmp_path / "ref").returncode == 0
+    r = relight(*args, "--workers", "2", "--out", tmp_path / "dist")
+    assert r.returncode == 0, r.stderr[-2000:]
+    rep = json.loads((tmp_path / "dist" / "Bumps_texture_report.json").read_text())
+    assert rep["direct_chunks"] == 3 and rep["indirect_chunks"] == 9
+    assert rep["chunks_total"] == rep["distributed"]["chunks"] == 12
+    assert _same_exr(tmp_path / "dist" / "Bumps_indirect.exr",
+                     tmp_path / "ref" / "Bumps_indirect.exr")
+    assert _same_bits(np.load(tmp_path / "dist" / "Bumps_transport_texture.npy"),
+                      np.load(tmp_path / "ref" / "Bumps_transport_texture.npy"))
+
+    lobes = ["bake-textures", path, "--object", "Bumps", "--method", "lobes", "--order", "3",
+             "--resolution", "16", "--samples", "4", "--bounces", "1", "--no-compare"]
+    assert relight(*lobes, "--no-resume", "--out", tmp_path / "lref").returncode == 0
+    r = relight(*lobes, "--workers", "2", "--out", tmp_path / "ldist")
+    assert r.returncode == 0, r.stderr[-2000:]
+    rep = json.loads((tmp_path / "ldist" / "Bumps_steerable.json").read_text())
+    assert rep["chunks_total"] == rep["distributed"]["chunks"] == 9
+    assert _same_exr(tmp_path / "ldist" / "Bumps_steerable.exr",
+                     tmp_path / "lref" / "Bumps_steerable.exr")
+    assert ".relight_cache" not in os.listdir(tmp_path / "ldist")
+
+    bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False)
+    scene, obj = bpy.context.scene, bpy.data.objects["Bumps"]
+    s = sb.TextureBakeSettings(order=3, resolution=16, samples=4, bounces=1)
+    run(sb.lobes_job(scene, obj, s, str(tmp_path / "lhere"), preview=False, resume=False))
+    out = tmp_path / "lresume"
+    gen = sb.lobes_job(scene, obj, s, str(out), preview=False)
+    for _ in range(4):
+        next(gen)
+    gen.close()
+    assert len(list(out.glob(".relight_cache/Bumps_lobes/*/light_*.npy"))) == 4
+    again = run(sb.lobes_job(scene, obj, s, str(out), preview=False))
+    assert again.report["chunks_reused"] == 4 and again.report["chunks_total"] == 9
+    assert _same_exr(out / "Bumps_steerable.exr", tmp_path / "lhere" / "Bumps_steerable.exr")
+    assert ".relight_cache" not in os.listdir(out)
+
+    ts = tx.TransportTextureSettings(directions="hemi:48", resolution=16, bounces=1,
+                                     indirect_samples=4, indirect_resolution=8, model="none")
+    out = tmp_path / "tresume"
+    gen = tx.bake_transport_textures(scene, [obj], ts, str(out))
+    for step in gen:                   # the albedo, 48 directions, then indirect lights
+        if step.message.startswith("indirect bake 5/"):
+            break
+    gen.close()
+    nested = list(out.glob(".relight_cache/Bumps/indirect/*/light_*.npy"))
+    assert len(nested) == 5 and len(list(out.glob(".relight_cache/Bumps/*/direct_*"))) == 3
+    res = run(tx.bake_transport_textures(scene, [obj], ts, str(out)))
+    assert res.chunks["chunks_reused"] == 3 + 5 and res.chunks["chunks_total"] == 12
+    tx.write_bake(res, [obj], str(out))
+    assert _same_exr(out / "Bumps_indirect.exr", tmp_path / "ref" / "Bumps_indirect.exr")
+    assert ".relight_cache" not in os.listdir(out)

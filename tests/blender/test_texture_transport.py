@@ -119,7 +119,8 @@ def test_a_cancelled_bake_resumes_from_its_finished_chunks_bit_for_bit(bumps, tm
     assert sorted(p.name for p in folder.iterdir()) == ["direct_00000.npy", "direct_00016.npy",
                                                         "key.json"]
     res = bake(scene, [obj], out, model="none")
-    assert res.chunks == {"chunks_total": 3, "chunks_reused": 2, "chunk_directions": 16}
+    assert res.chunks == {"chunks_total": 3, "chunks_reused": 2, "chunk_directions": 16,
+                          "direct_chunks": 3, "indirect_chunks": 0}
     np.testing.assert_array_equal(np.load(res.objects[0].store_path), T_ref)
     reports = tx.write_bake(res, [obj], str(out))
     assert reports[0]["chunks_reused"] == 2 and tx.CACHE_FOLDER not in os.listdir(out)

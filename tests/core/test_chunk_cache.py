@@ -37,3 +37,21 @@ def test_a_truncated_chunk_counts_as_missing_and_is_removed(tmp_path):
         fh.truncate(100)
     assert c.get("x") is None and not os.path.exists(c.path("x"))
     assert c.reused == 0 and c.written == 1
+
+
+def test_a_nested_stage_cache_survives_the_outer_prune_and_both_clear(tmp_path):
+    """A bake's stages with different keys: the indirect stage's cache nested in the direct
+    stage's root is not taken for a stale key folder; cleared inner first, nothing is left."""
+    root = tmp_path / "out" / ".relight_cache" / "A"
+    direct = ChunkCache(str(root), {"stage": "direct"})
+    lights = ChunkCache(str(root / "indirect"), {"stage": "lights"})
+    lights.put("light_00000", np.zeros(3, np.float32))
+    direct.put("direct_00000", np.zeros(3, np.float16))
+    stale = ChunkCache(str(root), {"stage": "direct", "old": True})
+    stale.put("direct_00000", np.zeros(3, np.float16))
+    assert direct.prune_others() == 1
+    assert sorted(os.listdir(root)) == sorted([os.path.basename(direct.folder), "indirect"])
+    assert lights.get("light_00000") is not None
+    lights.clear()
+    direct.clear()
+    assert os.listdir(tmp_path / "out") == []
