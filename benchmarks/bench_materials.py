@@ -8,10 +8,13 @@
    (irradiance, vertices x RGB) against a Cycles bake of the same diffuse scene with the edit
    applied and 2 bounces, next to the noise floor (two truth seeds, ``--truth-spp``) and the
    error without the two-bounce term.
+   Each row twice: the sun's direct term from the bake's directions blended ("baked") and
+   from a shadow ray per receiver ("rays", :mod:`relightable_textures.operators.direct_rays`).
 2. Update time at ``--vertices`` (default 13,000) with 2 editable regions: tensors of the
    default shapes filled with random numbers (the cost does not depend on the values),
    timed over 50 updates each: material only, sun moved and material changed, environment
-   rotated and material changed (the paper: 172 ms per update at 5.8 fps, 13K vertices).
+   rotated and material changed (the paper: 172 ms per update at 5.8 fps, 13K vertices);
+   and the rays: a floor grid of that many vertices under a box, one ray per lit vertex.
 
 Usage: python benchmarks/bench_materials.py [--size test|demo]
            [--settings hemi:400:1.5/hemi:32/hemi:8@64,...] [--truth-spp 256] [--no-bake]
@@ -79,7 +82,51 @@ def update_timing(vertices: int, specs=("hemi:400:1.5", "hemi:32", "hemi:8"), re
     out["material_ms"] = timed(material_only)
     out["sun_and_material_ms"] = timed(sun_and_material)
     out["environment_and_material_ms"] = timed(env_and_material)
+    rays = _rays_receivers(vertices)
+    if rays is not None:   # the sun's exact direct term: a shadow ray per receiver
+        out["rays_build_ms"] = rays.pop("build_ms")
+
+        def sun_rays_and_material(i):
+            a = np.radians(3.0 * i)
+            sun = ptt.Sun((0.4 * np.cos(a), 0.4 * np.sin(a), 0.92))
+            return t.shade(sun, colours(i), direct=rays["rays"].direct(sun.direction))
+
+        out["rays_ms"] = timed(lambda i: rays["rays"].direct(
+            (0.4 * np.cos(np.radians(3.0 * i)), 0.4 * np.sin(np.radians(3.0 * i)), 0.92)))
+        out["sun_rays_and_material_ms"] = timed(sun_rays_and_material)
     return out
+
+
+def _rays_receivers(vertices: int):
+    """A floor grid of about ``vertices`` vertices under a box (bpy), as ReceiverRays."""
+    try:
+        import bpy
+    except ImportError:
+        return None
+    from relightable_textures.operators.direct_rays import ReceiverRays
+
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    n = int(round(np.sqrt(vertices))) - 1
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=n, y_subdivisions=n, size=4.0)
+    grid = bpy.context.active_object
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.0, 0.0, 0.8))
+    a = time.perf_counter()
+    rays = ReceiverRays(bpy.context.scene, [(grid.name, len(grid.data.vertices))], "POINT")
+    build = 1e3 * (time.perf_counter() - a)
+    if rays.count != vertices:
+        return {"rays": _Padded(rays, vertices), "build_ms": round(build, 3)}
+    return {"rays": rays, "build_ms": round(build, 3)}
+
+
+class _Padded:
+    """ReceiverRays of a grid of nearly ``vertices`` vertices, padded to exactly that many."""
+
+    def __init__(self, rays, vertices):
+        self.rays, self.vertices = rays, vertices
+
+    def direct(self, direction, angle_deg=0.0):
+        d = self.rays.direct(direction, angle_deg)
+        return np.resize(d, self.vertices)
 
 
 def main(argv=None):
@@ -101,6 +148,7 @@ def main(argv=None):
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
     from relightable_textures.lt_addon.transport import ptt
     from relightable_textures.operators import material_bake as mb
+    from relightable_textures.operators.direct_rays import exact_direct
     from relightable_textures.operators.jobs import run
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
@@ -139,21 +187,24 @@ def main(argv=None):
         t0 = time.perf_counter()
         tensors = run(mb.bake_materials(scene, objs, st))
         secs = time.perf_counter() - t0
-        for name, edit in EDITS:
+        for rays, name, edit in [(r, n, e) for r in (False, True) for n, e in EDITS]:
             errs, floors, lows, parts = [], [], [], []
             for li, (az, el) in enumerate(LIGHTS):
                 a, b = truths[li, name]
                 light = ptt.Sun(tuple(direction_from_az_el(az, el)))
-                est = tensors.irradiance(light, edit)
-                e0 = tensors.irradiance(light, edit, orders=(0,))
+                exact = exact_direct(scene, tensors, light) if rays else None
+                est = tensors.irradiance(light, edit, direct=exact)
+                e0 = tensors.irradiance(light, edit, orders=(0,), direct=exact)
                 n = np.linalg.norm(a)
                 parts.append((np.linalg.norm(e0 - direct[li]) / n,
                               np.linalg.norm((est - e0) - (a - direct[li])) / n))
                 errs.append(rel(est, a))
-                lows.append(rel(tensors.irradiance(light, edit, orders=(0, 1)), a))
+                lows.append(rel(tensors.irradiance(light, edit, orders=(0, 1), direct=exact),
+                                a))
                 floors.append(rel(b, a))
             per = "/".join(f"{e:.3f}" for e in errs)
-            print(f"| {dirs} @{spp} spp | {tensors.metadata['bake_calls']} | {secs:.1f} | "
+            print(f"| {dirs} @{spp} spp, direct {'rays' if rays else 'baked'} | "
+                  f"{tensors.metadata['bake_calls']} | {secs:.1f} | "
                   f"{tensors.nbytes / 2**20:.2f} | {name} | {np.mean(errs):.4f} ({per}) | "
                   f"{np.mean([p[0] for p in parts]):.4f} | {np.mean([p[1] for p in parts]):.4f} | "
                   f"{np.mean(floors):.4f} | {np.mean(lows):.4f} |", flush=True)

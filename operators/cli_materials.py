@@ -95,6 +95,10 @@ def add_parsers(sub) -> None:
                    help="sun normal irradiance or environment multiplier (default 1)")
     p.add_argument("--color", type=_rgb, default=(1.0, 1.0, 1.0), metavar="R,G,B",
                    help="sun colour")
+    p.add_argument("--direct", choices=("rays", "baked"), default="rays",
+                   help="a sun's direct light: rays (default; a shadow ray per vertex against "
+                        "the scene: exact at any sun) or baked (the bake's directions "
+                        "blended, as an environment's is)")
     p.add_argument("--out", required=True, metavar="shading.npy",
                    help="outgoing radiance per stacked vertex, shape (V, 3), float32")
     p.add_argument("--compare", metavar="PNG",
@@ -224,9 +228,15 @@ def _cmd_relight_materials(args) -> int:
             raise CliError("the scene has no Sun lamp: give --sun AZ,EL or --env HDR.exr")
         light = ptt.Sun(tuple(sun[0]), sun[1], sun[2] * args.strength, args.color)
         what = {"sun": "the scene's Sun lamp", "sun_angle": sun[1]}
+    exact = None
     t = time.perf_counter()
-    values = tensors.shade(light, edits).astype(np.float32)
+    if isinstance(light, ptt.Sun) and args.direct == "rays":
+        from .direct_rays import exact_direct
+
+        exact = exact_direct(bpy.context.scene, tensors, light)
+    values = tensors.shade(light, edits, direct=exact).astype(np.float32)
     ms = (time.perf_counter() - t) * 1e3
+    what["direct"] = "rays" if exact is not None else "baked"
     with atomic.atomic_path(out) as tmp:
         np.save(tmp, values)
     info = {"objects": [n for n, _ in tensors.objects], "vertices": int(len(values)), **what,

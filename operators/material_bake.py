@@ -602,16 +602,22 @@ def ground_truth(scene, objects, tensors: ptt.TransferTensors, direction, sample
     b = truth_irradiance(scene, objects, colours, direction, tensors.bounces, samples, seed=2,
                          domain=domain)
     seconds = time.perf_counter() - t
+    from .direct_rays import exact_direct
+
     light = ptt.Sun(tuple(float(v) for v in direction))
-    est = tensors.irradiance(light, colours)
-    low = tensors.irradiance(light, colours, orders=(0, 1))
+    exact = exact_direct(scene, tensors, light)
+    est = tensors.irradiance(light, colours, direct=exact)
+    low = tensors.irradiance(light, colours, orders=(0, 1), direct=exact)
 
     def rel(x, y):
         return float(np.linalg.norm(x - y) / max(np.linalg.norm(y), 1e-30))
 
     return {"samples": samples, "light": [round(float(v), 5) for v in direction],
             "rel_error": rel(est, a), "noise_floor": rel(b, a),
-            "rel_error_without_two_bounce": rel(low, a), "truth_seconds": round(seconds, 3)}
+            "rel_error_without_two_bounce": rel(low, a),
+            "rel_error_baked_direct": rel(tensors.irradiance(light, colours), a),
+            "direct": "rays" if exact is not None else "baked",
+            "truth_seconds": round(seconds, 3)}
 
 
 def materials_job(scene, objects, settings: MaterialBakeSettings, out_dir: str,

@@ -6,8 +6,9 @@ colour attribute :data:`ATTRIBUTE` -- outgoing diffuse radiance ``albedo / pi * 
 editable materials' *current* colours and the scene's Sun lamp -- as emission. Changing an
 editable material's Base Color (or moving the Sun) recomputes it in NumPy: a depsgraph handler
 (:func:`on_depsgraph_update`) calls :func:`update_preview`, a few milliseconds at 13K vertices
-(``benchmarks/bench_materials.py``). The materials' own specular stays out of the preview: the
-bake is diffuse.
+(``benchmarks/bench_materials.py``). The Sun's direct light is exact: a ray per receiver
+(:mod:`.direct_rays`), not the baked directions blended. The materials' own specular stays out
+of the preview: the bake is diffuse.
 """
 
 from __future__ import annotations
@@ -80,10 +81,13 @@ def update_preview(scene) -> dict:
     light = preview_light(scene) if bakes else None
     if light is None:
         return {}
+    from .direct_rays import exact_direct
+
     shade_ms = write_ms = 0.0
     for _, tensors in bakes:
         t0 = time.perf_counter()
-        values = tensors.shade(light, material_bake.file_colours(tensors))
+        values = tensors.shade(light, material_bake.file_colours(tensors),
+                               direct=exact_direct(scene, tensors, light))
         t1 = time.perf_counter()
         domain = tensors.metadata.get("domain", "POINT")
         for name, rows in tensors.object_slices().items():

@@ -22,7 +22,7 @@ from ..lt_addon.steerable.sampled_basis import build_sampled_basis
 from ..lt_addon.steerable.basis import paper_basis
 from ..lt_addon.steerable.texture import FRAMES, STORAGE_MODES, SteerableTexture
 from .jobs import Progress, run  # noqa: F401  (the bake's job primitives)
-from .cycles_bake import (BAKE_MODES, WORLD_SAMPLING, BakeInputError, EnvironmentBake,
+from .cycles_bake import (BAKE_MODES, WORLD_SAMPLING, BakeInputError,
                           check_bakeable, check_memory)
 
 BAKE_KIND = "steerable_texture"

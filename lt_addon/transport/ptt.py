@@ -192,10 +192,22 @@ class TransferTensors:
         return c
 
     # -- relighting --------------------------------------------------------------------------
-    def project(self, light) -> ProjectedLight:
-        """Contract every term with ``light`` (a :class:`Sun` or :class:`Environment`)."""
+    def project(self, light, direct=None) -> ProjectedLight:
+        """Contract every term with ``light`` (a :class:`Sun` or :class:`Environment`).
+
+        ``direct`` (V,): the direct term's visibility x cosine per unit normal irradiance for
+        this sun, computed exactly elsewhere (a ray per receiver), instead of interpolating
+        ``D`` between its baked directions; it is scaled by the sun's strength and colour."""
         w0, w1, w2 = (light_weights(d, light).astype(np.float32) for d in self._dsets)
         V, R1 = self.vertices, len(self.regions) + 1
+        if direct is not None:
+            if not isinstance(light, Sun):
+                raise TypeError("an exact direct term is a sun's: the environment's direct "
+                                "light comes from D")
+            direct = np.asarray(direct, dtype=np.float32)
+            if direct.shape != (V,):
+                raise ValueError(f"direct must have shape ({V},), got {direct.shape}")
+            w0 = np.zeros_like(w0)
 
         def contract(term, w, rows):
             # term (S, 3, rows..., V) -> (3, rows..., V), over the directions the light touches
@@ -207,8 +219,12 @@ class TransferTensors:
                     out[c] = w[nz, c] @ block[:, c].reshape(len(nz), -1)
             return out.reshape((3, *rows, V))
 
-        nz0 = np.nonzero(np.any(w0 != 0, axis=1))[0]
-        direct = w0[nz0].T @ (self.direct if len(nz0) == len(w0) else self.direct[nz0])
+        if direct is not None:
+            rgb = np.float32(light.strength) * np.asarray(light.color, np.float32)
+            direct = rgb[:, None] * direct[None, :]
+        else:
+            nz0 = np.nonzero(np.any(w0 != 0, axis=1))[0]
+            direct = w0[nz0].T @ (self.direct if len(nz0) == len(w0) else self.direct[nz0])
         one = contract(self.one, w1, (R1,) if self.one.size else (0,))
         two = contract(self.two, w2, (R1, R1) if self.two.size else (0, 0))
         return ProjectedLight(np.ascontiguousarray(direct, np.float32), one, two)
@@ -226,9 +242,11 @@ class TransferTensors:
             E += np.einsum("abc,cabv->cv", pair, projected.two)
         return np.ascontiguousarray(E.T)
 
-    def irradiance(self, light, edits: dict | None = None, orders=(0, 1, 2)) -> np.ndarray:
-        """E (V, 3) float32 in W/m^2 under ``light`` with the materials ``edits``."""
-        return self.combine(self.project(light), self.albedos(edits), orders)
+    def irradiance(self, light, edits: dict | None = None, orders=(0, 1, 2),
+                   direct=None) -> np.ndarray:
+        """E (V, 3) float32 in W/m^2 under ``light`` with the materials ``edits``
+        (``direct``: an exact direct term, see :meth:`project`)."""
+        return self.combine(self.project(light, direct), self.albedos(edits), orders)
 
     def receiver_colors(self, albedos: np.ndarray) -> np.ndarray:
         """Each vertex's own diffuse colour (V, 3) with the edited albedos applied."""
@@ -237,15 +255,15 @@ class TransferTensors:
             col[self.receiver_region == r] = np.asarray(albedos[r], dtype=np.float32)
         return col
 
-    def shade(self, light, edits: dict | None = None) -> np.ndarray:
+    def shade(self, light, edits: dict | None = None, direct=None) -> np.ndarray:
         """Outgoing radiance (V, 3) float32 of the diffuse receivers: ``albedo / pi * E``."""
         c = self.albedos(edits)
         return (self.receiver_colors(c) / np.float32(np.pi)
-                * self.combine(self.project(light), c))
+                * self.combine(self.project(light, direct), c))
 
-    def term_shares(self, light, edits: dict | None = None) -> dict:
+    def term_shares(self, light, edits: dict | None = None, direct=None) -> dict:
         """Each path order's share of the summed irradiance (over vertices and RGB)."""
-        p, c = self.project(light), self.albedos(edits)
+        p, c = self.project(light, direct), self.albedos(edits)
         parts = [float(self.combine(p, c, (k,)).sum()) for k in (0, 1, 2)]
         total = sum(parts) or 1.0
         return {"direct": parts[0] / total, "one_bounce": parts[1] / total,

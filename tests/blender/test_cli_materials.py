@@ -60,11 +60,23 @@ def test_relight_materials_applies_the_edit(baked, tmp_path):
     assert r.returncode == 0, r.stderr
     info = json.loads(r.stdout)
     assert info["edits"]["RedMaterial"] == pytest.approx([0.1, 0.1, 0.9])
+    assert info["direct"] == "rays"
     t = ptt.TransferTensors.load(str(folder / "room_relight" / "Floor_materials.npz"))
     sun = ptt.Sun(tuple(direction_from_az_el(30, 50)))
-    np.testing.assert_allclose(np.load(a), t.shade(sun, {}), rtol=1e-6)
-    np.testing.assert_allclose(np.load(b), t.shade(sun, {"RedMaterial": (0.1, 0.1, 0.9)}),
-                               rtol=1e-6)
+    import bpy
+
+    from relightable_textures.operators.direct_rays import exact_direct
+
+    bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False)
+    exact = exact_direct(bpy.context.scene, t, sun)      # a shadow ray per vertex
+    np.testing.assert_allclose(np.load(a), t.shade(sun, {}, direct=exact), rtol=1e-6)
+    np.testing.assert_allclose(np.load(b), t.shade(sun, {"RedMaterial": (0.1, 0.1, 0.9)},
+                                                   direct=exact), rtol=1e-6)
+    # --direct baked: the bake's directions blended, as before the rays
+    r = relight("relight-materials", blend, "--object", "Floor", "--sun", "30,50", "--direct",
+                "baked", "--out", tmp_path / "d.npy")
+    assert r.returncode == 0 and json.loads(r.stdout)["direct"] == "baked"
+    np.testing.assert_allclose(np.load(tmp_path / "d.npy"), t.shade(sun, {}), rtol=1e-6)
     # without --sun / --env: the scene's Sun lamp
     r = relight("relight-materials", blend, "--object", "Floor", "--out", tmp_path / "c.npy")
     assert r.returncode == 0 and json.loads(r.stdout)["sun"] == "the scene's Sun lamp"

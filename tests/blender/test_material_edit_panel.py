@@ -37,7 +37,7 @@ def test_bake_materials_operator_and_live_colour_edit(fresh_scene, tmp_path):
         assert "Baked 5 objects, 350 vertices" in scene[me.SUMMARY_KEY]
         ((first, tensors),) = me.scene_bakes(scene)
         assert first.name == "Floor" and tensors.regions == ["RedMaterial"]
-        light = me.preview_light(scene)   # the sample's (hidden) Sun lamp
+        assert me.preview_light(scene) is not None   # the sample's (hidden) Sun lamp
 
         # the active object first, then the other selected meshes by name
         assert [n for n, _ in tensors.objects] == ["Floor", "Box", "WallBack", "WallLeft",
@@ -48,7 +48,13 @@ def test_bake_materials_operator_and_live_colour_edit(fresh_scene, tmp_path):
                 bpy.data.objects[n].data.color_attributes[me.ATTRIBUTE])[:, :3]
                 for n, _ in tensors.objects])
 
-        np.testing.assert_allclose(shown(), tensors.shade(light, {}), rtol=1e-5, atol=1e-7)
+        from relightable_textures.operators.direct_rays import exact_direct
+
+        def want(edits):   # the Sun's direct light from a shadow ray per vertex
+            lamp = me.preview_light(scene)
+            return tensors.shade(lamp, edits, direct=exact_direct(scene, tensors, lamp))
+
+        np.testing.assert_allclose(shown(), want({}), rtol=1e-5, atol=1e-7)
         # the preview is the active output of every receiver's material
         for n in names:
             mat = bpy.data.objects[n].material_slots[0].material
@@ -61,8 +67,8 @@ def test_bake_materials_operator_and_live_colour_edit(fresh_scene, tmp_path):
         socket.default_value = (0.1, 0.2, 0.9, 1.0)
         view_layer.update()
         after = shown()
-        want = tensors.shade(light, {"RedMaterial": (0.1, 0.2, 0.9)})
-        np.testing.assert_allclose(after, want, rtol=1e-5, atol=1e-7)
+        np.testing.assert_allclose(after, want({"RedMaterial": (0.1, 0.2, 0.9)}), rtol=1e-5,
+                                   atol=1e-7)
         sl = tensors.object_slices()
         # the floor took on less red and more blue from the wall; the box too
         assert after[sl["Floor"], 0].sum() < before[sl["Floor"], 0].sum()
@@ -71,8 +77,7 @@ def test_bake_materials_operator_and_live_colour_edit(fresh_scene, tmp_path):
         sun = next(o for o in scene.objects if o.type == "LIGHT")
         sun.rotation_euler[2] += 0.5
         view_layer.update()
-        np.testing.assert_allclose(shown(), tensors.shade(me.preview_light(scene),
-                                                          {"RedMaterial": (0.1, 0.2, 0.9)}),
+        np.testing.assert_allclose(shown(), want({"RedMaterial": (0.1, 0.2, 0.9)}),
                                    rtol=1e-5, atol=1e-7)
         assert not np.allclose(shown(), after)
     finally:

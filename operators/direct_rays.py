@@ -1,0 +1,220 @@
+"""The exact direct light of a sun at the receivers of a per-vertex bake, by ray casting (bpy).
+
+A per-vertex bake's direct term ``D`` (S0, V) is exact only at its baked directions: between
+them a hard shadow is blended from its neighbours (measured on the demo room, 400 directions:
+0.15 of the error of E at suns that are not baked directions, where the two truth seeds differ
+by 0.02). Under a sun the direct term is visibility x cosine, which a ray per receiver gives
+exactly at any direction: :class:`ReceiverRays` keeps a BVH of the scene's rendered meshes
+(``mathutils.bvhtree``) and the receivers' points and normals, and casts one ray per lit
+receiver towards the sun (``rays_per_receiver`` over the disc of a sun wider than
+:data:`HARD_SUN_DEG`). Measured here: 0.8 us a ray, 13K receivers in about 11 ms.
+
+What Cycles bakes and this reproduces (checked against ``D`` at baked directions in the tests):
+a value per face corner at the vertex position with the corner's normal; per vertex
+(``POINT``) the mean over the vertex's corners. Shadow rays start a little off the surface
+along the normal and see both sides of every face.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: A sun at most this wide (degrees) is treated as a point: one ray per receiver.
+HARD_SUN_DEG = 0.6
+#: Offset of a ray's origin along the receiver's normal (metres), against self-hits.
+RAY_OFFSET = 1e-4
+#: ... and as far towards the centre of the receiver's faces: a point on the edge of a face
+#: is taken on the face's side of a surface standing there (the floor's edge at the foot of
+#: a wall sees through the wall no light from behind it, as in Cycles).
+
+
+def _mesh_arrays(obj, depsgraph):
+    """World-space vertices (N, 3), corner vertex indices (C,), corner normals (C, 3), loop
+    triangles (T, 3) and the centre of each corner's face (C, 3) of the evaluated mesh of
+    ``obj``."""
+    ev = obj.evaluated_get(depsgraph)
+    mesh = ev.to_mesh()
+    try:
+        co = np.empty(len(mesh.vertices) * 3)
+        mesh.vertices.foreach_get("co", co)
+        M = np.array(obj.matrix_world)
+        co = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
+        corner_v = np.empty(len(mesh.loops), np.int64)
+        mesh.loops.foreach_get("vertex_index", corner_v)
+        cn = np.empty(len(mesh.loops) * 3)
+        mesh.corner_normals.foreach_get("vector", cn)
+        normal_matrix = np.linalg.inv(M[:3, :3]).T
+        cn = cn.reshape(-1, 3) @ normal_matrix.T
+        cn /= np.maximum(np.linalg.norm(cn, axis=1, keepdims=True), 1e-30)
+        mesh.calc_loop_triangles()
+        tri = np.empty(len(mesh.loop_triangles) * 3, np.int64)
+        mesh.loop_triangles.foreach_get("vertices", tri)
+        F = len(mesh.polygons)
+        centre = np.empty(F * 3)
+        mesh.polygons.foreach_get("center", centre)
+        centre = centre.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
+        start, total = np.empty(F, np.int64), np.empty(F, np.int64)
+        mesh.polygons.foreach_get("loop_start", start)
+        mesh.polygons.foreach_get("loop_total", total)
+        face_of = np.repeat(np.arange(F), total)[np.argsort(np.repeat(start, total)
+                                                             + _ranks(total), kind="stable")]
+        return co, corner_v, cn, tri.reshape(-1, 3), centre[face_of]
+    finally:
+        ev.to_mesh_clear()
+
+
+def _ranks(total):
+    """0, 1, .., n-1 for each run length n of ``total`` (a face's corner offsets)."""
+    ends = np.cumsum(total)
+    return np.arange(ends[-1] if len(ends) else 0) - np.repeat(ends - total, total)
+
+
+class ReceiverRays:
+    """Ray-cast direct light for the stacked receivers of a per-vertex bake.
+
+    Parameters
+    ----------
+    scene : bpy.types.Scene
+        Every rendered mesh of it casts shadows (as in the bake).
+    objects : list of (name, count)
+        The receivers in stacking order, as :attr:`..lt_addon.transport.ptt.TransferTensors.objects`.
+    domain : "POINT" or "CORNER"
+        A value per vertex (the mean of its corners) or per face corner.
+    """
+
+    def __init__(self, scene, objects, domain: str = "POINT"):
+        import bpy
+        from mathutils.bvhtree import BVHTree
+
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        verts, tris, offset = [], [], 0
+        for o in scene.objects:
+            if o.type != "MESH" or o.hide_render:
+                continue
+            co, _, _, tri, _ = _mesh_arrays(o, depsgraph)
+            verts.append(co)
+            tris.append(tri + offset)
+            offset += len(co)
+        self.tree = BVHTree.FromPolygons(np.concatenate(verts).tolist(),
+                                         np.concatenate(tris).tolist(), all_triangles=True)
+        self.domain = domain
+        points, normals, inward, groups, starts = [], [], [], [], 0
+        for name, count in objects:
+            co, corner_v, cn, _, fc = _mesh_arrays(bpy.data.objects[name], depsgraph)
+            n_el = len(corner_v) if domain == "CORNER" else len(co)
+            if n_el != count:
+                raise ValueError(f"{name!r} has {n_el} {'corners' if domain == 'CORNER' else 'vertices'} "
+                                 f"now, the bake {count}: bake the materials again")
+            points.append(co[corner_v])                 # every corner, at its vertex
+            normals.append(cn)
+            inward.append(fc - co[corner_v])
+            groups.append((corner_v if domain == "POINT" else np.arange(len(corner_v))) + starts)
+            starts += count
+        self.points = np.concatenate(points)            # (C, 3) world
+        self.normals = np.concatenate(normals)          # (C, 3) unit
+        self.group = np.concatenate(groups)             # (C,) receiver of each corner
+        self.count = starts
+        self.per_receiver = np.bincount(self.group, minlength=starts).astype(np.float64)
+        # one ray origin per point and normal: the corners of a smooth or flat vertex share
+        # one, a hard edge's faces get one each (their visibility differs near the edge);
+        # off the surface along the normal, and towards the centre of the corners' faces
+        key = np.concatenate([np.round(self.points, 6), np.round(self.normals, 3)], axis=1)
+        _, origin_of = np.unique(key, axis=0, return_inverse=True)
+        self._origin_of = origin_of.reshape(-1)
+        n_orig = int(self._origin_of.max()) + 1 if len(self._origin_of) else 0
+        towards = np.concatenate(inward)
+        towards /= np.maximum(np.linalg.norm(towards, axis=1, keepdims=True), 1e-30)
+        mean_t = np.zeros((n_orig, 3))
+        np.add.at(mean_t, self._origin_of, towards)
+        norm_t = np.linalg.norm(mean_t, axis=1, keepdims=True)
+        mean_t = np.where(norm_t > 1e-6, mean_t / np.maximum(norm_t, 1e-30), 0.0)
+        base, normal = np.zeros((n_orig, 3)), np.zeros((n_orig, 3))
+        base[self._origin_of] = self.points
+        normal[self._origin_of] = self.normals
+        self._origins = base + RAY_OFFSET * (normal + mean_t)
+
+    def direct(self, direction, angle_deg: float = 0.0, rays: int = 16) -> np.ndarray:
+        """Visibility x cosine (V,) float32 per unit normal irradiance from a sun towards
+        ``direction`` (3,) of angular diameter ``angle_deg``: one ray per receiver for a hard
+        sun, ``rays`` stratified over the disc otherwise."""
+        w = np.asarray(direction, dtype=np.float64)
+        w = w / np.linalg.norm(w)
+        cos = np.maximum(self.normals @ w, 0.0)                 # (C,)
+        if angle_deg <= HARD_SUN_DEG:
+            vis = self._visible_where(cos > 0, [w])
+        else:
+            vis = self._visible_where(cos > 0, disc_directions(w, angle_deg, rays))
+        per_corner = cos * vis[self._origin_of]
+        out = np.bincount(self.group, weights=per_corner, minlength=self.count)
+        return (out / np.maximum(self.per_receiver, 1)).astype(np.float32)
+
+    def _visible_where(self, lit, directions) -> np.ndarray:
+        """Mean visibility (origins,) over ``directions`` of the origins with a lit corner."""
+        from mathutils import Vector
+
+        need = np.zeros(len(self._origins), bool)
+        need[self._origin_of[lit]] = True
+        idx = np.nonzero(need)[0]
+        vis = np.zeros(len(self._origins))
+        if not len(idx):
+            return vis
+        cast = self.tree.ray_cast
+        pts = [Vector(p) for p in self._origins[idx].tolist()]
+        for d in directions:
+            dv = Vector(tuple(float(x) for x in d))
+            vis[idx] += np.fromiter((cast(p, dv)[0] is None for p in pts), dtype=np.float64,
+                                    count=len(pts))
+        return vis / len(directions)
+
+
+def disc_directions(w, angle_deg: float, n: int) -> np.ndarray:
+    """``n`` unit directions stratified over the sun disc of angular diameter ``angle_deg``
+    around ``w`` (a Fibonacci spiral: fixed, so the same light gives the same value)."""
+    w = np.asarray(w, dtype=np.float64)
+    a = np.cross(w, [0.0, 0.0, 1.0] if abs(w[2]) < 0.9 else [1.0, 0.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(w, a)
+    half = np.radians(angle_deg) / 2.0
+    k = np.arange(n) + 0.5
+    r = np.tan(half) * np.sqrt(k / n)
+    phi = k * np.pi * (3.0 - np.sqrt(5.0))
+    d = w[None] + r[:, None] * (np.cos(phi)[:, None] * a + np.sin(phi)[:, None] * b)
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+_RAYS: dict = {}
+
+
+def _scene_stamp(scene) -> str:
+    """A cheap fingerprint of the shadow casters: every rendered mesh's name, transform and
+    vertex positions (0.2 ms at 13K vertices), so a moved or edited mesh rebuilds the BVH."""
+    import hashlib
+
+    h = hashlib.sha1()
+    for o in sorted((o for o in scene.objects if o.type == "MESH" and not o.hide_render),
+                    key=lambda o: o.name):
+        co = np.empty(len(o.data.vertices) * 3, np.float32)
+        o.data.vertices.foreach_get("co", co)
+        h.update(o.name.encode())
+        h.update(np.asarray(o.matrix_world, np.float32).tobytes())
+        h.update(co.tobytes())
+    return h.hexdigest()
+
+
+def exact_direct(scene, tensors, light) -> np.ndarray | None:
+    """The exact direct term (V,) of ``light`` (a ``ptt.Sun``) for the receivers of
+    ``tensors`` in ``scene`` -- pass it as ``direct=`` to the tensors' relight -- with the
+    :class:`ReceiverRays` cached per scene, receivers and shadow casters; None when a
+    receiver's mesh no longer has the bake's vertex count (the caller keeps ``D``)."""
+    domain = tensors.metadata.get("domain", "POINT")
+    key = (scene.name, tuple(tuple(o) for o in tensors.objects), domain)
+    stamp = _scene_stamp(scene)
+    hit = _RAYS.get(key)
+    if hit is None or hit[0] != stamp:
+        try:
+            hit = (stamp, ReceiverRays(scene, tensors.objects, domain))
+        except (ValueError, KeyError):
+            _RAYS.pop(key, None)
+            return None
+        _RAYS[key] = hit
+    return hit[1].direct(light.direction, light.angle_deg)
