@@ -17,7 +17,7 @@
    and the rays: a floor grid of that many vertices under a box, one ray per lit vertex.
 
 Usage: python benchmarks/bench_materials.py [--size test|demo]
-           [--settings hemi:400:1.5/hemi:32/hemi:8@64,...] [--truth-spp 256] [--no-bake]
+           [--settings hemi:400:1.5/hemi:64/hemi:8@32,...] [--truth-spp 256] [--no-bake]
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ EDITS = (("file colours", {}),
 OBJECTS = ("Floor", "WallLeft", "WallRight", "WallBack", "Box")
 
 
-def update_timing(vertices: int, specs=("hemi:400:1.5", "hemi:32", "hemi:8"), regions: int = 2,
+def update_timing(vertices: int, specs=("hemi:400:1.5", "hemi:64", "hemi:8"), regions: int = 2,
                   repeats: int = 50) -> dict:
     from relightable_textures.lt_addon.transport import ptt
     from relightable_textures.lt_addon.transport.texture import parse_directions
@@ -43,6 +43,9 @@ def update_timing(vertices: int, specs=("hemi:400:1.5", "hemi:32", "hemi:8"), re
     rng = np.random.default_rng(0)
     S = [parse_directions(s).size for s in specs]
     R1 = regions + 1
+    grid = _rays_receivers(vertices)   # a floor grid under a box: real shadows for the rays
+    if grid is not None:
+        vertices = grid["rays"].count
     t = ptt.TransferTensors(
         rng.random((S[0], vertices), dtype=np.float32),
         rng.random((S[1], 3, R1, vertices), dtype=np.float32),
@@ -68,13 +71,16 @@ def update_timing(vertices: int, specs=("hemi:400:1.5", "hemi:32", "hemi:8"), re
     def colours(i):
         return {"R0": (0.1 + 0.01 * (i % 50), 0.5, 0.5)}
 
+    def moving_sun(i):
+        a = np.radians(3.0 * i)
+        return ptt.Sun((0.4 * np.cos(a), 0.4 * np.sin(a), 0.92))
+
     def material_only(i):
         c = t.albedos(colours(i))
         return t.receiver_colors(c) / np.pi * t.combine(p, c)
 
     def sun_and_material(i):
-        a = np.radians(3.0 * i)
-        return t.shade(ptt.Sun((0.4 * np.cos(a), 0.4 * np.sin(a), 0.92)), colours(i))
+        return t.shade(moving_sun(i), colours(i))
 
     def env_and_material(i):
         return t.shade(ptt.Environment(env, "bottom_first", 3.0 * i), colours(i))
@@ -82,23 +88,47 @@ def update_timing(vertices: int, specs=("hemi:400:1.5", "hemi:32", "hemi:8"), re
     out["material_ms"] = timed(material_only)
     out["sun_and_material_ms"] = timed(sun_and_material)
     out["environment_and_material_ms"] = timed(env_and_material)
-    rays = _rays_receivers(vertices)
-    if rays is not None:   # the sun's exact direct term: a shadow ray per receiver
-        out["rays_build_ms"] = rays.pop("build_ms")
+    if grid is None:
+        return out
+    # the sun's exact direct term: the grid's D is its own rays at the baked directions (equal
+    # to Cycles' bake, tests/blender/test_materials.py); rays go where D's neighbours disagree
+    from relightable_textures.lt_addon.transport.texture import sun_weights
 
-        def sun_rays_and_material(i):
-            a = np.radians(3.0 * i)
-            sun = ptt.Sun((0.4 * np.cos(a), 0.4 * np.sin(a), 0.92))
-            return t.shade(sun, colours(i), direct=rays["rays"].direct(sun.direction))
+    rays, d0 = grid["rays"], t.direction_sets()[0]
+    a = time.perf_counter()
+    t.direct[:] = np.stack([rays.direct(w) for w in d0.directions])
+    out["rays_build_ms"] = grid["build_ms"]
+    out["grid_D_seconds"] = round(time.perf_counter() - a, 2)
+    cast = []
 
-        out["rays_ms"] = timed(lambda i: rays["rays"].direct(
-            (0.4 * np.cos(np.radians(3.0 * i)), 0.4 * np.sin(np.radians(3.0 * i)), 0.92)))
-        out["sun_rays_and_material_ms"] = timed(sun_rays_and_material)
+    def exact(i, everywhere=False):
+        s = moving_sun(i)
+        known = None
+        if not everywhere:
+            idx, _ = sun_weights(d0, s.direction)
+            known = rays.known_from(t.direct[idx], d0.directions[idx])
+        d = rays.direct(s.direction, known=known)
+        cast.append(rays.cast)
+        return s, d
+
+    out["rays_everywhere_ms"] = timed(lambda i: exact(i, True))
+    out["rays_everywhere_cast"] = int(np.median(cast))
+    cast.clear()
+    out["rays_ms"] = timed(exact)
+    out["rays_cast"] = int(np.median(cast))
+
+    def sun_rays_and_material(i, everywhere=True):
+        s, d = exact(i, everywhere)
+        return t.shade(s, colours(i), direct=d)
+
+    out["sun_rays_and_material_ms"] = timed(sun_rays_and_material)   # the default
+    out["sun_rays_at_edges_and_material_ms"] = timed(lambda i: sun_rays_and_material(i, False))
     return out
 
 
 def _rays_receivers(vertices: int):
-    """A floor grid of about ``vertices`` vertices under a box (bpy), as ReceiverRays."""
+    """A floor grid of about ``vertices`` vertices under a box (bpy), as ReceiverRays, with the
+    milliseconds its BVH and arrays took; None without bpy."""
     try:
         import bpy
     except ImportError:
@@ -112,28 +142,14 @@ def _rays_receivers(vertices: int):
     bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.0, 0.0, 0.8))
     a = time.perf_counter()
     rays = ReceiverRays(bpy.context.scene, [(grid.name, len(grid.data.vertices))], "POINT")
-    build = 1e3 * (time.perf_counter() - a)
-    if rays.count != vertices:
-        return {"rays": _Padded(rays, vertices), "build_ms": round(build, 3)}
-    return {"rays": rays, "build_ms": round(build, 3)}
-
-
-class _Padded:
-    """ReceiverRays of a grid of nearly ``vertices`` vertices, padded to exactly that many."""
-
-    def __init__(self, rays, vertices):
-        self.rays, self.vertices = rays, vertices
-
-    def direct(self, direction, angle_deg=0.0):
-        d = self.rays.direct(direction, angle_deg)
-        return np.resize(d, self.vertices)
+    return {"rays": rays, "build_ms": round(1e3 * (time.perf_counter() - a), 3)}
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--size", default="test", choices=("test", "demo"))
     ap.add_argument("--settings", default="hemi:400:1.5/hemi:16/hemi:4@32,"
-                    "hemi:400:1.5/hemi:32/hemi:8@64")
+                    "hemi:400:1.5/hemi:32/hemi:8@64,hemi:400:1.5/hemi:64/hemi:8@32")
     ap.add_argument("--truth-spp", type=int, default=256)
     ap.add_argument("--vertices", type=int, default=13000)
     ap.add_argument("--no-bake", action="store_true", help="only the update timing")
@@ -187,12 +203,14 @@ def main(argv=None):
         t0 = time.perf_counter()
         tensors = run(mb.bake_materials(scene, objs, st))
         secs = time.perf_counter() - t0
-        for rays, name, edit in [(r, n, e) for r in (False, True) for n, e in EDITS]:
+        for rays, name, edit in [(r, n, e) for r in (None, "rays", "rays-at-edges")
+                                 for n, e in EDITS]:
             errs, floors, lows, parts = [], [], [], []
             for li, (az, el) in enumerate(LIGHTS):
                 a, b = truths[li, name]
                 light = ptt.Sun(tuple(direction_from_az_el(az, el)))
-                exact = exact_direct(scene, tensors, light) if rays else None
+                exact = exact_direct(scene, tensors, light, everywhere=rays == "rays") \
+                    if rays else None
                 est = tensors.irradiance(light, edit, direct=exact)
                 e0 = tensors.irradiance(light, edit, orders=(0,), direct=exact)
                 n = np.linalg.norm(a)
@@ -203,7 +221,7 @@ def main(argv=None):
                                 a))
                 floors.append(rel(b, a))
             per = "/".join(f"{e:.3f}" for e in errs)
-            print(f"| {dirs} @{spp} spp, direct {'rays' if rays else 'baked'} | "
+            print(f"| {dirs} @{spp} spp, direct {rays or 'baked'} | "
                   f"{tensors.metadata['bake_calls']} | {secs:.1f} | "
                   f"{tensors.nbytes / 2**20:.2f} | {name} | {np.mean(errs):.4f} ({per}) | "
                   f"{np.mean([p[0] for p in parts]):.4f} | {np.mean([p[1] for p in parts]):.4f} | "

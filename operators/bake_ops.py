@@ -475,10 +475,17 @@ class RELIGHT_OT_discard_chunks(bpy.types.Operator):
     bl_label = "Discard Kept Chunks"
     bl_options = {"REGISTER"}
 
+    kind: bpy.props.EnumProperty(
+        name="Bake", default="ALL", description="Whose chunks: one bake's, or every bake's",
+        items=[("ALL", "All", "Every bake of the active object"),
+               ("texture", "Texture", "The texture bake (either method)"),
+               ("vertex", "Vertex", "The vertex transport bake"),
+               ("materials", "Materials", "The material bake")])
+
     def execute(self, context):
         import shutil
 
-        kept = kept_chunks(context)
+        kept = kept_chunks(context, None if self.kind == "ALL" else self.kind)
         for folder, _ in kept:
             shutil.rmtree(folder, ignore_errors=True)
         root = os.path.dirname(kept[0][0]) if kept else None

@@ -439,16 +439,20 @@ def _run_job(job, verb: str):
         print(f"{verb}: cancelling after the current step (Ctrl-C again to stop at once)",
               file=sys.stderr, flush=True)
 
+    # SIGBREAK: Windows' Ctrl-Break, which the panel's Run On sends its command
+    signums = [signal.SIGINT] + ([signal.SIGBREAK] if hasattr(signal, "SIGBREAK") else [])
+    previous = {}
     try:
-        previous = signal.signal(signal.SIGINT, on_sigint)
+        for signum in signums:
+            previous[signum] = signal.signal(signum, on_sigint)
     except ValueError:   # not the main thread (Blender's own console, say): Ctrl-C as before
-        previous = None
+        pass
     try:
         result = jobs.run(job, on_progress=_progress_printer(verb),
                           should_cancel=lambda: bool(asked))
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGINT, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
     if asked and result is None:
         raise KeyboardInterrupt
     return result
@@ -637,8 +641,10 @@ def _cmd_bake_textures(args) -> int:
 def _print_chunks(rep: dict) -> None:
     """A chunked bake's resume and distribution figures, when there are any."""
     if rep.get("chunks_reused"):
-        of = (f"chunks of {rep['chunk_directions']} directions" if "chunk_directions" in rep
-              else "chunks (one basis light each)")
+        of = ("chunks (one basis light each)" if "chunk_directions" not in rep else
+              f"chunks ({rep['indirect_chunks']} of them indirect lights, the others "
+              f"{rep['chunk_directions']} directions each)" if rep.get("indirect_chunks") else
+              f"chunks of {rep['chunk_directions']} directions")
         print(f"  resumed: {rep['chunks_reused']} of {rep['chunks_total']} {of} reused from an "
               "interrupted bake")
     dist = rep.get("distributed")

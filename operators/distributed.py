@@ -1,4 +1,6 @@
-"""Bake a transport bake's chunks on a Dask cluster (``--workers N`` / ``--scheduler ADDRESS``).
+"""Bake a bake's chunks on a Dask cluster (``--workers N`` / ``--scheduler ADDRESS``): the
+transport bakes' ranges of directions (texture and vertex), basis lights (the lobes bake and the
+indirect stage, :mod:`.light_chunks`) and material terms (:mod:`.material_bake`).
 
 The coordinator (the CLI process, with the .blend open) knows the bake's chunks and which of
 them the chunk cache (:mod:`..lt_addon.io.chunk_cache`) still misses. It submits one Dask task
@@ -17,7 +19,8 @@ error before any work. Chunks finished before a failure stay in the cache for th
 Workers must have this package, bpy and Dask installed and reach the .blend and the output
 folder at the same paths (shared storage); ``bpy`` holds one scene per process, so each worker
 runs one thread. Dask is a development / CLI dependency (``requirements.txt``), not bundled in
-the extension zip: the panel bakes in Blender's own process.
+the extension zip: the panel's *Run On* hands the bake to a ``relight`` that has it
+(:mod:`.external_bake`).
 """
 
 from __future__ import annotations

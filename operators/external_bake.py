@@ -92,9 +92,34 @@ def saved_blend() -> str:
 
 
 def _reader(stream, lines: queue.Queue, tag: str) -> None:
-    for line in iter(stream.readline, ""):
-        lines.put((tag, line.rstrip("\n")))
-    lines.put((tag, None))
+    try:
+        for line in iter(stream.readline, ""):
+            lines.put((tag, line.rstrip("\n")))
+    finally:   # the job waits for both streams' end
+        lines.put((tag, None))
+
+
+def _interrupt(proc, windows: bool) -> None:
+    """Ctrl-C the command as a user would: the first one cancels after its current step and
+    keeps the finished chunks, a second one (after ``5 s``) stops it at once -- its
+    ``finally`` blocks still close the Dask cluster; only a command that ignores both is
+    killed (after 30 s more)."""
+    sig = signal.CTRL_BREAK_EVENT if windows else signal.SIGINT
+    for wait in (5.0, 30.0):
+        if proc.poll() is not None:
+            return
+        try:
+            proc.send_signal(sig)
+        except (OSError, ValueError):
+            break
+        try:
+            proc.wait(timeout=wait)
+            return
+        except subprocess.TimeoutExpired:
+            continue
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
 
 
 def external_job(command: list, blend_path: str, poll: float = 0.05):
@@ -103,8 +128,10 @@ def external_job(command: list, blend_path: str, poll: float = 0.05):
     never held longer); returns an :class:`ExternalResult`. Closing the job sends the command
     SIGINT (it keeps its finished chunks) and waits for it. A non-zero exit raises
     BakeInputError with the command's ``relight: error:`` line (or its last lines)."""
+    windows = os.name == "nt"
     proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            bufsize=1)
+                            encoding="utf-8", errors="replace", bufsize=1,
+                            creationflags=subprocess.CREATE_NEW_PROCESS_GROUP if windows else 0)
     lines: queue.Queue = queue.Queue()
     for stream, tag in ((proc.stdout, "out"), (proc.stderr, "err")):
         threading.Thread(target=_reader, args=(stream, lines, tag), daemon=True).start()
@@ -129,13 +156,8 @@ def external_job(command: list, blend_path: str, poll: float = 0.05):
         rc = proc.wait()
         finished = True
     finally:
-        if not finished and proc.poll() is None:
-            proc.send_signal(signal.SIGINT)   # the command keeps its chunks and exits
-            try:
-                proc.wait(timeout=60)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+        if not finished:
+            _interrupt(proc, windows)
     if rc != 0:
         error = next((ln for ln in err if ln.startswith("relight: error:")), None)
         raise BakeInputError(error[len("relight: error: "):] if error else

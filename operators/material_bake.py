@@ -268,8 +268,8 @@ class MaterialBakeSettings:
     regions: list = field(default_factory=list)
     anchors: str = "diffuse"
     bounces: int = 2
-    directions: tuple = ("hemi:400:1.5", "hemi:32", "hemi:8")
-    samples: int = 64
+    directions: tuple = ("hemi:400:1.5", "hemi:64", "hemi:8")
+    samples: int = 32
     seed: int = 0
     domain: str = "POINT"
 

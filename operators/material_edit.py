@@ -6,8 +6,9 @@ colour attribute :data:`ATTRIBUTE` -- outgoing diffuse radiance ``albedo / pi * 
 editable materials' *current* colours and the scene's Sun lamp -- as emission. Changing an
 editable material's Base Color (or moving the Sun) recomputes it in NumPy: a depsgraph handler
 (:func:`on_depsgraph_update`) calls :func:`update_preview`, a few milliseconds at 13K vertices
-(``benchmarks/bench_materials.py``). The Sun's direct light is exact: a ray per receiver
-(:mod:`.direct_rays`), not the baked directions blended. The materials' own specular stays out
+(``benchmarks/bench_materials.py``). The Sun's direct light comes from shadow rays
+(:mod:`.direct_rays`), not the baked directions blended: rays where the baked directions around
+the Sun disagree, which keeps the update fast. The materials' own specular stays out
 of the preview: the bake is diffuse.
 """
 
@@ -86,8 +87,10 @@ def update_preview(scene) -> dict:
     shade_ms = write_ms = 0.0
     for _, tensors in bakes:
         t0 = time.perf_counter()
+        # rays only where the baked directions disagree: the live update stays within 16 ms
+        # at 13K vertices (a ray to every receiver took 11-20 ms in all, measured)
         values = tensors.shade(light, material_bake.file_colours(tensors),
-                               direct=exact_direct(scene, tensors, light))
+                               direct=exact_direct(scene, tensors, light, everywhere=False))
         t1 = time.perf_counter()
         domain = tensors.metadata.get("domain", "POINT")
         for name, rows in tensors.object_slices().items():

@@ -107,7 +107,9 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
         for name in ("frame", "order", "resolution", "samples", "bounces", "storage", "mode",
                      "world_sampling", "truth_lights", "output_dir"):
             col.prop(props, name)
+        _run_on(layout, props)
         layout.operator("relight.bake_textures", icon="RENDER_STILL")
+        _kept_chunks(layout, context, "texture")
         _last_bake(layout, context.scene)
 
 
@@ -140,7 +142,7 @@ def _kept_chunks(layout, context, kind: str):
     if kept:
         layout.label(text=f"{sum(n for _, n in kept)} chunks of a cancelled bake are kept: "
                           "Bake resumes from them", icon="RECOVER_LAST")
-        layout.operator("relight.discard_chunks", icon="TRASH")
+        layout.operator("relight.discard_chunks", icon="TRASH").kind = kind
 
 
 class VIEW3D_PT_relight_light(_RelightSubPanel, bpy.types.Panel):

@@ -301,6 +301,10 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
 
         lights = light_cache(scene, objects, indirect_spec(settings),
                              os.path.join(cache.root, "indirect"))
+    elif resume:   # no indirect stage now: an earlier bake's indirect chunks are stale
+        import shutil
+
+        shutil.rmtree(os.path.join(cache.root, "indirect"), ignore_errors=True)
     try:
         result = yield from _indirect_and_models(scene, objects, settings, dset, albedos,
                                                  readers, seconds, calls, t_start, rss0, peak,

@@ -198,7 +198,6 @@ class TransferTensors:
         ``direct`` (V,): the direct term's visibility x cosine per unit normal irradiance for
         this sun, computed exactly elsewhere (a ray per receiver), instead of interpolating
         ``D`` between its baked directions; it is scaled by the sun's strength and colour."""
-        w0, w1, w2 = (light_weights(d, light).astype(np.float32) for d in self._dsets)
         V, R1 = self.vertices, len(self.regions) + 1
         if direct is not None:
             if not isinstance(light, Sun):
@@ -207,7 +206,9 @@ class TransferTensors:
             direct = np.asarray(direct, dtype=np.float32)
             if direct.shape != (V,):
                 raise ValueError(f"direct must have shape ({V},), got {direct.shape}")
-            w0 = np.zeros_like(w0)
+        else:
+            w0 = light_weights(self._dsets[0], light).astype(np.float32)
+        w1, w2 = (light_weights(d, light).astype(np.float32) for d in self._dsets[1:])
 
         def contract(term, w, rows):
             # term (S, 3, rows..., V) -> (3, rows..., V), over the directions the light touches

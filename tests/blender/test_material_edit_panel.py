@@ -52,7 +52,8 @@ def test_bake_materials_operator_and_live_colour_edit(fresh_scene, tmp_path):
 
         def want(edits):   # the Sun's direct light from a shadow ray per vertex
             lamp = me.preview_light(scene)
-            return tensors.shade(lamp, edits, direct=exact_direct(scene, tensors, lamp))
+            return tensors.shade(lamp, edits, direct=exact_direct(scene, tensors, lamp,
+                                                                  everywhere=False))
 
         np.testing.assert_allclose(shown(), want({}), rtol=1e-5, atol=1e-7)
         # the preview is the active output of every receiver's material

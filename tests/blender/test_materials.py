@@ -142,6 +142,29 @@ def test_the_suns_direct_light_by_rays_is_cycles_own_at_any_sun(room):
         assert rel(blended, cycles) > 0.1, (az, el)
 
 
+def test_rays_go_only_where_the_baked_directions_disagree(room):
+    """exact_direct casts rays only for receivers whose value D does not already settle at the
+    baked directions around the sun (all lit or all dark there): on the room with the default
+    direct set (400 directions; D from the rays themselves, equal to Cycles' bake by the test
+    above) that gives the every-receiver answer at 8 held-out suns with under half the rays."""
+    from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
+    from relightable_textures.lt_addon.transport.texture import parse_directions, sun_weights
+    from relightable_textures.operators.direct_rays import ReceiverRays
+
+    scene, _, tensors, _ = room
+    rays = ReceiverRays(scene, tensors.objects, "POINT")
+    d0 = parse_directions("hemi:400:1.5")
+    D = np.stack([rays.direct(w) for w in d0.directions])
+    for az in range(0, 360, 45):
+        w = direction_from_az_el(az + 7.0, 15.0 + az / 8.0)
+        every = rays.direct(w)
+        cast_all = rays.cast
+        idx, _ = sun_weights(d0, w)
+        fewer = rays.direct(w, known=rays.known_from(D[idx], d0.directions[idx]))
+        np.testing.assert_array_equal(fewer, every)
+        assert rays.cast < 0.5 * cast_all, (az, rays.cast, cast_all)
+
+
 def test_two_bounce_order_matters(room):
     """Light off the red wall then the green differs from green then red: the terms are not
     symmetric, which is why the paper keeps ordered pairs."""
