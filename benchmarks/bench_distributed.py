@@ -40,7 +40,7 @@ def main(argv=None):
     import bpy
 
     from relightable_textures import samples
-    from relightable_textures.operators import distributed, texture_transport as tx
+    from relightable_textures.operators import texture_transport as tx
     from relightable_textures.operators.jobs import run
 
     work = tempfile.mkdtemp(prefix="relight-bench-dist-")
@@ -65,13 +65,7 @@ def main(argv=None):
     print(f"one process: direct {s['direct_total']:.1f} s (Cycles {s['direct_cycles']:.1f} s), "
           f"bake {single_wall:.1f} s", flush=True)
     for n in map(int, args.workers.split(",")):
-        t0 = time.perf_counter()
-        client = distributed.connect(workers=n)
-        up = time.perf_counter() - t0
-        try:
-            res, wall = bake(f"w{n}", client=client, blend_path=blend)
-        finally:
-            distributed.close(client)
+        res, wall, up = _on_local_cluster(n, bake, blend)
         d = res.chunks["distributed"]
         same = np.array_equal(np.load(res.objects[0].store_path).view(np.uint16),
                               T_ref.view(np.uint16))
@@ -84,25 +78,45 @@ def main(argv=None):
               flush=True)
 
     # cold, cancelled after the direct stage, then the warm rerun
-    out = os.path.join(work, "resume")
-    gen = tx.bake_transport_textures(scene, objs, settings, out)
-    t0 = time.perf_counter()
-    for step in gen:
-        if step.message.startswith("indirect"):
-            break
-    cold = time.perf_counter() - t0
-    gen.close()
+    cold = _cancel_at(tx.bake_transport_textures(scene, objs, settings,
+                                                 os.path.join(work, "resume")), "indirect")
     res, warm = bake("resume")
     print(f"resume: cold run cancelled at its indirect stage after {cold:.1f} s; the warm rerun "
           f"({res.chunks['chunks_reused']}/{res.chunks['chunks_total']} chunks reused) took "
           f"{warm:.1f} s where the one-process bake took {single_wall:.1f} s", flush=True)
 
 
+def _on_local_cluster(n: int, bake, blend: str):
+    """``bake(out, client=, blend_path=)`` on a new local cluster of ``n`` workers; returns its
+    result, its wall seconds and the cluster's start-up seconds."""
+    from relightable_textures.operators import distributed
+
+    t0 = time.perf_counter()
+    client = distributed.connect(workers=n)
+    up = time.perf_counter() - t0
+    try:
+        res, wall = bake(f"w{n}", client=client, blend_path=blend)
+    finally:
+        distributed.close(client)
+    return res, wall, up
+
+
+def _cancel_at(gen, prefix: str) -> float:
+    """Run the job ``gen`` until a step whose message starts with ``prefix``, then cancel it
+    (as Esc does); returns the seconds it ran."""
+    t0 = time.perf_counter()
+    for step in gen:
+        if step.message.startswith(prefix):
+            break
+    gen.close()
+    return time.perf_counter() - t0
+
+
 def bench_materials(args):
     import bpy
 
     from relightable_textures import samples
-    from relightable_textures.operators import distributed, material_bake as mb
+    from relightable_textures.operators import material_bake as mb
     from relightable_textures.operators.jobs import run
 
     work = tempfile.mkdtemp(prefix="relight-bench-dist-mat-")
@@ -134,13 +148,7 @@ def bench_materials(args):
           f"{t.get('direct_seconds', 0):.1f} s, one bounce {t.get('one_bounce_seconds', 0):.1f}"
           f" s, two bounces {t.get('two_bounce_seconds', 0):.1f} s)", flush=True)
     for n in map(int, args.workers.split(",")):
-        t0 = time.perf_counter()
-        client = distributed.connect(workers=n)
-        up = time.perf_counter() - t0
-        try:
-            res, wall = bake(f"w{n}", client=client, blend_path=blend)
-        finally:
-            distributed.close(client)
+        res, wall, up = _on_local_cluster(n, bake, blend)
         d = res.report["distributed"]
         per = d["chunk_seconds"]
         print(f"{n} workers ({d['cycles_threads_per_worker']} Cycles threads each): cluster "
@@ -149,14 +157,8 @@ def bench_materials(args):
               f"{d['cycles_seconds']:.1f} s summed; {d['file_loads']} .blend loads); bake "
               f"{wall:.1f} s; tensors identical: {same(res.tensors, ref.tensors)}", flush=True)
 
-    out = os.path.join(work, "resume")
-    gen = mb.materials_job(scene, objs, settings, out)
-    t0 = time.perf_counter()
-    for step in gen:
-        if step.message.startswith("two bounces"):
-            break
-    cold = time.perf_counter() - t0
-    gen.close()
+    cold = _cancel_at(mb.materials_job(scene, objs, settings, os.path.join(work, "resume")),
+                      "two bounces")
     res, warm = bake("resume")
     print(f"resume: cold run cancelled at its two-bounce terms after {cold:.1f} s; the warm "
           f"rerun ({res.report['chunks_reused']}/{res.report['chunks_total']} chunks reused) "
