@@ -8,12 +8,17 @@
    (irradiance, vertices x RGB) against a Cycles bake of the same diffuse scene with the edit
    applied and 2 bounces, next to the noise floor (two truth seeds, ``--truth-spp``) and the
    error without the two-bounce term.
-   Each row twice: the sun's direct term from the bake's directions blended ("baked") and
-   from a shadow ray per receiver ("rays", :mod:`relightable_textures.operators.direct_rays`).
+   Rows per setting: the sun's direct term from the bake's directions blended ("baked"), from
+   a shadow ray per receiver ("rays", :mod:`relightable_textures.operators.direct_rays`) or
+   rays only where the baked directions disagree ("rays-at-edges"); the bounce terms as baked
+   ("raw": no smoothing, two-bounce blended) or smoothed with the second bounce composed
+   (the default, :mod:`relightable_textures.lt_addon.transport.bounce_transfer`; "blended":
+   smoothed, two-bounce blended).
 2. Update time at ``--vertices`` (default 13,000) with 2 editable regions: tensors of the
    default shapes filled with random numbers (the cost does not depend on the values),
    timed over 50 updates each: material only, sun moved and material changed, environment
-   rotated and material changed (the paper: 172 ms per update at 5.8 fps, 13K vertices);
+   rotated and material changed (the paper: 172 ms per update at 5.8 fps, 13K vertices),
+   the second bounce composed as the default bake does (32 patches per region);
    and the rays: a floor grid of that many vertices under a box, one ray per lit vertex.
 
 Usage: python benchmarks/bench_materials.py [--size test|demo]
@@ -24,10 +29,12 @@ from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import replace
 
 import numpy as np
 
-LIGHTS = ((30.0, 45.0), (200.0, 30.0), (120.0, 65.0), (300.0, 20.0))
+LIGHTS = ((30.0, 45.0), (200.0, 30.0), (120.0, 65.0), (300.0, 20.0), (200.0, 15.0),
+          (75.0, 10.0), (250.0, 45.0))
 EDITS = (("file colours", {}),
          ("red wall blue", {"RedMaterial": (0.1, 0.1, 0.8)}),
          ("both walls white 0.8", {"RedMaterial": (0.8, 0.8, 0.8),
@@ -53,6 +60,13 @@ def update_timing(vertices: int, specs=("hemi:400:1.5", "hemi:64", "hemi:8"), re
         [f"R{i}" for i in range(regions)], np.full((regions, 3), 0.5),
         rng.integers(0, R1, vertices).astype(np.int16),
         rng.random((vertices, 3), dtype=np.float32), [("synthetic", vertices)])
+    # the default bake's second-bounce composition: 32 patches per region
+    from relightable_textures.lt_addon.transport.bounce_transfer import BounceTransfer
+
+    owner = np.repeat(np.arange(R1), 32).astype(np.int16)
+    t.bounce = BounceTransfer(rng.integers(0, len(owner), vertices).astype(np.int32), owner,
+                              rng.random((len(owner), vertices), dtype=np.float32),
+                              np.ones((vertices, 3), np.float32), np.ones((R1, R1)))
     env = rng.random((64, 128, 3))
     out = {"vertices": vertices, "regions": regions, "specs": list(specs),
            "tensor_mib": round(t.nbytes / 2**20, 1)}
@@ -201,27 +215,34 @@ def main(argv=None):
         st = mb.MaterialBakeSettings(regions=["RedMaterial", "GreenMaterial"],
                                      directions=tuple(dirs.split("/")), samples=int(spp))
         t0 = time.perf_counter()
-        tensors = run(mb.bake_materials(scene, objs, st))
+        raw = run(mb.bake_materials(scene, objs, replace(st, smoothing=0.0)))
+        raw.bounce = None
         secs = time.perf_counter() - t0
-        for rays, name, edit in [(r, n, e) for r in (None, "rays", "rays-at-edges")
-                                 for n, e in EDITS]:
+        t0 = time.perf_counter()
+        smoothed = mb.bounce_terms(scene, raw, st.smoothing)
+        print(f"smoothing and second-bounce fit: {time.perf_counter() - t0:.2f} s; "
+              f"{smoothed.metadata['bounce_transfer']}", flush=True)
+        rows = [(r, "raw") for r in (None, "rays")] + [("rays", "blended")] + [
+            (r, "composed") for r in (None, "rays", "rays-at-edges")]
+        for (rays, bounce), (name, edit) in [(r, e) for r in rows for e in EDITS]:
+            tensors, compose = (raw, False) if bounce == "raw" else (smoothed,
+                                                                     bounce == "composed")
             errs, floors, lows, parts = [], [], [], []
             for li, (az, el) in enumerate(LIGHTS):
                 a, b = truths[li, name]
                 light = ptt.Sun(tuple(direction_from_az_el(az, el)))
                 exact = exact_direct(scene, tensors, light, everywhere=rays == "rays") \
                     if rays else None
-                est = tensors.irradiance(light, edit, direct=exact)
-                e0 = tensors.irradiance(light, edit, orders=(0,), direct=exact)
+                p, c = tensors.project(light, exact, compose), tensors.albedos(edit)
+                est, e0 = tensors.combine(p, c), tensors.combine(p, c, (0,))
                 n = np.linalg.norm(a)
                 parts.append((np.linalg.norm(e0 - direct[li]) / n,
                               np.linalg.norm((est - e0) - (a - direct[li])) / n))
                 errs.append(rel(est, a))
-                lows.append(rel(tensors.irradiance(light, edit, orders=(0, 1), direct=exact),
-                                a))
+                lows.append(rel(tensors.combine(p, c, (0, 1)), a))
                 floors.append(rel(b, a))
             per = "/".join(f"{e:.3f}" for e in errs)
-            print(f"| {dirs} @{spp} spp, direct {rays or 'baked'} | "
+            print(f"| {dirs} @{spp} spp, direct {rays or 'baked'}, bounces {bounce} | "
                   f"{tensors.metadata['bake_calls']} | {secs:.1f} | "
                   f"{tensors.nbytes / 2**20:.2f} | {name} | {np.mean(errs):.4f} ({per}) | "
                   f"{np.mean([p[0] for p in parts]):.4f} | {np.mean([p[1] for p in parts]):.4f} | "

@@ -68,6 +68,11 @@ def add_parsers(sub) -> None:
     p.add_argument("--per-corner", action="store_true",
                    help="a value per face corner instead of per vertex: hard edges stay hard "
                         "(about 4x the data and update time on quad meshes)")
+    p.add_argument("--smoothing", type=float, default=None, metavar="SPACINGS",
+                   help="average the bounce terms over this many median vertex spacings "
+                        "after the bake (default 2; 0: off). Measured on the demo room: the "
+                        "32-sample one-bounce term's error at baked directions went from "
+                        "0.030-0.039 to 0.014-0.022; nothing is re-baked when it changes")
     p.add_argument("--truth", action="store_true",
                    help="also bake Cycles truths (two seeds) under the scene's Sun with the "
                         "file's colours and report the error next to their noise floor")
@@ -125,7 +130,8 @@ def _cmd_bake_materials(args) -> int:
     settings = material_bake.MaterialBakeSettings(
         regions=list(args.region), anchors=args.anchors, bounces=args.bounces,
         directions=(args.directions, args.one_bounce_directions, args.two_bounce_directions),
-        samples=args.samples, seed=args.seed, domain="CORNER" if args.per_corner else "POINT")
+        samples=args.samples, seed=args.seed, domain="CORNER" if args.per_corner else "POINT",
+        **({} if args.smoothing is None else {"smoothing": args.smoothing}))
     path, out_dir = _check_bake_inputs(args, settings)
     started = time.perf_counter()
     objects = _open_objects(path, args.object)

@@ -149,6 +149,16 @@ class ReceiverRays:
         normal[self._origin_of] = self.normals
         self._origins = base + RAY_OFFSET * (normal + mean_t)
 
+    def receiver_frames(self):
+        """Each receiver's position (V, 3) and unit normal (V, 3): the mean over its corners."""
+        pos = np.zeros((self.count, 3))
+        nrm = np.zeros((self.count, 3))
+        np.add.at(pos, self.group, self.points)
+        np.add.at(nrm, self.group, self.normals)
+        pos /= np.maximum(self.per_receiver, 1)[:, None]
+        nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12)
+        return pos, nrm
+
     def direct(self, direction, angle_deg: float = 0.0, rays: int = 16,
                known=None) -> np.ndarray:
         """Visibility x cosine (V,) float32 per unit normal irradiance from a sun towards

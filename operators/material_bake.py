@@ -35,7 +35,7 @@ import bpy
 import numpy as np
 
 from ..lt_addon.io import atomic
-from ..lt_addon.transport import ptt
+from ..lt_addon.transport import bounce_transfer, ptt
 from ..lt_addon.transport.texture import parse_directions
 from .compat import ensure_node_tree
 from .cycles_bake import BakeInputError, EnvironmentBake, SceneChanges, check_memory
@@ -262,7 +262,10 @@ class MaterialBakeSettings:
     (``hemi:N[:P]``); samples : Cycles samples per vertex for the bounce terms (the direct term
     takes 1: exact under a hard Sun); seed : Cycles seed of every term; domain : "POINT" (a
     value per vertex) or "CORNER" (per face corner: hard edges stay hard, about 4x the data
-    on quad meshes).
+    on quad meshes); smoothing : radius, in median receiver spacings, over which the bounce
+    terms are averaged after the bake (0: off; :mod:`..lt_addon.transport.bounce_transfer`,
+    which also composes the two-bounce light; not part of the chunk key: changing it re-bakes
+    nothing).
     """
 
     regions: list = field(default_factory=list)
@@ -272,6 +275,7 @@ class MaterialBakeSettings:
     samples: int = 32
     seed: int = 0
     domain: str = "POINT"
+    smoothing: float = bounce_transfer.SMOOTH_SPACINGS
 
     def validate(self) -> list:
         if not self.regions:
@@ -285,6 +289,9 @@ class MaterialBakeSettings:
             raise BakeInputError(f"bounces must be 1 or 2, got {self.bounces}")
         if self.samples < 1:
             raise BakeInputError(f"samples must be >= 1, got {self.samples}")
+        if not 0.0 <= self.smoothing <= 20.0:
+            raise BakeInputError(f"smoothing must be 0..20 receiver spacings, got "
+                                 f"{self.smoothing}")
         if self.domain not in ("POINT", "CORNER"):
             raise BakeInputError(f"domain must be POINT or CORNER, got {self.domain!r}")
         try:
@@ -408,8 +415,9 @@ def material_chunk_cache(scene, objects, settings: MaterialBakeSettings, out_dir
     from .bake_inputs import scene_key
     from .texture_transport import CACHE_FOLDER
 
+    baked = {k: v for k, v in dataclasses.asdict(settings).items() if k != "smoothing"}
     key = {"stage": "materials", "scene": scene_key(scene, list(objects)),
-           "settings": dataclasses.asdict(settings), "chunk_directions": CHUNK_DIRECTIONS}
+           "settings": baked, "chunk_directions": CHUNK_DIRECTIONS}
     folder = atomic.safe_name(objects[0].name) + "_materials"
     cache = ChunkCache(os.path.join(out_dir, CACHE_FOLDER, folder), key)
     cache.prune_others()
@@ -516,10 +524,30 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
             "cycles_seconds": round(cycles, 3),
             "bake_seconds": round(time.perf_counter() - started, 3), "chunks": chunks,
             "notes": notes + [n for n in more if n not in notes]}
-    return ptt.TransferTensors(direct, one, two, tuple(d.spec for d in (d0, d1, d2)),
-                               list(settings.regions), base, region_of, colour_of,
-                               [(o.name, element_count(o, settings.domain)) for o in objects],
-                               meta)
+    tensors = ptt.TransferTensors(direct, one, two, tuple(d.spec for d in (d0, d1, d2)),
+                                  list(settings.regions), base, region_of, colour_of,
+                                  [(o.name, element_count(o, settings.domain)) for o in objects],
+                                  meta)
+    if S1 and settings.smoothing + bounce_transfer.composes(S1, S2) > 0:
+        yield Progress(total, total, "smoothing the bounce terms, fitting the second bounce")
+        t = time.perf_counter()
+        tensors = bounce_terms(scene, tensors, settings.smoothing)
+        tensors.metadata["bounce_transfer"]["seconds"] = round(time.perf_counter() - t, 3)
+        tensors.metadata["bake_seconds"] = round(time.perf_counter() - started, 3)
+    return tensors
+
+
+def bounce_terms(scene, tensors, smoothing: float):
+    """``tensors`` with smoothed bounce terms and a fitted second-bounce composition
+    (:func:`..lt_addon.transport.ptt.with_bounce_transfer`): the receivers' positions and
+    normals, and the exact direct light at the one-bounce directions, come from a
+    :class:`.direct_rays.ReceiverRays` of the scene (a ray per receiver and direction)."""
+    from .direct_rays import ReceiverRays
+
+    rays = ReceiverRays(scene, tensors.objects, tensors.metadata.get("domain", "POINT"))
+    positions, normals = rays.receiver_frames()
+    direct_one = np.stack([rays.direct(w) for w in tensors.direction_sets()[1].directions])
+    return ptt.with_bounce_transfer(tensors, positions, normals, direct_one, smoothing)
 
 
 def element_count(obj, domain: str) -> int:
@@ -654,6 +682,7 @@ def materials_job(scene, objects, settings: MaterialBakeSettings, out_dir: str,
               "energy_light": {"direction": [round(float(v), 5) for v in direction],
                                "from": "scene Sun" if sun is not None else "45-degree sun"},
               "notes": tensors.metadata["notes"],
+              "bounce_transfer": tensors.metadata.get("bounce_transfer", {}),
               "timings": {"bake_seconds": tensors.metadata["bake_seconds"],
                           "cycles_seconds": tensors.metadata["cycles_seconds"],
                           **{f"{k}_seconds": v for k, v in tensors.metadata["seconds"].items()}}}

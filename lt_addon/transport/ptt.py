@@ -33,6 +33,11 @@ Run time: a lighting change contracts every term with the new weights (:meth:`pr
 kernel touches); a material change only recombines the contracted terms (:meth:`combine`,
 ``3 V (R+1)^2``). Outgoing radiance of a diffuse receiver is ``albedo(v) / pi * E(v)``.
 
+Since version 2 a bake may carry a :class:`.bounce_transfer.BounceTransfer` (``bounce``): the
+bounce terms were smoothed over the surface at bake time, and :meth:`project` composes the
+two-bounce light from the projected one-bounce light instead of blending the coarse ``W``
+(see that module for why and what it measured).
+
 Roughness / metallic edits need more anchors than the diffuse one built here (a Principled
 material at several roughness values per region); they are not built yet.
 """
@@ -46,10 +51,13 @@ import numpy as np
 
 from ..io import atomic
 from ..sphere.directions import DirectionSet
+from .bounce_transfer import BounceTransfer
 from .texture import environment_weights, parse_directions, sun_weights
 
 FORMAT = "relight-transfer-tensors"
-VERSION = 1
+VERSION = 2
+#: Versions :meth:`TransferTensors.load` reads (1: no bounce transfer).
+READS = (1, 2)
 
 
 @dataclass(frozen=True)
@@ -124,6 +132,8 @@ class TransferTensors:
         The objects in the order their vertices are stacked.
     metadata : dict
         Bake settings, counts and timings (JSON).
+    bounce : BounceTransfer or None
+        The second-bounce composition (:mod:`.bounce_transfer`), None to blend ``two``.
     """
 
     direct: np.ndarray
@@ -136,6 +146,7 @@ class TransferTensors:
     receiver_albedo: np.ndarray
     objects: list
     metadata: dict = field(default_factory=dict)
+    bounce: BounceTransfer | None = None
 
     def __post_init__(self):
         V = self.direct.shape[1]
@@ -152,6 +163,9 @@ class TransferTensors:
             raise ValueError("receiver arrays do not match the vertex count")
         if sum(n for _, n in self.objects) != V:
             raise ValueError("the objects' vertex counts do not add up to the terms' rows")
+        if self.bounce is not None and (self.bounce.transfer.shape[1] != V
+                                        or self.bounce.scale.shape != (R1, R1)):
+            raise ValueError("the bounce transfer does not match the terms")
         self._dsets = [parse_directions(s) for s in self.specs]
         for k, term in enumerate((self.direct, self.one, self.two)):
             if term.size and term.shape[0] != self._dsets[k].size:
@@ -169,7 +183,8 @@ class TransferTensors:
 
     @property
     def nbytes(self) -> int:
-        return int(self.direct.nbytes + self.one.nbytes + self.two.nbytes)
+        extra = self.bounce.nbytes if self.bounce is not None else 0
+        return int(self.direct.nbytes + self.one.nbytes + self.two.nbytes + extra)
 
     def direction_sets(self) -> list:
         return list(self._dsets)
@@ -192,8 +207,12 @@ class TransferTensors:
         return c
 
     # -- relighting --------------------------------------------------------------------------
-    def project(self, light, direct=None) -> ProjectedLight:
+    def project(self, light, direct=None, compose: bool = True) -> ProjectedLight:
         """Contract every term with ``light`` (a :class:`Sun` or :class:`Environment`).
+
+        With a :attr:`bounce` transfer (and ``compose``) the two-bounce light is composed from
+        the contracted one-bounce light (:meth:`.BounceTransfer.compose`); ``compose=False``
+        blends the baked ``two`` as version 1 did.
 
         ``direct`` (V,): the direct term's visibility x cosine per unit normal irradiance for
         this sun, computed exactly elsewhere (a ray per receiver), instead of interpolating
@@ -227,7 +246,14 @@ class TransferTensors:
             nz0 = np.nonzero(np.any(w0 != 0, axis=1))[0]
             direct = w0[nz0].T @ (self.direct if len(nz0) == len(w0) else self.direct[nz0])
         one = contract(self.one, w1, (R1,) if self.one.size else (0,))
-        two = contract(self.two, w2, (R1, R1) if self.two.size else (0, 0))
+        composed = compose and self.bounce is not None and self.two.size and self.one.size
+        if composed and np.all(self.bounce.covers()):
+            two = self.bounce.compose(one)
+        else:
+            two = contract(self.two, w2, (R1, R1) if self.two.size else (0, 0))
+            if composed:
+                cov = self.bounce.covers()
+                two[:, cov] = self.bounce.compose(one)[:, cov]
         return ProjectedLight(np.ascontiguousarray(direct, np.float32), one, two)
 
     def combine(self, projected: ProjectedLight, albedos: np.ndarray,
@@ -284,12 +310,17 @@ class TransferTensors:
         header = {"format": FORMAT, "version": VERSION, "specs": list(self.specs),
                   "regions": list(self.regions), "objects": [list(o) for o in self.objects],
                   "metadata": self.metadata}
+        extra = {}
+        if self.bounce is not None:
+            b = self.bounce
+            extra = {"patch": b.patch, "patch_region": b.patch_region, "transfer": b.transfer,
+                     "source_albedo": b.source_albedo, "two_scale": b.scale}
         with atomic.atomic_path(path) as tmp:
             with open(tmp, "wb") as fh:
                 np.savez(fh, header=np.frombuffer(json.dumps(header).encode(), np.uint8),
                          direct=self.direct, one=self.one, two=self.two,
                          base_colors=self.base_colors, receiver_region=self.receiver_region,
-                         receiver_albedo=self.receiver_albedo)
+                         receiver_albedo=self.receiver_albedo, **extra)
 
     @classmethod
     def load(cls, path: str) -> "TransferTensors":
@@ -297,13 +328,18 @@ class TransferTensors:
             header = json.loads(bytes(z["header"]).decode())
             if header.get("format") != FORMAT:
                 raise ValueError(f"{path} is not a transfer-tensor file")
-            if header.get("version") != VERSION:
+            if header.get("version") not in READS:
                 raise ValueError(f"{path} has version {header.get('version')}; this build "
-                                 f"reads version {VERSION}: bake the materials again")
+                                 f"reads versions {', '.join(map(str, READS))}: bake the "
+                                 "materials again")
+            bounce = None
+            if "transfer" in z.files:
+                bounce = BounceTransfer(z["patch"], z["patch_region"], z["transfer"],
+                                        z["source_albedo"], z["two_scale"])
             return cls(z["direct"], z["one"], z["two"], tuple(header["specs"]),
                        list(header["regions"]), z["base_colors"], z["receiver_region"],
                        z["receiver_albedo"], [tuple(o) for o in header["objects"]],
-                       header.get("metadata", {}))
+                       header.get("metadata", {}), bounce)
 
 
 def bake_count(s0: int, s1: int, s2: int, regions: int, bounces: int) -> int:
@@ -311,3 +347,49 @@ def bake_count(s0: int, s1: int, s2: int, regions: int, bounces: int) -> int:
     terms need one reference bake per ``r2`` to subtract the one-bounce light)."""
     r1 = regions + 1
     return s0 + (s1 * r1 if bounces >= 1 else 0) + (s2 * (r1 + r1 * r1) if bounces >= 2 else 0)
+
+
+def with_bounce_transfer(tensors: TransferTensors, positions: np.ndarray, normals: np.ndarray,
+                         direct_one: np.ndarray, spacings: float | None = None,
+                         per_region: int | None = None) -> TransferTensors:
+    """The tensors with their bounce terms smoothed over the surface and a second-bounce
+    composition fitted (:mod:`.bounce_transfer`; ``tensors`` is not changed).
+
+    positions (V, 3) metres and normals (V, 3) of the receivers; direct_one (S1, V) the exact
+    direct term (visibility x cosine) at the one-bounce directions. ``spacings`` (default
+    ``SMOOTH_SPACINGS``; 0: no smoothing) and ``per_region`` patches (default
+    :func:`.bounce_transfer.composes`: none, i.e. only the smoothing, when the one-bounce
+    directions are too few to fit or no finer than the two-bounce ones). ``metadata["bounce_transfer"]`` says
+    what was done, with the fit's condition numbers and the calibration scales."""
+    from dataclasses import replace
+
+    from . import bounce_transfer as bt
+
+    spacings = bt.SMOOTH_SPACINGS if spacings is None else float(spacings)
+    V, R1 = tensors.vertices, len(tensors.regions) + 1
+    if per_region is None:
+        per_region = bt.composes(tensors.one.shape[0], tensors.two.shape[0])
+    op, radius = bt.smoothing_operator(positions, normals, spacings)
+    one, two = bt.smooth(op, tensors.one), bt.smooth(op, tensors.two)
+    info = {"smoothing_spacings": spacings, "smoothing_radius_m": round(radius, 6)}
+    out = replace(tensors, one=one, two=two, metadata=dict(tensors.metadata), bounce=None)
+    if two.size and one.size and per_region > 0:
+        region = tensors.receiver_region.astype(np.int64)
+        albedo = np.ones((V, 3), np.float32)
+        albedo[region == 0] = tensors.receiver_albedo[region == 0]
+        patch, owner = bt.region_patches(positions, normals, region, R1, per_region)
+        T, conds = bt.fit_transfer(one, np.asarray(direct_one, np.float64), patch, owner,
+                                   albedo)
+        transfer = bt.BounceTransfer(patch, owner, T, albedo, np.ones((R1, R1)))
+        one_at = [out.project(Sun(tuple(w)), compose=False).one
+                  for w in out.direction_sets()[2].directions]
+        transfer.scale = bt.calibrate(transfer, one_at, two)
+        out.bounce = transfer
+        info.update({"patches": int(len(owner)), "patches_per_region": per_region,
+                     "fit_condition": {str(k): float(f"{v:.3g}") for k, v in conds.items()},
+                     "two_bounce_scale": np.round(transfer.scale, 4).tolist(),
+                     "two_bounce": "composed"})
+    else:
+        info["two_bounce"] = "blended" if two.size else "none"
+    out.metadata["bounce_transfer"] = info
+    return out
