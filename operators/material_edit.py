@@ -271,6 +271,7 @@ class RELIGHT_OT_bake_materials(_ModalBake, bpy.types.Operator):
         settings = material_bake.MaterialBakeSettings(
             regions=regions, bounces=props.material_bounces, samples=props.material_samples,
             domain="CORNER" if props.material_per_corner else "POINT",
+            smoothing=props.material_smoothing,
             directions=(f"hemi:{props.material_directions}:1.5",
                         f"hemi:{props.material_one_directions}",
                         f"hemi:{props.material_two_directions}"))
@@ -282,7 +283,8 @@ class RELIGHT_OT_bake_materials(_ModalBake, bpy.types.Operator):
             return self._external(context, "bake-materials", args + [
                 "--bounces", str(settings.bounces), "--samples", str(settings.samples),
                 "--directions", d0, "--one-bounce-directions", d1, "--two-bounce-directions",
-                d2] + (["--per-corner"] if settings.domain == "CORNER" else []))
+                d2, "--smoothing", f"{settings.smoothing:g}"]
+                + (["--per-corner"] if settings.domain == "CORNER" else []))
         self._make_out_dir(props)
         return bake_job(scene, objects, settings, self.out_dir)
 

@@ -243,6 +243,7 @@ class VIEW3D_PT_relight_materials(_RelightSubPanel, bpy.types.Panel):
         col.prop(props, "material_one_directions")
         if props.material_bounces >= 2:
             col.prop(props, "material_two_directions")
+        col.prop(props, "material_smoothing")
         _run_on(layout, props)
         layout.operator("relight.bake_materials", icon="RENDER_STILL")
         _kept_chunks(layout, context, "materials")

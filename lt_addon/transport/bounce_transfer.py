@@ -72,8 +72,11 @@ def smoothing_operator(positions: np.ndarray, normals: np.ndarray, spacings: flo
     if spacings <= 0 or V < 2:
         return None, 0.0
     tree = cKDTree(pos)
-    nn = tree.query(pos, k=2)[0][:, 1]
-    nn = nn[nn > 0]   # corners of one vertex share its position
+    # the nearest other position: face corners of one vertex share its position (per-corner
+    # bakes), so look a few neighbours on and skip the zero distances
+    dist = tree.query(pos, k=min(V, 16))[0][:, 1:]
+    dist = np.where(dist > 0, dist, np.inf).min(axis=1)
+    nn = dist[np.isfinite(dist)]
     if not len(nn):
         return None, 0.0
     diagonal = float(np.linalg.norm(pos.max(axis=0) - pos.min(axis=0)))

@@ -144,3 +144,14 @@ def test_tensors_with_a_transfer_compose_and_round_trip(tmp_path):
     # a version-1 file (no transfer) still loads, and blends
     t.save(str(tmp_path / "v1.npz"))
     assert ptt.TransferTensors.load(str(tmp_path / "v1.npz")).bounce is None
+
+
+def test_smoothing_radius_of_a_per_corner_bake_skips_shared_positions():
+    """Per face corner, four receivers share each vertex's position: the spacing is still the
+    distance to the next vertex (1 cm), not zero."""
+    g = np.stack(np.meshgrid(np.arange(50), np.arange(50)), -1).reshape(-1, 2) * 0.01
+    pos = np.repeat(np.c_[g, np.zeros(len(g))], 4, axis=0)
+    nrm = np.tile([0, 0, 1.0], (len(pos), 1))
+    op, radius = bt.smoothing_operator(pos, nrm, spacings=2.0)
+    assert radius == pytest.approx(0.02)
+    assert op is not None and op.shape == (len(pos), len(pos))
