@@ -22,7 +22,7 @@
    and the rays: a floor grid of that many vertices under a box, one ray per lit vertex.
 
 Usage: python benchmarks/bench_materials.py [--size test|demo]
-           [--settings hemi:400:1.5/hemi:64/hemi:8@32,...] [--truth-spp 256] [--no-bake]
+           [--settings hemi:400:1.5/hemi:128/hemi:8@16,...] [--truth-spp 256] [--no-bake]
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ EDITS = (("file colours", {}),
 OBJECTS = ("Floor", "WallLeft", "WallRight", "WallBack", "Box")
 
 
-def update_timing(vertices: int, specs=("hemi:400:1.5", "hemi:64", "hemi:8"), regions: int = 2,
+def update_timing(vertices: int, specs=("hemi:400:1.5", "hemi:128", "hemi:8"), regions: int = 2,
                   repeats: int = 50) -> dict:
     from relightable_textures.lt_addon.transport import ptt
     from relightable_textures.lt_addon.transport.texture import parse_directions
@@ -163,7 +163,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--size", default="test", choices=("test", "demo"))
     ap.add_argument("--settings", default="hemi:400:1.5/hemi:16/hemi:4@32,"
-                    "hemi:400:1.5/hemi:32/hemi:8@64,hemi:400:1.5/hemi:64/hemi:8@32")
+                    "hemi:400:1.5/hemi:64/hemi:8@32,hemi:400:1.5/hemi:128/hemi:8@16")
     ap.add_argument("--truth-spp", type=int, default=256)
     ap.add_argument("--vertices", type=int, default=13000)
     ap.add_argument("--no-bake", action="store_true", help="only the update timing")

@@ -271,8 +271,8 @@ class MaterialBakeSettings:
     regions: list = field(default_factory=list)
     anchors: str = "diffuse"
     bounces: int = 2
-    directions: tuple = ("hemi:400:1.5", "hemi:64", "hemi:8")
-    samples: int = 32
+    directions: tuple = ("hemi:400:1.5", "hemi:128", "hemi:8")
+    samples: int = 16
     seed: int = 0
     domain: str = "POINT"
     smoothing: float = bounce_transfer.SMOOTH_SPACINGS
@@ -546,7 +546,11 @@ def bounce_terms(scene, tensors, smoothing: float):
 
     rays = ReceiverRays(scene, tensors.objects, tensors.metadata.get("domain", "POINT"))
     positions, normals = rays.receiver_frames()
-    direct_one = np.stack([rays.direct(w) for w in tensors.direction_sets()[1].directions])
+    d1 = tensors.direction_sets()[1].directions
+    if bounce_transfer.composes(len(tensors.one), len(tensors.two)):
+        direct_one = np.stack([rays.direct(w) for w in d1])
+    else:   # only the smoothing: no fit, no rays
+        direct_one = np.zeros((len(d1), tensors.vertices), np.float32)
     return ptt.with_bounce_transfer(tensors, positions, normals, direct_one, smoothing)
 
 
