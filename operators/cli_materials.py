@@ -73,7 +73,8 @@ def add_parsers(sub) -> None:
                    help="average the bounce terms over this many median vertex spacings "
                         "after the bake (default 2; 0: off). Measured on the demo room: the "
                         "32-sample one-bounce term's error at baked directions went from "
-                        "0.030-0.039 to 0.014-0.022; nothing is re-baked when it changes")
+                        "0.030-0.039 to 0.014-0.022. Not in the chunk key: kept chunks of a "
+                        "cancelled bake serve any smoothing")
     p.add_argument("--truth", action="store_true",
                    help="also bake Cycles truths (two seeds) under the scene's Sun with the "
                         "file's colours and report the error next to their noise floor")

@@ -264,8 +264,8 @@ class MaterialBakeSettings:
     value per vertex) or "CORNER" (per face corner: hard edges stay hard, about 4x the data
     on quad meshes); smoothing : radius, in median receiver spacings, over which the bounce
     terms are averaged after the bake (0: off; :mod:`..lt_addon.transport.bounce_transfer`,
-    which also composes the two-bounce light; not part of the chunk key: changing it re-bakes
-    nothing).
+    which also composes the two-bounce light; not part of the chunk key: the chunks a cancelled
+    bake kept serve any smoothing; the file holds only the smoothed terms).
     """
 
     regions: list = field(default_factory=list)
@@ -529,28 +529,40 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
                                   [(o.name, element_count(o, settings.domain)) for o in objects],
                                   meta)
     if S1 and settings.smoothing + bounce_transfer.composes(S1, S2) > 0:
-        yield Progress(total, total, "smoothing the bounce terms, fitting the second bounce")
         t = time.perf_counter()
-        tensors = bounce_terms(scene, tensors, settings.smoothing)
+        tensors = yield from bounce_terms(scene, tensors, settings.smoothing)
         tensors.metadata["bounce_transfer"]["seconds"] = round(time.perf_counter() - t, 3)
         tensors.metadata["bake_seconds"] = round(time.perf_counter() - started, 3)
     return tensors
 
 
 def bounce_terms(scene, tensors, smoothing: float):
-    """``tensors`` with smoothed bounce terms and a fitted second-bounce composition
-    (:func:`..lt_addon.transport.ptt.with_bounce_transfer`): the receivers' positions and
+    """Generator (Progress per one-bounce direction): returns ``tensors`` with smoothed bounce
+    terms and a fitted second-bounce composition
+    (:func:`..lt_addon.transport.ptt.with_bounce_transfer`); the receivers' positions and
     normals, and the exact direct light at the one-bounce directions, come from a
-    :class:`.direct_rays.ReceiverRays` of the scene (a ray per receiver and direction)."""
+    :class:`.direct_rays.ReceiverRays` of the scene (a ray per receiver and direction). When
+    the receivers' evaluated meshes do not match the bake (a modifier that changes the vertex
+    count) the tensors are returned as baked, with a note."""
     from .direct_rays import ReceiverRays
 
-    rays = ReceiverRays(scene, tensors.objects, tensors.metadata.get("domain", "POINT"))
+    try:
+        rays = ReceiverRays(scene, tensors.objects, tensors.metadata.get("domain", "POINT"))
+    except (ValueError, KeyError) as exc:
+        tensors.metadata["bounce_transfer"] = {"two_bounce": "blended", "smoothing_spacings": 0,
+                                               "skipped": str(exc)}
+        tensors.metadata["notes"] = list(tensors.metadata.get("notes", [])) + [
+            f"bounce terms not smoothed, second bounce blended: {exc}"]
+        return tensors
     positions, normals = rays.receiver_frames()
     d1 = tensors.direction_sets()[1].directions
-    if bounce_transfer.composes(len(tensors.one), len(tensors.two)):
-        direct_one = np.stack([rays.direct(w) for w in d1])
-    else:   # only the smoothing: no fit, no rays
-        direct_one = np.zeros((len(d1), tensors.vertices), np.float32)
+    direct_one = np.zeros((len(d1), tensors.vertices), np.float32)
+    if bounce_transfer.composes(len(tensors.one), len(tensors.two)):   # else only smoothing
+        for s, w in enumerate(d1):
+            direct_one[s] = rays.direct(w)
+            yield Progress(s + 1, len(d1), "fitting the second bounce: direct light by rays, "
+                                           f"direction {s + 1}")
+    yield Progress(len(d1), len(d1), "smoothing the bounce terms, fitting the second bounce")
     return ptt.with_bounce_transfer(tensors, positions, normals, direct_one, smoothing)
 
 

@@ -249,7 +249,7 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         name="Smoothing", default=2.0, min=0.0, max=20.0,
         description="Average the bounce terms over this many vertex spacings after the bake "
                     "(0: off; never across differently facing surfaces, never over 3% of the "
-                    "scene). Measured on the demo room: halves the 32-sample noise")
+                    "scene). Measured on the demo room: about halves the bounce terms' noise")
 
     # export (relight export): directional lightmaps and RTI models of a transport bake
     export_format: EnumProperty(name="Format", default="rti-hsh", items=[

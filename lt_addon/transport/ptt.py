@@ -163,8 +163,11 @@ class TransferTensors:
             raise ValueError("receiver arrays do not match the vertex count")
         if sum(n for _, n in self.objects) != V:
             raise ValueError("the objects' vertex counts do not add up to the terms' rows")
-        if self.bounce is not None and (self.bounce.transfer.shape[1] != V
-                                        or self.bounce.scale.shape != (R1, R1)):
+        b = self.bounce
+        if b is not None and (b.transfer.shape != (len(b.patch_region), V)
+                              or b.scale.shape != (R1, R1) or b.patch.shape != (V,)
+                              or b.source_albedo.shape != (V, 3)
+                              or (V and int(b.patch.max(initial=0)) >= len(b.patch_region))):
             raise ValueError("the bounce transfer does not match the terms")
         self._dsets = [parse_directions(s) for s in self.specs]
         for k, term in enumerate((self.direct, self.one, self.two)):
@@ -378,17 +381,26 @@ def with_bounce_transfer(tensors: TransferTensors, positions: np.ndarray, normal
         albedo = np.ones((V, 3), np.float32)
         albedo[region == 0] = tensors.receiver_albedo[region == 0]
         patch, owner = bt.region_patches(positions, normals, region, R1, per_region)
-        T, conds = bt.fit_transfer(one, np.asarray(direct_one, np.float64), patch, owner,
-                                   albedo)
+        T, explained = bt.fit_transfer(one, np.asarray(direct_one, np.float64), patch, owner,
+                                       albedo)
         transfer = bt.BounceTransfer(patch, owner, T, albedo, np.ones((R1, R1)))
         one_at = [out.project(Sun(tuple(w)), compose=False).one
                   for w in out.direction_sets()[2].directions]
-        transfer.scale = bt.calibrate(transfer, one_at, two)
-        out.bounce = transfer
+        scale = bt.calibrate(transfer, one_at, two)
+        for r, e in explained.items():      # the patch model does not hold for this region
+            if e < bt.MIN_EXPLAINED:
+                scale[:, r] = 0.0
+        transfer.scale = scale
+        composed = bool(np.any(scale))
+        out.bounce = transfer if composed else None
         info.update({"patches": int(len(owner)), "patches_per_region": per_region,
-                     "fit_condition": {str(k): float(f"{v:.3g}") for k, v in conds.items()},
-                     "two_bounce_scale": np.round(transfer.scale, 4).tolist(),
-                     "two_bounce": "composed"})
+                     "fit_explained": {str(k): round(v, 4) for k, v in explained.items()},
+                     "two_bounce_scale": np.round(scale, 4).tolist(),
+                     "two_bounce": "composed" if composed else "blended (the patch fit did "
+                                                                "not hold)",
+                     # pairs left to the baked term: nothing to compose (a flat wall does not
+                     # light itself), no patches, or a calibration out of range
+                     "blended_pairs": np.argwhere(scale == 0).tolist()})
     else:
         info["two_bounce"] = "blended" if two.size else "none"
     out.metadata["bounce_transfer"] = info

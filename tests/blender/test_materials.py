@@ -255,8 +255,8 @@ def test_composed_second_bounce_follows_a_held_out_sun():
                                        directions=("hemi:16", "hemi:16", "hemi:4"), samples=64)
     t = run(mb.bake_materials(scene, objs, settings))
     info = t.metadata["bounce_transfer"]
-    assert info["two_bounce"] == "composed" and info["patches"] == 3 * 8
-    assert max(info["fit_condition"].values()) < 1e4
+    assert t.bounce is not None and info["patches"] == 3 * 8
+    assert min(info["fit_explained"].values()) > 0.9   # the patch model holds here
     c = t.albedos(WHITE)
     colours = {**mb.file_colours(t), **WHITE}
     for (az, el), blended_off in (((75.0, 10.0), True), ((120.0, 65.0), False)):
