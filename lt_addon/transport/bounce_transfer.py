@@ -75,8 +75,9 @@ def smoothing_operator(positions: np.ndarray, normals: np.ndarray, spacings: flo
     from scipy.spatial import cKDTree
 
     V = len(positions)
-    valid = np.linalg.norm(np.asarray(normals, np.float64), axis=1) > 0.5   # a vertex without
-    idx = np.nonzero(valid)[0]                                              # faces: left alone
+    # a vertex without faces (no normal, placed at the origin) is left alone
+    valid = np.linalg.norm(np.asarray(normals, np.float64), axis=1) > 0.5
+    idx = np.nonzero(valid)[0]
     pos = np.asarray(positions, np.float64)[idx]
     nrm = np.asarray(normals, np.float64)[idx]
     if spacings <= 0 or len(idx) < 2:
@@ -131,7 +132,8 @@ def region_patches(positions: np.ndarray, normals: np.ndarray, region: np.ndarra
                    regions: int, per_region: int = PATCHES, seed: int = 0):
     """Cluster each region's receivers into at most ``per_region`` patches (k-means on position
     and twice the normal: a patch does not wrap round a corner). Returns ``patch`` (V,) int32
-    (the patch of each receiver) and ``patch_region`` (K,) int16."""
+    (the patch of each receiver; a faceless vertex stays in patch 0, where its zero light adds
+    nothing) and ``patch_region`` (K,) int16."""
     from scipy.cluster.vq import kmeans2
 
     patch = np.zeros(len(region), np.int32)

@@ -362,8 +362,10 @@ def with_bounce_transfer(tensors: TransferTensors, positions: np.ndarray, normal
     direct term (visibility x cosine) at the one-bounce directions. ``spacings`` (default
     ``SMOOTH_SPACINGS``; 0: no smoothing) and ``per_region`` patches (default
     :func:`.bounce_transfer.composes`: none, i.e. only the smoothing, when the one-bounce
-    directions are too few to fit or no finer than the two-bounce ones). ``metadata["bounce_transfer"]`` says
-    what was done, with the fit's condition numbers and the calibration scales."""
+    directions are too few to fit or no finer than the two-bounce ones).
+    ``metadata["bounce_transfer"]`` says what was done: the smoothing radius, the share of each
+    region's one-bounce energy the fit explains, the calibration scales and the pairs left
+    blended."""
     from dataclasses import replace
 
     from . import bounce_transfer as bt
