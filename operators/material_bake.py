@@ -530,14 +530,15 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
                                   meta)
     if S1 and settings.smoothing + bounce_transfer.composes(S1, S2) > 0:
         t = time.perf_counter()
-        tensors = yield from bounce_terms(scene, tensors, settings.smoothing)
+        tensors = yield from bounce_terms(scene, tensors, settings.smoothing, total)
         tensors.metadata["bounce_transfer"]["seconds"] = round(time.perf_counter() - t, 3)
         tensors.metadata["bake_seconds"] = round(time.perf_counter() - started, 3)
     return tensors
 
 
-def bounce_terms(scene, tensors, smoothing: float):
-    """Generator (Progress per one-bounce direction): returns ``tensors`` with smoothed bounce
+def bounce_terms(scene, tensors, smoothing: float, of: int | None = None):
+    """Generator (Progress per one-bounce direction; with ``of``, the finished bake's
+    ``of / of`` so that a progress bar does not start again): returns ``tensors`` with smoothed bounce
     terms and a fitted second-bounce composition
     (:func:`..lt_addon.transport.ptt.with_bounce_transfer`); the receivers' positions and
     normals, and the exact direct light at the one-bounce directions, come from a
@@ -560,9 +561,10 @@ def bounce_terms(scene, tensors, smoothing: float):
     if bounce_transfer.composes(len(tensors.one), len(tensors.two)):   # else only smoothing
         for s, w in enumerate(d1):
             direct_one[s] = rays.direct(w)
-            yield Progress(s + 1, len(d1), "fitting the second bounce: direct light by rays, "
-                                           f"direction {s + 1}")
-    yield Progress(len(d1), len(d1), "smoothing the bounce terms, fitting the second bounce")
+            yield Progress(of or s + 1, of or len(d1), "fitting the second bounce: direct "
+                           f"light by rays, direction {s + 1} of {len(d1)}")
+    yield Progress(of or len(d1), of or len(d1),
+                   "smoothing the bounce terms, fitting the second bounce")
     return ptt.with_bounce_transfer(tensors, positions, normals, direct_one, smoothing)
 
 
