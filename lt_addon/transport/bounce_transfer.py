@@ -176,20 +176,39 @@ class BounceTransfer:
         """The two-bounce irradiance (3, R+1, R+1, V) float32 from the one-bounce irradiance
         ``one`` (3, R+1, V) of the same light: ``[c, r1, r2, v]`` is the light from region
         ``r1`` reflected once more off ``r2`` (before the region coefficients)."""
-        C, R1, V = one.shape
+        return self.compose_sources(one, self.scale)
+
+    def compose_sources(self, one: np.ndarray, scale: np.ndarray) -> np.ndarray:
+        """:meth:`compose` for any N sources of one-bounce light: ``one`` (3, N, V) -> (3, N,
+        R+1, V), each source's light reflected once more off each region ``r2``, times
+        ``scale`` (N, R+1) (0: not composed)."""
+        C, N, V = one.shape
+        R1 = self.scale.shape[1]
         K = len(self.patch_region)
-        out = np.zeros((C, R1, R1, V), np.float32)
-        src = one * self.source_albedo.T[:, None, :]              # (3, R+1, V)
-        Q = np.zeros((C * R1, K))
-        flat = src.reshape(C * R1, V)
-        for i in range(C * R1):
+        out = np.zeros((C, N, R1, V), np.float32)
+        src = one * self.source_albedo.T[:, None, :]              # (3, N, V)
+        Q = np.zeros((C * N, K))
+        flat = src.reshape(C * N, V)
+        for i in range(C * N):
             Q[i] = np.bincount(self.patch, weights=flat[i], minlength=K)
         for r2 in range(R1):
             ks = np.nonzero(self.patch_region == r2)[0]
-            if not len(ks) or not np.any(self.scale[:, r2]):
+            if not len(ks) or not np.any(scale[:, r2]):
                 continue
-            block = (Q[:, ks].astype(np.float32) @ self.transfer[ks]).reshape(C, R1, V)
-            out[:, :, r2] = block * self.scale[None, :, r2, None].astype(np.float32)
+            block = (Q[:, ks].astype(np.float32) @ self.transfer[ks]).reshape(C, N, V)
+            out[:, :, r2] = block * np.asarray(scale, np.float32)[None, :, r2, None]
+        return out
+
+    def source_scale(self, sources: np.ndarray) -> np.ndarray:
+        """Calibration (N, R+1) for light sources that are not baked two-bounce pairs (a glossy
+        anchor of region ``sources[i]``): the pair's own scale, or where that pair was left
+        blended (a flat wall does not light itself diffusely, a glossy one may) the median of
+        ``r2``'s composed pairs; 0 where ``r2`` is not composed into at all."""
+        out = self.scale[np.asarray(sources, np.int64)].copy()
+        for r2 in range(self.scale.shape[1]):
+            col = self.scale[:, r2]
+            if np.any(col):
+                out[out[:, r2] == 0, r2] = float(np.median(col[col > 0]))
         return out
 
     def covers(self) -> np.ndarray:

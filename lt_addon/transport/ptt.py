@@ -38,8 +38,20 @@ bounce terms were smoothed over the surface at bake time, and :meth:`project` co
 two-bounce light from the projected one-bounce light instead of blending the coarse ``W``
 (see that module for why and what it measured).
 
-Roughness / metallic edits need more anchors than the diffuse one built here (a Principled
-material at several roughness values per region); they are not built yet.
+Since version 3 a bake may carry *glossy anchors* (``gloss``): per editable region and
+roughness anchor ``rho_k``, the one-bounce light off the region as a white GGX metal of roughness
+``rho_k`` (Principled, metallic 1). Cycles cannot shade negative BRDFs, so these non-negative
+anchors stand in for the paper's BRDF basis; transport is linear in the BRDF, so a region with
+Principled colour ``c``, metallic ``m`` and roughness ``rho`` (specular IOR level 0: the
+dielectric's specular layer is not modelled) reflects
+
+    (1 - m) c * diffuse  +  m c * sum_k w_k(rho) * metal(rho_k)
+
+with ``w`` the linear interpolation weights of ``rho`` between the anchors (clamped to their
+range). ``m c`` for a coloured metal drops Schlick's grazing term ``(1 - c)(1 - mu)^5``. The
+second bounce off a glossy region's light is composed like the diffuse one (it needs the
+:class:`.bounce_transfer.BounceTransfer`); light that reflects glossily off the *second*
+surface is not modelled.
 """
 
 from __future__ import annotations
@@ -55,9 +67,46 @@ from .bounce_transfer import BounceTransfer
 from .texture import environment_weights, parse_directions, sun_weights
 
 FORMAT = "relight-transfer-tensors"
-VERSION = 2
-#: Versions :meth:`TransferTensors.load` reads (1: no bounce transfer).
-READS = (1, 2)
+VERSION = 3
+#: Versions :meth:`TransferTensors.load` reads (1: no bounce transfer; 2: no glossy anchors).
+READS = (1, 2, 3)
+#: At most this many roughness anchors per region (each costs S1 bakes per region).
+MAX_ANCHORS = 4
+
+
+def parse_anchors(spec: str) -> tuple:
+    """``"diffuse"`` -> () (colour edits only); ``"roughness:0.2,0.5,0.9"`` -> the sorted
+    roughness values (0..1) of the glossy anchors baked besides the diffuse one. ValueError
+    with the reason otherwise."""
+    spec = str(spec).strip()
+    if spec == "diffuse":
+        return ()
+    kind, sep, values = spec.partition(":")
+    if kind != "roughness" or not sep:
+        raise ValueError(f"anchors must be 'diffuse' or 'roughness:R1,R2,...', got {spec!r}")
+    try:
+        rho = sorted(float(v) for v in values.split(","))
+    except ValueError:
+        raise ValueError(f"roughness anchors must be numbers, got {values!r}") from None
+    if not rho or len(rho) > MAX_ANCHORS:
+        raise ValueError(f"give 1..{MAX_ANCHORS} roughness anchors, got {len(rho)}")
+    if rho[0] < 0.05 or rho[-1] > 1.0 or len(set(rho)) != len(rho):
+        raise ValueError(f"roughness anchors must be distinct values in 0.05..1 (below 0.05 "
+                         f"a metal is a mirror the bake's noise cannot resolve), got {values!r}")
+    return tuple(rho)
+
+
+def anchor_weights(anchors: tuple, metallic, roughness) -> np.ndarray:
+    """Weights (R, K) float64 of the K glossy ``anchors`` for regions with ``metallic`` (R,)
+    and ``roughness`` (R,): ``m * w_k(rho)``, ``w`` the linear interpolation weights of
+    ``rho`` between the anchors (clamped to their range; one anchor: 1)."""
+    m = np.clip(np.asarray(metallic, np.float64), 0.0, 1.0)
+    rho = np.asarray(roughness, np.float64)
+    K = len(anchors)
+    eye = np.eye(K)
+    w = (np.stack([np.interp(rho, anchors, eye[k]) for k in range(K)], axis=1)
+         if K else np.zeros((len(m), 0)))
+    return m[:, None] * w
 
 
 @dataclass(frozen=True)
@@ -102,11 +151,15 @@ def light_weights(dset: DirectionSet, light) -> np.ndarray:
 @dataclass
 class ProjectedLight:
     """The terms contracted with one lighting, channel first: direct (3, V), one (3, R+1, V),
-    two (3, R+1, R+1, V), float32 irradiance in W/m^2 (one / two may have zero regions)."""
+    two (3, R+1, R+1, V), float32 irradiance in W/m^2 (one / two may have zero regions);
+    with glossy anchors ``gloss`` (3, R, K, V) and its second bounce composed ``gloss_two``
+    (3, R, K, R+1, V) (None without the composition)."""
 
     direct: np.ndarray
     one: np.ndarray
     two: np.ndarray
+    gloss: np.ndarray | None = None
+    gloss_two: np.ndarray | None = None
 
 
 @dataclass
@@ -134,6 +187,13 @@ class TransferTensors:
         Bake settings, counts and timings (JSON).
     bounce : BounceTransfer or None
         The second-bounce composition (:mod:`.bounce_transfer`), None to blend ``two``.
+    roughness : tuple of float
+        The K glossy anchors' roughness values (module docstring), () for colour edits only.
+    gloss : (S1, R, K, V) float32 or None
+        One-bounce irradiance off each editable region as a white metal at each anchor (one
+        channel: the sun and the anchor are white).
+    base_finish : (R, 2) float64 or None
+        The editable materials' own (metallic, roughness) in the file.
     """
 
     direct: np.ndarray
@@ -147,6 +207,9 @@ class TransferTensors:
     objects: list
     metadata: dict = field(default_factory=dict)
     bounce: BounceTransfer | None = None
+    roughness: tuple = ()
+    gloss: np.ndarray | None = None
+    base_finish: np.ndarray | None = None
 
     def __post_init__(self):
         V = self.direct.shape[1]
@@ -169,6 +232,16 @@ class TransferTensors:
                               or b.source_albedo.shape != (V, 3)
                               or (V and int(b.patch.max(initial=0)) >= len(b.patch_region))):
             raise ValueError("the bounce transfer does not match the terms")
+        R, K = len(self.regions), len(self.roughness)
+        if K and (self.gloss is None or self.gloss.shape != (self.one.shape[0], R, K, V)
+                  or not self.one.size):
+            raise ValueError(f"glossy anchors need a gloss term of shape "
+                             f"({self.one.shape[0]}, {R}, {K}, {V}) and one-bounce terms")
+        if not K:
+            self.gloss = None
+        if self.base_finish is None:
+            self.base_finish = np.tile([0.0, 0.5], (R, 1))
+        self.base_finish = np.asarray(self.base_finish, np.float64).reshape(R, 2)
         self._dsets = [parse_directions(s) for s in self.specs]
         for k, term in enumerate((self.direct, self.one, self.two)):
             if term.size and term.shape[0] != self._dsets[k].size:
@@ -187,6 +260,7 @@ class TransferTensors:
     @property
     def nbytes(self) -> int:
         extra = self.bounce.nbytes if self.bounce is not None else 0
+        extra += self.gloss.nbytes if self.gloss is not None else 0
         return int(self.direct.nbytes + self.one.nbytes + self.two.nbytes + extra)
 
     def direction_sets(self) -> list:
@@ -208,6 +282,28 @@ class TransferTensors:
                 raise ValueError(f"colour of {name!r} must be three non-negative numbers")
             c[i + 1] = rgb
         return c
+
+    def anchor_weights(self, finish: dict | None = None) -> np.ndarray:
+        """Glossy anchor weights (R, K) (:func:`anchor_weights`) for ``finish``
+        ``{region: (metallic, roughness)}`` (the file's own where not given). Without glossy
+        anchors (K = 0) a metallic edit is a ValueError: the bake has no light for it."""
+        finish = dict(finish or {})
+        unknown = sorted(set(finish) - set(self.regions))
+        if unknown:
+            raise KeyError(f"not an editable region: {', '.join(unknown)}")
+        mr = self.base_finish.copy()
+        for i, name in enumerate(self.regions):
+            if name in finish:
+                m, rho = (float(v) for v in finish[name])
+                if not (0.0 <= m <= 1.0 and 0.0 <= rho <= 1.0):
+                    raise ValueError(f"metallic and roughness of {name!r} must be in 0..1")
+                if m > 0 and not self.roughness:
+                    raise ValueError(f"{name!r}: metallic {m:g} needs glossy anchors: bake "
+                                     "with --anchors roughness:R1,R2,...")
+                mr[i] = (m, rho)
+        if not self.roughness:
+            return np.zeros((len(self.regions), 0))
+        return anchor_weights(self.roughness, mr[:, 0], mr[:, 1])
 
     # -- relighting --------------------------------------------------------------------------
     def project(self, light, direct=None, compose: bool = True) -> ProjectedLight:
@@ -257,44 +353,82 @@ class TransferTensors:
             if composed:
                 cov = self.bounce.covers()
                 two[:, cov] = self.bounce.compose(one)[:, cov]
-        return ProjectedLight(np.ascontiguousarray(direct, np.float32), one, two)
+        gloss = gloss_two = None
+        if self.gloss is not None:
+            R, K = self.gloss.shape[1:3]
+            nz = np.nonzero(np.any(w1 != 0, axis=1))[0]
+            gloss = np.zeros((3, R * K, V), np.float32)
+            if len(nz):   # white anchors: one channel, the light's colour per channel
+                gloss[:] = (w1[nz].T @ self.gloss[nz].reshape(len(nz), -1)).reshape(3, R * K, V)
+            if compose and self.bounce is not None:
+                src = np.repeat(np.arange(1, R + 1), K)
+                gloss_two = self.bounce.compose_sources(
+                    gloss, self.bounce.source_scale(src)).reshape(3, R, K, R1, V)
+            gloss = gloss.reshape(3, R, K, V)
+        return ProjectedLight(np.ascontiguousarray(direct, np.float32), one, two, gloss,
+                              gloss_two)
 
     def combine(self, projected: ProjectedLight, albedos: np.ndarray,
-                orders: tuple = (0, 1, 2)) -> np.ndarray:
+                orders: tuple = (0, 1, 2), anchors: np.ndarray | None = None) -> np.ndarray:
         """Irradiance E (V, 3) float32 (W/m^2) for region coefficients ``albedos`` (R+1, 3)
-        (:meth:`albedos`); ``orders`` picks which path orders to sum (0 direct, 1, 2)."""
+        (:meth:`albedos`) and glossy ``anchors`` weights (R, K) (:meth:`anchor_weights`; None:
+        all diffuse); ``orders`` picks which path orders to sum (0 direct, 1, 2).
+
+        A region of metallic ``m`` reflects ``(1 - m)`` of its colour diffusely: that scales
+        its diffuse terms, and ``m`` spreads over its glossy anchors."""
         c = np.asarray(albedos, dtype=np.float32)
+        cd, ca = self._coefficients(c, anchors)
         E = projected.direct.copy() if 0 in orders else np.zeros_like(projected.direct)
         if 1 in orders and projected.one.size:
-            E += np.einsum("rc,crv->cv", c, projected.one)
+            E += np.einsum("rc,crv->cv", cd, projected.one)
+            if ca is not None and projected.gloss is not None:
+                E += np.einsum("rkc,crkv->cv", ca, projected.gloss)
         if 2 in orders and projected.two.size:
-            pair = c[:, None, :] * c[None, :, :]            # (R+1, R+1, 3)
+            pair = cd[:, None, :] * cd[None, :, :]            # (R+1, R+1, 3)
             E += np.einsum("abc,cabv->cv", pair, projected.two)
+            if ca is not None and projected.gloss_two is not None:
+                E += np.einsum("rkc,sc,crksv->cv", ca, cd, projected.gloss_two)
         return np.ascontiguousarray(E.T)
 
-    def irradiance(self, light, edits: dict | None = None, orders=(0, 1, 2),
-                   direct=None) -> np.ndarray:
-        """E (V, 3) float32 in W/m^2 under ``light`` with the materials ``edits``
-        (``direct``: an exact direct term, see :meth:`project`)."""
-        return self.combine(self.project(light, direct), self.albedos(edits), orders)
+    def _coefficients(self, c: np.ndarray, anchors):
+        """Diffuse coefficients (R+1, 3) and glossy ones (R, K, 3) (None without anchors)."""
+        if anchors is None or not np.size(anchors):
+            return c, None
+        a = np.asarray(anchors, np.float32)
+        cd = c.copy()
+        cd[1:] *= (1.0 - a.sum(axis=1))[:, None]
+        return cd, c[1:, None, :] * a[:, :, None]
 
-    def receiver_colors(self, albedos: np.ndarray) -> np.ndarray:
-        """Each vertex's own diffuse colour (V, 3) with the edited albedos applied."""
+    def irradiance(self, light, edits: dict | None = None, orders=(0, 1, 2),
+                   direct=None, finish: dict | None = None) -> np.ndarray:
+        """E (V, 3) float32 in W/m^2 under ``light`` with the materials ``edits`` (colours)
+        and ``finish`` (``{region: (metallic, roughness)}``; ``direct``: an exact direct term,
+        see :meth:`project`)."""
+        return self.combine(self.project(light, direct), self.albedos(edits), orders,
+                            self.anchor_weights(finish))
+
+    def receiver_colors(self, albedos: np.ndarray, anchors=None) -> np.ndarray:
+        """Each vertex's own diffuse colour (V, 3) with the edited albedos applied (times
+        ``1 - metallic`` with glossy ``anchors`` weights: a metal has no diffuse colour)."""
+        cd, _ = self._coefficients(np.asarray(albedos, np.float32), anchors)
         col = self.receiver_albedo.astype(np.float32).copy()
         for r in range(1, len(self.regions) + 1):
-            col[self.receiver_region == r] = np.asarray(albedos[r], dtype=np.float32)
+            col[self.receiver_region == r] = cd[r]
         return col
 
-    def shade(self, light, edits: dict | None = None, direct=None) -> np.ndarray:
-        """Outgoing radiance (V, 3) float32 of the diffuse receivers: ``albedo / pi * E``."""
-        c = self.albedos(edits)
-        return (self.receiver_colors(c) / np.float32(np.pi)
-                * self.combine(self.project(light, direct), c))
+    def shade(self, light, edits: dict | None = None, direct=None,
+              finish: dict | None = None) -> np.ndarray:
+        """Outgoing radiance (V, 3) float32 of the diffuse receivers: ``albedo / pi * E`` (a
+        metal receiver's own glossy reflection is the renderer's)."""
+        c, a = self.albedos(edits), self.anchor_weights(finish)
+        return (self.receiver_colors(c, a) / np.float32(np.pi)
+                * self.combine(self.project(light, direct), c, anchors=a))
 
-    def term_shares(self, light, edits: dict | None = None, direct=None) -> dict:
+    def term_shares(self, light, edits: dict | None = None, direct=None,
+                    finish: dict | None = None) -> dict:
         """Each path order's share of the summed irradiance (over vertices and RGB)."""
-        p, c = self.project(light, direct), self.albedos(edits)
-        parts = [float(self.combine(p, c, (k,)).sum()) for k in (0, 1, 2)]
+        p, c, a = self.project(light, direct), self.albedos(edits), self.anchor_weights(finish)
+        parts = [float(self.combine(p, c, (k,), a).sum()) for k in (0, 1, 2)]
         total = sum(parts) or 1.0
         return {"direct": parts[0] / total, "one_bounce": parts[1] / total,
                 "two_bounce": parts[2] / total}
@@ -312,12 +446,14 @@ class TransferTensors:
         """Write an .npz (float32 terms, JSON header) atomically."""
         header = {"format": FORMAT, "version": VERSION, "specs": list(self.specs),
                   "regions": list(self.regions), "objects": [list(o) for o in self.objects],
-                  "metadata": self.metadata}
-        extra = {}
+                  "roughness": list(self.roughness), "metadata": self.metadata}
+        extra = {"base_finish": self.base_finish}
+        if self.gloss is not None:
+            extra["gloss"] = self.gloss
         if self.bounce is not None:
             b = self.bounce
-            extra = {"patch": b.patch, "patch_region": b.patch_region, "transfer": b.transfer,
-                     "source_albedo": b.source_albedo, "two_scale": b.scale}
+            extra.update({"patch": b.patch, "patch_region": b.patch_region, "transfer": b.transfer,
+                     "source_albedo": b.source_albedo, "two_scale": b.scale})
         with atomic.atomic_path(path) as tmp:
             with open(tmp, "wb") as fh:
                 np.savez(fh, header=np.frombuffer(json.dumps(header).encode(), np.uint8),
@@ -342,14 +478,18 @@ class TransferTensors:
             return cls(z["direct"], z["one"], z["two"], tuple(header["specs"]),
                        list(header["regions"]), z["base_colors"], z["receiver_region"],
                        z["receiver_albedo"], [tuple(o) for o in header["objects"]],
-                       header.get("metadata", {}), bounce)
+                       header.get("metadata", {}), bounce, tuple(header.get("roughness", ())),
+                       z["gloss"] if "gloss" in z.files else None,
+                       z["base_finish"] if "base_finish" in z.files else None)
 
 
-def bake_count(s0: int, s1: int, s2: int, regions: int, bounces: int) -> int:
-    """Cycles calls of a bake: ``S0 + S1 (R+1) + S2 ((R+1) + (R+1)^2)`` (the two-bounce
-    terms need one reference bake per ``r2`` to subtract the one-bounce light)."""
+def bake_count(s0: int, s1: int, s2: int, regions: int, bounces: int, anchors: int = 0) -> int:
+    """Cycles calls of a bake: ``S0 + S1 (R+1) + S1 R K + S2 ((R+1) + (R+1)^2)`` (the
+    two-bounce terms need one reference bake per ``r2`` to subtract the one-bounce light; K
+    glossy ``anchors`` per editable region add one-bounce bakes only)."""
     r1 = regions + 1
-    return s0 + (s1 * r1 if bounces >= 1 else 0) + (s2 * (r1 + r1 * r1) if bounces >= 2 else 0)
+    return (s0 + (s1 * (r1 + regions * anchors) if bounces >= 1 else 0)
+            + (s2 * (r1 + r1 * r1) if bounces >= 2 else 0))
 
 
 def with_bounce_transfer(tensors: TransferTensors, positions: np.ndarray, normals: np.ndarray,
@@ -376,8 +516,10 @@ def with_bounce_transfer(tensors: TransferTensors, positions: np.ndarray, normal
         per_region = bt.composes(tensors.one.shape[0], tensors.two.shape[0])
     op, radius = bt.smoothing_operator(positions, normals, spacings)
     one, two = bt.smooth(op, tensors.one), bt.smooth(op, tensors.two)
+    gloss = bt.smooth(op, tensors.gloss) if tensors.gloss is not None else None
     info = {"smoothing_spacings": spacings, "smoothing_radius_m": round(radius, 6)}
-    out = replace(tensors, one=one, two=two, metadata=dict(tensors.metadata), bounce=None)
+    out = replace(tensors, one=one, two=two, gloss=gloss, metadata=dict(tensors.metadata),
+                  bounce=None)
     if two.size and one.size and per_region > 0:
         region = tensors.receiver_region.astype(np.int64)
         albedo = np.ones((V, 3), np.float32)

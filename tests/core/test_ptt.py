@@ -1,6 +1,7 @@
 """Transfer tensors (Sun et al. 2007) in NumPy: the polynomial in the albedos, lighting weights,
 files. Checked against brute-force loops over the terms, not against the same einsum."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -139,3 +140,100 @@ def test_bake_count_matches_the_paper_formula_with_references():
     assert ptt.bake_count(64, 16, 4, 3, 2) == 64 + 16 * 4 + 4 * (4 + 16)
     assert ptt.bake_count(64, 16, 4, 3, 1) == 64 + 16 * 4
     assert ptt.bake_count(64, 16, 4, 3, 0) == 64
+
+
+def with_gloss(t, roughness=(0.2, 0.6), seed=3):
+    """``t`` with random glossy-anchor terms (S1, R, K, V) and file finishes."""
+    rng = np.random.default_rng(seed)
+    R, V = len(t.regions), t.vertices
+    gloss = rng.random((t.one.shape[0], R, len(roughness), V), dtype=np.float32)
+    return dataclasses.replace(t, roughness=tuple(roughness), gloss=gloss,
+                               base_finish=np.array([[0.0, 0.5]] * R))
+
+
+def test_anchor_weights_interpolate_roughness_and_scale_by_metallic():
+    w = ptt.anchor_weights((0.2, 0.6, 1.0), [1.0, 0.5, 1.0, 0.0], [0.4, 0.2, 2.0, 0.5])
+    np.testing.assert_allclose(w, [[0.5, 0.5, 0], [0.5, 0, 0], [0, 0, 1], [0, 0, 0]])
+    assert ptt.parse_anchors("diffuse") == ()
+    assert ptt.parse_anchors("roughness:0.9,0.2") == (0.2, 0.9)
+    for bad in ("roughness:", "roughness:0.2,0.2", "roughness:0.01", "rough:0.5",
+                "roughness:0.1,0.2,0.3,0.4,0.5", "roughness:x"):
+        with pytest.raises(ValueError):
+            ptt.parse_anchors(bad)
+
+
+@pytest.mark.parametrize("light", [ptt.Sun((0.3, -0.2, 0.9), 3.0, 2.5, (1.0, 0.5, 0.25)),
+                                   ptt.Environment(np.random.default_rng(1).random((16, 32, 3)),
+                                                   "bottom_first", 40.0, 0.7)])
+def test_a_metallic_region_trades_its_diffuse_terms_for_its_glossy_anchors(light):
+    t = with_gloss(make())
+    w = [ptt.light_weights(d, light) for d in t.direction_sets()]
+    edits = {"M0": (0.2, 0.4, 0.9), "M1": (0.7, 0.6, 0.5)}
+    c = t.albedos(edits)
+    # metallic 0: the anchors add nothing, the diffuse polynomial is unchanged
+    np.testing.assert_allclose(t.irradiance(light, edits, finish={"M0": (0.0, 0.3)}),
+                               brute_force(t, w, c), rtol=2e-5)
+    # metallic 0.25 at roughness 0.3 (a quarter of the way from anchor 0.2 to 0.6), by loops
+    m, k = 0.25, (0.75, 0.25)
+    cd = c.copy()
+    cd[1] *= 1 - m
+    expect = brute_force(t, w, cd)
+    for ch in range(3):
+        for s in range(t.one.shape[0]):
+            for j in range(2):
+                expect[:, ch] += c[1, ch] * m * k[j] * w[1][s, ch] * t.gloss[s, 0, j]
+    got = t.irradiance(light, edits, finish={"M0": (m, 0.3)})
+    np.testing.assert_allclose(got, expect, rtol=2e-5)
+    # a metal receiver has no diffuse colour left: its shading scales by 1 - m
+    col = t.receiver_colors(c, t.anchor_weights({"M0": (m, 0.3)}))
+    np.testing.assert_allclose(col[t.receiver_region == 1], np.tile(cd[1], (np.sum(
+        t.receiver_region == 1), 1)), rtol=1e-6)
+
+
+def test_glossy_second_bounce_is_composed_through_the_transfer(tmp_path):
+    from relightable_textures.lt_addon.transport import bounce_transfer as bt
+
+    t = with_gloss(make(V=40))
+    V, R1 = t.vertices, 3
+    rng = np.random.default_rng(5)
+    patch = rng.integers(0, 6, V).astype(np.int32)
+    owner = np.repeat(np.arange(R1), 2).astype(np.int16)
+    scale = np.array([[1.0, 2.0, 0.0], [1.5, 0.0, 0.0], [1.0, 3.0, 0.0]])
+    t.bounce = bt.BounceTransfer(patch, owner, rng.random((6, V), dtype=np.float32),
+                                 np.ones((V, 3), np.float32), scale)
+    sun = ptt.Sun((0.2, 0.1, 0.97))
+    p = t.project(sun)
+    assert p.gloss_two.shape == (3, 2, 2, R1, V)
+    # region 1's glossy light, reflected by the regions as the diffuse light of a source
+    # with that region's calibration (1.5 into region 0; pair 1 -> 1 was blended: the
+    # median of the pairs composed into region 1, 2.5)
+    src = p.gloss[:, 0, 1][:, None]
+    got = p.gloss_two[:, 0, 1]
+    want = t.bounce.compose_sources(src, np.array([[1.5, 2.5, 0.0]]))[:, 0]
+    np.testing.assert_allclose(got, want, rtol=1e-6)
+    assert not np.any(p.gloss_two[:, :, :, 2])        # region 2 is never composed into
+    # metal region 1: its glossy light's second bounce comes in, its diffuse pairs go
+    c = t.albedos({"M0": (1.0, 1.0, 1.0)})
+    a = t.anchor_weights({"M0": (1.0, 0.6)})
+    two = t.combine(p, c, (2,), a)
+    cd = c.copy()
+    cd[1] = 0
+    want = (t.combine(p, cd, (2,)) + np.einsum("sc,csv->vc", cd.astype(np.float32),
+                                                p.gloss_two[:, 0, 1]))
+    np.testing.assert_allclose(two, want, rtol=1e-5)
+    # files keep the anchors
+    t.save(str(tmp_path / "g.npz"))
+    back = ptt.TransferTensors.load(str(tmp_path / "g.npz"))
+    assert back.roughness == (0.2, 0.6)
+    np.testing.assert_array_equal(back.gloss, t.gloss)
+    np.testing.assert_array_equal(back.irradiance(sun, finish={"M1": (0.5, 0.9)}),
+                                  t.irradiance(sun, finish={"M1": (0.5, 0.9)}))
+
+
+def test_a_metallic_edit_without_glossy_anchors_is_refused():
+    t = make()
+    with pytest.raises(ValueError, match="glossy anchors"):
+        t.irradiance(ptt.Sun((0, 0, 1.0)), finish={"M0": (0.5, 0.5)})
+    # metallic 0 is the diffuse bake itself
+    np.testing.assert_array_equal(t.irradiance(ptt.Sun((0, 0, 1.0)), finish={"M0": (0, 0.5)}),
+                                  t.irradiance(ptt.Sun((0, 0, 1.0))))
