@@ -21,8 +21,18 @@
    the second bounce composed as the default bake does (32 patches per region);
    and the rays: a floor grid of that many vertices under a box, one ray per lit vertex.
 
+3. With ``--anchors roughness:R1,...``: every setting is baked with those glossy anchors too,
+   and ``METAL_EDITS`` (a wall made a Principled metal) are compared the same way against
+   Cycles bakes with the metal (2 bounces, glossy ones included), next to the error of
+   taking the metal wall as diffuse (what a bake without anchors can do).
+
+4. ``--metal-picture PNG``: the demo's bake (``DEMO``) with ``--anchors`` on a copy of the
+   room whose red wall is a Principled BSDF, and the preview before and after making that wall
+   a metal of roughness 0.5 next to Cycles renders of the same (``material_edit.compare_edit``).
+
 Usage: python benchmarks/bench_materials.py [--size test|demo]
            [--settings hemi:400:1.5/hemi:128/hemi:8@16,...] [--truth-spp 256] [--no-bake]
+           [--anchors roughness:0.4,0.8] [--metal-picture PNG]
 """
 
 from __future__ import annotations
@@ -40,6 +50,15 @@ EDITS = (("file colours", {}),
          ("both walls white 0.8", {"RedMaterial": (0.8, 0.8, 0.8),
                                    "GreenMaterial": (0.8, 0.8, 0.8)}))
 OBJECTS = ("Floor", "WallLeft", "WallRight", "WallBack", "Box")
+#: Edits of the metallic / roughness (``--anchors``): name, colours, {material: (m, rho)}.
+METAL_EDITS = (("red wall metal, roughness 0.4", {}, {"RedMaterial": (1.0, 0.4)}),
+               ("red wall metal, roughness 0.6", {}, {"RedMaterial": (1.0, 0.6)}),
+               ("red wall blue metal, roughness 0.8", {"RedMaterial": (0.1, 0.1, 0.8)},
+                {"RedMaterial": (1.0, 0.8)}),
+               ("both walls white 0.8 metal, roughness 0.5",
+                {"RedMaterial": (0.8, 0.8, 0.8), "GreenMaterial": (0.8, 0.8, 0.8)},
+                {"RedMaterial": (1.0, 0.5), "GreenMaterial": (1.0, 0.5)}),
+               ("red wall half metal, roughness 0.6", {}, {"RedMaterial": (0.5, 0.6)}))
 
 
 def update_timing(vertices: int, specs=("hemi:400:1.5", "hemi:128", "hemi:8"), regions: int = 2,
@@ -159,6 +178,39 @@ def _rays_receivers(vertices: int):
     return {"rays": rays, "build_ms": round(1e3 * (time.perf_counter() - a), 3)}
 
 
+#: The demo's material bake (Makefile ``demo``): direction specs and samples, per face corner.
+DEMO = (("hemi:256:1.5", "hemi:16", "hemi:4"), 32)
+
+
+def metal_picture(png: str, size: str, anchors: str, finish: dict) -> dict:
+    """Bake the room as the demo does with glossy ``anchors`` and render the preview of the
+    ``finish`` edit (``{material: {"metallic": m, "roughness": r}}``) next to Cycles."""
+    import tempfile
+
+    import bpy
+
+    from relightable_textures import samples
+    from relightable_textures.operators import material_bake as mb
+    from relightable_textures.operators import material_edit
+    from relightable_textures.operators.jobs import run
+
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = bpy.context.scene
+    samples.build("room", scene, size)
+    from relightable_textures.samples.scene_setup import make_principled
+
+    make_principled(bpy.data.materials["RedMaterial"])
+    objs = [bpy.data.objects[n] for n in OBJECTS]
+    st = mb.MaterialBakeSettings(regions=["RedMaterial", "GreenMaterial"], directions=DEMO[0],
+                                 samples=DEMO[1], domain="CORNER", anchors=anchors)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = run(material_edit.bake_job(scene, objs, st, tmp))
+        cmp = material_edit.compare_edit(scene, out.tensors, {}, png, 64, finish=finish)
+    cmp.update(bake_calls=out.report["bake_calls"],
+               bake_seconds=out.report["timings"]["bake_seconds"])
+    return cmp
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--size", default="test", choices=("test", "demo"))
@@ -167,7 +219,16 @@ def main(argv=None):
     ap.add_argument("--truth-spp", type=int, default=256)
     ap.add_argument("--vertices", type=int, default=13000)
     ap.add_argument("--no-bake", action="store_true", help="only the update timing")
+    ap.add_argument("--anchors", default="diffuse",
+                    help="glossy anchors of every setting's bake (and the metal edits)")
+    ap.add_argument("--metal-picture", metavar="PNG",
+                    help="only the picture of a metal edit (with --anchors, default 0.4,0.8)")
     args = ap.parse_args(argv)
+    if args.metal_picture:
+        anchors = args.anchors if args.anchors != "diffuse" else "roughness:0.4,0.8"
+        print(metal_picture(args.metal_picture, args.size, anchors,
+                            {"RedMaterial": {"metallic": 1.0, "roughness": 0.5}}), flush=True)
+        return
 
     print("update time (median of 50, ms):", update_timing(args.vertices), flush=True)
     if args.no_bake:
@@ -198,6 +259,10 @@ def main(argv=None):
             cols = {**base, **edit}
             truths[li, name] = [mb.truth_irradiance(scene, objs, cols, d, 2, args.truth_spp,
                                                     seed=s) for s in (1, 2)]
+        for name, edit, finish in METAL_EDITS if args.anchors != "diffuse" else ():
+            cols = {**base, **edit}
+            truths[li, name] = [mb.truth_irradiance(scene, objs, cols, d, 2, args.truth_spp,
+                                                    seed=s, finish=finish) for s in (1, 2)]
     print(f"truths: {len(truths) * 2} Cycles bakes at {args.truth_spp} spp in "
           f"{time.perf_counter() - t0:.1f} s", flush=True)
 
@@ -213,7 +278,8 @@ def main(argv=None):
     for entry in args.settings.split(","):
         dirs, spp = entry.split("@")
         st = mb.MaterialBakeSettings(regions=["RedMaterial", "GreenMaterial"],
-                                     directions=tuple(dirs.split("/")), samples=int(spp))
+                                     directions=tuple(dirs.split("/")), samples=int(spp),
+                                     anchors=args.anchors)
         t0 = time.perf_counter()
         raw = run(mb.bake_materials(scene, objs, replace(st, smoothing=0.0)))
         raw.bounce = None   # as baked: the Cycles time only, the fit's seconds taken out
@@ -248,6 +314,24 @@ def main(argv=None):
                   f"{tensors.nbytes / 2**20:.2f} | {name} | {np.mean(errs):.4f} ({per}) | "
                   f"{np.mean([p[0] for p in parts]):.4f} | {np.mean([p[1] for p in parts]):.4f} | "
                   f"{np.mean(floors):.4f} | {np.mean(lows):.4f} |", flush=True)
+        for name, edit, finish in METAL_EDITS if smoothed.roughness else ():
+            errs, floors, lows, flat = [], [], [], []
+            for li, (az, el) in enumerate(LIGHTS):
+                a, b = truths[li, name]
+                light = ptt.Sun(tuple(direction_from_az_el(az, el)))
+                exact = exact_direct(scene, smoothed, light, everywhere=True)
+                p = smoothed.project(light, exact)
+                c, w = smoothed.albedos(edit), smoothed.anchor_weights(finish)
+                errs.append(rel(smoothed.combine(p, c, anchors=w), a))
+                lows.append(rel(smoothed.combine(p, c, (0, 1), w), a))
+                flat.append(rel(smoothed.combine(p, c), a))    # the metal taken as diffuse
+                floors.append(rel(b, a))
+            per = "/".join(f"{e:.3f}" for e in errs)
+            print(f"| {dirs} @{spp} spp, anchors {args.anchors}, rays, composed | "
+                  f"{smoothed.metadata['bake_calls']} | {secs:.1f} | "
+                  f"{smoothed.nbytes / 2**20:.2f} | {name} | {np.mean(errs):.4f} ({per}) | "
+                  f"as diffuse {np.mean(flat):.4f} | | {np.mean(floors):.4f} | "
+                  f"{np.mean(lows):.4f} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -17,7 +17,8 @@ from ..lt_addon.io import atomic
 
 
 def _set_edit(text: str):
-    """``MATERIAL.color=R,G,B`` (or ``.roughness=X``, refused later: no anchors for it)."""
+    """``MATERIAL.color=R,G,B``, ``MATERIAL.metallic=X`` or ``MATERIAL.roughness=X`` (the
+    last two need a bake with glossy anchors: checked against the file)."""
     name, sep, value = text.rpartition("=")
     mat, dot, prop = name.rpartition(".")
     if not sep or not dot or not mat:
@@ -27,10 +28,14 @@ def _set_edit(text: str):
         return mat, prop, _rgb(value)
     if prop in ("roughness", "metallic"):
         try:
-            return mat, prop, float(value)
+            x = float(value)
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected {mat}.{prop}=X, got {text!r}") from None
-    raise argparse.ArgumentTypeError(f"{prop!r} is not editable: use MATERIAL.color=R,G,B")
+        if not 0.0 <= x <= 1.0:
+            raise argparse.ArgumentTypeError(f"{mat}.{prop} must be in 0..1, got {value}")
+        return mat, prop, x
+    raise argparse.ArgumentTypeError(f"{prop!r} is not editable: use MATERIAL.color=R,G,B, "
+                                     "MATERIAL.metallic=X or MATERIAL.roughness=X")
 
 
 def add_parsers(sub) -> None:
@@ -43,8 +48,9 @@ def add_parsers(sub) -> None:
                     "reflected once off each editable material (region) and twice off each "
                     "ordered pair, under hard suns over direction sets (finer for lower "
                     "orders). Every rendered mesh of the scene reflects light; materials not "
-                    "named with --region keep their colour. Diffuse only: the materials' "
-                    "specular and textures are not modelled. Writes <object>_materials.npz "
+                    "named with --region keep their colour. Diffuse, or with --anchors "
+                    "roughness:... diffuse plus metal: a dielectric's specular layer and "
+                    "textures are not modelled. Writes <object>_materials.npz "
                     "and a JSON report; the .blend records where.")
     p.add_argument("file", metavar="FILE.blend")
     p.add_argument("--object", required=True, action="append", metavar="NAME",
@@ -52,9 +58,13 @@ def add_parsers(sub) -> None:
                         "this order)")
     p.add_argument("--region", required=True, action="append", metavar="MATERIAL",
                    help="an editable material (repeat for several)")
-    p.add_argument("--anchors", default="diffuse",
-                   help="material anchors per region: 'diffuse' (colour edits; the only one "
-                        "built)")
+    p.add_argument("--anchors", default="diffuse", metavar="diffuse|roughness:R1,R2,...",
+                   help="material anchors per region: 'diffuse' (colour edits) or "
+                        "'roughness:0.4,0.8' (also metallic and roughness edits of a Principled "
+                        "material: one more one-bounce bake per region, anchor and direction, "
+                        "the region reflecting as a metal of that roughness; a roughness "
+                        "between anchors blends them). Below about 0.4 a metal's reflected "
+                        "sun is a caustic: raise --samples")
     p.add_argument("--bounces", type=int, default=2, choices=(1, 2))
     p.add_argument("--directions", default="hemi:400:1.5", metavar="SPEC",
                    help="direct-light directions (default hemi:400:1.5; 1 sample each)")
@@ -92,7 +102,9 @@ def add_parsers(sub) -> None:
                    help="the bake's first object (as given to bake-materials)")
     p.add_argument("--set", action="append", type=_set_edit, default=[],
                    metavar="MATERIAL.color=R,G,B",
-                   help="edit a region's colour (linear RGB); without it, the file's colours")
+                   help="edit a region's colour (linear RGB), or with glossy anchors its "
+                        "MATERIAL.metallic=X / MATERIAL.roughness=X; without it, the file's "
+                        "materials")
     group = p.add_mutually_exclusive_group()
     group.add_argument("--sun", type=_az_el, metavar="AZ,EL",
                        help="a hard distant light (azimuth from +x toward +y, degrees)")
@@ -168,7 +180,8 @@ def _cmd_bake_materials(args) -> int:
     shares = rep["energy_shares"]
     what = "face corners" if rep["domain"] == "CORNER" else "vertices"
     print(f"baked {', '.join(rep['objects'])}: {rep['vertices']} {what}, regions "
-          f"{', '.join(rep['regions'])}, {rep['bake_calls']} Cycles bakes in "
+          f"{', '.join(rep['regions'])} (anchors {rep['anchors']}), {rep['bake_calls']} "
+          f"Cycles bakes in "
           f"{t['wall_total']:.2f} s ({time.perf_counter() - started - t['wall_total']:.2f} s "
           f"more to open and save the .blend); {rep['bytes']['tensors'] / 2**20:.2f} MiB; "
           f"light shares direct {shares['direct']:.3f}, one bounce {shares['one_bounce']:.3f}"
@@ -200,10 +213,6 @@ def _cmd_relight_materials(args) -> int:
         raise CliError("--compare renders under the scene's Sun lamp: drop --sun / --env")
     if args.compare_samples < 1:
         raise CliError(f"--compare-samples must be >= 1, got {args.compare_samples}")
-    for mat, prop, _ in args.set:
-        if prop != "color":
-            raise CliError(f"{mat}.{prop}: only colour edits are baked (anchors 'diffuse'); "
-                           "roughness / metallic anchors are not built yet")
     if not np.isfinite(args.strength) or args.strength < 0:
         raise CliError(f"--strength must be >= 0, got {args.strength}")
     if not 0.0 <= args.sun_angle <= 90.0:
@@ -222,11 +231,21 @@ def _cmd_relight_materials(args) -> int:
     except (FileNotFoundError, ValueError) as exc:
         raise CliError(str(exc)) from None
     edits = material_bake.file_colours(tensors)
-    for mat, _, rgb in args.set:
+    finish = material_bake.file_finish(tensors)
+    finish_edits: dict = {}
+    for mat, prop, value in args.set:
         if mat not in tensors.regions:
             raise CliError(f"{mat!r} is not an editable region of this bake (regions: "
                            f"{', '.join(tensors.regions)}); bake it with --region {mat}")
-        edits[mat] = rgb
+        if prop == "color":
+            edits[mat] = value
+            continue
+        if not tensors.roughness:
+            raise CliError(f"{mat}.{prop}: this bake has only the diffuse anchor; bake it "
+                           "with --anchors roughness:R1,R2,... for metallic / roughness edits")
+        m, rho = finish[mat]
+        finish[mat] = (value, rho) if prop == "metallic" else (m, value)
+        finish_edits.setdefault(mat, {})[prop] = value
     if env is not None:
         light = ptt.Environment(env, "bottom_first", -args.rotate, args.strength)
         what = {"env": os.path.abspath(args.env), "rotate": args.rotate}
@@ -247,24 +266,27 @@ def _cmd_relight_materials(args) -> int:
 
         exact = exact_direct(bpy.context.scene, tensors, light,
                              everywhere=args.direct == "rays")
-    values = tensors.shade(light, edits, direct=exact).astype(np.float32)
+    values = tensors.shade(light, edits, direct=exact, finish=finish).astype(np.float32)
     ms = (time.perf_counter() - t) * 1e3
     what["direct"] = args.direct if exact is not None else "baked"
     with atomic.atomic_path(out) as tmp:
         np.save(tmp, values)
     info = {"objects": [n for n, _ in tensors.objects], "vertices": int(len(values)), **what,
             "edits": {k: [float(x) for x in v] for k, v in edits.items()},
+            "finish": {k: {"metallic": float(v[0]), "roughness": float(v[1])}
+                       for k, v in finish.items()},
             "update_ms": round(ms, 3), "mean": [float(v) for v in values.mean(axis=0)],
             "out": out}
     if png:
         from . import material_edit
         from .cycles_bake import BakeInputError
 
-        changed = {m: rgb for m, _, rgb in args.set}
+        changed = {m: rgb for m, prop, rgb in args.set if prop == "color"}
         try:
             with atomic.atomic_path(png) as tmp:
                 info["compare"] = material_edit.compare_edit(
-                    bpy.context.scene, tensors, changed, tmp, args.compare_samples)
+                    bpy.context.scene, tensors, changed, tmp, args.compare_samples,
+                    finish=finish_edits)
         except BakeInputError as exc:
             raise CliError(str(exc)) from None
         info["compare"]["png"] = png

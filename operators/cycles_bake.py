@@ -209,13 +209,17 @@ class EnvironmentBake(SceneChanges):
         See :data:`WORLD_SAMPLING`.
     importance_map_size : int
         Resolution of the world importance map (Cycles' ``sample_map_resolution``).
+    glossy_bounces : int
+        Cycles' glossy bounce limit (0: light is not carried on after a glossy reflection;
+        the material bakes' truths of metallic edits need their bounce count).
     """
 
     def __init__(self, scene, obj, resolution: int, samples: int, bounces: int,
                  env_size: tuple[int, int], mode: str = "radiance", seed: int = 0,
                  margin: int = 4, world_sampling: str = "importance", importance_map_size: int = 256,
-                 passes: str = "all", domain: str = "POINT"):
+                 passes: str = "all", domain: str = "POINT", glossy_bounces: int = 0):
         self.per_vertex = resolution is None
+        self.glossy_bounces = int(glossy_bounces)   # 0: a glossy closure ends the path
         if domain not in ("POINT", "CORNER"):
             raise BakeInputError(f"domain must be POINT or CORNER, got {domain!r}")
         self.domain = domain
@@ -266,7 +270,7 @@ class EnvironmentBake(SceneChanges):
                             ("use_animated_seed", False), ("use_adaptive_sampling", False),
                             ("use_denoising", False), ("sample_clamp_direct", 0.0),
                             ("sample_clamp_indirect", 0.0), ("max_bounces", self.bounces),
-                            ("diffuse_bounces", self.bounces), ("glossy_bounces", 0),
+                            ("diffuse_bounces", self.bounces), ("glossy_bounces", self.glossy_bounces),
                             ("transmission_bounces", 0), ("volume_bounces", 0)):
             self._save_attr(cyc, name, value)
         self._save_attr(cyc, "sampling_pattern", "TABULATED_SOBOL")  # 4.x's AUTOMATIC: blue noise

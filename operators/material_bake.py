@@ -43,23 +43,50 @@ from .jobs import Progress
 from .meshes import corner_vertices, polygon_arrays
 
 _PREFIX = "RelightGate"
-ANCHORS = ("diffuse",)
 #: Kind of the bake record on the first object (:func:`.steerable_bake.record_kind`).
 KIND = "material_tensors"
+
+
+def material_bsdf(mat):
+    """The BSDF node on the material's own active output (not a relight preview's), or None."""
+    tree = mat.node_tree if mat is not None else None
+    outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"
+            and not n.get("relight_preview")] if tree else []
+    out = next((n for n in outs if n.is_active_output), outs[0] if outs else None)
+    return (out.inputs["Surface"].links[0].from_node
+            if out is not None and out.inputs["Surface"].is_linked else None)
 
 
 def material_colour_socket(mat):
     """The unlinked Base Color / Color socket of the BSDF on the material's own active output
     (the colour an edit changes), or None."""
-    tree = mat.node_tree if mat is not None else None
-    outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"
-            and not n.get("relight_preview")] if tree else []
-    out = next((n for n in outs if n.is_active_output), outs[0] if outs else None)
-    node = (out.inputs["Surface"].links[0].from_node
-            if out is not None and out.inputs["Surface"].is_linked else None)
+    node = material_bsdf(mat)
     socket = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}.get(
         getattr(node, "bl_idname", ""))
     return node.inputs[socket] if socket and not node.inputs[socket].is_linked else None
+
+
+def finish_sockets(mat) -> dict:
+    """The unlinked Metallic and Roughness sockets of the material's Principled BSDF
+    (``{"metallic": socket, "roughness": socket}``, fewer where linked or not Principled)."""
+    node = material_bsdf(mat)
+    if node is None or node.bl_idname != "ShaderNodeBsdfPrincipled":
+        return {}
+    return {k.lower(): node.inputs[k] for k in ("Metallic", "Roughness")
+            if not node.inputs[k].is_linked}
+
+
+def material_finish(mat) -> tuple:
+    """``(metallic, roughness)`` of the material's Principled BSDF (unlinked inputs; a linked
+    one counts as 0 / 0.5), ``(0, 0.5)`` for anything else: the finish glossy anchors edit."""
+    node = material_bsdf(mat)
+    if node is None or node.bl_idname != "ShaderNodeBsdfPrincipled":
+        return (0.0, 0.5)
+    out = []
+    for name, default in (("Metallic", 0.0), ("Roughness", 0.5)):
+        sock = node.inputs[name]
+        out.append(default if sock.is_linked else float(sock.default_value))
+    return tuple(out)
 
 
 def material_colour(mat) -> tuple[np.ndarray, str | None]:
@@ -113,13 +140,15 @@ class GatedMaterials(SceneChanges):
     """
 
     def __init__(self, scene, regions: list, colours: dict | None = None,
-                 camera_colour: bool = False):
+                 camera_colour: bool = False, gloss: bool = False):
         self.scene, self.regions = scene, list(regions)
         self.colours = dict(colours or {})
         self.camera_colour = camera_colour   # depth 0 in colour too: a render, not a bake
+        self.gloss = gloss   # a metal lobe too (glossy anchors, truths of metallic edits)
         self.notes: list[str] = []
         self._restore, self._created = [], []
         self._gates: dict = {}   # region index -> [(g1 socket, g2 socket)]
+        self._metal: dict = {}   # material name -> (region, m1, m2, roughness sockets)
 
     what = "the materials"
 
@@ -164,11 +193,15 @@ class GatedMaterials(SceneChanges):
         mix = nodes.new("ShaderNodeVectorMath")   # colour * gate + [depth == 0]
         mix.operation = "MULTIPLY_ADD"
         mix.inputs[0].default_value = [float(v) for v in colour]
-        if self.camera_colour:      # colour * (gate + [depth == 0])
+        camera = None
+        if self.camera_colour:      # colour * (gate + k0 [depth == 0]), k0 = 1 - metallic
+            camera = nodes.new("ShaderNodeValue")
+            camera.outputs[0].default_value = 1.0
             both = nodes.new("ShaderNodeMath")
-            both.operation = "ADD"
-            links.new(m2.outputs[0], both.inputs[0])
-            links.new(depth[0].outputs[0], both.inputs[1])
+            both.operation = "MULTIPLY_ADD"
+            links.new(depth[0].outputs[0], both.inputs[0])
+            links.new(camera.outputs[0], both.inputs[1])
+            links.new(m2.outputs[0], both.inputs[2])
             links.new(both.outputs[0], mix.inputs[1])
             mix.inputs[2].default_value = (0.0, 0.0, 0.0)
         else:
@@ -178,7 +211,35 @@ class GatedMaterials(SceneChanges):
         bsdf.inputs["Roughness"].default_value = 0.0
         links.new(mix.outputs[0], bsdf.inputs["Color"])
         out = nodes.new("ShaderNodeOutputMaterial")
-        links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
+        if self.gloss:
+            # (1 - f) diffuse + f metal, f = m1 [depth == 1] + m2 [depth == 2]: 0 at the
+            # receiver, and a closure of weight 0 is not sampled at all
+            m1, m2, rough = (nodes.new("ShaderNodeValue") for _ in range(3))
+            for v in (m1, m2):
+                v.outputs[0].default_value = 0.0
+            rough.outputs[0].default_value = 0.5
+            f1 = nodes.new("ShaderNodeMath")
+            f1.operation = "MULTIPLY"
+            links.new(depth[1].outputs[0], f1.inputs[0])
+            links.new(m1.outputs[0], f1.inputs[1])
+            f2 = nodes.new("ShaderNodeMath")
+            f2.operation = "MULTIPLY_ADD"
+            links.new(depth[2].outputs[0], f2.inputs[0])
+            links.new(m2.outputs[0], f2.inputs[1])
+            links.new(f1.outputs[0], f2.inputs[2])
+            metal = nodes.new("ShaderNodeBsdfPrincipled")
+            metal.inputs["Base Color"].default_value = [float(v) for v in colour] + [1.0]
+            metal.inputs["Metallic"].default_value = 1.0
+            links.new(rough.outputs[0], metal.inputs["Roughness"])
+            both = nodes.new("ShaderNodeMixShader")
+            links.new(f2.outputs[0], both.inputs[0])
+            links.new(bsdf.outputs["BSDF"], both.inputs[1])
+            links.new(metal.outputs["BSDF"], both.inputs[2])
+            links.new(both.outputs[0], out.inputs["Surface"])
+            self._metal[name] = (region, m1.outputs[0], m2.outputs[0], rough.outputs[0],
+                                 camera.outputs[0] if camera is not None else None)
+        else:
+            links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
         self._gates.setdefault(region, []).append((g1.outputs[0], g2.outputs[0]))
         self._made[name] = gate
         return gate
@@ -186,6 +247,12 @@ class GatedMaterials(SceneChanges):
     def _setup(self):
         self._made = {}
         check_regions(self.scene, self.regions)
+        if self.gloss:   # a metal's lobe as it is: no glossy blur, its light reaching diffuse
+            cyc = self.scene.cycles
+            for attr, value in (("blur_glossy", 0.0), ("caustics_reflective", True)):
+                old = getattr(cyc, attr)
+                self._restore.append(lambda a=attr, v=old: setattr(cyc, a, v))
+                setattr(cyc, attr, value)
         for o in self.scene.objects:
             if o.type != "MESH" or o.hide_render:
                 continue
@@ -208,6 +275,28 @@ class GatedMaterials(SceneChanges):
             for g1, g2 in sockets:
                 g1.default_value = float(last == "all" or last == region)
                 g2.default_value = float(before == "all" or before == region)
+        for _, m1, m2, _, _ in self._metal.values():
+            m1.default_value = m2.default_value = 0.0
+
+    def set_metal(self, region: int, roughness: float) -> None:
+        """Let light reflect last off region ``region`` as a metal of ``roughness`` (its colour,
+        metallic 1) and off nothing else: a glossy anchor's bake (needs ``gloss``)."""
+        self.set_gates(None, None)
+        for reg, m1, _, rough, _ in self._metal.values():
+            m1.default_value = float(reg == region)
+            rough.default_value = float(roughness)
+
+    def set_finish(self, finish: dict) -> None:
+        """Give materials ``{name: (metallic, roughness)}`` at every bounce (a truth bake of a
+        metallic edit; after :meth:`set_gates`): ``(1 - m)`` diffuse plus ``m`` metal. With
+        ``camera_colour`` the camera sees only the diffuse part, as the preview shows it."""
+        for name, (m, rho) in finish.items():
+            if name in self._metal:
+                _, m1, m2, rough, camera = self._metal[name]
+                m1.default_value = m2.default_value = float(m)
+                rough.default_value = float(rho)
+                if camera is not None:
+                    camera.default_value = 1.0 - float(m)
 
 
 
@@ -257,7 +346,9 @@ def receivers(objects, regions: list, domain: str = "POINT"
 class MaterialBakeSettings:
     """What ``bake-materials`` bakes.
 
-    regions : editable material names; anchors : only "diffuse" (albedo edits) is built;
+    regions : editable material names; anchors : "diffuse" (colour edits) or
+    "roughness:R1,R2,..." (also metallic / roughness edits: a glossy anchor per region and
+    roughness, :mod:`..lt_addon.transport.ptt`);
     bounces : 1 or 2; directions : specs of the direct, one- and two-bounce direction sets
     (``hemi:N[:P]``); samples : Cycles samples per vertex for the bounce terms (the direct term
     takes 1: exact under a hard Sun); seed : Cycles seed of every term; domain : "POINT" (a
@@ -282,9 +373,10 @@ class MaterialBakeSettings:
             raise BakeInputError("name at least one editable material (--region MATERIAL)")
         if len(set(self.regions)) != len(self.regions):
             raise BakeInputError("a --region is given twice")
-        if self.anchors not in ANCHORS:
-            raise BakeInputError(f"anchors {self.anchors!r} are not built yet: only 'diffuse' "
-                                 "(albedo edits); roughness / metallic anchors are future work")
+        try:
+            ptt.parse_anchors(self.anchors)
+        except ValueError as exc:
+            raise BakeInputError(str(exc)) from None
         if self.bounces not in (1, 2):
             raise BakeInputError(f"bounces must be 1 or 2, got {self.bounces}")
         if self.samples < 1:
@@ -299,6 +391,11 @@ class MaterialBakeSettings:
         except ValueError as exc:
             raise BakeInputError(f"bad direction set: {exc}") from None
 
+    @property
+    def roughness(self) -> tuple:
+        """The glossy anchors' roughness values (() for "diffuse")."""
+        return ptt.parse_anchors(self.anchors)
+
 
 #: Directions per chunk (as the transport bakes'): a cancelled bake resumes from its finished
 #: chunks, and a distributed one hands out pieces of similar Cycles time.
@@ -312,8 +409,10 @@ class MaterialChunk:
 
     ``kind``: "direct" (gates closed; the direct set, 1 spp), "one" (one bounce off ``last``;
     the one-bounce set), "ref" (one bounce off ``last`` over the two-bounce set: what the pairs
-    of ``last`` subtract) or "pair" (``before`` -> ``last``, raw: the "ref" of ``last`` is
-    subtracted when the tensors are assembled, so every chunk is a plain Cycles bake).
+    of ``last`` subtract), "pair" (``before`` -> ``last``, raw: the "ref" of ``last`` is
+    subtracted when the tensors are assembled, so every chunk is a plain Cycles bake) or
+    "gloss" (one bounce off region ``last`` as a white metal of the ``before``-th roughness
+    anchor; the one-bounce set).
     """
 
     kind: str
@@ -325,6 +424,8 @@ class MaterialChunk:
     @property
     def name(self) -> str:
         """Chunk-cache name, e.g. ``pair_r1_r2_00016`` (light off region 1, then region 2)."""
+        if self.kind == "gloss":
+            return f"gloss_r{self.last}_a{self.before}_{self.start:05d}"
         regions = "".join(f"_r{r}" for r in (self.before, self.last) if r is not None)
         return f"{self.kind}{regions}_{self.start:05d}"
 
@@ -356,6 +457,9 @@ def material_chunks(settings: MaterialBakeSettings, sizes: tuple) -> list:
     out = runs("direct", S0)
     for r in range(R1 if S1 else 0):
         out += runs("one", S1, r)
+    for r in range(1, R1 if S1 else 0):
+        for k in range(len(settings.roughness)):
+            out += runs("gloss", S1, r, k)
     for r2 in range(R1 if S2 else 0):
         out += runs("ref", S2, r2)
         for r1 in range(R1):
@@ -370,11 +474,12 @@ def bake_material_chunks(scene, objects, settings: MaterialBakeSettings, chunks,
     ``(chunk, direction index)`` after every Cycles call and returns Cycles' seconds.
     ``threads``: Cycles threads (0: all cores). Used by the bake, the Dask task and farms."""
     sets = dict(zip(("direct", "one", "ref"), settings.validate()))
-    sets["pair"] = sets["ref"]
+    sets["pair"], sets["gloss"] = sets["ref"], sets["one"]
+    roughness = settings.roughness
     if threads:   # workers sharing a machine: no more Cycles threads than their share of cores
         scene.render.threads_mode, scene.render.threads = "FIXED", int(threads)
     cycles = 0.0
-    with GatedMaterials(scene, settings.regions) as gates:
+    with GatedMaterials(scene, settings.regions, gloss=bool(roughness)) as gates:
         for direct in (True, False):
             mine = [c for c in chunks if (c.kind == "direct") == direct]
             if not mine:
@@ -385,7 +490,10 @@ def bake_material_chunks(scene, objects, settings: MaterialBakeSettings, chunks,
                                  mode="irradiance", seed=settings.seed, world_sampling="none",
                                  domain=settings.domain, **kw) as session:
                 for c in mine:
-                    gates.set_gates(c.last, c.before)
+                    if c.kind == "gloss":
+                        gates.set_metal(c.last, roughness[c.before])
+                    else:
+                        gates.set_gates(c.last, c.before)
                     rows = []
                     for s in range(c.start, c.stop):
                         e = np.pi * np.concatenate(
@@ -443,13 +551,14 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
     started = time.perf_counter()
     V = sum(element_count(o, settings.domain) for o in objects)
     R1 = len(settings.regions) + 1
+    K = len(settings.roughness)
     S1 = d1.size if settings.bounces >= 1 else 0
     S2 = d2.size if settings.bounces >= 2 else 0
-    floats = V * (d0.size + 3 * R1 * S1 + 3 * R1 * R1 * S2)
+    floats = V * (d0.size + 3 * R1 * S1 + (R1 - 1) * K * S1 + 3 * R1 * R1 * S2)
     check_memory(floats * 4 * 2, f"{V} vertices x {floats // max(V, 1)} term values",
                  "use fewer regions or coarser direction sets")
     plan = material_chunks(settings, (d0.size, S1, S2))
-    total = ptt.bake_count(d0.size, S1, S2, R1 - 1, settings.bounces)
+    total = ptt.bake_count(d0.size, S1, S2, R1 - 1, settings.bounces, K)
     assert total == sum(len(c) for c in plan)
     have = {}
     for c in plan if cache is not None else ():
@@ -483,8 +592,10 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
     cycles = 0.0
     if todo:
         what = {"direct": "direct", "one": "one bounce off region {last}",
+                "gloss": "one bounce off region {last} as metal, anchor {before}",
                 "ref": "two bounces: reference {last}", "pair": "two bounces {before}->{last}"}
-        stage = {"direct": "direct", "one": "one_bounce", "ref": "two_bounce",
+        stage = {"direct": "direct", "one": "one_bounce", "gloss": "glossy_anchors",
+                 "ref": "two_bounce",
                  "pair": "two_bounce"}
         gen = bake_material_chunks(scene, objects, settings, todo, put)
         t = time.perf_counter()
@@ -502,18 +613,22 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
     direct = np.empty((d0.size, V), dtype=np.float32)
     one = np.zeros((S1, 3, R1 if S1 else 0, V), dtype=np.float32)
     two = np.zeros((S2, 3, R1 if S2 else 0, R1 if S2 else 0, V), dtype=np.float32)
+    gloss = np.zeros((S1, R1 - 1, K, V), dtype=np.float32) if K and S1 else None
     for c in plan:
         arr, rows = have[c.name], slice(c.start, c.stop)
         if c.kind == "direct":
             direct[rows] = arr
         elif c.kind == "one":
             one[rows, :, c.last] = arr.transpose(0, 2, 1)
+        elif c.kind == "gloss":   # white sun, white metal: the channels agree but for noise
+            gloss[rows, c.last - 1, c.before] = arr.mean(axis=2)
         elif c.kind == "pair":   # the light that took the second bounce (>= 0 up to noise)
             ref = have[MaterialChunk("ref", c.last, None, c.start, c.stop).name]
             two[rows, :, c.before, c.last] = np.maximum(arr - ref, 0.0).transpose(0, 2, 1)
     notes = colour_notes(scene, settings.regions)
     region_of, colour_of, more = receivers(objects, settings.regions, settings.domain)
     base = np.array([material_colour(bpy.data.materials[r])[0] for r in settings.regions])
+    finish = np.array([material_finish(bpy.data.materials[r]) for r in settings.regions])
     chunks = {"chunks_total": len(plan), "chunks_reused": reused,
               "chunk_directions": CHUNK_DIRECTIONS}
     if distributed is not None:
@@ -527,7 +642,8 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
     tensors = ptt.TransferTensors(direct, one, two, tuple(d.spec for d in (d0, d1, d2)),
                                   list(settings.regions), base, region_of, colour_of,
                                   [(o.name, element_count(o, settings.domain)) for o in objects],
-                                  meta)
+                                  meta, roughness=settings.roughness if gloss is not None else (),
+                                  gloss=gloss, base_finish=finish)
     if S1 and settings.smoothing + bounce_transfer.composes(S1, S2) > 0:
         t = time.perf_counter()
         tensors = yield from bounce_terms(scene, tensors, settings.smoothing, total)
@@ -574,16 +690,21 @@ def element_count(obj, domain: str) -> int:
 
 
 def truth_irradiance(scene, objects, colours: dict, direction, bounces: int, samples: int,
-                     seed: int = 1, angle_deg: float = 0.0, domain: str = "POINT") -> np.ndarray:
+                     seed: int = 1, angle_deg: float = 0.0, domain: str = "POINT",
+                     finish: dict | None = None) -> np.ndarray:
     """Cycles ground truth of an edit: irradiance E (V, 3) (per unit normal irradiance) of the
     stacked vertices of ``objects`` under a Sun from ``direction``, with every material a
     Diffuse BSDF of its colour (``colours[name]`` where given, else its own) and ``bounces``
-    diffuse bounces -- the same diffuse scene the tensors model, without any gating."""
-    with GatedMaterials(scene, [], colours) as gates:
+    bounces -- the same diffuse scene the tensors model, without any gating. ``finish``
+    ``{name: (metallic, roughness)}`` mixes in a Principled metal of the material's colour
+    (Principled with metallic ``m`` and no dielectric specular), glossy bounces included."""
+    finish = {k: v for k, v in (finish or {}).items() if float(v[0]) > 0}
+    with GatedMaterials(scene, [], colours, gloss=bool(finish)) as gates:
         gates.set_gates("all", "all")
+        gates.set_finish(finish)
         with EnvironmentBake(scene, list(objects), None, samples, bounces, (8, 16),
                              mode="irradiance", seed=seed, world_sampling="none",
-                             domain=domain) as session:
+                             domain=domain, glossy_bounces=bounces if finish else 0) as session:
             values = session.bake_sun_all(direction, 1.0, angle_deg)
     return np.pi * np.concatenate(values, axis=0)
 
@@ -636,24 +757,37 @@ def file_colours(tensors: ptt.TransferTensors) -> dict:
     return out
 
 
+def file_finish(tensors: ptt.TransferTensors) -> dict:
+    """The editable regions' (metallic, roughness) as the open file has them now; {} for a bake
+    without glossy anchors (its regions are diffuse whatever the file says)."""
+    if not tensors.roughness:
+        return {}
+    out = {}
+    for i, name in enumerate(tensors.regions):
+        mat = bpy.data.materials.get(name)
+        out[name] = (material_finish(mat) if mat is not None
+                     else tuple(tensors.base_finish[i]))
+    return out
+
+
 def ground_truth(scene, objects, tensors: ptt.TransferTensors, direction, samples: int) -> dict:
     """Relative error of the tensors against a Cycles bake of the file's colours under a hard
     sun from ``direction``, next to the noise floor (two truth seeds), and without the
     two-bounce term; errors are ``||E - E_cycles|| / ||E_cycles||`` over vertices and RGB."""
-    colours = file_colours(tensors)
+    colours, finish = file_colours(tensors), file_finish(tensors)
     t = time.perf_counter()
     domain = tensors.metadata.get("domain", "POINT")
     a = truth_irradiance(scene, objects, colours, direction, tensors.bounces, samples, seed=1,
-                         domain=domain)
+                         domain=domain, finish=finish)
     b = truth_irradiance(scene, objects, colours, direction, tensors.bounces, samples, seed=2,
-                         domain=domain)
+                         domain=domain, finish=finish)
     seconds = time.perf_counter() - t
     from .direct_rays import exact_direct
 
     light = ptt.Sun(tuple(float(v) for v in direction))
     exact = exact_direct(scene, tensors, light)
-    est = tensors.irradiance(light, colours, direct=exact)
-    low = tensors.irradiance(light, colours, orders=(0, 1), direct=exact)
+    est = tensors.irradiance(light, colours, direct=exact, finish=finish)
+    low = tensors.irradiance(light, colours, orders=(0, 1), direct=exact, finish=finish)
 
     def rel(x, y):
         return float(np.linalg.norm(x - y) / max(np.linalg.norm(y), 1e-30))
@@ -661,7 +795,7 @@ def ground_truth(scene, objects, tensors: ptt.TransferTensors, direction, sample
     return {"samples": samples, "light": [round(float(v), 5) for v in direction],
             "rel_error": rel(est, a), "noise_floor": rel(b, a),
             "rel_error_without_two_bounce": rel(low, a),
-            "rel_error_baked_direct": rel(tensors.irradiance(light, colours), a),
+            "rel_error_baked_direct": rel(tensors.irradiance(light, colours, finish=finish), a),
             "direct": "rays" if exact is not None else "baked",
             "truth_seconds": round(seconds, 3)}
 
@@ -687,11 +821,13 @@ def materials_job(scene, objects, settings: MaterialBakeSettings, out_dir: str,
     direction = (sun[0] if sun is not None and sun[0][2] > 0
                  else np.array([0.5, 0.5, np.sqrt(0.5)]))
     light = ptt.Sun(tuple(float(v) for v in direction))
-    shares = tensors.term_shares(light, file_colours(tensors))
+    shares = tensors.term_shares(light, file_colours(tensors), finish=file_finish(tensors))
     d0, d1, d2 = tensors.direction_sets()
     report = {"objects": [o.name for o in objects], "vertices": tensors.vertices,
               "domain": settings.domain,
               "regions": tensors.regions, "anchors": settings.anchors,
+              "finish": {k: [round(float(x), 4) for x in v]
+                         for k, v in file_finish(tensors).items()},
               "bounces": settings.bounces, "samples": settings.samples, "seed": settings.seed,
               "directions": {"direct": d0.spec, "one_bounce": d1.spec, "two_bounce": d2.spec},
               "bake_calls": tensors.metadata["bake_calls"],

@@ -90,7 +90,8 @@ def update_preview(scene) -> dict:
         # rays only where the baked directions disagree: the live update stays within 16 ms
         # at 13K vertices (a ray to every receiver took 11-20 ms in all, measured)
         values = tensors.shade(light, material_bake.file_colours(tensors),
-                               direct=exact_direct(scene, tensors, light, everywhere=False))
+                               direct=exact_direct(scene, tensors, light, everywhere=False),
+                               finish=material_bake.file_finish(tensors))
         t1 = time.perf_counter()
         domain = tensors.metadata.get("domain", "POINT")
         for name, rows in tensors.object_slices().items():
@@ -138,12 +139,14 @@ def bake_job(scene, objects, settings, out_dir: str, truth_samples: int = 0,
 
 
 def compare_edit(scene, tensors, edits: dict, out_png: str, samples: int = 64,
-                 resolution: int = 256) -> dict:
+                 resolution: int = 256, finish: dict | None = None) -> dict:
     """Look at an edit the way a user does: render the preview before and after ``edits``
-    (``{material: RGB}``) and Cycles renders of the same diffuse scene with the same colours,
-    lit by the preview's Sun with 2 bounces, from the scene camera; write a captioned 2 x 3
-    PNG (preview | Cycles | |difference| x 4; before on top) and return the relative RMSE of
-    each row over the receivers' pixels. The scene is restored afterwards."""
+    (``{material: RGB}``; ``finish`` ``{material: {"metallic": m, "roughness": r}}`` with
+    glossy anchors) and Cycles renders of the same scene with the same materials (diffuse, or
+    diffuse plus a Principled metal), lit by the preview's Sun with the bake's bounces, from
+    the scene camera, which sees only the diffuse part as the preview does; write a captioned
+    2 x 3 PNG (preview | Cycles | |difference| x 4; before on top) and return the relative
+    RMSE of each row over the receivers' pixels. The scene is restored afterwards."""
     import math
     import tempfile
 
@@ -166,6 +169,15 @@ def compare_edit(scene, tensors, edits: dict, out_png: str, samples: int = 64,
     sockets = {r: material_bake.material_colour_socket(bpy.data.materials[r])
                for r in tensors.regions}
     before = {r: tuple(s.default_value) for r, s in sockets.items() if s is not None}
+    finish = dict(finish or {})
+    knobs = {r: material_bake.finish_sockets(bpy.data.materials[r]) for r in finish}
+    for r, props in finish.items():
+        missing = sorted(set(props) - set(knobs[r]))
+        if missing:
+            raise BakeInputError(f"{r}: its {missing[0]} is not an unlinked input of a "
+                                 "Principled BSDF, so the preview cannot show the edit")
+    knobs_before = [(sock, sock.default_value) for props in knobs.values()
+                    for sock in props.values()]
     data = bpy.data.lights.new("RelightEditSun", type="SUN")
     sun = bpy.data.objects.new("RelightEditSun", data)
     rows, errors = [], []
@@ -187,15 +199,22 @@ def compare_edit(scene, tensors, edits: dict, out_png: str, samples: int = 64,
                 for r, rgb in edit.items():
                     if sockets.get(r) is not None:
                         sockets[r].default_value = (*rgb, 1.0)
+                if label == "after":
+                    for r, props in finish.items():
+                        for k, v in props.items():
+                            knobs[r][k].default_value = float(v)
                 update_preview(scene)
                 bpy.context.view_layer.update()
                 preview = _render(scene, os.path.join(tmp, f"p_{label}.exr"), 1)
                 colours = {**material_bake.file_colours(tensors), **edit}
+                metal = {k: v for k, v in material_bake.file_finish(tensors).items() if v[0] > 0}
+                cyc.glossy_bounces = tensors.bounces if metal else 0
                 scene.collection.objects.link(sun)
                 try:
-                    with material_bake.GatedMaterials(scene, [], colours,
-                                                      camera_colour=True) as gates:
+                    with material_bake.GatedMaterials(scene, [], colours, camera_colour=True,
+                                                      gloss=bool(metal)) as gates:
                         gates.set_gates("all", "all")
+                        gates.set_finish(metal)
                         truth = _render(scene, os.path.join(tmp, f"t_{label}.exr"), samples)
                 finally:
                     scene.collection.objects.unlink(sun)
@@ -203,7 +222,7 @@ def compare_edit(scene, tensors, edits: dict, out_png: str, samples: int = 64,
                 err = float(np.linalg.norm((preview - truth)[mask])
                             / max(np.linalg.norm(truth[mask]), 1e-30))
                 errors.append(err)
-                what = "file colours" if not edit else "edited"
+                what = "file colours" if label == "before" else "edited"
                 rows.append([(linear_to_srgb8(preview[::-1]), f"preview, {what}"),
                              (linear_to_srgb8(truth[::-1]), f"Cycles {samples} spp"),
                              (linear_to_srgb8(4.0 * np.abs(preview - truth)[::-1]),
@@ -212,6 +231,8 @@ def compare_edit(scene, tensors, edits: dict, out_png: str, samples: int = 64,
     finally:
         for r, rgb in before.items():
             sockets[r].default_value = rgb
+        for sock, v in knobs_before:
+            sock.default_value = v
         bpy.data.objects.remove(sun)
         bpy.data.lights.remove(data)
         for o, h in hidden:
@@ -225,7 +246,7 @@ def compare_edit(scene, tensors, edits: dict, out_png: str, samples: int = 64,
         update_preview(scene)
     return {"png": os.path.abspath(out_png), "rel_rmse_before": errors[0],
             "rel_rmse_after": errors[1], "truth_samples": samples,
-            "edits": {k: list(v) for k, v in edits.items()}}
+            "edits": {k: list(v) for k, v in edits.items()}, "finish": finish}
 
 
 _busy = []
@@ -268,8 +289,10 @@ class RELIGHT_OT_bake_materials(_ModalBake, bpy.types.Operator):
         if not regions:
             raise BakeInputError("mark at least one material Editable in the Material Edits "
                                  "panel")
+        rough = props.material_anchors.replace(" ", "")
         settings = material_bake.MaterialBakeSettings(
             regions=regions, bounces=props.material_bounces, samples=props.material_samples,
+            anchors=f"roughness:{rough}" if rough else "diffuse",
             domain="CORNER" if props.material_per_corner else "POINT",
             smoothing=props.material_smoothing,
             directions=(f"hemi:{props.material_directions}:1.5",
@@ -282,6 +305,7 @@ class RELIGHT_OT_bake_materials(_ModalBake, bpy.types.Operator):
             args += [a for r in regions for a in ("--region", r)]
             return self._external(context, "bake-materials", args + [
                 "--bounces", str(settings.bounces), "--samples", str(settings.samples),
+                "--anchors", settings.anchors,
                 "--directions", d0, "--one-bounce-directions", d1, "--two-bounce-directions",
                 d2, "--smoothing", f"{settings.smoothing:g}"]
                 + (["--per-corner"] if settings.domain == "CORNER" else []))

@@ -219,8 +219,8 @@ class VIEW3D_PT_relight_materials(_RelightSubPanel, bpy.types.Panel):
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
-        from .material_bake import material_colour_socket
-        from .material_edit import SUMMARY_KEY
+        from .material_bake import finish_sockets, material_colour_socket
+        from .material_edit import SUMMARY_KEY, scene_bakes
 
         layout, props = self.layout, context.scene.relight
         meshes = [o for o in context.selected_objects if o.type == "MESH"]
@@ -228,6 +228,8 @@ class VIEW3D_PT_relight_materials(_RelightSubPanel, bpy.types.Panel):
                       key=lambda m: m.name)
         if not mats:
             layout.label(text="Select the meshes that receive light")
+        # metallic / roughness are editable where a bake has glossy anchors for the material
+        glossy = {r for _, t in scene_bakes(context.scene) if t.roughness for r in t.regions}
         col = layout.column(align=True)
         for mat in mats:
             row = col.row(align=True)
@@ -235,6 +237,12 @@ class VIEW3D_PT_relight_materials(_RelightSubPanel, bpy.types.Panel):
             socket = material_colour_socket(mat)
             if socket is not None:   # the material's own colour: edits show live after a bake
                 row.prop(socket, "default_value", text="")
+            if mat.name in glossy:
+                knobs = finish_sockets(mat)
+                if knobs:
+                    row = col.row(align=True)
+                    for k, sock in knobs.items():
+                        row.prop(sock, "default_value", text=k.title())
         col = layout.column(align=True)
         col.prop(props, "material_bounces")
         col.prop(props, "material_samples")
@@ -243,6 +251,7 @@ class VIEW3D_PT_relight_materials(_RelightSubPanel, bpy.types.Panel):
         col.prop(props, "material_one_directions")
         if props.material_bounces >= 2:
             col.prop(props, "material_two_directions")
+        col.prop(props, "material_anchors")
         col.prop(props, "material_smoothing")
         _run_on(layout, props)
         layout.operator("relight.bake_materials", icon="RENDER_STILL")

@@ -245,6 +245,12 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
     material_two_directions: IntProperty(
         name="2-Bounce Directions", default=8, min=2, max=10000,
         description="Sun directions of the two-bounce terms ((R+1) + (R+1)^2 bakes each)")
+    material_anchors: StringProperty(
+        name="Roughness Anchors", default="",
+        description="Comma-separated roughness values (e.g. 0.4,0.8) at which each editable "
+                    "material is also baked as a metal, so its Metallic and Roughness can be "
+                    "edited live (one more one-bounce bake per material, value and direction). "
+                    "Empty: colour edits only")
     material_smoothing: FloatProperty(
         name="Smoothing", default=2.0, min=0.0, max=20.0,
         description="Average the bounce terms over this many vertex spacings after the bake "

@@ -107,6 +107,20 @@ def diffuse_material(name: str, color) -> bpy.types.Material:
     return mat
 
 
+def make_principled(mat) -> None:
+    """Swap a :func:`diffuse_material`'s Diffuse BSDF for a Principled BSDF of its colour
+    (metallic 0, roughness 0.5): the material whose Metallic and Roughness a material bake
+    with glossy anchors edits."""
+    tree = mat.node_tree
+    (old,) = [n for n in tree.nodes if n.bl_idname == "ShaderNodeBsdfDiffuse"]
+    new = tree.nodes.new("ShaderNodeBsdfPrincipled")
+    new.inputs["Base Color"].default_value = old.inputs["Color"].default_value
+    new.location = old.location
+    (out,) = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+    tree.links.new(new.outputs["BSDF"], out.inputs["Surface"])
+    tree.nodes.remove(old)
+
+
 def ortho_top_camera(scene, collection, centre, size: float, height: float = 5.0):
     """An orthographic camera looking straight down -z at ``centre`` covering ``size`` metres."""
     cam_data = bpy.data.cameras.new("TopCamera")

@@ -84,7 +84,8 @@ def test_relight_materials_applies_the_edit(baked, tmp_path):
 
 @pytest.mark.parametrize("extra, message", [
     (["--set", "Nope.color=1,1,1"], "'Nope' is not an editable region of this bake"),
-    (["--set", "RedMaterial.roughness=0.5"], "only colour edits are baked"),
+    (["--set", "RedMaterial.roughness=0.5"], "has only the diffuse anchor"),
+    (["--set", "RedMaterial.metallic=2"], "must be in 0..1"),
     (["--set", "RedMaterial.color=1,1"], "expected R,G,B"),
     (["--sun", "30,95"], "elevation must be in [-90, 90]"),
 ])
@@ -110,8 +111,8 @@ def test_bake_materials_refuses_without_force_and_bad_regions(baked):
     (line,) = our_lines(r.stderr)
     assert "uses material 'Nope'" in line and "nothing was written" in line
     r = relight("bake-materials", blend, "--object", "Floor", "--region", "RedMaterial",
-                "--anchors", "roughness:0.2,0.5", "--force")
-    assert r.returncode == 2 and "not built yet" in r.stderr
+                "--anchors", "roughness:0.01", "--force")
+    assert r.returncode == 2 and "0.05..1" in r.stderr
     assert folder_state(folder / "room_relight") == before
 
 
@@ -133,3 +134,61 @@ def test_compare_renders_the_edit_before_and_after(baked, tmp_path):
     r = relight("relight-materials", blend, "--object", "Floor", "--sun", "30,40", "--compare",
                 tmp_path / "x.png", "--out", tmp_path / "x.npy")
     assert r.returncode == 2 and "drop --sun" in r.stderr
+
+
+def test_glossy_anchors_from_the_cli_edit_metallic_and_roughness(tmp_path):
+    """A bake with one glossy anchor; relight-materials applies --set metallic / roughness
+    as the tensors do, and --compare renders the metal edit next to Cycles."""
+    from relightable_textures.lt_addon.io.contact_sheet import read_png
+    from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
+    from relightable_textures.lt_addon.transport import ptt
+
+    import bpy
+
+    blend = tmp_path / "room.blend"
+    assert relight("scene", "room", "--out", blend).returncode == 0
+    # the sample's walls are Diffuse BSDFs: make the red one a Principled BSDF, whose Metallic
+    # and Roughness a user edits
+    from relightable_textures.samples.scene_setup import make_principled
+
+    bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False)
+    make_principled(bpy.data.materials["RedMaterial"])
+    bpy.ops.wm.save_mainfile(filepath=str(blend))
+    args = ["bake-materials", blend]
+    for name in OBJECTS:
+        args += ["--object", name]
+    r = relight(*args, "--region", "RedMaterial", "--anchors", "roughness:0.5", "--bounces",
+                "1", "--directions", "hemi:16", "--one-bounce-directions", "hemi:4",
+                "--samples", "16")
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "anchors roughness:0.5" in r.stdout
+    rep = json.loads((tmp_path / "room_relight" / "Floor_materials.json").read_text())
+    assert rep["bake_calls"] == 16 + 4 * 2 + 4 and rep["anchors"] == "roughness:0.5"
+    out = tmp_path / "m.npy"
+    png = tmp_path / "metal.png"
+    r = relight("relight-materials", blend, "--object", "Floor", "--sun", "30,50",
+                "--set", "RedMaterial.metallic=1", "--set", "RedMaterial.roughness=0.5",
+                "--out", out)
+    assert r.returncode == 0, r.stderr[-2000:]
+    info = json.loads(r.stdout)
+    assert info["finish"]["RedMaterial"] == {"metallic": 1.0, "roughness": 0.5}
+    t = ptt.TransferTensors.load(str(tmp_path / "room_relight" / "Floor_materials.npz"))
+    from relightable_textures.operators.direct_rays import exact_direct
+
+    bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False)
+    sun = ptt.Sun(tuple(direction_from_az_el(30, 50)))
+    exact = exact_direct(bpy.context.scene, t, sun)
+    metal = t.shade(sun, {}, direct=exact, finish={"RedMaterial": (1.0, 0.5)})
+    np.testing.assert_allclose(np.load(out), metal, rtol=1e-6)
+    # a metal wall has no diffuse colour: its own vertices go black in the preview
+    sl = t.object_slices()["WallLeft"]
+    assert np.abs(metal[sl]).max() == 0 and np.abs(t.shade(sun, {}, direct=exact)[sl]).max() > 0
+    r = relight("relight-materials", blend, "--object", "Floor", "--set",
+                "RedMaterial.metallic=1", "--compare", png, "--compare-samples", "16",
+                "--out", tmp_path / "c.npy")
+    assert r.returncode == 0, r.stderr[-2000:]
+    cmp = json.loads(r.stdout)["compare"]
+    assert cmp["finish"] == {"RedMaterial": {"metallic": 1.0}}
+    assert read_png(str(png)).shape[1] > 3 * 256
+    # as coarse as the colour edit's comparison above; a metal wall lit as diffuse errs more
+    assert 0 < cmp["rel_rmse_before"] < 0.6 and 0 < cmp["rel_rmse_after"] < 0.6

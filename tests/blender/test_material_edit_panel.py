@@ -83,3 +83,67 @@ def test_bake_materials_operator_and_live_colour_edit(fresh_scene, tmp_path):
         assert not np.allclose(shown(), after)
     finally:
         relightable_textures.unregister()
+
+
+def test_panel_bake_with_roughness_anchors_follows_a_metallic_edit(fresh_scene, tmp_path):
+    """Roughness Anchors in the panel bake glossy anchors; the Principled wall's Metallic and
+    Roughness then re-shade the preview live, as the tensors' own shading of that finish."""
+    import bpy
+
+    import relightable_textures
+    from relightable_textures import samples
+    from relightable_textures.operators import material_bake as mb, material_edit as me
+    from relightable_textures.operators.direct_rays import exact_direct
+    from relightable_textures.operators.meshes import color_attribute
+    from relightable_textures.samples.scene_setup import make_principled
+
+    scene = fresh_scene
+    samples.build("room", scene, "test")
+    red = bpy.data.materials["RedMaterial"]
+    make_principled(red)
+    names = ("Floor", "WallLeft", "WallRight", "WallBack", "Box")
+    relightable_textures.register()
+    try:
+        props = scene.relight
+        props.output_dir = str(tmp_path)
+        props.material_samples, props.material_directions = 16, 16
+        props.material_one_directions = props.material_two_directions = 4
+        props.material_bounces = 1
+        props.material_anchors = "0.3, x"
+        for o in bpy.data.objects:
+            o.select_set(o.name in names)
+        bpy.context.view_layer.objects.active = bpy.data.objects["Floor"]
+        red.relight_editable = True
+        with pytest.raises(RuntimeError, match="roughness anchors must be numbers"):
+            bpy.ops.relight.bake_materials()
+        props.material_anchors = "0.3, 0.7"
+        assert bpy.ops.relight.bake_materials() == {"FINISHED"}
+        ((_, tensors),) = me.scene_bakes(scene)
+        assert tensors.roughness == (0.3, 0.7)
+        assert tensors.metadata["bake_calls"] == 16 + 4 * 2 + 4 * 2
+
+        def shown():
+            return np.concatenate([color_attribute(
+                bpy.data.objects[n].data.color_attributes[me.ATTRIBUTE])[:, :3]
+                for n, _ in tensors.objects])
+
+        def want(finish):
+            lamp = me.preview_light(scene)
+            return tensors.shade(lamp, {}, direct=exact_direct(scene, tensors, lamp,
+                                                               everywhere=False), finish=finish)
+
+        knobs = mb.finish_sockets(red)
+        before = shown().copy()
+        np.testing.assert_allclose(before, want({"RedMaterial": (0.0, 0.5)}), rtol=1e-5,
+                                   atol=1e-7)
+        knobs["metallic"].default_value = 1.0
+        knobs["roughness"].default_value = 0.4
+        bpy.context.view_layer.update()
+        after = shown()
+        np.testing.assert_allclose(after, want({"RedMaterial": (1.0, 0.4)}), rtol=1e-5,
+                                   atol=1e-7)
+        sl = tensors.object_slices()
+        assert np.abs(after[sl["WallLeft"]]).max() == 0      # a metal has no diffuse colour
+        assert not np.allclose(after[sl["Floor"]], before[sl["Floor"]])
+    finally:
+        relightable_textures.unregister()
