@@ -182,9 +182,10 @@ def _rays_receivers(vertices: int):
 DEMO = (("hemi:256:1.5", "hemi:16", "hemi:4"), 32)
 
 
-def metal_picture(png: str, size: str, anchors: str, finish: dict) -> dict:
+def metal_picture(png: str, size: str, anchors: str, finish: dict, spp: int) -> dict:
     """Bake the room as the demo does with glossy ``anchors`` and render the preview of the
-    ``finish`` edit (``{material: {"metallic": m, "roughness": r}}``) next to Cycles."""
+    ``finish`` edit (``{material: {"metallic": m, "roughness": r}}``) next to Cycles at
+    ``spp`` samples (a metal's reflected sun is a caustic: 64 spp is mostly fireflies)."""
     import tempfile
 
     import bpy
@@ -205,7 +206,7 @@ def metal_picture(png: str, size: str, anchors: str, finish: dict) -> dict:
                                  samples=DEMO[1], domain="CORNER", anchors=anchors)
     with tempfile.TemporaryDirectory() as tmp:
         out = run(material_edit.bake_job(scene, objs, st, tmp))
-        cmp = material_edit.compare_edit(scene, out.tensors, {}, png, 64, finish=finish)
+        cmp = material_edit.compare_edit(scene, out.tensors, {}, png, spp, finish=finish)
     cmp.update(bake_calls=out.report["bake_calls"],
                bake_seconds=out.report["timings"]["bake_seconds"])
     return cmp
@@ -227,7 +228,8 @@ def main(argv=None):
     if args.metal_picture:
         anchors = args.anchors if args.anchors != "diffuse" else "roughness:0.4,0.8"
         print(metal_picture(args.metal_picture, args.size, anchors,
-                            {"RedMaterial": {"metallic": 1.0, "roughness": 0.5}}), flush=True)
+                            {"RedMaterial": {"metallic": 1.0, "roughness": 0.5}},
+                            args.truth_spp), flush=True)
         return
 
     print("update time (median of 50, ms):", update_timing(args.vertices), flush=True)

@@ -23,6 +23,11 @@ Measured (bpy 5.0.1, room test scene): the floor's indirect irradiance off the b
 was 0.0187 (x pi), the pair back wall <- floor added 0.0040; a wall cannot light itself (0).
 The materials' specular and textures are not modelled: the bake uses each material's base
 colour (Principled Base Color or Diffuse Color; otherwise its viewport colour, reported).
+
+Glossy anchors (``anchors="roughness:R1,..."``): the gated material also mixes in a Principled
+metal of its colour with weight ``k1 [depth == 1] + k2 [depth == 2]``; a "gloss" chunk opens
+``k1`` on one region at one roughness (the one-bounce light off it as a white metal), and a
+truth of a metallic edit sets ``k1 = k2 = metallic`` (:meth:`GatedMaterials.set_finish`).
 """
 
 from __future__ import annotations
@@ -148,7 +153,7 @@ class GatedMaterials(SceneChanges):
         self.notes: list[str] = []
         self._restore, self._created = [], []
         self._gates: dict = {}   # region index -> [(g1 socket, g2 socket)]
-        self._metal: dict = {}   # material name -> (region, m1, m2, roughness sockets)
+        self._metal: dict = {}   # material name -> (region, m1, m2, roughness, k0 sockets)
 
     what = "the materials"
 
@@ -179,17 +184,23 @@ class GatedMaterials(SceneChanges):
             links.new(path.outputs["Ray Depth"], c.inputs[0])
             c.inputs[1].default_value, c.inputs[2].default_value = float(d), 0.5
             depth.append(c)
-        g1, g2 = nodes.new("ShaderNodeValue"), nodes.new("ShaderNodeValue")
-        g1.outputs[0].default_value = g2.outputs[0].default_value = 0.0
-        m1 = nodes.new("ShaderNodeMath")
-        m1.operation = "MULTIPLY"
-        links.new(depth[1].outputs[0], m1.inputs[0])
-        links.new(g1.outputs[0], m1.inputs[1])
-        m2 = nodes.new("ShaderNodeMath")
-        m2.operation = "MULTIPLY_ADD"
-        links.new(depth[2].outputs[0], m2.inputs[0])
-        links.new(g2.outputs[0], m2.inputs[1])
-        links.new(m1.outputs[0], m2.inputs[2])
+
+        def gated(default=0.0):
+            """Two Value nodes a, b and the output of a [depth == 1] + b [depth == 2]."""
+            a, b = nodes.new("ShaderNodeValue"), nodes.new("ShaderNodeValue")
+            a.outputs[0].default_value = b.outputs[0].default_value = default
+            first = nodes.new("ShaderNodeMath")
+            first.operation = "MULTIPLY"
+            links.new(depth[1].outputs[0], first.inputs[0])
+            links.new(a.outputs[0], first.inputs[1])
+            both = nodes.new("ShaderNodeMath")
+            both.operation = "MULTIPLY_ADD"
+            links.new(depth[2].outputs[0], both.inputs[0])
+            links.new(b.outputs[0], both.inputs[1])
+            links.new(first.outputs[0], both.inputs[2])
+            return a, b, both
+
+        g1, g2, gate_sum = gated()
         mix = nodes.new("ShaderNodeVectorMath")   # colour * gate + [depth == 0]
         mix.operation = "MULTIPLY_ADD"
         mix.inputs[0].default_value = [float(v) for v in colour]
@@ -201,32 +212,22 @@ class GatedMaterials(SceneChanges):
             both.operation = "MULTIPLY_ADD"
             links.new(depth[0].outputs[0], both.inputs[0])
             links.new(camera.outputs[0], both.inputs[1])
-            links.new(m2.outputs[0], both.inputs[2])
+            links.new(gate_sum.outputs[0], both.inputs[2])
             links.new(both.outputs[0], mix.inputs[1])
             mix.inputs[2].default_value = (0.0, 0.0, 0.0)
         else:
-            links.new(m2.outputs[0], mix.inputs[1])
+            links.new(gate_sum.outputs[0], mix.inputs[1])
             links.new(depth[0].outputs[0], mix.inputs[2])
         bsdf = nodes.new("ShaderNodeBsdfDiffuse")
         bsdf.inputs["Roughness"].default_value = 0.0
         links.new(mix.outputs[0], bsdf.inputs["Color"])
         out = nodes.new("ShaderNodeOutputMaterial")
         if self.gloss:
-            # (1 - f) diffuse + f metal, f = m1 [depth == 1] + m2 [depth == 2]: 0 at the
+            # (1 - f) diffuse + f metal, f = k1 [depth == 1] + k2 [depth == 2]: 0 at the
             # receiver, and a closure of weight 0 is not sampled at all
-            m1, m2, rough = (nodes.new("ShaderNodeValue") for _ in range(3))
-            for v in (m1, m2):
-                v.outputs[0].default_value = 0.0
+            k1, k2, f2 = gated()
+            rough = nodes.new("ShaderNodeValue")
             rough.outputs[0].default_value = 0.5
-            f1 = nodes.new("ShaderNodeMath")
-            f1.operation = "MULTIPLY"
-            links.new(depth[1].outputs[0], f1.inputs[0])
-            links.new(m1.outputs[0], f1.inputs[1])
-            f2 = nodes.new("ShaderNodeMath")
-            f2.operation = "MULTIPLY_ADD"
-            links.new(depth[2].outputs[0], f2.inputs[0])
-            links.new(m2.outputs[0], f2.inputs[1])
-            links.new(f1.outputs[0], f2.inputs[2])
             metal = nodes.new("ShaderNodeBsdfPrincipled")
             metal.inputs["Base Color"].default_value = [float(v) for v in colour] + [1.0]
             metal.inputs["Metallic"].default_value = 1.0
@@ -236,7 +237,7 @@ class GatedMaterials(SceneChanges):
             links.new(bsdf.outputs["BSDF"], both.inputs[1])
             links.new(metal.outputs["BSDF"], both.inputs[2])
             links.new(both.outputs[0], out.inputs["Surface"])
-            self._metal[name] = (region, m1.outputs[0], m2.outputs[0], rough.outputs[0],
+            self._metal[name] = (region, k1.outputs[0], k2.outputs[0], rough.outputs[0],
                                  camera.outputs[0] if camera is not None else None)
         else:
             links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
@@ -847,7 +848,8 @@ def materials_job(scene, objects, settings: MaterialBakeSettings, out_dir: str,
     path = tensors_path(out_dir, objects)
     tensors.save(path)
     record_kind(objects[0], KIND, path, {"regions": list(tensors.regions),
-                                         "objects": [o.name for o in objects]})
+                                         "objects": [o.name for o in objects],
+                                         "anchors": settings.anchors})
     report["tensors"] = path
     report["bytes"]["file"] = os.path.getsize(path)
     report.update(chunks)

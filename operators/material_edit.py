@@ -9,7 +9,8 @@ editable material's Base Color (or moving the Sun) recomputes it in NumPy: a dep
 (``benchmarks/bench_materials.py``). The Sun's direct light comes from shadow rays
 (:mod:`.direct_rays`), not the baked directions blended: rays where the baked directions around
 the Sun disagree, which keeps the update fast. The materials' own specular stays out
-of the preview: the bake is diffuse.
+of the preview: it shows each receiver's diffuse part, so a metal (a bake with glossy anchors,
+whose Metallic and Roughness re-shade the preview too) is black in it.
 """
 
 from __future__ import annotations

@@ -48,7 +48,7 @@ def _tensors(folder):
 
 def _same(a, b):
     return all(np.array_equal(getattr(a, k).view(np.uint32), getattr(b, k).view(np.uint32))
-               for k in ("direct", "one", "two"))
+               for k in ("direct", "one", "two") + (("gloss",) if a.roughness else ()))
 
 
 def test_bake_materials_on_dask_workers_from_the_panel(room, tmp_path):
@@ -56,9 +56,11 @@ def test_bake_materials_on_dask_workers_from_the_panel(room, tmp_path):
 
     scene, path = room
     props = scene.relight
+    props.material_anchors = "0.5"   # glossy anchor chunks travel to the workers too
     props.output_dir = str(tmp_path / "here")
     assert bpy.ops.relight.bake_materials() == {"FINISHED"}
     here = _tensors(tmp_path / "here")
+    assert here.roughness == (0.5,) and here.gloss.any()
 
     props.output_dir = str(tmp_path / "dask")
     props.run_on, props.dask_workers = "WORKERS", 2
@@ -71,7 +73,9 @@ def test_bake_materials_on_dask_workers_from_the_panel(room, tmp_path):
     bpy.ops.wm.save_mainfile()   # (background Blender flags every file dirty: no check here)
     assert bpy.ops.relight.bake_materials() == {"FINISHED"}
     rep = json.loads((tmp_path / "dask" / "Floor_materials.json").read_text())
-    assert rep["distributed"]["chunks"] == rep["chunks_total"] == 21
+    # 3 direct, 2 one-bounce per region (3), 2 glossy per editable region (2), 1 + 3 per
+    # region for the two-bounce references and pairs
+    assert rep["distributed"]["chunks"] == rep["chunks_total"] == 3 + 6 + 4 + 12
     assert len(rep["distributed"]["workers"]) == 2
     assert _same(_tensors(tmp_path / "dask"), here)
     # the command saved the bake into the file: reopened, it is recorded there

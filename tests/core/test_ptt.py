@@ -25,8 +25,10 @@ def make(V=40, regions=2, seed=0, specs=SPECS):
         [("a", V - 10), ("b", 10)], {"note": "synthetic"})
 
 
-def brute_force(t, w, c):
-    """E (V, 3) by explicit loops over directions, regions and pairs."""
+def brute_force(t, w, c, c_second=None):
+    """E (V, 3) by explicit loops over directions, regions and pairs (``c_second``: the
+    coefficients of a pair's second surface, default ``c``)."""
+    c2 = c if c_second is None else c_second
     w0, w1, w2 = w
     E = np.zeros((t.vertices, 3))
     R1 = len(t.regions) + 1
@@ -39,7 +41,7 @@ def brute_force(t, w, c):
         for a in range(R1):
             for b in range(R1):
                 for s in range(t.two.shape[0]):
-                    E[:, ch] += c[a, ch] * c[b, ch] * w2[s, ch] * t.two[s, ch, a, b]
+                    E[:, ch] += c[a, ch] * c2[b, ch] * w2[s, ch] * t.two[s, ch, a, b]
     return E
 
 
@@ -177,7 +179,7 @@ def test_a_metallic_region_trades_its_diffuse_terms_for_its_glossy_anchors(light
     m, k = 0.25, (0.75, 0.25)
     cd = c.copy()
     cd[1] *= 1 - m
-    expect = brute_force(t, w, cd)
+    expect = brute_force(t, w, cd, c)   # a second surface reflects its whole colour
     for ch in range(3):
         for s in range(t.one.shape[0]):
             for j in range(2):
@@ -212,14 +214,18 @@ def test_glossy_second_bounce_is_composed_through_the_transfer(tmp_path):
     want = t.bounce.compose_sources(src, np.array([[1.5, 2.5, 0.0]]))[:, 0]
     np.testing.assert_allclose(got, want, rtol=1e-6)
     assert not np.any(p.gloss_two[:, :, :, 2])        # region 2 is never composed into
-    # metal region 1: its glossy light's second bounce comes in, its diffuse pairs go
-    c = t.albedos({"M0": (1.0, 1.0, 1.0)})
+    # metal region 1: its glossy light's second bounce comes in, the diffuse pairs it starts
+    # go; as a second surface it stays diffuse with its colour
+    c = t.albedos({"M0": (0.9, 0.5, 0.2)})
     a = t.anchor_weights({"M0": (1.0, 0.6)})
     two = t.combine(p, c, (2,), a)
-    cd = c.copy()
-    cd[1] = 0
-    want = (t.combine(p, cd, (2,)) + np.einsum("sc,csv->vc", cd.astype(np.float32),
-                                                p.gloss_two[:, 0, 1]))
+    want = np.zeros((V, 3))
+    for ch in range(3):
+        for r1 in range(R1):
+            for r2 in range(R1):
+                first = 0.0 if r1 == 1 else c[r1, ch]
+                want[:, ch] += first * c[r2, ch] * p.two[ch, r1, r2]
+            want[:, ch] += c[1, ch] * c[r1, ch] * p.gloss_two[ch, 0, 1, r1]
     np.testing.assert_allclose(two, want, rtol=1e-5)
     # files keep the anchors
     t.save(str(tmp_path / "g.npz"))
