@@ -75,7 +75,8 @@ test-core: $(STAMP)
 ##   (out/bench/transport_textures.*), relight bench --quick on all four scenes (JSON, CSV,
 ##   Pareto charts in out/bench), the CPCA comparison on statue and room (out/bench/cpca.*),
 ##   distributed and resumed bakes (1, 2, 4 local workers), the horizon-model experiment and
-##   the material edits' transfer tensors on the demo room (~25 min of it), and the exports
+##   the material edits' transfer tensors on the demo room (~25 min of it, ~20 more for the
+##   metal edits of glossy anchors), and the exports
 ##   of a balanced bumps bake (lightmaps, RTI, equal-coefficient comparison; ~5 min)
 bench: $(STAMP)
 	mkdir -p $(OUT)/bench $(BLENDER_USER_RESOURCES)
@@ -88,6 +89,8 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_low_sun_floor.py
 	$(PY) benchmarks/bench_export.py --out $(OUT)/bench
 	$(PY) benchmarks/bench_materials.py --size demo
+	$(PY) benchmarks/bench_materials.py --size demo --anchors roughness:0.4,0.8 \
+	  --settings hemi:400:1.5/hemi:128/hemi:8@16
 
 ## bench-full: the standard (demo-size) sweeps behind the README tables and the presets
 ##   (~2 h): writes docs/bench and operators/presets.json, plus the deeper per-method benchmarks

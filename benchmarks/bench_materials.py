@@ -26,9 +26,10 @@
    Cycles bakes with the metal (2 bounces, glossy ones included), next to the error of
    taking the metal wall as diffuse (what a bake without anchors can do).
 
-4. ``--metal-picture PNG``: the demo's bake (``DEMO``) with ``--anchors`` on a copy of the
-   room whose red wall is a Principled BSDF, and the preview before and after making that wall
-   a metal of roughness 0.5 next to Cycles renders of the same (``material_edit.compare_edit``).
+4. ``--metal-picture PNG``: the demo's bake (``DEMO``, or ``--picture-settings`` per vertex)
+   with ``--anchors`` on a copy of the room whose red wall is a Principled BSDF, and the
+   preview before and after making that wall a metal of roughness 0.5 next to Cycles renders
+   of the same at ``--truth-spp`` (``material_edit.compare_edit``).
 
 Usage: python benchmarks/bench_materials.py [--size test|demo]
            [--settings hemi:400:1.5/hemi:128/hemi:8@16,...] [--truth-spp 256] [--no-bake]
@@ -156,6 +157,31 @@ def update_timing(vertices: int, specs=("hemi:400:1.5", "hemi:128", "hemi:8"), r
 
     out["sun_rays_and_material_ms"] = timed(sun_rays_and_material)   # the default
     out["sun_rays_at_edges_and_material_ms"] = timed(lambda i: sun_rays_and_material(i, False))
+    # glossy anchors (2 per region), the first region a metal whose roughness changes
+    g = replace(t, roughness=(0.4, 0.8),
+                gloss=rng.random((S[1], regions, 2, vertices), dtype=np.float32))
+    out["anchors_mib"] = round(g.nbytes / 2**20, 1)
+
+    def finish(i):
+        return {"R0": (1.0, 0.4 + 0.008 * (i % 50))}
+
+    pg = g.project(sun)
+
+    def metal_only(i):
+        c, w = g.albedos(colours(i)), g.anchor_weights(finish(i))
+        return g.receiver_colors(c, w) / np.pi * g.combine(pg, c, anchors=w)
+
+    def sun_rays_at_edges_and_metal(i):
+        s, d = exact(i, False)
+        return g.shade(s, colours(i), direct=d, finish=finish(i))
+
+    def sun_rays_at_edges_no_metal(i):   # metallic 0: the anchors are not projected
+        s, d = exact(i, False)
+        return g.shade(s, colours(i), direct=d)
+
+    out["metal_and_colour_ms"] = timed(metal_only)
+    out["sun_rays_at_edges_and_metal_ms"] = timed(sun_rays_at_edges_and_metal)
+    out["sun_rays_at_edges_no_metal_ms"] = timed(sun_rays_at_edges_no_metal)
     return out
 
 
@@ -182,10 +208,12 @@ def _rays_receivers(vertices: int):
 DEMO = (("hemi:256:1.5", "hemi:16", "hemi:4"), 32)
 
 
-def metal_picture(png: str, size: str, anchors: str, finish: dict, spp: int) -> dict:
+def metal_picture(png: str, size: str, anchors: str, finish: dict, spp: int,
+                  entry: str | None = None) -> dict:
     """Bake the room as the demo does with glossy ``anchors`` and render the preview of the
     ``finish`` edit (``{material: {"metallic": m, "roughness": r}}``) next to Cycles at
-    ``spp`` samples (a metal's reflected sun is a caustic: 64 spp is mostly fireflies)."""
+    ``spp`` samples (a metal's reflected sun is a caustic: 64 spp is mostly fireflies).
+    ``entry`` ``DIRECT/ONE/TWO@SPP``: bake those settings per vertex instead."""
     import tempfile
 
     import bpy
@@ -202,8 +230,12 @@ def metal_picture(png: str, size: str, anchors: str, finish: dict, spp: int) -> 
 
     make_principled(bpy.data.materials["RedMaterial"])
     objs = [bpy.data.objects[n] for n in OBJECTS]
-    st = mb.MaterialBakeSettings(regions=["RedMaterial", "GreenMaterial"], directions=DEMO[0],
-                                 samples=DEMO[1], domain="CORNER", anchors=anchors)
+    dirs, bake_spp, domain = DEMO[0], DEMO[1], "CORNER"
+    if entry:
+        dirs, bake_spp = entry.split("@")
+        dirs, bake_spp, domain = tuple(dirs.split("/")), int(bake_spp), "POINT"
+    st = mb.MaterialBakeSettings(regions=["RedMaterial", "GreenMaterial"], directions=dirs,
+                                 samples=bake_spp, domain=domain, anchors=anchors)
     with tempfile.TemporaryDirectory() as tmp:
         out = run(material_edit.bake_job(scene, objs, st, tmp))
         cmp = material_edit.compare_edit(scene, out.tensors, {}, png, spp, finish=finish)
@@ -224,12 +256,14 @@ def main(argv=None):
                     help="glossy anchors of every setting's bake (and the metal edits)")
     ap.add_argument("--metal-picture", metavar="PNG",
                     help="only the picture of a metal edit (with --anchors, default 0.4,0.8)")
+    ap.add_argument("--picture-settings", metavar="DIRECT/ONE/TWO@SPP",
+                    help="the picture's bake, per vertex (default: the demo's, per corner)")
     args = ap.parse_args(argv)
     if args.metal_picture:
         anchors = args.anchors if args.anchors != "diffuse" else "roughness:0.4,0.8"
         print(metal_picture(args.metal_picture, args.size, anchors,
                             {"RedMaterial": {"metallic": 1.0, "roughness": 0.5}},
-                            args.truth_spp), flush=True)
+                            args.truth_spp, args.picture_settings), flush=True)
         return
 
     print("update time (median of 50, ms):", update_timing(args.vertices), flush=True)

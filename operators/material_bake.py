@@ -349,7 +349,9 @@ class MaterialBakeSettings:
 
     regions : editable material names; anchors : "diffuse" (colour edits) or
     "roughness:R1,R2,..." (also metallic / roughness edits: a glossy anchor per region and
-    roughness, :mod:`..lt_addon.transport.ptt`);
+    roughness, :mod:`..lt_addon.transport.ptt`); anchor_samples : Cycles samples of the
+    glossy anchors' bakes (a metal's reflected sun is a caustic: noisier than the diffuse
+    bounce terms);
     bounces : 1 or 2; directions : specs of the direct, one- and two-bounce direction sets
     (``hemi:N[:P]``); samples : Cycles samples per vertex for the bounce terms (the direct term
     takes 1: exact under a hard Sun); seed : Cycles seed of every term; domain : "POINT" (a
@@ -362,6 +364,7 @@ class MaterialBakeSettings:
 
     regions: list = field(default_factory=list)
     anchors: str = "diffuse"
+    anchor_samples: int = 64
     bounces: int = 2
     directions: tuple = ("hemi:400:1.5", "hemi:128", "hemi:8")
     samples: int = 16
@@ -380,8 +383,9 @@ class MaterialBakeSettings:
             raise BakeInputError(str(exc)) from None
         if self.bounces not in (1, 2):
             raise BakeInputError(f"bounces must be 1 or 2, got {self.bounces}")
-        if self.samples < 1:
-            raise BakeInputError(f"samples must be >= 1, got {self.samples}")
+        if self.samples < 1 or self.anchor_samples < 1:
+            raise BakeInputError(f"samples must be >= 1, got {self.samples} and "
+                                 f"{self.anchor_samples} for the glossy anchors")
         if not 0.0 <= self.smoothing <= 20.0:
             raise BakeInputError(f"smoothing must be 0..20 receiver spacings, got "
                                  f"{self.smoothing}")
@@ -481,13 +485,15 @@ def bake_material_chunks(scene, objects, settings: MaterialBakeSettings, chunks,
         scene.render.threads_mode, scene.render.threads = "FIXED", int(threads)
     cycles = 0.0
     with GatedMaterials(scene, settings.regions, gloss=bool(roughness)) as gates:
-        for direct in (True, False):
-            mine = [c for c in chunks if (c.kind == "direct") == direct]
+        group = {"direct": 0, "gloss": 2}
+        for g, spp in enumerate((1, settings.samples, settings.anchor_samples)):
+            mine = [c for c in chunks if group.get(c.kind, 1) == g]
             if not mine:
                 continue
+            direct = g == 0
             kw = ({} if direct else {"passes": "indirect"})
-            with EnvironmentBake(scene, objects, None, 1 if direct else settings.samples,
-                                 0 if direct else settings.bounces, (8, 16),
+            with EnvironmentBake(scene, objects, None, spp, 0 if direct else settings.bounces,
+                                 (8, 16),
                                  mode="irradiance", seed=settings.seed, world_sampling="none",
                                  domain=settings.domain, **kw) as session:
                 for c in mine:
@@ -555,7 +561,8 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
     K = len(settings.roughness)
     S1 = d1.size if settings.bounces >= 1 else 0
     S2 = d2.size if settings.bounces >= 2 else 0
-    floats = V * (d0.size + 3 * R1 * S1 + (R1 - 1) * K * S1 + 3 * R1 * R1 * S2)
+    # the glossy chunks arrive in RGB (3 values) and are averaged only when assembled
+    floats = V * (d0.size + 3 * R1 * S1 + 3 * (R1 - 1) * K * S1 + 3 * R1 * R1 * S2)
     check_memory(floats * 4 * 2, f"{V} vertices x {floats // max(V, 1)} term values",
                  "use fewer regions or coarser direction sets")
     plan = material_chunks(settings, (d0.size, S1, S2))
@@ -636,6 +643,7 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
         chunks["distributed"] = distributed
     meta = {"anchors": settings.anchors, "bounces": settings.bounces, "domain": settings.domain,
             "samples": settings.samples, "seed": settings.seed, "bake_calls": total,
+            "anchor_samples": settings.anchor_samples if K else None,
             "seconds": {k: round(v, 3) for k, v in seconds.items()},
             "cycles_seconds": round(cycles, 3),
             "bake_seconds": round(time.perf_counter() - started, 3), "chunks": chunks,
@@ -655,8 +663,8 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
 
 def bounce_terms(scene, tensors, smoothing: float, of: int | None = None):
     """Generator (Progress per one-bounce direction; with ``of``, the finished bake's
-    ``of / of`` so that a progress bar does not start again): returns ``tensors`` with smoothed bounce
-    terms and a fitted second-bounce composition
+    ``of / of`` so that a progress bar does not start again): returns ``tensors`` with
+    smoothed bounce terms and a fitted second-bounce composition
     (:func:`..lt_addon.transport.ptt.with_bounce_transfer`); the receivers' positions and
     normals, and the exact direct light at the one-bounce directions, come from a
     :class:`.direct_rays.ReceiverRays` of the scene (a ray per receiver and direction). When
@@ -830,6 +838,7 @@ def materials_job(scene, objects, settings: MaterialBakeSettings, out_dir: str,
               "finish": {k: [round(float(x), 4) for x in v]
                          for k, v in file_finish(tensors).items()},
               "bounces": settings.bounces, "samples": settings.samples, "seed": settings.seed,
+              "anchor_samples": settings.anchor_samples if settings.roughness else None,
               "directions": {"direct": d0.spec, "one_bounce": d1.spec, "two_bounce": d2.spec},
               "bake_calls": tensors.metadata["bake_calls"],
               "bytes": {"tensors": tensors.nbytes},

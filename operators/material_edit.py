@@ -162,7 +162,8 @@ def compare_edit(scene, tensors, edits: dict, out_png: str, samples: int = 64,
         raise BakeInputError("the comparison needs a scene camera and a Sun lamp")
     cyc = scene.cycles
     saved = [(cyc, k, getattr(cyc, k)) for k in ("max_bounces", "diffuse_bounces",
-                                                  "glossy_bounces", "transmission_bounces")]
+                                                  "glossy_bounces", "transmission_bounces",
+                                                  "sample_clamp_direct", "sample_clamp_indirect")]
     res = (scene.render.resolution_x, scene.render.resolution_y,
            scene.render.resolution_percentage)
     world, render = scene.world, _saved_render_settings(scene)
@@ -192,6 +193,8 @@ def compare_edit(scene, tensors, edits: dict, out_png: str, samples: int = 64,
             o.hide_render = True
         cyc.max_bounces = cyc.diffuse_bounces = tensors.bounces
         cyc.glossy_bounces = cyc.transmission_bounces = 0
+        # unclamped, as the bake's truths: a metal's caustic is what a clamp would cut
+        cyc.sample_clamp_direct = cyc.sample_clamp_indirect = 0.0
         data.energy, data.angle = light.strength, math.radians(light.angle_deg)
         data.color = light.color
         sun.rotation_euler = (-Vector(light.direction)).to_track_quat("-Z", "Y").to_euler()
@@ -290,10 +293,13 @@ class RELIGHT_OT_bake_materials(_ModalBake, bpy.types.Operator):
         if not regions:
             raise BakeInputError("mark at least one material Editable in the Material Edits "
                                  "panel")
-        rough = props.material_anchors.replace(" ", "")
+        import re
+
+        rough = ",".join(v for v in re.split(r"[,\s]+", props.material_anchors) if v)
         settings = material_bake.MaterialBakeSettings(
             regions=regions, bounces=props.material_bounces, samples=props.material_samples,
             anchors=f"roughness:{rough}" if rough else "diffuse",
+            anchor_samples=props.material_anchor_samples,
             domain="CORNER" if props.material_per_corner else "POINT",
             smoothing=props.material_smoothing,
             directions=(f"hemi:{props.material_directions}:1.5",
@@ -306,7 +312,7 @@ class RELIGHT_OT_bake_materials(_ModalBake, bpy.types.Operator):
             args += [a for r in regions for a in ("--region", r)]
             return self._external(context, "bake-materials", args + [
                 "--bounces", str(settings.bounces), "--samples", str(settings.samples),
-                "--anchors", settings.anchors,
+                "--anchors", settings.anchors, "--anchor-samples", str(settings.anchor_samples),
                 "--directions", d0, "--one-bounce-directions", d1, "--two-bounce-directions",
                 d2, "--smoothing", f"{settings.smoothing:g}"]
                 + (["--per-corner"] if settings.domain == "CORNER" else []))

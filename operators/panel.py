@@ -219,8 +219,9 @@ class VIEW3D_PT_relight_materials(_RelightSubPanel, bpy.types.Panel):
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
-        from .material_bake import finish_sockets, material_colour_socket
-        from .material_edit import SUMMARY_KEY, scene_bakes
+        from .blend_files import object_bakes
+        from .material_bake import KIND, finish_sockets, material_colour_socket
+        from .material_edit import SUMMARY_KEY
 
         layout, props = self.layout, context.scene.relight
         meshes = [o for o in context.selected_objects if o.type == "MESH"]
@@ -229,7 +230,10 @@ class VIEW3D_PT_relight_materials(_RelightSubPanel, bpy.types.Panel):
         if not mats:
             layout.label(text="Select the meshes that receive light")
         # metallic / roughness are editable where a bake has glossy anchors for the material
-        glossy = {r for _, t in scene_bakes(context.scene) if t.roughness for r in t.regions}
+        # (from the bake records: drawing loads no file)
+        glossy = {r for o in context.scene.objects if o.type == "MESH" for b in object_bakes(o)
+                  if b.get("kind") == KIND and b.get("anchors", "diffuse") != "diffuse"
+                  for r in b.get("regions", ())}
         col = layout.column(align=True)
         for mat in mats:
             row = col.row(align=True)
@@ -252,6 +256,8 @@ class VIEW3D_PT_relight_materials(_RelightSubPanel, bpy.types.Panel):
         if props.material_bounces >= 2:
             col.prop(props, "material_two_directions")
         col.prop(props, "material_anchors")
+        if props.material_anchors.strip():
+            col.prop(props, "material_anchor_samples")
         col.prop(props, "material_smoothing")
         _run_on(layout, props)
         layout.operator("relight.bake_materials", icon="RENDER_STILL")

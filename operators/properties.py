@@ -251,6 +251,10 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
                     "material is also baked as a metal, so its Metallic and Roughness can be "
                     "edited live (one more one-bounce bake per material, value and direction). "
                     "Empty: colour edits only")
+    material_anchor_samples: IntProperty(
+        name="Anchor Samples", default=64, min=1, max=65536,
+        description="Cycles samples of the glossy anchors' bakes (a metal's reflected sun is "
+                    "noisier than diffuse light)")
     material_smoothing: FloatProperty(
         name="Smoothing", default=2.0, min=0.0, max=20.0,
         description="Average the bounce terms over this many vertex spacings after the bake "

@@ -90,7 +90,8 @@ def parse_anchors(spec: str) -> tuple:
         raise ValueError(f"roughness anchors must be numbers, got {values!r}") from None
     if not rho or len(rho) > MAX_ANCHORS:
         raise ValueError(f"give 1..{MAX_ANCHORS} roughness anchors, got {len(rho)}")
-    if rho[0] < 0.05 or rho[-1] > 1.0 or len(set(rho)) != len(rho):
+    if (not np.all(np.isfinite(rho)) or rho[0] < 0.05 or rho[-1] > 1.0
+            or len(set(rho)) != len(rho)):
         raise ValueError(f"roughness anchors must be distinct values in 0.05..1 (below 0.05 "
                          f"a metal is a mirror the bake's noise cannot resolve), got {values!r}")
     return tuple(rho)
@@ -153,13 +154,15 @@ class ProjectedLight:
     """The terms contracted with one lighting, channel first: direct (3, V), one (3, R+1, V),
     two (3, R+1, R+1, V), float32 irradiance in W/m^2 (one / two may have zero regions);
     with glossy anchors ``gloss`` (3, R, K, V) and its second bounce composed ``gloss_two``
-    (3, R, K, R+1, V) (None without the composition)."""
+    (3, R, K, R+1, V) (None without the composition; ``gloss_covers`` (R, R+1) bool: the pairs
+    ``r -> r2`` it composes)."""
 
     direct: np.ndarray
     one: np.ndarray
     two: np.ndarray
     gloss: np.ndarray | None = None
     gloss_two: np.ndarray | None = None
+    gloss_covers: np.ndarray | None = None
 
 
 @dataclass
@@ -306,8 +309,11 @@ class TransferTensors:
         return anchor_weights(self.roughness, mr[:, 0], mr[:, 1])
 
     # -- relighting --------------------------------------------------------------------------
-    def project(self, light, direct=None, compose: bool = True) -> ProjectedLight:
-        """Contract every term with ``light`` (a :class:`Sun` or :class:`Environment`).
+    def project(self, light, direct=None, compose: bool = True,
+                gloss: bool = True) -> ProjectedLight:
+        """Contract every term with ``light`` (a :class:`Sun` or :class:`Environment`);
+        ``gloss=False`` leaves the glossy anchors out (no region is metallic: half the
+        update at 13K vertices).
 
         With a :attr:`bounce` transfer (and ``compose``) the two-bounce light is composed from
         the contracted one-bounce light (:meth:`.BounceTransfer.compose`); ``compose=False``
@@ -353,20 +359,23 @@ class TransferTensors:
             if composed:
                 cov = self.bounce.covers()
                 two[:, cov] = self.bounce.compose(one)[:, cov]
-        gloss = gloss_two = None
-        if self.gloss is not None:
+        want_gloss, gloss = gloss, None
+        gloss_two = covers = None
+        if self.gloss is not None and want_gloss:
             R, K = self.gloss.shape[1:3]
             nz = np.nonzero(np.any(w1 != 0, axis=1))[0]
             gloss = np.zeros((3, R * K, V), np.float32)
             if len(nz):   # white anchors: one channel, the light's colour per channel
                 gloss[:] = (w1[nz].T @ self.gloss[nz].reshape(len(nz), -1)).reshape(3, R * K, V)
-            if compose and self.bounce is not None:
+            covers = np.zeros((R, R1), bool)
+            if compose and self.bounce is not None and self.two.size:
                 src = np.repeat(np.arange(1, R + 1), K)
-                gloss_two = self.bounce.compose_sources(
-                    gloss, self.bounce.source_scale(src)).reshape(3, R, K, R1, V)
+                scale = self.bounce.source_scale(src)
+                gloss_two = self.bounce.compose_sources(gloss, scale).reshape(3, R, K, R1, V)
+                covers = scale.reshape(R, K, R1)[:, 0] != 0
             gloss = gloss.reshape(3, R, K, V)
         return ProjectedLight(np.ascontiguousarray(direct, np.float32), one, two, gloss,
-                              gloss_two)
+                              gloss_two, covers)
 
     def combine(self, projected: ProjectedLight, albedos: np.ndarray,
                 orders: tuple = (0, 1, 2), anchors: np.ndarray | None = None) -> np.ndarray:
@@ -375,28 +384,39 @@ class TransferTensors:
         all diffuse); ``orders`` picks which path orders to sum (0 direct, 1, 2).
 
         A region of metallic ``m`` reflects ``(1 - m)`` of its colour diffusely: that scales
-        its diffuse one-bounce term and the pairs it starts, and ``m`` spreads over its glossy
-        anchors. As the *second* surface of a pair it reflects its whole colour diffusely: the
-        anchors hold no glossy second bounce, and taking it as diffuse came closer to Cycles
-        than leaving it out (measured on the demo room, 7 held-out suns: both walls a white
-        metal of roughness 0.5, 0.083 against 0.090; the other metal edits equal or better)."""
+        its diffuse one-bounce term and the pairs it starts whose glossy second bounce is
+        composed (``projected.gloss_covers``; a pair that is not, without the composition,
+        keeps the diffuse term at the whole colour: its light as if the metal were diffuse),
+        and ``m`` spreads over its glossy anchors. As the *second* surface of a pair it
+        reflects its whole colour diffusely: the anchors hold no glossy second bounce, and
+        taking it as diffuse came closer to Cycles than leaving it out (measured on the demo
+        room, 7 held-out suns: both walls a white metal of roughness 0.5, 0.083 against
+        0.090; the other metal edits equal or better)."""
         c = np.asarray(albedos, dtype=np.float32)
         cd, ca = self._coefficients(c, anchors)
+        if ca is not None and projected.gloss is None:
+            raise ValueError("a metallic region needs its glossy anchors projected "
+                             "(project(..., gloss=True))")
         E = projected.direct.copy() if 0 in orders else np.zeros_like(projected.direct)
         if 1 in orders and projected.one.size:
             E += np.einsum("rc,crv->cv", cd, projected.one)
-            if ca is not None and projected.gloss is not None:
+            if ca is not None:
                 E += np.einsum("rkc,crkv->cv", ca, projected.gloss)
         if 2 in orders and projected.two.size:
-            pair = cd[:, None, :] * c[None, :, :]            # (R+1, R+1, 3)
+            first = np.repeat(cd[:, None, :], len(c), axis=1)     # (R+1, R+1, 3)
+            if ca is not None:   # pairs whose glossy light is not composed: as diffuse
+                lost = ~projected.gloss_covers
+                first[1:][lost] = np.repeat(c[1:, None, :], len(c), axis=1)[lost]
+            pair = first * c[None, :, :]
             E += np.einsum("abc,cabv->cv", pair, projected.two)
             if ca is not None and projected.gloss_two is not None:
                 E += np.einsum("rkc,sc,crksv->cv", ca, c, projected.gloss_two)
         return np.ascontiguousarray(E.T)
 
     def _coefficients(self, c: np.ndarray, anchors):
-        """Diffuse coefficients (R+1, 3) and glossy ones (R, K, 3) (None without anchors)."""
-        if anchors is None or not np.size(anchors):
+        """Diffuse coefficients (R+1, 3) and glossy ones (R, K, 3) (None without anchors or
+        with every weight 0)."""
+        if anchors is None or not np.any(anchors):
             return c, None
         a = np.asarray(anchors, np.float32)
         cd = c.copy()
@@ -408,8 +428,9 @@ class TransferTensors:
         """E (V, 3) float32 in W/m^2 under ``light`` with the materials ``edits`` (colours)
         and ``finish`` (``{region: (metallic, roughness)}``; ``direct``: an exact direct term,
         see :meth:`project`)."""
-        return self.combine(self.project(light, direct), self.albedos(edits), orders,
-                            self.anchor_weights(finish))
+        a = self.anchor_weights(finish)
+        return self.combine(self.project(light, direct, gloss=bool(np.any(a))),
+                            self.albedos(edits), orders, a)
 
     def receiver_colors(self, albedos: np.ndarray, anchors=None) -> np.ndarray:
         """Each vertex's own diffuse colour (V, 3) with the edited albedos applied (times
@@ -426,12 +447,14 @@ class TransferTensors:
         metal receiver's own glossy reflection is the renderer's)."""
         c, a = self.albedos(edits), self.anchor_weights(finish)
         return (self.receiver_colors(c, a) / np.float32(np.pi)
-                * self.combine(self.project(light, direct), c, anchors=a))
+                * self.combine(self.project(light, direct, gloss=bool(np.any(a))), c,
+                               anchors=a))
 
     def term_shares(self, light, edits: dict | None = None, direct=None,
                     finish: dict | None = None) -> dict:
         """Each path order's share of the summed irradiance (over vertices and RGB)."""
-        p, c, a = self.project(light, direct), self.albedos(edits), self.anchor_weights(finish)
+        c, a = self.albedos(edits), self.anchor_weights(finish)
+        p = self.project(light, direct, gloss=bool(np.any(a)))
         parts = [float(self.combine(p, c, (k,), a).sum()) for k in (0, 1, 2)]
         total = sum(parts) or 1.0
         return {"direct": parts[0] / total, "one_bounce": parts[1] / total,
@@ -448,7 +471,9 @@ class TransferTensors:
     # -- files -------------------------------------------------------------------------------
     def save(self, path: str) -> None:
         """Write an .npz (float32 terms, JSON header) atomically."""
-        header = {"format": FORMAT, "version": VERSION, "specs": list(self.specs),
+        # a file without glossy anchors stays version 2: older builds read it
+        header = {"format": FORMAT, "version": VERSION if self.gloss is not None else 2,
+                  "specs": list(self.specs),
                   "regions": list(self.regions), "objects": [list(o) for o in self.objects],
                   "roughness": list(self.roughness), "metadata": self.metadata}
         extra = {"base_finish": self.base_finish}

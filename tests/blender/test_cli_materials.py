@@ -164,6 +164,7 @@ def test_glossy_anchors_from_the_cli_edit_metallic_and_roughness(tmp_path):
     assert "anchors roughness:0.5" in r.stdout
     rep = json.loads((tmp_path / "room_relight" / "Floor_materials.json").read_text())
     assert rep["bake_calls"] == 16 + 4 * 2 + 4 and rep["anchors"] == "roughness:0.5"
+    assert rep["anchor_samples"] == 64
     out = tmp_path / "m.npy"
     png = tmp_path / "metal.png"
     r = relight("relight-materials", blend, "--object", "Floor", "--sun", "30,50",

@@ -290,7 +290,8 @@ def glossy_room():
     objs = [bpy.data.objects[n] for n in OBJECTS]
     settings = mb.MaterialBakeSettings(regions=["RedMaterial", "GreenMaterial"],
                                        anchors="roughness:0.8,0.4", bounces=1,
-                                       directions=(SPEC, SPEC, SPEC), samples=SAMPLES)
+                                       directions=(SPEC, SPEC, SPEC), samples=SAMPLES,
+                                       anchor_samples=SAMPLES)
     tensors = run(mb.bake_materials(scene, objs, settings))
     d = parse_directions(SPEC).directions
     return scene, objs, tensors, d[int(np.argmax(d[:, 2]))]

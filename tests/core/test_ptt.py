@@ -25,10 +25,12 @@ def make(V=40, regions=2, seed=0, specs=SPECS):
         [("a", V - 10), ("b", 10)], {"note": "synthetic"})
 
 
-def brute_force(t, w, c, c_second=None):
+def brute_force(t, w, c, c_second=None, c_one=None):
     """E (V, 3) by explicit loops over directions, regions and pairs (``c_second``: the
-    coefficients of a pair's second surface, default ``c``)."""
+    coefficients of a pair's second surface, ``c_one`` of the one-bounce terms; default
+    ``c``)."""
     c2 = c if c_second is None else c_second
+    c1 = c if c_one is None else c_one
     w0, w1, w2 = w
     E = np.zeros((t.vertices, 3))
     R1 = len(t.regions) + 1
@@ -37,7 +39,7 @@ def brute_force(t, w, c, c_second=None):
             E[:, ch] += w0[s, ch] * t.direct[s]
         for r in range(R1):
             for s in range(t.one.shape[0]):
-                E[:, ch] += c[r, ch] * w1[s, ch] * t.one[s, ch, r]
+                E[:, ch] += c1[r, ch] * w1[s, ch] * t.one[s, ch, r]
         for a in range(R1):
             for b in range(R1):
                 for s in range(t.two.shape[0]):
@@ -159,7 +161,7 @@ def test_anchor_weights_interpolate_roughness_and_scale_by_metallic():
     assert ptt.parse_anchors("diffuse") == ()
     assert ptt.parse_anchors("roughness:0.9,0.2") == (0.2, 0.9)
     for bad in ("roughness:", "roughness:0.2,0.2", "roughness:0.01", "rough:0.5",
-                "roughness:0.1,0.2,0.3,0.4,0.5", "roughness:x"):
+                "roughness:0.1,0.2,0.3,0.4,0.5", "roughness:x", "roughness:nan,0.5"):
         with pytest.raises(ValueError):
             ptt.parse_anchors(bad)
 
@@ -179,7 +181,9 @@ def test_a_metallic_region_trades_its_diffuse_terms_for_its_glossy_anchors(light
     m, k = 0.25, (0.75, 0.25)
     cd = c.copy()
     cd[1] *= 1 - m
-    expect = brute_force(t, w, cd, c)   # a second surface reflects its whole colour
+    # without the composition the pairs a metal starts keep their diffuse light, and a second
+    # surface reflects its whole colour
+    expect = brute_force(t, w, c, c_one=cd)
     for ch in range(3):
         for s in range(t.one.shape[0]):
             for j in range(2):
@@ -215,7 +219,9 @@ def test_glossy_second_bounce_is_composed_through_the_transfer(tmp_path):
     np.testing.assert_allclose(got, want, rtol=1e-6)
     assert not np.any(p.gloss_two[:, :, :, 2])        # region 2 is never composed into
     # metal region 1: its glossy light's second bounce comes in, the diffuse pairs it starts
-    # go; as a second surface it stays diffuse with its colour
+    # go where that is composed (into regions 0 and 1, not 2: they stay, as diffuse); as a
+    # second surface it stays diffuse with its colour
+    np.testing.assert_array_equal(p.gloss_covers, [[True, True, False], [True, True, False]])
     c = t.albedos({"M0": (0.9, 0.5, 0.2)})
     a = t.anchor_weights({"M0": (1.0, 0.6)})
     two = t.combine(p, c, (2,), a)
@@ -223,12 +229,16 @@ def test_glossy_second_bounce_is_composed_through_the_transfer(tmp_path):
     for ch in range(3):
         for r1 in range(R1):
             for r2 in range(R1):
-                first = 0.0 if r1 == 1 else c[r1, ch]
+                first = 0.0 if r1 == 1 and r2 != 2 else c[r1, ch]
                 want[:, ch] += first * c[r2, ch] * p.two[ch, r1, r2]
             want[:, ch] += c[1, ch] * c[r1, ch] * p.gloss_two[ch, 0, 1, r1]
     np.testing.assert_allclose(two, want, rtol=1e-5)
-    # files keep the anchors
+    # files keep the anchors (version 3; without anchors a file stays version 2)
     t.save(str(tmp_path / "g.npz"))
+    make().save(str(tmp_path / "d.npz"))
+    for name, version in (("g", 3), ("d", 2)):
+        with np.load(str(tmp_path / f"{name}.npz")) as z:
+            assert json.loads(bytes(z["header"]).decode())["version"] == version
     back = ptt.TransferTensors.load(str(tmp_path / "g.npz"))
     assert back.roughness == (0.2, 0.6)
     np.testing.assert_array_equal(back.gloss, t.gloss)
