@@ -209,11 +209,12 @@ DEMO = (("hemi:256:1.5", "hemi:16", "hemi:4"), 32)
 
 
 def metal_picture(png: str, size: str, anchors: str, finish: dict, spp: int,
-                  entry: str | None = None) -> dict:
+                  entry: str | None = None, sun: tuple | None = None) -> dict:
     """Bake the room as the demo does with glossy ``anchors`` and render the preview of the
     ``finish`` edit (``{material: {"metallic": m, "roughness": r}}``) next to Cycles at
     ``spp`` samples (a metal's reflected sun is a caustic: 64 spp is mostly fireflies).
-    ``entry`` ``DIRECT/ONE/TWO@SPP``: bake those settings per vertex instead."""
+    ``entry`` ``DIRECT/ONE/TWO@SPP``: bake those settings per vertex instead; ``sun``
+    ``(az, el)`` degrees: the scene's Sun lamp turned there first."""
     import tempfile
 
     import bpy
@@ -229,6 +230,14 @@ def metal_picture(png: str, size: str, anchors: str, finish: dict, spp: int,
     from relightable_textures.samples.scene_setup import make_principled
 
     make_principled(bpy.data.materials["RedMaterial"])
+    if sun is not None:
+        from mathutils import Vector
+
+        from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
+
+        d = Vector(direction_from_az_el(*sun))
+        for lamp in (o for o in scene.objects if o.type == "LIGHT" and o.data.type == "SUN"):
+            lamp.rotation_euler = (-d).to_track_quat("-Z", "Y").to_euler()
     objs = [bpy.data.objects[n] for n in OBJECTS]
     dirs, bake_spp, domain = DEMO[0], DEMO[1], "CORNER"
     if entry:
@@ -256,6 +265,8 @@ def main(argv=None):
                     help="glossy anchors of every setting's bake (and the metal edits)")
     ap.add_argument("--metal-picture", metavar="PNG",
                     help="only the picture of a metal edit (with --anchors, default 0.4,0.8)")
+    ap.add_argument("--picture-sun", metavar="AZ,EL",
+                    help="the picture's Sun (default: the scene's, 45 degrees up)")
     ap.add_argument("--picture-settings", metavar="DIRECT/ONE/TWO@SPP",
                     help="the picture's bake, per vertex (default: the demo's, per corner)")
     args = ap.parse_args(argv)
@@ -263,7 +274,9 @@ def main(argv=None):
         anchors = args.anchors if args.anchors != "diffuse" else "roughness:0.4,0.8"
         print(metal_picture(args.metal_picture, args.size, anchors,
                             {"RedMaterial": {"metallic": 1.0, "roughness": 0.5}},
-                            args.truth_spp, args.picture_settings), flush=True)
+                            args.truth_spp, args.picture_settings,
+                            tuple(float(v) for v in args.picture_sun.split(","))
+                            if args.picture_sun else None), flush=True)
         return
 
     print("update time (median of 50, ms):", update_timing(args.vertices), flush=True)

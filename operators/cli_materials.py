@@ -64,7 +64,7 @@ def add_parsers(sub) -> None:
                         "material: one more one-bounce bake per region, anchor and direction, "
                         "the region reflecting as a metal of that roughness; a roughness "
                         "between anchors blends them). Below about 0.4 a metal's reflected "
-                        "sun is a caustic: raise --samples")
+                        "sun is a caustic: raise --anchor-samples")
     p.add_argument("--anchor-samples", type=int, default=64, metavar="N",
                    help="Cycles samples of the glossy anchors' bakes (default 64; measured on "
                         "the demo room: 16 left the metal's light on the floor blotchy)")

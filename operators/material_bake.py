@@ -84,14 +84,9 @@ def finish_sockets(mat) -> dict:
 def material_finish(mat) -> tuple:
     """``(metallic, roughness)`` of the material's Principled BSDF (unlinked inputs; a linked
     one counts as 0 / 0.5), ``(0, 0.5)`` for anything else: the finish glossy anchors edit."""
-    node = material_bsdf(mat)
-    if node is None or node.bl_idname != "ShaderNodeBsdfPrincipled":
-        return (0.0, 0.5)
-    out = []
-    for name, default in (("Metallic", 0.0), ("Roughness", 0.5)):
-        sock = node.inputs[name]
-        out.append(default if sock.is_linked else float(sock.default_value))
-    return tuple(out)
+    knobs = finish_sockets(mat)
+    return tuple(float(knobs[k].default_value) if k in knobs else default
+                 for k, default in (("metallic", 0.0), ("roughness", 0.5)))
 
 
 def material_colour(mat) -> tuple[np.ndarray, str | None]:

@@ -16,6 +16,7 @@ whose Metallic and Roughness re-shade the preview too) is black in it.
 from __future__ import annotations
 
 import os
+import re
 import time
 
 import bpy
@@ -293,8 +294,6 @@ class RELIGHT_OT_bake_materials(_ModalBake, bpy.types.Operator):
         if not regions:
             raise BakeInputError("mark at least one material Editable in the Material Edits "
                                  "panel")
-        import re
-
         rough = ",".join(v for v in re.split(r"[,\s]+", props.material_anchors) if v)
         settings = material_bake.MaterialBakeSettings(
             regions=regions, bounces=props.material_bounces, samples=props.material_samples,

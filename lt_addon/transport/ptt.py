@@ -359,23 +359,22 @@ class TransferTensors:
             if composed:
                 cov = self.bounce.covers()
                 two[:, cov] = self.bounce.compose(one)[:, cov]
-        want_gloss, gloss = gloss, None
-        gloss_two = covers = None
-        if self.gloss is not None and want_gloss:
+        g_one = g_two = covers = None
+        if self.gloss is not None and gloss:
             R, K = self.gloss.shape[1:3]
             nz = np.nonzero(np.any(w1 != 0, axis=1))[0]
-            gloss = np.zeros((3, R * K, V), np.float32)
+            g_one = np.zeros((3, R * K, V), np.float32)
             if len(nz):   # white anchors: one channel, the light's colour per channel
-                gloss[:] = (w1[nz].T @ self.gloss[nz].reshape(len(nz), -1)).reshape(3, R * K, V)
+                g_one[:] = (w1[nz].T @ self.gloss[nz].reshape(len(nz), -1)).reshape(3, R * K, V)
             covers = np.zeros((R, R1), bool)
             if compose and self.bounce is not None and self.two.size:
                 src = np.repeat(np.arange(1, R + 1), K)
                 scale = self.bounce.source_scale(src)
-                gloss_two = self.bounce.compose_sources(gloss, scale).reshape(3, R, K, R1, V)
+                g_two = self.bounce.compose_sources(g_one, scale).reshape(3, R, K, R1, V)
                 covers = scale.reshape(R, K, R1)[:, 0] != 0
-            gloss = gloss.reshape(3, R, K, V)
-        return ProjectedLight(np.ascontiguousarray(direct, np.float32), one, two, gloss,
-                              gloss_two, covers)
+            g_one = g_one.reshape(3, R, K, V)
+        return ProjectedLight(np.ascontiguousarray(direct, np.float32), one, two, g_one, g_two,
+                              covers)
 
     def combine(self, projected: ProjectedLight, albedos: np.ndarray,
                 orders: tuple = (0, 1, 2), anchors: np.ndarray | None = None) -> np.ndarray:
