@@ -19,11 +19,13 @@ Two measured facts about the per-vertex transfer tensors (:mod:`.ptt`) of the de
   times their albedo, summed over patches of ``r2``, times each patch's transfer to every
   receiver (Hasan et al. 2006's direct-to-indirect transfer at patch resolution). The transfer
   ``T`` (K, V) is fitted (ridge least squares) from the bake itself: at every one-bounce
-  direction, the exact direct light on each patch against the baked one-bounce term. The
-  composition came out 10-30 % low (the patches are coarser than the near field at a corner),
-  so a scale per region pair, fitted against the baked two-bounce term at its directions,
-  calibrates it. Measured at 7 held-out suns: the relative error of E went from 0.066 / 0.089
-  (file colours / both walls white) to 0.047 / 0.057 with both.
+  direction, the exact direct light on each patch against the baked one-bounce term, and at
+  every two-bounce direction the one-bounce light on each patch against the baked two-bounce
+  term (:func:`fit_transfer`). Fitted to direct light alone it composed 10-60 % low
+  (reflected light gathers in corners, direct light lies evenly); a scale per region pair,
+  fitted against the baked two-bounce term at its directions, calibrates what is left.
+  Measured at 7 held-out suns: the relative error of E went from 0.066 / 0.089 (file colours
+  / both walls white) to 0.047 / 0.057 with both (direct light alone in the fit).
 
 Shapes: V receivers, R+1 regions (0 fixed), K patches in all; units as in :mod:`.ptt`
 (irradiance per unit normal irradiance of the light).
@@ -59,6 +61,9 @@ MIN_EXPLAINED = 0.9
 SCALE_RANGE = (0.2, 5.0)
 #: Ridge weight of the transfer fit, relative to the mean diagonal of the normal matrix.
 RIDGE = 1e-2
+#: Weight of the two-bounce observations in the transfer fit, relative to equal total weight
+#: with the one-bounce ones (measured best 0.2-0.3 at 16 and 64 samples, :func:`fit_transfer`).
+TWO_WEIGHT = 0.3
 
 
 def smoothing_operator(positions: np.ndarray, normals: np.ndarray, spacings: float = SMOOTH_SPACINGS,
@@ -220,41 +225,81 @@ class BounceTransfer:
         return int(self.transfer.nbytes + self.patch.nbytes + self.source_albedo.nbytes)
 
 
+def _patch_sums(values: np.ndarray, patch: np.ndarray, K: int) -> np.ndarray:
+    """(..., V) -> (..., K): each patch's sum of ``values`` over its receivers."""
+    flat = values.reshape(-1, values.shape[-1])
+    out = np.stack([np.bincount(patch, weights=row, minlength=K) for row in flat])
+    return out.reshape(*values.shape[:-1], K)
+
+
 def fit_transfer(one: np.ndarray, direct_one: np.ndarray, patch: np.ndarray,
-                 patch_region: np.ndarray, source_albedo: np.ndarray, ridge: float = RIDGE):
-    """Fit ``T`` (K, V) float32 from the one-bounce term ``one`` (S1, 3, R+1, V) and the exact
-    direct term at its directions ``direct_one`` (S1, V) (visibility x cosine): per region r,
-    ``one[s, c, r] ~ P[s, c] @ T_r`` with ``P`` each patch's sum of albedo x direct light.
+                 patch_region: np.ndarray, source_albedo: np.ndarray, ridge: float = RIDGE,
+                 two: np.ndarray | None = None, one_at: np.ndarray | None = None,
+                 two_weight: float | None = None):
+    """Fit ``T`` (K, V) float32: the irradiance each patch's reflected light gives every
+    receiver.
+
+    Observations, per region r (its patches ``k``):
+
+    * the one-bounce term ``one`` (S1, 3, R+1, V) against the exact direct term at its
+      directions ``direct_one`` (S1, V) (visibility x cosine): ``one[s, c, r] ~ P[s, c] @ T_r``
+      with ``P`` each patch's sum of albedo x direct light;
+    * with ``two`` (S2, 3, R+1, R+1, V), the baked two-bounce term, and ``one_at`` (S2, 3,
+      R+1, V), the one-bounce light at its directions: ``two[s, c, r1, r] ~ Q[s, c, r1] @ T_r``
+      with ``Q`` each patch's sum of albedo x the light off ``r1``, weighted by
+      ``two_weight`` (default :data:`TWO_WEIGHT`) relative to both blocks weighing the same in
+      total. Direct light lies evenly over a lit patch; reflected light does not (it gathers
+      in the corners), and a ``T`` fitted to direct light alone composed the second bounce up
+      to 57 % low (demo room: calibration scales 1.01-1.57, 64 samples). Measured on the
+      demo room at the 7 held-out suns of ``benchmarks/bench_materials.py`` (two-bounce
+      part's error, of the norm of E, file colours / both walls white): at 16 samples 0.018 /
+      0.025 with direct light alone, 0.016 / 0.023 at weight 0.3, 0.018 / 0.026 at 1 (the
+      noisy two-bounce bake pulls too hard); at 64 samples 0.018 / 0.024, 0.015 / 0.021 at
+      0.3 (0.1-1: 0.015-0.017). Scales then 1.01-1.19.
+
     Ridge least squares in float64 with ``ridge`` x the mean diagonal added: that bounds the
     condition number of what is solved by ``1 + K_r / ridge`` (3,201 at 32 patches), so the
     solve is stable by construction and its condition says nothing about the fit. Returns
-    ``(T, explained)``: per region the fraction of the baked one-bounce energy the fit explains
-    (``1 - |B - A T|^2 / |B|^2`` over the directions, channels and receivers), which says
-    whether the patch model holds -- it does not when the region's reflected light does not
-    follow its patches' direct light (light from meshes that are not receivers, patches never
-    lit directly)."""
+    ``(T, explained, explained_two)``: per region the fraction of the baked one-bounce (and
+    two-bounce: empty without ``two``) energy the fit explains (``1 - |B - A T|^2 / |B|^2``),
+    which says whether the patch model holds -- it does not when the region's reflected light
+    does not follow its patches' light (light from meshes that are not receivers, patches
+    never lit directly)."""
     S1, C, R1, V = one.shape
     K = len(patch_region)
-    P = np.zeros((S1, C, K))
-    for s in range(S1):
-        for c in range(C):
-            P[s, c] = np.bincount(patch, weights=source_albedo[:, c] * direct_one[s], minlength=K)
+    P = _patch_sums(source_albedo.T[None, :, :] * np.asarray(direct_one, np.float64)[:, None, :],
+                    patch, K)                                                   # (S1, 3, K)
+    Q = None
+    if two is not None and one_at is not None and len(two):
+        Q = _patch_sums(source_albedo.T[None, :, None, :] * np.asarray(one_at, np.float64),
+                        patch, K)                                               # (S2, 3, R1, K)
     T = np.zeros((K, V), np.float32)
-    explained = {}
+    explained, explained_two = {}, {}
     for r in range(R1):
         ks = np.nonzero(patch_region == r)[0]
         if not len(ks):
             continue
         A = P[:, :, ks].reshape(S1 * C, len(ks))
         B = one[:, :, r, :].reshape(S1 * C, V).astype(np.float64)
-        G = A.T @ A
+        A_all, B_all = A, B
+        if Q is not None:
+            A2 = Q[:, :, :, ks].reshape(-1, len(ks))
+            B2 = two[:, :, :, r, :].reshape(-1, V).astype(np.float64)
+            if np.any(A2):   # equal total weight: rms(A) sqrt(rows) alike
+                k = (np.sqrt(np.mean(A * A) * len(A) / (np.mean(A2 * A2) * len(A2)))
+                     if np.any(A) else 1.0) * (TWO_WEIGHT if two_weight is None else two_weight)
+                A_all, B_all = np.concatenate([A, k * A2]), np.concatenate([B, k * B2])
+        G = A_all.T @ A_all
         lam = ridge * max(float(np.trace(G)) / len(ks), 1e-30)
         G += lam * np.eye(len(ks))
-        Tr = np.linalg.solve(G, A.T @ B)
+        Tr = np.linalg.solve(G, A_all.T @ B_all)
         T[ks] = Tr
         energy = float(np.sum(B * B))
         explained[r] = 1.0 - float(np.sum((B - A @ Tr) ** 2)) / energy if energy > 0 else 0.0
-    return T, explained
+        if A_all is not A:
+            e2 = float(np.sum(B2 * B2))
+            explained_two[r] = 1.0 - float(np.sum((B2 - A2 @ Tr) ** 2)) / e2 if e2 > 0 else 0.0
+    return T, explained, explained_two
 
 
 def calibrate(transfer: BounceTransfer, one_at: list, two: np.ndarray) -> np.ndarray:

@@ -553,11 +553,12 @@ def with_bounce_transfer(tensors: TransferTensors, positions: np.ndarray, normal
         albedo = np.ones((V, 3), np.float32)
         albedo[region == 0] = tensors.receiver_albedo[region == 0]
         patch, owner = bt.region_patches(positions, normals, region, R1, per_region)
-        T, explained = bt.fit_transfer(one, np.asarray(direct_one, np.float64), patch, owner,
-                                       albedo)
-        transfer = bt.BounceTransfer(patch, owner, T, albedo, np.ones((R1, R1)))
-        one_at = [out.project(Sun(tuple(w)), compose=False).one
+        one_at = [out.project(Sun(tuple(w)), compose=False, gloss=False).one
                   for w in out.direction_sets()[2].directions]
+        T, explained, explained_two = bt.fit_transfer(
+            one, np.asarray(direct_one, np.float64), patch, owner, albedo, two=two,
+            one_at=np.stack(one_at))
+        transfer = bt.BounceTransfer(patch, owner, T, albedo, np.ones((R1, R1)))
         scale = bt.calibrate(transfer, one_at, two)
         for r, e in explained.items():      # the patch model does not hold for this region
             if e < bt.MIN_EXPLAINED:
@@ -567,6 +568,8 @@ def with_bounce_transfer(tensors: TransferTensors, positions: np.ndarray, normal
         out.bounce = transfer if composed else None
         info.update({"patches": int(len(owner)), "patches_per_region": per_region,
                      "fit_explained": {str(k): round(v, 4) for k, v in explained.items()},
+                     "fit_explained_two": {str(k): round(v, 4)
+                                           for k, v in explained_two.items()},
                      "two_bounce_scale": np.round(scale, 4).tolist(),
                      "two_bounce": "composed" if composed else "blended (the patch fit did "
                                                                 "not hold)",

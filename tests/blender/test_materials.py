@@ -114,9 +114,11 @@ def test_the_suns_direct_light_by_rays_is_cycles_own_at_any_sun(room):
     bake -- exact under a hard sun, 1 spp -- at the baked directions and at suns between them,
     where blending D's 4 baked directions is far off. Allowed to differ (measured): at a baked
     direction one vertex, a corner where two walls' edges meet exactly (Cycles' answer there
-    is its intersection tie-break); at the 45-degree sun 5 of 350, a row of wall vertices the
-    back wall's top edge shadows exactly through, which Cycles lights by half (it samples each
-    face corner inside its face) and one ray per vertex lights or not."""
+    is its intersection tie-break). At the 45-degree sun the back wall's top edge shadows a
+    row of 5 wall vertices exactly through: Cycles lights them by half (each face corner's
+    ray starts on its own triangle, and the rounding splits them), and so do the rays, which
+    cast again from inside each corner's face next to a shadow edge (one ray per vertex lit
+    them fully)."""
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
     from relightable_textures.lt_addon.transport import ptt
     from relightable_textures.operators import material_bake as mb
@@ -133,11 +135,10 @@ def test_the_suns_direct_light_by_rays_is_cycles_own_at_any_sun(room):
         cycles = mb.truth_irradiance(scene, objs, {}, w, 0, 1)[:, 0]
         exact = rays.direct(w)
         off = np.abs(exact - cycles) > 1e-5
-        if (az, el) == (30.0, 45.0):   # the tie: lit here, half lit by Cycles
-            assert off.sum() == 5
-            np.testing.assert_allclose(cycles[off], exact[off] / 2, rtol=1e-5)
+        assert not off.any(), (az, el, np.nonzero(off))
+        if (az, el) == (30.0, 45.0):   # the tie: those corners were cast again
+            assert rays.ties > 0
             continue
-        assert not off.any()
         blended = tensors.irradiance(ptt.Sun(tuple(w)), zero, orders=(0,))[:, 0]
         assert rel(blended, cycles) > 0.1, (az, el)
 
@@ -236,8 +237,10 @@ def test_composed_second_bounce_follows_a_held_out_sun():
     (lt_addon/transport/bounce_transfer). At suns that are no baked direction the composed
     two-bounce light must be within 1.5x of the difference between two Cycles truths of it
     (2 bounces minus 1 bounce, both walls white), where blending the 4 baked directions is not:
-    measured (64 spp bake, 128 spp truths): at 10 degrees 0.021 vs 0.147, noise 0.028; at 65
-    degrees 0.036 vs 0.066, noise 0.033."""
+    measured (64 spp bake, 128 spp truths; relative to the truth's norm): at 10 degrees 0.85
+    vs 5.9, noise 1.10; at 65 degrees 0.50 vs 0.77, noise 0.39 (0.42 with the transfer fitted
+    to the one-bounce term alone: this room is too coarse to gain from the two-bounce
+    observations, the demo room gains, see bounce_transfer.fit_transfer)."""
     import bpy
 
     from relightable_textures import samples
