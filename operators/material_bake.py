@@ -19,6 +19,13 @@ bounces capped at 2 and the indirect pass only:
   light that took the second bounce (it is >= 0; measured: the two bakes of a floor's one-bounce
   light off a wall were equal to the last bit).
 
+Every light direction bakes with its own seed (:func:`direction_seed`; the same for every
+gate at that direction). With one seed for all, each vertex sees the same hemisphere samples
+at every sun, the noise is the same pattern at every direction, and blending neighbouring
+directions at a sun between them does not average it out. Measured on the demo room (16 spp,
+the bench's 7 held-out suns): the one-bounce part's error fell from 0.028 / 0.034 (file
+colours / white walls) to 0.026 / 0.031, at no cost.
+
 Measured (bpy 5.0.1, room test scene): the floor's indirect irradiance off the back wall alone
 was 0.0187 (x pi), the pair back wall <- floor added 0.0040; a wall cannot light itself (0).
 The materials' specular and textures are not modelled: the bake uses each material's base
@@ -349,7 +356,8 @@ class MaterialBakeSettings:
     bounce terms);
     bounces : 1 or 2; directions : specs of the direct, one- and two-bounce direction sets
     (``hemi:N[:P]``); samples : Cycles samples per vertex for the bounce terms (the direct term
-    takes 1: exact under a hard Sun); seed : Cycles seed of every term; domain : "POINT" (a
+    takes 1: exact under a hard Sun); seed : base of the Cycles seed of each direction
+    (:func:`direction_seed`); domain : "POINT" (a
     value per vertex) or "CORNER" (per face corner: hard edges stay hard, about 4x the data
     on quad meshes); smoothing : radius, in median receiver spacings, over which the bounce
     terms are averaged after the bake (0: off; :mod:`..lt_addon.transport.bounce_transfer`,
@@ -443,6 +451,12 @@ class MaterialChunk:
         return (len(self), V) if self.kind == "direct" else (len(self), V, 3)
 
 
+def direction_seed(seed: int, s: int) -> int:
+    """Cycles seed of direction ``s`` of a bake whose settings say ``seed``: a different one
+    per direction (see the module docstring), the same for every gate and process."""
+    return int((int(seed) * 1_000_003 + int(s)) % 2_147_483_647)
+
+
 def material_chunks(settings: MaterialBakeSettings, sizes: tuple) -> list:
     """The chunks of a material bake in the order one process bakes them (a gate change makes
     Cycles sync the shaders again, about 0.25 s a call here, a new direction does not: gates
@@ -498,6 +512,7 @@ def bake_material_chunks(scene, objects, settings: MaterialBakeSettings, chunks,
                         gates.set_gates(c.last, c.before)
                     rows = []
                     for s in range(c.start, c.stop):
+                        session.scene.cycles.seed = direction_seed(settings.seed, s)
                         e = np.pi * np.concatenate(
                             session.bake_sun_all(sets[c.kind].directions[s], 1.0, 0.0), axis=0)
                         rows.append(e[:, 0] if direct else e)   # E per unit irradiance
@@ -527,7 +542,8 @@ def material_chunk_cache(scene, objects, settings: MaterialBakeSettings, out_dir
 
     baked = {k: v for k, v in dataclasses.asdict(settings).items() if k != "smoothing"}
     key = {"stage": "materials", "scene": scene_key(scene, list(objects)),
-           "settings": baked, "chunk_directions": CHUNK_DIRECTIONS}
+           "settings": baked, "chunk_directions": CHUNK_DIRECTIONS,
+           "seeds": "per direction"}   # chunks of the one-seed bakes are not these
     folder = atomic.safe_name(objects[0].name) + "_materials"
     cache = ChunkCache(os.path.join(out_dir, CACHE_FOLDER, folder), key)
     cache.prune_others()
