@@ -9,7 +9,8 @@ casters (``mathutils.bvhtree``; not instances) and the receivers' points and nor
 one ray per lit receiver towards the sun (``rays`` over the disc of a sun wider than
 :data:`HARD_SUN_DEG`), or only where the baked directions around the sun disagree
 (:meth:`ReceiverRays.known_from`). Measured here (idle): 13K receivers in 9.1 ms, or 2.2 ms
-casting only where the baked directions disagree (544 rays).
+casting only where the baked directions disagree (544 rays); with the ties below 10.5 ms and
+3.4 ms (1,072 and 932 corners cast again; ``benchmarks/bench_materials.py --no-bake``).
 
 What Cycles bakes and this reproduces (checked against ``D`` at baked directions in the tests):
 a value per face corner at the vertex position with the corner's normal; per vertex
