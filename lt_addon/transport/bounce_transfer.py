@@ -255,7 +255,7 @@ def fit_transfer(one: np.ndarray, direct_one: np.ndarray, patch: np.ndarray,
       part's error, of the norm of E, file colours / both walls white): at 16 samples 0.018 /
       0.025 with direct light alone, 0.016 / 0.023 at weight 0.3, 0.018 / 0.026 at 1 (the
       noisy two-bounce bake pulls too hard); at 64 samples 0.018 / 0.024, 0.015 / 0.021 at
-      0.3 (0.1-1: 0.015-0.017). Scales then 1.01-1.19.
+      0.3 (0.1-1: 0.015-0.017). Scales then 1.01-1.20.
 
     Ridge least squares in float64 with ``ridge`` x the mean diagonal added: that bounds the
     condition number of what is solved by ``1 + K_r / ridge`` (3,201 at 32 patches), so the
