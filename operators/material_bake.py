@@ -512,6 +512,7 @@ def bake_material_chunks(scene, objects, settings: MaterialBakeSettings, chunks,
                         gates.set_gates(c.last, c.before)
                     rows = []
                     for s in range(c.start, c.stop):
+                        # the session put the scene's own seed aside and restores it
                         session.scene.cycles.seed = direction_seed(settings.seed, s)
                         e = np.pi * np.concatenate(
                             session.bake_sun_all(sets[c.kind].directions[s], 1.0, 0.0), axis=0)

@@ -162,6 +162,13 @@ def region_patches(positions: np.ndarray, normals: np.ndarray, region: np.ndarra
     return patch, np.asarray(owner, np.int16)
 
 
+def _patch_sums(values: np.ndarray, patch: np.ndarray, K: int) -> np.ndarray:
+    """(..., V) -> (..., K): each patch's sum of ``values`` over its receivers."""
+    flat = values.reshape(-1, values.shape[-1])
+    out = np.stack([np.bincount(patch, weights=row, minlength=K) for row in flat])
+    return out.reshape(*values.shape[:-1], K)
+
+
 @dataclass
 class BounceTransfer:
     """Second-bounce composition: ``patch`` (V,) int32, ``patch_region`` (K,) int16,
@@ -192,10 +199,7 @@ class BounceTransfer:
         K = len(self.patch_region)
         out = np.zeros((C, N, R1, V), np.float32)
         src = one * self.source_albedo.T[:, None, :]              # (3, N, V)
-        Q = np.zeros((C * N, K))
-        flat = src.reshape(C * N, V)
-        for i in range(C * N):
-            Q[i] = np.bincount(self.patch, weights=flat[i], minlength=K)
+        Q = _patch_sums(src, self.patch, K).reshape(C * N, K)
         for r2 in range(R1):
             ks = np.nonzero(self.patch_region == r2)[0]
             if not len(ks) or not np.any(scale[:, r2]):
@@ -223,13 +227,6 @@ class BounceTransfer:
     @property
     def nbytes(self) -> int:
         return int(self.transfer.nbytes + self.patch.nbytes + self.source_albedo.nbytes)
-
-
-def _patch_sums(values: np.ndarray, patch: np.ndarray, K: int) -> np.ndarray:
-    """(..., V) -> (..., K): each patch's sum of ``values`` over its receivers."""
-    flat = values.reshape(-1, values.shape[-1])
-    out = np.stack([np.bincount(patch, weights=row, minlength=K) for row in flat])
-    return out.reshape(*values.shape[:-1], K)
 
 
 def fit_transfer(one: np.ndarray, direct_one: np.ndarray, patch: np.ndarray,

@@ -532,8 +532,8 @@ def with_bounce_transfer(tensors: TransferTensors, positions: np.ndarray, normal
     :func:`.bounce_transfer.composes`: none, i.e. only the smoothing, when the one-bounce
     directions are too few to fit or no finer than the two-bounce ones).
     ``metadata["bounce_transfer"]`` says what was done: the smoothing radius, the share of each
-    region's one-bounce energy the fit explains, the calibration scales and the pairs left
-    blended."""
+    region's one- and two-bounce energy the fit explains, the calibration scales and the pairs
+    left blended."""
     from dataclasses import replace
 
     from . import bounce_transfer as bt
