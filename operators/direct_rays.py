@@ -109,9 +109,12 @@ class ReceiverRays:
         The receivers in stacking order, as :attr:`..lt_addon.transport.ptt.TransferTensors.objects`.
     domain : "POINT" or "CORNER"
         A value per vertex (the mean of its corners) or per face corner.
+    side : 1 or -1
+        The faces' front sides (as Cycles bakes a receiver) or their back sides (what a ray
+        meeting a face from behind sees lit: :mod:`.bounce_rays`).
     """
 
-    def __init__(self, scene, objects, domain: str = "POINT"):
+    def __init__(self, scene, objects, domain: str = "POINT", side: int = 1):
         import bpy
         from mathutils.bvhtree import BVHTree
 
@@ -136,7 +139,7 @@ class ReceiverRays:
                 raise ValueError(f"{name!r} has {n_el} {'corners' if domain == 'CORNER' else 'vertices'} "
                                  f"now, the bake {count}: bake the materials again")
             points.append(co[corner_v])                 # every corner, at its vertex
-            normals.append(cn)
+            normals.append(cn if side > 0 else -cn)
             inward.append(fc - co[corner_v])
             groups.append((corner_v if domain == "POINT" else np.arange(len(corner_v))) + starts)
             nexts.append(following + corners)
@@ -164,12 +167,23 @@ class ReceiverRays:
         base[self._origin_of] = self.points
         normal[self._origin_of] = self.normals
         self._origins = base + RAY_OFFSET * (normal + mean_t)
+        self.origin_normals = normal   # (origins, 3) unit: the normal each origin stands on
         # each corner's own origin, inside its face (for ties, see the module docstring), and
         # the faces' edges as pairs of corners
         self._corner_origins = self.points + RAY_OFFSET * (self.normals + towards)
         self._edge_from = np.arange(corners)
         self._edge_to = np.concatenate(nexts) if nexts else np.zeros(0, np.int64)
         self.ties = 0   # corners the last direct() cast again at a shadow edge
+
+    @property
+    def origin_of(self) -> np.ndarray:
+        """(C,) the ray origin of each corner (corners of one point and normal share one)."""
+        return self._origin_of
+
+    @property
+    def origins(self) -> np.ndarray:
+        """(origins, 3) world: the ray origins, just off the surface."""
+        return self._origins
 
     def receiver_frames(self):
         """Each receiver's position (V, 3) and unit normal (V, 3): the mean over its corners."""

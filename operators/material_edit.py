@@ -299,19 +299,23 @@ class RELIGHT_OT_bake_materials(_ModalBake, bpy.types.Operator):
             regions=regions, bounces=props.material_bounces, samples=props.material_samples,
             anchors=f"roughness:{rough}" if rough else "diffuse",
             anchor_samples=props.material_anchor_samples,
+            anchor_directions=f"hemi:{props.material_anchor_directions}",
             domain="CORNER" if props.material_per_corner else "POINT",
-            smoothing=props.material_smoothing,
+            smoothing=props.material_smoothing, bounce_bake=props.material_bounce_bake,
+            rays=props.material_rays,
             directions=(f"hemi:{props.material_directions}:1.5",
                         f"hemi:{props.material_one_directions}",
                         f"hemi:{props.material_two_directions}"))
         settings.validate()
         if props.run_on != "HERE":
-            d0, d1, d2 = settings.directions
+            d0, d1, d2 = settings.specs()
             args = [a for o in objects for a in ("--object", o.name)]
             args += [a for r in regions for a in ("--region", r)]
             return self._external(context, "bake-materials", args + [
                 "--bounces", str(settings.bounces), "--samples", str(settings.samples),
+                "--bounce-bake", settings.bounce_bake, "--rays", str(settings.rays),
                 "--anchors", settings.anchors, "--anchor-samples", str(settings.anchor_samples),
+                "--anchor-directions", settings.anchor_spec(),
                 "--directions", d0, "--one-bounce-directions", d1, "--two-bounce-directions",
                 d2, "--smoothing", f"{settings.smoothing:g}"]
                 + (["--per-corner"] if settings.domain == "CORNER" else []))
@@ -324,8 +328,11 @@ class RELIGHT_OT_bake_materials(_ModalBake, bpy.types.Operator):
     def _finish(self, context, result):
         rep = result.report
         s = rep["energy_shares"]
+        g = rep.get("gather")
+        rays = f" + {g['rays_per_origin']} rays a receiver" if g else ""
         text = (f"Baked {len(rep['objects'])} objects, {rep['vertices']} vertices: "
-                f"{rep['bake_calls']} Cycles bakes in {rep['timings']['wall_total']:.1f} s, "
+                f"{rep['bake_calls']} Cycles bakes{rays} in "
+                f"{rep['timings']['wall_total']:.1f} s, "
                 f"{rep['bytes']['tensors'] / 2**20:.1f} MiB; light direct {s['direct']:.2f}, "
                 f"1 bounce {s['one_bounce']:.2f}, 2 bounces {s['two_bounce']:.2f}")
         context.scene[SUMMARY_KEY] = text

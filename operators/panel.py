@@ -249,7 +249,9 @@ class VIEW3D_PT_relight_materials(_RelightSubPanel, bpy.types.Panel):
                         row.prop(sock, "default_value", text=k.title())
         col = layout.column(align=True)
         col.prop(props, "material_bounces")
-        col.prop(props, "material_samples")
+        col.prop(props, "material_bounce_bake")
+        col.prop(props, "material_rays" if props.material_bounce_bake == "rays"
+                 else "material_samples")
         col.prop(props, "material_per_corner")
         col.prop(props, "material_directions")
         col.prop(props, "material_one_directions")
@@ -257,8 +259,10 @@ class VIEW3D_PT_relight_materials(_RelightSubPanel, bpy.types.Panel):
             col.prop(props, "material_two_directions")
         col.prop(props, "material_anchors")
         if props.material_anchors.strip():
+            col.prop(props, "material_anchor_directions")
             col.prop(props, "material_anchor_samples")
-        col.prop(props, "material_smoothing")
+        if props.material_bounce_bake == "cycles" or props.material_anchors.strip():
+            col.prop(props, "material_smoothing")
         _run_on(layout, props)
         layout.operator("relight.bake_materials", icon="RENDER_STILL")
         _kept_chunks(layout, context, "materials")

@@ -64,12 +64,14 @@ import numpy as np
 from ..io import atomic
 from ..sphere.directions import DirectionSet
 from .bounce_transfer import BounceTransfer
+from .gathered_transfer import ReceiverTransfer
 from .texture import environment_weights, parse_directions, sun_weights
 
 FORMAT = "relight-transfer-tensors"
-VERSION = 3
-#: Versions :meth:`TransferTensors.load` reads (1: no bounce transfer; 2: no glossy anchors).
-READS = (1, 2, 3)
+VERSION = 4
+#: Versions :meth:`TransferTensors.load` reads (1: no bounce transfer; 2: no glossy anchors;
+#: 3: glossy anchors at the one-bounce directions; 4: at their own, ``gloss_spec``).
+READS = (1, 2, 3, 4)
 #: At most this many roughness anchors per region (each costs S1 bakes per region).
 MAX_ANCHORS = 4
 
@@ -155,7 +157,8 @@ class ProjectedLight:
     two (3, R+1, R+1, V), float32 irradiance in W/m^2 (one / two may have zero regions);
     with glossy anchors ``gloss`` (3, R, K, V) and its second bounce composed ``gloss_two``
     (3, R, K, R+1, V) (None without the composition; ``gloss_covers`` (R, R+1) bool: the pairs
-    ``r -> r2`` it composes)."""
+    ``r -> r2`` it composes); ``fixed``: the receivers whose one-bounce light the receiver
+    transfer made exact (:class:`.gathered_transfer.ReceiverTransfer`)."""
 
     direct: np.ndarray
     one: np.ndarray
@@ -163,6 +166,7 @@ class ProjectedLight:
     gloss: np.ndarray | None = None
     gloss_two: np.ndarray | None = None
     gloss_covers: np.ndarray | None = None
+    fixed: int = 0
 
 
 @dataclass
@@ -192,11 +196,17 @@ class TransferTensors:
         The second-bounce composition (:mod:`.bounce_transfer`), None to blend ``two``.
     roughness : tuple of float
         The K glossy anchors' roughness values (module docstring), () for colour edits only.
-    gloss : (S1, R, K, V) float32 or None
+    gloss : (Sg, R, K, V) float32 or None
         One-bounce irradiance off each editable region as a white metal at each anchor (one
-        channel: the sun and the anchor are white).
+        channel: the sun and the anchor are white), over the directions ``gloss_spec``.
     base_finish : (R, 2) float64 or None
         The editable materials' own (metallic, roughness) in the file.
+    gloss_spec : str or None
+        Direction set of ``gloss`` (None: the one-bounce set, ``specs[1]``, as version 3 had).
+    receiver_transfer : ReceiverTransfer or None
+        With gathered bounce terms: the transfer between the receivers that makes a sun's
+        one-bounce light exact where its shadow edges lie between the baked directions
+        (:meth:`project` with an exact ``direct``; :mod:`.gathered_transfer`).
     """
 
     direct: np.ndarray
@@ -213,6 +223,8 @@ class TransferTensors:
     roughness: tuple = ()
     gloss: np.ndarray | None = None
     base_finish: np.ndarray | None = None
+    gloss_spec: str | None = None
+    receiver_transfer: ReceiverTransfer | None = None
 
     def __post_init__(self):
         V = self.direct.shape[1]
@@ -236,12 +248,22 @@ class TransferTensors:
                               or (V and int(b.patch.max(initial=0)) >= len(b.patch_region))):
             raise ValueError("the bounce transfer does not match the terms")
         R, K = len(self.regions), len(self.roughness)
-        if K and (self.gloss is None or self.gloss.shape != (self.one.shape[0], R, K, V)
+        if self.gloss_spec is None:
+            self.gloss_spec = self.specs[1]
+        self._gloss_dset = parse_directions(self.gloss_spec)
+        Sg = self._gloss_dset.size
+        if K and (self.gloss is None or self.gloss.shape != (Sg, R, K, V)
                   or not self.one.size):
             raise ValueError(f"glossy anchors need a gloss term of shape "
-                             f"({self.one.shape[0]}, {R}, {K}, {V}) and one-bounce terms")
+                             f"({Sg}, {R}, {K}, {V}) and one-bounce terms")
         if not K:
             self.gloss = None
+        rt = self.receiver_transfer
+        if rt is not None and (len(rt.matrices) != len(self.regions) + 1
+                               or any(m.shape != (V, V) for m in rt.matrices)
+                               or rt.direct_one.shape != (self.one.shape[0], V)
+                               or rt.source_albedo.shape != (V, 3)):
+            raise ValueError("the receiver transfer does not match the terms")
         if self.base_finish is None:
             self.base_finish = np.tile([0.0, 0.5], (R, 1))
         self.base_finish = np.asarray(self.base_finish, np.float64).reshape(R, 2)
@@ -264,6 +286,7 @@ class TransferTensors:
     def nbytes(self) -> int:
         extra = self.bounce.nbytes if self.bounce is not None else 0
         extra += self.gloss.nbytes if self.gloss is not None else 0
+        extra += self.receiver_transfer.nbytes if self.receiver_transfer is not None else 0
         return int(self.direct.nbytes + self.one.nbytes + self.two.nbytes + extra)
 
     def direction_sets(self) -> list:
@@ -321,7 +344,9 @@ class TransferTensors:
 
         ``direct`` (V,): the direct term's visibility x cosine per unit normal irradiance for
         this sun, computed exactly elsewhere (a ray per receiver), instead of interpolating
-        ``D`` between its baked directions; it is scaled by the sun's strength and colour."""
+        ``D`` between its baked directions; it is scaled by the sun's strength and colour.
+        With a :attr:`receiver_transfer` it also makes the one-bounce light exact where the
+        sun's shadow edges lie between the one-bounce directions."""
         V, R1 = self.vertices, len(self.regions) + 1
         if direct is not None:
             if not isinstance(light, Sun):
@@ -330,7 +355,8 @@ class TransferTensors:
             direct = np.asarray(direct, dtype=np.float32)
             if direct.shape != (V,):
                 raise ValueError(f"direct must have shape ({V},), got {direct.shape}")
-        else:
+        unit = direct   # per unit normal irradiance (V,), or None
+        if direct is None:
             w0 = light_weights(self._dsets[0], light).astype(np.float32)
         w1, w2 = (light_weights(d, light).astype(np.float32) for d in self._dsets[1:])
 
@@ -351,6 +377,12 @@ class TransferTensors:
             nz0 = np.nonzero(np.any(w0 != 0, axis=1))[0]
             direct = w0[nz0].T @ (self.direct if len(nz0) == len(w0) else self.direct[nz0])
         one = contract(self.one, w1, (R1,) if self.one.size else (0,))
+        fixed = 0
+        if unit is not None and self.receiver_transfer is not None and self.one.size:
+            idx, k = sun_weights(self._dsets[1], light.direction, light.angle_deg)
+            if len(idx):
+                fix, fixed = self.receiver_transfer.one_bounce_fix(unit, idx, k)
+                one += rgb[:, None, None] * fix
         composed = compose and self.bounce is not None and self.two.size and self.one.size
         if composed and np.all(self.bounce.covers()):
             two = self.bounce.compose(one)
@@ -362,10 +394,12 @@ class TransferTensors:
         g_one = g_two = covers = None
         if self.gloss is not None and gloss:
             R, K = self.gloss.shape[1:3]
-            nz = np.nonzero(np.any(w1 != 0, axis=1))[0]
+            wg = (w1 if self.gloss_spec == self.specs[1]
+                  else light_weights(self._gloss_dset, light).astype(np.float32))
+            nz = np.nonzero(np.any(wg != 0, axis=1))[0]
             g_one = np.zeros((3, R * K, V), np.float32)
             if len(nz):   # white anchors: one channel, the light's colour per channel
-                g_one[:] = (w1[nz].T @ self.gloss[nz].reshape(len(nz), -1)).reshape(3, R * K, V)
+                g_one[:] = (wg[nz].T @ self.gloss[nz].reshape(len(nz), -1)).reshape(3, R * K, V)
             covers = np.zeros((R, R1), bool)
             if compose and self.bounce is not None and self.two.size:
                 src = np.repeat(np.arange(1, R + 1), K)
@@ -374,7 +408,7 @@ class TransferTensors:
                 covers = scale.reshape(R, K, R1)[:, 0] != 0
             g_one = g_one.reshape(3, R, K, V)
         return ProjectedLight(np.ascontiguousarray(direct, np.float32), one, two, g_one, g_two,
-                              covers)
+                              covers, fixed)
 
     def combine(self, projected: ProjectedLight, albedos: np.ndarray,
                 orders: tuple = (0, 1, 2), anchors: np.ndarray | None = None) -> np.ndarray:
@@ -470,9 +504,12 @@ class TransferTensors:
     # -- files -------------------------------------------------------------------------------
     def save(self, path: str) -> None:
         """Write an .npz (float32 terms, JSON header) atomically."""
-        # a file without glossy anchors stays version 2: older builds read it
-        header = {"format": FORMAT, "version": VERSION if self.gloss is not None else 2,
-                  "specs": list(self.specs),
+        # a file without glossy anchors stays version 2 (and 3 with them at the one-bounce
+        # directions): older builds read it
+        version = (2 if self.gloss is None else 3 if self.gloss_spec == self.specs[1]
+                   else VERSION)
+        header = {"format": FORMAT, "version": version, "specs": list(self.specs),
+                  "gloss_spec": self.gloss_spec,
                   "regions": list(self.regions), "objects": [list(o) for o in self.objects],
                   "roughness": list(self.roughness), "metadata": self.metadata}
         extra = {"base_finish": self.base_finish}
@@ -482,6 +519,12 @@ class TransferTensors:
             b = self.bounce
             extra.update({"patch": b.patch, "patch_region": b.patch_region, "transfer": b.transfer,
                      "source_albedo": b.source_albedo, "two_scale": b.scale})
+        rt = self.receiver_transfer
+        if rt is not None:   # optional arrays: builds without it read the file and blend
+            extra.update({"fix_direct_one": rt.direct_one, "fix_source_albedo": rt.source_albedo})
+            for r, m in enumerate(rt.matrices):
+                extra.update({f"fix_{r}_data": m.data, f"fix_{r}_indices": m.indices,
+                              f"fix_{r}_indptr": m.indptr})
         with atomic.atomic_path(path) as tmp:
             with open(tmp, "wb") as fh:
                 np.savez(fh, header=np.frombuffer(json.dumps(header).encode(), np.uint8),
@@ -503,26 +546,47 @@ class TransferTensors:
             if "transfer" in z.files:
                 bounce = BounceTransfer(z["patch"], z["patch_region"], z["transfer"],
                                         z["source_albedo"], z["two_scale"])
+            fix = None
+            if "fix_direct_one" in z.files:
+                from scipy import sparse
+
+                V = z["direct"].shape[1]
+                fix = ReceiverTransfer(
+                    [sparse.csc_matrix((z[f"fix_{r}_data"], z[f"fix_{r}_indices"],
+                                        z[f"fix_{r}_indptr"]), shape=(V, V))
+                     for r in range(len(header["regions"]) + 1)],
+                    z["fix_direct_one"], z["fix_source_albedo"])
             return cls(z["direct"], z["one"], z["two"], tuple(header["specs"]),
                        list(header["regions"]), z["base_colors"], z["receiver_region"],
                        z["receiver_albedo"], [tuple(o) for o in header["objects"]],
                        header.get("metadata", {}), bounce, tuple(header.get("roughness", ())),
                        z["gloss"] if "gloss" in z.files else None,
-                       z["base_finish"] if "base_finish" in z.files else None)
+                       z["base_finish"] if "base_finish" in z.files else None,
+                       header.get("gloss_spec"), fix)
 
 
-def bake_count(s0: int, s1: int, s2: int, regions: int, bounces: int, anchors: int = 0) -> int:
-    """Cycles calls of a bake: ``S0 + S1 (R+1) + S1 R K + S2 ((R+1) + (R+1)^2)`` (the
+def bake_count(s0: int, s1: int, s2: int, regions: int, bounces: int, anchors: int = 0,
+               gloss_directions: int | None = None, rays: bool = False) -> int:
+    """Cycles calls of a bake: ``S0 + S1 (R+1) + Sg R K + S2 ((R+1) + (R+1)^2)`` (the
     two-bounce terms need one reference bake per ``r2`` to subtract the one-bounce light; K
-    glossy ``anchors`` per editable region add one-bounce bakes only)."""
+    glossy ``anchors`` per editable region add one-bounce bakes only, over ``gloss_directions``
+    ``Sg``, default ``S1``). With the bounce terms gathered by ``rays``
+    (:mod:`.gathered_transfer`) only ``S0 + Sg R K`` are Cycles calls."""
     r1 = regions + 1
-    return (s0 + (s1 * (r1 + regions * anchors) if bounces >= 1 else 0)
+    sg = s1 if gloss_directions is None else gloss_directions
+    if bounces < 1:
+        return s0
+    if rays:
+        return s0 + sg * regions * anchors
+    return (s0 + s1 * r1 + sg * regions * anchors
             + (s2 * (r1 + r1 * r1) if bounces >= 2 else 0))
 
 
 def with_bounce_transfer(tensors: TransferTensors, positions: np.ndarray, normals: np.ndarray,
                          direct_one: np.ndarray, spacings: float | None = None,
-                         per_region: int | None = None) -> TransferTensors:
+                         per_region: int | None = None, smooth_bounces: bool = True,
+                         observations: tuple | None = None,
+                         two_weight: float | None = None) -> TransferTensors:
     """The tensors with their bounce terms smoothed over the surface and a second-bounce
     composition fitted (:mod:`.bounce_transfer`; ``tensors`` is not changed).
 
@@ -531,6 +595,13 @@ def with_bounce_transfer(tensors: TransferTensors, positions: np.ndarray, normal
     ``SMOOTH_SPACINGS``; 0: no smoothing) and ``per_region`` patches (default
     :func:`.bounce_transfer.composes`: none, i.e. only the smoothing, when the one-bounce
     directions are too few to fit or no finer than the two-bounce ones).
+    ``smooth_bounces=False`` smooths only the glossy anchors (the diffuse bounce terms were
+    gathered by rays, :mod:`.gathered_transfer`: smoothing them only blurred them, measured).
+    ``observations`` ``(one_at (S, 3, R+1, V), two (S, 3, R+1, R+1, V))``: the one- and
+    two-bounce light at some directions the fit and calibration use instead of the stored
+    two-bounce term and the one-bounce term blended at its directions (gathered terms: exact
+    at any direction, so a finer set than the stored one), weighted ``two_weight`` in the fit
+    (default :data:`.bounce_transfer.TWO_WEIGHT`, chosen for noisy Cycles-baked terms).
     ``metadata["bounce_transfer"]`` says what was done: the smoothing radius, the share of each
     region's one- and two-bounce energy the fit explains, the calibration scales and the pairs
     left blended."""
@@ -543,9 +614,14 @@ def with_bounce_transfer(tensors: TransferTensors, positions: np.ndarray, normal
     if per_region is None:
         per_region = bt.composes(tensors.one.shape[0], tensors.two.shape[0])
     op, radius = bt.smoothing_operator(positions, normals, spacings)
-    one, two = bt.smooth(op, tensors.one), bt.smooth(op, tensors.two)
+    if smooth_bounces:
+        one, two = bt.smooth(op, tensors.one), bt.smooth(op, tensors.two)
+    else:
+        one, two = tensors.one, tensors.two
     gloss = bt.smooth(op, tensors.gloss) if tensors.gloss is not None else None
-    info = {"smoothing_spacings": spacings, "smoothing_radius_m": round(radius, 6)}
+    info = {"smoothing_spacings": spacings, "smoothing_radius_m": round(radius, 6),
+            "smoothed": "bounce terms" + (" and glossy anchors" if gloss is not None else "")
+            if smooth_bounces else ("glossy anchors" if gloss is not None else "nothing")}
     out = replace(tensors, one=one, two=two, gloss=gloss, metadata=dict(tensors.metadata),
                   bounce=None)
     if two.size and one.size and per_region > 0:
@@ -553,13 +629,17 @@ def with_bounce_transfer(tensors: TransferTensors, positions: np.ndarray, normal
         albedo = np.ones((V, 3), np.float32)
         albedo[region == 0] = tensors.receiver_albedo[region == 0]
         patch, owner = bt.region_patches(positions, normals, region, R1, per_region)
-        one_at = [out.project(Sun(tuple(w)), compose=False, gloss=False).one
-                  for w in out.direction_sets()[2].directions]
+        if observations is None:
+            one_at = np.stack([out.project(Sun(tuple(w)), compose=False, gloss=False).one
+                               for w in out.direction_sets()[2].directions])
+            two_obs = two
+        else:
+            one_at, two_obs = (np.asarray(x, np.float32) for x in observations)
         T, explained, explained_two = bt.fit_transfer(
-            one, np.asarray(direct_one, np.float64), patch, owner, albedo, two=two,
-            one_at=np.stack(one_at))
+            one, np.asarray(direct_one, np.float64), patch, owner, albedo, two=two_obs,
+            one_at=one_at, two_weight=two_weight)
         transfer = bt.BounceTransfer(patch, owner, T, albedo, np.ones((R1, R1)))
-        scale = bt.calibrate(transfer, one_at, two)
+        scale = bt.calibrate(transfer, one_at, two_obs)
         for r, e in explained.items():      # the patch model does not hold for this region
             if e < bt.MIN_EXPLAINED:
                 scale[:, r] = 0.0

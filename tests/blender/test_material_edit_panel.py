@@ -22,6 +22,7 @@ def test_bake_materials_operator_and_live_colour_edit(fresh_scene, tmp_path):
         props.output_dir = str(tmp_path)
         props.material_samples, props.material_directions = 16, 16
         props.material_one_directions = props.material_two_directions = 4
+        props.material_anchor_directions = 4
         red = bpy.data.materials["RedMaterial"]
         view_layer = bpy.context.view_layer
         for o in bpy.data.objects:
@@ -108,6 +109,7 @@ def test_panel_bake_with_roughness_anchors_follows_a_metallic_edit(fresh_scene, 
         props.output_dir = str(tmp_path)
         props.material_samples, props.material_directions = 16, 16
         props.material_one_directions = props.material_two_directions = 4
+        props.material_anchor_directions = 4
         props.material_bounces = 1
         props.material_anchors = "0.3, x"
         for o in bpy.data.objects:
@@ -120,7 +122,9 @@ def test_panel_bake_with_roughness_anchors_follows_a_metallic_edit(fresh_scene, 
         assert bpy.ops.relight.bake_materials() == {"FINISHED"}
         ((_, tensors),) = me.scene_bakes(scene)
         assert tensors.roughness == (0.3, 0.7)
-        assert tensors.metadata["bake_calls"] == 16 + 4 * 2 + 4 * 2
+        # Cycles: 16 direct directions and 2 anchors x 4 directions; the bounces by rays
+        assert tensors.metadata["bake_calls"] == 16 + 4 * 2
+        assert tensors.metadata["gather"]["rays_per_origin"] == props.material_rays == 512
 
         def shown():
             return np.concatenate([color_attribute(
