@@ -2,24 +2,27 @@
 
 1. Accuracy and cost of the bake on the sample ``room`` (all five meshes are receivers; the red
    and green walls are the editable regions), for each ``--settings`` entry
-   ``DIRECT/ONE/TWO@SPP`` (direction specs of the three path orders, samples of the bounce
-   terms): bake calls, seconds, bytes, and at held-out suns (``LIGHTS``: none is a baked
-   direction) for several edits the relative error ``||E - E_cycles|| / ||E_cycles||``
-   (irradiance, vertices x RGB) against a Cycles bake of the same diffuse scene with the edit
-   applied and 2 bounces, next to the noise floor (two truth seeds, ``--truth-spp``) and the
-   error without the two-bounce term.
+   ``DIRECT/ONE/TWO@SPP`` (direction specs of the three path orders; bounce terms by Cycles
+   bakes at SPP samples) or ``DIRECT/ONE/TWO@rays:N`` (bounce terms gathered by N rays per
+   receiver, the default bake): bake calls, seconds, bytes, and at held-out suns (``LIGHTS``:
+   none is a baked direction) for several edits the relative error
+   ``||E - E_cycles|| / ||E_cycles||`` (irradiance, vertices x RGB) against a Cycles bake of
+   the same diffuse scene with the edit applied and 2 bounces, next to the noise floor (two
+   truth seeds, ``--truth-spp``) and the error without the two-bounce term.
    Rows per setting: the sun's direct term from the bake's directions blended ("baked"), from
    a shadow ray per receiver ("rays", :mod:`relightable_textures.operators.direct_rays`) or
-   rays only where the baked directions disagree ("rays-at-edges"); the bounce terms as baked
-   ("raw": no smoothing, two-bounce blended) or smoothed with the second bounce composed
-   (the default, :mod:`relightable_textures.lt_addon.transport.bounce_transfer`; "blended":
-   smoothed, two-bounce blended).
-2. Update time at ``--vertices`` (default 13,000) with 2 editable regions: tensors of the
-   default shapes filled with random numbers (the cost does not depend on the values),
-   timed over 50 updates each: material only, sun moved and material changed, environment
-   rotated and material changed (the paper: 172 ms per update at 5.8 fps, 13K vertices),
-   the second bounce composed as the default bake does (32 patches per region);
-   and the rays: a floor grid of that many vertices under a box, one ray per lit vertex.
+   rays only where the baked directions disagree ("rays-at-edges", the live preview); Cycles
+   bounce terms as baked ("raw": no smoothing, two-bounce blended) or smoothed with the second
+   bounce composed (:mod:`relightable_textures.lt_addon.transport.bounce_transfer`;
+   "blended": smoothed, two-bounce blended); gathered ones with and without the receiver
+   transfer that makes a sun's one-bounce light exact between the baked directions
+   (:mod:`relightable_textures.lt_addon.transport.gathered_transfer`).
+2. Update time on the room at ``--quads`` quads per wall side (default 56: 13,094 vertices, the
+   paper's Table 1 has 13.0K) with 2 editable regions, baked for real with the default
+   settings, timed over 50 updates each: material only, sun moved and material changed (rays
+   at edges, the live preview; a ray to every receiver), environment rotated and material
+   changed (the paper: 172 ms per update at 5.8 fps, 13K vertices), and a metallic edit with
+   glossy anchors of the default shapes.
 
 3. With ``--anchors roughness:R1,...``: every setting is baked with those glossy anchors too,
    and ``METAL_EDITS`` (a wall made a Principled metal) are compared the same way against
@@ -62,36 +65,46 @@ METAL_EDITS = (("red wall metal, roughness 0.4", {}, {"RedMaterial": (1.0, 0.4)}
                ("red wall half metal, roughness 0.6", {}, {"RedMaterial": (0.5, 0.6)}))
 
 
-def update_timing(vertices: int, specs=("hemi:400:1.5", "hemi:128", "hemi:8"), regions: int = 2,
-                  repeats: int = 50) -> dict:
+#: Quads per wall side of the room the update is timed on: 57 x 57 vertices on each of the
+#: four planes and the demo's box, 13,094 vertices (the paper's Table 1 row has 13.0K).
+TIMING_QUADS = 56
+
+
+def update_timing(quads: int = TIMING_QUADS, repeats: int = 50,
+                  settings: str = "hemi:400:1.5/hemi:128/hemi:8@rays:512") -> dict:
+    """The room at ``quads`` quads per wall side, baked for real with ``settings`` (the
+    default bake), then the live update timed over ``repeats`` updates each (median, ms):
+    a material change alone; the Sun moved and a colour changed with rays where the baked
+    directions disagree (the live preview) and with a ray to every receiver; the environment
+    rotated and a colour changed; and with glossy anchors of the default shapes (random values:
+    the cost does not depend on them) a metallic / roughness edit with the Sun moving."""
+    import bpy
+
+    from relightable_textures import samples
     from relightable_textures.lt_addon.transport import ptt
-    from relightable_textures.lt_addon.transport.texture import parse_directions
+    from relightable_textures.operators import material_bake as mb
+    from relightable_textures.operators.direct_rays import exact_direct
+    from relightable_textures.operators.jobs import run
+    from relightable_textures.samples import objects as sample_objects
 
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = bpy.context.scene
+    sample_objects.DETAIL["timing"] = (2, quads)
+    try:
+        samples.build("room", scene, "timing")
+    finally:
+        del sample_objects.DETAIL["timing"]
+    objs = [bpy.data.objects[n] for n in OBJECTS]
+    t0 = time.perf_counter()
+    t = run(mb.bake_materials(scene, objs, parse_setting(settings)))
+    out = {"vertices": t.vertices, "regions": len(t.regions), "specs": list(t.specs),
+           "bake_seconds": round(time.perf_counter() - t0, 1),
+           "bake_calls": t.metadata["bake_calls"], "seconds": t.metadata["seconds"],
+           "gather": t.metadata.get("gather"), "tensor_mib": round(t.nbytes / 2**20, 1),
+           "receiver_transfer_mib": round(t.receiver_transfer.nbytes / 2**20, 1)
+           if t.receiver_transfer is not None else None}
     rng = np.random.default_rng(0)
-    S = [parse_directions(s).size for s in specs]
-    R1 = regions + 1
-    grid = _rays_receivers(vertices)   # a floor grid under a box: real shadows for the rays
-    if grid is not None:
-        vertices = grid["rays"].count
-    t = ptt.TransferTensors(
-        rng.random((S[0], vertices), dtype=np.float32),
-        rng.random((S[1], 3, R1, vertices), dtype=np.float32),
-        rng.random((S[2], 3, R1, R1, vertices), dtype=np.float32), specs,
-        [f"R{i}" for i in range(regions)], np.full((regions, 3), 0.5),
-        rng.integers(0, R1, vertices).astype(np.int16),
-        rng.random((vertices, 3), dtype=np.float32), [("synthetic", vertices)])
-    # the default bake's second-bounce composition: 32 patches per region
-    from relightable_textures.lt_addon.transport.bounce_transfer import BounceTransfer
-
-    owner = np.repeat(np.arange(R1), 32).astype(np.int16)
-    t.bounce = BounceTransfer(rng.integers(0, len(owner), vertices).astype(np.int32), owner,
-                              rng.random((len(owner), vertices), dtype=np.float32),
-                              np.ones((vertices, 3), np.float32), np.ones((R1, R1)))
     env = rng.random((64, 128, 3))
-    out = {"vertices": vertices, "regions": regions, "specs": list(specs),
-           "tensor_mib": round(t.nbytes / 2**20, 1)}
-    sun = ptt.Sun((0.3, 0.2, 0.93))
-    p = t.project(sun)
 
     def timed(fn):
         fn(0)
@@ -103,112 +116,66 @@ def update_timing(vertices: int, specs=("hemi:400:1.5", "hemi:128", "hemi:8"), r
         return round(1e3 * float(np.median(ts)), 3)
 
     def colours(i):
-        return {"R0": (0.1 + 0.01 * (i % 50), 0.5, 0.5)}
+        return {"RedMaterial": (0.1 + 0.01 * (i % 50), 0.5, 0.5)}
 
     def moving_sun(i):
-        a = np.radians(3.0 * i)
-        return ptt.Sun((0.4 * np.cos(a), 0.4 * np.sin(a), 0.92))
+        a = np.radians(250.0 + 3.0 * i)
+        return ptt.Sun((0.7 * np.cos(a), 0.7 * np.sin(a), 0.714))
+
+    p = t.project(moving_sun(0), exact_direct(scene, t, moving_sun(0)))
 
     def material_only(i):
         c = t.albedos(colours(i))
         return t.receiver_colors(c) / np.pi * t.combine(p, c)
 
-    def sun_and_material(i):
-        return t.shade(moving_sun(i), colours(i))
+    fixed = []
+
+    def sun_and_material(i, everywhere=False):
+        s = moving_sun(i)
+        d = exact_direct(scene, t, s, everywhere=everywhere)
+        out = t.shade(s, colours(i), direct=d)
+        fixed.append(t.project(s, d).fixed if i == 0 else 0)
+        return out
 
     def env_and_material(i):
         return t.shade(ptt.Environment(env, "bottom_first", 3.0 * i), colours(i))
 
     out["material_ms"] = timed(material_only)
-    out["sun_and_material_ms"] = timed(sun_and_material)
+    out["sun_rays_at_edges_and_material_ms"] = timed(sun_and_material)   # the live preview
+    out["sun_rays_everywhere_and_material_ms"] = timed(lambda i: sun_and_material(i, True))
     out["environment_and_material_ms"] = timed(env_and_material)
-    if grid is None:
-        return out
-    # the sun's exact direct term: the grid's D is its own rays at the baked directions (equal
-    # to Cycles' bake, tests/blender/test_materials.py); rays go where D's neighbours disagree
-    from relightable_textures.lt_addon.transport.texture import sun_weights
-
-    rays, d0 = grid["rays"], t.direction_sets()[0]
-    a = time.perf_counter()
-    t.direct[:] = np.stack([rays.direct(w) for w in d0.directions])
-    out["rays_build_ms"] = grid["build_ms"]
-    out["grid_D_seconds"] = round(time.perf_counter() - a, 2)
+    keep = t.receiver_transfer
+    t.receiver_transfer = None
+    out["sun_rays_at_edges_no_receiver_transfer_ms"] = timed(sun_and_material)
+    t.receiver_transfer = keep
     cast = []
 
-    def exact(i, everywhere=False):
+    def rays_only(i):
         s = moving_sun(i)
-        known = None
-        if not everywhere:
-            idx, _ = sun_weights(d0, s.direction)
-            known = rays.known_from(t.direct[idx], d0.directions[idx])
-        d = rays.direct(s.direction, known=known)
-        cast.append((rays.cast, rays.ties))
-        return s, d
+        exact_direct(scene, t, s, everywhere=False)
+        cast.append(1)
 
-    # cast: one ray per vertex (where it is not known); ties: corners next to a shadow edge
-    # cast again from inside their faces (direct_rays: a shadow edge through a vertex)
-    out["rays_everywhere_ms"] = timed(lambda i: exact(i, True))
-    out["rays_everywhere_cast"], out["rays_everywhere_ties"] = (
-        int(v) for v in np.median(cast, axis=0))
-    cast.clear()
-    out["rays_ms"] = timed(exact)
-    out["rays_cast"], out["rays_ties"] = (int(v) for v in np.median(cast, axis=0))
+    out["rays_at_edges_ms"] = timed(rays_only)
+    fixes = [t.project(moving_sun(i), exact_direct(scene, t, moving_sun(i))).fixed
+             for i in range(0, 50, 5)]
+    out["receivers_fixed_median"] = int(np.median(fixes))
+    # glossy anchors (2 per region, at 128 directions), the red wall a metal whose roughness
+    # changes while the Sun moves
+    g = replace(t, roughness=(0.4, 0.8), gloss_spec="hemi:128",
+                gloss=rng.random((128, len(t.regions), 2, t.vertices), dtype=np.float32))
+    out["anchors_mib"] = round((g.nbytes - t.nbytes) / 2**20, 1)
 
-    def sun_rays_and_material(i, everywhere=True):
-        s, d = exact(i, everywhere)
-        return t.shade(s, colours(i), direct=d)
+    def sun_and_metal(i):
+        s = moving_sun(i)
+        return g.shade(s, colours(i), direct=exact_direct(scene, g, s, everywhere=False),
+                       finish={"RedMaterial": (1.0, 0.4 + 0.008 * (i % 50))})
 
-    out["sun_rays_and_material_ms"] = timed(sun_rays_and_material)   # the default
-    out["sun_rays_at_edges_and_material_ms"] = timed(lambda i: sun_rays_and_material(i, False))
-    # glossy anchors (2 per region), the first region a metal whose roughness changes
-    g = replace(t, roughness=(0.4, 0.8),
-                gloss=rng.random((S[1], regions, 2, vertices), dtype=np.float32))
-    out["anchors_mib"] = round(g.nbytes / 2**20, 1)
-
-    def finish(i):
-        return {"R0": (1.0, 0.4 + 0.008 * (i % 50))}
-
-    pg = g.project(sun)
-
-    def metal_only(i):
-        c, w = g.albedos(colours(i)), g.anchor_weights(finish(i))
-        return g.receiver_colors(c, w) / np.pi * g.combine(pg, c, anchors=w)
-
-    def sun_rays_at_edges_and_metal(i):
-        s, d = exact(i, False)
-        return g.shade(s, colours(i), direct=d, finish=finish(i))
-
-    def sun_rays_at_edges_no_metal(i):   # metallic 0: the anchors are not projected
-        s, d = exact(i, False)
-        return g.shade(s, colours(i), direct=d)
-
-    out["metal_and_colour_ms"] = timed(metal_only)
-    out["sun_rays_at_edges_and_metal_ms"] = timed(sun_rays_at_edges_and_metal)
-    out["sun_rays_at_edges_no_metal_ms"] = timed(sun_rays_at_edges_no_metal)
+    out["sun_rays_at_edges_and_metal_ms"] = timed(sun_and_metal)
     return out
 
 
-def _rays_receivers(vertices: int):
-    """A floor grid of about ``vertices`` vertices under a box (bpy), as ReceiverRays, with the
-    milliseconds its BVH and arrays took; None without bpy."""
-    try:
-        import bpy
-    except ImportError:
-        return None
-    from relightable_textures.operators.direct_rays import ReceiverRays
-
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    n = int(round(np.sqrt(vertices))) - 1
-    bpy.ops.mesh.primitive_grid_add(x_subdivisions=n, y_subdivisions=n, size=4.0)
-    grid = bpy.context.active_object
-    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.0, 0.0, 0.8))
-    a = time.perf_counter()
-    rays = ReceiverRays(bpy.context.scene, [(grid.name, len(grid.data.vertices))], "POINT")
-    return {"rays": rays, "build_ms": round(1e3 * (time.perf_counter() - a), 3)}
-
-
-#: The demo's material bake (Makefile ``demo``): direction specs and samples, per face corner.
-DEMO = (("hemi:256:1.5", "hemi:16", "hemi:4"), 32)
+#: The demo's material bake (Makefile ``demo``), per face corner.
+DEMO = "hemi:400:1.5/hemi:128/hemi:8@rays:512"
 
 
 def metal_picture(png: str, size: str, anchors: str, finish: dict, spp: int,
@@ -242,12 +209,7 @@ def metal_picture(png: str, size: str, anchors: str, finish: dict, spp: int,
         for lamp in (o for o in scene.objects if o.type == "LIGHT" and o.data.type == "SUN"):
             lamp.rotation_euler = (-d).to_track_quat("-Z", "Y").to_euler()
     objs = [bpy.data.objects[n] for n in OBJECTS]
-    dirs, bake_spp, domain = DEMO[0], DEMO[1], "CORNER"
-    if entry:
-        dirs, bake_spp = entry.split("@")
-        dirs, bake_spp, domain = tuple(dirs.split("/")), int(bake_spp), "POINT"
-    st = mb.MaterialBakeSettings(regions=["RedMaterial", "GreenMaterial"], directions=dirs,
-                                 samples=bake_spp, domain=domain, anchors=anchors)
+    st = replace(parse_setting(entry or DEMO, anchors), domain="POINT" if entry else "CORNER")
     with tempfile.TemporaryDirectory() as tmp:
         out = run(material_edit.bake_job(scene, objs, st, tmp))
         cmp = material_edit.compare_edit(scene, out.tensors, {}, png, spp, finish=finish)
@@ -256,13 +218,26 @@ def metal_picture(png: str, size: str, anchors: str, finish: dict, spp: int,
     return cmp
 
 
+def parse_setting(entry: str, anchors: str = "diffuse"):
+    """``DIRECT/ONE/TWO@SPP`` (bounce terms by Cycles bakes at SPP samples) or
+    ``DIRECT/ONE/TWO@rays:N`` (gathered by N rays per receiver) -> MaterialBakeSettings."""
+    from relightable_textures.operators import material_bake as mb
+
+    dirs, how = entry.split("@")
+    kw = ({"bounce_bake": "rays", "rays": int(how.split(":")[1])} if how.startswith("rays")
+          else {"bounce_bake": "cycles", "samples": int(how)})
+    return mb.MaterialBakeSettings(regions=["RedMaterial", "GreenMaterial"],
+                                   directions=tuple(dirs.split("/")), anchors=anchors, **kw)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--size", default="test", choices=("test", "demo"))
-    ap.add_argument("--settings", default="hemi:400:1.5/hemi:16/hemi:4@32,"
-                    "hemi:400:1.5/hemi:64/hemi:8@32,hemi:400:1.5/hemi:128/hemi:8@16")
+    ap.add_argument("--settings", default="hemi:400:1.5/hemi:128/hemi:8@rays:512,"
+                    "hemi:400:1.5/hemi:128/hemi:8@16")
     ap.add_argument("--truth-spp", type=int, default=256)
-    ap.add_argument("--vertices", type=int, default=13000)
+    ap.add_argument("--quads", type=int, default=TIMING_QUADS,
+                    help="quads per wall side of the room the update is timed on")
     ap.add_argument("--no-bake", action="store_true", help="only the update timing")
     ap.add_argument("--anchors", default="diffuse",
                     help="glossy anchors of every setting's bake (and the metal edits)")
@@ -282,7 +257,7 @@ def main(argv=None):
                             if args.picture_sun else None), flush=True)
         return
 
-    print("update time (median of 50, ms):", update_timing(args.vertices), flush=True)
+    print("update time (median of 50, ms):", update_timing(args.quads), flush=True)
     if args.no_bake:
         return
     import bpy
@@ -328,31 +303,45 @@ def main(argv=None):
           "noise floor | without two-bounce |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for entry in args.settings.split(","):
-        dirs, spp = entry.split("@")
-        st = mb.MaterialBakeSettings(regions=["RedMaterial", "GreenMaterial"],
-                                     directions=tuple(dirs.split("/")), samples=int(spp),
-                                     anchors=args.anchors)
-        t0 = time.perf_counter()
-        raw = run(mb.bake_materials(scene, objs, replace(st, smoothing=0.0)))
-        raw.bounce = None   # as baked: the Cycles time only, the fit's seconds taken out
-        secs = (time.perf_counter() - t0
-                - raw.metadata.get("bounce_transfer", {}).get("seconds", 0.0))
-        t0 = time.perf_counter()
-        smoothed = run(mb.bounce_terms(scene, raw, st.smoothing))
-        print(f"smoothing and second-bounce fit: {time.perf_counter() - t0:.2f} s; "
-              f"{smoothed.metadata['bounce_transfer']}", flush=True)
-        rows = [(r, "raw") for r in (None, "rays")] + [("rays", "blended")] + [
-            (r, "composed") for r in (None, "rays", "rays-at-edges")]
-        for (rays, bounce), (name, edit) in [(r, e) for r in rows for e in EDITS]:
+        st = parse_setting(entry, args.anchors)
+        dirs, how = entry.split("@")
+        if st.gathers:   # the whole bake: the Cycles calls of the direct term, rays, tables
+            t0 = time.perf_counter()
+            smoothed = run(mb.bake_materials(scene, objs, st))
+            secs = time.perf_counter() - t0
+            print(f"bake {entry}: {secs:.1f} s; {smoothed.metadata['seconds']}; gather "
+                  f"{smoothed.metadata['gather']}; {smoothed.metadata['bounce_transfer']}",
+                  flush=True)
+            # direct: rays (every receiver), rays-at-edges (the live preview) or baked (D
+            # blended); the receiver transfer on (default) or off; second bounce composed
+            rows = [(r, "composed", True) for r in ("rays", "rays-at-edges", None)] + [
+                ("rays", "composed", False), ("rays", "blended", True)]
+        else:
+            t0 = time.perf_counter()
+            raw = run(mb.bake_materials(scene, objs, replace(st, smoothing=0.0)))
+            raw.bounce = None   # as baked: the Cycles time only, the fit's seconds taken out
+            secs = (time.perf_counter() - t0
+                    - raw.metadata.get("bounce_transfer", {}).get("seconds", 0.0))
+            t0 = time.perf_counter()
+            smoothed = run(mb.bounce_terms(scene, raw, st.smoothing))
+            print(f"smoothing and second-bounce fit: {time.perf_counter() - t0:.2f} s; "
+                  f"{smoothed.metadata['bounce_transfer']}", flush=True)
+            rows = [(r, "raw", False) for r in (None, "rays")] + [("rays", "blended", False)] + [
+                (r, "composed", False) for r in (None, "rays", "rays-at-edges")]
+        for (rays, bounce, fix), (name, edit) in [(r, e) for r in rows for e in EDITS]:
             tensors, compose = (raw, False) if bounce == "raw" else (smoothed,
                                                                      bounce == "composed")
-            errs, floors, lows, parts = [], [], [], []
+            keep = tensors.receiver_transfer
+            if not fix:
+                tensors.receiver_transfer = None
+            errs, floors, lows, parts, fixed = [], [], [], [], []
             for li, (az, el) in enumerate(LIGHTS):
                 a, b = truths[li, name]
                 light = ptt.Sun(tuple(direction_from_az_el(az, el)))
                 exact = exact_direct(scene, tensors, light, everywhere=rays == "rays") \
                     if rays else None
                 p, c = tensors.project(light, exact, compose), tensors.albedos(edit)
+                fixed.append(p.fixed)
                 est, e0 = tensors.combine(p, c), tensors.combine(p, c, (0,))
                 n = np.linalg.norm(a)
                 parts.append((np.linalg.norm(e0 - direct[li]) / n,
@@ -360,12 +349,18 @@ def main(argv=None):
                 errs.append(rel(est, a))
                 lows.append(rel(tensors.combine(p, c, (0, 1)), a))
                 floors.append(rel(b, a))
+            tensors.receiver_transfer = keep
             per = "/".join(f"{e:.3f}" for e in errs)
-            print(f"| {dirs} @{spp} spp, direct {rays or 'baked'}, bounces {bounce} | "
+            label = (f"{dirs} @{how}, direct {rays or 'baked'}, bounces {bounce}"
+                     + (", receiver transfer" if fix else (", no receiver transfer"
+                                                           if st.gathers else "")))
+            print(f"| {label} | "
                   f"{tensors.metadata['bake_calls']} | {secs:.1f} | "
-                  f"{tensors.nbytes / 2**20:.2f} | {name} | {np.mean(errs):.4f} ({per}) | "
+                  f"{tensors.nbytes / 2**20:.2f} | {name} | {np.mean(errs):.4f} "
+                  f"({np.mean(errs) / np.mean(floors):.2f}x; {per}) | "
                   f"{np.mean([p[0] for p in parts]):.4f} | {np.mean([p[1] for p in parts]):.4f} | "
-                  f"{np.mean(floors):.4f} | {np.mean(lows):.4f} |", flush=True)
+                  f"{np.mean(floors):.4f} | {np.mean(lows):.4f} |"
+                  + (f" fixed {int(np.median(fixed))}" if fix else ""), flush=True)
         for name, edit, finish in METAL_EDITS if smoothed.roughness else ():
             errs, floors, lows, flat = [], [], [], []
             for li, (az, el) in enumerate(LIGHTS):
@@ -379,9 +374,10 @@ def main(argv=None):
                 flat.append(rel(smoothed.combine(p, c), a))    # the metal taken as diffuse
                 floors.append(rel(b, a))
             per = "/".join(f"{e:.3f}" for e in errs)
-            print(f"| {dirs} @{spp} spp, anchors {args.anchors}, rays, composed | "
+            print(f"| {dirs} @{how}, anchors {args.anchors}, rays, composed | "
                   f"{smoothed.metadata['bake_calls']} | {secs:.1f} | "
-                  f"{smoothed.nbytes / 2**20:.2f} | {name} | {np.mean(errs):.4f} ({per}) | "
+                  f"{smoothed.nbytes / 2**20:.2f} | {name} | {np.mean(errs):.4f} "
+                  f"({np.mean(errs) / np.mean(floors):.2f}x; {per}) | "
                   f"as diffuse {np.mean(flat):.4f} | | {np.mean(floors):.4f} | "
                   f"{np.mean(lows):.4f} |", flush=True)
 

@@ -619,6 +619,12 @@ def material_chunk_cache(scene, objects, settings: MaterialBakeSettings, out_dir
     from .texture_transport import CACHE_FOLDER
 
     baked = {k: v for k, v in dataclasses.asdict(settings).items() if k != "smoothing"}
+    # what the chunks depend on, defaults resolved (a panel and a command line that mean the
+    # same bake share its chunks): the rays' count only with rays, the Cycles samples of the
+    # bounce terms only without, the anchors' set only with anchors
+    baked["directions"] = list(settings.specs())
+    baked["anchor_directions"] = settings.anchor_spec() if settings.roughness else None
+    baked.pop("samples" if settings.gathers else "rays")
     key = {"stage": "materials", "scene": scene_key(scene, list(objects)),
            "settings": baked, "chunk_directions": CHUNK_DIRECTIONS,
            "seeds": "per direction"}   # chunks of the one-seed bakes are not these

@@ -188,11 +188,13 @@ def test_vertex_transport_bakes_distribute_and_resume_bit_for_bit(tmp_path):
     assert ".relight_cache" not in os.listdir(out)
 
 
-def test_material_bakes_distribute_and_resume_bit_for_bit(tmp_path):
+@pytest.mark.parametrize("bounce_bake", ["rays", "cycles"])
+def test_material_bakes_distribute_and_resume_bit_for_bit(tmp_path, bounce_bake):
     """`bake-materials --workers 2` gives the one-process tensors bit for bit (every term is a
-    chunk: direct, one bounce per region, the two-bounce references and ordered pairs); an
-    in-process bake cancelled part way keeps its finished chunks, a rerun reuses them and gives
-    the same tensors, and a change to the scene gives another key (the stale chunks go)."""
+    chunk: direct, and with rays the gather of each block of ray origins, with Cycles one
+    bounce per region, the two-bounce references and ordered pairs); an in-process bake
+    cancelled part way keeps its finished chunks, a rerun reuses them and gives the same
+    tensors, and a change to the scene gives another key (the stale chunks go)."""
     import json
 
     import bpy
@@ -207,39 +209,50 @@ def test_material_bakes_distribute_and_resume_bit_for_bit(tmp_path):
     args = ["bake-materials", blend, "--object", "Floor", "--object", "Box", "--region",
             "RedMaterial", "--region", "GreenMaterial", "--directions", "hemi:40",
             "--one-bounce-directions", "hemi:20", "--two-bounce-directions", "hemi:4",
-            "--samples", "8"]
+            "--samples", "8", "--bounce-bake", bounce_bake]
     r = relight(*args, "--no-resume", "--out", tmp_path / "ref")
     assert r.returncode == 0, r.stderr[-2000:]
     ref = ptt.TransferTensors.load(str(tmp_path / "ref" / "Floor_materials.npz"))
 
     def same(t):
-        return all(np.array_equal(getattr(t, k).view(np.uint32), getattr(ref, k).view(np.uint32))
-                   for k in ("direct", "one", "two"))
+        if not all(np.array_equal(getattr(t, k).view(np.uint8), getattr(ref, k).view(np.uint8))
+                   for k in ("direct", "one", "two")):
+            return False
+        if bounce_bake == "cycles":
+            return t.receiver_transfer is None
+        return all(np.array_equal(m.data.view(np.uint8), n.data.view(np.uint8))
+                   and np.array_equal(m.indices, n.indices)
+                   for m, n in zip(t.receiver_transfer.matrices,
+                                   ref.receiver_transfer.matrices))
 
     r = relight(*args, "--workers", "2", "--out", tmp_path / "dist")
     assert r.returncode == 0, r.stderr[-2000:]
     rep = json.loads((tmp_path / "dist" / "Floor_materials.json").read_text())
-    # 40/16 -> 3 direct chunks; 3 regions x 2 one-bounce; 3 references + 9 ordered pairs
-    assert rep["chunks_total"] == rep["distributed"]["chunks"] == 3 + 6 + 3 + 9
+    # 40/16 -> 3 direct chunks; with rays, 378 ray origins / 256 -> 2 gather chunks; with
+    # Cycles 3 regions x 2 one-bounce chunks, 3 references + 9 ordered pairs
+    chunks = 3 + (2 if bounce_bake == "rays" else 6 + 3 + 9)
+    assert rep["chunks_total"] == rep["distributed"]["chunks"] == chunks
     assert rep["chunks_reused"] == 0 and len(rep["distributed"]["workers"]) == 2
-    assert "distributed: 21 chunks on 2 worker processes" in r.stdout
+    assert f"distributed: {chunks} chunks on 2 worker processes" in r.stdout
     assert same(ptt.TransferTensors.load(str(tmp_path / "dist" / "Floor_materials.npz")))
     assert ".relight_cache" not in os.listdir(tmp_path / "dist")
 
     bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False)
     scene, objs = bpy.context.scene, [bpy.data.objects[n] for n in objects]
     s = mb.MaterialBakeSettings(regions=regions, directions=("hemi:40", "hemi:20", "hemi:4"),
-                                samples=8)
+                                samples=8, bounce_bake=bounce_bake)
     out = tmp_path / "resume"
     gen = mb.materials_job(scene, objs, s, str(out))
-    for _ in range(60):                     # direct (40) and the first one-bounce chunk (16)
+    # rays: the 2 gather chunks (rays first, before the gates) and 2 of the 3 direct chunks;
+    # Cycles: the 3 direct chunks (40 directions) and the first one-bounce chunk (16)
+    for _ in range(2 + 32 + 1 if bounce_bake == "rays" else 60):
         next(gen)
     gen.close()
     assert os.listdir(out) == [".relight_cache"]
     (folder,) = (out / ".relight_cache").iterdir()
     assert folder.name == "Floor_materials" and len(list(folder.glob("*/*_0*.npy"))) == 4
     again = run(mb.materials_job(scene, objs, s, str(out)))
-    assert again.report["chunks_reused"] == 4 and again.report["chunks_total"] == 21
+    assert again.report["chunks_reused"] == 4 and again.report["chunks_total"] == chunks
     assert same(again.tensors) and ".relight_cache" not in os.listdir(out)
 
     gen = mb.materials_job(scene, objs, s, str(out))

@@ -253,3 +253,49 @@ def test_a_metallic_edit_without_glossy_anchors_is_refused():
     # metallic 0 is the diffuse bake itself
     np.testing.assert_array_equal(t.irradiance(ptt.Sun((0, 0, 1.0)), finish={"M0": (0, 0.5)}),
                                   t.irradiance(ptt.Sun((0, 0, 1.0))))
+
+
+def test_gathered_files_round_trip_the_receiver_transfer_half_floats_and_the_gloss_set(tmp_path):
+    """A bake with gathered bounces: half-float one-bounce term, the receiver transfer (a sun's
+    exact one-bounce light) and glossy anchors at their own direction set (version 4) survive
+    the file; the transfer adds exactly its product to the blended one-bounce light."""
+    from scipy import sparse
+
+    from relightable_textures.lt_addon.transport.gathered_transfer import ReceiverTransfer
+
+    t = with_gloss(make(V=40))
+    V, R1, S1 = t.vertices, 3, t.one.shape[0]
+    rng = np.random.default_rng(8)
+    g = parse_directions("hemi:6")
+    t = dataclasses.replace(t, one=t.one.astype(np.float16), gloss_spec=g.spec,
+                            gloss=rng.random((g.size, 2, 2, V), dtype=np.float32))
+    mats = [sparse.random(V, V, density=0.2, random_state=r, format="csc", dtype=np.float32)
+            for r in range(R1)]
+    t.receiver_transfer = ReceiverTransfer(mats, rng.random((S1, V)).astype(np.float16),
+                                           np.ones((V, 3), np.float32))
+    path = str(tmp_path / "r.npz")
+    t.save(path)
+    with np.load(path) as z:
+        assert json.loads(bytes(z["header"]).decode())["version"] == 4
+    u = ptt.TransferTensors.load(path)
+    assert u.one.dtype == np.float16 and u.gloss_spec == "hemi:6"
+    np.testing.assert_array_equal(u.gloss, t.gloss)
+    for m, n in zip(u.receiver_transfer.matrices, mats):
+        assert (m != n).nnz == 0
+    sun = ptt.Sun((0.3, 0.2, 0.93), 0.0, 2.0, (1.0, 0.8, 0.5))
+    exact = rng.random(V).astype(np.float32)
+    p = u.project(sun, direct=exact)
+    plain = dataclasses.replace(u, receiver_transfer=None)
+    bare = plain.project(sun, direct=exact)
+    idx, k = ptt.sun_weights(u.direction_sets()[1], sun.direction)
+    d = exact - k.astype(np.float32) @ u.receiver_transfer.direct_one[idx].astype(np.float32)
+    d[np.abs(d) <= 1e-2] = 0.0
+    rgb = 2.0 * np.array([1.0, 0.8, 0.5], np.float32)
+    for r in range(R1):
+        want = rgb[:, None] * (mats[r].toarray() @ d)[None, :]
+        np.testing.assert_allclose(p.one[:, r] - bare.one[:, r], want, rtol=1e-4, atol=1e-5)
+    assert p.fixed == int(np.sum(d != 0)) > 0
+    # an environment has no exact direct term: nothing is corrected
+    env = ptt.Environment(rng.random((8, 16, 3)), "bottom_first")
+    np.testing.assert_array_equal(u.project(env).one, plain.project(env).one)
+    assert u.project(env).fixed == 0
