@@ -80,7 +80,6 @@ def update_timing(quads: int = TIMING_QUADS, repeats: int = 50,
     the cost does not depend on them) a metallic / roughness edit with the Sun moving."""
     import bpy
 
-    from relightable_textures import samples
     from relightable_textures.lt_addon.transport import ptt
     from relightable_textures.operators import material_bake as mb
     from relightable_textures.operators.direct_rays import exact_direct
@@ -89,11 +88,7 @@ def update_timing(quads: int = TIMING_QUADS, repeats: int = 50,
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = bpy.context.scene
-    sample_objects.DETAIL["timing"] = (2, quads)
-    try:
-        samples.build("room", scene, "timing")
-    finally:
-        del sample_objects.DETAIL["timing"]
+    sample_objects.build_room(scene, "demo", quads=quads)
     objs = [bpy.data.objects[n] for n in OBJECTS]
     t0 = time.perf_counter()
     t = run(mb.bake_materials(scene, objs, parse_setting(settings)))
@@ -128,14 +123,10 @@ def update_timing(quads: int = TIMING_QUADS, repeats: int = 50,
         c = t.albedos(colours(i))
         return t.receiver_colors(c) / np.pi * t.combine(p, c)
 
-    fixed = []
-
     def sun_and_material(i, everywhere=False):
         s = moving_sun(i)
         d = exact_direct(scene, t, s, everywhere=everywhere)
-        out = t.shade(s, colours(i), direct=d)
-        fixed.append(t.project(s, d).fixed if i == 0 else 0)
-        return out
+        return t.shade(s, colours(i), direct=d)
 
     def env_and_material(i):
         return t.shade(ptt.Environment(env, "bottom_first", 3.0 * i), colours(i))
@@ -148,12 +139,8 @@ def update_timing(quads: int = TIMING_QUADS, repeats: int = 50,
     t.receiver_transfer = None
     out["sun_rays_at_edges_no_receiver_transfer_ms"] = timed(sun_and_material)
     t.receiver_transfer = keep
-    cast = []
-
     def rays_only(i):
-        s = moving_sun(i)
-        exact_direct(scene, t, s, everywhere=False)
-        cast.append(1)
+        exact_direct(scene, t, moving_sun(i), everywhere=False)
 
     out["rays_at_edges_ms"] = timed(rays_only)
     fixes = [t.project(moving_sun(i), exact_direct(scene, t, moving_sun(i))).fixed

@@ -903,14 +903,10 @@ def bounce_terms(scene, tensors, smoothing: float, of: int | None = None, direct
         S1, S2 = len(tensors.one), len(tensors.two)
         per = min(GATHER_PATCHES, S1 // 2) if bounce_transfer.composes(S1, S2) else 0
         yield Progress(of or 1, of or 1, "fitting the second bounce")
-        out = ptt.with_bounce_transfer(tensors, positions, normals, direct_one, smoothing,
-                                       per_region=per, smooth_bounces=False,
-                                       observations=observations,
-                                       two_weight=GATHER_TWO_WEIGHT)
-        # half floats on purpose: the term is smooth, non-negative and O(1) (a relative
-        # step of 2^-11), and at 400 directions it is most of the file and of the memory
-        out.one = out.one.astype(np.float16)
-        return out
+        return ptt.with_bounce_transfer(tensors, positions, normals, direct_one, smoothing,
+                                        per_region=per, smooth_bounces=False,
+                                        observations=observations,
+                                        two_weight=GATHER_TWO_WEIGHT)
     direct_one = np.zeros((len(d1), tensors.vertices), np.float32)
     if bounce_transfer.composes(len(tensors.one), len(tensors.two)):   # else only smoothing
         for s, w in enumerate(d1):

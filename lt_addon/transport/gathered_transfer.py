@@ -10,8 +10,8 @@ transfer ``K`` (origins x corners) so gathered turns the direct light at the cor
 a shadow ray per corner -- into the one-bounce irradiance at the receivers for *any* light
 direction, and the one-bounce light at the corners into the two-bounce irradiance (Hasan et al.
 2006's direct-to-indirect transfer at vertex resolution). The rays are shared by all directions,
-regions and both bounce orders, so ``N = 1024`` rays cost less than the 16 samples per
-direction of the Cycles bakes did.
+regions and both bounce orders, so 512 rays per receiver cost less than the 16 samples per
+direction, region and gate of the Cycles bakes did.
 
 Measured on the demo room (4,454 vertices, 7 held-out suns, 256-spp Cycles truths with 2
 bounces; ``benchmarks/bench_materials.py``): evaluated exactly at each sun (no blend between
@@ -36,11 +36,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: Rays per origin of the default bake. Measured on the demo room through the whole bake (the
-#: one-bounce light blended from 400 directions, the second bounce composed): relative error of
-#: E 0.0208 / 0.0203 / 0.0201 / 0.0201 at 256 / 512 / 1,024 / 2,048 rays (1.16x / 1.13x /
-#: 1.12x / 1.11x the noise floor) for 7.5 / 13.3 / 23.6 / 49.0 s of rays: past 512 the blend
-#: between directions, not the rays, limits it.
+#: Rays per origin of the default bake. Measured on the demo room through the whole default bake
+#: (128 one-bounce directions with the receiver transfer, the second bounce composed; 7
+#: held-out suns): relative error of E 0.0174 / 0.0167 / 0.0165 at 256 / 512 / 1,024 rays
+#: (0.97x / 0.93x / 0.92x the noise floor) for 7.6 / 12.7 / 27.3 s of rays and 45.5 / 53.9 /
+#: 66.9 MiB of tensors: past 512 the rays buy little.
 DEFAULT_RAYS = 512
 #: The fractional golden ratio: the second coordinate of the Fibonacci lattice.
 _GOLDEN = (np.sqrt(5.0) - 1.0) / 2.0
@@ -249,10 +249,11 @@ class GatheredTransfer:
             cols, Kr = self._K[r]
             front = cols < C
             A = (Kr[:, np.nonzero(front)[0]] @ Q[cols[front]]).tocsr()   # (G, V)
-            M = (self.receivers @ A[self.corner_origin]).tocsc()            # (V, V)
-            M.eliminate_zeros()
-            mats.append(sparse.csc_matrix(M, dtype=np.float32))
-        return ReceiverTransfer(mats, np.asarray(direct_one, np.float16),
+            mats.append(self.receivers @ A[self.corner_origin])              # (V, V)
+        M = sparse.vstack(mats).tocsc()
+        M.eliminate_zeros()
+        return ReceiverTransfer(sparse.csc_matrix(M, dtype=np.float32),
+                                np.asarray(direct_one, np.float16),
                                 np.asarray(source_albedo, np.float32))
 
 
@@ -282,22 +283,28 @@ class ReceiverTransfer:
 
     Attributes
     ----------
-    matrices : list of R1 scipy.sparse.csc_matrix (V, V) float32
-        ``[r][v, u]``: irradiance at receiver ``v`` per unit of albedo x irradiance at receiver
-        ``u``'s corners of region ``r``.
+    matrix : scipy.sparse.csc_matrix (R1 V, V) float32
+        Row ``r V + v``, column ``u``: irradiance at receiver ``v`` per unit of albedo x
+        irradiance at receiver ``u``'s corners of region ``r`` (the regions stacked: one
+        column slice serves them all).
     direct_one : (S1, V) float16
         The receivers' direct term (visibility x cosine) at the one-bounce directions.
     source_albedo : (V, 3) float32
         Each receiver's colour as a source (1 on editable regions: the coefficient is the edit).
     """
 
-    matrices: list
+    matrix: object
     direct_one: np.ndarray
     source_albedo: np.ndarray
 
     @property
+    def regions(self) -> int:
+        return self.matrix.shape[0] // max(self.matrix.shape[1], 1)
+
+    @property
     def nbytes(self) -> int:
-        return int(sum(m.data.nbytes + m.indices.nbytes + m.indptr.nbytes for m in self.matrices)
+        m = self.matrix
+        return int(m.data.nbytes + m.indices.nbytes + m.indptr.nbytes
                    + self.direct_one.nbytes + self.source_albedo.nbytes)
 
     def one_bounce_fix(self, direct: np.ndarray, index: np.ndarray, weights: np.ndarray,
@@ -309,14 +316,9 @@ class ReceiverTransfer:
         d = np.asarray(direct, np.float32) - (np.asarray(weights, np.float32)
                                               @ self.direct_one[index].astype(np.float32))
         cols = np.nonzero(np.abs(d) > threshold)[0]
-        V = len(d)
-        out = np.zeros((3, len(self.matrices), V), np.float32)
+        V, R1 = len(d), self.regions
         if not len(cols):
-            return out, 0
+            return np.zeros((3, R1, V), np.float32), 0
         src = self.source_albedo[cols] * d[cols, None]                  # (n, 3)
-        for r, M in enumerate(self.matrices):
-            sub = M[:, cols]
-            if not sub.nnz:
-                continue
-            out[:, r] = np.asarray(sub @ src).T
-        return out, len(cols)
+        out = np.asarray(self.matrix[:, cols] @ src)                     # (R1 V, 3)
+        return np.ascontiguousarray(out.T.reshape(3, R1, V), np.float32), len(cols)

@@ -134,13 +134,14 @@ class Environment:
     strength: float = 1.0
 
 
-def light_weights(dset: DirectionSet, light) -> np.ndarray:
+def light_weights(dset: DirectionSet, light, sparse_weights: tuple | None = None) -> np.ndarray:
     """Dense weights (S, 3) float64 of ``light`` over the baked directions ``dset``: a term
-    ``T`` (V, S[, 3]) times these, summed over S, is the irradiance in W/m^2."""
+    ``T`` (V, S[, 3]) times these, summed over S, is the irradiance in W/m^2 (a sun's
+    ``sparse_weights``, :func:`.texture.sun_weights` of it, when the caller has them)."""
     S = dset.size
     w = np.zeros((S, 3))
     if isinstance(light, Sun):
-        idx, k = sun_weights(dset, light.direction, light.angle_deg)
+        idx, k = sparse_weights or sun_weights(dset, light.direction, light.angle_deg)
         w[idx] = (k * float(light.strength))[:, None] * np.asarray(light.color, float)[None, :]
         return w
     if isinstance(light, Environment):
@@ -259,8 +260,7 @@ class TransferTensors:
         if not K:
             self.gloss = None
         rt = self.receiver_transfer
-        if rt is not None and (len(rt.matrices) != len(self.regions) + 1
-                               or any(m.shape != (V, V) for m in rt.matrices)
+        if rt is not None and (rt.matrix.shape != ((len(self.regions) + 1) * V, V)
                                or rt.direct_one.shape != (self.one.shape[0], V)
                                or rt.source_albedo.shape != (V, 3)):
             raise ValueError("the receiver transfer does not match the terms")
@@ -358,7 +358,10 @@ class TransferTensors:
         unit = direct   # per unit normal irradiance (V,), or None
         if direct is None:
             w0 = light_weights(self._dsets[0], light).astype(np.float32)
-        w1, w2 = (light_weights(d, light).astype(np.float32) for d in self._dsets[1:])
+        sw1 = (sun_weights(self._dsets[1], light.direction, light.angle_deg)
+               if isinstance(light, Sun) else None)
+        w1 = light_weights(self._dsets[1], light, sw1).astype(np.float32)
+        w2 = light_weights(self._dsets[2], light).astype(np.float32)
 
         def contract(term, w, rows):
             # term (S, 3, rows..., V) -> (3, rows..., V), over the directions the light touches
@@ -379,7 +382,7 @@ class TransferTensors:
         one = contract(self.one, w1, (R1,) if self.one.size else (0,))
         fixed = 0
         if unit is not None and self.receiver_transfer is not None and self.one.size:
-            idx, k = sun_weights(self._dsets[1], light.direction, light.angle_deg)
+            idx, k = sw1
             if len(idx):
                 fix, fixed = self.receiver_transfer.one_bounce_fix(unit, idx, k)
                 one += rgb[:, None, None] * fix
@@ -521,10 +524,9 @@ class TransferTensors:
                      "source_albedo": b.source_albedo, "two_scale": b.scale})
         rt = self.receiver_transfer
         if rt is not None:   # optional arrays: builds without it read the file and blend
-            extra.update({"fix_direct_one": rt.direct_one, "fix_source_albedo": rt.source_albedo})
-            for r, m in enumerate(rt.matrices):
-                extra.update({f"fix_{r}_data": m.data, f"fix_{r}_indices": m.indices,
-                              f"fix_{r}_indptr": m.indptr})
+            m = rt.matrix
+            extra.update({"fix_direct_one": rt.direct_one, "fix_source_albedo": rt.source_albedo,
+                          "fix_data": m.data, "fix_indices": m.indices, "fix_indptr": m.indptr})
         with atomic.atomic_path(path) as tmp:
             with open(tmp, "wb") as fh:
                 np.savez(fh, header=np.frombuffer(json.dumps(header).encode(), np.uint8),
@@ -552,9 +554,8 @@ class TransferTensors:
 
                 V = z["direct"].shape[1]
                 fix = ReceiverTransfer(
-                    [sparse.csc_matrix((z[f"fix_{r}_data"], z[f"fix_{r}_indices"],
-                                        z[f"fix_{r}_indptr"]), shape=(V, V))
-                     for r in range(len(header["regions"]) + 1)],
+                    sparse.csc_matrix((z["fix_data"], z["fix_indices"], z["fix_indptr"]),
+                                      shape=((len(header["regions"]) + 1) * V, V)),
                     z["fix_direct_one"], z["fix_source_albedo"])
             return cls(z["direct"], z["one"], z["two"], tuple(header["specs"]),
                        list(header["regions"]), z["base_colors"], z["receiver_region"],

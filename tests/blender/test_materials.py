@@ -74,7 +74,6 @@ def test_bake_shapes_and_counts(room):
         # the rays' direct light is Cycles' own at the 4 directions (a corner where two walls'
         # edges meet may differ: their intersection tie-break)
         assert g["direct_vs_cycles"]["values_apart"] <= 1 / 350
-        assert t.one.dtype == np.float16   # on purpose: see material_bake.bounce_terms
     else:
         assert t.metadata["bake_calls"] == 4 + 4 * 3 + 4 * (3 + 9)
     assert [n for n, _ in t.objects] == list(OBJECTS)
