@@ -67,7 +67,7 @@ def _mesh_arrays(obj, depsgraph, receiver: bool = True):
         tri = np.empty(len(mesh.loop_triangles) * 3, np.int64)
         mesh.loop_triangles.foreach_get("vertices", tri)
         if not receiver:
-            return co, None, None, tri.reshape(-1, 3), None, None
+            return co, None, None, tri.reshape(-1, 3), None, None, None
         corner_v = np.empty(len(mesh.loops), np.int64)
         mesh.loops.foreach_get("vertex_index", corner_v)
         cn = np.empty(len(mesh.loops) * 3)
@@ -87,7 +87,7 @@ def _mesh_arrays(obj, depsgraph, receiver: bool = True):
         # the next corner round each corner's face: the face's edges as corner pairs
         first = start[face_of]
         following = first + (np.arange(len(face_of)) - first + 1) % total[face_of]
-        return co, corner_v, cn, tri.reshape(-1, 3), centre[face_of], following
+        return co, corner_v, cn, tri.reshape(-1, 3), centre[face_of], following, face_of
     finally:
         ev.to_mesh_clear()
 
@@ -121,7 +121,7 @@ class ReceiverRays:
         depsgraph = bpy.context.evaluated_depsgraph_get()
         verts, tris, offset = [], [], 0
         for o in _casters(scene):
-            co, _, _, tri, _, _ = _mesh_arrays(o, depsgraph, receiver=False)
+            co, _, _, tri, _, _, _ = _mesh_arrays(o, depsgraph, receiver=False)
             verts.append(co)
             tris.append(tri + offset)
             offset += len(co)
@@ -131,9 +131,11 @@ class ReceiverRays:
                                          np.concatenate(tris).tolist(), all_triangles=True)
         self.domain = domain
         self.cast = 0   # origins the last direct() cast rays from
-        points, normals, inward, groups, nexts, starts, corners = [], [], [], [], [], 0, 0
+        points, normals, inward, groups, nexts, faces, starts, corners = [], [], [], [], [], [], 0, 0
+        n_faces = 0
         for name, count in objects:
-            co, corner_v, cn, _, fc, following = _mesh_arrays(bpy.data.objects[name], depsgraph)
+            co, corner_v, cn, _, fc, following, face_of = _mesh_arrays(bpy.data.objects[name],
+                                                                       depsgraph)
             n_el = len(corner_v) if domain == "CORNER" else len(co)
             if n_el != count:
                 raise ValueError(f"{name!r} has {n_el} {'corners' if domain == 'CORNER' else 'vertices'} "
@@ -143,6 +145,8 @@ class ReceiverRays:
             inward.append(fc - co[corner_v])
             groups.append((corner_v if domain == "POINT" else np.arange(len(corner_v))) + starts)
             nexts.append(following + corners)
+            faces.append(face_of + n_faces)
+            n_faces += int(face_of.max()) + 1 if len(face_of) else 0
             starts += count
             corners += len(corner_v)
         self.points = np.concatenate(points)            # (C, 3) world
@@ -173,6 +177,8 @@ class ReceiverRays:
         self._corner_origins = self.points + RAY_OFFSET * (self.normals + towards)
         self._edge_from = np.arange(corners)
         self._edge_to = np.concatenate(nexts) if nexts else np.zeros(0, np.int64)
+        self._face = np.concatenate(faces) if faces else np.zeros(0, np.int64)
+        self._faces = n_faces
         self.ties = 0   # corners the last direct() cast again at a shadow edge
 
     @property
@@ -232,22 +238,44 @@ class ReceiverRays:
         near = np.zeros(len(self._origins), bool)
         near[self._origin_of[a[edge]]] = True
         near[self._origin_of[b[edge]]] = True
-        idx = np.nonzero(near[self._origin_of] & cast)[0]
+        # only the corners on a face the edge crosses: a corner whose face lies on one side
+        # of it is on that side whether or not the edge passes through its vertex (half the
+        # rays at 13K vertices, the same values)
+        crossed = np.zeros(self._faces, bool)
+        crossed[self._face[a[edge]]] = True
+        idx = np.nonzero(near[self._origin_of] & cast & crossed[self._face])[0]
         self.ties = len(idx)
         if not len(idx):
             return vis
         ray_cast, dv = self.tree.ray_cast, Vector(tuple(float(x) for x in w))
         out = vis.copy()
-        out[idx] = np.fromiter((ray_cast(Vector(p), dv)[0] is None
-                                for p in self._corner_origins[idx].tolist()),
+        out[idx] = np.fromiter((ray_cast(p, dv)[0] is None for p in
+                                self._vectors("_corner_vectors", self._corner_origins, idx)),
                                dtype=np.float64, count=len(idx))
         return out
 
     def mean_cos(self, directions) -> np.ndarray:
         """(K, V) mean over each receiver's corners of ``max(0, n . w)`` for K directions."""
-        cos = np.maximum(np.asarray(directions, np.float64) @ self.normals.T, 0.0)   # (K, C)
-        out = np.stack([np.bincount(self.group, weights=c, minlength=self.count) for c in cos])
-        return out / np.maximum(self.per_receiver, 1)
+        w = np.asarray(directions, np.float64).reshape(-1, 3)
+        if not hasattr(self, "_flat"):
+            # receivers whose corners share one normal (a flat or smooth vertex; not a hard
+            # edge's): their mean is the cosine of that normal, no per-corner sum (at 13K
+            # vertices 0.3 ms instead of 1.5)
+            first = np.zeros((self.count, 3))
+            first[self.group] = self.normals
+            self._flat = np.bincount(self.group, weights=np.any(
+                np.abs(self.normals - first[self.group]) > 1e-6, axis=1),
+                minlength=self.count) == 0
+            self._flat_normal = first
+            self._edge_corners = np.nonzero(~self._flat[self.group])[0]
+        out = np.maximum(w @ self._flat_normal.T, 0.0)                           # (K, V)
+        e = self._edge_corners
+        if len(e):
+            cos = np.maximum(w @ self.normals[e].T, 0.0)
+            sums = np.stack([np.bincount(self.group[e], weights=c, minlength=self.count)
+                             for c in cos])
+            out = np.where(self._flat[None], out, sums / np.maximum(self.per_receiver, 1))
+        return out
 
     def known_from(self, D_rows, directions) -> np.ndarray:
         """Visibility (V,) the baked direct term already tells at a sun between ``directions``
@@ -279,12 +307,29 @@ class ReceiverRays:
         if not len(idx):
             return vis
         cast = self.tree.ray_cast
-        pts = [Vector(p) for p in self._origins[idx].tolist()]
+        pts = self._vectors("_origin_vectors", self._origins, idx)
         for d in directions:
             dv = Vector(tuple(float(x) for x in d))
             vis[idx] += np.fromiter((cast(p, dv)[0] is None for p in pts), dtype=np.float64,
                                     count=len(pts))
         return vis / len(directions)
+
+    def _vectors(self, name: str, points: np.ndarray, idx: np.ndarray) -> list:
+        """``mathutils.Vector`` of ``points[idx]``, made once per point (a ray's origin is
+        the same at every sun: making it again was a fifth of a ray's cost)."""
+        from mathutils import Vector
+
+        cache = getattr(self, name, None)
+        if cache is None:
+            cache = [None] * len(points)
+            setattr(self, name, cache)
+        out = []
+        for i in idx.tolist():
+            v = cache[i]
+            if v is None:
+                v = cache[i] = Vector(points[i].tolist())
+            out.append(v)
+        return out
 
 
 def disc_directions(w, angle_deg: float, n: int) -> np.ndarray:
@@ -320,7 +365,11 @@ def _scene_stamp(scene) -> str:
         data = o.evaluated_get(depsgraph).data   # a mesh's: after modifiers and poses
         if o.type == "MESH" and data is not None:
             co = np.empty(len(data.vertices) * 3, np.float32)
-            data.vertices.foreach_get("co", co)
+            position = data.attributes.get("position")
+            if position is not None:   # 12x faster than vertices' "co" (1.0 -> 0.08 ms)
+                position.data.foreach_get("vector", co)
+            else:
+                data.vertices.foreach_get("co", co)
             h.update(co.tobytes())
     return h.hexdigest()
 

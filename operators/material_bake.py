@@ -795,7 +795,13 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
         tensors.metadata["bounce_transfer"]["seconds"] = round(time.perf_counter() - t, 3)
         source = np.ones((V, 3), np.float32)   # editable receivers: the edit is the coefficient
         source[region_of == 0] = colour_of[region_of == 0]
-        tensors.receiver_transfer = transfer.receiver_transfer(source, direct_one)
+        pos = np.asarray(transfer.receivers @ gs.front.points)          # (V, 3)
+        diagonal = float(np.linalg.norm(pos.max(axis=0) - pos.min(axis=0))) if V else 0.0
+        tensors.receiver_transfer = transfer.receiver_transfer(
+            source, direct_one, pos, gathered_transfer.NEAR_FRACTION * diagonal)
+        tensors.metadata["gather"]["receiver_transfer"] = {
+            "radius_m": round(gathered_transfer.NEAR_FRACTION * diagonal, 4),
+            "entries": int(tensors.receiver_transfer.matrix.nnz)}
     elif S1 and settings.smoothing + bounce_transfer.composes(S1, S2) > 0:
         t = time.perf_counter()
         tensors = yield from bounce_terms(scene, tensors, settings.smoothing, total)
@@ -818,10 +824,11 @@ def direct_agreement(cycles: np.ndarray, rays: np.ndarray) -> dict:
 #: Two-bounce directions the second-bounce composition is fitted to when the bounce terms are
 #: gathered (exact at any direction, so a finer set than the stored two-bounce term; not kept).
 FIT_TWO_DIRECTIONS = "hemi:64"
-#: Patches per region of that composition (measured on the demo room with gathered terms, 7
-#: held-out suns: 0.0233 / 0.0221 of E at 32 / 64 patches; the Cycles-baked terms' noise left
-#: 16-48 alike, bounce_transfer.PATCHES).
-GATHER_PATCHES = 64
+#: Patches per region of that composition. Measured on the demo room with gathered terms, 7
+#: held-out suns (error of E): 0.0177 / 0.0182 at 64 / 32 patches (0.98x / 1.01x the noise
+#: floor); the composition reads the (patches, V) transfer once per update, so 32 halve that
+#: part of the update (about 1.5 of 3 ms at 13K vertices).
+GATHER_PATCHES = 32
 #: Weight of the two-bounce observations in that fit (relative to equal total weight; measured
 #: there: the two-bounce part's error 0.0114 / 0.0103 / 0.0102 at 0.3 / 1 / 3: exact
 #: observations may pull harder than the noisy Cycles bakes, bounce_transfer.TWO_WEIGHT).

@@ -204,6 +204,8 @@ class BounceTransfer:
             ks = np.nonzero(self.patch_region == r2)[0]
             if not len(ks) or not np.any(scale[:, r2]):
                 continue
+            if ks[-1] - ks[0] + 1 == len(ks):   # a region's patches are contiguous: no copy
+                ks = slice(int(ks[0]), int(ks[-1]) + 1)
             block = (Q[:, ks].astype(np.float32) @ self.transfer[ks]).reshape(C, N, V)
             out[:, :, r2] = block * np.asarray(scale, np.float32)[None, :, r2, None]
         return out
