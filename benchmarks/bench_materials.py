@@ -177,7 +177,6 @@ def metal_picture(png: str, size: str, anchors: str, finish: dict, spp: int,
     import bpy
 
     from relightable_textures import samples
-    from relightable_textures.operators import material_bake as mb
     from relightable_textures.operators import material_edit
     from relightable_textures.operators.jobs import run
 

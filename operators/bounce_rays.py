@@ -24,6 +24,7 @@ import time
 import bpy
 import numpy as np
 
+from ..lt_addon.geometry.barycentric import barycentric
 from ..lt_addon.transport import gathered_transfer as gt
 from .direct_rays import ReceiverRays, _casters
 
@@ -143,7 +144,7 @@ class GatherScene:
         point = org[ok] + dist[ok, None] * d[ok]
         front = np.einsum("ij,ij->i", d[ok], n) < 0.0
         return gt.hit_entries(np.repeat(ids, rays)[ok], self.tri_corners[ti],
-                              gt.barycentric(point, a, b, c), front, self.corners, rays)
+                              barycentric(point, a, b, c), front, self.corners, rays)
 
     def direct(self, directions, back: np.ndarray | None = None):
         """Exact direct light, visibility x cosine, at every corner for each of ``directions``

@@ -504,18 +504,10 @@ def hull_barycentric(points, simplices, equations, q):
     facet = np.argmax(score, axis=1)
     tri = simplices[facet]                       # (Q, 3)
     p = q / score[np.arange(q.shape[0]), facet][:, None]   # hit point on the facet plane
+    from ..geometry.barycentric import barycentric
+
     a, b, c = (points[tri[:, i]] for i in range(3))
-    v0, v1, v2 = b - a, c - a, p - a
-    d00 = np.einsum("qi,qi->q", v0, v0)
-    d01 = np.einsum("qi,qi->q", v0, v1)
-    d11 = np.einsum("qi,qi->q", v1, v1)
-    d20 = np.einsum("qi,qi->q", v2, v0)
-    d21 = np.einsum("qi,qi->q", v2, v1)
-    den = d00 * d11 - d01 * d01
-    wb = (d11 * d20 - d01 * d21) / den
-    wc = (d00 * d21 - d01 * d20) / den
-    w = np.stack([1.0 - wb - wc, wb, wc], axis=-1)
-    return tri, np.clip(w, 0.0, 1.0) / np.clip(w, 0.0, 1.0).sum(axis=1, keepdims=True)
+    return tri, barycentric(p, a, b, c)
 
 
 def interpolation_weights(direction_set: DirectionSet, query, method: str = "auto"):

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from scipy import sparse
 
+from relightable_textures.lt_addon.geometry.barycentric import barycentric
 from relightable_textures.lt_addon.transport import gathered_transfer as gt
 
 
@@ -37,8 +38,8 @@ def test_barycentric_reconstructs_the_point_and_survives_a_degenerate_triangle()
     a, b, c = (rng.normal(size=(50, 3)) for _ in range(3))
     w = rng.dirichlet([1, 1, 1], size=50)
     p = w[:, :1] * a + w[:, 1:2] * b + w[:, 2:] * c
-    np.testing.assert_allclose(gt.barycentric(p, a, b, c), w, atol=1e-9)
-    flat = gt.barycentric(np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3)),
+    np.testing.assert_allclose(barycentric(p, a, b, c), w, atol=1e-9)
+    flat = barycentric(np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3)),
                           np.zeros((1, 3)))
     np.testing.assert_allclose(flat, [[1 / 3, 1 / 3, 1 / 3]])
 
@@ -79,7 +80,7 @@ def _plate_transfer(height, side, rays, albedo=(1.0, 1.0, 1.0)):
     ok = tri >= 0
     p = o[ok] + dist[ok, None] * d[ok]
     t = tri[ok]
-    bary = gt.barycentric(p, tris[t, 0], tris[t, 1], tris[t, 2])
+    bary = barycentric(p, tris[t, 0], tris[t, 1], tris[t, 2])
     front = np.einsum("ij,ij->i", d[ok], n[t]) < 0
     C = 5                                                   # corner 4: the receiver's own
     e = gt.hit_entries(np.zeros(ok.sum(), int), tri_corners[t], bary, front, C, rays)
@@ -173,7 +174,7 @@ def test_receiver_transfer_makes_a_blend_exact_where_the_direct_light_was_correc
     receiver transfer of (exact - blended) direct light gives the transfer of the exact light,
     where every receiver is also an emitter (here: per face corner, a receiver per corner)."""
     rng = np.random.default_rng(4)
-    G = C = V = 30
+    G = C = 30
     K = sparse.random(G, 2 * C, density=0.3, random_state=4, format="csr") * 0.05
     K = sparse.hstack([K[:, :C], sparse.csr_matrix((G, C))]).tocsr()   # front sides only
     region = rng.integers(0, 3, C)
