@@ -19,7 +19,6 @@ def baked(tmp_path_factory):
     for name in OBJECTS:
         args += ["--object", name]
     args += ["--region", "RedMaterial", "--region", "GreenMaterial", "--directions", "hemi:16",
-             "--one-bounce-directions", "hemi:4", "--two-bounce-directions", "hemi:4",
              "--truth", "--truth-samples", "64"]
     r = relight(*args)
     assert r.returncode == 0, r.stderr[-2000:]
