@@ -9,9 +9,10 @@ with the chunk cache, cancelled once the direct stage is done (the indirect bake
 its warm rerun: what resuming saves.
 
 ``--bake materials`` does the same for the material bake of ``make demo`` (the demo room, its
-five meshes, the red and green walls editable, 256:1.5 / 16 / 4 directions, 32 spp, per face
-corner; 31 chunks): one process, 1/2/4 workers (tensors checked bit for bit), and a cold bake
-cancelled at its two-bounce terms with its warm rerun.
+five meshes, the red and green walls editable, the default settings: 400 direct directions by
+Cycles, the bounces gathered by 512 rays per receiver, per face corner; 25 direct chunks of 16
+directions and one gather chunk per 256 receivers): one process, 1/2/4 workers (tensors
+checked bit for bit), and a cold bake cancelled once its gather started with its warm rerun.
 
 Usage: python benchmarks/bench_distributed.py [--workers 1,2,4] [--size demo|test]
                                               [--bake textures|materials]
@@ -127,10 +128,10 @@ def bench_materials(args):
     scene = bpy.context.scene
     objs = [bpy.data.objects[n] for n in ("Floor", "WallLeft", "WallRight", "WallBack", "Box")]
     settings = mb.MaterialBakeSettings(regions=["RedMaterial", "GreenMaterial"],
-                                       directions=("hemi:256:1.5", "hemi:16", "hemi:4"),
-                                       samples=32, domain="CORNER")
-    print(f"room {args.size}, material bake as make demo's: {settings.directions}, "
-          f"{settings.samples} spp, per corner, {os.cpu_count()} cores", flush=True)
+                                       domain="CORNER")
+    print(f"room {args.size}, material bake as make demo's: {settings.specs()}, bounces by "
+          f"{settings.bounce_bake} ({settings.rays} rays), per corner, {os.cpu_count()} cores",
+          flush=True)
 
     def bake(out, **kw):
         t0 = time.perf_counter()
@@ -145,8 +146,8 @@ def bench_materials(args):
     t = ref.report["timings"]
     print(f"one process: bake {single_wall:.1f} s ({ref.report['bake_calls']} Cycles bakes, "
           f"{ref.report['chunks_total']} chunks; Cycles {t['cycles_seconds']:.1f} s; direct "
-          f"{t.get('direct_seconds', 0):.1f} s, one bounce {t.get('one_bounce_seconds', 0):.1f}"
-          f" s, two bounces {t.get('two_bounce_seconds', 0):.1f} s)", flush=True)
+          f"{t.get('direct_seconds', 0):.1f} s, bounce rays {t.get('bounce_rays_seconds', 0):.1f}"
+          f" s)", flush=True)
     for n in map(int, args.workers.split(",")):
         res, wall, up = _on_local_cluster(n, bake, blend)
         d = res.report["distributed"]
@@ -158,9 +159,9 @@ def bench_materials(args):
               f"{wall:.1f} s; tensors identical: {same(res.tensors, ref.tensors)}", flush=True)
 
     cold = _cancel_at(mb.materials_job(scene, objs, settings, os.path.join(work, "resume")),
-                      "two bounces")
+                      "bounce rays")
     res, warm = bake("resume")
-    print(f"resume: cold run cancelled at its two-bounce terms after {cold:.1f} s; the warm "
+    print(f"resume: cold run cancelled once its gather started, after {cold:.1f} s; the warm "
           f"rerun ({res.report['chunks_reused']}/{res.report['chunks_total']} chunks reused) "
           f"took {warm:.1f} s where the one-process bake took {single_wall:.1f} s; tensors "
           f"identical: {same(res.tensors, ref.tensors)}", flush=True)

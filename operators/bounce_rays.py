@@ -19,7 +19,6 @@ between shadow and diffuse rays (every shadow caster reflects here).
 
 from __future__ import annotations
 
-import time
 
 import bpy
 import numpy as np
@@ -210,10 +209,3 @@ class GatherScene:
 def gather_chunks(origins: int) -> list:
     """``(start, stop)`` origin ranges of the gather, :data:`CHUNK_ORIGINS` each."""
     return [(a, min(a + CHUNK_ORIGINS, origins)) for a in range(0, origins, CHUNK_ORIGINS)]
-
-
-def timed_gather(gs: GatherScene, start: int, stop: int, rays: int, seed: int):
-    """:meth:`GatherScene.gather` and its seconds."""
-    t = time.perf_counter()
-    out = gs.gather(start, stop, rays, seed)
-    return out, time.perf_counter() - t
