@@ -38,8 +38,7 @@ demo: $(STAMP)
 	  --energy 0.99 --truth --force
 	$(VENV)/bin/relight bake-materials $(OUT)/room.blend --object Floor --object WallLeft \
 	  --object WallRight --object WallBack --object Box --region RedMaterial \
-	  --region GreenMaterial --directions hemi:256:1.5 --one-bounce-directions hemi:16 \
-	  --two-bounce-directions hemi:4 --samples 32 --per-corner --force
+	  --region GreenMaterial --per-corner --force
 	$(VENV)/bin/relight relight-materials $(OUT)/room.blend --object Floor \
 	  --set RedMaterial.color=0.1,0.2,0.8 --compare $(OUT)/room-edit-vs-cycles.png \
 	  --out $(OUT)/room_edit_shading.npy --force

@@ -12,7 +12,8 @@ its warm rerun: what resuming saves.
 five meshes, the red and green walls editable, the default settings: 400 direct directions by
 Cycles, the bounces gathered by 512 rays per receiver, per face corner; 25 direct chunks of 16
 directions and one gather chunk per 256 receivers): one process, 1/2/4 workers (tensors
-checked bit for bit), and a cold bake cancelled once its gather started with its warm rerun.
+checked bit for bit), and a cold bake cancelled once its gather is done (its direct bakes
+started) with its warm rerun.
 
 Usage: python benchmarks/bench_distributed.py [--workers 1,2,4] [--size demo|test]
                                               [--bake textures|materials]
@@ -159,9 +160,10 @@ def bench_materials(args):
               f"{wall:.1f} s; tensors identical: {same(res.tensors, ref.tensors)}", flush=True)
 
     cold = _cancel_at(mb.materials_job(scene, objs, settings, os.path.join(work, "resume")),
-                      "bounce rays")
+                      "direct")
     res, warm = bake("resume")
-    print(f"resume: cold run cancelled once its gather started, after {cold:.1f} s; the warm "
+    print(f"resume: cold run cancelled once its direct bakes started (the gather done), "
+          f"after {cold:.1f} s; the warm "
           f"rerun ({res.report['chunks_reused']}/{res.report['chunks_total']} chunks reused) "
           f"took {warm:.1f} s where the one-process bake took {single_wall:.1f} s; tensors "
           f"identical: {same(res.tensors, ref.tensors)}", flush=True)
