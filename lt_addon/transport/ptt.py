@@ -153,21 +153,65 @@ def light_weights(dset: DirectionSet, light, sparse_weights: tuple | None = None
 
 
 @dataclass
+class ComposedBounce:
+    """The composed second bounce of one lighting before it is spread over the receivers
+    (:class:`.bounce_transfer.BounceTransfer`): ``light`` (3, R+1, K) float32, the patches'
+    reflected one-bounce light per source region; ``rest`` (3, P, V) float32 the blended
+    baked term of the ``rest_pairs`` (P, 2) the composition does not cover (a flat wall's
+    own); with glossy anchors ``gloss_light`` (3, R*K_a, K) and ``gloss_scale`` (R*K_a, R+1)."""
+
+    bounce: BounceTransfer
+    light: np.ndarray
+    rest_pairs: np.ndarray
+    rest: np.ndarray
+    gloss_light: np.ndarray | None = None
+    gloss_scale: np.ndarray | None = None
+
+
+@dataclass
 class ProjectedLight:
     """The terms contracted with one lighting, channel first: direct (3, V), one (3, R+1, V),
-    two (3, R+1, R+1, V), float32 irradiance in W/m^2 (one / two may have zero regions);
-    with glossy anchors ``gloss`` (3, R, K, V) and its second bounce composed ``gloss_two``
-    (3, R, K, R+1, V) (None without the composition; ``gloss_covers`` (R, R+1) bool: the pairs
-    ``r -> r2`` it composes); ``fixed``: the receivers whose one-bounce light the receiver
-    transfer made exact (:class:`.gathered_transfer.ReceiverTransfer`)."""
+    float32 irradiance in W/m^2 (one may have zero regions); the second bounce either
+    ``blended`` (3, R+1, R+1, V) (the baked term, or none: zero regions) or ``composed``
+    (:class:`ComposedBounce`, spread over the receivers only when :attr:`two` is read:
+    :meth:`TransferTensors.combine` weighs the patches first); with glossy anchors ``gloss``
+    (3, R, K, V) (its composed second bounce: :attr:`gloss_two`; ``gloss_covers`` (R, R+1)
+    bool: the pairs ``r -> r2`` it composes); ``fixed``: the receivers whose one-bounce light
+    the receiver transfer made exact (:class:`.gathered_transfer.ReceiverTransfer`)."""
 
     direct: np.ndarray
     one: np.ndarray
-    two: np.ndarray
+    blended: np.ndarray | None = None
+    composed: ComposedBounce | None = None
     gloss: np.ndarray | None = None
-    gloss_two: np.ndarray | None = None
     gloss_covers: np.ndarray | None = None
     fixed: int = 0
+
+    @property
+    def has_two(self) -> bool:
+        return self.composed is not None or (self.blended is not None and self.blended.size > 0)
+
+    @property
+    def two(self) -> np.ndarray:
+        """(3, R+1, R+1, V) float32: the two-bounce light per ordered pair ``r1 -> r2``."""
+        cb = self.composed
+        if cb is None:
+            return self.blended
+        two = cb.bounce.spread(cb.light, cb.bounce.scale)
+        if len(cb.rest_pairs):
+            two[:, cb.rest_pairs[:, 0], cb.rest_pairs[:, 1]] = cb.rest
+        return two
+
+    @property
+    def gloss_two(self) -> np.ndarray | None:
+        """(3, R, K, R+1, V) float32: the glossy anchors' light reflected once more off each
+        region (None without the composition)."""
+        cb = self.composed
+        if cb is None or cb.gloss_light is None:
+            return None
+        R, K = self.gloss.shape[1:3]
+        V = self.direct.shape[-1]
+        return cb.bounce.spread(cb.gloss_light, cb.gloss_scale).reshape(3, R, K, -1, V)
 
 
 @dataclass
@@ -387,18 +431,18 @@ class TransferTensors:
                 _, fixed = self.receiver_transfer.one_bounce_fix(unit, idx, k, into=one,
                                                                  scale=rgb)
         composed = compose and self.bounce is not None and self.two.size and self.one.size
+        blended = cb = None
         if composed:   # the composed pairs, and the others (a flat wall's own) blended
-            two = self.bounce.compose(one)
-            rest = ~self.bounce.covers()
-            if np.any(rest):
-                r1, r2 = np.nonzero(rest)
-                nz = np.nonzero(np.any(w2 != 0, axis=1))[0]
-                if len(nz):   # index the pairs first: the whole term is 27 times larger
-                    block = self.two[:, :, r1, r2][nz]                   # (k, 3, pairs, V)
-                    two[:, r1, r2] = np.einsum("kc,kcpv->cpv", w2[nz], block)
+            rest = np.argwhere(~self.bounce.covers())                            # (P, 2)
+            part = np.zeros((3, len(rest), V), np.float32)
+            nz = np.nonzero(np.any(w2 != 0, axis=1))[0]
+            if len(rest) and len(nz):   # index the pairs first: the whole term is 27x larger
+                block = self.two[:, :, rest[:, 0], rest[:, 1]][nz]          # (k, 3, P, V)
+                part = np.einsum("kc,kcpv->cpv", w2[nz], block)
+            cb = ComposedBounce(self.bounce, self.bounce.patch_light(one), rest, part)
         else:
-            two = contract(self.two, w2, (R1, R1) if self.two.size else (0, 0))
-        g_one = g_two = covers = None
+            blended = contract(self.two, w2, (R1, R1) if self.two.size else (0, 0))
+        g_one = covers = None
         if self.gloss is not None and gloss:
             R, K = self.gloss.shape[1:3]
             wg = (w1 if self.gloss_spec == self.specs[1]
@@ -408,13 +452,13 @@ class TransferTensors:
             if len(nz):   # white anchors: one channel, the light's colour per channel
                 g_one[:] = (wg[nz].T @ self.gloss[nz].reshape(len(nz), -1)).reshape(3, R * K, V)
             covers = np.zeros((R, R1), bool)
-            if compose and self.bounce is not None and self.two.size:
+            if cb is not None:
                 src = np.repeat(np.arange(1, R + 1), K)
                 scale = self.bounce.source_scale(src)
-                g_two = self.bounce.compose_sources(g_one, scale).reshape(3, R, K, R1, V)
+                cb.gloss_light, cb.gloss_scale = self.bounce.patch_light(g_one), scale
                 covers = scale.reshape(R, K, R1)[:, 0] != 0
             g_one = g_one.reshape(3, R, K, V)
-        return ProjectedLight(np.ascontiguousarray(direct, np.float32), one, two, g_one, g_two,
+        return ProjectedLight(np.ascontiguousarray(direct, np.float32), one, blended, cb, g_one,
                               covers, fixed)
 
     def _contract_one(self, w: np.ndarray) -> np.ndarray:
@@ -466,15 +510,24 @@ class TransferTensors:
             E += np.einsum("rc,crv->cv", cd, projected.one)
             if ca is not None:
                 E += np.einsum("rkc,crkv->cv", ca, projected.gloss)
-        if 2 in orders and projected.two.size:
+        if 2 in orders and projected.has_two:
             first = np.repeat(cd[:, None, :], len(c), axis=1)     # (R+1, R+1, 3)
             if ca is not None:   # pairs whose glossy light is not composed: as diffuse
                 lost = ~projected.gloss_covers
                 first[1:][lost] = np.repeat(c[1:, None, :], len(c), axis=1)[lost]
-            pair = first * c[None, :, :]
-            E += np.einsum("abc,cabv->cv", pair, projected.two)
-            if ca is not None and projected.gloss_two is not None:
-                E += np.einsum("rkc,sc,crksv->cv", ca, c, projected.gloss_two)
+            pair = first * c[None, :, :]                          # (R+1, R+1, 3)
+            cb = projected.composed
+            if cb is None:
+                E += np.einsum("abc,cabv->cv", pair, projected.blended)
+            else:   # the patches weighed by the pairs' colours, then spread once
+                E += cb.bounce.contract(cb.light, pair, cb.bounce.scale)
+                if len(cb.rest_pairs):
+                    E += np.einsum("pc,cpv->cv", pair[cb.rest_pairs[:, 0], cb.rest_pairs[:, 1]],
+                                   cb.rest)
+                if ca is not None and cb.gloss_light is not None:
+                    coef = ca[:, :, None, :] * c[None, None, :, :]   # (R, K, R+1, 3)
+                    E += cb.bounce.contract(cb.gloss_light, coef.reshape(-1, len(c), 3),
+                                            cb.gloss_scale)
         return np.ascontiguousarray(E.T)
 
     def _coefficients(self, c: np.ndarray, anchors):
