@@ -89,8 +89,8 @@ def update_preview(scene) -> dict:
     shade_ms = write_ms = 0.0
     for _, tensors in bakes:
         t0 = time.perf_counter()
-        # rays only where the baked directions disagree: the live update stays within 16 ms
-        # at 13K vertices (a ray to every receiver took 11-20 ms in all, measured)
+        # rays only where the baked directions disagree: at 13K vertices the update took
+        # 12-18 ms where a ray to every receiver took 27-30 ms (README, measured)
         values = tensors.shade(light, material_bake.file_colours(tensors),
                                direct=exact_direct(scene, tensors, light, everywhere=False),
                                finish=material_bake.file_finish(tensors))
