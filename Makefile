@@ -18,8 +18,8 @@ $(STAMP): requirements.txt pyproject.toml
 	$(PY) -m pip install --quiet --no-deps -e .
 	touch $(STAMP)
 
-## demo: set up the venv and run the main job on the bundled sample scenes (writes out/; 468 s
-##   measured on 2 cores with the venv in place)
+## demo: set up the venv and run the main job on the bundled sample scenes (writes out/; 494 s
+##   measured on 2 cores with the venv in place, 2026-12-01)
 demo: $(STAMP)
 	mkdir -p $(OUT) $(BLENDER_USER_RESOURCES)
 	for s in bumps noise statue room; do \
