@@ -168,6 +168,9 @@ def test_glossy_anchors_from_the_cli_edit_metallic_and_roughness(tmp_path):
                 "--anchor-directions", "hemi:4")
     assert r.returncode == 0, r.stderr[-2000:]
     assert "anchors roughness:0.5" in r.stdout
+    # 4 one-bounce directions: the bake warns that a sun between them blends coarsely
+    (warning,) = [ln for ln in our_lines(r.stderr) if "one-bounce directions" in ln]
+    assert warning.startswith("relight: warning: 4 one-bounce directions") and "6.7x" in warning
     rep = json.loads((tmp_path / "room_relight" / "Floor_materials.json").read_text())
     # Cycles bakes the direct light and the glossy anchor (one region, 4 directions); the
     # diffuse bounce is gathered by rays
