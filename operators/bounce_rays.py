@@ -19,7 +19,6 @@ between shadow and diffuse rays (every shadow caster reflects here).
 
 from __future__ import annotations
 
-
 import bpy
 import numpy as np
 

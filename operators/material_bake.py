@@ -836,8 +836,9 @@ def direct_agreement(cycles: np.ndarray, rays: np.ndarray) -> dict:
 FIT_TWO_DIRECTIONS = "hemi:64"
 #: Patches per region of that composition. Measured on the demo room with gathered terms, 7
 #: held-out suns (error of E): 0.0177 / 0.0182 at 64 / 32 patches (0.98x / 1.01x the noise
-#: floor); the composition reads the (patches, V) transfer once per update, so 32 halve that
-#: part of the update (about 1.5 of 3 ms at 13K vertices).
+#: floor). Chosen when an update spread each pair's patches over the receivers (32 halved
+#: that part, about 1.5 of 3 ms at 13K vertices); since the update weighs the patches first
+#: (BounceTransfer.contract, 0.2 ms) 64 would cost little there: not re-measured yet.
 GATHER_PATCHES = 32
 #: Weight of the two-bounce observations in that fit (relative to equal total weight; measured
 #: there: the two-bounce part's error 0.0114 / 0.0103 / 0.0102 at 0.3 / 1 / 3: exact
