@@ -5,14 +5,14 @@ import json
 
 import numpy as np
 import pytest
-from relight_cli import assert_refused, relight
+from relight_cli import assert_refused, make_scene, relight
 
 
 @pytest.fixture(scope="module")
 def analyzed(tmp_path_factory):
     folder = tmp_path_factory.mktemp("analyze")
     blend = folder / "statue.blend"
-    assert relight("scene", "statue", "--out", blend).returncode == 0
+    make_scene("statue", blend)
     before = hashlib.sha256(blend.read_bytes()).hexdigest()
     r = relight("analyze", blend, "--object", "Statue", "--directions", "cube:8", "--seeds", "4",
                 "--out", folder / "an")
@@ -95,5 +95,5 @@ def test_analysis_cost_agrees_with_a_one_cluster_cpca_bake(analyzed, tmp_path):
 ])
 def test_bad_analyze_input_exit_2(tmp_path, args, message):
     blend = tmp_path / "s.blend"
-    assert relight("scene", "statue", "--out", blend).returncode == 0
+    make_scene("statue", blend)
     assert_refused(tmp_path, message, "analyze", blend, "--object", "Statue", *args)

@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 import pytest
-from relight_cli import assert_refused, relight
+from relight_cli import assert_refused, make_scene, relight
 
 from relightable_textures.lt_addon.io import exrio
 
@@ -21,7 +21,7 @@ TINY = ["--method", "lobes", "--resolution", "16", "--samples", "4", "--order", 
 def baked(tmp_path_factory):
     folder = tmp_path_factory.mktemp("bake")
     blend = folder / "bumps.blend"
-    assert relight("scene", "bumps", "--out", blend).returncode == 0
+    make_scene("bumps", blend)
     t0 = time.perf_counter()
     r = relight("bake-textures", blend, "--object", "Bumps", *TINY, "--truth", "2")
     r.stopwatch = time.perf_counter() - t0
@@ -150,5 +150,5 @@ def test_relight_and_light_env_write_float_exrs(baked, tmp_path):
 ])
 def test_bad_bake_input_exit_2_and_nothing_changes(tmp_path, args, message):
     blend = tmp_path / "b.blend"
-    assert relight("scene", "bumps", "--out", blend).returncode == 0
+    make_scene("bumps", blend)
     assert_refused(tmp_path, message, *[a.format(blend=blend, tmp=tmp_path) for a in args])

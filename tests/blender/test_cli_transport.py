@@ -5,7 +5,7 @@ import os
 
 import numpy as np
 import pytest
-from relight_cli import assert_refused, relight
+from relight_cli import assert_refused, make_scene, relight
 
 
 
@@ -14,7 +14,7 @@ from relight_cli import assert_refused, relight
 def baked(tmp_path_factory):
     folder = tmp_path_factory.mktemp("transport")
     blend = folder / "statue.blend"
-    assert relight("scene", "statue", "--out", blend).returncode == 0
+    make_scene("statue", blend)
     r = relight("bake-transport", blend, "--object", "Statue", "--directions", "cube:4",
                 "--coeffs", "12", "--truth")
     assert r.returncode == 0, r.stderr[-2000:]
@@ -64,7 +64,7 @@ def test_cpca_bakes_shade_like_the_full_eigentransport(tmp_path):
     are two exact models of the same deterministic bake: relight-vertices must agree to float32
     round-off. --clusters auto records its subdivision tree and Mahajan's cost."""
     blend = tmp_path / "statue.blend"
-    assert relight("scene", "statue", "--out", blend).returncode == 0
+    make_scene("statue", blend)
     common = ("--object", "Statue", "--directions", "cube:4")
     out = {}
     for name, extra in (("pca", ()), ("cpca", ("--clusters", "3"))):
@@ -112,7 +112,7 @@ def test_cpca_bakes_shade_like_the_full_eigentransport(tmp_path):
 ])
 def test_bad_transport_input_exit_2(tmp_path, args, message):
     blend = tmp_path / "s.blend"
-    assert relight("scene", "statue", "--out", blend).returncode == 0
+    make_scene("statue", blend)
     assert_refused(tmp_path, message, *[x.format(blend=blend, tmp=tmp_path) for x in args])
 
 
@@ -120,7 +120,7 @@ def test_bake_verbs_refuse_to_replace_a_bake_without_force(tmp_path):
     """bake-transport and the lobes bake-textures refuse an existing bake of the same object in
     --out (one line, exit 2, nothing changed) before any work; --force replaces it."""
     blend = tmp_path / "statue.blend"
-    assert relight("scene", "statue", "--out", blend).returncode == 0
+    make_scene("statue", blend)
     runs = [("bake-transport", blend, "--object", "Statue", "--directions", "cube:2",
              "--out", tmp_path / "t"),
             ("bake-textures", blend, "--object", "Statue", "--method", "lobes", "--order", "2",

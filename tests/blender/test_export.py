@@ -9,7 +9,7 @@ import subprocess
 
 import numpy as np
 import pytest
-from relight_cli import assert_refused, relight
+from relight_cli import assert_refused, make_scene, relight
 
 from relightable_textures.lt_addon.export import rti, rti_files
 from relightable_textures.lt_addon.io import exrio
@@ -45,7 +45,7 @@ def plane(tmp_path_factory):
 def bumps(tmp_path_factory):
     folder = tmp_path_factory.mktemp("bumps")
     blend = folder / "bumps.blend"
-    assert relight("scene", "bumps", "--out", blend).returncode == 0
+    make_scene("bumps", blend)
     r = relight("bake-textures", blend, "--object", "Bumps", "--directions", "hemi:100:1.5",
                 "--resolution", "24", "--indirect-resolution", "12", "--indirect-samples",
                 "8", "--no-compare")
@@ -251,7 +251,7 @@ def test_a_lobes_bake_exports_rti_and_refuses_lightmaps(tmp_path):
     """A steerable (lobes) bake is a source for RTI (its relight sampled at hemi:400:1.5);
     the lightmaps need a transport bake's visibility and say so."""
     blend = tmp_path / "bumps.blend"
-    assert relight("scene", "bumps", "--out", blend).returncode == 0
+    make_scene("bumps", blend)
     r = relight("bake-textures", blend, "--object", "Bumps", "--method", "lobes",
                 "--resolution", "16", "--samples", "4", "--order", "3", "--bounces", "0",
                 "--no-compare")
