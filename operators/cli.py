@@ -472,6 +472,9 @@ def _add_distribution_options(p, what: str) -> None:
                    help=f"{what}bake the chunks on the Dask cluster at ADDRESS (e.g. "
                         "tcp://host:8786); its workers need this package and bpy, and must "
                         "read the .blend and --out at the same paths")
+    p.add_argument("--connect-timeout", type=float, default=10.0, metavar="SECONDS",
+                   help="with --scheduler: how long to wait for the scheduler to answer before "
+                        "giving up (default 10; a scheduler still starting may need more)")
 
 
 def _dask_client(args):
@@ -485,8 +488,10 @@ def _dask_client(args):
     if args.no_resume:
         raise CliError("--workers / --scheduler hand chunks to the workers through the chunk "
                        "cache; drop --no-resume")
+    if not args.connect_timeout > 0:
+        raise CliError(f"--connect-timeout must be > 0 seconds, got {args.connect_timeout:g}")
     try:
-        return distributed.connect(args.workers, args.scheduler)
+        return distributed.connect(args.workers, args.scheduler, timeout=args.connect_timeout)
     except distributed.DistributedError as exc:
         raise CliError(str(exc)) from None
 

@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 import pytest
-from relight_cli import BIN, assert_refused, relight
+from relight_cli import BIN, assert_refused, make_scene, relight
 
 TINY = ["--object", "Bumps", "--directions", "hemi:400", "--resolution", "16", "--bounces",
         "0", "--model", "none", "--no-compare"]
@@ -23,7 +23,7 @@ TINY = ["--object", "Bumps", "--directions", "hemi:400", "--resolution", "16", "
 def blend(tmp_path_factory):
     folder = tmp_path_factory.mktemp("dist")
     path = folder / "b.blend"
-    assert relight("scene", "bumps", "--out", path).returncode == 0
+    make_scene("bumps", path)
     r = relight("bake-textures", path, *TINY, "--no-resume", "--out", folder / "ref")
     assert r.returncode == 0, r.stderr[-2000:]
     return path, np.load(folder / "ref" / "Bumps_transport_texture.npy")
@@ -75,8 +75,12 @@ def test_a_worker_killed_mid_bake_is_replaced_and_the_result_is_unchanged(blend,
 
 def test_unreachable_scheduler_and_conflicting_options_exit_2(blend, tmp_path):
     path, _ = blend
+    # 1 s instead of the default 10 to wait for the scheduler: nothing listens on port 9
     assert_refused(tmp_path, "cannot reach the Dask scheduler at tcp://127.0.0.1:9",
                    "bake-textures", path, *TINY, "--scheduler", "tcp://127.0.0.1:9",
+                   "--connect-timeout", "1", "--out", tmp_path / "o")
+    assert_refused(tmp_path, "--connect-timeout must be > 0", "bake-textures", path, *TINY,
+                   "--scheduler", "tcp://127.0.0.1:9", "--connect-timeout", "0",
                    "--out", tmp_path / "o")
     assert_refused(tmp_path, "drop --no-resume", "bake-textures", path, *TINY, "--workers", "2",
                    "--no-resume", "--out", tmp_path / "o")
@@ -116,7 +120,7 @@ def test_the_flamenco_job_type_emits_chunk_commands_that_bake_the_same_bits(tmp_
     assert node, "node is needed to compile the Flamenco job type"
     root = pathlib.Path(__file__).resolve().parents[2]
     blend = tmp_path / "b.blend"
-    assert relight("scene", "bumps", "--out", blend).returncode == 0
+    make_scene("bumps", blend)
     settings = {"objects": "Bumps", "preset": "draft", "directions": "hemi:48",
                 "resolution": 16, "force": False, "output_dir": str(tmp_path / "farm"),
                 "blendfile": str(blend)}
@@ -156,7 +160,7 @@ def test_vertex_transport_bakes_distribute_and_resume_bit_for_bit(tmp_path):
     import json
 
     blend = tmp_path / "s.blend"
-    assert relight("scene", "statue", "--out", blend).returncode == 0
+    make_scene("statue", blend)
     args = ["bake-transport", blend, "--object", "Statue", "--directions", "cube:6"]
     assert relight(*args, "--no-resume", "--out", tmp_path / "ref").returncode == 0
     r = relight(*args, "--workers", "2", "--out", tmp_path / "dist")
@@ -204,7 +208,7 @@ def test_material_bakes_distribute_and_resume_bit_for_bit(tmp_path, bounce_bake)
     from relightable_textures.operators.jobs import run
 
     blend = tmp_path / "room.blend"
-    assert relight("scene", "room", "--out", blend).returncode == 0
+    make_scene("room", blend)
     objects, regions = ["Floor", "Box"], ["RedMaterial", "GreenMaterial"]
     args = ["bake-materials", blend, "--object", "Floor", "--object", "Box", "--region",
             "RedMaterial", "--region", "GreenMaterial", "--directions", "hemi:40",
