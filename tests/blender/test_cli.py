@@ -51,6 +51,7 @@ def test_force_overwrites_atomically(tmp_path):
     assert sorted(os.listdir(tmp_path)) == ["x.blend"]
 
 
+@pytest.mark.version_sensitive
 def test_json_stdout_stays_clean_when_blender_logs(tmp_path):
     """With ``$OCIO`` set (studios set it for ACES; bpy 5.2 sets it for its child processes)
     Blender logs ``color_management | Using OCIO=...`` (5.3: ``Using config from OCIO: ...``) to

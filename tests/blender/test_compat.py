@@ -4,6 +4,11 @@ version, without deprecation or blend-relative warnings."""
 
 import warnings
 
+import pytest
+
+#: Also run on 5.2 LTS by the matrix: every branch of operators/compat.py.
+pytestmark = pytest.mark.version_sensitive
+
 
 def test_new_material_and_world_have_their_default_nodes(fresh_scene):
     import bpy

@@ -7,10 +7,15 @@ Linear, EEVEE's own pixel sample positions and texture filtering differ from Cyc
 scale (measured: image mean equal to 0.04%, single pixels up to 24% of the peak at 16^2)."""
 
 import numpy as np
+import pytest
 from render_check import render_rgb
 
 from relightable_textures import samples
 from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
+
+#: Also run on 5.2 LTS by the matrix: EEVEE's engine id (compat.EEVEE_ENGINE) and its shader
+#: nodes.
+pytestmark = pytest.mark.version_sensitive
 
 
 def test_eevee_renders_the_preview_group_like_numpy(fresh_scene, tmp_path):

@@ -11,6 +11,9 @@ import textwrap
 
 import pytest
 
+#: Also run on 5.2 LTS by the matrix: Blender's extension installer.
+pytestmark = pytest.mark.version_sensitive
+
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 
 INSTALL_SCRIPT = textwrap.dedent(r"""

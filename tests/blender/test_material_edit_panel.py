@@ -4,6 +4,10 @@ live preview it installs, and the handler that re-shades when a colour or the Su
 import numpy as np
 import pytest
 
+#: Also run on 5.2 LTS by the matrix: the material gates' node trees (compat.ensure_node_tree),
+#: the panel's properties (compat.path_options) and the depsgraph handler.
+pytestmark = pytest.mark.version_sensitive
+
 
 def test_bake_materials_operator_and_live_colour_edit(fresh_scene, tmp_path):
     import bpy

@@ -8,6 +8,10 @@ import pytest
 from relightable_textures import samples
 from relightable_textures.lt_addon.geometry import heightfield
 
+#: Also run on 5.2 LTS by the matrix: the sample scenes' materials and worlds
+#: (compat.ensure_node_tree).
+pytestmark = pytest.mark.version_sensitive
+
 EXPECTED_VERTICES = {  # (test, demo) vertex counts of the object to relight
     "bumps": (33 * 33, 129 * 129),
     "noise": (33 * 33, 129 * 129),
