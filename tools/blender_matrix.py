@@ -1,6 +1,6 @@
 """Install the built linux-x64 zip into every supported Blender (the PyPI ``bpy`` releases) and
-bake through the installed operator; run the full test suite on 5.2 LTS and the newest bpy
-(both Python 3.13; ``make test`` runs it on 5.0.1).
+bake through the installed operator; run the full test suite on the newest bpy and the
+version-sensitive subset on 5.2 LTS (both Python 3.13; ``make test`` runs the full suite on 5.0.1).
 
 For each Blender in :data:`MATRIX` a venv holding only ``bpy`` (and what its wheel requires:
 numpy, ...) -- never scipy or OpenEXR, so the zip's bundled wheels must do their job -- runs
@@ -9,17 +9,19 @@ numpy, ...) -- never scipy or OpenEXR, so the zip's bundled wheels must do their
 registered, that scipy and OpenEXR import from the extension's own site-packages, and bake a
 tiny texture through ``bpy.ops.relight.bake_textures``. A Blender that must refuse the zip
 (4.2.0: no Python-tag wheel filter, below ``blender_version_min``) must refuse it.
-Then a second venv of Blender 5.2 LTS and one of the newest bpy (Python 3.13) get scipy,
-OpenEXR, pytest and hypothesis plus this package (``pip install -e``, the pyproject mapping) and
-run the whole suite.
+Then a second venv per suite version (scipy, OpenEXR, pytest, ... plus this package through
+``pip install -e``, the pyproject mapping) runs the whole suite on :data:`NEWEST` and the tests
+marked ``version_sensitive`` on 5.2 LTS (why that subset is enough: docs/testing.md).
 
 Venvs live under ``--cache`` (default ``~/.cache/relightable-textures/blender-matrix``) and are
-reused when their stamp matches; pip's own cache keeps the downloaded wheels. Prints one table
-row per Blender and exits 1 if any row differs from what is expected.
+reused when their stamp matches; pip's own cache keeps the downloaded wheels. Prints each
+phase's seconds and one table row per Blender, and exits 1 if any row differs from what is
+expected. ``--deadline`` (a Unix time, from ``.ci/run``) bounds every step: a step that would
+run past it is stopped and the run fails with one line saying which.
 
 Usage: ``python3 tools/blender_matrix.py [--zip dist/<id>-<version>-linux_x64.zip]
-[--only VERSION ...] [--suite VERSION ...|none] [--markdown FILE]`` (``make matrix`` builds the
-zips first).
+[--only VERSION ...] [--suite VERSION ...|none] [--subset VERSION ...|none] [--deadline T]
+[--markdown FILE]`` (``make matrix`` builds the zips first).
 """
 
 from __future__ import annotations
@@ -47,9 +49,15 @@ MATRIX = [
     ("5.3.0", "3.13", True),
 ]
 NEWEST = MATRIX[-1][0]
-#: Where CI runs the full suite besides ``make test`` (5.0.1): 5.2 LTS, the newest LTS on
-#: Python 3.13 (and numpy 2), and the newest bpy on PyPI.
-SUITE_DEFAULT = ["5.2.3", NEWEST]
+#: Where CI runs the full suite besides ``make test`` (5.0.1, Python 3.11): the newest bpy on
+#: PyPI (Python 3.13, numpy 2).
+SUITE_DEFAULT = [NEWEST]
+#: Where CI runs only the tests marked ``version_sensitive`` (``pytest -m version_sensitive``):
+#: 5.2 LTS, which shares Python 3.13, numpy 2 and every branch of operators/compat.py with the
+#: newest bpy (docs/testing.md says why that subset is enough).
+SUBSET_DEFAULT = ["5.2.3"]
+#: The pytest marker of that subset (declared in pyproject.toml).
+SUBSET_MARKER = "version_sensitive"
 
 #: Failures of the full suite on Python 3.13 Blenders that are known and not fixed yet: none
 #: since 2026-11-28 (the ten listed before were fixed: the CLI's stdout, a 5.2 reference bake,
@@ -70,7 +78,8 @@ def judge_suite(stdout: str) -> tuple[bool, list[str]]:
 
 #: Extra packages of the full-suite venv (bpy brings numpy; scipy/OpenEXR as in the zip).
 SUITE_PACKAGES = ["scipy==1.17.1", "OpenEXR==3.5.3", "pytest==9.2.0", "hypothesis==6.170.17",
-                  "matplotlib==3.11.2", "dask==2026.8.0", "distributed==2026.8.0"]
+                  "matplotlib==3.11.2", "dask==2026.8.0", "distributed==2026.8.0",
+                  "setuptools==84.2.1"]
 
 CHECK = r'''
 import json, os, platform, sys, traceback
@@ -153,12 +162,15 @@ def ensure_venv(path: str, python: str, packages: list[str]) -> str:
     exe = os.path.join(path, "bin", "python")
     if os.path.exists(stamp) and open(stamp).read() == want and os.path.exists(exe):
         return exe
+    t0 = time.time()
     shutil.rmtree(path, ignore_errors=True)
     subprocess.run([python, "-m", "venv", path], check=True)
     subprocess.run([exe, "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
                     *packages], check=True)
     with open(stamp, "w") as fh:
         fh.write(want)
+    print(f"blender_matrix: created the venv {os.path.basename(path)} in {time.time() - t0:.0f} s "
+          "(a warm run reuses it)", flush=True)
     return exe
 
 
@@ -185,24 +197,50 @@ def check_version(cache: str, bpy_version: str, python: str, zip_path: str) -> d
     return rep
 
 
-def run_suite(cache: str, bpy_version: str, python: str, log_dir: str) -> tuple[bool, str]:
-    """The full pytest suite in a venv of ``bpy_version``; returns (passed, pytest's summary).
-    The whole output goes to ``log_dir/suite-<version>.log``; failures are listed here."""
+class DeadlineError(RuntimeError):
+    """A step would run past ``--deadline``."""
+
+
+def remaining(deadline: float | None, step: str) -> float | None:
+    """Seconds left before ``deadline`` for ``step`` (None: no deadline); raises when none."""
+    if deadline is None:
+        return None
+    left = deadline - time.time()
+    if left <= 0:
+        raise DeadlineError(f"no time left for {step} before the deadline")
+    return left
+
+
+def run_suite(cache: str, bpy_version: str, python: str, log_dir: str,
+              marker: str | None = None, deadline: float | None = None) -> tuple[bool, str]:
+    """The pytest suite (only the tests marked ``marker`` if given) in a venv of
+    ``bpy_version``; returns (passed, pytest's summary). The whole output goes to
+    ``log_dir/suite-<version>.log``; the 30 slowest tests and the failures are printed here."""
+    what = f"the {marker} subset" if marker else "the full suite"
     exe = ensure_venv(os.path.join(cache, f"suite-{bpy_version}"), find_python(python),
                       [f"bpy=={bpy_version}", *SUITE_PACKAGES])
     # The checkout may move between runs (CI clones afresh): re-point the editable install.
+    # setuptools is in the venv, so no isolated build environment is fetched for it.
     subprocess.run([exe, "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
-                    "--no-deps", "-e", ROOT], check=True, capture_output=True)
-    r = subprocess.run([exe, "-m", "pytest", "-q", "-rfE", "-p", "no:cacheprovider"], cwd=ROOT,
-                       capture_output=True, text=True)
+                    "--no-deps", "--no-build-isolation", "--no-index", "-e", ROOT], check=True,
+                   capture_output=True)
+    cmd = [exe, "-m", "pytest", "-q", "-rfE", "-p", "no:cacheprovider", "--durations=30"]
+    if marker:
+        cmd += ["-m", marker]
+    try:
+        r = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True,
+                           timeout=remaining(deadline, f"{what} on bpy {bpy_version}"))
+    except subprocess.TimeoutExpired as exc:
+        raise DeadlineError(f"{what} on bpy {bpy_version} was still running at the deadline "
+                            f"(after {exc.timeout:.0f} s)") from None
     os.makedirs(log_dir, exist_ok=True)
     log = os.path.join(log_dir, f"suite-{bpy_version}.log")
     with open(log, "w") as fh:
         fh.write(r.stdout + r.stderr)
     lines = r.stdout.splitlines()
-    start = next((i for i, ln in enumerate(lines) if "short test summary info" in ln),
-                 max(len(lines) - 5, 0))
-    print(f"blender_matrix: full suite on bpy {bpy_version} (whole output: {log})")
+    start = next((i for i, ln in enumerate(lines) if "slowest 30 durations" in ln
+                  or "short test summary info" in ln), max(len(lines) - 5, 0))
+    print(f"blender_matrix: {what} on bpy {bpy_version} (whole output: {log})")
     print("\n".join(lines[start:]))
     ok, problems = judge_suite(r.stdout)
     for problem in problems:
@@ -214,7 +252,7 @@ def run_suite(cache: str, bpy_version: str, python: str, log_dir: str) -> tuple[
     summary = re.sub(r" in [0-9.]+s.*$", "", summary)
     if r.returncode != 0 and ok:
         summary += f" (the {len(KNOWN_313_FAILURES)} known 3.13 failures)"
-    return ok, summary
+    return ok, ("" if marker is None else f"{marker} subset: ") + summary
 
 
 def default_zip() -> str:
@@ -237,36 +275,64 @@ def main() -> int:
         os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")),
         "relightable-textures", "blender-matrix"))
     parser.add_argument("--only", action="append", default=[],
-                        help="check only this bpy version (repeatable)")
+                        help="check only this bpy version (repeatable; 'none' for no row)")
     parser.add_argument("--suite", action="append", default=None,
                         help=f"run the full suite on this bpy version (default {', '.join(SUITE_DEFAULT)}; "
-                             "'none' for no suite run)")
+                             "'none' for no full suite)")
+    parser.add_argument("--subset", action="append", default=None,
+                        help=f"run the {SUBSET_MARKER} tests on this bpy version (default "
+                             f"{', '.join(SUBSET_DEFAULT)}; 'none' for no subset)")
+    parser.add_argument("--deadline", type=float, default=None,
+                        help="a Unix time: a step still running then is stopped and the run fails")
     parser.add_argument("--markdown", help="also write the table to this file")
     parser.add_argument("--log-dir", default=os.path.join(ROOT, "dist"),
-                        help="where the full suite's output is written")
+                        help="where the suites' output is written")
     args = parser.parse_args()
     if not os.path.isfile(args.zip) or not args.zip.endswith(".zip"):
-        print(f"blender_matrix: --zip {args.zip!r} is not a zip file (run `make dist`)",
+        print(f"blender_matrix: error: --zip {args.zip!r} is not a zip file (run `make dist`)",
               file=sys.stderr)
         return 2
     zip_path = os.path.abspath(args.zip)
     known = {v: (py, ok) for v, py, ok in MATRIX}
-    for v in args.only + [s for s in (args.suite or []) if s != "none"]:
+    suites = list(SUITE_DEFAULT) if args.suite is None else [s for s in args.suite if s != "none"]
+    subsets = (list(SUBSET_DEFAULT) if args.subset is None
+               else [s for s in args.subset if s != "none"])
+    for v in [o for o in args.only if o != "none"] + suites + subsets:
         if v not in known:
-            print(f"blender_matrix: bpy {v} is not in the matrix ({', '.join(known)})",
+            print(f"blender_matrix: error: bpy {v} is not in the matrix ({', '.join(known)})",
                   file=sys.stderr)
             return 2
     os.makedirs(args.cache, exist_ok=True)
-    rows, failures = [], []
-    header = ("| Blender (bpy) | Python | installs | enables | bundled scipy / OpenEXR import "
-              "| tiny bake (installed operator) | full suite |")
-    rows += [header, "|---|---|---|---|---|---|---|"]
-    suites = list(SUITE_DEFAULT) if args.suite is None else [s for s in args.suite if s != "none"]
+    failures, reps, suite_cells = [], {}, {}
+    try:
+        t0 = time.time()
+        for version, python, _ in MATRIX:
+            if args.only and version not in args.only:
+                continue
+            remaining(args.deadline, f"the install row of bpy {version}")
+            reps[version] = rep = check_version(args.cache, version, python, zip_path)
+            print(f"blender_matrix: bpy {version}: {json.dumps(rep)}", flush=True)
+        print(f"blender_matrix: phase install rows ({len(reps)} Blenders) took "
+              f"{time.time() - t0:.0f} s", flush=True)
+        for version, marker in [(v, None) for v in suites] + [(v, SUBSET_MARKER) for v in subsets]:
+            t1 = time.time()
+            passed, summary = run_suite(args.cache, version, known[version][0], args.log_dir,
+                                        marker, args.deadline)
+            suite_cells[version] = summary if passed else f"**{summary}**"
+            if not passed:
+                failures.append(f"{version}: {summary}")
+            print(f"blender_matrix: phase {'subset' if marker else 'full suite'} on bpy {version} "
+                  f"took {time.time() - t1:.0f} s", flush=True)
+    except DeadlineError as exc:
+        print(f"blender_matrix: error: {exc}; the run would pass its time budget "
+              "(the slowest tests: docs/testing.md)", file=sys.stderr)
+        return 1
+    rows = ["| Blender (bpy) | Python | installs | enables | bundled scipy / OpenEXR import "
+            "| tiny bake (installed operator) | suite |", "|---|---|---|---|---|---|---|"]
     for version, python, expect_install in MATRIX:
-        if args.only and version not in args.only:
+        if version not in reps:
             continue
-        rep = check_version(args.cache, version, python, zip_path)
-        print(f"blender_matrix: bpy {version}: {json.dumps(rep)}", flush=True)
+        rep = reps[version]
         if "error" in rep:
             failures.append(f"{version}: {rep['error']}")
         if not rep.get("clean_venv"):
@@ -285,15 +351,9 @@ def main() -> int:
             msg = (rep["messages"] or [str(rep.get("install", ""))])[0]
             row = [f"refused, as it must ({msg.replace('|', '/')})" if refused else "**yes**",
                    "-", "-", "-"]
-        suite = "not run"
-        if version in suites:
-            passed, summary = run_suite(args.cache, version, python, args.log_dir)
-            suite = summary if passed else f"**{summary}**"
-            if not passed:
-                failures.append(f"{version}: full suite: {summary}")
         rows.append(f"| {rep.get('blender', version)} (bpy {version}) | "
-                    f"{rep.get('python', python)} | " + " | ".join(row) + f" | {suite} |")
-        print(rows[-1], flush=True)
+                    f"{rep.get('python', python)} | " + " | ".join(row)
+                    + f" | {suite_cells.get(version, 'not run')} |")
     table = "\n".join(rows)
     print("\n" + table)
     if args.markdown:
