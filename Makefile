@@ -11,11 +11,19 @@ export BLENDER_USER_RESOURCES ?= $(CURDIR)/build/blender-user
 
 venv: $(STAMP)
 
+# The venv's wheels come from a wheelhouse kept under ~/.cache (pip's own cache does not persist
+# on every machine: a fresh clone re-downloaded ~430 MB): the registry is asked only when the
+# wheelhouse lacks a pinned wheel, so a warm machine builds the venv offline.
+WHEELHOUSE  ?= $(HOME)/.cache/relightable-textures/wheelhouse
+PIP_OFFLINE := $(PY) -m pip install --quiet --no-index --find-links $(WHEELHOUSE)
+VENV_PKGS   := --upgrade pip setuptools -r requirements.txt
+
 $(STAMP): requirements.txt pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -r requirements.txt
-	$(PY) -m pip install --quiet --no-deps -e .
+	$(PIP_OFFLINE) $(VENV_PKGS) 2>/dev/null || { \
+	  $(PY) -m pip download --quiet -d $(WHEELHOUSE) pip setuptools -r requirements.txt && \
+	  $(PIP_OFFLINE) $(VENV_PKGS); }
+	$(PIP_OFFLINE) --no-deps --no-build-isolation -e .
 	touch $(STAMP)
 
 ## demo: set up the venv and run the main job on the bundled sample scenes (writes out/; 494 s
