@@ -75,6 +75,8 @@ codes in half channels plus per-channel ranges, so it only wins above tiny sizes
 
 
 def test_quick_transport_bench_via_the_cli(tmp_path):
+    # Slow on purpose (~23 s): the whole quick sweep -- Cycles bakes at cube:4, 8 and 16, every
+    # model, the charts -- because the ordering of its points and the Pareto flags are the test.
     from matplotlib.image import imread
     from relightable_textures.devtools.pareto import read_csv
 

@@ -118,7 +118,8 @@ def test_bad_transport_input_exit_2(tmp_path, args, message):
 
 def test_bake_verbs_refuse_to_replace_a_bake_without_force(tmp_path):
     """bake-transport and the lobes bake-textures refuse an existing bake of the same object in
-    --out (one line, exit 2, nothing changed) before any work; --force replaces it."""
+    --out (one line, exit 2, nothing changed) before any work; --force replaces it. Slow on
+    purpose (~12 s): 8 runs of the real console script, ~1.3 s of Blender start-up each."""
     blend = tmp_path / "statue.blend"
     make_scene("statue", blend)
     runs = [("bake-transport", blend, "--object", "Statue", "--directions", "cube:2",

@@ -420,7 +420,9 @@ def test_gathered_terms_are_cycles_gated_bakes_of_each_region_and_pair():
     within 1.5x the two Cycles bakes' difference. Measured (bpy 5.0.1): one bounce 1.00 /
     1.10 / 0.72x (fixed region, red, green wall: the red wall's light is 10 % more than
     Cycles' on this coarse room, where a shadow edge inside a 25-cm triangle is blurred over
-    it), pairs 0.69-0.79x."""
+    it), pairs 0.69-0.79x. Slow on purpose (~10 s): the independent truth is Cycles' own gated
+    bakes of every term at two seeds, at 128 spp (at 64 the floor would be sqrt(2) wider, noise
+    going as 1/sqrt(spp), and the check on the rays' 10 % bias on the red wall looser)."""
     import bpy
 
     from relightable_textures import samples
