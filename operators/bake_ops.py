@@ -91,6 +91,20 @@ class _ModalBake:
     def _finish(self, context, result):
         raise NotImplementedError
 
+    def _job(self, context):
+        """``_prepare``'s job with its Cycles bakes on the panel's Device (resolved here, before
+        any bake: Device GPU without a GPU is one error line); the device is shown in the
+        panel (*Baked On*)."""
+        from . import cycles_device
+
+        props = context.scene.relight
+        device = cycles_device.resolve(props.device, context.scene)
+        gen = self._prepare(context)
+        props.device_used = device.describe() + (f" ({device.note})" if device.note else "")
+        if device.note:
+            self.report({"INFO"}, f"Baking on {device.describe()}: {device.note}")
+        return cycles_device.stepped(gen, device)
+
     def _make_out_dir(self, props):
         self.out_dir = _output_dir(props)
         os.makedirs(self.out_dir, exist_ok=True)
@@ -106,7 +120,7 @@ class _ModalBake:
         path = eb.saved_blend()
         self._make_out_dir(props)
         return eb.external_job([command, verb, path, *args, "--out", self.out_dir, "--force",
-                                *eb.distribution_args(props)], path)
+                                "--device", props.device, *eb.distribution_args(props)], path)
 
     def _done(self, context, result):
         """``_finish`` for a job of this process; for a Dask job, its summary, and the open file
@@ -121,7 +135,7 @@ class _ModalBake:
 
     def execute(self, context):
         try:
-            gen = self._prepare(context)
+            gen = self._job(context)
 
             def warn(step):
                 if step.message.startswith("warning:"):
@@ -138,7 +152,7 @@ class _ModalBake:
         if bpy.app.background:
             return self.execute(context)
         try:
-            self._gen = self._prepare(context)
+            self._gen = self._job(context)
         except (BakeInputError, OSError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}

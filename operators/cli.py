@@ -128,6 +128,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "degrees, none a sample centre) and put the errors in the report")
     p.add_argument("--contact-sheet", metavar="PNG", help="with --truth: write a PNG of steered | "
                    "Cycles truth | difference x4 | Cycles Sun for up to 4 directions")
+    _add_device_option(p)
     _add_distribution_options(p, "")
     p.add_argument("--no-compare", action="store_true",
                    help="with --truth and a scene camera, the bake also renders "
@@ -156,6 +157,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="Cycles threads (default 0: all cores)")
     p.add_argument("--out", metavar="DIR", help="the bake's output folder (default: next to "
                    "the .blend, <name>_relight/)")
+    _add_device_option(p)
     p.set_defaults(func=_cmd_bake_chunk)
 
     p = sub.add_parser("relight", help="relight a stored steerable texture for one light (NumPy)")
@@ -229,6 +231,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", help="output folder (default <blend>_relight/)")
     p.add_argument("--force", action="store_true",
                    help="replace an existing transport bake of the same object in --out")
+    _add_device_option(p)
     _add_distribution_options(p, "")
     p.set_defaults(func=_cmd_bake_transport)
 
@@ -253,6 +256,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", help="output folder (default <blend>_relight/)")
     p.add_argument("--force", action="store_true",
                    help="replace an existing analysis of the same object in --out")
+    _add_device_option(p)
     p.set_defaults(func=_cmd_analyze)
 
     try:   # development verbs (bench) exist in a source checkout only, not in the extension
@@ -420,9 +424,10 @@ def _point_light(text: str):
     return (x, y, z), power
 
 
-def _run_job(job, verb: str):
+def _run_job(job, verb: str, device=None):
     """Drive ``job`` (a :mod:`.jobs` generator) to the end, printing its progress; returns its
-    result. Ctrl-C (SIGINT) cancels it between two steps -- Cycles runs Python callbacks that
+    result. Its Cycles bakes run on ``device`` (a :class:`.cycles_device.Device`; None: the
+    CPU, as a job driven by a script that never chose). Ctrl-C (SIGINT) cancels it between two steps -- Cycles runs Python callbacks that
     would swallow a KeyboardInterrupt raised in the middle of a bake -- so the job closes
     cleanly (its ``finally`` blocks restore the scene and drop temporary files); a second
     Ctrl-C stops at once. A cancelled job raises KeyboardInterrupt here."""
@@ -447,15 +452,56 @@ def _run_job(job, verb: str):
             previous[signum] = signal.signal(signum, on_sigint)
     except ValueError:   # not the main thread (Blender's own console, say): Ctrl-C as before
         pass
+    from . import cycles_device
+
+    printer = _progress_printer(verb)
+    said = []
+
+    def on_progress(step):   # the device, once the bake has started (a refused one: not at all)
+        if device is not None and not said:
+            note = f": {device.note}" if device.note else ""
+            print(f"{verb}: baking on {device.describe()}{note}", file=sys.stderr, flush=True)
+            said.append(True)
+        printer(step)
+
     try:
-        result = jobs.run(job, on_progress=_progress_printer(verb),
-                          should_cancel=lambda: bool(asked))
+        with cycles_device.use(device or cycles_device.resolve("cpu")):
+            result = jobs.run(job, on_progress=on_progress, should_cancel=lambda: bool(asked))
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
     if asked and result is None:
         raise KeyboardInterrupt
     return result
+
+
+def _add_device_option(p) -> None:
+    """--device, shared by the verbs that bake with Cycles."""
+    p.add_argument("--device", choices=("auto", "cpu", "gpu"),
+                   default=os.environ.get("RELIGHT_DEVICE", "auto"),
+                   help="where Cycles bakes (default: $RELIGHT_DEVICE, else auto): auto uses "
+                        "the GPU the user chose -- the scene's Cycles device and "
+                        "Preferences > System in Blender, the first "
+                        "GPU backend Cycles finds in the venv CLI -- else the CPU, and says "
+                        "so; cpu forces the CPU; gpu refuses to bake without a GPU. The "
+                        "report records the device (CPU and GPU bakes of one seed are different "
+                        "sample sets: a resumed bake on another device bakes its chunks again)")
+
+
+def _bake_device(args, verb: str):
+    """The device ``--device`` gives for the open scene, or CliError before any bake call
+    (``gpu`` without a GPU). :func:`_run_job` says which on stderr when the bake starts."""
+    import bpy
+
+    from . import cycles_device
+
+    if args.device not in cycles_device.CHOICES:   # only a default from the environment can be
+        raise CliError(f"$RELIGHT_DEVICE must be one of {', '.join(cycles_device.CHOICES)}, "
+                       f"got {args.device!r}")
+    try:
+        return cycles_device.resolve(args.device, bpy.context.scene)
+    except cycles_device.DeviceError as exc:
+        raise CliError(str(exc)) from None
 
 
 def _add_distribution_options(p, what: str) -> None:
@@ -598,6 +644,7 @@ def _cmd_bake_textures(args) -> int:
     obj = _open_object(path, args.object)
     _refuse_existing(out_dir, obj.name, ("_steerable.exr", "_steerable.json"), args.force,
                      "a steerable bake")
+    device = _bake_device(args, "bake-textures")
     client = _dask_client(args)
     try:   # the same job as the panel's Bake: bake, truths, files, preview
         report = _run_job(steerable_bake.lobes_job(bpy.context.scene, obj, settings, out_dir,
@@ -605,7 +652,7 @@ def _cmd_bake_textures(args) -> int:
                                                    compare=not args.no_compare,
                                                    resume=not args.no_resume, client=client,
                                                    blend_path=path),
-                          "bake-textures").report
+                          "bake-textures", device).report
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
     except RuntimeError as exc:
@@ -645,6 +692,10 @@ def _cmd_bake_textures(args) -> int:
 
 def _print_chunks(rep: dict) -> None:
     """A chunked bake's resume and distribution figures, when there are any."""
+    for dev, n in (rep.get("other_device_chunks") or {}).items():
+        print(f"  note: {n} chunks an interrupted bake left were baked on {dev}; this bake runs "
+              f"on {rep.get('device', {}).get('device', 'CPU')}, a different sample set, so "
+              "they were baked again")
     if rep.get("chunks_reused"):
         of = ("chunks (one basis light each)" if "chunk_directions" not in rep else
               f"chunks ({rep['indirect_chunks']} of them indirect lights, the others "
@@ -711,6 +762,7 @@ def _cmd_bake_texture_transport(args) -> int:
             if os.path.exists(rp):
                 raise CliError(f"a bake of {o.name} exists in {out_dir} (use --force to "
                                "replace it)")
+    device = _bake_device(args, "bake-textures")
     client = _dask_client(args)
     try:
         reports = _run_job(tx.bake_job(bpy.context.scene, objects, settings, out_dir,
@@ -718,7 +770,7 @@ def _cmd_bake_texture_transport(args) -> int:
                                        target_error=args.target_error,
                                        compare=not args.no_compare, resume=not args.no_resume,
                                        client=client, blend_path=path),
-                           "bake-textures").reports
+                           "bake-textures", device).reports
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
     except RuntimeError as exc:
@@ -808,19 +860,25 @@ def _cmd_bake_chunk(args) -> int:
         raise CliError(str(exc)) from None
     start = args.chunk * tx.CHUNK_DIRECTIONS
     stop = min(start + tx.CHUNK_DIRECTIONS, dset.size)
-    cache = tx.direct_chunk_cache(bpy.context.scene, objects, settings, out_dir)
-    name = f"direct_{start:05d}"
-    if os.path.exists(cache.path(name)):
-        print(f"chunk {args.chunk}: directions {start}-{stop - 1} are already in {cache.folder}")
-        return EXIT_OK
-    t0 = time.perf_counter()
-    try:
-        cycles = bake_directions(bpy.context.scene, objects, settings, start, stop, cache,
-                                 args.threads)
-    except BakeInputError as exc:
-        raise CliError(str(exc)) from None
-    print(f"chunk {args.chunk} of {n}: directions {start}-{stop - 1} baked in "
-          f"{time.perf_counter() - t0:.2f} s ({cycles:.2f} s in Cycles) into {cache.path(name)}")
+    from . import cycles_device
+
+    device = _bake_device(args, "bake-chunk")
+    with cycles_device.use(device):   # the chunk cache's key names the device
+        cache = tx.direct_chunk_cache(bpy.context.scene, objects, settings, out_dir)
+        name = f"direct_{start:05d}"
+        if os.path.exists(cache.path(name)):
+            print(f"chunk {args.chunk}: directions {start}-{stop - 1} are already in "
+                  f"{cache.folder}")
+            return EXIT_OK
+        t0 = time.perf_counter()
+        try:
+            cycles = bake_directions(bpy.context.scene, objects, settings, start, stop, cache,
+                                     args.threads)
+        except BakeInputError as exc:
+            raise CliError(str(exc)) from None
+    print(f"chunk {args.chunk} of {n}: directions {start}-{stop - 1} baked on "
+          f"{device.describe()} in {time.perf_counter() - t0:.2f} s ({cycles:.2f} s in Cycles) "
+          f"into {cache.path(name)}")
     return EXIT_OK
 
 
@@ -846,11 +904,13 @@ def _cmd_bake_transport(args) -> int:
     if isinstance(settings.clusters, int) and settings.clusters > n_vertices > 0:
         raise CliError(f"--clusters {settings.clusters} exceeds {obj.name}'s {n_vertices} "
                        f"vertices; use at most {n_vertices} or 'auto'")
+    device = _bake_device(args, "bake-transport")
     client = _dask_client(args)
     try:
         out = _run_job(transport_bake.transport_job(
             bpy.context.scene, obj, settings, out_dir, truth_samples=256 if args.truth else 0,
-            resume=not args.no_resume, client=client, blend_path=path), "bake-transport")
+            resume=not args.no_resume, client=client, blend_path=path), "bake-transport",
+            device)
     except (BakeInputError, ValueError) as exc:
         raise CliError(f"nothing was written: {exc}") from None
     except RuntimeError as exc:
@@ -912,10 +972,11 @@ def _cmd_analyze(args) -> int:
     obj = _open_object(path, args.object)
     _refuse_existing(out_dir, obj.name, ("_analysis.json", "_dimensionality.png", "_cost.png"),
                      args.force, "an analysis")
+    device = _bake_device(args, "analyze")
     try:
         out = _run_job(analyze.analysis_job(bpy.context.scene, obj, ds, out_dir, args.bounces,
                                             None, args.tol, args.seeds,
-                                            reuse=not args.rebake), "analyze")
+                                            reuse=not args.rebake), "analyze", device)
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
     except KeyboardInterrupt:

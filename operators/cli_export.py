@@ -45,14 +45,16 @@ def add_parsers(sub) -> None:
     p.add_argument("--out", metavar="DIR", help="output folder (default: next to the .blend, "
                    "<name>_relight/)")
     p.add_argument("--force", action="store_true", help="replace existing export files")
+    from .cli import _add_device_option
+    _add_device_option(p)
     p.set_defaults(func=_cmd_export)
 
 
 def _cmd_export(args) -> int:
     import bpy
 
-    from .cli import (EXIT_OK, CliError, _check_input_blend, _check_output_dir, _open_object,
-                      _run_job)
+    from .cli import (EXIT_OK, CliError, _bake_device, _check_input_blend, _check_output_dir,
+                      _open_object, _run_job)
     from .cycles_bake import BakeInputError
     from .export import ExportSettings, export_job
 
@@ -70,10 +72,11 @@ def _cmd_export(args) -> int:
         raise CliError(f"environment not found: {settings.env}")
     out_dir = _check_output_dir(args.out, path)
     obj = _open_object(path, args.object)
+    device = _bake_device(args, "export")
     os.makedirs(out_dir, exist_ok=True)
     try:
         result = _run_job(export_job(bpy.context.scene, obj, settings, out_dir, args.force),
-                          "export")
+                          "export", device)
     except (BakeInputError, ValueError) as exc:
         raise CliError(f"nothing was written: {exc}") from None
     except KeyboardInterrupt:

@@ -113,7 +113,8 @@ def add_parsers(sub) -> None:
     p.add_argument("--out", metavar="DIR", help="output folder (default <blend>_relight/)")
     p.add_argument("--force", action="store_true",
                    help="replace an existing material bake of the same object in --out")
-    from .cli import _add_distribution_options
+    from .cli import _add_device_option, _add_distribution_options
+    _add_device_option(p)
     _add_distribution_options(p, "")
     p.set_defaults(func=_cmd_bake_materials)
 
@@ -160,8 +161,8 @@ def _cmd_bake_materials(args) -> int:
     import bpy
 
     from . import blend_files, material_bake, material_edit
-    from .cli import (CliError, _check_bake_inputs, _dask_client, _open_objects, _print_chunks,
-                      _refuse_existing, _run_job)
+    from .cli import (CliError, _bake_device, _check_bake_inputs, _dask_client, _open_objects,
+                      _print_chunks, _refuse_existing, _run_job)
     from .cycles_bake import BakeInputError
 
     settings = material_bake.MaterialBakeSettings(
@@ -180,12 +181,13 @@ def _cmd_bake_materials(args) -> int:
             raise CliError(f"{o.name!r} is a {o.type.lower()}, not a mesh")
     _refuse_existing(out_dir, objects[0].name, ("_materials.npz", "_materials.json"),
                      args.force, "a material bake")
+    device = _bake_device(args, "bake-materials")
     client = _dask_client(args)
     try:
         out = _run_job(material_edit.bake_job(
             bpy.context.scene, objects, settings, out_dir,
             truth_samples=args.truth_samples if args.truth else 0, resume=not args.no_resume,
-            client=client, blend_path=path), "bake-materials")
+            client=client, blend_path=path), "bake-materials", device)
     except (BakeInputError, ValueError) as exc:
         raise CliError(f"nothing was written: {exc}") from None
     except RuntimeError as exc:

@@ -22,6 +22,7 @@ import time
 import bpy
 import numpy as np
 
+from . import cycles_device
 from .compat import ensure_node_tree
 from .meshes import (color_attribute, corner_vertices, image_pixels, polygon_arrays,
                      set_image_pixels)
@@ -266,7 +267,10 @@ class EnvironmentBake(SceneChanges):
         scene = self.scene
         cyc = scene.cycles
         self._save_attr(scene.render, "engine", "CYCLES")
-        for name, value in (("device", "CPU"), ("samples", self.samples), ("seed", self.seed),
+        # the device the bake was asked to use (cycles_device.use; the CPU if none was chosen)
+        self.device = cycles_device.current()
+        cycles_device.applied(scene, self.device, self._save_attr)
+        for name, value in (("samples", self.samples), ("seed", self.seed),
                             ("use_animated_seed", False), ("use_adaptive_sampling", False),
                             ("use_denoising", False), ("sample_clamp_direct", 0.0),
                             ("sample_clamp_indirect", 0.0), ("max_bounces", self.bounces),

@@ -128,6 +128,28 @@ def _worker_scene(blend_path: str, object_names: list, cache_key: dict):
     return scene, objects
 
 
+def worker_device(cache_key: dict):
+    """The device a worker bakes a chunk of ``cache_key`` on: the one the coordinator resolved
+    for the bake (the key's ``device``: chunks of one bake come from one device, as their sample
+    sets differ); a worker that cannot use it raises DistributedError in one line."""
+    import socket
+
+    from . import cycles_device
+
+    want = cache_key.get("device", "CPU")
+    if want == "CPU":
+        return cycles_device.resolve("cpu")
+    try:
+        got = cycles_device.resolve("gpu")
+    except cycles_device.DeviceError:
+        got = None
+    if got is None or got.id != want:
+        raise DistributedError(f"the worker on {socket.gethostname()} cannot bake on {want} "
+                               f"(it has {got.id if got else 'no GPU'}); run every worker on "
+                               "that device, or bake with --device cpu")
+    return got
+
+
 def bake_chunk(blend_path: str, object_names: list, settings: dict, start: int, stop: int,
                cache_root: str, cache_key: dict, threads: int = 0, stage: str = "texture",
                part: tuple | None = None) -> dict:
@@ -145,8 +167,19 @@ def bake_chunk(blend_path: str, object_names: list, settings: dict, start: int, 
     scene, objects = _worker_scene(blend_path, object_names, cache_key)
     opened = time.perf_counter() - t0
     from ..lt_addon.io.chunk_cache import ChunkCache
+    from . import cycles_device
 
+    device = worker_device(cache_key)
     cache = ChunkCache(cache_root, cache_key)
+    with cycles_device.use(device):
+        cycles = _bake_stage(scene, objects, settings, start, stop, cache, threads, stage, part)
+    return {"start": start, "pid": os.getpid(), "open_seconds": round(opened, 3),
+            "opened_file": _OPENED.get("loads", 0) > loads, "cycles_seconds": round(cycles, 3),
+            "seconds": round(time.perf_counter() - t0, 3), "device": device.describe()}
+
+
+def _bake_stage(scene, objects, settings, start, stop, cache, threads, stage, part) -> float:
+    """Bake one chunk of ``stage`` (see :func:`bake_chunk`); returns Cycles' seconds."""
     if stage == "vertex":
         from .transport_bake import bake_vertex_directions
 
@@ -167,9 +200,7 @@ def bake_chunk(blend_path: str, object_names: list, settings: dict, start: int, 
 
         cycles = bake_directions(scene, objects, TransportTextureSettings(**settings), start,
                                  stop, cache, threads)
-    return {"start": start, "pid": os.getpid(), "open_seconds": round(opened, 3),
-            "opened_file": _OPENED.get("loads", 0) > loads, "cycles_seconds": round(cycles, 3),
-            "seconds": round(time.perf_counter() - t0, 3)}
+    return cycles
 
 
 def _drain(gen):
@@ -252,4 +283,6 @@ def fill_chunks(client, blend_path: str, objects, settings, cache, chunks, step0
             "file_loads": sum(r["opened_file"] for r in rows),
             "chunk_seconds": [r["seconds"] for r in rows],
             "cycles_seconds": round(sum(r["cycles_seconds"] for r in rows), 3),
-            "workers": sorted({r["pid"] for r in rows}), "cycles_threads_per_worker": threads}
+            "workers": sorted({r["pid"] for r in rows}), "cycles_threads_per_worker": threads,
+            "worker_devices": {str(pid): dev for pid, dev in
+                               sorted({(r["pid"], r.get("device", "CPU")) for r in rows})}}

@@ -23,6 +23,7 @@ from ..lt_addon.io.contact_sheet import write_png
 from ..lt_addon.sphere.directions import hemisphere_fibonacci
 from ..lt_addon.sphere.hemisphere import direction_from_az_el
 from ..lt_addon.transport import texture as tt
+from . import cycles_device
 from .cycles_bake import BakeInputError
 from .jobs import Progress
 
@@ -476,6 +477,7 @@ def export_job(scene, obj, settings: ExportSettings, out_dir: str, force: bool =
     rep = {"kind": KIND, "object": obj.name, "format": settings.format,
            "settings": asdict(settings), "source": report.get("report"),
            "directions": S, "resolution": R, "files": files, **figures,
+           "device": cycles_device.current().report(),
            "timings": {k: round(v, 3) for k, v in seconds.items()}}
     atomic.write_json(base + ".json", rep, default=float)
     files["report"] = base + ".json"

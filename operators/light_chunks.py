@@ -70,9 +70,10 @@ def light_cache(scene, objects, spec: dict, root: str):
     content (:func:`.bake_inputs.scene_key`) and ``spec``; stale keys there are removed."""
     from ..lt_addon.io.chunk_cache import ChunkCache
     from .bake_inputs import scene_key
+    from .cycles_device import current
 
     cache = ChunkCache(root, {"stage": "lights", "scene": scene_key(scene, list(objects)),
-                              "spec": spec})
+                              "device": current().id, "spec": spec})
     cache.prune_others()
     return cache
 

@@ -49,6 +49,7 @@ import numpy as np
 from ..lt_addon.io import atomic
 from ..lt_addon.transport import bounce_transfer, gathered_transfer, ptt
 from ..lt_addon.transport.texture import parse_directions
+from . import cycles_device
 from .compat import ensure_node_tree
 from .cycles_bake import BakeInputError, EnvironmentBake, SceneChanges, check_memory
 from .jobs import Progress
@@ -620,6 +621,7 @@ def material_chunk_cache(scene, objects, settings: MaterialBakeSettings, out_dir
 
     from ..lt_addon.io.chunk_cache import ChunkCache
     from .bake_inputs import scene_key
+    from .cycles_device import current
     from .texture_transport import CACHE_FOLDER
 
     baked = {k: v for k, v in dataclasses.asdict(settings).items() if k != "smoothing"}
@@ -630,7 +632,7 @@ def material_chunk_cache(scene, objects, settings: MaterialBakeSettings, out_dir
     baked["anchor_directions"] = settings.anchor_spec() if settings.roughness else None
     baked.pop("samples" if settings.gathers else "rays")
     key = {"stage": "materials", "scene": scene_key(scene, list(objects)),
-           "settings": baked, "chunk_directions": CHUNK_DIRECTIONS,
+           "device": current().id, "settings": baked, "chunk_directions": CHUNK_DIRECTIONS,
            "seeds": "per direction"}   # chunks of the one-seed bakes are not these
     folder = atomic.safe_name(objects[0].name) + "_materials"
     cache = ChunkCache(os.path.join(out_dir, CACHE_FOLDER, folder), key)
@@ -1088,6 +1090,7 @@ def materials_job(scene, objects, settings: MaterialBakeSettings, out_dir: str,
               "directions": {"direct": d0.spec, "one_bounce": d1.spec, "two_bounce": d2.spec},
               "bake_calls": tensors.metadata["bake_calls"],
               "bounce_bake": settings.bounce_bake,
+              "device": cycles_device.current().report(),
               "bytes": {"tensors": tensors.nbytes},
               "energy_shares": {k: round(v, 5) for k, v in shares.items()},
               "energy_light": {"direction": [round(float(v), 5) for v in direction],

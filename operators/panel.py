@@ -124,6 +124,9 @@ def _last_bake(layout, scene):
 def _run_on(layout, props):
     """Where the bake below runs: here, or on Dask through the Relight Command."""
     col = layout.column(align=True)
+    col.prop(props, "device")
+    if props.device_used:
+        col.label(text=f"Baked On: {props.device_used}", icon="INFO")
     col.prop(props, "run_on")
     if props.run_on == "WORKERS":
         col.prop(props, "dask_workers")

@@ -305,6 +305,16 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
     export_force: BoolProperty(name="Replace Existing", default=False,
                                description="Replace an earlier export of this object and format")
 
+    # which device Cycles bakes on (operators/cycles_device.py), and the last bake's
+    device: EnumProperty(name="Device", default="auto", items=[
+        ("auto", "Auto", "The GPU chosen in Preferences > System when the scene's Cycles device "
+                          "is GPU, else the CPU (the bake says which)"),
+        ("cpu", "CPU", "Always the CPU"),
+        ("gpu", "GPU", "The GPU of Preferences > System (or the first Cycles finds); refuses "
+                        "to bake without one")])
+    device_used: StringProperty(name="Baked On", default="",
+                                description="The device the last bake of this scene used")
+
     # where a bake runs (operators/external_bake.py): here, or through `relight` on Dask
     run_on: EnumProperty(name="Run On", default="HERE", items=[
         (k, label, desc) for k, label, desc in _RUN_ON])

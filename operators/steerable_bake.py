@@ -21,6 +21,7 @@ from ..lt_addon.io import atomic
 from ..lt_addon.steerable.sampled_basis import build_sampled_basis
 from ..lt_addon.steerable.basis import paper_basis
 from ..lt_addon.steerable.texture import FRAMES, STORAGE_MODES, SteerableTexture
+from . import cycles_device
 from .jobs import Progress, run  # noqa: F401  (the bake's job primitives)
 from .cycles_bake import (BAKE_MODES, WORLD_SAMPLING, BakeInputError,
                           check_bakeable, check_memory)
@@ -193,6 +194,7 @@ def write_bake(result: BakeResult, obj, out_dir: str, settings: TextureBakeSetti
         "exr": os.path.abspath(exr_path),
         "settings": asdict(settings),
         "condition_number": result.condition_number,
+        "device": cycles_device.current().report(),
         "timings": {
             "cycles_bake_seconds": round(result.cycles_seconds, 4),
             "own_work_seconds": round(result.total_seconds - result.cycles_seconds, 4),

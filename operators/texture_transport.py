@@ -35,6 +35,7 @@ from .. import __version__
 from ..lt_addon.io import atomic, exrio
 from ..lt_addon.transport import texture as tt
 from ..lt_addon.sphere.hemisphere import direction_from_az_el
+from . import cycles_device
 from .cycles_bake import BakeInputError, EnvironmentBake, check_bakeable, check_memory
 from .jobs import Progress
 
@@ -320,6 +321,12 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
                      "chunks_reused": reused + ind.get("chunks_reused", 0),
                      "chunk_directions": CHUNK_DIRECTIONS,
                      "direct_chunks": len(chunks), "indirect_chunks": ind.get("chunks_total", 0)}
+    other = {}
+    for c in result.cache:
+        for dev, n in c.other_devices.items():
+            other[dev] = other.get(dev, 0) + n
+    if other:   # a resume on another device: those chunks were baked again here
+        result.chunks["other_device_chunks"] = other
     if distributed is not None or "distributed" in ind:
         both = [d for d in (distributed, ind.get("distributed")) if d]
         result.chunks["distributed"] = {
@@ -329,6 +336,7 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
             "chunk_seconds": [x for d in both for x in d["chunk_seconds"]],
             "cycles_seconds": round(sum(d["cycles_seconds"] for d in both), 3),
             "workers": sorted({w for d in both for w in d["workers"]}),
+            "worker_devices": {k: v for d in both for k, v in d.get("worker_devices", {}).items()},
             "cycles_threads_per_worker": both[0]["cycles_threads_per_worker"]}
     return result
 
@@ -349,8 +357,9 @@ def direct_chunk_cache(scene, objects, settings: TransportTextureSettings, out_d
     the direct bakes use; the folders of other keys (stale chunks) are removed."""
     from ..lt_addon.io.chunk_cache import ChunkCache
     from .bake_inputs import scene_key
+    from .cycles_device import current
 
-    key = {"stage": "direct", "scene": scene_key(scene, objects),
+    key = {"stage": "direct", "scene": scene_key(scene, objects), "device": current().id,
            "directions": settings.directions, "resolution": settings.resolution,
            "seed": settings.seed, "chunk_directions": CHUNK_DIRECTIONS}
     root = os.path.join(out_dir, CACHE_FOLDER, "+".join(atomic.safe_name(o.name) for o in objects))
@@ -609,6 +618,7 @@ def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: d
                       **(b.model.storage_bytes() if hasattr(b.model, "storage_bytes") else {})},
             "model": model_summary(b.model, result.directions.size),
             "timings": {k: round(v, 3) for k, v in result.seconds.items()},
+            "device": cycles_device.current().report(),
             "bake_calls": result.bake_calls,
             "peak_rss_above_start_mb": round(result.peak_rss_mb, 1),
             "rss_growth_while_streaming_mb": round(result.growth_after_first_mb, 1),

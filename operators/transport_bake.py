@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..lt_addon.io import atomic
+from . import cycles_device
 from .cycles_bake import BakeInputError, EnvironmentBake, check_bakeable, check_memory
 from .jobs import Progress
 
@@ -77,9 +78,10 @@ def vertex_chunk_cache(scene, obj, directions, bounces: int, samples, seed: int,
 
     from ..lt_addon.io.chunk_cache import ChunkCache
     from .bake_inputs import scene_key
+    from .cycles_device import current
 
     dirs = np.ascontiguousarray(directions, dtype=np.float64)
-    key = {"stage": "vertex", "scene": scene_key(scene, [obj]),
+    key = {"stage": "vertex", "scene": scene_key(scene, [obj]), "device": current().id,
            "directions": hashlib.sha256(dirs.tobytes()).hexdigest(), "count": len(dirs),
            "bounces": int(bounces), "samples": _default_samples(samples, bounces),
            "seed": int(seed), "chunk_directions": CHUNK_DIRECTIONS}
@@ -164,7 +166,9 @@ def bake_transport(scene, obj, directions, bounces: int = 0, samples: int | None
     figures = None
     if cache is not None:
         figures = {"chunks_total": len(chunks), "chunks_reused": reused,
-                   "chunk_directions": CHUNK_DIRECTIONS}
+                   "chunk_directions": CHUNK_DIRECTIONS,
+                   **({"other_device_chunks": cache.other_devices} if cache.other_devices
+                      else {})}
         if distributed is not None:
             figures["distributed"] = distributed
     return TransportBakeResult(T, dirs, cycles, time.perf_counter() - start, calls, figures)
@@ -318,6 +322,7 @@ def write_transport(result: TransportBakeResult, model, fit_seconds: float, obj,
         **({"cpca": cluster_summary(model),
             "relative_rms_error": model.info["relative_rms_error"]} if clustered else
            {"captured_energy": model.captured_energy, "selection": model.selection}),
+        "device": cycles_device.current().report(),
         "timings": {"cycles_bake_seconds": round(result.cycles_seconds, 4),
                     "total_bake_seconds": round(result.total_seconds, 4),
                     "fit_seconds": round(fit_seconds, 4),

@@ -15,6 +15,10 @@ import pytest
 
 _USER_RESOURCES = tempfile.mkdtemp(prefix="relight-test-blender-user-")
 os.environ["BLENDER_USER_RESOURCES"] = _USER_RESOURCES
+# Bakes of the CLI (and its Dask workers) on the CPU, as in-process bakes that choose no device,
+# even on a machine with a GPU: the tests compare against CPU references and Cycles truths.
+# Tests of --device auto / gpu pass it explicitly.
+os.environ["RELIGHT_DEVICE"] = "cpu"
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 

@@ -49,6 +49,10 @@ class ChunkCache:
         self.folder = os.path.join(self.root, self.digest[:20])
         self.reused = 0
         self.written = 0
+        #: {device: chunk count} of the folders :meth:`prune_others` removed whose key differs
+        #: from this one only in its ``device`` (a bake resumed on another device: those chunks
+        #: are another sample set, so they are baked again, and the bake says so)
+        self.other_devices: dict = {}
 
     def path(self, chunk: str) -> str:
         safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in str(chunk))
@@ -89,9 +93,29 @@ class ChunkCache:
             p = os.path.join(self.root, name)
             if (os.path.isdir(p) and p != self.folder and len(name) == 20
                     and all(ch in "0123456789abcdef" for ch in name)):
+                device = self._other_device(p)
+                if device is not None:
+                    n = sum(1 for f in os.listdir(p) if f.endswith(".npy"))
+                    self.other_devices[device] = self.other_devices.get(device, 0) + n
                 shutil.rmtree(p, ignore_errors=True)
                 gone += 1
         return gone
+
+    def _other_device(self, folder: str) -> str | None:
+        """The device of ``folder``'s key when it equals this key but for ``device``."""
+        if "device" not in self.key:
+            return None
+        try:
+            with open(os.path.join(folder, "key.json"), encoding="utf-8") as fh:
+                other = json.load(fh)
+        except (OSError, ValueError):
+            return None
+        if not isinstance(other, dict) or other.get("device", "CPU") == self.key["device"]:
+            return None
+        mine = json.loads(json.dumps(self.key, default=str))   # as key.json holds it
+        rest = {k: v for k, v in other.items() if k != "device"}
+        return str(other.get("device", "CPU")) if rest == {
+            k: v for k, v in mine.items() if k != "device"} else None
 
     def clear(self) -> None:
         """Remove this key's chunks, and ``root`` (and its parent) when left empty."""

@@ -10,9 +10,9 @@ import tempfile
 BIN = pathlib.Path(sys.executable).parent
 
 
-def relight(*args, cwd=None):
+def relight(*args, cwd=None, env=None):
     return subprocess.run([str(BIN / "relight"), *map(str, args)], capture_output=True,
-                          text=True, cwd=cwd, timeout=600)
+                          text=True, cwd=cwd, timeout=600, env=env)
 
 
 #: Sample .blend files made once per test session by the real ``relight scene`` (the scenes are
@@ -51,11 +51,11 @@ def folder_state(folder):
     return {p.name: p.read_bytes() for p in pathlib.Path(folder).iterdir() if p.is_file()}
 
 
-def assert_refused(folder, message, *args):
+def assert_refused(folder, message, *args, env=None):
     """Run ``relight *args`` expecting a one-line ``relight: error:`` containing ``message``
     (case-insensitive), exit code 2, and ``folder`` unchanged."""
     before = folder_state(folder)
-    r = relight(*args)
+    r = relight(*args, env=env)
     assert r.returncode == 2, r.stderr[-2000:]
     last = our_lines(r.stderr)[-1]
     assert last.startswith("relight: error: "), r.stderr[-2000:]

@@ -33,6 +33,8 @@ def _same_bits(a, b):
     return a.shape == b.shape and np.array_equal(a.view(np.uint16), b.view(np.uint16))
 
 
+# The tests that start a cluster are slow on purpose (6-12 s each): 2 worker processes import
+# bpy and open the .blend, which is what they prove works.
 def test_two_local_workers_bake_the_same_bits_as_one_process(blend, tmp_path):
     path, ref = blend
     r = relight("bake-textures", path, *TINY, "--workers", "2", "--out", tmp_path)
@@ -44,6 +46,11 @@ def test_two_local_workers_bake_the_same_bits_as_one_process(blend, tmp_path):
     assert dist["chunks"] == rep["chunks_total"] == 25 and rep["chunks_reused"] == 0
     assert len(dist["workers"]) == 2 and dist["file_loads"] == 2   # each worker opened it once
     assert dist["cycles_threads_per_worker"] == max(1, os.cpu_count() // 2)
+    # each worker baked on the bake's device (the CPU: the tests set RELIGHT_DEVICE=cpu), and
+    # the report says which
+    assert sorted(dist["worker_devices"]) == sorted(str(w) for w in dist["workers"])
+    assert all(d.startswith("CPU") for d in dist["worker_devices"].values())
+    assert rep["device"]["device"] == "CPU"
     assert "distributed: 25 chunks on 2 worker processes" in r.stdout
     assert _same_bits(np.load(tmp_path / "Bumps_transport_texture.npy"), ref)
     assert ".relight_cache" not in os.listdir(tmp_path)
