@@ -490,6 +490,7 @@ def test_panel_operator_bakes_selected_objects_and_sun_size_retabulates(statue, 
         props.directions, props.resolution, props.indirect_samples = 24, 16, 4
         props.truth_lights = 1
         props.output_dir = str(tmp_path) + os.sep
+        props.device = "cpu"   # the panel's Device (default Auto); tests bake on the CPU
         for o in scene.objects:
             o.select_set(o in (statue_obj, ground))
         bpy.context.view_layer.objects.active = statue_obj
@@ -502,6 +503,9 @@ def test_panel_operator_bakes_selected_objects_and_sun_size_retabulates(statue, 
             assert f"{name}_preview_tables.exr" in files
         rep = json.loads((tmp_path / "Ground_texture_report.json").read_text())
         assert rep["objects_baked_together"] == ["Statue", "Ground"]
+        # the device it baked on: in the report and in the panel (Baked On)
+        assert rep["device"]["device"] == "CPU" and rep["device"]["choice"] == "cpu"
+        assert props.device_used.startswith("CPU") and scene.cycles.device == "CPU"
         assert rep["directions"] == 24 and "ground_truth" in rep
         # the report's picture: preview | Cycles Sun | difference from the scene camera at the
         # held-out light, captioned, its cost in the report and its line in the panel
