@@ -62,11 +62,13 @@ demo: $(STAMP)
 WEB_STAMP := tests/web/node_modules/.installed
 
 # The exported RTI page's browser test drives Debian's Chromium with playwright-core (from the
-# npm registry, pinned in tests/web/package-lock.json). Without npm the test skips (it fails
-# under CI=true, where .ci/run installs both).
+# npm registry, pinned in tests/web/package-lock.json; --prefer-offline: npm's cache serves it
+# on a warm machine, where npm ci received 6.5 MB each time without it, measured 2026-12-02).
+# Without npm the test skips (it fails under CI=true, where .ci/run installs both).
 $(WEB_STAMP): tests/web/package.json tests/web/package-lock.json
 	@if command -v npm >/dev/null 2>&1; then \
-	  npm ci --prefix tests/web --no-audit --no-fund --silent && touch $(WEB_STAMP); \
+	  npm ci --prefix tests/web --no-audit --no-fund --silent --prefer-offline && \
+	  touch $(WEB_STAMP); \
 	else echo "make: npm not found; the web page test will skip" >&2; fi
 
 ## test: the full default test suite (core + real Blender/Cycles) on bpy 5.0.1; prints the 30
