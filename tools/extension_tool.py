@@ -77,6 +77,17 @@ WHEEL_CACHE = os.path.join(os.environ.get("XDG_CACHE_HOME", os.path.expanduser("
                            "relightable-textures", "extension-wheels")
 
 
+def _copy_atomically(src: str, dst: str) -> None:
+    """``src`` copied to ``dst`` whole or not at all, through the project's one rename helper
+    (lt_addon/io/atomic.py, loaded by path: this tool runs outside the package)."""
+    spec = importlib.util.spec_from_file_location(
+        "_relight_atomic", os.path.join(ROOT, "lt_addon", "io", "atomic.py"))
+    atomic = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(atomic)
+    with atomic.atomic_path(dst) as tmp:
+        shutil.copyfile(src, tmp)
+
+
 def ensure_wheels() -> list[str]:
     """The manifest's wheels in ./wheels: copied from :data:`WHEEL_CACHE`, else downloaded (and
     then kept there); returns their paths."""
@@ -89,8 +100,7 @@ def ensure_wheels() -> list[str]:
         cached = os.path.join(WHEEL_CACHE, os.path.basename(w))
         if not os.path.exists(w) and os.path.isfile(cached):
             os.makedirs(os.path.dirname(w), exist_ok=True)
-            shutil.copyfile(cached, w + ".tmp")
-            os.replace(w + ".tmp", w)
+            _copy_atomically(cached, w)
     if any(not os.path.exists(w) for w in wanted):
         for platform in m.get("platforms", []):
             for python in PYTHONS:
@@ -111,8 +121,7 @@ def ensure_wheels() -> list[str]:
         for w in wanted:
             cached = os.path.join(WHEEL_CACHE, os.path.basename(w))
             if not os.path.exists(cached):
-                shutil.copyfile(w, cached + ".tmp")
-                os.replace(cached + ".tmp", cached)
+                _copy_atomically(w, cached)
     except OSError as exc:   # a read-only or full cache only costs the next clone a download
         print(f"extension_tool: note: could not keep the wheels in {WHEEL_CACHE}: {exc}",
               file=sys.stderr)
