@@ -94,10 +94,13 @@ class _ModalBake:
     def _job(self, context):
         """``_prepare``'s job with its Cycles bakes on the panel's Device (resolved here, before
         any bake: Device GPU without a GPU is one error line); the device is shown in the
-        panel (*Baked On*)."""
+        panel (*Baked On*). Run On Dask passes the Device to the command, whose workers'
+        machines resolve it, not this one."""
         from . import cycles_device
 
         props = context.scene.relight
+        if props.run_on != "HERE":
+            return self._prepare(context)
         device = cycles_device.resolve(props.device, context.scene)
         gen = self._prepare(context)
         props.device_used = device.describe() + (f" ({device.note})" if device.note else "")

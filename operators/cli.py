@@ -427,10 +427,11 @@ def _point_light(text: str):
 def _run_job(job, verb: str, device=None):
     """Drive ``job`` (a :mod:`.jobs` generator) to the end, printing its progress; returns its
     result. Its Cycles bakes run on ``device`` (a :class:`.cycles_device.Device`; None: the
-    CPU, as a job driven by a script that never chose). Ctrl-C (SIGINT) cancels it between two steps -- Cycles runs Python callbacks that
-    would swallow a KeyboardInterrupt raised in the middle of a bake -- so the job closes
-    cleanly (its ``finally`` blocks restore the scene and drop temporary files); a second
-    Ctrl-C stops at once. A cancelled job raises KeyboardInterrupt here."""
+    CPU, as for a job driven by a script that never chose). Ctrl-C (SIGINT) cancels it
+    between two steps -- Cycles runs Python callbacks that would swallow a KeyboardInterrupt
+    raised in the middle of a bake -- so the job closes cleanly (its ``finally`` blocks
+    restore the scene and drop temporary files); a second Ctrl-C stops at once. A cancelled
+    job raises KeyboardInterrupt here."""
     import signal
 
     from . import jobs
@@ -452,6 +453,8 @@ def _run_job(job, verb: str, device=None):
             previous[signum] = signal.signal(signum, on_sigint)
     except ValueError:   # not the main thread (Blender's own console, say): Ctrl-C as before
         pass
+    import contextlib
+
     from . import cycles_device
 
     printer = _progress_printer(verb)
@@ -465,7 +468,7 @@ def _run_job(job, verb: str, device=None):
         printer(step)
 
     try:
-        with cycles_device.use(device or cycles_device.resolve("cpu")):
+        with cycles_device.use(device) if device else contextlib.nullcontext():
             result = jobs.run(job, on_progress=on_progress, should_cancel=lambda: bool(asked))
     finally:
         for signum, handler in previous.items():

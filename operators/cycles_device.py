@@ -118,10 +118,11 @@ def resolve(choice: str = "auto", scene=None) -> Device:
                           cpu_name=cpu)
     if choice == "auto" and not _module_mode():
         asked_gpu = scene is not None and scene.cycles.device == "GPU"
-        note = (f"the scene asks for the GPU, but Preferences > System enables no {chosen} "
-                "device; baking on the CPU") if asked_gpu and chosen != "NONE" else (
-            "the scene asks for the GPU, but Preferences > System names no compute backend; "
-            "baking on the CPU") if asked_gpu else None
+        note = None
+        if asked_gpu:   # the CLI line and the report say CPU next to it
+            note = ("the scene asks for the GPU, but Preferences > System "
+                    + (f"enables no {chosen} device" if chosen != "NONE"
+                       else "names no compute backend"))
         return Device("CPU", note=note, choice=choice, cpu_name=cpu)
     for backend in BACKENDS:
         found = _gpu_devices(prefs, backend)
@@ -131,7 +132,7 @@ def resolve(choice: str = "auto", scene=None) -> Device:
     if choice == "gpu":
         raise DeviceError("--device gpu: Cycles finds no GPU on this machine (tried "
                           f"{', '.join(BACKENDS)}); use --device cpu or auto")
-    return Device("CPU", note=f"no GPU found ({', '.join(BACKENDS)} tried); baking on the CPU",
+    return Device("CPU", note=f"no GPU found ({', '.join(BACKENDS)} tried)",
                   choice=choice, cpu_name=cpu)
 
 
