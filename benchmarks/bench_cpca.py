@@ -38,9 +38,9 @@ def bake(name: str, size: str, spec: str):
 
     from relightable_textures import samples
     from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
-    from relightable_textures.operators import transport_bake as tb
-    from relightable_textures.operators.meshes import mesh_edges
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import transport_bake as tb
+    from relightable_textures.operators.base.meshes import mesh_edges
+    from relightable_textures.operators.base.jobs import run
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = bpy.context.scene

@@ -42,8 +42,8 @@ def main(argv=None):
     import bpy
 
     from relightable_textures import samples
-    from relightable_textures.operators import texture_transport as tx
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.base.jobs import run
 
     work = tempfile.mkdtemp(prefix="relight-bench-dist-")
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
@@ -91,7 +91,7 @@ def main(argv=None):
 def _on_local_cluster(n: int, bake, blend: str):
     """``bake(out, client=, blend_path=)`` on a new local cluster of ``n`` workers; returns its
     result, its wall seconds and the cluster's start-up seconds."""
-    from relightable_textures.operators import distributed
+    from relightable_textures.operators.farm import distributed
 
     t0 = time.perf_counter()
     client = distributed.connect(workers=n)
@@ -118,8 +118,8 @@ def bench_materials(args):
     import bpy
 
     from relightable_textures import samples
-    from relightable_textures.operators import material_bake as mb
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import material_bake as mb
+    from relightable_textures.operators.base.jobs import run
 
     work = tempfile.mkdtemp(prefix="relight-bench-dist-mat-")
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)

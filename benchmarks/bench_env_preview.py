@@ -67,9 +67,9 @@ def main(argv=None):
     import relightable_textures
     from relightable_textures import samples
     from relightable_textures.lt_addon.transport import texture as tt
-    from relightable_textures.operators import texture_transport as tx
-    from relightable_textures.operators import transport_preview as tp
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.preview import transport_preview as tp
+    from relightable_textures.operators.base.jobs import run
     from render_check import render_rgb
     from test_texture_transport import _sky_world
 
@@ -115,7 +115,7 @@ def main(argv=None):
     print(f"world Mapping Z change (depsgraph update + handler): median "
           f"{statistics.median(times):.2f} ms, max {max(times):.2f} ms")
     times = {"update (all parts)": [], "weights": [], "products": [], "write constants": []}
-    from relightable_textures.operators.vertex_relight import world_light
+    from relightable_textures.operators.preview.vertex_relight import world_light
 
     data = tp._env_data(obj)
     env64 = world_light(scene)[0]      # the cached float64 pixels the preview samples

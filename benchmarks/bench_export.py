@@ -65,8 +65,8 @@ def equal_count(report_path: str, held_out: int) -> list:
     """Rows {method, terms, bytes_per_texel, rmse_mean, psnr_mean_db, fit_seconds}."""
     from relightable_textures.lt_addon.export import rti
     from relightable_textures.lt_addon.transport import texture as tt
-    from relightable_textures.operators import texture_transport as tx
-    from relightable_textures.operators.export import _radiance_at, held_out_lights
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.bakes.export import _radiance_at, held_out_lights
 
     bake, store, _ = tx.load_bake(report_path)
     dset = store.directions
@@ -115,7 +115,7 @@ def equal_count(report_path: str, held_out: int) -> list:
         t0 = time.perf_counter()
         steer = tx.steerable_from_store(store, bake.albedo, order)
         fit_s = time.perf_counter() - t0
-        from relightable_textures.operators.texture_transport import _upsample
+        from relightable_textures.operators.bakes.texture_transport import _upsample
 
         def st(d, steer=steer):
             rad = steer.relight(d).reshape(-1, 3).astype(np.float64)

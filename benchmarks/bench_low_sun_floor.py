@@ -35,9 +35,9 @@ def main(argv=None):
     from bench_transport_textures import build, truths as truth_bakes
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
     from relightable_textures.lt_addon.transport import texture as tt
-    from relightable_textures.operators import texture_transport as tx
-    from relightable_textures.operators.cycles_bake import EnvironmentBake
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.base.jobs import run
 
     assert LIGHTS == tx.TRUTH_LIGHTS
     scene, objs = build("bumps", "demo")

@@ -10,7 +10,7 @@
    the same diffuse scene with the edit applied and 2 bounces, next to the noise floor (two
    truth seeds, ``--truth-spp``) and the error without the two-bounce term.
    Rows per setting: the sun's direct term from the bake's directions blended ("baked"), from
-   a shadow ray per receiver ("rays", :mod:`relightable_textures.operators.direct_rays`) or
+   a shadow ray per receiver ("rays", :mod:`relightable_textures.operators.base.direct_rays`) or
    rays only where the baked directions disagree ("rays-at-edges", the live preview); Cycles
    bounce terms as baked ("raw": no smoothing, two-bounce blended) or smoothed with the second
    bounce composed (:mod:`relightable_textures.lt_addon.transport.bounce_transfer`;
@@ -81,9 +81,9 @@ def update_timing(quads: int = TIMING_QUADS, repeats: int = 50,
     import bpy
 
     from relightable_textures.lt_addon.transport import ptt
-    from relightable_textures.operators import material_bake as mb
-    from relightable_textures.operators.direct_rays import exact_direct
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import material_bake as mb
+    from relightable_textures.operators.base.direct_rays import exact_direct
+    from relightable_textures.operators.base.jobs import run
     from relightable_textures.samples import objects as sample_objects
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
@@ -177,8 +177,8 @@ def metal_picture(png: str, size: str, anchors: str, finish: dict, spp: int,
     import bpy
 
     from relightable_textures import samples
-    from relightable_textures.operators import material_edit
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import material_edit
+    from relightable_textures.operators.base.jobs import run
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = bpy.context.scene
@@ -207,7 +207,7 @@ def metal_picture(png: str, size: str, anchors: str, finish: dict, spp: int,
 def parse_setting(entry: str, anchors: str = "diffuse"):
     """``DIRECT/ONE/TWO@SPP`` (bounce terms by Cycles bakes at SPP samples) or
     ``DIRECT/ONE/TWO@rays:N`` (gathered by N rays per receiver) -> MaterialBakeSettings."""
-    from relightable_textures.operators import material_bake as mb
+    from relightable_textures.operators.bakes import material_bake as mb
 
     dirs, how = entry.split("@")
     kw = ({"bounce_bake": "rays", "rays": int(how.split(":")[1])} if how.startswith("rays")
@@ -251,9 +251,9 @@ def main(argv=None):
     from relightable_textures import samples
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
     from relightable_textures.lt_addon.transport import ptt
-    from relightable_textures.operators import material_bake as mb
-    from relightable_textures.operators.direct_rays import exact_direct
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import material_bake as mb
+    from relightable_textures.operators.base.direct_rays import exact_direct
+    from relightable_textures.operators.base.jobs import run
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = bpy.context.scene

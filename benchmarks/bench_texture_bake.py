@@ -9,7 +9,7 @@ Prints figures (not a test) and writes JSON:
 * 1 process x 2 threads vs 2 worker processes x 1 thread on the same 8 bakes;
 
 The presets themselves are chosen from measured data by ``relight bench --scene bumps
---write-presets`` (operators/presets.json); this script measures them in more depth.
+--write-presets`` (operators/bakes/presets.json); this script measures them in more depth.
 
 Usage: python benchmarks/bench_texture_bake.py [--presets draft,balanced,production]
        [--size demo|test] [--json out/bench/texture_bake.json] [--no-workers]
@@ -42,8 +42,8 @@ def bench_preset(name: str, size: str, truth: int, tmp: str) -> dict:
     from relightable_textures.lt_addon.steerable.texture import SteerableTexture
     from relightable_textures.lt_addon.io.storage import reconstruction_error
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
-    from relightable_textures.operators import steerable_bake as sb
-    from relightable_textures.operators.presets import settings_from_preset
+    from relightable_textures.operators.bakes import steerable_bake as sb
+    from relightable_textures.operators.bakes.presets import settings_from_preset
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = bpy.context.scene
@@ -84,7 +84,7 @@ def bench_preset(name: str, size: str, truth: int, tmp: str) -> dict:
 
 WORKER = r"""
 import sys, time, bpy
-from relightable_textures.operators.cycles_bake import EnvironmentBake
+from relightable_textures.operators.base.cycles_bake import EnvironmentBake
 from relightable_textures.lt_addon.steerable.sampled_basis import build_sampled_basis
 from relightable_textures.lt_addon.steerable.basis import paper_basis
 blend, first, count, threads, res, spp = sys.argv[1], *map(int, sys.argv[2:7])

@@ -26,8 +26,8 @@ def bench_scene(name: str, size: str, spec: str, bounces: int) -> dict:
     from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
     from relightable_textures.lt_addon.transport.eigentransport import fit_eigentransport, project_environment
     from relightable_textures.lt_addon.transport.error import error_curves, sun_sky_environment
-    from relightable_textures.operators import transport_bake as tb
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import transport_bake as tb
+    from relightable_textures.operators.base.jobs import run
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = bpy.context.scene
@@ -66,8 +66,8 @@ def bench_update(n_vertices: int = 40000, d: int = 48, spec: str = "cube:16",
     from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
     from relightable_textures.lt_addon.transport.eigentransport import Eigentransport
     from relightable_textures.lt_addon.transport.error import sun_sky_environment
-    from relightable_textures.operators import vertex_relight as vr
-    from relightable_textures.operators.meshes import object_from_bmesh
+    from relightable_textures.operators.preview import vertex_relight as vr
+    from relightable_textures.operators.base.meshes import object_from_bmesh
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     bm = bmesh.new()

@@ -8,7 +8,7 @@ with the scene's 2 diffuse bounces at four held-out lights (elevations 10, 30, 5
 
 * transport: directions S x indirect samples x resolution, each with the models fitted from the
   same store (PCA at k components, block PCA at a tolerance, and the relight from T itself);
-* lobes: the three lobes presets (``operators/presets.json``).
+* lobes: the three lobes presets (``operators/bakes/presets.json``).
 
 Per point: bake wall time (Cycles and everything else, fit included), peak anonymous memory
 above the start, bytes on disk (what the preview needs, and T), preview cost (texture lookups per
@@ -36,7 +36,7 @@ ANGLES = (2.0, 10.0)
 
 
 def _rss():
-    from relightable_textures.operators.texture_transport import _rss_mb
+    from relightable_textures.operators.bakes.texture_transport import _rss_mb
 
     return _rss_mb()
 
@@ -60,8 +60,8 @@ def truths(scene, objects, R, spp, bounces=2, seed=1):
     """{angle: {light: [image per object]}}: Cycles Sun bakes at the held-out lights
     (``tx.TRUTH_LIGHTS``) for each of :data:`ANGLES`; also used by the low-sun benchmarks
     (``bounces=0``: direct light only)."""
-    from relightable_textures.operators import texture_transport as tx
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.base.jobs import run
 
     out = {}
     for a in ANGLES:
@@ -76,7 +76,7 @@ def truths(scene, objects, R, spp, bounces=2, seed=1):
 def single_bake_seconds(scene, objects, R):
     """Wall time of one 64-spp Cycles radiance bake of the same textures (2 bounces, a Sun)."""
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
-    from relightable_textures.operators.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
 
     with EnvironmentBake(scene, objects, R, 64, 2, (8, 16), mode="radiance",
                          world_sampling="none") as s:
@@ -87,7 +87,7 @@ def single_bake_seconds(scene, objects, R):
 
 
 def _up(img, R):
-    from relightable_textures.operators.texture_transport import _upsample
+    from relightable_textures.operators.bakes.texture_transport import _upsample
 
     return _upsample(img, R)
 
@@ -95,7 +95,7 @@ def _up(img, R):
 def errors_for(relight_fn, truth, R):
     """{angle: combined rel. RMSE over lights and objects} for relight_fn(obj_index, d, angle)."""
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
-    from relightable_textures.operators import texture_transport as tx
+    from relightable_textures.operators.bakes import texture_transport as tx
 
     out = {}
     for a in ANGLES:
@@ -114,8 +114,8 @@ def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder,
     model fitted from that store."""
     from relightable_textures.lt_addon.transport import sparse_tables as sp
     from relightable_textures.lt_addon.transport import texture as tt
-    from relightable_textures.operators import texture_transport as tx
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.base.jobs import run
 
     ind_res = ind_res or max(8, res // 2)
     st = tx.TransportTextureSettings(directions=f"hemi:{S}:1.5", resolution=res, bounces=2,
@@ -210,8 +210,8 @@ def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder,
 
 def lobes_points(scene, objects, truth, R):
     """The lobes presets (one object: the first)."""
-    from relightable_textures.operators import steerable_bake as sb
-    from relightable_textures.operators.presets import settings_from_preset
+    from relightable_textures.operators.bakes import steerable_bake as sb
+    from relightable_textures.operators.bakes.presets import settings_from_preset
 
     rows = []
     for name in ("draft", "balanced", "production"):
@@ -285,7 +285,7 @@ def write_presets(report, scene):
                          "rel_rmse_2deg": r["err_2deg"], "scene": f"{scene} {report['size']}",
                          "why": r["why"]}}
     path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                        "operators", "transport_presets.json")
+                        "operators", "bakes", "transport_presets.json")
     from relightable_textures.lt_addon.io import atomic
 
     atomic.write_json(path, out, indent=1)
@@ -293,7 +293,7 @@ def write_presets(report, scene):
 
 
 def measure_presets(out_dir, truth_spp=256):
-    """Bake each transport preset exactly as defined (operators/transport_presets.json) on the
+    """Bake each transport preset exactly as defined (operators/bakes/transport_presets.json) on the
     bumps demo at 256^2, measure it as the sweep does (plus T itself and one 64-spp Cycles bake
     in the same run) and write the figures into the presets file's ``measured`` blocks."""
     from relightable_textures.lt_addon.io import atomic
@@ -301,7 +301,7 @@ def measure_presets(out_dir, truth_spp=256):
     from relightable_textures.lt_addon.transport.texture import parse_directions
 
     path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                        "operators", "transport_presets.json")
+                        "operators", "bakes", "transport_presets.json")
     with open(path) as fh:
         data = json.load(fh)
     scene, objects = build("bumps", "demo")
@@ -353,12 +353,12 @@ def main(argv=None):
     ap.add_argument("--resolution", type=int, help="texture side (default 256; 64 with --quick)")
     ap.add_argument("--write-presets", action="store_true",
                     help="choose draft / balanced / production from the first scene's front of "
-                         "viewport (PCA) points and write operators/transport_presets.json")
+                         "viewport (PCA) points and write operators/bakes/transport_presets.json")
     ap.add_argument("--truth-samples", type=int, help="Cycles samples of the truths (default "
                     "256; 64 with --quick); one 256-spp truth's own noise is 0.011 here")
     ap.add_argument("--measure-presets", action="store_true",
                     help="bake and measure the three transport presets as defined (bumps demo) "
-                         "and write their figures into operators/transport_presets.json")
+                         "and write their figures into operators/bakes/transport_presets.json")
     args = ap.parse_args(argv)
     if args.measure_presets:
         os.makedirs(args.out, exist_ok=True)

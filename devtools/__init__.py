@@ -5,5 +5,5 @@ Not part of the extension: the zip leaves this folder out (``blender_manifest.to
 use packages Blender does not ship (matplotlib, in requirements.txt). From a source checkout
 the ``relight`` command gains the ``bench`` verb (:mod:`.bench_cli`) and ``relight analyze``
 draws its charts (:mod:`.charts`). Presets measured here are written into the checkout's
-``operators/presets.json``, never into an installed package.
+``operators/bakes/presets.json``, never into an installed package.
 """

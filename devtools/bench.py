@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..lt_addon.io import atomic
-from ..operators.jobs import Progress
+from ..operators.base.jobs import Progress
 from . import charts, pareto
 
 TEXTURE_SCENES = ("bumps", "noise")
@@ -160,7 +160,7 @@ def _fresh_scene(name: str, size: str):
 def texture_reference(scene, obj, sweep: TextureSweep, on_progress=None) -> dict:
     """Cycles Sun-lamp bakes at the sweep's largest resolution: {"images": [(R, R, 3)], ...}."""
     from ..lt_addon.sphere.hemisphere import direction_from_az_el
-    from ..operators.cycles_bake import EnvironmentBake
+    from ..operators.base.cycles_bake import EnvironmentBake
 
     R = max(sweep.resolutions)
     t0 = time.perf_counter()
@@ -181,8 +181,8 @@ def texture_points(scene, obj, sweep: TextureSweep, reference: dict, tmp: str,
     """Bake every (order, samples, resolution) and measure it at every storage precision."""
     from ..lt_addon.sphere.hemisphere import direction_from_az_el
     from ..lt_addon.steerable.texture import SteerableTexture
-    from ..operators.jobs import run
-    from ..operators.steerable_bake import TextureBakeSettings, bake_steerable_texture
+    from ..operators.base.jobs import run
+    from ..operators.bakes.steerable_bake import TextureBakeSettings, bake_steerable_texture
 
     lights = [direction_from_az_el(az, el) for az, el in REFERENCE_LIGHTS]
     R = reference["resolution"]
@@ -241,10 +241,10 @@ def transport_points(scene, obj, sweep: TransportSweep, tmp: str, on_progress=No
     from ..lt_addon.sphere.directions import parse_direction_spec
     from ..lt_addon.transport.eigentransport import fit_eigentransport, project_environment
     from ..lt_addon.transport.error import sun_sky_environment
-    from ..operators.jobs import run
-    from ..operators.transport_bake import bake_environment_truth, bake_transport
-    from ..operators.meshes import mesh_edges
-    from ..operators.vertex_relight import write_shading
+    from ..operators.base.jobs import run
+    from ..operators.bakes.transport_bake import bake_environment_truth, bake_transport
+    from ..operators.base.meshes import mesh_edges
+    from ..operators.preview.vertex_relight import write_shading
 
     edges = mesh_edges(obj)
     env = sun_sky_environment(64, [0.4, -0.3, 0.8], row_order="bottom_first",

@@ -2,7 +2,7 @@
 
 Registered by :func:`..operators.cli.build_parser` when this folder is importable (a source
 checkout), absent from the installed extension. ``--write-presets`` stores the presets chosen
-from the bumps sweep in the checkout's ``operators/presets.json`` (:data:`PRESETS_PATH`), the
+from the bumps sweep in the checkout's ``operators/bakes/presets.json`` (:data:`PRESETS_PATH`), the
 file the extension reads; nothing is ever written into an installed package.
 """
 
@@ -14,9 +14,9 @@ import time
 
 from ..lt_addon.io import atomic
 
-#: the checkout's preset file, next to the module that reads it (operators/presets.py)
+#: the checkout's preset file, next to the module that reads it (operators/bakes/presets.py)
 PRESETS_PATH = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                            "operators", "presets.json")
+                            "operators", "bakes", "presets.json")
 
 
 def add_parser(sub) -> None:
@@ -43,7 +43,7 @@ def add_parser(sub) -> None:
 
 
 def _cmd_bench(args) -> int:
-    from ..operators.cli import EXIT_OK, CliError, _can_create_in, _progress_printer
+    from ..operators.cli.commands import EXIT_OK, CliError, _can_create_in, _progress_printer
     from . import bench
 
     out_dir = os.path.abspath(args.out)

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import bpy
 
-from . import bake_ops, cli, export_ops, material_edit, panel, properties, scene_ops
+from .ui import bake_ops, export_ops, panel, properties, scene_ops
+from . import cli
+from .bakes import material_edit
 
 CLASSES = (properties.CLASSES + scene_ops.CLASSES + bake_ops.CLASSES + material_edit.CLASSES
            + export_ops.CLASSES + panel.CLASSES)

@@ -12,7 +12,7 @@ import bmesh
 import numpy as np
 from mathutils import Matrix
 
-from ..operators.meshes import grid_faces, mesh_object, object_from_bmesh
+from ..operators.base.meshes import grid_faces, mesh_object, object_from_bmesh
 from . import scene_setup
 
 #: (object subdivision cuts, ground / wall grid quads per side), by size.

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..lt_addon.geometry import heightfield
-from ..operators.meshes import grid_faces, mesh_object
+from ..operators.base.meshes import grid_faces, mesh_object
 from . import scene_setup
 
 #: Grid quads per side, by size.

@@ -10,8 +10,8 @@ import math
 
 import bpy
 
-from ..operators.compat import ensure_node_tree
-from ..operators.meshes import set_image_pixels
+from ..operators.base.compat import ensure_node_tree
+from ..operators.base.meshes import set_image_pixels
 
 #: Samples per pixel written into each sample scene, by size.
 SAMPLES = {"test": 16, "demo": 64}

@@ -53,7 +53,7 @@ NEWEST = MATRIX[-1][0]
 #: PyPI (Python 3.13, numpy 2).
 SUITE_DEFAULT = [NEWEST]
 #: Where CI runs only the tests marked ``version_sensitive`` (``pytest -m version_sensitive``):
-#: 5.2 LTS, which shares Python 3.13, numpy 2 and every branch of operators/compat.py with the
+#: 5.2 LTS, which shares Python 3.13, numpy 2 and every branch of operators/base/compat.py with the
 #: newest bpy (docs/testing.md says why that subset is enough).
 SUBSET_DEFAULT = ["5.2.3"]
 #: The pytest marker of that subset (declared in pyproject.toml).

@@ -4,7 +4,7 @@ The bounce terms of the material tensors (:mod:`.ptt`) were Cycles bakes, one pe
 direction, region and gate: each direction's value at a receiver came from that bake's own
 16 hemisphere samples. But what a receiver sees of the scene does not depend on the light:
 only the light *on* the surfaces it sees does. So here every receiver casts ``N`` cosine-
-weighted rays once (the bpy layer, :mod:`..operators.bounce_rays`), each ray's hit is written
+weighted rays once (the bpy layer, :mod:`..operators.bakes.bounce_rays`), each ray's hit is written
 as barycentric weights on the three face corners of the triangle it hits, and the sparse
 transfer ``K`` (origins x corners) so gathered turns the direct light at the corners -- exact,
 a shadow ray per corner -- into the one-bounce irradiance at the receivers for *any* light
@@ -273,7 +273,7 @@ class ReceiverTransfer:
     grazing range, so the one-bounce light there changes steeply as an edge sweeps by (measured
     on the test room: a 0.25-degree turn of the sun moved the whole one-bounce term by 22 %, a
     row of wall vertices coming into the sun). The runtime knows the exact direct light at the
-    receivers (a shadow ray where the baked directions disagree, :mod:`..operators.direct_rays`),
+    receivers (a shadow ray where the baked directions disagree, :mod:`..operators.base.direct_rays`),
     so adding the transfer of the difference makes the blend exact at the receivers' resolution:
     a sparse product over the few receivers where the difference is not small. Measured on the
     demo room (512 rays, 7 held-out suns, the one-bounce part's error over the norm of E):

@@ -17,7 +17,7 @@ A light direction is looked up bilinearly *in the weights*: the four table texel
 disk point each contribute their ``K`` taps times their bilinear factor, so the light moves
 continuously and at a table texel centre the relight is exactly the (truncated) kernel's
 (:func:`sparse_weights_at`). The node tree does the same with Closest lookups of the index and
-weight tables at the four corners (``operators/transport_preview.py``; ``K`` from
+weight tables at the four corners (``operators/preview/transport_preview.py``; ``K`` from
 :func:`choose_taps`, 3 to 12, the tables stored as ``K / 3`` RGB parts side by side). Per
 pixel: 4 corners x (2 K / 3 table lookups + K atlas lookups).
 

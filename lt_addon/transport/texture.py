@@ -11,7 +11,7 @@ lighting is a weighted sum of these images:
 * an environment ``L``: ``E/pi = sum_s L(w_s) dw_s T[s]`` (:func:`environment_weights`).
 
 Outgoing radiance of the diffuse surface is ``albedo * E/pi``; indirect light is a separate
-term (see ``operators/texture_transport.py``).
+term (see ``operators/bakes/texture_transport.py``).
 
 Storage is direction-major, ``(S, P)`` float16 on disk through a NumPy memmap
 (:class:`TransportStore`), so a bake is streamed one direction at a time and a relight reads only
@@ -187,7 +187,7 @@ def environment_weights(dset: DirectionSet, env_image, *, row_order: str,
         above): the relit light from direction ``w`` is ``L(R^T w)``. A world Mapping node
         (Point type) with Z rotation ``phi`` turns the picture the other way, so it equals
         ``rotation_deg = -phi`` (measured in a Cycles bake, see
-        ``operators/vertex_relight.shade_rotation``).
+        ``operators/preview/vertex_relight.shade_rotation``).
     validate : bool
         Check the image (finite values) -- see :func:`.eigentransport.sample_equirect`.
 

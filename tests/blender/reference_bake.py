@@ -20,7 +20,7 @@ def bake_reference():
     import bpy
 
     from relightable_textures import samples
-    from relightable_textures.operators import steerable_bake as sb
+    from relightable_textures.operators.bakes import steerable_bake as sb
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     samples.build("bumps", bpy.context.scene, "test")

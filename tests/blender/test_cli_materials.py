@@ -71,7 +71,7 @@ def test_relight_materials_applies_the_edit(baked, tmp_path):
     sun = ptt.Sun(tuple(direction_from_az_el(30, 50)))
     import bpy
 
-    from relightable_textures.operators.direct_rays import exact_direct
+    from relightable_textures.operators.base.direct_rays import exact_direct
 
     bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False)
     exact = exact_direct(bpy.context.scene, t, sun)      # a shadow ray per vertex
@@ -185,7 +185,7 @@ def test_glossy_anchors_from_the_cli_edit_metallic_and_roughness(tmp_path):
     info = json.loads(r.stdout)
     assert info["finish"]["RedMaterial"] == {"metallic": 1.0, "roughness": 0.5}
     t = ptt.TransferTensors.load(str(tmp_path / "room_relight" / "Floor_materials.npz"))
-    from relightable_textures.operators.direct_rays import exact_direct
+    from relightable_textures.operators.base.direct_rays import exact_direct
 
     bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False)
     sun = ptt.Sun(tuple(direction_from_az_el(30, 50)))

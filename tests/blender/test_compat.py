@@ -1,4 +1,4 @@
-"""operators/compat.py on the running Blender (the suite runs on 5.0.1 in `make test`, on the
+"""operators/base/compat.py on the running Blender (the suite runs on 5.0.1 in `make test`, on the
 newest 3.13 bpy in CI's matrix, and was run on 4.2 / 4.5): the same calls work on every
 version, without deprecation or blend-relative warnings."""
 
@@ -6,14 +6,14 @@ import warnings
 
 import pytest
 
-#: Also run on 5.2 LTS by the matrix: every branch of operators/compat.py.
+#: Also run on 5.2 LTS by the matrix: every branch of operators/base/compat.py.
 pytestmark = pytest.mark.version_sensitive
 
 
 def test_new_material_and_world_have_their_default_nodes(fresh_scene):
     import bpy
 
-    from relightable_textures.operators.compat import ensure_node_tree
+    from relightable_textures.operators.base.compat import ensure_node_tree
 
     mat, world = bpy.data.materials.new("M"), bpy.data.worlds.new("W")
     with warnings.catch_warnings():

@@ -1,4 +1,4 @@
-"""Bakes on the device the user chose (operators/cycles_device.py), on real Cycles bakes.
+"""Bakes on the device the user chose (operators/base/cycles_device.py), on real Cycles bakes.
 
 These machines have no GPU: what is proven here is the CPU side of every rule, the refusal of
 ``--device gpu`` before any bake, that the device chosen is what the Cycles session bakes on
@@ -37,7 +37,7 @@ def _gpus() -> dict:
 
 
 def test_auto_cpu_and_gpu_resolve_to_what_this_machine_has(fresh_scene):
-    from relightable_textures.operators import cycles_device as cd
+    from relightable_textures.operators.base import cycles_device as cd
 
     gpus = _gpus()
     auto = cd.resolve("auto", fresh_scene)   # the bpy module: the first backend Cycles finds
@@ -65,9 +65,10 @@ def test_the_device_reaches_the_cycles_session_and_the_scene_keeps_its_own(fresh
     import bmesh
     import bpy
 
-    from relightable_textures.operators import cycles_device as cd, transport_bake as tb
-    from relightable_textures.operators.jobs import run
-    from relightable_textures.operators.meshes import object_from_bmesh
+    from relightable_textures.operators.base import cycles_device as cd
+    from relightable_textures.operators.bakes import transport_bake as tb
+    from relightable_textures.operators.base.jobs import run
+    from relightable_textures.operators.base.meshes import object_from_bmesh
 
     bm = bmesh.new()
     bmesh.ops.create_uvsphere(bm, u_segments=8, v_segments=4, radius=1.0)

@@ -101,8 +101,8 @@ def test_a_worker_refuses_a_scene_that_is_not_the_one_being_baked(blend, tmp_pat
     a key for another scene) is one clear error, never a chunk of the wrong scene."""
     from dataclasses import asdict
 
-    from relightable_textures.operators import distributed
-    from relightable_textures.operators.texture_transport import TransportTextureSettings
+    from relightable_textures.operators.farm import distributed
+    from relightable_textures.operators.bakes.texture_transport import TransportTextureSettings
 
     path, _ = blend
     s = asdict(TransportTextureSettings(directions="hemi:400", resolution=16, bounces=0,
@@ -181,8 +181,8 @@ def test_vertex_transport_bakes_distribute_and_resume_bit_for_bit(tmp_path):
 
     import bpy
 
-    from relightable_textures.operators import transport_bake as tb
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import transport_bake as tb
+    from relightable_textures.operators.base.jobs import run
 
     bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False)
     obj, scene = bpy.data.objects["Statue"], bpy.context.scene
@@ -211,8 +211,8 @@ def test_material_bakes_distribute_and_resume_bit_for_bit(tmp_path, bounce_bake)
     import bpy
 
     from relightable_textures.lt_addon.transport import ptt
-    from relightable_textures.operators import material_bake as mb
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import material_bake as mb
+    from relightable_textures.operators.base.jobs import run
 
     blend = tmp_path / "room.blend"
     make_scene("room", blend)
@@ -298,8 +298,8 @@ def test_basis_light_stages_distribute_and_resume_bit_for_bit(blend, tmp_path):
 
     import bpy
 
-    from relightable_textures.operators import steerable_bake as sb, texture_transport as tx
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import steerable_bake as sb, texture_transport as tx
+    from relightable_textures.operators.base.jobs import run
 
     path, _ = blend
     args = ["bake-textures", path, "--object", "Bumps", "--directions", "hemi:48",

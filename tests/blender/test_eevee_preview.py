@@ -23,7 +23,9 @@ def test_eevee_renders_the_preview_group_like_numpy(fresh_scene, tmp_path):
     # (22.7 s on a cold machine; Mesa caches them in ~/.cache/mesa_shader_cache: 4.9 s warm).
     import bpy
 
-    from relightable_textures.operators import compat, preview_nodes, steerable_bake as sb
+    from relightable_textures.operators.base import compat
+    from relightable_textures.operators.preview import preview_nodes
+    from relightable_textures.operators.bakes import steerable_bake as sb
 
     samples.build("bumps", fresh_scene, "test")
     obj = bpy.data.objects["Bumps"]
@@ -54,8 +56,9 @@ def test_eevee_renders_the_transport_preview_like_its_numpy_twin(fresh_scene, tm
     from relightable_textures.lt_addon.transport import texture as tt
     from relightable_textures.lt_addon.io.atlas import unpack_atlas
     from relightable_textures.lt_addon.sphere.hemisphere import az_el_from_direction, disk_to_hemisphere
-    from relightable_textures.operators import texture_transport as tx, transport_preview as tp
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.preview import transport_preview as tp
+    from relightable_textures.operators.base.jobs import run
 
     samples.build("bumps", fresh_scene, "test")
     obj = bpy.data.objects["Bumps"]
@@ -98,8 +101,9 @@ def test_eevee_renders_the_transport_viewport_of_T_like_its_numpy_twin(fresh_sce
 
     from relightable_textures.lt_addon.transport import texture as tt
     from relightable_textures.lt_addon.sphere.hemisphere import az_el_from_direction, disk_to_hemisphere
-    from relightable_textures.operators import texture_transport as tx, transport_preview as tp
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.preview import transport_preview as tp
+    from relightable_textures.operators.base.jobs import run
     from test_texture_transport import _sparse_preview
 
     samples.build("bumps", fresh_scene, "test")
@@ -132,8 +136,9 @@ def test_eevee_renders_the_world_lit_transport_preview_like_its_numpy_twin(fresh
     import relightable_textures
     from relightable_textures.lt_addon.io import exrio
     from relightable_textures.lt_addon.io.atlas import unpack_atlas
-    from relightable_textures.operators import texture_transport as tx, transport_preview as tp
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.preview import transport_preview as tp
+    from relightable_textures.operators.base.jobs import run
     from test_texture_transport import _sky_world, _smooth_sky
 
     samples.build("bumps", fresh_scene, "test")

@@ -169,12 +169,12 @@ def test_rti_page_in_headless_chromium_matches_the_numpy_relight(bumps, tmp_path
 def _float_fit_display(folder, light, H, W):
     """The unquantised HSH fit at ``light`` as display values, top row first, refitted here
     from the bake's transport with the same weights (independent of the exporter's loop)."""
-    from relightable_textures.operators import texture_transport as tx
+    from relightable_textures.operators.bakes import texture_transport as tx
 
     bake, store, _ = tx.load_bake(str(folder / "bumps_relight" / "Bumps_texture_report.json"))
     info = json.loads((folder / "bumps_relight" / "Bumps_rti-hsh9" / "info.json").read_text())
     dset = store.directions
-    from relightable_textures.operators.export import _radiance_at
+    from relightable_textures.operators.bakes.export import _radiance_at
 
     vals = np.stack([rti.to_display(_radiance_at(bake, store, s, store.array),
                                     info["exposure"]) for s in range(dset.size)])

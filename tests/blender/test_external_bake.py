@@ -80,12 +80,12 @@ def test_bake_materials_on_dask_workers_from_the_panel(room, tmp_path):
     assert _same(_tensors(tmp_path / "dask"), here)
     # the command saved the bake into the file: reopened, it is recorded there
     bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False)
-    from relightable_textures.operators import material_edit as me
+    from relightable_textures.operators.bakes import material_edit as me
 
     ((first, tensors),) = me.scene_bakes(bpy.context.scene)
     assert first.name == "Floor" and _same(tensors, here)
-    from relightable_textures.operators import external_bake as eb
-    from relightable_textures.operators.cycles_bake import BakeInputError
+    from relightable_textures.operators.farm import external_bake as eb
+    from relightable_textures.operators.base.cycles_bake import BakeInputError
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     with pytest.raises(BakeInputError, match="save the .blend first"):
@@ -95,7 +95,7 @@ def test_bake_materials_on_dask_workers_from_the_panel(room, tmp_path):
 def test_an_interrupted_dask_bake_keeps_its_chunks_and_the_next_bake_resumes(room, tmp_path):
     import bpy
 
-    from relightable_textures.operators import external_bake as eb
+    from relightable_textures.operators.farm import external_bake as eb
 
     scene, path = room
     props = scene.relight

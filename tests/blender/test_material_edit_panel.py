@@ -14,8 +14,8 @@ def test_bake_materials_operator_and_live_colour_edit(fresh_scene, tmp_path):
 
     import relightable_textures
     from relightable_textures import samples
-    from relightable_textures.operators import material_bake as mb, material_edit as me
-    from relightable_textures.operators.meshes import color_attribute
+    from relightable_textures.operators.bakes import material_bake as mb, material_edit as me
+    from relightable_textures.operators.base.meshes import color_attribute
 
     scene = fresh_scene
     samples.build("room", scene, "test")
@@ -53,7 +53,7 @@ def test_bake_materials_operator_and_live_colour_edit(fresh_scene, tmp_path):
                 bpy.data.objects[n].data.color_attributes[me.ATTRIBUTE])[:, :3]
                 for n, _ in tensors.objects])
 
-        from relightable_textures.operators.direct_rays import exact_direct
+        from relightable_textures.operators.base.direct_rays import exact_direct
 
         def want(edits):   # the Sun's direct light from a shadow ray per vertex
             lamp = me.preview_light(scene)
@@ -97,9 +97,9 @@ def test_panel_bake_with_roughness_anchors_follows_a_metallic_edit(fresh_scene, 
 
     import relightable_textures
     from relightable_textures import samples
-    from relightable_textures.operators import material_bake as mb, material_edit as me
-    from relightable_textures.operators.direct_rays import exact_direct
-    from relightable_textures.operators.meshes import color_attribute
+    from relightable_textures.operators.bakes import material_bake as mb, material_edit as me
+    from relightable_textures.operators.base.direct_rays import exact_direct
+    from relightable_textures.operators.base.meshes import color_attribute
     from relightable_textures.samples.scene_setup import make_principled
 
     scene = fresh_scene

@@ -37,8 +37,8 @@ def room(request):
 
     from relightable_textures import samples
     from relightable_textures.lt_addon.transport.texture import parse_directions
-    from relightable_textures.operators import material_bake as mb
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import material_bake as mb
+    from relightable_textures.operators.base.jobs import run
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = bpy.context.scene
@@ -54,7 +54,7 @@ def room(request):
 
 
 def truths(room, edit, bounces=2):
-    from relightable_textures.operators import material_bake as mb
+    from relightable_textures.operators.bakes import material_bake as mb
 
     scene, objs, tensors, light = room
     colours = {**mb.file_colours(tensors), **edit}
@@ -112,7 +112,7 @@ def test_two_bounce_term_matters_in_a_white_room(room):
 
 def test_direct_term_equals_a_bounce_free_cycles_bake(room):
     from relightable_textures.lt_addon.transport import ptt
-    from relightable_textures.operators import material_bake as mb
+    from relightable_textures.operators.bakes import material_bake as mb
 
     scene, objs, tensors, light = room
     direct = mb.truth_irradiance(scene, objs, {}, light, 0, 1)
@@ -133,8 +133,8 @@ def test_the_suns_direct_light_by_rays_is_cycles_own_at_any_sun(room):
     them fully)."""
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
     from relightable_textures.lt_addon.transport import ptt
-    from relightable_textures.operators import material_bake as mb
-    from relightable_textures.operators.direct_rays import ReceiverRays
+    from relightable_textures.operators.bakes import material_bake as mb
+    from relightable_textures.operators.base.direct_rays import ReceiverRays
 
     scene, objs, tensors, _ = room
     rays = ReceiverRays(scene, tensors.objects, "POINT")
@@ -162,7 +162,7 @@ def test_rays_go_only_where_the_baked_directions_disagree(room):
     above) that gives the every-receiver answer at 8 held-out suns with under half the rays."""
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
     from relightable_textures.lt_addon.transport.texture import parse_directions, sun_weights
-    from relightable_textures.operators.direct_rays import ReceiverRays
+    from relightable_textures.operators.base.direct_rays import ReceiverRays
 
     scene, _, tensors, _ = room
     rays = ReceiverRays(scene, tensors.objects, "POINT")
@@ -190,7 +190,7 @@ def test_two_bounce_order_matters(room):
 def test_gated_materials_restore_the_scene(room):
     import bpy
 
-    from relightable_textures.operators import material_bake as mb
+    from relightable_textures.operators.bakes import material_bake as mb
 
     scene, objs, _, _ = room
     before = {o.name: [s.material.name for s in o.material_slots] for o in objs}
@@ -215,9 +215,9 @@ def test_per_corner_bake_keeps_hard_edges():
     from relightable_textures import samples
     from relightable_textures.lt_addon.transport import ptt
     from relightable_textures.lt_addon.transport.texture import parse_directions
-    from relightable_textures.operators import material_bake as mb
-    from relightable_textures.operators.meshes import corner_vertices
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import material_bake as mb
+    from relightable_textures.operators.base.meshes import corner_vertices
+    from relightable_textures.operators.base.jobs import run
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = bpy.context.scene
@@ -258,9 +258,9 @@ def test_composed_second_bounce_follows_a_held_out_sun():
     from relightable_textures import samples
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
     from relightable_textures.lt_addon.transport import ptt
-    from relightable_textures.operators import material_bake as mb
-    from relightable_textures.operators.direct_rays import exact_direct
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import material_bake as mb
+    from relightable_textures.operators.base.direct_rays import exact_direct
+    from relightable_textures.operators.base.jobs import run
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = bpy.context.scene
@@ -297,8 +297,8 @@ def glossy_room():
 
     from relightable_textures import samples
     from relightable_textures.lt_addon.transport.texture import parse_directions
-    from relightable_textures.operators import material_bake as mb
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import material_bake as mb
+    from relightable_textures.operators.base.jobs import run
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = bpy.context.scene
@@ -319,7 +319,7 @@ def test_glossy_anchors_follow_a_cycles_bake_of_a_metal_wall(glossy_room):
     sun is a caustic: noisy at low roughness), at 0.6 between the anchors 0.046 (floor 0.027,
     the blend of two lobes), and the same wall taken as diffuse 0.196 / 0.089 / 0.041."""
     from relightable_textures.lt_addon.transport import ptt
-    from relightable_textures.operators import material_bake as mb
+    from relightable_textures.operators.bakes import material_bake as mb
 
     scene, objs, t, light = glossy_room
     assert t.roughness == (0.4, 0.8) and t.gloss.shape == (4, 2, 2, 350)
@@ -349,7 +349,7 @@ def test_glossy_anchors_follow_a_cycles_bake_of_a_metal_wall(glossy_room):
 def test_glossy_gates_restore_the_scene(glossy_room):
     import bpy
 
-    from relightable_textures.operators import material_bake as mb
+    from relightable_textures.operators.bakes import material_bake as mb
 
     scene, objs, _, _ = glossy_room
     cyc = scene.cycles
@@ -379,9 +379,9 @@ def test_gathered_bounces_follow_held_out_suns():
     from relightable_textures import samples
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
     from relightable_textures.lt_addon.transport import ptt
-    from relightable_textures.operators import material_bake as mb
-    from relightable_textures.operators.direct_rays import exact_direct
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import material_bake as mb
+    from relightable_textures.operators.base.direct_rays import exact_direct
+    from relightable_textures.operators.base.jobs import run
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = bpy.context.scene
@@ -426,8 +426,8 @@ def test_gathered_terms_are_cycles_gated_bakes_of_each_region_and_pair():
     import bpy
 
     from relightable_textures import samples
-    from relightable_textures.operators import material_bake as mb
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import material_bake as mb
+    from relightable_textures.operators.base.jobs import run
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = bpy.context.scene

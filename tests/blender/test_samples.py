@@ -23,7 +23,7 @@ EXPECTED_VERTICES = {  # (test, demo) vertex counts of the object to relight
 def _fingerprint(scene_name, size):
     import bpy
 
-    from relightable_textures.operators.meshes import vertex_positions, world_bounds
+    from relightable_textures.operators.base.meshes import vertex_positions, world_bounds
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     info = samples.build(scene_name, bpy.context.scene, size)
@@ -67,7 +67,8 @@ def test_bumps_vertices_follow_the_height_field(fresh_scene):
     """Each vertex height equals the analytic field at its UV (an independent evaluation)."""
     import bpy
 
-    from relightable_textures.operators.meshes import corner_vertices, uv_corners, vertex_positions
+    from relightable_textures.operators.base.meshes import (corner_vertices, uv_corners,
+                                                            vertex_positions)
 
     samples.build("bumps", fresh_scene, "test")
     mesh = bpy.data.objects["Bumps"].data
@@ -127,7 +128,7 @@ def test_object_scenes_have_a_sky_whose_rotation_shows(fresh_scene, tmp_path, na
     from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
     from relightable_textures.lt_addon.transport.eigentransport import (
         project_environment, rotate_environment_samples, sample_equirect)
-    from relightable_textures.operators import vertex_relight as vr
+    from relightable_textures.operators.preview import vertex_relight as vr
 
     samples.build(name, fresh_scene, "test")
     path = str(tmp_path / "s.blend")

@@ -20,7 +20,8 @@ import numpy as np
 import pytest
 
 from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
-from relightable_textures.operators.meshes import corner_vertices, set_uv_corners, vertex_positions
+from relightable_textures.operators.base.meshes import (corner_vertices, set_uv_corners,
+                                                        vertex_positions)
 
 R = 16
 
@@ -58,7 +59,7 @@ def flat_plane(scene, name="Plane", albedo=None, n=3):
     t = np.linspace(-1.0, 1.0, n)
     Y, X = np.meshgrid(t, t, indexing="ij")
     verts = np.stack([X, Y, np.zeros_like(X)], -1).reshape(-1, 3)
-    from relightable_textures.operators.meshes import grid_faces
+    from relightable_textures.operators.base.meshes import grid_faces
 
     return mesh(name, verts, grid_faces(n, n), scene, uv=(verts[:, :2] + 1) / 2, smooth=False,
                 material=None if albedo is None else diffuse(f"{name}Albedo", albedo))
@@ -68,7 +69,7 @@ def scene_state(scene):
     """Everything a refused or cancelled bake must leave as it was."""
     import bpy
 
-    from relightable_textures.operators.blend_files import object_bakes
+    from relightable_textures.operators.base.blend_files import object_bakes
 
     return {
         "ids": {kind: sorted(x.name for x in getattr(bpy.data, kind))
@@ -86,7 +87,7 @@ def scene_state(scene):
 
 
 def tex_settings(**kw):
-    from relightable_textures.operators.steerable_bake import TextureBakeSettings
+    from relightable_textures.operators.bakes.steerable_bake import TextureBakeSettings
 
     base = dict(order=2, resolution=R, samples=1, bounces=0, env_height=16, storage="float")
     base.update(kw)
@@ -94,21 +95,21 @@ def tex_settings(**kw):
 
 
 def bake_texture(scene, obj, **kw):
-    from relightable_textures.operators import steerable_bake as sb
+    from relightable_textures.operators.bakes import steerable_bake as sb
 
     return sb.run(sb.bake_steerable_texture(scene, obj, tex_settings(**kw)))
 
 
 def bake_transport(scene, obj, dirs, **kw):
-    from relightable_textures.operators import steerable_bake as sb
-    from relightable_textures.operators import transport_bake as tb
+    from relightable_textures.operators.bakes import steerable_bake as sb
+    from relightable_textures.operators.bakes import transport_bake as tb
 
     return sb.run(tb.bake_transport(scene, obj, dirs, **kw)).transport
 
 
 def refused(gen_or_call, message):
     """Run a bake generator (or a callable) expecting BakeInputError with exactly ``message``."""
-    from relightable_textures.operators.cycles_bake import BakeInputError
+    from relightable_textures.operators.base.cycles_bake import BakeInputError
 
     with pytest.raises(BakeInputError) as info:
         gen_or_call() if callable(gen_or_call) else next(gen_or_call)
@@ -126,8 +127,8 @@ DIRS = DIRS / np.linalg.norm(DIRS, axis=1, keepdims=True)
 
 
 def test_single_vertex_and_faceless_meshes_are_refused_and_nothing_changes(fresh_scene):
-    from relightable_textures.operators import steerable_bake as sb
-    from relightable_textures.operators import transport_bake as tb
+    from relightable_textures.operators.bakes import steerable_bake as sb
+    from relightable_textures.operators.bakes import transport_bake as tb
 
     one = mesh("One", [[0, 0, 0]], [], fresh_scene)
     one_uv = mesh("OneUV", [[0, 0, 0]], [], fresh_scene, uv=[[0.5, 0.5]])
@@ -215,13 +216,13 @@ def test_flat_shaded_zero_area_faces_add_nothing(fresh_scene):
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "BUG (operators/cycles_bake.py / transport_bake.py): with smooth shading Cycles bakes a "
+    "BUG (operators/base/cycles_bake.py / transport_bake.py): with smooth shading Cycles bakes a "
     "zero-area face with Blender's fallback vertex normal (0, 0, 1): its texels and (when all "
     "its corners get that fallback) its vertices are lit as if it faced +z. A defined result "
     "would be 0 (no surface), as with flat shading, or a refusal naming the degenerate faces."))
 @pytest.mark.version_sensitive
 def test_smooth_shaded_zero_area_faces_get_no_light(fresh_scene):
-    from relightable_textures.operators.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
 
     obj = mesh("Line", [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [3, 0, 0], [4, 1, 1],
                         [5, 2, 2]], [[0, 1, 2, 3], [4, 5, 6]], fresh_scene,
@@ -241,7 +242,7 @@ def test_smooth_shaded_zero_area_faces_get_no_light(fresh_scene):
 
 
 def test_missing_uvs_are_refused_before_anything_changes(fresh_scene):
-    from relightable_textures.operators import steerable_bake as sb
+    from relightable_textures.operators.bakes import steerable_bake as sb
 
     obj = mesh("NoUV", [[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], fresh_scene,
                material=diffuse("Grey", 0.5))
@@ -271,7 +272,7 @@ def test_collapsed_uvs_bake_nothing_and_say_so_in_the_figures(fresh_scene):
 
 
 def _plane_under_a_plate(scene):
-    from relightable_textures.operators.meshes import grid_faces
+    from relightable_textures.operators.base.meshes import grid_faces
 
     t = np.linspace(-1, 1, 4)  # no vertex on the plate's edge x = 0
     Y, X = np.meshgrid(t, t, indexing="ij")
@@ -285,7 +286,7 @@ def test_modifiers_are_baked_on_the_evaluated_mesh_and_left_untouched(fresh_scen
     """A plate at z = 1 shades the plane's x < 0 half from the zenith; a Displace modifier
     (+2 along z) lifts the evaluated plane above it, so both bakes see full light; the modifier
     stack and the base mesh stay as they were."""
-    from relightable_textures.operators.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
 
     plane, verts = _plane_under_a_plate(fresh_scene)
     shaded = np.where(verts[:, 0] < 0, 0.0, 1.0)
@@ -316,7 +317,7 @@ def test_subdivided_cube_vertices_get_the_limit_surface_cosine(fresh_scene):
     limit-surface point, whose normal on a cube corner is corner / |corner| by symmetry."""
     import bmesh
 
-    from relightable_textures.operators.meshes import object_from_bmesh
+    from relightable_textures.operators.base.meshes import object_from_bmesh
 
     bm = bmesh.new()
     bmesh.ops.create_cube(bm, size=2.0)
@@ -337,7 +338,7 @@ def test_point_light_positions_follow_the_modifiers(fresh_scene):
     first (a cube's corners move inwards along their diagonals)."""
     import bpy
 
-    from relightable_textures.operators.vertex_relight import mesh_positions_normals
+    from relightable_textures.operators.preview.vertex_relight import mesh_positions_normals
 
     plane, verts = _plane_under_a_plate(fresh_scene)
     mod = plane.modifiers.new("Lift", "DISPLACE")
@@ -366,7 +367,7 @@ def test_point_light_positions_follow_the_modifiers(fresh_scene):
 def test_white_furnace_black_world_and_hdr_scales_are_exact(fresh_scene):
     """A white Lambertian plane under a constant white world reflects exactly the world's
     radiance (texture and per vertex), at 1, 1e6 and 1e-6; a black world gives exactly 0."""
-    from relightable_textures.operators.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
 
     plane = flat_plane(fresh_scene, albedo=1.0)
     white = np.ones((16, 32))
@@ -396,7 +397,7 @@ def _vgroove(scene, beta_deg=80.0, periods=4, albedo=0.8):
 def test_hdr_scales_stay_linear_on_shadowed_interreflecting_geometry(fresh_scene):
     """Steep grooves (shadows, one bounce), world importance sampling (the texture bake's
     default): the same seed gives s * bake(env) for s = 1e6 and 1e-6 to float32 precision."""
-    from relightable_textures.operators.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
 
     obj, _, _ = _vgroove(fresh_scene)
     h = np.linspace(-1, 1, 16)[:, None] * np.ones((1, 32))
@@ -411,7 +412,7 @@ def test_hdr_scales_stay_linear_on_shadowed_interreflecting_geometry(fresh_scene
 
 def test_black_albedo_bakes_exactly_zero_and_round_trips_in_every_storage(fresh_scene, tmp_path):
     from relightable_textures.lt_addon.steerable.texture import SteerableTexture
-    from relightable_textures.operators import steerable_bake as sb
+    from relightable_textures.operators.bakes import steerable_bake as sb
 
     plane = flat_plane(fresh_scene, albedo=0.0)
     settings = tex_settings()
@@ -435,10 +436,10 @@ def test_transport_is_geometry_whatever_the_material(fresh_scene, surface):
     refused with bounces (where it does)."""
     import bpy
 
-    from relightable_textures.operators import transport_bake as tb
-    from relightable_textures.operators.compat import ensure_node_tree
-    from relightable_textures.operators.cycles_bake import BakeInputError
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import transport_bake as tb
+    from relightable_textures.operators.base.compat import ensure_node_tree
+    from relightable_textures.operators.base.cycles_bake import BakeInputError
+    from relightable_textures.operators.base.jobs import run
 
     plane = flat_plane(fresh_scene)
     mat = bpy.data.materials.new("Surface")
@@ -468,8 +469,8 @@ def test_hdr_albedo_overflowing_half_storage_is_refused_and_the_previous_bake_ke
     record on the object stay byte-identical; float storage then writes them exactly. The
     values are the albedo-1 bake times 3e5 (linear in the albedo, same seed)."""
     from relightable_textures.lt_addon.steerable.texture import SteerableTexture
-    from relightable_textures.operators import steerable_bake as sb
-    from relightable_textures.operators.blend_files import object_bakes
+    from relightable_textures.operators.bakes import steerable_bake as sb
+    from relightable_textures.operators.base.blend_files import object_bakes
 
     plane = flat_plane(fresh_scene, albedo=1.0)
     unit = bake_texture(fresh_scene, plane)
@@ -526,7 +527,7 @@ def test_grazing_sun_on_80_degree_grooves_follows_the_shadow_geometry(fresh_scen
     """Walls at 80 deg (slope 5.7), Sun at 65 deg from +x: texels on the sunny walls are lit by
     sin(beta + e) / pi until the next ridge's shadow, the rest is dark; the last wall has no
     ridge ahead. Hard Sun, 1 sample: exact away from edges."""
-    from relightable_textures.operators.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
 
     beta, e = np.radians(80.0), np.radians(65.0)
     obj, p, H = _vgroove(fresh_scene, 80.0)
@@ -549,8 +550,8 @@ def test_steep_bumps_steer_to_grazing_light_exactly_like_cycles(fresh_scene):
     (albedo + albedo^2) a_i a_j that a one-bounce bake of b_ij can reach; relit 2 deg above the
     horizon they equal a same-seed Cycles bake of that steered light; on and below the horizon
     they are black."""
-    from relightable_textures.operators.cycles_bake import EnvironmentBake
-    from relightable_textures.operators.steerable_truth import steered_light_environment
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.bakes.steerable_truth import steered_light_environment
 
     obj, _, _ = _vgroove(fresh_scene, 80.0, albedo=0.8)
     kw = dict(order=3, samples=4, bounces=1, env_height=32, world_sampling="none", seed=7)
@@ -578,8 +579,8 @@ def test_steep_bumps_steer_to_grazing_light_exactly_like_cycles(fresh_scene):
 def test_a_resolution_beyond_memory_is_refused_up_front(fresh_scene, monkeypatch):
     """need = 2 (basis + sampled stacks) * N1^2 * R^2 * 3 channels * 4 bytes, refused above
     80% of the memory available now, before the scene is touched."""
-    from relightable_textures.operators import cycles_bake as cb
-    from relightable_textures.operators import steerable_bake as sb
+    from relightable_textures.operators.base import cycles_bake as cb
+    from relightable_textures.operators.bakes import steerable_bake as sb
 
     plane = flat_plane(fresh_scene, albedo=0.5)
     before = scene_state(fresh_scene)
@@ -609,8 +610,8 @@ def test_a_resolution_beyond_memory_is_refused_up_front(fresh_scene, monkeypatch
 
 def test_transport_beyond_memory_is_refused_up_front(fresh_scene, monkeypatch):
     """need = V * S * 12 bytes (float32 T plus its float64 copy for the fit)."""
-    from relightable_textures.operators import cycles_bake as cb
-    from relightable_textures.operators import transport_bake as tb
+    from relightable_textures.operators.base import cycles_bake as cb
+    from relightable_textures.operators.bakes import transport_bake as tb
 
     plane = flat_plane(fresh_scene, n=100)
     dirs = np.tile(DIRS[:2], (5000, 1))
@@ -630,9 +631,9 @@ def test_orders_2_and_12_bake_and_steer_exactly_and_1_and_13_are_refused(fresh_s
     """N1 = 2 (4 lights) and N1 = 12 (144 lights): steering to the zenith and to an arbitrary
     direction equals a same-seed Cycles bake of that steered light; outside 2..12 the settings
     are refused before anything is baked."""
-    from relightable_textures.operators import steerable_bake as sb
-    from relightable_textures.operators.cycles_bake import EnvironmentBake
-    from relightable_textures.operators.steerable_truth import steered_light_environment
+    from relightable_textures.operators.bakes import steerable_bake as sb
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.bakes.steerable_truth import steered_light_environment
 
     obj, _, _ = _vgroove(fresh_scene, 60.0, periods=2)
     for order in (2, 12):
@@ -661,8 +662,8 @@ def test_preview_node_group_at_the_zenith_horizon_and_below(fresh_scene, tmp_pat
     (half-float atlas precision) and is exactly black on and below the horizon."""
     from render_check import render_rgb
 
-    from relightable_textures.operators import preview_nodes
-    from relightable_textures.operators import steerable_bake as sb
+    from relightable_textures.operators.preview import preview_nodes
+    from relightable_textures.operators.bakes import steerable_bake as sb
     from relightable_textures.samples.scene_setup import configure_cycles, ortho_top_camera
 
     configure_cycles(fresh_scene, "test")  # no denoiser / adaptive sampling in the render

@@ -30,7 +30,7 @@ def bumps(fresh_scene):
 
 
 def settings(**kw):
-    from relightable_textures.operators.steerable_bake import TextureBakeSettings
+    from relightable_textures.operators.bakes.steerable_bake import TextureBakeSettings
 
     base = dict(order=ORDER, resolution=R, samples=SPP, bounces=1, env_height=ENV_H,
                 storage="float")
@@ -39,7 +39,7 @@ def settings(**kw):
 
 
 def bake(scene, obj, **kw):
-    from relightable_textures.operators import steerable_bake as sb
+    from relightable_textures.operators.bakes import steerable_bake as sb
 
     s = settings(**kw)
     return s, sb.run(sb.bake_steerable_texture(scene, obj, s))
@@ -47,7 +47,8 @@ def bake(scene, obj, **kw):
 
 def bake_with_preview(scene, obj, tmp_path, target=None, **kw):
     """Bake ``obj``, write its files to ``tmp_path`` and install the preview on ``target``."""
-    from relightable_textures.operators import preview_nodes, steerable_bake as sb
+    from relightable_textures.operators.preview import preview_nodes
+    from relightable_textures.operators.bakes import steerable_bake as sb
 
     s, result = bake(scene, obj, **kw)
     report = sb.write_bake(result, obj, str(tmp_path), s)
@@ -56,7 +57,7 @@ def bake_with_preview(scene, obj, tmp_path, target=None, **kw):
 
 
 def env_bake(scene, obj, env, spp, seed, sampling="importance"):
-    from relightable_textures.operators.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
 
     with EnvironmentBake(scene, obj, R, spp, 1, (ENV_H, 2 * ENV_H), seed=seed,
                          world_sampling=sampling) as session:
@@ -96,8 +97,8 @@ def test_relight_matches_cycles_truth_of_the_same_light_within_noise(bumps):
     """Tolerance from measured noise: the relit texture may differ from an independent bake of
     the same light by at most 1.3x what two independent bakes differ by (measured ratio <= 1.08
     at 16..256 spp), plus 0.01 for environment discretisation."""
-    from relightable_textures.operators.steerable_bake import truth_directions
-    from relightable_textures.operators.steerable_truth import steered_light_environment
+    from relightable_textures.operators.bakes.steerable_bake import truth_directions
+    from relightable_textures.operators.bakes.steerable_truth import steered_light_environment
 
     scene, obj = bumps
     _, result = bake(scene, obj)
@@ -119,7 +120,7 @@ def test_preview_node_group_rendered_by_cycles_equals_numpy_relight(bumps, tmp_p
     import bpy
 
     from relightable_textures.lt_addon.geometry import heightfield
-    from relightable_textures.operators.meshes import grid_faces, mesh_object
+    from relightable_textures.operators.base.meshes import grid_faces, mesh_object
 
     scene, obj = bumps
     target = obj
@@ -144,7 +145,7 @@ def test_preview_node_group_rendered_by_cycles_equals_numpy_relight(bumps, tmp_p
 
 
 def test_preview_follows_the_sun_lamp(bumps, tmp_path):
-    from relightable_textures.operators import preview_nodes
+    from relightable_textures.operators.preview import preview_nodes
     from relightable_textures.samples.scene_setup import sun_lamp
 
     scene, obj = bumps
@@ -161,8 +162,9 @@ def test_preview_follows_the_sun_lamp(bumps, tmp_path):
 def test_cancel_keeps_the_previous_bake_and_rebake_replaces_it(bumps, tmp_path):
     import bpy
 
-    from relightable_textures.operators import preview_nodes, steerable_bake as sb
-    from relightable_textures.operators.blend_files import object_bakes
+    from relightable_textures.operators.preview import preview_nodes
+    from relightable_textures.operators.bakes import steerable_bake as sb
+    from relightable_textures.operators.base.blend_files import object_bakes
 
     scene, obj = bumps
     result = bake_with_preview(scene, obj, tmp_path, samples=4)
@@ -198,8 +200,8 @@ def test_cancel_keeps_the_previous_bake_and_rebake_replaces_it(bumps, tmp_path):
 def test_bad_objects_are_refused_with_clear_errors(fresh_scene):
     import bpy
 
-    from relightable_textures.operators.cycles_bake import BakeInputError, check_bakeable
-    from relightable_textures.operators.meshes import mesh_object
+    from relightable_textures.operators.base.cycles_bake import BakeInputError, check_bakeable
+    from relightable_textures.operators.base.meshes import mesh_object
 
     samples.build("statue", fresh_scene, "test")
     with pytest.raises(BakeInputError, match="not a mesh"):
@@ -216,8 +218,8 @@ def test_bad_objects_are_refused_with_clear_errors(fresh_scene):
 def test_environment_orientation_agrees_with_a_cycles_sun_lamp(bumps):
     """Relit under azimuth az, the texture must resemble a real Cycles Sun lamp from az far more
     than Suns from the mirrored azimuths (catches any flip of the equirect convention)."""
-    from relightable_textures.operators.cycles_bake import EnvironmentBake
-    from relightable_textures.operators.steerable_truth import equivalent_sun_angle_deg
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.bakes.steerable_truth import equivalent_sun_angle_deg
 
     scene, obj = bumps
     _, result = bake(scene, obj, samples=128, order=7)
@@ -242,8 +244,8 @@ def test_calibrated_flat_plane_follows_the_cosine_law_in_cycles(fresh_scene):
     import bpy
 
     from relightable_textures.lt_addon.geometry import heightfield
-    from relightable_textures.operators.cycles_bake import EnvironmentBake
-    from relightable_textures.operators.meshes import grid_faces, mesh_object
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.base.meshes import grid_faces, mesh_object
     from relightable_textures.samples.scene_setup import diffuse_material
 
     u, v = heightfield.grid(4)
@@ -266,8 +268,8 @@ def test_calibrated_flat_plane_follows_the_cosine_law_in_cycles(fresh_scene):
 def test_overlapping_uvs_are_reported_before_baking(fresh_scene):
     """Two quads mapped onto the same UV square: every covered texel overlaps; the bake warns
     through its progress stream (operator report / CLI line) and records it in the figures."""
-    from relightable_textures.operators import steerable_bake as sb
-    from relightable_textures.operators.meshes import mesh_object
+    from relightable_textures.operators.bakes import steerable_bake as sb
+    from relightable_textures.operators.base.meshes import mesh_object
 
     verts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
                       [2, 0, 0], [3, 0, 0], [3, 1, 0], [2, 1, 0]], dtype=float)
@@ -291,7 +293,7 @@ def test_lobes_job_reports_a_camera_comparison_or_says_why_not(bumps, tmp_path):
     from matplotlib.image import imread
 
     from relightable_textures.lt_addon.io.label import GLYPH_H
-    from relightable_textures.operators import steerable_bake as sb
+    from relightable_textures.operators.bakes import steerable_bake as sb
 
     scene, obj = bumps
     s = settings(order=3, resolution=16, samples=4, bounces=0)

@@ -40,7 +40,7 @@ def statue(fresh_scene):
 
 
 def settings(**kw):
-    from relightable_textures.operators.texture_transport import TransportTextureSettings
+    from relightable_textures.operators.bakes.texture_transport import TransportTextureSettings
 
     base = dict(directions="hemi:48:1.5", resolution=R, bounces=0, model="pca", components=48,
                 table_size=16)
@@ -49,15 +49,15 @@ def settings(**kw):
 
 
 def bake(scene, objects, out, resume=True, **kw):
-    from relightable_textures.operators import texture_transport as tx
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.base.jobs import run
 
     return run(tx.bake_transport_textures(scene, objects, settings(**kw), str(out), resume))
 
 
 def sun_bake(scene, objects, direction, angle=0.0, spp=1, bounces=0, passes="direct",
              mode="irradiance", seed=0, res=R):
-    from relightable_textures.operators.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
 
     with EnvironmentBake(scene, objects, res, spp, bounces, (8, 16), mode=mode, seed=seed,
                          world_sampling="none", passes=passes) as s:
@@ -80,7 +80,7 @@ def test_relight_at_a_sample_direction_with_a_point_sun_equals_that_directions_b
 
 
 def test_stores_are_streamed_and_cancel_leaves_nothing(bumps, tmp_path):
-    from relightable_textures.operators import texture_transport as tx
+    from relightable_textures.operators.bakes import texture_transport as tx
 
     scene, obj = bumps
     gen = tx.bake_transport_textures(scene, [obj], settings(), str(tmp_path))
@@ -99,7 +99,7 @@ def test_a_cancelled_bake_resumes_from_its_finished_chunks_bit_for_bit(bumps, tm
     bake's bit for bit (1 spp, fixed seed: Cycles is deterministic here); writing the bake
     removes the cache; moving an object invalidates it (nothing reused, the stale folder
     pruned)."""
-    from relightable_textures.operators import texture_transport as tx
+    from relightable_textures.operators.bakes import texture_transport as tx
 
     scene, obj = bumps
     ref = bake(scene, [obj], tmp_path / "ref", resume=False, model="none")
@@ -137,7 +137,7 @@ def test_the_cache_key_follows_shading_not_layout(bumps):
     """What invalidates the chunks: geometry, transforms, material values and links; what does
     not: a node moved in the editor, our own preview nodes."""
     from relightable_textures.lt_addon.io.chunk_cache import digest
-    from relightable_textures.operators.bake_inputs import scene_key
+    from relightable_textures.operators.base.bake_inputs import scene_key
 
     scene, obj = bumps
     key = lambda: digest(scene_key(scene, [obj]))
@@ -165,7 +165,7 @@ def test_quadrature_steerable_light_equals_its_environment_bake(bumps, tmp_path)
     light as an environment (direct light): agreement to the environment bake's own noise."""
     from relightable_textures.lt_addon.steerable.sampled_basis import build_sampled_basis
     from relightable_textures.lt_addon.steerable.basis import paper_basis
-    from relightable_textures.operators.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
 
     scene, obj = bumps
     res = bake(scene, [obj], tmp_path, directions="hemi:600:1.0", model="none")
@@ -191,7 +191,7 @@ def test_quadrature_steerable_light_equals_its_environment_bake(bumps, tmp_path)
 
 
 def test_pca_model_is_exact_at_full_rank_and_viewport_twin_matches(bumps, tmp_path):
-    from relightable_textures.operators import transport_preview as tp
+    from relightable_textures.operators.preview import transport_preview as tp
 
     scene, obj = bumps
     res = bake(scene, [obj], tmp_path, components=48)
@@ -217,9 +217,9 @@ def test_preview_group_rendered_by_cycles_equals_numpy_twin(bumps, tmp_path):
     Cycles through the top camera equals viewport_relight of the half-float atlases."""
     from relightable_textures.lt_addon.io import exrio
     from relightable_textures.lt_addon.io.atlas import unpack_atlas
-    from relightable_textures.operators import texture_transport as tx
-    from relightable_textures.operators import transport_preview as tp
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.preview import transport_preview as tp
+    from relightable_textures.operators.base.jobs import run
 
     scene, obj = bumps
     s = settings(components=12, sun_angle=4.0, viewport="pca")
@@ -249,7 +249,7 @@ def _sparse_preview(prev, resolution=R):
     from relightable_textures.lt_addon.io import exrio
     from relightable_textures.lt_addon.io.atlas import unpack_atlas
     from relightable_textures.lt_addon.io.contact_sheet import read_png
-    from relightable_textures.operators import transport_preview as tp
+    from relightable_textures.operators.preview import transport_preview as tp
 
     def rgb(path):
         ch = exrio.read_exr(path)[0]
@@ -272,9 +272,9 @@ def test_transport_viewport_rendered_by_cycles_equals_its_twin_and_T(bumps, tmp_
     within the bilinear table error of it."""
     from relightable_textures.lt_addon.transport import sparse_tables as sp
     from relightable_textures.lt_addon.sphere.hemisphere import disk_to_hemisphere
-    from relightable_textures.operators import texture_transport as tx
-    from relightable_textures.operators import transport_preview as tp
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.preview import transport_preview as tp
+    from relightable_textures.operators.base.jobs import run
 
     scene, obj = bumps
     s = settings(sun_angle=0.0, viewport="transport")
@@ -361,8 +361,8 @@ def test_two_objects_baked_together_shadow_each_other(statue, tmp_path):
 
 def test_environment_relight_equals_a_cycles_bake_of_the_same_hdri(bumps, tmp_path):
     """A smooth sky (upper hemisphere) relit from T vs Cycles baking it (direct light)."""
-    from relightable_textures.operators import texture_transport as tx
-    from relightable_textures.operators.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
 
     scene, obj = bumps
     res = bake(scene, [obj], tmp_path, directions="hemi:600:1.0", model="none")
@@ -397,8 +397,8 @@ def test_environment_relight_equals_a_cycles_bake_of_the_same_hdri(bumps, tmp_pa
 
 
 def test_memory_is_refused_up_front_with_the_figure(bumps, tmp_path):
-    from relightable_textures.operators import texture_transport as tx
-    from relightable_textures.operators.cycles_bake import BakeInputError
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.base.cycles_bake import BakeInputError
 
     scene, obj = bumps
     before = {o.name for o in scene.objects}
@@ -479,7 +479,7 @@ def test_panel_operator_bakes_selected_objects_and_sun_size_retabulates(statue, 
 
     import relightable_textures
     from relightable_textures.lt_addon.io import exrio
-    from relightable_textures.operators.blend_files import object_bakes
+    from relightable_textures.operators.base.blend_files import object_bakes
 
     scene, statue_obj, ground = statue
     relightable_textures.register()
@@ -524,7 +524,7 @@ def test_panel_operator_bakes_selected_objects_and_sun_size_retabulates(statue, 
         assert sorted(os.listdir(tmp_path)) == files
         # previews of different bakes coexist in one material (issue 12: a vertex transport
         # bake silently replaced the texture preview) and Show Preview switches between them
-        from relightable_textures.operators.preview_nodes import preview_kinds
+        from relightable_textures.operators.preview.preview_nodes import preview_kinds
 
         bpy.context.view_layer.objects.active = statue_obj
         props.vertex_directions, props.output_dir = "cube:2", str(tmp_path / "vt") + os.sep
@@ -559,7 +559,7 @@ def test_panel_operator_bakes_selected_objects_and_sun_size_retabulates(statue, 
                 assert not (m.node_tree.animation_data and m.node_tree.animation_data.drivers)
         assert not [g for g in bpy.data.node_groups if g.get(tag)]
         assert not [i for i in bpy.data.images if i.get(tag)]
-        from relightable_textures.operators.preview_nodes import COLOR_SLIDER, SLIDERS
+        from relightable_textures.operators.preview.preview_nodes import COLOR_SLIDER, SLIDERS
 
         assert not [k for k in (*SLIDERS, COLOR_SLIDER) if k in scene]
         assert scene["relight_sample"] == "statue"          # not ours to remove
@@ -586,8 +586,8 @@ def test_new_scene_holds_the_preset_it_names_and_edits_make_it_custom(fresh_scen
     either method, the panel's settings equal what the preset's measured figures used
     (components included), and any edit is reported as Custom with the field's name."""
     import relightable_textures
-    from relightable_textures.operators import properties as pr
-    from relightable_textures.operators import texture_transport as tx
+    from relightable_textures.operators.ui import properties as pr
+    from relightable_textures.operators.bakes import texture_transport as tx
 
     relightable_textures.register()
     try:
@@ -623,8 +623,8 @@ def test_target_error_pilot_chooses_directions_and_reports_what_it_achieved(bump
     """--target-error: the pilot tries direction counts cheapest first, stops at the first that
     meets the target on its small bake, and the report states the choice and the error the
     real bake achieved against its own truths."""
-    from relightable_textures.operators import texture_transport as tx
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.base.jobs import run
 
     scene, obj = bumps
     s = settings(components=None, tol=0.02, bounces=1, indirect_resolution=8,
@@ -713,7 +713,8 @@ def test_panel_lists_the_chunks_a_cancelled_bake_kept_and_discards_them(bumps, t
     import bpy
 
     import relightable_textures
-    from relightable_textures.operators import bake_ops, texture_transport as tx
+    from relightable_textures.operators.ui import bake_ops
+    from relightable_textures.operators.bakes import texture_transport as tx
 
     scene, obj = bumps
     relightable_textures.register()
@@ -744,7 +745,7 @@ def _sky_world(scene, env, rotation_deg):
     img.colorspace_settings.name = "Non-Color"
     rgba = np.concatenate([env, np.ones((h, w, 1), np.float32)], -1)
     img.pixels.foreach_set(rgba.ravel())
-    from relightable_textures.operators.compat import ensure_node_tree
+    from relightable_textures.operators.base.compat import ensure_node_tree
 
     world = bpy.data.worlds.new("test world")
     nodes, links = ensure_node_tree(world).nodes, world.node_tree.links
@@ -781,9 +782,9 @@ def test_world_lit_preview_rendered_by_cycles_equals_numpy_relight(bumps, tmp_pa
     import relightable_textures
     from relightable_textures.lt_addon.io import exrio
     from relightable_textures.lt_addon.io.atlas import unpack_atlas
-    from relightable_textures.operators import texture_transport as tx
-    from relightable_textures.operators import transport_preview as tp
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.preview import transport_preview as tp
+    from relightable_textures.operators.base.jobs import run
 
     scene, obj = bumps
     relightable_textures.register()
@@ -838,7 +839,7 @@ def test_world_lit_preview_rendered_by_cycles_equals_numpy_relight(bumps, tmp_pa
         scene.relight.texture_light = "SUN"
         np.testing.assert_allclose(render_rgb(scene, tmp_path, R), sun_img, atol=1e-6)
         # Remove Preview takes both light modes' groups away
-        from relightable_textures.operators import preview_nodes as pn
+        from relightable_textures.operators.preview import preview_nodes as pn
 
         pn.remove_preview(obj, scene)
         assert not [g for g in bpy.data.node_groups if g.name.startswith("Relight Transport")]
@@ -849,8 +850,8 @@ def test_world_lit_preview_rendered_by_cycles_equals_numpy_relight(bumps, tmp_pa
 def test_every_bake_reports_how_far_the_viewport_model_is_from_T(bumps, tmp_path):
     """report["model_vs_T"]: the PCA at full rank is T (0 to half-float eigen-textures), a
     2-component PCA is far from it; no Cycles truth is needed."""
-    from relightable_textures.operators import texture_transport as tx
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.base.jobs import run
 
     scene, obj = bumps
     full = run(tx.bake_job(scene, [obj], settings(components=48, viewport="pca"),
@@ -876,9 +877,9 @@ def test_a_preview_of_many_components_fits_cycles_svm_stack(bumps, tmp_path):
     the twin to half precision."""
     from relightable_textures.lt_addon.io import exrio
     from relightable_textures.lt_addon.io.atlas import unpack_atlas
-    from relightable_textures.operators import texture_transport as tx
-    from relightable_textures.operators import transport_preview as tp
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.preview import transport_preview as tp
+    from relightable_textures.operators.base.jobs import run
 
     scene, obj = bumps
     s = settings(directions="hemi:160:1.5", components=150, viewport="pca")

@@ -5,15 +5,15 @@ import os
 import numpy as np
 import pytest
 
-from relightable_textures.operators.meshes import (color_attribute, set_image_pixels,
-                                                   vertex_normals, vertex_positions)
+from relightable_textures.operators.base.meshes import (color_attribute, set_image_pixels,
+                                                        vertex_normals, vertex_positions)
 
 
 @pytest.fixture
 def ball(fresh_scene):
     import bmesh
 
-    from relightable_textures.operators.meshes import object_from_bmesh
+    from relightable_textures.operators.base.meshes import object_from_bmesh
 
     bm = bmesh.new()
     bmesh.ops.create_uvsphere(bm, u_segments=24, v_segments=12, radius=1.0)
@@ -26,8 +26,8 @@ def _normals(obj):
 
 def test_convex_transport_is_the_clamped_cosine(ball):
     """No occluder: T[v, s] = max(0, n_v . w_s), which Cycles reproduces to float precision."""
-    from relightable_textures.operators import transport_bake as tb
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import transport_bake as tb
+    from relightable_textures.operators.base.jobs import run
 
     scene, obj = ball
     rng = np.random.default_rng(0)
@@ -45,9 +45,9 @@ def test_an_occluder_casts_a_shadow_and_cancel_restores_attributes(ball):
     """A plate above the ball blocks light from the zenith for the upper vertices."""
     import bpy
 
-    from relightable_textures.operators import transport_bake as tb
-    from relightable_textures.operators.meshes import grid_faces, mesh_object
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import transport_bake as tb
+    from relightable_textures.operators.base.meshes import grid_faces, mesh_object
+    from relightable_textures.operators.base.jobs import run
 
     scene, obj = ball
     t = np.linspace(-3, 3, 3)
@@ -69,7 +69,7 @@ def test_an_occluder_casts_a_shadow_and_cancel_restores_attributes(ball):
 
 @pytest.fixture
 def ball_on_floor(ball):
-    from relightable_textures.operators.meshes import grid_faces, mesh_object
+    from relightable_textures.operators.base.meshes import grid_faces, mesh_object
 
     scene, obj = ball
     t = np.linspace(-3, 3, 3)
@@ -88,8 +88,8 @@ def test_eigentransport_matches_a_cycles_bake_of_the_same_hdri(ball_on_floor):
     from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
     from relightable_textures.lt_addon.transport.eigentransport import fit_eigentransport
     from relightable_textures.lt_addon.transport.error import sun_sky_environment
-    from relightable_textures.operators import transport_bake as tb
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import transport_bake as tb
+    from relightable_textures.operators.base.jobs import run
 
     scene, obj = ball_on_floor
     ds = parse_direction_spec("cube:8")
@@ -112,8 +112,9 @@ def test_vertex_preview_updates_from_sliders_and_a_moving_point_lamp(ball_on_flo
 
     import relightable_textures
     from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
-    from relightable_textures.operators import transport_bake as tb, vertex_relight as vr
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import transport_bake as tb
+    from relightable_textures.operators.preview import vertex_relight as vr
+    from relightable_textures.operators.base.jobs import run
 
     scene, obj = ball_on_floor
     ds = parse_direction_spec("cube:4")
@@ -157,10 +158,11 @@ def test_point_light_shading_matches_a_cycles_point_lamp(fresh_scene, tmp_path):
     import bpy
 
     from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
-    from relightable_textures.operators import transport_bake as tb, vertex_relight as vr
-    from relightable_textures.operators.cycles_bake import EnvironmentBake
-    from relightable_textures.operators.meshes import grid_faces, mesh_object
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import transport_bake as tb
+    from relightable_textures.operators.preview import vertex_relight as vr
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.base.meshes import grid_faces, mesh_object
+    from relightable_textures.operators.base.jobs import run
 
     t = np.linspace(-1.0, 1.0, 9)
     Y, X = np.meshgrid(t, t, indexing="ij")
@@ -196,8 +198,8 @@ def test_interreflected_transport_matches_cycles_with_the_same_bounces(ball_on_f
     from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
     from relightable_textures.lt_addon.transport.eigentransport import fit_eigentransport
     from relightable_textures.lt_addon.transport.error import sun_sky_environment
-    from relightable_textures.operators import transport_bake as tb
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import transport_bake as tb
+    from relightable_textures.operators.base.jobs import run
 
     scene, obj = ball_on_floor
     ds = parse_direction_spec("cube:6")
@@ -222,8 +224,9 @@ def test_cpca_bake_shades_like_cycles_and_the_toggle_colours_clusters(ball_on_fl
     from relightable_textures.lt_addon.transport.cpca import CPCA, cluster_colors
     from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
     from relightable_textures.lt_addon.transport.error import sun_sky_environment
-    from relightable_textures.operators import transport_bake as tb, vertex_relight as vr
-    from relightable_textures.operators.jobs import run
+    from relightable_textures.operators.bakes import transport_bake as tb
+    from relightable_textures.operators.preview import vertex_relight as vr
+    from relightable_textures.operators.base.jobs import run
 
     scene, obj = ball_on_floor
     ds = parse_direction_spec("cube:4")
@@ -272,8 +275,9 @@ def test_panel_bakes_vertex_transport_and_shows_it(fresh_scene, tmp_path):
 
     import relightable_textures
     from relightable_textures import samples
-    from relightable_textures.operators.blend_files import object_bakes
-    from relightable_textures.operators.vertex_relight import SHADING_ATTRIBUTE, world_environment
+    from relightable_textures.operators.base.blend_files import object_bakes
+    from relightable_textures.operators.preview.vertex_relight import (SHADING_ATTRIBUTE,
+                                                                       world_environment)
 
     samples.build("statue", fresh_scene, "test")
     samples.scene_setup.uniform_world(fresh_scene, "ConstantSky")   # the bound needs one
@@ -411,7 +415,7 @@ def _world_with_mapping(scene, env_bottom_first, rotation_deg: float):
     h, w = env_bottom_first.shape[:2]
     img = bpy.data.images.new("relight_test_env", w, h, float_buffer=True)
     set_image_pixels(img, env_bottom_first)
-    from relightable_textures.operators.compat import ensure_node_tree
+    from relightable_textures.operators.base.compat import ensure_node_tree
 
     world = bpy.data.worlds.new("MappedWorld")
     scene.world = world
@@ -464,7 +468,7 @@ def test_vertex_preview_follows_the_world_mapping_rotation_like_cycles(fresh_sce
     import relightable_textures
     from relightable_textures import samples
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
-    from relightable_textures.operators import vertex_relight as vr
+    from relightable_textures.operators.preview import vertex_relight as vr
 
     samples.build("statue", fresh_scene, "test")
     obj = bpy.data.objects["Statue"]

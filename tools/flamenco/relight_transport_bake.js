@@ -37,7 +37,7 @@ const JOB_TYPE = {
 };
 
 const CHUNK_DIRECTIONS = 16;
-// The presets' direction counts (operators/transport_presets.json).
+// The presets' direction counts (operators/bakes/transport_presets.json).
 const PRESET_DIRECTIONS = { draft: 400, balanced: 400, production: 1600 };
 
 // How many directions the bake has: N of `hemi:N[:P]`, or the preset's.

@@ -1,0 +1,359 @@
+"""Material edits in the viewport (bpy): the bake operator, the live per-vertex preview and
+what keeps it live (Sun et al. 2007's run time).
+
+After ``bake-materials`` (CLI or the panel's *Bake Materials*), every receiver shows the
+colour attribute :data:`ATTRIBUTE` -- outgoing diffuse radiance ``albedo / pi * E`` with the
+editable materials' *current* colours and the scene's Sun lamp -- as emission. Changing an
+editable material's Base Color (or moving the Sun) recomputes it in NumPy: a depsgraph handler
+(:func:`on_depsgraph_update`) calls :func:`update_preview`, a few milliseconds at 13K vertices
+(``benchmarks/bench_materials.py``). The Sun's direct light comes from shadow rays
+(:mod:`.direct_rays`), not the baked directions blended: rays where the baked directions around
+the Sun disagree, which keeps the update fast. The materials' own specular stays out
+of the preview: it shows each receiver's diffuse part, so a metal (a bake with glossy anchors,
+whose Metallic and Roughness re-shade the preview too) is black in it.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import time
+
+import bpy
+import numpy as np
+
+from ...lt_addon.transport import ptt
+from . import material_bake
+from ..ui.bake_ops import _ModalBake, _transport_objects
+from ..base.cycles_bake import BakeInputError
+from ..base.meshes import set_color_attribute
+
+ATTRIBUTE = "RelightMaterials"
+#: Scene property: the last material bake's and update's summary (the panel shows it).
+SUMMARY_KEY = "relight_material_summary"
+_CACHE: dict = {}
+
+
+def scene_bakes(scene) -> list:
+    """``(first object, tensors)`` of every material bake recorded in ``scene`` (cached by file
+    and modification time); bakes whose file is missing are skipped."""
+    from ..base.blend_files import object_bakes
+
+    out = []
+    for obj in scene.objects:
+        if obj.type != "MESH" or not any(b.get("kind") == material_bake.KIND
+                                         for b in object_bakes(obj)):
+            continue
+        try:
+            from ..base.blend_files import bake_file
+
+            path = bake_file(obj, material_bake.KIND, "material")
+        except (ValueError, FileNotFoundError):
+            continue
+        key = (obj.name, path, os.path.getmtime(path))
+        if key not in _CACHE:
+            for k in [k for k in _CACHE if k[0] == obj.name]:
+                del _CACHE[k]
+            _CACHE[key] = ptt.TransferTensors.load(path)
+        out.append((obj, _CACHE[key]))
+    return out
+
+
+def preview_light(scene):
+    """The light the preview shows: the panel's Sun lamp, else the scene's first Sun lamp
+    (direction, angular size, strength, colour); None without one."""
+    props = getattr(scene, "relight", None)
+    lamp = props.sun if props is not None and props.sun is not None else None
+    if lamp is None:
+        suns = [o for o in scene.objects if o.type == "LIGHT" and o.data.type == "SUN"]
+        lamp = min(suns, key=lambda o: o.hide_render) if suns else None
+    if lamp is None:
+        return None
+    from mathutils import Vector
+
+    d = (lamp.matrix_world.to_quaternion() @ Vector((0.0, 0.0, 1.0))).normalized()
+    return ptt.Sun(tuple(d), float(np.degrees(lamp.data.angle)), float(lamp.data.energy),
+                   tuple(lamp.data.color))
+
+
+def update_preview(scene) -> dict:
+    """Shade every material bake of ``scene`` with the current colours and Sun and write the
+    receivers' :data:`ATTRIBUTE`; returns ``{"update_ms": ..., "write_ms": ...}`` (empty
+    without a bake or a Sun)."""
+    bakes = scene_bakes(scene)
+    light = preview_light(scene) if bakes else None
+    if light is None:
+        return {}
+    from ..base.direct_rays import exact_direct
+
+    shade_ms = write_ms = 0.0
+    for _, tensors in bakes:
+        t0 = time.perf_counter()
+        # rays only where the baked directions disagree: at 13K vertices the update took
+        # 12-18 ms where a ray to every receiver took 27-30 ms (README, measured)
+        values = tensors.shade(light, material_bake.file_colours(tensors),
+                               direct=exact_direct(scene, tensors, light, everywhere=False),
+                               finish=material_bake.file_finish(tensors))
+        t1 = time.perf_counter()
+        domain = tensors.metadata.get("domain", "POINT")
+        for name, rows in tensors.object_slices().items():
+            obj = scene.objects.get(name)
+            if (obj is None or obj.type != "MESH"
+                    or material_bake.element_count(obj, domain) != rows.stop - rows.start):
+                continue   # the mesh changed since the bake: leave it
+            attrs = obj.data.color_attributes
+            attr = attrs.get(ATTRIBUTE)
+            if attr is not None and attr.domain != domain:
+                attrs.remove(attr)
+                attr = None
+            attr = attr or attrs.new(ATTRIBUTE, "FLOAT_COLOR", domain)
+            set_color_attribute(attr, values[rows])
+            obj.data.update()
+        shade_ms += 1e3 * (t1 - t0)
+        write_ms += 1e3 * (time.perf_counter() - t1)
+    return {"update_ms": round(shade_ms, 3), "write_ms": round(write_ms, 3)}
+
+
+def install_preview(scene, tensors) -> None:
+    """Wire :data:`ATTRIBUTE` into every receiver's materials and fill it."""
+    from ..preview import preview_nodes
+
+    update_preview(scene)
+    for name, _ in tensors.objects:
+        obj = scene.objects.get(name)
+        if obj is not None and obj.type == "MESH":
+            preview_nodes.install_attribute_preview(obj, ATTRIBUTE, kind=material_bake.KIND,
+                                                    base_color=False)
+
+
+def bake_job(scene, objects, settings, out_dir: str, truth_samples: int = 0,
+             preview: bool = True, resume: bool = True, client=None,
+             blend_path: str | None = None):
+    """``bake-materials`` as one job (:func:`.material_bake.materials_job`: chunk cache with
+    ``resume``, Dask workers with ``client``), then the live preview on every receiver;
+    returns the :class:`.material_bake.MaterialsBakeOutput`."""
+    out = yield from material_bake.materials_job(scene, objects, settings, out_dir,
+                                                 truth_samples=truth_samples, resume=resume,
+                                                 client=client, blend_path=blend_path)
+    if preview:
+        install_preview(scene, out.tensors)
+    return out
+
+
+def compare_edit(scene, tensors, edits: dict, out_png: str, samples: int = 64,
+                 resolution: int = 256, finish: dict | None = None) -> dict:
+    """Look at an edit the way a user does: render the preview before and after ``edits``
+    (``{material: RGB}``; ``finish`` ``{material: {"metallic": m, "roughness": r}}`` with
+    glossy anchors) and Cycles renders of the same scene with the same materials (diffuse, or
+    diffuse plus a Principled metal), lit by the preview's Sun with the bake's bounces, from
+    the scene camera, which sees only the diffuse part as the preview does; write a captioned
+    2 x 3 PNG (preview | Cycles | |difference| x 4; before on top) and return the relative
+    RMSE of each row over the receivers' pixels. The scene is restored afterwards."""
+    import math
+    import tempfile
+
+    from mathutils import Vector
+
+    from ...lt_addon.io.contact_sheet import linear_to_srgb8, write_png
+    from ...lt_addon.io.label import labelled_grid
+    from ..preview.compare_render import _render, _saved_render_settings
+
+    light = preview_light(scene)
+    if scene.camera is None or light is None:
+        raise BakeInputError("the comparison needs a scene camera and a Sun lamp")
+    cyc = scene.cycles
+    saved = [(cyc, k, getattr(cyc, k)) for k in ("max_bounces", "diffuse_bounces",
+                                                  "glossy_bounces", "transmission_bounces",
+                                                  "sample_clamp_direct", "sample_clamp_indirect")]
+    res = (scene.render.resolution_x, scene.render.resolution_y,
+           scene.render.resolution_percentage)
+    world, render = scene.world, _saved_render_settings(scene)
+    hidden = [(o, o.hide_render) for o in scene.objects if o.type == "LIGHT"]
+    sockets = {r: material_bake.material_colour_socket(bpy.data.materials[r])
+               for r in tensors.regions}
+    before = {r: tuple(s.default_value) for r, s in sockets.items() if s is not None}
+    finish = dict(finish or {})
+    knobs = {r: material_bake.finish_sockets(bpy.data.materials[r]) for r in finish}
+    for r, props in finish.items():
+        missing = sorted(set(props) - set(knobs[r]))
+        if missing:
+            raise BakeInputError(f"{r}: its {missing[0]} is not an unlinked input of a "
+                                 "Principled BSDF, so the preview cannot show the edit")
+    knobs_before = [(sock, sock.default_value) for props in knobs.values()
+                    for sock in props.values()]
+    data = bpy.data.lights.new("RelightEditSun", type="SUN")
+    sun = bpy.data.objects.new("RelightEditSun", data)
+    rows, errors = [], []
+    try:
+        f = int(resolution) / max(res[0], res[1])
+        scene.render.resolution_x = max(1, round(res[0] * f))
+        scene.render.resolution_y = max(1, round(res[1] * f))
+        scene.render.resolution_percentage = 100
+        scene.world = None
+        for o, _ in hidden:
+            o.hide_render = True
+        cyc.max_bounces = cyc.diffuse_bounces = tensors.bounces
+        cyc.glossy_bounces = cyc.transmission_bounces = 0
+        # unclamped, as the bake's truths: a metal's caustic is what a clamp would cut
+        cyc.sample_clamp_direct = cyc.sample_clamp_indirect = 0.0
+        data.energy, data.angle = light.strength, math.radians(light.angle_deg)
+        data.color = light.color
+        sun.rotation_euler = (-Vector(light.direction)).to_track_quat("-Z", "Y").to_euler()
+        with tempfile.TemporaryDirectory() as tmp:
+            for label, edit in (("before", {}), ("after", edits)):
+                for r, rgb in edit.items():
+                    if sockets.get(r) is not None:
+                        sockets[r].default_value = (*rgb, 1.0)
+                if label == "after":
+                    for r, props in finish.items():
+                        for k, v in props.items():
+                            knobs[r][k].default_value = float(v)
+                update_preview(scene)
+                bpy.context.view_layer.update()
+                preview = _render(scene, os.path.join(tmp, f"p_{label}.exr"), 1)
+                colours = {**material_bake.file_colours(tensors), **edit}
+                metal = {k: v for k, v in material_bake.file_finish(tensors).items() if v[0] > 0}
+                cyc.glossy_bounces = tensors.bounces if metal else 0
+                scene.collection.objects.link(sun)
+                try:
+                    with material_bake.GatedMaterials(scene, [], colours, camera_colour=True,
+                                                      gloss=bool(metal)) as gates:
+                        gates.set_gates("all", "all")
+                        gates.set_finish(metal)
+                        truth = _render(scene, os.path.join(tmp, f"t_{label}.exr"), samples)
+                finally:
+                    scene.collection.objects.unlink(sun)
+                mask = preview.sum(-1) > 0
+                err = float(np.linalg.norm((preview - truth)[mask])
+                            / max(np.linalg.norm(truth[mask]), 1e-30))
+                errors.append(err)
+                what = "file colours" if label == "before" else "edited"
+                rows.append([(linear_to_srgb8(preview[::-1]), f"preview, {what}"),
+                             (linear_to_srgb8(truth[::-1]), f"Cycles {samples} spp"),
+                             (linear_to_srgb8(4.0 * np.abs(preview - truth)[::-1]),
+                              f"|diff| x4, rel {err:.3f}")])
+        write_png(out_png, labelled_grid(rows))
+    finally:
+        for r, rgb in before.items():
+            sockets[r].default_value = rgb
+        for sock, v in knobs_before:
+            sock.default_value = v
+        bpy.data.objects.remove(sun)
+        bpy.data.lights.remove(data)
+        for o, h in hidden:
+            o.hide_render = h
+        for owner, k, v in saved:
+            setattr(owner, k, v)
+        scene.world = world
+        scene.render.resolution_x, scene.render.resolution_y, \
+            scene.render.resolution_percentage = res
+        render()
+        update_preview(scene)
+    return {"png": os.path.abspath(out_png), "rel_rmse_before": errors[0],
+            "rel_rmse_after": errors[1], "truth_samples": samples,
+            "edits": {k: list(v) for k, v in edits.items()}, "finish": finish}
+
+
+_busy = []
+
+
+@bpy.app.handlers.persistent
+def on_depsgraph_update(scene, depsgraph):
+    """Re-shade when a material, node tree or Sun lamp changed and the scene has a material
+    bake (our own attribute writes change meshes only, so they do not come back here)."""
+    if _busy:
+        return
+    kinds = (bpy.types.Material, bpy.types.NodeTree, bpy.types.Light)
+    hit = any(isinstance(u.id, kinds) or (isinstance(u.id, bpy.types.Object)
+                                          and u.id.type == "LIGHT" and u.is_updated_transform)
+              for u in depsgraph.updates)
+    if not hit:
+        return
+    _busy.append(True)
+    try:
+        timings = update_preview(scene)
+    finally:
+        _busy.pop()
+    if timings:
+        scene[SUMMARY_KEY + "_update"] = f"Last update {timings['update_ms']:.1f} ms"
+
+
+class RELIGHT_OT_bake_materials(_ModalBake, bpy.types.Operator):
+    """Bake transfer tensors of the selected meshes (Sun 2007) so the materials marked Editable
+    can be recoloured with their interreflection following live (Esc cancels)"""
+
+    bl_idname = "relight.bake_materials"
+    bl_label = "Bake Materials"
+    bl_options = {"REGISTER"}
+
+    def _prepare(self, context):
+        scene, props = context.scene, context.scene.relight
+        objects = _transport_objects(context)
+        regions = [m.name for m in material_bake.scene_materials(scene)
+                   if m is not None and m.relight_editable]
+        if not regions:
+            raise BakeInputError("mark at least one material Editable in the Material Edits "
+                                 "panel")
+        rough = ",".join(v for v in re.split(r"[,\s]+", props.material_anchors) if v)
+        settings = material_bake.MaterialBakeSettings(
+            regions=regions, bounces=props.material_bounces, samples=props.material_samples,
+            anchors=f"roughness:{rough}" if rough else "diffuse",
+            anchor_samples=props.material_anchor_samples,
+            anchor_directions=f"hemi:{props.material_anchor_directions}",
+            domain="CORNER" if props.material_per_corner else "POINT",
+            smoothing=props.material_smoothing, bounce_bake=props.material_bounce_bake,
+            rays=props.material_rays,
+            directions=(f"hemi:{props.material_directions}:1.5",
+                        f"hemi:{props.material_one_directions}",
+                        f"hemi:{props.material_two_directions}"))
+        settings.validate()
+        if props.run_on != "HERE":
+            d0, d1, d2 = settings.specs()
+            args = [a for o in objects for a in ("--object", o.name)]
+            args += [a for r in regions for a in ("--region", r)]
+            return self._external(context, "bake-materials", args + [
+                "--bounces", str(settings.bounces), "--samples", str(settings.samples),
+                "--bounce-bake", settings.bounce_bake, "--rays", str(settings.rays),
+                "--anchors", settings.anchors, "--anchor-samples", str(settings.anchor_samples),
+                "--anchor-directions", settings.anchor_spec(),
+                "--directions", d0, "--one-bounce-directions", d1, "--two-bounce-directions",
+                d2, "--smoothing", f"{settings.smoothing:g}"]
+                + (["--per-corner"] if settings.domain == "CORNER" else []))
+        self._make_out_dir(props)
+        return bake_job(scene, objects, settings, self.out_dir)
+
+    def _cancel_note(self, context) -> str:
+        return "; its finished chunks are kept, so baking again resumes"
+
+    def _finish(self, context, result):
+        rep = result.report
+        s = rep["energy_shares"]
+        g = rep.get("gather")
+        rays = f" + {g['rays_per_origin']} rays a receiver" if g else ""
+        text = (f"Baked {len(rep['objects'])} objects, {rep['vertices']} vertices: "
+                f"{rep['bake_calls']} Cycles bakes{rays} in "
+                f"{rep['timings']['wall_total']:.1f} s, "
+                f"{rep['bytes']['tensors'] / 2**20:.1f} MiB; light direct {s['direct']:.2f}, "
+                f"1 bounce {s['one_bounce']:.2f}, 2 bounces {s['two_bounce']:.2f}")
+        context.scene[SUMMARY_KEY] = text
+        for note in rep["notes"]:
+            self.report({"WARNING"}, note)
+        self.report({"INFO"}, text)
+
+
+CLASSES = (RELIGHT_OT_bake_materials,)
+
+
+def register() -> None:
+    bpy.types.Material.relight_editable = bpy.props.BoolProperty(
+        name="Editable", default=False,
+        description="Bake Materials keeps this material's colour editable, with the light it "
+                    "throws on the rest of the scene following (Sun 2007)")
+    bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
+
+
+def unregister() -> None:
+    if on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
+    del bpy.types.Material.relight_editable
+

@@ -1,0 +1,1027 @@
+"""Direction-sampled transport textures baked with Cycles (bpy): the default texture bake.
+
+For every selected object, in the same Cycles calls:
+
+1. an **albedo** texture (DIFFUSE colour pass, no light);
+2. the **direct transport** ``T[s]``: one irradiance bake per direction ``w_s`` of a hemisphere
+   set under a hard Sun (angle 0, strength 1, 1 sample: noise-free apart from anti-aliasing),
+   streamed to a float16 store on disk (:class:`..lt_addon.transport.texture.TransportStore`)
+   one direction at a time, so memory holds one image, never ``T``;
+3. the **indirect** light as its own term, when the scene has bounces: a low-order steerable
+   bake of the indirect pass only (Ashikhmin & Shirley's lobes are accurate for light that is
+   smooth in the light direction, which interreflection is), in radiance units.
+
+Relit radiance for a sun of angular size ``a`` from ``w0`` and normal irradiance ``I``::
+
+    I * (albedo * sum_s k_s(w0, a) T[s]  +  steer(indirect, w0))
+
+The same geometry-of-the-generator as the other bakes: a generator yielding Progress and
+returning the result; stopping it restores the scene and deletes the partial store.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+import time
+from dataclasses import asdict, dataclass, field
+
+import bpy
+import numpy as np
+
+from ... import __version__
+from ...lt_addon.io import atomic, exrio
+from ...lt_addon.transport import texture as tt
+from ...lt_addon.sphere.hemisphere import direction_from_az_el
+from ..base import cycles_device
+from ..base.cycles_bake import BakeInputError, EnvironmentBake, check_bakeable, check_memory
+from ..base.jobs import Progress
+
+KIND = "transport_texture"
+#: Directions per chunk of the direct stage: the unit a cancelled bake resumes from (16 hard-sun
+#: bakes at 256^2 are about 2 s here; a chunk of 16 x 256^2 half floats is 2 MiB per object).
+CHUNK_DIRECTIONS = 16
+#: The chunk cache's folder inside the output folder (hidden; removed when the bake completes).
+CACHE_FOLDER = ".relight_cache"
+MODELS = ("pca", "blocks", "steerable", "none")
+#: What the viewport shows (``auto``: T itself when its atlas fits, else the PCA; see
+#: :func:`..lt_addon.transport.sparse_tables.choose_viewport`).
+VIEWPORTS = ("auto", "transport", "pca")
+INDIRECT = ("steerable", "none")
+#: Held-out truth lights (azimuth, elevation in degrees): the four elevations of issue 13.
+TRUTH_LIGHTS = ((37.0, 10.0), (161.0, 30.0), (283.0, 55.0), (59.0, 80.0))
+
+
+@dataclass
+class TransportTextureSettings:
+    """What to bake (``directions``, ``resolution``, indirect effort) and which model to fit.
+
+    ``bounces``: the scene's diffuse bounces for the indirect term (0 = direct light only).
+    ``tol``: relative Frobenius residual of T the PCA models keep (or ``components``: a fixed
+    count for ``pca``). ``sun_angle``: the sun size (degrees) the viewport tables are made
+    for (the NumPy relight takes any size). ``viewport``: what the live preview shows --
+    ``transport`` relights from T itself (a few baked directions per pixel through sparse
+    kernel tables), ``pca`` from the fitted PCA, ``auto`` T when its preview atlas fits
+    :data:`..lt_addon.transport.sparse_tables.AUTO_BYTES`, else the PCA.
+    """
+
+    directions: str = "hemi:400:1.5"
+    resolution: int = 256
+    bounces: int = 2
+    indirect: str = "steerable"
+    indirect_order: int = 3
+    indirect_resolution: int = 128
+    indirect_samples: int = 64
+    indirect_smoothing: float = 0.75
+    model: str = "pca"
+    components: int | None = None
+    tol: float = 0.02
+    block: int = 16
+    sun_angle: float = 2.0
+    kernel: str = "linear"
+    table_size: int = 32
+    seed: int = 0
+    viewport: str = "auto"
+
+    def validate(self):
+        """Check ranges; returns the DirectionSet."""
+        try:
+            dset = tt.parse_directions(self.directions)
+        except ValueError as exc:
+            raise BakeInputError(str(exc)) from None
+        if dset.size < 8:
+            raise BakeInputError(f"need at least 8 upper-hemisphere directions, got {dset.size}")
+        if not 4 <= self.resolution <= 8192:
+            raise BakeInputError(f"resolution must be in 4..8192, got {self.resolution}")
+        if not 0 <= self.bounces <= 64:
+            raise BakeInputError(f"bounces must be in 0..64, got {self.bounces}")
+        if self.indirect not in INDIRECT:
+            raise BakeInputError(f"indirect must be one of {INDIRECT}, got {self.indirect!r}")
+        if self.model not in MODELS:
+            raise BakeInputError(f"model must be one of {MODELS}, got {self.model!r}")
+        if not 2 <= self.indirect_order <= 7:
+            raise BakeInputError(f"indirect order must be in 2..7, got {self.indirect_order}")
+        if not 4 <= self.indirect_resolution <= 8192 or self.indirect_samples < 1:
+            raise BakeInputError("indirect resolution must be in 4..8192 and samples >= 1")
+        if not 0.0 <= self.indirect_smoothing <= 16.0:
+            raise BakeInputError(f"indirect smoothing must be in 0..16 texels, got "
+                                 f"{self.indirect_smoothing}")
+        if self.components is not None and self.components < 1:
+            raise BakeInputError(f"components must be >= 1, got {self.components}")
+        if not 0.0 < self.tol < 1.0:
+            raise BakeInputError(f"tol must be in (0, 1), got {self.tol}")
+        if self.model == "blocks" and (self.block < 2 or self.resolution % self.block):
+            raise BakeInputError(f"block {self.block} must divide the resolution {self.resolution}")
+        if not 0.0 <= self.sun_angle <= 30.0:
+            raise BakeInputError(f"sun angle must be in 0..30 degrees, got {self.sun_angle}")
+        if self.kernel not in tt.KERNELS:
+            raise BakeInputError(f"kernel must be one of {tt.KERNELS}, got {self.kernel!r}")
+        if not 8 <= self.table_size <= 256:
+            raise BakeInputError(f"table size must be in 8..256, got {self.table_size}")
+        if self.viewport not in VIEWPORTS:
+            raise BakeInputError(f"viewport must be one of {VIEWPORTS}, got {self.viewport!r}")
+        return dset
+
+
+@dataclass
+class ObjectBake:
+    """What one object's bake produced (arrays in memory are small: no T)."""
+
+    name: str
+    store_path: str
+    albedo: np.ndarray                      # (R, R, 3) float32
+    indirect: object = None                 # SteerableTexture or None
+    model: object = None                    # TexturePCA / BlockPCA / SteerableTexture / None
+    fit_seconds: float = 0.0
+    store: object = None                    # the TransportStore (temporary until written)
+
+
+@dataclass
+class TransportTextureResult:
+    objects: list
+    directions: object
+    settings: TransportTextureSettings
+    seconds: dict = field(default_factory=dict)
+    bake_calls: int = 0
+    peak_rss_mb: float = 0.0         # anonymous memory above the level before the bake
+    growth_after_first_mb: float = 0.0   # ... above the level after the first direction
+    cache: object = None             # the stages' ChunkCaches, inner first (None: resume off)
+    chunks: dict = field(default_factory=dict)   # chunks_total, chunks_reused, chunk_directions
+    indirect_chunks: dict = None     # the indirect stage's light chunks (light_stacks figures)
+
+
+def _rss_mb() -> float:
+    """Anonymous resident memory (MiB): what the process holds. File-backed pages of the store's
+    memmap are page cache the kernel can drop, so they are not counted (VmRSS would)."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("RssAnon:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return 0.0
+
+
+def check_space(n_objects: int, dset, settings: TransportTextureSettings, out_dir: str,
+                resume: bool = True) -> int:
+    """Refuse up front, with the figure, when T would not fit on disk -- twice, with the chunk
+    cache of ``resume`` -- (and the fit's working set in memory). Returns the bytes needed."""
+    P = settings.resolution ** 2
+    need = n_objects * tt.transport_bytes(dset.size, P) * (2 if resume else 1)
+    folder = out_dir
+    while folder and not os.path.isdir(folder):
+        folder = os.path.dirname(folder)
+    free = shutil.disk_usage(folder or ".").free
+    if need > 0.9 * free:
+        raise BakeInputError(
+            f"the transport textures need {need / 2**20:.0f} MiB on disk ({n_objects} object(s) "
+            f"x {dset.size} directions x {settings.resolution}^2 texels, half floats"
+            f"{', and as much again for the resumable chunks' if resume else ''}) but "
+            f"{free / 2**20:.0f} MiB are free in {folder}; use fewer directions or a lower "
+            "resolution" + (" (or --no-resume)" if resume else ""))
+    # in memory: one chunk of T in float64, the eigen-textures and a few images
+    k = settings.components or 48
+    check_memory(tt.CHUNK_BYTES + k * P * 4 + 8 * P * 3 * 4,
+                 f"{settings.resolution}^2 texels x {dset.size} directions",
+                 "use fewer directions or a lower resolution")
+    return need
+
+
+def bake_transport_textures(scene, objects, settings: TransportTextureSettings, out_dir: str,
+                            resume: bool = True, client=None, blend_path: str | None = None):
+    """Generator: bake albedo, direct transport and indirect light of ``objects``; fit models.
+
+    Writes the stores (temporary names until complete) into ``out_dir``; the models and
+    reports are written by :func:`write_bake`. With ``resume``, the direct bakes' finished
+    chunks of :data:`CHUNK_DIRECTIONS` directions are kept in ``<out_dir>/.relight_cache/`` and
+    reused by a rerun of the same bake of the same scene (:func:`direct_chunk_cache`);
+    :func:`write_bake` removes them. With a Dask ``client`` the missing chunks are baked on
+    its workers from the saved ``blend_path`` first (:mod:`.distributed`); the result is the
+    same bit for bit. Returns a TransportTextureResult.
+    """
+    dset = settings.validate()
+    if client is not None and (not resume or not blend_path):
+        raise BakeInputError("a distributed bake needs the chunk cache (no --no-resume) and a "
+                             "saved .blend the workers can open")
+    objects = list(objects)
+    for o in objects:
+        check_bakeable(o)
+    check_space(len(objects), dset, settings, out_dir, resume)
+    t_start = time.perf_counter()
+    rss0 = _rss_mb()
+    peak = rss0
+    R = settings.resolution
+    S = dset.size
+    do_indirect = settings.bounces > 0 and settings.indirect == "steerable"
+    n_ind = settings.indirect_order ** 2 if do_indirect else 0
+    total = 1 + S + n_ind + 1
+    calls = 0
+    seconds = {}
+
+    # 1. albedo (colour pass only)
+    with EnvironmentBake(scene, objects, R, 1, 0, (8, 16), mode="irradiance", seed=settings.seed,
+                         world_sampling="none", passes="color") as session:
+        albedos = session.bake_all(np.zeros((8, 16), np.float32))
+        seconds["albedo_cycles"] = session.bake_seconds
+        calls += session.bake_calls
+    yield Progress(1, total, "albedo baked")
+
+    # 2. direct transport, streamed to disk in chunks of directions; each finished chunk is
+    # also kept in the chunk cache, so a cancelled or killed bake run again redoes only the
+    # chunks it is missing (the cache goes once the bake's files are written)
+    os.makedirs(out_dir, exist_ok=True)
+    cache = direct_chunk_cache(scene, objects, settings, out_dir) if resume else None
+    stores = [tt.TransportStore.create(
+        os.path.join(out_dir, f"{atomic.safe_name(o.name)}_transport_texture.npy"), dset, R,
+        {"object": o.name, "kind": "direct_irradiance_over_pi", "samples": 1,
+         "seed": settings.seed,
+         "texel_sampling": "1 sample at the texel centre (Cycles' first bake sample)",
+         "addon_version": __version__}) for o in objects]
+    chunks = [range(a, min(a + CHUNK_DIRECTIONS, S)) for a in range(0, S, CHUNK_DIRECTIONS)]
+    cached = [cache.get(f"direct_{c.start:05d}") if cache else None for c in chunks]
+    reused = sum(c is not None for c in cached)
+    distributed = None
+    if client is not None and reused < len(chunks):   # the workers fill the cache first
+        from ..farm.distributed import fill_chunks
+
+        try:
+            distributed = yield from fill_chunks(
+                client, blend_path, objects, settings, cache,
+                [c for c, kept in zip(chunks, cached) if kept is None], 1, total)
+        except BaseException:
+            for store in stores:
+                store.abort()
+            raise
+        seconds["distributed_wall"] = distributed["wall_seconds"]
+        cached = [kept if kept is not None else cache.get(f"direct_{c.start:05d}")
+                  for c, kept in zip(chunks, cached)]
+    finished = False
+    first = peak
+    seconds["direct_cycles"] = 0.0
+    try:
+        missing = any(c is None for c in cached)
+        with (EnvironmentBake(scene, objects, R, 1, 0, (8, 16), mode="irradiance",
+                              seed=settings.seed, world_sampling="none", passes="direct")
+              if missing else contextlib.nullcontext()) as session:
+            for chunk, kept in zip(chunks, cached):
+                if kept is not None:     # (objects, directions in the chunk, texels), half
+                    for s in chunk:
+                        for store, row in zip(stores, kept[:, s - chunk.start]):
+                            store.write(s, row)
+                        yield Progress(2 + s, total, f"direction {s + 1}/{S} (reused)")
+                    continue
+                for s in chunk:
+                    images = session.bake_sun_all(dset.directions[s], 1.0, 0.0)
+                    for store, img in zip(stores, images):
+                        store.write(s, img[..., 0])
+                    peak = max(peak, _rss_mb())
+                    if s == 0:
+                        first = peak   # Cycles' own session memory is allocated by now
+                    yield Progress(2 + s, total, f"direction {s + 1}/{S}")
+                if cache:
+                    cache.put(f"direct_{chunk.start:05d}",
+                              np.stack([np.asarray(st._array[chunk.start:chunk.stop])
+                                        for st in stores]))
+            if session is not None:
+                seconds["direct_cycles"] = session.bake_seconds
+                calls += session.bake_calls
+        readers = [store.finish() for store in stores]
+        finished = True
+    finally:
+        if not finished:
+            for store in stores:
+                store.abort()
+    seconds["direct_total"] = time.perf_counter() - t_start
+
+    lights = None
+    if resume and settings.bounces > 0 and settings.indirect == "steerable":
+        from .light_chunks import light_cache
+
+        lights = light_cache(scene, objects, indirect_spec(settings),
+                             os.path.join(cache.root, "indirect"))
+    elif resume:   # no indirect stage now: an earlier bake's indirect chunks are stale
+        import shutil
+
+        shutil.rmtree(os.path.join(cache.root, "indirect"), ignore_errors=True)
+    try:
+        result = yield from _indirect_and_models(scene, objects, settings, dset, albedos,
+                                                 readers, seconds, calls, t_start, rss0, peak,
+                                                 first, 2 + S, total, lights, client,
+                                                 blend_path)
+    except BaseException:   # cancelled or failed after the directions: drop the stores too
+        for r in readers:
+            r.abort()
+        raise
+    result.cache = [c for c in (lights, cache) if c is not None]   # cleared in this order
+    ind = result.indirect_chunks or {}
+    result.chunks = {"chunks_total": len(chunks) + ind.get("chunks_total", 0),
+                     "chunks_reused": reused + ind.get("chunks_reused", 0),
+                     "chunk_directions": CHUNK_DIRECTIONS,
+                     "direct_chunks": len(chunks), "indirect_chunks": ind.get("chunks_total", 0)}
+    other = {}
+    for c in result.cache:
+        for dev, n in c.other_devices.items():
+            other[dev] = other.get(dev, 0) + n
+    if other:   # a resume on another device: those chunks were baked again here
+        result.chunks["other_device_chunks"] = other
+    if distributed is not None or "distributed" in ind:
+        both = [d for d in (distributed, ind.get("distributed")) if d]
+        result.chunks["distributed"] = {
+            "chunks": sum(d["chunks"] for d in both),
+            "wall_seconds": round(sum(d["wall_seconds"] for d in both), 3),
+            "file_loads": sum(d["file_loads"] for d in both),
+            "chunk_seconds": [x for d in both for x in d["chunk_seconds"]],
+            "cycles_seconds": round(sum(d["cycles_seconds"] for d in both), 3),
+            "workers": sorted({w for d in both for w in d["workers"]}),
+            "worker_devices": {k: v for d in both for k, v in d.get("worker_devices", {}).items()},
+            "cycles_threads_per_worker": both[0]["cycles_threads_per_worker"]}
+    return result
+
+
+def indirect_spec(settings: TransportTextureSettings) -> dict:
+    """The indirect stage's basis lights (:func:`.light_chunks.light_spec`): the paper's
+    steerable basis of ``indirect_order`` on 64-row environments, the indirect pass only."""
+    from .light_chunks import light_spec
+
+    return light_spec(settings.indirect_order, 64, settings.indirect_resolution,
+                      settings.indirect_samples, settings.bounces, "radiance", settings.seed,
+                      "importance", passes="indirect")
+
+
+def direct_chunk_cache(scene, objects, settings: TransportTextureSettings, out_dir: str):
+    """The chunk cache of the direct stage of a bake of ``objects`` into ``out_dir``: keyed
+    by the scene content the bake depends on (:func:`.bake_inputs.scene_key`) and the settings
+    the direct bakes use; the folders of other keys (stale chunks) are removed."""
+    from ...lt_addon.io.chunk_cache import ChunkCache
+    from ..base.bake_inputs import scene_key
+    from ..base.cycles_device import current
+
+    key = {"stage": "direct", "scene": scene_key(scene, objects), "device": current().id,
+           "directions": settings.directions, "resolution": settings.resolution,
+           "seed": settings.seed, "chunk_directions": CHUNK_DIRECTIONS}
+    root = os.path.join(out_dir, CACHE_FOLDER, "+".join(atomic.safe_name(o.name) for o in objects))
+    cache = ChunkCache(root, key)
+    cache.prune_others()
+    return cache
+
+
+def _indirect_and_models(scene, objects, settings, dset, albedos, readers, seconds, calls,
+                         t_start, rss0, peak, first, step, total, cache=None, client=None,
+                         blend_path=None):
+    """Steps 3 and 4 of :func:`bake_transport_textures` (the stores are not committed yet).
+    The indirect stage's basis lights are chunks (:mod:`.light_chunks`): from ``cache``, from
+    ``client``'s workers, or baked here."""
+    do_indirect = settings.bounces > 0 and settings.indirect == "steerable"
+    # 3. indirect light: a low-order steerable bake of the indirect pass
+    indirects = [None] * len(objects)
+    indirect_chunks = None
+    if do_indirect:
+        from ...lt_addon.steerable.sampled_basis import build_sampled_basis
+        from ...lt_addon.steerable.basis import paper_basis
+        from ...lt_addon.steerable.texture import SteerableTexture
+        from .light_chunks import light_stacks
+
+        t0 = time.perf_counter()
+        basis = paper_basis(settings.indirect_order)
+        sampled = build_sampled_basis(basis)
+        ri = settings.indirect_resolution
+        stacks, indirect_chunks = yield from light_stacks(
+            scene, objects, indirect_spec(settings), cache, client if cache else None,
+            blend_path, step - 1, total, "indirect bake")
+        seconds["indirect_cycles"] = indirect_chunks["cycles_seconds"]
+        calls += indirect_chunks["calls"]
+        from ...lt_addon.geometry.uv_layout import uv_coverage
+        from ..base.meshes import uv_triangles
+
+        for i, o in enumerate(objects):
+            images = sampled.to_basis_images(stacks[i], dtype=np.float32)
+            if settings.indirect_smoothing > 0:
+                covered = uv_coverage(uv_triangles(o), ri) > 0
+                images = tt.smooth_in_coverage(images, covered, settings.indirect_smoothing)
+            indirects[i] = SteerableTexture(
+                images, settings.indirect_order,
+                basis.width, sampled.centres, frame="world", calibration="steerable_cos",
+                settings={"resolution": ri, "samples": settings.indirect_samples,
+                          "bounces": settings.bounces, "mode": "radiance", "passes": "indirect",
+                          "smoothing_texels": settings.indirect_smoothing,
+                          "object": o.name, "seed": settings.seed})
+        seconds["indirect_total"] = time.perf_counter() - t0
+
+    # 4. models
+    results = []
+    for i, o in enumerate(objects):
+        t0 = time.perf_counter()
+        model = fit_model(readers[i], settings, albedos[i])
+        results.append(ObjectBake(o.name, readers[i].path, albedos[i], indirects[i], model,
+                                  time.perf_counter() - t0, readers[i]))
+        peak = max(peak, _rss_mb())
+    seconds["fit"] = sum(r.fit_seconds for r in results)
+    seconds["bake_total"] = time.perf_counter() - t_start
+    yield Progress(total, total, "models fitted")
+    out = TransportTextureResult(results, dset, settings, seconds, calls, peak - rss0,
+                                 peak - first)
+    out.indirect_chunks = indirect_chunks
+    return out
+
+
+def fit_model(store, settings: TransportTextureSettings, albedo):
+    """The chosen model of one object's store (None for ``model="none"``)."""
+    if settings.model == "pca":
+        return tt.fit_texture_pca(store, k=settings.components,
+                                  tol=None if settings.components else settings.tol)
+    if settings.model == "blocks":
+        return tt.fit_block_pca(store, block=settings.block, tol=settings.tol)
+    if settings.model == "steerable":
+        return steerable_from_store(store, albedo, order=settings.components or 7)
+    return None
+
+
+def steerable_from_store(store, albedo, order: int = 7):
+    """The steerable basis of Ashikhmin & Shirley by quadrature over the baked directions:
+    noise-free, any order, radiance of the direct light (albedo applied)."""
+    from ...lt_addon.steerable.sampled_basis import build_sampled_basis
+    from ...lt_addon.steerable.basis import paper_basis
+    from ...lt_addon.steerable.texture import SteerableTexture
+
+    basis = paper_basis(order)
+    sampled = build_sampled_basis(basis)
+    stack = tt.quadrature_sampled_lights(store, sampled)              # (K, R, R)
+    rgb = stack[..., None] * np.asarray(albedo, np.float32)[None]
+    return SteerableTexture(sampled.to_basis_images(rgb, dtype=np.float32), order, basis.width,
+                            sampled.centres, frame="world", calibration="steerable_cos",
+                            settings={"resolution": store.resolution, "mode": "radiance",
+                                      "method": "transport-quadrature",
+                                      "directions": store.directions.spec})
+
+
+# ----------------------------------------------------------------------------------------------
+# relighting (NumPy)
+
+
+def _upsample(img, R):
+    """Bilinear resize of (r, r, C) to (R, R, C) at texel centres (as a GPU sampler would)."""
+    img = np.asarray(img, np.float32)
+    r = img.shape[0]
+    if r == R:
+        return img
+    c = (np.arange(R) + 0.5) * r / R - 0.5
+    c = np.clip(c, 0.0, r - 1.0)
+    i0 = np.minimum(np.floor(c).astype(int), r - 2 if r > 1 else 0)
+    f = (c - i0)[:, None]
+    i1 = np.minimum(i0 + 1, r - 1)
+    rows = img[i0] * (1 - f)[..., None] + img[i1] * f[..., None]
+    return rows[:, i0] * (1 - f.T)[..., None] + rows[:, i1] * f.T[..., None]
+
+
+def relight(bake: ObjectBake, store, direction, sun_angle: float = 0.0, intensity: float = 1.0,
+            source: str = "transport", kernel: str = "linear") -> np.ndarray:
+    """Radiance (R, R, 3) under a sun: ``source="transport"`` relights from T itself (the
+    full-accuracy reference), ``"model"`` from the fitted model."""
+    idx, w = tt.sun_weights(store.directions, direction, sun_angle, kernel)
+    R = store.resolution
+    if source == "transport" or bake.model is None:
+        e = store.relight(idx, w)
+        direct = e[..., None] * bake.albedo
+    elif hasattr(bake.model, "relight") and hasattr(bake.model, "V"):
+        e = bake.model.relight(idx, w)
+        direct = e[..., None] * bake.albedo
+    else:   # steerable texture
+        direct = bake.model.relight(np.asarray(direction, np.float64))
+    out = direct
+    if bake.indirect is not None:
+        out = out + _upsample(bake.indirect.relight(np.asarray(direction, np.float64)), R)
+    return (intensity * out).astype(np.float32)
+
+
+def relight_environment(bake: ObjectBake, store, env_image, rotation_deg: float = 0.0,
+                        *, row_order: str = "top_first", source: str = "transport") -> np.ndarray:
+    """Radiance (R, R, 3) under an equirectangular environment (upper hemisphere): direct
+    light from T (``source="transport"``) or from the PCA model (``"model"``, what the
+    viewport shows), plus the indirect term steered by the same environment
+    (:func:`..lt_addon.transport.texture.steer_environment`)."""
+    w = tt.environment_weights(store.directions, env_image, row_order=row_order,
+                               rotation_deg=rotation_deg)
+    model = bake.model
+    if source == "model" and hasattr(model, "relight_dense") and hasattr(model, "V"):
+        e = model.relight_dense(w)
+    else:
+        e = store.relight_dense(w)
+    out = (e if e.ndim == 3 else e[..., None]) * bake.albedo
+    if bake.indirect is not None:
+        B = tt.steering_matrix(bake.indirect, store.directions)
+        out = out + _upsample(tt.steer_environment(bake.indirect, B, w), store.resolution)
+    return out.astype(np.float32)
+
+
+# ----------------------------------------------------------------------------------------------
+# ground truth and the report
+
+
+def rel_rmse(estimate, truth) -> float:
+    e, t = np.asarray(estimate, np.float64), np.asarray(truth, np.float64)
+    den = np.linalg.norm(t)
+    return float(np.linalg.norm(e - t) / den) if den > 0 else float(np.linalg.norm(e) > 0)
+
+
+def truth_bakes(scene, objects, lights, sun_angle: float, bounces: int, samples: int,
+                resolution: int, seed: int = 1):
+    """Generator: Cycles radiance bakes of ``objects`` under Sun lamps (strength 1, angle
+    ``sun_angle``) from ``lights`` [(az, el) degrees]; returns {light: [image per object]}."""
+    out = {}
+    t0 = time.perf_counter()
+    with EnvironmentBake(scene, list(objects), resolution, samples, bounces, (8, 16),
+                         mode="radiance", seed=seed, world_sampling="none") as session:
+        for i, (az, el) in enumerate(lights):
+            out[(az, el)] = session.bake_sun_all(direction_from_az_el(az, el), 1.0, sun_angle)
+            yield Progress(i + 1, len(lights), f"truth {i + 1}/{len(lights)}")
+    out["seconds"] = time.perf_counter() - t0
+    return out
+
+
+def truth_errors(result: TransportTextureResult, truths: dict, sun_angle: float,
+                 lights=TRUTH_LIGHTS) -> dict:
+    """Relative RMSE of the transport relight, of the model and of the viewport (when it
+    relights from T through sparse tables) against the truths, per object and light, and one
+    headline figure: ``sqrt(mean(rel^2))`` over lights of what the viewport shows."""
+    rows = []
+    for oi, b in enumerate(result.objects):
+        store = b.store or tt.TransportStore.open(b.store_path)
+        tables = viewport_tables(result.settings, store, sun_angle)
+        for az, el in lights:
+            truth = truths[(az, el)][oi]
+            d = direction_from_az_el(az, el)
+            row = {"object": b.name, "azimuth": az, "elevation": el,
+                   "transport": rel_rmse(relight(b, store, d, sun_angle, source="transport",
+                                                 kernel=result.settings.kernel), truth)}
+            if b.model is not None:
+                row["model"] = rel_rmse(relight(b, store, d, sun_angle, source="model",
+                                                kernel=result.settings.kernel), truth)
+            ind = (None if b.indirect is None else
+                   _upsample(b.indirect.relight(d), store.resolution))
+            if tables is not None:   # the viewport relights from T through sparse tables
+                view = viewport_direct(store, tables, d)[..., None] * b.albedo
+                row["viewport"] = rel_rmse(view if ind is None else view + ind, truth)
+            if ind is not None:
+                row["indirect_share"] = float(np.sum(ind) / max(np.sum(truth), 1e-12))
+            rows.append(row)
+    key = ("viewport" if all("viewport" in r for r in rows) else
+           "model" if all("model" in r for r in rows) else "transport")
+    head = float(np.sqrt(np.mean([r[key] ** 2 for r in rows])))
+    return {"sun_angle": sun_angle, "lights": rows, "headline_rel_rmse": head,
+            "headline_of": key,
+            "transport_rel_rmse": float(np.sqrt(np.mean([r["transport"] ** 2 for r in rows]))),
+            "meaning": "relative RMSE ||relit - Cycles||_F / ||Cycles||_F over texels and RGB "
+                       "against Cycles Sun-lamp radiance bakes (with the bake's bounces) at "
+                       "held-out lights; combined as sqrt(mean(rel^2)); 0.05 = 5 %"}
+
+
+def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: dict | None = None,
+               started: float | None = None) -> list:
+    """Write per object: albedo + indirect EXRs, the model (NPZ) and the report JSON; record the
+    bake on the object. Returns the reports."""
+    from ...lt_addon.steerable.texture import SteerableTexture
+    from .steerable_bake import record_kind
+
+    t0 = time.perf_counter()
+    reports = []
+    for b, obj in zip(result.objects, objects):
+        base = os.path.join(out_dir, atomic.safe_name(b.name))
+        if b.store is not None and getattr(b.store, "_tmp", None):
+            b.store_path = b.store.commit()
+        files = {"transport": b.store_path}
+        files["albedo"] = base + "_albedo.exr"
+        exrio.write_exr(files["albedo"], {c: b.albedo[..., i] for i, c in enumerate("RGB")},
+                        {"format": "relightable_textures.albedo"}, pixel_type="half")
+        if b.indirect is not None:
+            files["indirect"] = base + "_indirect.exr"
+            b.indirect.save(files["indirect"], "half")
+        if b.model is not None:
+            if isinstance(b.model, SteerableTexture):
+                files["model"] = base + "_transport_steerable.exr"
+                b.model.save(files["model"], "half")
+            else:
+                files["model"] = base + "_transport_model.npz"
+                tt.save_model(files["model"], b.model, result.directions.spec)
+        nbytes = {k: os.path.getsize(v) for k, v in files.items()}
+        s = result.settings
+        store = b.store or tt.TransportStore.open(b.store_path)
+        report = {
+            "kind": KIND, "object": b.name, "method": "transport",
+            "settings": asdict(s), "directions": result.directions.size,
+            "direction_set": result.directions.spec,
+            "objects_baked_together": [o.name for o in objects],
+            "files": {k: os.path.abspath(v) for k, v in files.items()},
+            "bytes": {**nbytes, "total": int(sum(nbytes.values())),
+                      **(b.model.storage_bytes() if hasattr(b.model, "storage_bytes") else {})},
+            "model": model_summary(b.model, result.directions.size),
+            "timings": {k: round(v, 3) for k, v in result.seconds.items()},
+            "device": cycles_device.current().report(),
+            "bake_calls": result.bake_calls,
+            "peak_rss_above_start_mb": round(result.peak_rss_mb, 1),
+            "rss_growth_while_streaming_mb": round(result.growth_after_first_mb, 1),
+            "preview_cost": preview_cost(b.model, s, store),
+            "model_vs_T": model_fidelity(b, store, s),
+            **result.chunks,
+            **(figures or {}),
+        }
+        report["timings"]["write"] = round(time.perf_counter() - t0, 3)
+        if started is not None:
+            report["timings"]["wall_total"] = round(time.perf_counter() - started, 3)
+        path = base + "_texture_report.json"
+        atomic.write_json(path, report, default=float)
+        report["report"] = os.path.abspath(path)
+        record_kind(obj, KIND, path, {"directions": result.directions.spec,
+                                      "resolution": s.resolution, "model": s.model,
+                                      "bytes": report["bytes"]["total"],
+                                      "bake_seconds": round(result.seconds.get("bake_total", 0), 2)})
+        reports.append(report)
+    for cache in result.cache or ():   # every file is written: the chunks have served
+        cache.clear()
+    return reports
+
+
+def viewport_tables(settings, store, sun_angle: float | None = None):
+    """The sparse kernel tables (indices, weights, kept) of the transport viewport when the
+    settings choose it for this store, else None."""
+    from ...lt_addon.transport import sparse_tables as sp
+
+    if settings.model != "pca":
+        return None
+    try:
+        viewport, _ = sp.choose_viewport(settings.viewport, store.directions.size,
+                                         store.resolution)
+    except ValueError:
+        return None
+    if viewport != "transport":
+        return None
+    return sp.cached_tables(store.directions, max(sp.TABLE_SIZE, settings.table_size),
+                            settings.sun_angle if sun_angle is None else sun_angle,
+                            settings.kernel)
+
+
+_QUANTIZED: dict = {}
+
+
+def quantized(store):
+    """(tiles, scales) of :func:`..lt_addon.transport.sparse_tables.quantize_directions` for
+    ``store`` (cached per store file and its modification time)."""
+    from ...lt_addon.transport import sparse_tables as sp
+
+    path = getattr(store, "_tmp", None) or store.path
+    key = (os.path.abspath(path), os.path.getmtime(path) if os.path.exists(path) else 0.0,
+           store.directions.size)
+    if key not in _QUANTIZED:
+        if len(_QUANTIZED) >= 4:      # a few stores (objects baked together): S * R^2 bytes each
+            _QUANTIZED.clear()
+        _QUANTIZED[key] = sp.quantize_directions(store.array)
+    return _QUANTIZED[key]
+
+
+def viewport_direct(store, tables, direction) -> np.ndarray:
+    """What the transport viewport shows of the direct light (R, R), irradiance/pi: T through
+    the sparse tables, read from its 8-bit atlas."""
+    from ...lt_addon.transport import sparse_tables as sp
+
+    tiles, scales = quantized(store)
+    return sp.viewport_relight(tiles, tables[0], sp.scaled_weights(tables[0], tables[1], scales),
+                               direction, 1.0 / 255.0)
+
+
+def model_fidelity(bake: ObjectBake, store, settings, lights=TRUTH_LIGHTS) -> dict | None:
+    """How far what the viewport shows is from T itself (the offline relight) at the held-out
+    lights, for the preview's sun size: direct light only (both add the same indirect term),
+    relative RMSE per light and combined as ``sqrt(mean(rel^2))``. The viewport is T through
+    sparse kernel tables (``viewport`` transport) or the fitted model; ``model_headline`` is
+    the fitted model's figure either way. Needs no Cycles truth, so every bake reports it.
+    None without a PCA-like model."""
+    model = bake.model
+    if model is None or not (hasattr(model, "V") or hasattr(model, "n_blocks")):
+        return None                     # none, or the steerable basis (no sparse relight)
+    tables = viewport_tables(settings, store)
+    viewport = settings.model if tables is None else "transport"
+    rows = []
+    for az, el in lights:
+        d = direction_from_az_el(az, el)
+        idx, w = tt.sun_weights(store.directions, d, settings.sun_angle, settings.kernel)
+        full = store.relight(idx, w)
+        row = {"azimuth": az, "elevation": el, "model": rel_rmse(model.relight(idx, w), full)}
+        row["rel"] = (row["model"] if tables is None else
+                      rel_rmse(viewport_direct(store, tables, d), full))
+        rows.append(row)
+    head = float(np.sqrt(np.mean([r["rel"] ** 2 for r in rows])))
+    mhead = float(np.sqrt(np.mean([r["model"] ** 2 for r in rows])))
+    worst = max(rows, key=lambda r: r["rel"])
+    return {"headline": round(head, 4), "viewport": viewport,
+            "model_headline": round(mhead, 4), "lights": rows, "sun_angle": settings.sun_angle,
+            "worst": {"rel": round(worst["rel"], 4), "elevation": worst["elevation"]},
+            "meaning": "relative RMSE of the viewport's relight against T's (direct light, "
+                       "albedo left out) at the held-out lights: how far the viewport is from "
+                       "the bake's own relight (relight --source transport); model_headline: "
+                       "the same for the fitted model. Not an error against Cycles: T blends "
+                       "neighbouring directions' shadows, and a PCA that smooths them can even "
+                       "be closer to Cycles (bumps demo, 2-degree Sun: 0.101 vs T's 0.103, "
+                       "while 0.056 apart). A global PCA loses cast shadows on large receivers "
+                       "(statue demo's ground, PCA 96: 0.064, 0.102 at 10 degrees elevation); "
+                       "the transport viewport keeps them (bumps demo, 64^2 tables: 0.005)"}
+
+
+def model_summary(model, S: int) -> dict:
+    """The report's model entry; a steerable quadrature model or none have no PCA summary."""
+    if model is None:
+        return {"kind": "none"}
+    if hasattr(model, "summary"):
+        return model.summary(S)
+    return {"kind": "steerable", "order": model.order}
+
+
+def preview_cost(model, settings, store=None) -> dict:
+    """Per-pixel cost of the live preview of ``model`` as ``settings.viewport`` shows it (the
+    transport viewport: 4 table texels x (2 K / 3 table lookups + K atlas lookups) + the
+    albedo, K the taps its tables need for the preview's sun size: 21 lookups for a point sun,
+    whatever the number of directions)."""
+    if not hasattr(model, "preview_cost"):
+        return {}
+    extra = settings.indirect_order ** 2 if settings.bounces else 0
+    tables = viewport_tables(settings, store) if store is not None else None
+    if tables is not None:
+        from ...lt_addon.transport import sparse_tables as sp
+
+        taps = tables[0].shape[-1]
+        side, nbytes = sp.atlas_layout_bytes(store.directions.size, model.resolution)
+        return {"viewport": "transport", "taps": taps,
+                "texture_lookups_per_pixel": 4 * (2 * taps // 3 + taps) + 1 + extra,
+                "multiply_adds_per_texel": 4 * taps, "python_per_light_change": False,
+                "atlas_side": side, "atlas_mib_8bit": round(nbytes / 2**20, 1)}
+    return {"viewport": "pca", **model.preview_cost(extra)}
+
+
+def load_bake(report_path: str) -> tuple:
+    """(ObjectBake, TransportStore, report) from a report written by :func:`write_bake`."""
+    from ...lt_addon.steerable.texture import SteerableTexture
+
+    with open(report_path) as fh:
+        report = json.load(fh)
+    report["report"] = os.path.abspath(report_path)
+    files = report["files"]
+    folder = os.path.dirname(report_path)
+
+    def where(p):  # the report's folder may have moved with the files
+        return p if os.path.exists(p) else os.path.join(folder, os.path.basename(p))
+
+    store = tt.TransportStore.open(where(files["transport"]))
+    ch, _ = exrio.read_exr(where(files["albedo"]))
+    albedo = np.stack([ch[c] for c in "RGB"], axis=-1).astype(np.float32)
+    indirect = SteerableTexture.load(where(files["indirect"])) if "indirect" in files else None
+    model = None
+    if "model" in files:
+        m = where(files["model"])
+        model = SteerableTexture.load(m) if m.endswith(".exr") else tt.load_model(m)
+    return ObjectBake(report["object"], store.path, albedo, indirect, model), store, report
+
+
+# ----------------------------------------------------------------------------------------------
+# presets, the pilot for --target-error, and the whole job
+
+
+#: Starting points for ``--method transport`` (see the README for how they were measured).
+PRESETS = {
+    "draft": dict(directions="hemi:100:1.5", resolution=128, indirect_resolution=64,
+                  indirect_samples=16, tol=0.03),
+    "balanced": dict(directions="hemi:400:1.5", resolution=256, indirect_resolution=128,
+                     indirect_samples=64, tol=0.02),
+    "production": dict(directions="hemi:1600:1.5", resolution=256, indirect_resolution=256,
+                       indirect_samples=256, tol=0.01, table_size=64),
+}
+def _measured_presets() -> dict:
+    """PRESETS updated from operators/bakes/transport_presets.json (written by
+    ``benchmarks/bench_transport_textures.py --write-presets`` from the measured front)."""
+    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), "transport_presets.json")
+    out = {k: dict(v) for k, v in PRESETS.items()}
+    try:
+        with open(path) as fh:
+            data = json.load(fh)["presets"]
+    except (OSError, ValueError, KeyError):
+        return out
+    for name in out:
+        if name in data:
+            out[name].update({k: v for k, v in data[name].items()
+                              if k in TransportTextureSettings.__dataclass_fields__
+                              or k == "measured"})
+    return out
+
+
+PRESETS = _measured_presets()
+
+#: Direction counts the pilot tries for ``--target-error``, cheapest first.
+PILOT_COUNTS = (64, 100, 200, 400, 800, 1600)
+
+
+def truth_lights(count: int) -> list:
+    """``count`` held-out (azimuth, elevation) lights: the four of :data:`TRUTH_LIGHTS` first,
+    then elevations 5..85 degrees with golden-angle azimuths."""
+    extra = [((17.0 + 137.508 * i) % 360.0, float(el))
+             for i, el in enumerate((20.0, 45.0, 70.0, 5.0, 38.0, 63.0, 15.0, 85.0))]
+    lights = list(TRUTH_LIGHTS) + extra
+    if not 1 <= count <= len(lights):
+        raise BakeInputError(f"--truth takes 1..{len(lights)} lights, got {count}")
+    return lights[:count]
+
+
+def settings_from_preset(name: str, **overrides) -> TransportTextureSettings:
+    if name not in PRESETS:
+        raise BakeInputError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
+    values = {k: v for k, v in PRESETS[name].items() if k != "measured"}
+    if "components" in overrides or "tol" in overrides:
+        values.pop("components", None)
+    return TransportTextureSettings(**{**values, **overrides})
+
+
+def pilot(scene, objects, settings: TransportTextureSettings, target: float, out_dir: str,
+          resolution: int = 64, truth_samples: int = 256):
+    """Generator: choose the fewest directions whose *transport* relight meets ``target``
+    (relative RMSE vs Cycles Sun truths with the bake's bounces at the four held-out lights,
+    sun of ``settings.sun_angle``) on a small bake at ``resolution``; the model tolerance is
+    then set to a third of the target so the fitted model adds little. Returns a dict of what
+    was tried and chosen."""
+    import tempfile
+
+    from dataclasses import replace
+
+    t0 = time.perf_counter()
+    truths = yield from truth_bakes(scene, objects, TRUTH_LIGHTS, settings.sun_angle,
+                                    settings.bounces, truth_samples, resolution)
+    tried = []
+    power = settings.directions.split(":")[2] if settings.directions.count(":") == 2 else "1.5"
+    chosen = None
+    with tempfile.TemporaryDirectory(dir=out_dir if os.path.isdir(out_dir) else None) as tmp:
+        for n in PILOT_COUNTS:
+            s = replace(settings, directions=f"hemi:{n}:{power}", resolution=resolution,
+                        indirect_resolution=min(settings.indirect_resolution, resolution),
+                        model="none")
+            res = yield from bake_transport_textures(scene, objects, s, tmp, resume=False)
+            err = truth_errors(res, truths, settings.sun_angle)["transport_rel_rmse"]
+            tried.append({"directions": s.directions, "rel_rmse": err,
+                          "bake_seconds": round(res.seconds["bake_total"], 2)})
+            if err <= target:
+                chosen = s.directions
+                break
+    out = {"target_error": target, "pilot_resolution": resolution, "tried": tried,
+           "chosen_directions": chosen or tried[-1]["directions"],
+           "met_in_pilot": chosen is not None, "tol": round(target / 3.0, 5),
+           "seconds": round(time.perf_counter() - t0, 2)}
+    return out
+
+
+@dataclass
+class TextureBakeOutput:
+    """What :func:`bake_job` produced: per object baked together, the JSON-safe report (as
+    written to its ``report`` path) and the fitted model (TexturePCA, BlockPCA, steerable
+    texture, or None for ``--model none``) -- objects, not report entries."""
+    reports: list
+    models: list
+
+
+def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *,
+             truth: int = 4, truth_samples: int = 256, target_error: float | None = None,
+             preview: bool = True, compare: bool = True, resume: bool = True, client=None,
+             blend_path: str | None = None):
+    """The whole ``bake-textures --method transport`` verb as one generator: optional pilot
+    (``target_error``), the bake, Cycles truths at held-out lights, files, preview and -- with
+    ``truth``, a preview and ``compare`` and a scene camera -- ``<object>_compare.png`` (the
+    first object's name): the previews next to a Cycles Sun render from the camera at the
+    lowest held-out light. With ``resume`` a rerun after a cancel or crash reuses the direct
+    bakes' finished chunks (``chunks_reused`` in the reports); a Dask ``client`` bakes the
+    missing ones on its workers from ``blend_path``. Returns a
+    :class:`TextureBakeOutput` (the reports' ``timings.wall_total`` covers all of it)."""
+    from dataclasses import replace
+
+    started = time.perf_counter()
+    figures = {}
+    if preview and settings.model == "pca":   # refuse an impossible viewport before baking
+        from ...lt_addon.transport import sparse_tables as sp
+
+        try:
+            sp.choose_viewport(settings.viewport, settings.validate().size, settings.resolution)
+        except ValueError as exc:
+            raise BakeInputError(str(exc)) from None
+    if target_error is not None:
+        if not 0.0 < target_error < 1.0:
+            raise BakeInputError(f"--target-error must be in (0, 1), got {target_error}")
+        chosen = yield from pilot(scene, objects, settings, target_error, out_dir,
+                                  resolution=min(64, settings.resolution),
+                                  truth_samples=truth_samples)
+        settings = replace(settings, directions=chosen["chosen_directions"], tol=chosen["tol"])
+        figures["target_error"] = chosen
+        truth = max(truth, 4)
+    result = yield from bake_transport_textures(scene, objects, settings, out_dir, resume,
+                                                client, blend_path)
+    try:
+        figures.update((yield from _truth_figures(scene, objects, settings, result, truth,
+                                                  truth_samples, target_error, figures)))
+    except BaseException:   # cancelled during the truths: the previous bake stays as it was
+        for b in result.objects:
+            if b.store is not None:
+                b.store.abort()
+        raise
+    figures["glossy"] = glossy_note(objects)
+    reports = write_bake(result, objects, out_dir, figures)
+
+    previewed = preview and settings.model == "pca"
+    if previewed:
+        for rep, b, obj in zip(reports, result.objects, objects):
+            t_prev = time.perf_counter()
+            store = tt.TransportStore.open(b.store_path)
+            rep["preview"] = install_transport_preview(scene, obj, rep, b, store)
+            rep["timings"]["preview_seconds"] = round(time.perf_counter() - t_prev, 3)
+    if truth and previewed and compare:
+        from ..preview.compare_render import report_comparison
+
+        yield Progress(1, 1, "rendering the comparison from the scene camera")
+        png = os.path.join(out_dir, f"{atomic.safe_name(objects[0].name)}_compare.png")
+        cmp = report_comparison(scene, objects, truth_lights(truth), settings.sun_angle, png,
+                                truth_samples)
+        for rep in reports:
+            rep["comparison"] = cmp
+            rep["timings"]["compare_seconds"] = cmp.get("seconds", 0.0)
+    wall = round(time.perf_counter() - started, 3)
+    for rep in reports:   # the wall time of everything the verb did, in the file too
+        rep["timings"]["wall_total"] = wall
+        atomic.write_json(rep["report"], {k: v for k, v in rep.items() if k != "report"},
+                          default=float)
+    return TextureBakeOutput(reports, [b.model for b in result.objects])
+
+
+def _truth_figures(scene, objects, settings, result, truth, truth_samples, target_error,
+                   figures):
+    """Generator: the ground-truth block of the report (empty without ``truth``)."""
+    out = {}
+    if not truth:
+        return out
+    lights = truth_lights(truth)
+    t0 = time.perf_counter()
+    truths = yield from truth_bakes(scene, objects, lights, settings.sun_angle,
+                                    settings.bounces, truth_samples, settings.resolution)
+    errs = truth_errors(result, truths, settings.sun_angle, lights)
+    errs["truth_samples"] = truth_samples
+    errs["truth_seconds"] = round(time.perf_counter() - t0, 2)
+    out["ground_truth"] = errs
+    if target_error is not None:
+        figures["target_error"]["achieved"] = errs["headline_rel_rmse"]
+        figures["target_error"]["met"] = errs["headline_rel_rmse"] <= target_error
+    return out
+
+
+def install_transport_preview(scene, obj, report, bake, store, **kw):
+    from ..preview.transport_preview import install_transport_preview as install
+
+    return install(scene, obj, report, bake, store, **kw)
+
+
+def glossy_note(objects) -> dict:
+    """Which materials have a non-negligible specular part the diffuse bake leaves out."""
+    found = []
+    for o in objects:
+        for slot in o.material_slots:
+            mat = slot.material
+            tree = getattr(mat, "node_tree", None)
+            if tree is None:
+                continue
+            for node in tree.nodes:
+                if node.bl_idname != "ShaderNodeBsdfPrincipled":
+                    continue
+                spec = node.inputs.get("Specular IOR Level") or node.inputs.get("Specular")
+                rough = node.inputs.get("Roughness")
+                metal = node.inputs.get("Metallic")
+                s = spec.default_value if spec is not None and not spec.is_linked else 0.5
+                r = rough.default_value if rough is not None and not rough.is_linked else 0.5
+                m = metal.default_value if metal is not None and not metal.is_linked else 0.0
+                if (s > 0.05 and r < 0.6) or m > 0.1:
+                    found.append({"object": o.name, "material": mat.name,
+                                  "specular": round(float(s), 3), "roughness": round(float(r), 3),
+                                  "metallic": round(float(m), 3)})
+            if any(n.bl_idname == "ShaderNodeBsdfGlossy" for n in tree.nodes):
+                found.append({"object": o.name, "material": mat.name, "glossy_bsdf": True})
+    return {"materials": found,
+            "note": ("the bake is diffuse-only (Cycles DIFFUSE pass): these materials' "
+                     "view-dependent reflection is not in the relit texture and the preview "
+                     "shows them darker than a render") if found else "all diffuse"}
+
+
+def refresh_preview_tables(scene, obj, sun_angle: float) -> dict | None:
+    """Rewrite ``obj``'s preview coefficient tables for a new sun size (no re-bake); returns
+    {"seconds": ...} or None when ``obj`` has no transport preview."""
+    from ..base.blend_files import object_bakes
+    from ..preview.transport_preview import rewrite_tables
+
+    records = [b for b in object_bakes(obj) if b.get("kind") == KIND]
+    if not records or bpy.data.node_groups.get(f"Relight Transport ({obj.name})") is None:
+        return None
+    t0 = time.perf_counter()
+    bake, store, report = load_bake(bpy.path.abspath(records[-1]["path"]))
+    if not getattr(bake.model, "live_preview", False):
+        return None
+    rewrite_tables(obj, report, bake, store, sun_angle)
+    return {"seconds": time.perf_counter() - t0}

@@ -1,0 +1,1276 @@
+"""The ``relight`` command line: one argparse definition for every launcher.
+
+Launchers
+---------
+* venv console script ``relight ...`` and ``python -m relightable_textures ...`` call :func:`main`.
+* Inside Blender the extension registers :func:`run` with ``bpy.utils.register_cli_command`` so
+  ``blender -b [FILE.blend] --command relight VERB ...`` runs the same verbs.
+
+Errors in the user's input print one line ``relight: error: ...`` to stderr and return exit
+code 2; nothing is written in that case (outputs are written to a temporary name in the target
+directory and renamed into place only when complete).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+from ... import __version__
+from ...lt_addon.io import atomic
+
+EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
+
+
+class CliError(Exception):
+    """A user-facing error: printed as one line, exit code 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser that raises instead of exiting, so Blender's process survives."""
+
+    def error(self, message):
+        raise CliError(message)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from ...lt_addon.steerable.calibration import METHODS as CALIBRATIONS
+    from ...lt_addon.steerable.texture import FRAMES, STORAGE_MODES
+    from ...samples import DESCRIPTIONS, SIZES
+    from ..base.cycles_bake import BAKE_MODES, WORLD_SAMPLING
+
+    parser = _Parser(
+        prog="relight",
+        description="Relightable Textures: bake relightable textures and light transport "
+                    "with Cycles and relight them.",
+    )
+    parser.add_argument("--version", action="version", version=f"relight {__version__}")
+    sub = parser.add_subparsers(dest="verb", metavar="VERB", parser_class=_Parser)
+    sub.required = True
+
+    p = sub.add_parser("scene", help="write a sample scene to a .blend file",
+                       description="Write a sample scene. Scenes: " + "; ".join(
+                           f"{k}: {v}" for k, v in DESCRIPTIONS.items()))
+    p.add_argument("name", metavar="NAME", help="one of: " + ", ".join(DESCRIPTIONS))
+    p.add_argument("--out", required=True, metavar="FILE.blend", help="output .blend path")
+    p.add_argument("--size", choices=SIZES, default="test",
+                   help="test: tiny meshes, 16 spp (default); demo: finer meshes, 64 spp")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    p.set_defaults(func=_cmd_scene)
+
+    p = sub.add_parser("info", help="list the relightable data stored in a .blend file")
+    p.add_argument("file", metavar="FILE.blend", nargs="?",
+                   help="the .blend to read (inside Blender: defaults to the open file)")
+    p.add_argument("--json", action="store_true", help="print the listing as JSON")
+    p.set_defaults(func=_cmd_info)
+
+    p = sub.add_parser("bake-textures", help="bake relightable textures of one or more objects",
+                       description="--method transport (default): bake each object's UV texture "
+                                   "under S hard Sun lamps (1 sample each, streamed to disk), the "
+                                   "albedo, and the indirect light as a low-order steerable term; "
+                                   "fit a model (PCA eigen-textures by default) and install a live "
+                                   "preview. --method lobes: the paper's broad-lobe bake under the "
+                                   "N = order^2 sampled steerable lights. Both write EXR/NPZ files "
+                                   "and a JSON report; the .blend gets the bake record and preview.")
+    p.add_argument("file", metavar="FILE.blend")
+    p.add_argument("--object", required=True, action="append", metavar="NAME",
+                   help="mesh object with a UV map; repeat to bake several objects in the same "
+                        "Cycles calls (shadows fall between them; transport method only)")
+    p.add_argument("--method", choices=("transport", "lobes"), default="transport",
+                   help="transport: direction-sampled hard-sun bake (default); lobes: the "
+                        "paper's steerable-lobe environment bake")
+    p.add_argument("--preset", choices=("draft", "balanced", "production"), default="balanced",
+                   help="starting values for the settings below (default balanced)")
+    p.add_argument("--directions", metavar="SPEC", help="transport: sun directions, hemi:N[:P] "
+                   "(N directions over the upper hemisphere, P > 1 denser near the horizon)")
+    p.add_argument("--sun-angle", type=float, help="transport: sun size in degrees for the "
+                   "preview and the truth (default 2)")
+    p.add_argument("--model", choices=("pca", "blocks", "steerable", "none"),
+                   help="transport: pca eigen-textures (live preview), blocks (clustered PCA "
+                        "over texel blocks), steerable (the paper's basis by quadrature), none")
+    p.add_argument("--components", type=int, help="transport: PCA components (default: from "
+                   "--tol) or the steerable order")
+    p.add_argument("--tol", type=float, help="transport: relative residual the PCA keeps")
+    p.add_argument("--indirect-samples", type=int, help="transport: samples of the indirect bake")
+    p.add_argument("--indirect-resolution", type=int, help="transport: indirect texture side")
+    p.add_argument("--table-size", type=int, help="transport: texels across the preview's "
+                   "coefficient tables (hemisphere disk; 8..256)")
+    p.add_argument("--viewport", choices=("auto", "transport", "pca"), help="transport: what "
+                   "the live preview shows -- T itself through sparse kernel tables (keeps "
+                   "cast shadows; an atlas of all directions), the PCA, or auto (T when its "
+                   "atlas takes at most 256 MiB; default)")
+    p.add_argument("--target-error", type=float, metavar="E", help="transport: a pilot bake "
+                   "chooses the directions and the PCA tolerance to reach relative RMSE E on "
+                   "held-out lights; the report says what it chose and achieved")
+    p.add_argument("--truth-samples", type=int, default=256,
+                   help="transport: Cycles samples of the truth bakes (default 256)")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing bake of the same object in --out")
+    p.add_argument("--frame", choices=FRAMES, help="world: relight by a distant world light; "
+                   "tangent: a tileable patch relit per pixel in a surface's UV tangent frame")
+    p.add_argument("--order", type=int, help="basis order N1 (N = N1^2 bakes), 2..12")
+    p.add_argument("--resolution", type=int, help="texture side in texels")
+    p.add_argument("--samples", type=int, help="Cycles samples per texel per bake")
+    p.add_argument("--bounces", type=int, help="diffuse bounces (0 = direct light only)")
+    p.add_argument("--storage", choices=STORAGE_MODES, help="EXR precision (u8: 8-bit + min/max)")
+    p.add_argument("--mode", choices=BAKE_MODES, help="radiance: albedo x light (the paper); "
+                   "irradiance: light only, so the albedo stays editable")
+    p.add_argument("--world-sampling", choices=WORLD_SAMPLING,
+                   help="importance (lower noise, default) or none (exactly linear)")
+    p.add_argument("--seed", type=int, help="Cycles seed (default 0)")
+    p.add_argument("--truth", type=int, default=0, metavar="K",
+                   help="also bake Cycles ground truth for K light directions (elevations 5..85 "
+                        "degrees, none a sample centre) and put the errors in the report")
+    p.add_argument("--contact-sheet", metavar="PNG", help="with --truth: write a PNG of steered | "
+                   "Cycles truth | difference x4 | Cycles Sun for up to 4 directions")
+    _add_device_option(p)
+    _add_distribution_options(p, "")
+    p.add_argument("--no-compare", action="store_true",
+                   help="with --truth and a scene camera, the bake also renders "
+                        "<object>[_steerable]_compare.png (preview | Cycles Sun | difference x4 "
+                        "from the camera at the lowest held-out light; in the report's timings "
+                        "as compare_seconds); this skips it")
+    p.add_argument("--out", metavar="DIR", help="output folder (default: next to the .blend, "
+                   "<name>_relight/)")
+    p.set_defaults(func=_cmd_bake_textures)
+
+    p = sub.add_parser("bake-chunk", help="bake one chunk of a transport bake's directions into "
+                                          "its chunk cache (render farms)",
+                       description="Bake chunk K (directions 16K..16K+15) of `bake-textures "
+                                   "--method transport` with the same objects and settings into "
+                                   "<out>/.relight_cache, as a farm task; `bake-textures` with "
+                                   "the same arguments then finds every chunk and only fits and "
+                                   "writes. A chunk already there is not baked again.")
+    p.add_argument("file", metavar="FILE.blend")
+    p.add_argument("--object", required=True, action="append", metavar="NAME")
+    p.add_argument("--chunk", required=True, type=int, metavar="K")
+    p.add_argument("--preset", choices=("draft", "balanced", "production"), default="balanced")
+    p.add_argument("--directions", metavar="SPEC")
+    p.add_argument("--resolution", type=int)
+    p.add_argument("--seed", type=int)
+    p.add_argument("--threads", type=int, default=0,
+                   help="Cycles threads (default 0: all cores)")
+    p.add_argument("--out", metavar="DIR", help="the bake's output folder (default: next to "
+                   "the .blend, <name>_relight/)")
+    _add_device_option(p)
+    p.set_defaults(func=_cmd_bake_chunk)
+
+    p = sub.add_parser("relight", help="relight a stored steerable texture for one light (NumPy)")
+    p.add_argument("file", metavar="FILE.blend")
+    p.add_argument("--object", required=True, metavar="NAME")
+    p.add_argument("--light", type=_az_el, metavar="AZ,EL",
+                   help="light azimuth and elevation in degrees (bake frame, z up)")
+    p.add_argument("--intensity", type=float, default=1.0,
+                   help="normal irradiance, as a Sun lamp's strength (default 1)")
+    p.add_argument("--color", type=_rgb, default=(1.0, 1.0, 1.0), metavar="R,G,B")
+    p.add_argument("--sun-angle", type=float, default=None, metavar="DEG",
+                   help="transport bakes: sun size in degrees (default: the bake's)")
+    p.add_argument("--env", metavar="HDR.exr", help="transport bakes: relight under this "
+                   "equirectangular environment instead of a sun (direct light)")
+    p.add_argument("--rotate", type=float, default=0.0, metavar="DEG",
+                   help="with --env: rotate the environment about +z like a world Mapping "
+                        "node's Z rotation (Point type)")
+    p.add_argument("--source", choices=("model", "transport"), default="model",
+                   help="transport bakes: relight from the fitted model or from T itself")
+    p.add_argument("--out", metavar="IMG.exr", help="write the relit texture (float RGB EXR)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    p.set_defaults(func=_cmd_relight)
+
+    p = sub.add_parser("compare", help="render the preview next to a Cycles Sun render (PNG)",
+                       description="Render the open scene from its camera twice with Cycles: "
+                                   "through the relight previews and with the objects' own "
+                                   "materials under a real Sun of the same direction and size; "
+                                   "writes preview | Cycles | |difference| x 4 as one PNG. The "
+                                   ".blend is not changed.")
+    p.add_argument("file", metavar="FILE.blend")
+    p.add_argument("--light", required=True, type=_az_el, metavar="AZ,EL")
+    p.add_argument("--sun-angle", type=float, default=2.0, metavar="DEG")
+    p.add_argument("--samples", type=int, default=128, help="Cycles samples of the Sun render")
+    p.add_argument("--resolution", type=int, help="square render size (default: the scene's)")
+    p.add_argument("--out", required=True, metavar="IMG.png")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    p.set_defaults(func=_cmd_compare)
+
+    p = sub.add_parser("light-env", help="write the environment image of one steerable light",
+                       description="Write the equirectangular EXR of the calibrated steerable "
+                                   "light the relight uses, so its Cycles ground truth can be "
+                                   "rendered anywhere (Environment Texture, strength 1).")
+    p.add_argument("--order", type=int, default=7, help="basis order N1 (default 7)")
+    p.add_argument("--light", required=True, type=_az_el, metavar="AZ,EL")
+    p.add_argument("--height", type=int, default=256, help="image rows (width = 2 x height)")
+    p.add_argument("--intensity", type=float, default=1.0)
+    p.add_argument("--calibration", choices=CALIBRATIONS, default="steerable_cos")
+    p.add_argument("--out", required=True, metavar="ENV.exr")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    p.set_defaults(func=_cmd_light_env)
+
+    p = sub.add_parser("bake-transport", help="bake per-vertex light transport and fit "
+                       "eigentransport (Nowrouzezahrai 2008)",
+                       description="One Cycles vertex bake per sample direction under a hard "
+                                   "Sun (T = visibility x cosine, plus interreflection with "
+                                   "--bounces), then PCA to d eigentransports. Writes an .npz "
+                                   "sidecar and a JSON report; the .blend gets the bake record "
+                                   "and a per-vertex preview.")
+    _add_transport_source_args(p)
+    p.add_argument("--samples", type=int, help="Cycles samples per vertex (default 1 without "
+                   "bounces: exact for a hard Sun; 64 with bounces)")
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("--energy", type=float, help="keep d capturing this fraction of the "
+                       "centred transport energy (default 0.99)")
+    group.add_argument("--coeffs", type=int, help="keep exactly d eigentransports")
+    p.add_argument("--clusters", metavar="auto|K", help="clustered PCA (Mahajan 2007) instead of "
+                   "one global PCA: K clusters, or 'auto' for adaptive subdivision by cost; "
+                   "--energy is then each cluster's tolerance")
+    p.add_argument("--truth", action="store_true", help="also bake the object under the world "
+                   "(or a sun-and-sky HDRI) with Cycles and report the error per d")
+    p.add_argument("--out", metavar="DIR", help="output folder (default <blend>_relight/)")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing transport bake of the same object in --out")
+    _add_device_option(p)
+    _add_distribution_options(p, "")
+    p.set_defaults(func=_cmd_bake_transport)
+
+    p = sub.add_parser("analyze", help="how many CPCA clusters an object's transport needs "
+                       "(Mahajan 2007): JSON (+ charts in a source checkout)",
+                       description="Bakes the object's per-vertex transport (as bake-transport), "
+                                   "measures patch dimensionality vs size (log-log slope, mu, "
+                                   "p*), the CPCA cost per vertex over cluster counts and the "
+                                   "adaptive subdivision. Writes <object>_analysis.json (and, "
+                                   "from a source checkout with matplotlib, "
+                                   "<object>_dimensionality.png and <object>_cost.png); the "
+                                   ".blend is not changed.")
+    _add_transport_source_args(p)
+    p.add_argument("--tol", type=float, default=1e-3, help="CPCA per-cluster unexplained "
+                   "energy fraction (default 1e-3: the paper's 99.9%%)")
+    p.add_argument("--seeds", type=int, default=8, help="seed vertices of the dimensionality "
+                   "curves (default 8)")
+    p.add_argument("--rebake", action="store_true",
+                   help="bake the transport again even when the object's bake-transport made "
+                        "with the same directions and bounces kept its samples (reused by "
+                        "default)")
+    p.add_argument("--out", metavar="DIR", help="output folder (default <blend>_relight/)")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing analysis of the same object in --out")
+    _add_device_option(p)
+    p.set_defaults(func=_cmd_analyze)
+
+    try:   # development verbs (bench) exist in a source checkout only, not in the extension
+        from ...devtools import bench_cli
+    except ImportError:
+        pass
+    else:
+        bench_cli.add_parser(sub)
+
+    p = sub.add_parser("relight-vertices", help="shade a stored eigentransport bake (NumPy)")
+    p.add_argument("file", metavar="FILE.blend")
+    p.add_argument("--object", required=True, metavar="NAME")
+    p.add_argument("--env", metavar="HDR.exr", help="equirect RGB EXR (default: the scene world)")
+    p.add_argument("--rotate", type=float, default=0.0, metavar="DEG",
+                   help="rotate the environment about +z like a world Mapping node's Z "
+                        "rotation (Point type), added to the world's own Mapping rotation")
+    p.add_argument("--point-light", type=_point_light, metavar="X,Y,Z,POWER",
+                   help="add an isotropic point light (W); valid outside the convex hull")
+    p.add_argument("--out", required=True, metavar="shading.npy",
+                   help="per-vertex RGB, shape (V, 3), float32")
+    p.add_argument("--force", action="store_true")
+    p.set_defaults(func=_cmd_relight_vertices)
+
+    from . import materials as cli_materials
+    cli_materials.add_parsers(sub)
+    from . import export as cli_export
+    cli_export.add_parsers(sub)
+
+    p = sub.add_parser("validate", help="reproduce a paper's figures and check them")
+    p.add_argument("--paper", required=True, choices=sorted(PAPER_CHECKS),
+                   help="which paper's figures to reproduce")
+    p.set_defaults(func=_cmd_validate)
+    return parser
+
+
+def _add_transport_source_args(p) -> None:
+    """FILE, --object, --directions and --bounces: what a per-vertex transport bake reads."""
+    p.add_argument("file", metavar="FILE.blend")
+    p.add_argument("--object", required=True, metavar="NAME")
+    p.add_argument("--directions", default="cube:8",
+                   help="halton:N | latlong:RxC | cube:N | cubegauss:N (default cube:8 = 384)")
+    p.add_argument("--bounces", type=int, default=0)
+
+
+def run(argv: list[str]) -> int:
+    """Run one CLI invocation; returns the process exit code (never raises SystemExit)."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        return int(args.func(args) or EXIT_OK)
+    except CliError as exc:
+        print(f"relight: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except SystemExit as exc:  # --help / --version
+        return int(exc.code or 0) if not isinstance(exc.code, str) else EXIT_USAGE
+
+
+def _keep_stdout_for_results() -> None:
+    """Give the CLI's results a stdout of their own, before bpy is imported.
+
+    Blender's C code logs to file descriptor 1, e.g. ``color_management | Using OCIO=...``
+    whenever ``$OCIO`` is set (studios set it for ACES; bpy 5.2 itself sets it for every child
+    process), which would corrupt ``--json`` output. Descriptor 1 is pointed at stderr, where
+    diagnostics belong, and Python's ``sys.stdout`` keeps the original stream."""
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+        os.dup2(2, 1)
+        sys.stdout = os.fdopen(saved, "w", buffering=1, encoding=sys.stdout.encoding,
+                               errors=sys.stdout.errors)
+    except (OSError, ValueError, AttributeError):  # no real descriptors (embedded, captured)
+        pass
+
+
+def main() -> None:
+    """Console-script entry point (``relight`` and ``python -m relightable_textures``)."""
+    _keep_stdout_for_results()
+    sys.exit(run(sys.argv[1:]))
+
+
+# ---------------------------------------------------------------------------------------------
+# Verbs
+
+
+def _cmd_scene(args) -> int:
+    from ...samples import SCENES
+
+    if args.name not in SCENES:
+        raise CliError(f"unknown scene {args.name!r}; choose one of: {', '.join(SCENES)}")
+    out = _check_output_path(args.out, ".blend", args.force)
+    from ..base import blend_files
+
+    try:
+        info = blend_files.write_sample_scene(args.name, args.size, out)
+    except (OSError, RuntimeError) as exc:
+        raise CliError(f"could not write {out}: {str(exc).strip().splitlines()[-1]}") from exc
+    print(f"wrote {out} (scene {args.name}, size {args.size}, "
+          f"object {info['relight_object']}: {info['vertices']} vertices)")
+    return EXIT_OK
+
+
+def _cmd_info(args) -> int:
+    from ..base import blend_files
+
+    if args.file is None:
+        path = blend_files.current_file()
+        if not path:
+            raise CliError("no FILE.blend given and no file is open")
+    else:
+        path = _check_input_blend(args.file)
+    listing = blend_files.relightable_listing(path)
+    if args.json:
+        print(json.dumps(listing, indent=2))
+    else:
+        print(blend_files.format_listing(listing))
+    return EXIT_OK
+
+
+#: paper name -> (module in lt_addon, report function)
+PAPER_CHECKS = {"ashikhmin2002": ("checks.ashikhmin2002", "ashikhmin2002_report"),
+                "mahajan2007": ("checks.mahajan2007", "mahajan2007_report")}
+
+
+def _cmd_validate(args) -> int:
+    import importlib
+
+    module_name, function = PAPER_CHECKS[args.paper]
+    checks = importlib.import_module(f"...lt_addon.{module_name}", __package__)
+    report = getattr(checks, function)()
+    print(json.dumps(report, indent=2))
+    if not checks.all_ok(report):
+        bad = [k for k, v in report.items() if isinstance(v, dict) and not v.get("ok", True)]
+        print(f"relight: validate: outside tolerance: {', '.join(bad)}", file=sys.stderr)
+        return EXIT_FAILURE
+    return EXIT_OK
+
+
+def _az_el(text: str) -> tuple[float, float]:
+    try:
+        az, el = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected AZ,EL in degrees, got {text!r}") from None
+    if not (np.isfinite(az) and np.isfinite(el)) or not -90.0 <= el <= 90.0:
+        raise argparse.ArgumentTypeError(f"elevation must be in [-90, 90] degrees, got {text!r}")
+    return az, el
+
+
+def _rgb(text: str) -> tuple[float, float, float]:
+    try:
+        rgb = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        rgb = ()
+    if len(rgb) != 3 or not all(np.isfinite(rgb)) or min(rgb) < 0:
+        raise argparse.ArgumentTypeError(f"expected R,G,B (three non-negative numbers), got {text!r}")
+    return rgb
+
+
+def _point_light(text: str):
+    try:
+        x, y, z, power = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y,Z,POWER, got {text!r}") from None
+    if not all(np.isfinite([x, y, z, power])) or power < 0:
+        raise argparse.ArgumentTypeError(f"need finite X,Y,Z and POWER >= 0, got {text!r}")
+    return (x, y, z), power
+
+
+def _run_job(job, verb: str, device=None):
+    """Drive ``job`` (a :mod:`.jobs` generator) to the end, printing its progress; returns its
+    result. Its Cycles bakes run on ``device`` (a :class:`.cycles_device.Device`; None: the
+    CPU, as for a job driven by a script that never chose). Ctrl-C (SIGINT) cancels it
+    between two steps -- Cycles runs Python callbacks that would swallow a KeyboardInterrupt
+    raised in the middle of a bake -- so the job closes cleanly (its ``finally`` blocks
+    restore the scene and drop temporary files); a second Ctrl-C stops at once. A cancelled
+    job raises KeyboardInterrupt here."""
+    import signal
+
+    from ..base import jobs
+
+    asked = []
+
+    def on_sigint(signum, frame):
+        if asked:
+            raise KeyboardInterrupt
+        asked.append(True)
+        print(f"{verb}: cancelling after the current step (Ctrl-C again to stop at once)",
+              file=sys.stderr, flush=True)
+
+    # SIGBREAK: Windows' Ctrl-Break, which the panel's Run On sends its command
+    signums = [signal.SIGINT] + ([signal.SIGBREAK] if hasattr(signal, "SIGBREAK") else [])
+    previous = {}
+    try:
+        for signum in signums:
+            previous[signum] = signal.signal(signum, on_sigint)
+    except ValueError:   # not the main thread (Blender's own console, say): Ctrl-C as before
+        pass
+    import contextlib
+
+    from ..base import cycles_device
+
+    printer = _progress_printer(verb)
+    said = []
+
+    def on_progress(step):   # the device, once the bake has started (a refused one: not at all)
+        if device is not None and not said:
+            note = f": {device.note}" if device.note else ""
+            print(f"{verb}: baking on {device.describe()}{note}", file=sys.stderr, flush=True)
+            said.append(True)
+        printer(step)
+
+    try:
+        with cycles_device.use(device) if device else contextlib.nullcontext():
+            result = jobs.run(job, on_progress=on_progress, should_cancel=lambda: bool(asked))
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    if asked and result is None:
+        raise KeyboardInterrupt
+    return result
+
+
+def _add_device_option(p) -> None:
+    """--device, shared by the verbs that bake with Cycles."""
+    p.add_argument("--device", choices=("auto", "cpu", "gpu"),
+                   default=os.environ.get("RELIGHT_DEVICE", "auto"),
+                   help="where Cycles bakes (default: $RELIGHT_DEVICE, else auto): auto uses "
+                        "the GPU the user chose -- the scene's Cycles device and "
+                        "Preferences > System in Blender, the first "
+                        "GPU backend Cycles finds in the venv CLI -- else the CPU, and says "
+                        "so; cpu forces the CPU; gpu refuses to bake without a GPU. The "
+                        "report records the device (CPU and GPU bakes of one seed are different "
+                        "sample sets: a resumed bake on another device bakes its chunks again)")
+
+
+def _bake_device(args, verb: str):
+    """The device ``--device`` gives for the open scene, or CliError before any bake call
+    (``gpu`` without a GPU). :func:`_run_job` says which on stderr when the bake starts."""
+    import bpy
+
+    from ..base import cycles_device
+
+    if args.device not in cycles_device.CHOICES:   # only a default from the environment can be
+        raise CliError(f"$RELIGHT_DEVICE must be one of {', '.join(cycles_device.CHOICES)}, "
+                       f"got {args.device!r}")
+    try:
+        return cycles_device.resolve(args.device, bpy.context.scene)
+    except cycles_device.DeviceError as exc:
+        raise CliError(str(exc)) from None
+
+
+def _add_distribution_options(p, what: str) -> None:
+    """--no-resume / --workers / --scheduler, shared by the verbs that bake in chunks."""
+    p.add_argument("--no-resume", action="store_true",
+                   help=f"{what}keep no chunks (by default each finished chunk -- 16 "
+                        "directions, one basis light or one material term's 16 directions -- "
+                        "is kept in <out>/.relight_cache/ until the bake completes, so a "
+                        "cancelled or crashed bake run again redoes only the missing ones)")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help=f"{what}bake the chunks on a local Dask cluster of N worker processes "
+                        "(needs dask[distributed])")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help=f"{what}bake the chunks on the Dask cluster at ADDRESS (e.g. "
+                        "tcp://host:8786); its workers need this package and bpy, and must "
+                        "read the .blend and --out at the same paths")
+    p.add_argument("--connect-timeout", type=float, default=10.0, metavar="SECONDS",
+                   help="with --scheduler: how long to wait for the scheduler to answer before "
+                        "giving up (default 10; a scheduler still starting may need more)")
+
+
+def _dask_client(args):
+    """The Dask client the options ask for (None: bake here); the caller closes it."""
+    if args.workers is None and not args.scheduler:
+        return None
+    from ..farm import distributed
+
+    if args.workers is not None and args.scheduler:
+        raise CliError("give --workers N (a local cluster) or --scheduler ADDRESS, not both")
+    if args.no_resume:
+        raise CliError("--workers / --scheduler hand chunks to the workers through the chunk "
+                       "cache; drop --no-resume")
+    if not args.connect_timeout > 0:
+        raise CliError(f"--connect-timeout must be > 0 seconds, got {args.connect_timeout:g}")
+    try:
+        return distributed.connect(args.workers, args.scheduler, timeout=args.connect_timeout)
+    except distributed.DistributedError as exc:
+        raise CliError(str(exc)) from None
+
+
+def _progress_printer(prefix: str):
+    def show(step):   # a jobs.Progress
+        print(f"{prefix} [{step.done}/{step.total}] {step.message}", file=sys.stderr,
+              flush=True)
+    return show
+
+
+def _open_object(path: str, name: str):
+    """Open ``path`` and return its object ``name`` (a CliError names the meshes if missing)."""
+    import bpy
+
+    from ..base.blend_files import blender_log_to_stderr
+
+    with blender_log_to_stderr():
+        bpy.ops.wm.open_mainfile(filepath=path, load_ui=False)
+    obj = bpy.data.objects.get(name)
+    if obj is None:
+        meshes = sorted(o.name for o in bpy.data.objects if o.type == "MESH")
+        raise CliError(f"no object {name!r} in {path}; mesh objects: {', '.join(meshes) or 'none'}")
+    from ..base.blend_files import activate_scene_of
+    from ..base.cycles_bake import BakeInputError
+
+    try:
+        activate_scene_of(obj, path)
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    return obj
+
+
+def _open_objects(path: str, names: list) -> list:
+    """Open ``path`` and return its objects ``names``, all in the first one's scene (objects
+    baked together share one scene); a CliError names what is wrong."""
+    import bpy
+
+    if len(set(names)) != len(names):
+        raise CliError("an --object is given twice")
+    objects = [_open_object(path, names[0])]
+    for name in names[1:]:
+        obj = bpy.data.objects.get(name)
+        if obj is None:
+            meshes = sorted(o.name for o in bpy.data.objects if o.type == "MESH")
+            raise CliError(f"no object {name!r} in {path}; mesh objects: {', '.join(meshes)}")
+        if obj.name not in bpy.context.view_layer.objects:
+            raise CliError(f"{obj.name!r} is not in scene {bpy.context.scene.name!r} with "
+                           f"{objects[0].name!r}; objects baked together share one scene")
+        objects.append(obj)
+    return objects
+
+
+def _refuse_existing(out_dir: str, obj_name: str, suffixes, force: bool, what: str) -> None:
+    """Refuse (before any work) to replace ``<out_dir>/<object><suffix>`` without --force."""
+    safe = atomic.safe_name(obj_name)
+    if force:
+        return
+    for suffix in suffixes:
+        if os.path.exists(os.path.join(out_dir, safe + suffix)):
+            raise CliError(f"{what} of {obj_name} exists in {out_dir} (use --force to replace it)")
+
+
+def _cmd_bake_textures(args) -> int:
+    if args.method == "transport":
+        return _cmd_bake_texture_transport(args)
+    lobes_only = [f"--{k.replace('_', '-')}" for k in ("directions", "sun_angle", "model",
+                                                       "components", "tol", "indirect_samples",
+                                                       "indirect_resolution", "table_size",
+                                                       "viewport", "target_error")
+                  if getattr(args, k) is not None]
+    if lobes_only:
+        raise CliError(f"{', '.join(lobes_only)} apply to --method transport, not lobes")
+    if len(args.object) > 1:
+        raise CliError("--method lobes bakes one object; give --object once "
+                       "(or use --method transport for several)")
+    args.object = args.object[0]
+    import bpy
+
+    from ..base import blend_files
+    from ..bakes import steerable_bake
+    from ..base.cycles_bake import BakeInputError
+    from ..bakes.presets import settings_from_preset
+
+    path = _check_input_blend(args.file)
+    overrides = {k: getattr(args, k) for k in ("frame", "order", "resolution", "samples",
+                                               "bounces", "storage", "mode", "world_sampling",
+                                               "seed") if getattr(args, k) is not None}
+    try:
+        settings = settings_from_preset(args.preset, **overrides)
+        settings.validate()
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    if args.truth < 0 or args.truth > 32:
+        raise CliError(f"--truth takes 0..32 directions, got {args.truth}")
+    sheet = None
+    if args.contact_sheet:
+        if not args.truth:
+            raise CliError("--contact-sheet needs --truth K (K >= 1 directions)")
+        sheet = _check_output_path(args.contact_sheet, ".png", True)
+    out_dir = _check_output_dir(args.out, path)
+    if not _can_create_in(os.path.dirname(path)):
+        raise CliError(f"cannot update {path}: its folder is not writable")
+    started = time.perf_counter()
+    obj = _open_object(path, args.object)
+    _refuse_existing(out_dir, obj.name, ("_steerable.exr", "_steerable.json"), args.force,
+                     "a steerable bake")
+    device = _bake_device(args, "bake-textures")
+    client = _dask_client(args)
+    try:   # the same job as the panel's Bake: bake, truths, files, preview
+        report = _run_job(steerable_bake.lobes_job(bpy.context.scene, obj, settings, out_dir,
+                                                   truth=args.truth, sheet_path=sheet,
+                                                   compare=not args.no_compare,
+                                                   resume=not args.no_resume, client=client,
+                                                   blend_path=path),
+                          "bake-textures", device).report
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    except RuntimeError as exc:
+        if type(exc).__name__ != "DistributedError":
+            raise
+        raise CliError(f"{exc}; the finished chunks are kept, the same command resumes") from None
+    except KeyboardInterrupt:
+        kept = "" if args.no_resume else (
+            "; the finished basis lights are kept and the same command resumes from them")
+        print(f"bake-textures: cancelled; nothing was written{kept}", file=sys.stderr)
+        return 130
+    finally:
+        if client is not None:
+            from ..farm.distributed import close
+            close(client)
+    blend_files.save_atomically(path)
+    t = report["timings"]
+    print(f"baked {obj.name}: {report['exr']} ({report['bytes']['exr_file']} bytes); "
+          f"{t['wall_total']:.2f} s in all: bake {t['total_seconds']:.2f} s "
+          f"({t['cycles_bake_seconds']:.2f} s in Cycles), truth {t['truth_seconds']:.2f} s, "
+          f"camera comparison {t.get('compare_seconds', 0.0):.2f} s; "
+          f"{time.perf_counter() - started - t['wall_total']:.2f} s more to open and save the "
+          ".blend")
+    gt = report.get("ground_truth", {})
+    if "headline_rel_rmse" in gt:
+        print(f"  error: {gt['headline_rel_rmse']:.3f} ({gt['headline_meaning']})")
+    _print_comparison(report.get("comparison"))
+    for row in gt.get("directions", []):
+        e = row["errors"]
+        print(f"  light az {row['azimuth']:6.1f} el {row['elevation']:5.1f}: rel. RMSE vs same "
+              f"light {e['same_light']['rel_fro']:.4f}"
+              + (f", 4x samples {e['same_light_4x']['rel_fro']:.4f}" if "same_light_4x" in e else "")
+              + (f", vs Sun lamp {e['sun']['rel_fro']:.4f}" if "sun" in e else ""))
+    _print_chunks(report)
+    return EXIT_OK
+
+
+def _print_chunks(rep: dict) -> None:
+    """A chunked bake's resume and distribution figures, when there are any."""
+    for dev, n in (rep.get("other_device_chunks") or {}).items():
+        print(f"  note: {n} chunks an interrupted bake left were baked on {dev}; this bake runs "
+              f"on {rep.get('device', {}).get('device', 'CPU')}, a different sample set, so "
+              "they were baked again")
+    if rep.get("chunks_reused"):
+        of = ("chunks (one basis light each)" if "chunk_directions" not in rep else
+              f"chunks ({rep['indirect_chunks']} of them indirect lights, the others "
+              f"{rep['chunk_directions']} directions each)" if rep.get("indirect_chunks") else
+              f"chunks of {rep['chunk_directions']} directions")
+        print(f"  resumed: {rep['chunks_reused']} of {rep['chunks_total']} {of} reused from an "
+              "interrupted bake")
+    dist = rep.get("distributed")
+    if dist:
+        print(f"  distributed: {dist['chunks']} chunks on {len(dist['workers'])} worker "
+              f"processes in {dist['wall_seconds']:.1f} s ({dist['cycles_seconds']:.1f} s "
+              f"of Cycles, {dist['file_loads']} .blend loads)")
+
+
+def _print_comparison(cmp: dict | None) -> None:
+    """The bake report's camera-space comparison, in one line (or why there is none)."""
+    if not cmp:
+        return
+    if "png" in cmp:
+        print(f"  camera comparison at light az {cmp['azimuth']:g} el {cmp['elevation']:g}: "
+              f"{cmp['png']} (rel. RMSE {cmp['rel_rmse_covered_pixels']:.3f} over the "
+              f"object's pixels, {cmp['seconds']:.1f} s)")
+    else:
+        print(f"  no camera comparison: {cmp['skipped']}")
+
+
+def _cmd_bake_texture_transport(args) -> int:
+    import bpy
+
+    from ..base import blend_files
+    from ..bakes import texture_transport as tx
+    from ..base.cycles_bake import BakeInputError
+
+    lobes_only = [f"--{k.replace('_', '-')}" for k in ("frame", "order", "samples", "storage",
+                                                       "mode", "world_sampling", "contact_sheet")
+                  if getattr(args, k) is not None]
+    if lobes_only:
+        raise CliError(f"{', '.join(lobes_only)} apply to --method lobes; the transport method "
+                       "takes --directions, --resolution, --bounces, --model, --sun-angle")
+    path = _check_input_blend(args.file)
+    names = {"directions": "directions", "resolution": "resolution", "bounces": "bounces",
+             "seed": "seed", "sun_angle": "sun_angle", "model": "model",
+             "components": "components", "tol": "tol", "indirect_samples": "indirect_samples",
+             "indirect_resolution": "indirect_resolution", "table_size": "table_size",
+             "viewport": "viewport"}
+    overrides = {v: getattr(args, k) for k, v in names.items() if getattr(args, k) is not None}
+    try:
+        settings = tx.settings_from_preset(args.preset, **overrides)
+        settings.validate()
+        if args.truth:
+            tx.truth_lights(args.truth)
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    if args.truth_samples < 1:
+        raise CliError(f"--truth-samples must be >= 1, got {args.truth_samples}")
+    if args.target_error is not None and not 0.0 < args.target_error < 1.0:
+        raise CliError(f"--target-error must be in (0, 1), got {args.target_error}")
+    out_dir = _check_output_dir(args.out, path)
+    if not _can_create_in(os.path.dirname(path)):
+        raise CliError(f"cannot update {path}: its folder is not writable")
+    objects = _open_objects(path, args.object)
+    if not args.force:
+        for o in objects:
+            rp = os.path.join(out_dir, f"{atomic.safe_name(o.name)}_texture_report.json")
+            if os.path.exists(rp):
+                raise CliError(f"a bake of {o.name} exists in {out_dir} (use --force to "
+                               "replace it)")
+    device = _bake_device(args, "bake-textures")
+    client = _dask_client(args)
+    try:
+        reports = _run_job(tx.bake_job(bpy.context.scene, objects, settings, out_dir,
+                                       truth=args.truth, truth_samples=args.truth_samples,
+                                       target_error=args.target_error,
+                                       compare=not args.no_compare, resume=not args.no_resume,
+                                       client=client, blend_path=path),
+                           "bake-textures", device).reports
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    except RuntimeError as exc:
+        if type(exc).__name__ != "DistributedError":
+            raise
+        raise CliError(f"{exc}; the finished chunks are kept, the same command resumes") from None
+    except KeyboardInterrupt:
+        kept = "" if args.no_resume else (
+            f"; the finished chunks are kept in {os.path.join(out_dir, tx.CACHE_FOLDER)} and "
+            "the same command resumes from them")
+        print(f"bake-textures: cancelled; no bake file was written{kept}", file=sys.stderr)
+        return 130
+    finally:
+        if client is not None:
+            from ..farm.distributed import close
+            close(client)
+    blend_files.save_atomically(path)
+    for rep in reports:
+        t = rep["timings"]
+        print(f"baked {rep['object']}: {rep['directions']} directions at "
+              f"{rep['settings']['resolution']}^2, model {rep['model']['kind']}, "
+              f"{rep['bytes']['total'] / 2**20:.1f} MiB; {t['wall_total']:.1f} s in all "
+              f"(bake {t['bake_total']:.1f} s: "
+              + (f"direct on the workers {t['distributed_wall']:.1f} s, "
+                 if "distributed_wall" in t else
+                 f"Cycles direct {t.get('direct_cycles', 0):.1f} s, ")
+              + f"indirect {t.get('indirect_cycles', 0):.1f} s; fit {t['fit']:.1f} s; camera "
+              f"comparison {t.get('compare_seconds', 0.0):.1f} s); report {rep['report']}")
+        fid = rep.get("model_vs_T") or {}
+        if "headline" in fid:
+            via = {"transport": "T through sparse tables",
+                   "pca": "the PCA"}.get(fid.get("viewport"), fid.get("viewport", "the model"))
+            extra = (f"; the PCA alone {fid['model_headline']:.3f}"
+                     if fid.get("viewport") == "transport" else "")
+            print(f"  the viewport ({via}) vs T itself at the held-out lights: "
+                  f"{fid['headline']:.3f} (worst {fid['worst']['rel']:.3f} at elevation "
+                  f"{fid['worst']['elevation']:g} deg{extra}; relight --source transport "
+                  "shows T)")
+        if rep is reports[0]:
+            _print_chunks(rep)
+        gt = rep.get("ground_truth")
+        if gt and rep is reports[0]:   # one headline over all objects baked together
+            print(f"  error vs Cycles Sun ({gt['sun_angle']:g} deg, {gt['truth_samples']} spp, "
+                  f"{rep['settings']['bounces']} bounces) at {len(gt['lights']) // len(reports)}"
+                  f" held-out lights: {gt['headline_rel_rmse']:.3f} relative RMSE "
+                  f"({gt['headline_of']}; from T directly {gt['transport_rel_rmse']:.3f})")
+        if rep is reports[0]:
+            _print_comparison(rep.get("comparison"))
+        te = rep.get("target_error")
+        if te:
+            print(f"  target {te['target_error']}: chose {te['chosen_directions']}, tol "
+                  f"{te['tol']}; achieved {te.get('achieved', float('nan')):.3f}"
+                  f"{'' if te.get('met') else ' (NOT met)'}")
+        if rep["glossy"]["materials"]:
+            print(f"  note: {rep['glossy']['note']}: "
+                  + ", ".join(m["material"] for m in rep["glossy"]["materials"]))
+    return EXIT_OK
+
+
+def _cmd_bake_chunk(args) -> int:
+    import bpy
+
+    from ..bakes import texture_transport as tx
+    from ..base.cycles_bake import BakeInputError, check_bakeable
+    from ..farm.distributed import bake_directions
+
+    path = _check_input_blend(args.file)
+    overrides = {k: getattr(args, k) for k in ("directions", "resolution", "seed")
+                 if getattr(args, k) is not None}
+    try:
+        settings = tx.settings_from_preset(args.preset, **overrides)
+        dset = settings.validate()
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    n = -(-dset.size // tx.CHUNK_DIRECTIONS)
+    if not 0 <= args.chunk < n:
+        raise CliError(f"--chunk must be in 0..{n - 1} ({dset.size} directions in chunks of "
+                       f"{tx.CHUNK_DIRECTIONS}), got {args.chunk}")
+    if args.threads < 0:
+        raise CliError(f"--threads must be >= 0, got {args.threads}")
+    out_dir = _check_output_dir(args.out, path)
+    objects = _open_objects(path, args.object)
+    try:
+        for o in objects:
+            check_bakeable(o)
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    start = args.chunk * tx.CHUNK_DIRECTIONS
+    stop = min(start + tx.CHUNK_DIRECTIONS, dset.size)
+    from ..base import cycles_device
+
+    device = _bake_device(args, "bake-chunk")
+    with cycles_device.use(device):   # the chunk cache's key names the device
+        cache = tx.direct_chunk_cache(bpy.context.scene, objects, settings, out_dir)
+        name = f"direct_{start:05d}"
+        if os.path.exists(cache.path(name)):
+            print(f"chunk {args.chunk}: directions {start}-{stop - 1} are already in "
+                  f"{cache.folder}")
+            return EXIT_OK
+        t0 = time.perf_counter()
+        try:
+            cycles = bake_directions(bpy.context.scene, objects, settings, start, stop, cache,
+                                     args.threads)
+        except BakeInputError as exc:
+            raise CliError(str(exc)) from None
+    print(f"chunk {args.chunk} of {n}: directions {start}-{stop - 1} baked on "
+          f"{device.describe()} in {time.perf_counter() - t0:.2f} s ({cycles:.2f} s in Cycles) "
+          f"into {cache.path(name)}")
+    return EXIT_OK
+
+
+def _cmd_bake_transport(args) -> int:
+    import bpy
+
+    from ..base import blend_files
+    from ..bakes import transport_bake
+    from ..base.cycles_bake import BakeInputError
+
+    settings = transport_bake.TransportSettings(
+        directions=args.directions, bounces=args.bounces, samples=args.samples,
+        energy=args.energy if args.coeffs is None else None, coeffs=args.coeffs,
+        clusters=args.clusters)
+    if settings.energy is None and settings.coeffs is None:
+        settings.energy = 0.99
+    path, out_dir = _check_bake_inputs(args, settings)
+    started = time.perf_counter()
+    obj = _open_object(path, args.object)
+    _refuse_existing(out_dir, obj.name, ("_transport.npz", "_transport.json",
+                                          "_transport_samples.npy"), args.force,
+                     "a transport bake")
+    n_vertices = len(obj.data.vertices) if obj.type == "MESH" else 0
+    if isinstance(settings.clusters, int) and settings.clusters > n_vertices > 0:
+        raise CliError(f"--clusters {settings.clusters} exceeds {obj.name}'s {n_vertices} "
+                       f"vertices; use at most {n_vertices} or 'auto'")
+    device = _bake_device(args, "bake-transport")
+    client = _dask_client(args)
+    try:
+        out = _run_job(transport_bake.transport_job(
+            bpy.context.scene, obj, settings, out_dir, truth_samples=256 if args.truth else 0,
+            resume=not args.no_resume, client=client, blend_path=path), "bake-transport",
+            device)
+    except (BakeInputError, ValueError) as exc:
+        raise CliError(f"nothing was written: {exc}") from None
+    except RuntimeError as exc:
+        if type(exc).__name__ != "DistributedError":
+            raise
+        raise CliError(f"{exc}; the finished chunks are kept, the same command resumes") from None
+    except KeyboardInterrupt:
+        kept = "" if args.no_resume else (
+            "; the finished chunks are kept and the same command resumes from them")
+        print(f"bake-transport: cancelled; no bake file was written{kept}", file=sys.stderr)
+        return 130
+    finally:
+        if client is not None:
+            from ..farm.distributed import close
+            close(client)
+    blend_files.save_atomically(path)
+    report, t = out.report, out.report["timings"]
+    for w in report.get("preview", {}).get("warnings", []):
+        print(f"relight: warning: {w}", file=sys.stderr)
+    print(f"baked {obj.name}: {report['vertices']} vertices x {report['directions']} directions "
+          f"in {t['wall_total']:.2f} s in all (bake {t['total_bake_seconds']:.2f} s, "
+          f"{t['directions_per_second']:.1f} directions/s; fit {t['fit_seconds']:.2f} s"
+          + (f"; truth {report['ground_truth']['truth_seconds']:.2f} s" if args.truth else "")
+          + f"; {time.perf_counter() - started - t['wall_total']:.2f} s more to open and save "
+            "the .blend); "
+          + (f"CPCA {report['cpca']['clusters']} clusters, {report['cpca']['cost_per_vertex']:.1f}"
+             f" multiply-adds per vertex (N = {report['cpca']['N']}), rel. RMS error "
+             f"{report['relative_rms_error']:.4f}; " if "cpca" in report else
+             f"d = {report['d']} (captured energy {report['captured_energy']:.4f}); ")
+          + f"{report['bytes']['sidecar_file']} bytes -> {report['sidecar']}")
+    for row in report.get("ground_truth", {}).get("per_d", []):
+        what = "CPCA model" if "cpca" in report else f"d = {row['d']:4d}"
+        print(f"  {what}: rel. RMS error vs Cycles {row['rel_rms_error']:.4f}")
+    if "all_directions_rel_rms_error" in report.get("ground_truth", {}):
+        print(f"  all {report['directions']} directions, no PCA: "
+              f"{report['ground_truth']['all_directions_rel_rms_error']:.4f} (sampling floor)")
+    _print_chunks(report)
+    return EXIT_OK
+
+
+def _cmd_analyze(args) -> int:
+    import bpy
+
+    from ..bakes import analyze, transport_bake
+    from ..base.cycles_bake import BakeInputError
+
+    path = _check_input_blend(args.file)
+    try:  # the same direction / bounce checks as bake-transport
+        ds = transport_bake.TransportSettings(directions=args.directions,
+                                              bounces=args.bounces).validate()
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    if not 0.0 <= args.tol <= 1.0:
+        raise CliError(f"--tol must be in [0, 1], got {args.tol}")
+    if args.seeds < 1:
+        raise CliError(f"--seeds must be >= 1, got {args.seeds}")
+    out_dir = _check_output_dir(args.out, path)
+    started = time.perf_counter()
+    obj = _open_object(path, args.object)
+    _refuse_existing(out_dir, obj.name, ("_analysis.json", "_dimensionality.png", "_cost.png"),
+                     args.force, "an analysis")
+    device = _bake_device(args, "analyze")
+    try:
+        out = _run_job(analyze.analysis_job(bpy.context.scene, obj, ds, out_dir, args.bounces,
+                                            None, args.tol, args.seeds,
+                                            reuse=not args.rebake), "analyze", device)
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    except KeyboardInterrupt:
+        print("analyze: cancelled; nothing was written", file=sys.stderr)
+        return 130
+    report, paths = out.report, out.paths
+    dim, best, ad, au = (report["dimensionality"], report["optimum"], report["adaptive"],
+                         report["auto"])
+    one = report["global_pca"]
+    prediction = (f"slope {dim['slope']:.3f}, mu {dim['mu']:.3f}, p* {dim['p_star']:.1f} -> "
+                  f"predicted {report['predicted_clusters']} clusters" if dim["mu"] is not None
+                  else "no slope (patches too small or saturated): no prediction")
+    src = report["transport_source"]
+    print(f"analyzed {obj.name}: {report['vertices']} vertices x {report['samples']} directions, "
+          f"N = {report['N']}; {prediction}")
+    print("  transport: " + (f"reused {src['file']} ({src['why']})" if src["kind"] == "reused"
+                              else f"baked in {report['timings']['bake_seconds']:.1f} s "
+                                   f"({src['why']})")
+          + f"; {report['timings']['wall_total']:.1f} s in all, "
+            f"{time.perf_counter() - started - report['timings']['wall_total']:.1f} s more to "
+            "open the .blend")
+    print(f"  cost per vertex: global PCA {one['cost_per_vertex']:.1f}, best fixed CPCA "
+          f"{best['cost_per_vertex']:.1f} at {best['clusters']} clusters, adaptive (paper) "
+          f"{ad['cost_per_vertex']:.1f} at {ad['clusters']} clusters, auto "
+          f"{au['cost_per_vertex']:.1f} at {au['clusters']} clusters")
+    print("  wrote " + ", ".join(paths.values()))
+    return EXIT_OK
+
+
+def _check_bake_inputs(args, settings) -> tuple[str, str]:
+    """What every bake verb checks before opening the file: the input .blend, the settings
+    (``settings.validate()``; a BakeInputError becomes one CLI line), the output folder and
+    that the .blend can be saved again. Returns ``(blend path, output folder)``."""
+    from ..base.cycles_bake import BakeInputError
+
+    path = _check_input_blend(args.file)
+    try:
+        settings.validate()
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    out_dir = _check_output_dir(args.out, path)
+    if not _can_create_in(os.path.dirname(path)):
+        raise CliError(f"cannot update {path}: its folder is not writable")
+    return path, out_dir
+
+
+def _check_output_dir(out: str | None, blend_path: str) -> str:
+    """The output folder (default next to the .blend), checked creatable and writable."""
+    from ..bakes.steerable_bake import default_output_dir
+
+    out_dir = os.path.abspath(out) if out else default_output_dir(blend_path)
+    parent = os.path.dirname(out_dir)
+    if not os.path.isdir(parent):
+        raise CliError(f"output folder's parent does not exist: {parent}")
+    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
+        raise CliError(f"output exists and is not a folder: {out_dir}")
+    if not _can_create_in(out_dir if os.path.isdir(out_dir) else parent):
+        raise CliError(f"output folder is not writable: {out_dir}")
+    return out_dir
+
+
+def _cmd_relight_vertices(args) -> int:
+    import warnings
+
+    import bpy
+
+    from ...lt_addon.transport.sidecar import read_environment_exr
+    from ..preview import vertex_relight
+
+    path = _check_input_blend(args.file)
+    out = _check_output_path(args.out, ".npy", args.force)
+    env = None
+    if args.env:
+        if not os.path.isfile(args.env):
+            raise CliError(f"environment file not found: {args.env}")
+        try:
+            env = read_environment_exr(args.env)
+        except (ValueError, OSError) as exc:
+            raise CliError(str(exc)) from None
+    obj = _open_object(path, args.object)
+    world_z = 0.0
+    if env is None and args.point_light is None:
+        env = vertex_relight.world_environment(bpy.context.scene)
+        if env is None:
+            raise CliError("the scene world has no environment image or colour; pass --env")
+        world_z, note = vertex_relight.world_rotation(bpy.context.scene)
+        if note:
+            print(f"relight: warning: {note}", file=sys.stderr)
+    try:
+        data = vertex_relight.transport_data(obj)
+    except (ValueError, FileNotFoundError) as exc:
+        raise CliError(str(exc)) from None
+    light = None
+    if args.point_light is not None:
+        light = (np.array(args.point_light[0]), args.point_light[1], (1.0, 1.0, 1.0))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        values = data.shade(env, vertex_relight.shade_rotation(world_z + args.rotate), 1.0,
+                            light).astype(np.float32)
+    for w in caught:
+        print(f"relight: warning: {w.message}", file=sys.stderr)
+    with atomic.atomic_path(out) as tmp:
+        np.save(tmp, values)
+    print(json.dumps({"object": obj.name, "vertices": int(values.shape[0]), "d": data.model.d,
+                      "mean": [float(v) for v in values.mean(axis=0)], "out": out}))
+    return EXIT_OK
+
+
+def _cmd_relight(args) -> int:
+    from ...lt_addon.io import exrio
+    from ...lt_addon.sphere.hemisphere import direction_from_az_el
+    from ..bakes import steerable_bake
+
+    path = _check_input_blend(args.file)
+    out = _check_output_path(args.out, ".exr", args.force) if args.out else None
+    if (args.light is None) == (args.env is None):
+        raise CliError("give exactly one of --light AZ,EL and --env HDR.exr")
+    obj = _open_object(path, args.object)
+    from ..base.blend_files import object_bakes
+
+    kinds = [b.get("kind") for b in object_bakes(obj)]
+    if "transport_texture" in kinds and (args.env or kinds.index("transport_texture") >
+                                         (kinds.index("steerable_texture")
+                                          if "steerable_texture" in kinds else -1)):
+        return _relight_transport(args, obj, out)
+    if args.env:
+        raise CliError(f"{obj.name}'s bake is a lobes bake; --env needs a transport bake "
+                       "(bake-textures --method transport)")
+    try:
+        texture = steerable_bake.load_texture(obj)
+    except (FileNotFoundError, ValueError) as exc:
+        raise CliError(str(exc)) from None
+    az, el = args.light
+    img = texture.relight(direction_from_az_el(az, el), args.intensity, args.color)
+    if out:
+        exrio.write_exr(out, {c: img[..., i] for i, c in enumerate("RGB")},
+                        {"light_azimuth": az, "light_elevation": el,
+                         "intensity": args.intensity, "color": list(args.color),
+                         "source": texture.settings}, pixel_type="float")
+    print(json.dumps({"object": obj.name, "light": [az, el], "mean": [float(v) for v in img.mean(axis=(0, 1))],
+                      "max": float(img.max()), "out": out}))
+    return EXIT_OK
+
+
+def _relight_transport(args, obj, out) -> int:
+    from ...lt_addon.io import exrio
+    from ...lt_addon.sphere.hemisphere import direction_from_az_el
+    from ..bakes import texture_transport as tx
+    from ..base.blend_files import bake_file
+
+    try:
+        bake, store, report = tx.load_bake(bake_file(obj, tx.KIND, "transport texture"))
+    except (FileNotFoundError, ValueError, KeyError) as exc:
+        raise CliError(str(exc)) from None
+    angle = report["settings"]["sun_angle"] if args.sun_angle is None else args.sun_angle
+    if not 0.0 <= angle <= 90.0:
+        raise CliError(f"--sun-angle must be in 0..90 degrees, got {angle}")
+    info = {"object": obj.name, "method": "transport"}
+    if args.env:
+        from ..base.cycles_bake import BakeInputError
+        from ..bakes.export import read_environment
+
+        env_path = os.path.abspath(args.env)
+        try:
+            env = read_environment(env_path)        # row 0 at the bottom (exrio)
+        except BakeInputError as exc:
+            raise CliError(str(exc)) from None
+        img = tx.relight_environment(bake, store, env, -args.rotate,   # Mapping convention
+                                     row_order="bottom_first", source=args.source)
+        img = img * args.intensity * np.asarray(args.color, np.float32)
+        info.update(env=env_path, rotate=args.rotate, source=args.source,
+                    indirect=("steered by the environment" if bake.indirect is not None
+                              else "none baked (bounces 0)"))
+    else:
+        az, el = args.light
+        img = tx.relight(bake, store, direction_from_az_el(az, el), angle, args.intensity,
+                         source=args.source, kernel=report["settings"].get("kernel", "linear"))
+        img = img * np.asarray(args.color, np.float32)
+        info.update(light=[az, el], sun_angle=angle, source=args.source)
+    if out:
+        exrio.write_exr(out, {c: img[..., i] for i, c in enumerate("RGB")},
+                        {k: v for k, v in info.items()}, pixel_type="float")
+    print(json.dumps({**info, "mean": [float(v) for v in img.mean(axis=(0, 1))],
+                      "max": float(img.max()), "out": out}))
+    return EXIT_OK
+
+
+def _cmd_compare(args) -> int:
+    import bpy
+
+    from ..preview import compare_render
+    from ..base.blend_files import blender_log_to_stderr
+    from ..base.cycles_bake import BakeInputError
+
+    path = _check_input_blend(args.file)
+    out = _check_output_path(args.out, ".png", args.force)
+    if not 0.0 <= args.sun_angle <= 30.0:
+        raise CliError(f"--sun-angle must be in 0..30 degrees, got {args.sun_angle}")
+    if args.samples < 1 or (args.resolution is not None and not 8 <= args.resolution <= 4096):
+        raise CliError("--samples must be >= 1 and --resolution in 8..4096")
+    with blender_log_to_stderr():
+        bpy.ops.wm.open_mainfile(filepath=path, load_ui=False)
+    scene = bpy.context.scene
+    objects = [o for o in scene.objects if o.type == "MESH"]
+    az, el = args.light
+    try:
+        with blender_log_to_stderr():
+            info = compare_render.compare(scene, objects, az, el, args.sun_angle, out,
+                                          args.samples, args.resolution)
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    print(json.dumps(info))
+    return EXIT_OK
+
+
+def _cmd_light_env(args) -> int:
+    from ...lt_addon.io import exrio
+    from ...lt_addon.sphere.hemisphere import direction_from_az_el
+    from ...lt_addon.steerable.basis import environment_image, paper_basis
+    from ...lt_addon.steerable.calibration import make_calibration
+    from ...lt_addon.sphere.hemisphere import hemisphere_to_disk
+
+    if not 2 <= args.order <= 12:
+        raise CliError(f"--order must be in 2..12, got {args.order}")
+    if not 8 <= args.height <= 8192:
+        raise CliError(f"--height must be in 8..8192, got {args.height}")
+    out = _check_output_path(args.out, ".exr", args.force)
+    az, el = args.light
+    d = direction_from_az_el(az, el)
+    basis = paper_basis(args.order)
+    gain, _ = make_calibration(basis, args.calibration).gain_offset(d)
+    env = environment_image(basis, hemisphere_to_disk(d), args.height, 2 * args.height,
+                            row_order="bottom_first", dtype=np.float64) * float(gain) * args.intensity
+    nbytes = exrio.write_exr(out, {c: env for c in "RGB"},
+                             {"order": args.order, "light_azimuth": az, "light_elevation": el,
+                              "calibration": args.calibration, "gain": float(gain),
+                              "intensity": args.intensity}, pixel_type="float")
+    print(f"wrote {out} ({args.height}x{2 * args.height}, {nbytes} bytes; "
+          f"min {env.min():.4g}, max {env.max():.4g}: negative lobes are part of the light)")
+    return EXIT_OK
+
+
+# ---------------------------------------------------------------------------------------------
+# Input checks (no bpy needed, so they fail fast and identically in every launcher)
+
+BLEND_MAGICS = (b"BLENDER", b"\x28\xb5\x2f\xfd", b"\x1f\x8b")  # plain, zstd, gzip (old)
+
+
+def _check_input_blend(path: str) -> str:
+    path = os.path.abspath(path)
+    if not os.path.exists(path):
+        raise CliError(f"input file not found: {path}")
+    if os.path.isdir(path):
+        raise CliError(f"input is a directory, not a .blend file: {path}")
+    if not path.lower().endswith(".blend"):
+        raise CliError(f"input must be a .blend file: {path}")
+    with open(path, "rb") as fh:
+        head = fh.read(7)
+    if not head.startswith(BLEND_MAGICS):
+        raise CliError(f"not a Blender file (bad header): {path}")
+    return path
+
+
+def _can_create_in(folder: str) -> bool:
+    """Really try to create (and remove) a file: permission bits lie for root and odd mounts."""
+    probe = os.path.join(folder, f".relight-write-probe-{os.getpid()}")
+    try:
+        with open(probe, "xb"):
+            pass
+    except OSError:
+        return False
+    os.remove(probe)
+    return True
+
+
+def _check_output_path(path: str, suffix: str, force: bool) -> str:
+    path = os.path.abspath(path)
+    if not path.lower().endswith(suffix):
+        raise CliError(f"output must end in {suffix}: {path}")
+    folder = os.path.dirname(path)
+    if not os.path.isdir(folder):
+        raise CliError(f"output directory does not exist: {folder}")
+    if not _can_create_in(folder):
+        raise CliError(f"output directory is not writable: {folder}")
+    if os.path.isdir(path):
+        raise CliError(f"output is a directory: {path}")
+    if os.path.exists(path) and not force:
+        raise CliError(f"output exists (use --force to overwrite): {path}")
+    if os.path.exists(path) and not os.access(path, os.W_OK):
+        raise CliError(f"output exists and is not writable: {path}")
+    return path

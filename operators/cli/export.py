@@ -1,0 +1,89 @@
+"""The ``relight export`` verb: parsing and printing only; the work is
+:func:`.export.export_job`."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+
+
+def add_parsers(sub) -> None:
+    from .commands import _az_el, _rgb
+    from ..bakes.export import FORMATS
+
+    p = sub.add_parser(
+        "export", help="export a transport-texture bake as a directional lightmap (L1 SH, "
+        "MonoSH) or an RTI model (PTM, HSH) with a relightable web page",
+        description="Fits a format from the object's transport-texture bake (bake-textures "
+                    "--method transport) and reports its error against our own relight. "
+                    "sh-l1: four half EXRs of L1 SH coefficients in Godot's layer order and "
+                    "axes; monosh: Bakery's MonoSH (L0 EXR + 8-bit direction PNG, Unity axes) "
+                    "-- both baked for one lighting, --env or --sun. rti-ptm / rti-hsh: a "
+                    "folder in the relight tools' layout (info.json, plane_<k>.png, as "
+                    "OpenLIME reads it) plus index.html, a page that relights it with the "
+                    "mouse.")
+    p.add_argument("file", metavar="FILE.blend")
+    p.add_argument("--object", required=True, metavar="NAME")
+    p.add_argument("--format", required=True, choices=FORMATS)
+    p.add_argument("--terms", type=int, metavar="K",
+                   help="rti-hsh: 4, 9 (default) or 16 terms (OpenLIME reads 4 and 9)")
+    p.add_argument("--env", metavar="HDR.exr", help="SH formats: light by this equirect EXR")
+    p.add_argument("--rotate", type=float, default=0.0, metavar="DEG",
+                   help="with --env: its rotation about +z, as a world Mapping node's Z")
+    p.add_argument("--sun", type=_az_el, metavar="AZ,EL",
+                   help="SH formats: light by a sun (azimuth, elevation in degrees)")
+    p.add_argument("--sun-angle", type=float, default=0.0, metavar="DEG")
+    p.add_argument("--strength", type=float, default=1.0,
+                   help="the light's strength (sun: W/m^2; env: a multiplier)")
+    p.add_argument("--color", type=_rgb, default=(1.0, 1.0, 1.0), metavar="R,G,B")
+    p.add_argument("--exposure", type=float, metavar="X",
+                   help="RTI: radiance scale before sRGB encoding (default: the 99.5th "
+                        "percentile of the brightest lights maps to 1)")
+    p.add_argument("--held-out", type=int, default=16, metavar="N",
+                   help="RTI: light directions off the baked ones the error is measured at")
+    p.add_argument("--out", metavar="DIR", help="output folder (default: next to the .blend, "
+                   "<name>_relight/)")
+    p.add_argument("--force", action="store_true", help="replace existing export files")
+    from .commands import _add_device_option
+    _add_device_option(p)
+    p.set_defaults(func=_cmd_export)
+
+
+def _cmd_export(args) -> int:
+    import bpy
+
+    from .commands import (EXIT_OK, CliError, _bake_device, _check_input_blend, _check_output_dir,
+                           _open_object, _run_job)
+    from ..base.cycles_bake import BakeInputError
+    from ..bakes.export import ExportSettings, export_job
+
+    path = _check_input_blend(args.file)
+    settings = ExportSettings(format=args.format, terms=args.terms,
+                              env=os.path.abspath(args.env) if args.env else None,
+                              rotate=args.rotate, sun=args.sun, sun_angle=args.sun_angle,
+                              strength=args.strength, color=args.color,
+                              exposure=args.exposure, held_out=args.held_out)
+    try:
+        settings.validate()
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    if settings.env is not None and not os.path.isfile(settings.env):
+        raise CliError(f"environment not found: {settings.env}")
+    out_dir = _check_output_dir(args.out, path)
+    obj = _open_object(path, args.object)
+    device = _bake_device(args, "export")
+    os.makedirs(out_dir, exist_ok=True)
+    try:
+        result = _run_job(export_job(bpy.context.scene, obj, settings, out_dir, args.force),
+                          "export", device)
+    except (BakeInputError, ValueError) as exc:
+        raise CliError(f"nothing was written: {exc}") from None
+    except KeyboardInterrupt:
+        print("export: cancelled; nothing was written", file=sys.stderr)
+        return 130
+    rep = result.report
+    print(json.dumps({k: rep[k] for k in ("object", "format", "bytes_per_texel",
+                                          "error_vs_our_relight", "timings")
+                      if k in rep} | {"files": result.files}, default=float))
+    return EXIT_OK

@@ -1,0 +1,558 @@
+"""The live preview: a "Steerable Illumination" shader node group and its material wiring (bpy).
+
+The group recombines the basis textures for a light direction entirely inside the node tree,
+so moving a slider (or the Sun lamp) needs no Python at all:
+
+1. light direction ``d`` (normalised) -- world frame, or per pixel in the UV tangent frame
+   ``(d.T, d.B, d.N)`` with ``T`` the UV tangent, ``N`` the shading normal, ``B = N x T``;
+2. disk point ``(x0, y0) = (dx, dy) / sqrt(1 + dz)`` (Ashikhmin & Shirley eq. 7);
+3. 1D coefficients ``c_i(x) = a_i cos(i w x + 3 (i - 1) pi / 2)``, products ``c_ij = c_i(x0) c_j(y0)``;
+4. ``S = sum_ij c_ij * tile_ij`` from one padded atlas image (one GPU sampler, see
+   :mod:`..lt_addon.io.atlas`), clamped at 0 (sec. 7.1);
+5. calibration gain ``max(dz, 0) / max(E(w0), floor * E_zenith)`` with
+   ``E(w0) = sum_ij c_ij E_ij`` (:mod:`..lt_addon.steerable.calibration`, steerable cos-law);
+6. output ``S * gain * intensity * colour`` (times an albedo input in irradiance mode).
+
+This equals :meth:`SteerableTexture.relight` up to float32 rounding and the half-float atlas
+(tests render it with Cycles and compare with NumPy).
+
+Material wiring is reversible: the nodes live in a frame "Relight Preview" with their own
+Material Output made active; :func:`remove_preview` deletes them and re-activates the user's
+output. Scene sliders are ID custom properties on the scene (``relight_azimuth`` ...), read by
+simple single-variable drivers, so the preview also works where the extension is not installed.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import bpy
+
+from ...lt_addon.io import exrio
+from ...lt_addon.io.atlas import atlas_layout, pack_atlas
+from ..base.compat import ensure_node_tree
+
+GROUP_PREFIX = "Steerable Illumination"
+FRAME_NAME = "Relight Preview"
+#: the bake kinds with a preview; a material holds at most one preview of each
+PREVIEW_KINDS = ("steerable_texture", "transport_texture", "eigentransport", "material_tensors")
+_TAG = "relight_preview"  # custom property marking our nodes
+OWNER = "relight_object"  # custom property: the object a preview's group belongs to
+
+#: Scene slider properties: name -> (default, min, max, description)
+SLIDERS = {
+    "relight_azimuth": (30.0, -360.0, 360.0, "Light azimuth in degrees (from +x towards +y)"),
+    "relight_elevation": (45.0, -90.0, 90.0, "Light elevation in degrees above the horizon"),
+    "relight_intensity": (1.0, 0.0, 1000.0, "Light normal irradiance (like a Sun's strength)"),
+    "relight_follow_sun": (0.0, 0.0, 1.0, "1: take the direction from the followed Sun lamp"),
+}
+COLOR_SLIDER = "relight_color"
+
+
+# ---------------------------------------------------------------------------------------------
+# small node helpers
+
+
+class _Builder:
+    """Adds nodes to a tree on a simple grid so the generated tree stays readable."""
+
+    def __init__(self, tree):
+        self.tree = tree
+        self.nodes, self.links = tree.nodes, tree.links
+
+    def node(self, kind, x, y, **attrs):
+        n = self.nodes.new(kind)
+        n.location = (x, y)
+        for k, v in attrs.items():
+            setattr(n, k, v)
+        return n
+
+    def math(self, op, a, b=None, c=None, x=0, y=0, clamp=False):
+        n = self.node("ShaderNodeMath", x, y, operation=op, use_clamp=clamp)
+        for i, v in enumerate((a, b, c)):
+            self._feed(n.inputs[i], v)
+        return n.outputs[0]
+
+    def vmath(self, op, a, b=None, x=0, y=0, scale=None):
+        n = self.node("ShaderNodeVectorMath", x, y, operation=op)
+        self._feed(n.inputs[0], a)
+        if b is not None:
+            self._feed(n.inputs[1], b)
+        if scale is not None:
+            self._feed(n.inputs["Scale"], scale)
+        return n.outputs["Value"] if op in ("DOT_PRODUCT", "LENGTH", "DISTANCE") else n.outputs["Vector"]
+
+    def _feed(self, socket, value):
+        if value is None:
+            return
+        if isinstance(value, bpy.types.NodeSocket):
+            self.links.new(value, socket)
+        else:
+            socket.default_value = value
+
+
+def _basis_constants(texture):
+    basis = texture.basis
+    cal = texture.calibration_model()
+    return basis, cal
+
+
+# ---------------------------------------------------------------------------------------------
+# the node group
+
+
+def after_sum(b, vector, acc, x, y):
+    """``vector`` made to depend on the running (scalar) sum ``acc`` without changing it (adds
+    ``acc > 1e30``, 0 for any real sum, which constant folding cannot remove). Cycles' SVM
+    compiles a shader graph in waves of ready nodes, so without it every tile's lookups are
+    compiled, and held on its 255-float stack, before the first sum: "out of SVM stack space"
+    from about 40 tiles (measured: 32 tiles rendered, 50 did not). Chained through the sum,
+    each tile's lookups wait for the previous tile and the stack holds one tile at a time."""
+    if acc is None:
+        return vector
+    never = b.math("GREATER_THAN", acc, 1e30, x=x, y=y)
+    return b.vmath("ADD", vector, never, x=x + 100, y=y)
+
+
+def new_light_group(name: str):
+    """A new tagged shader node group with the preview groups' light inputs -- Light Direction
+    (towards the light), Intensity, Color -- so a group node can swap between such groups (sun
+    and environment) and keep its links; callers add further inputs and the output."""
+    group = bpy.data.node_groups.new(name, "ShaderNodeTree")
+    group[_TAG] = True
+    iface = group.interface
+    s = iface.new_socket("Light Direction", in_out="INPUT", socket_type="NodeSocketVector")
+    s.default_value = (0.0, 0.0, 1.0)
+    s = iface.new_socket("Intensity", in_out="INPUT", socket_type="NodeSocketFloat")
+    s.default_value, s.min_value = 1.0, 0.0
+    s = iface.new_socket("Color", in_out="INPUT", socket_type="NodeSocketColor")
+    s.default_value = (1.0, 1.0, 1.0, 1.0)
+    return group
+
+
+def build_group(texture, atlas_image, uv_map: str, name: str | None = None):
+    """Create the "Steerable Illumination" node group for ``texture`` sampling ``atlas_image``.
+
+    Inputs: Light Direction (vector, towards the light), Intensity, Color, Albedo (used in
+    irradiance mode). Output: Color.
+    """
+    if texture.calibration != "steerable_cos":
+        raise ValueError("the live preview implements the steerable_cos calibration only")
+    basis, cal = _basis_constants(texture)
+    n1, n = basis.order, basis.order ** 2
+    group = new_light_group(name or f"{GROUP_PREFIX}")
+    iface = group.interface
+    s_alb = iface.new_socket("Albedo", in_out="INPUT", socket_type="NodeSocketColor")
+    s_alb.default_value = (0.8, 0.8, 0.8, 1.0)
+    iface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
+
+    b = _Builder(group)
+    gin = b.node("NodeGroupInput", -2400, 0)
+    gout = b.node("NodeGroupOutput", 2400, 0)
+    d = b.vmath("NORMALIZE", gin.outputs["Light Direction"], x=-2200, y=0)
+
+    if texture.frame == "tangent":
+        tangent = b.node("ShaderNodeTangent", -2400, -300, direction_type="UV_MAP", uv_map=uv_map)
+        geometry = b.node("ShaderNodeNewGeometry", -2400, -500)
+        normal = geometry.outputs["Normal"]
+        t_vec = tangent.outputs["Tangent"]
+        bitangent = b.vmath("CROSS_PRODUCT", normal, t_vec, x=-2200, y=-400)
+        dx = b.vmath("DOT_PRODUCT", d, t_vec, x=-2000, y=100)
+        dy = b.vmath("DOT_PRODUCT", d, bitangent, x=-2000, y=0)
+        dz = b.vmath("DOT_PRODUCT", d, normal, x=-2000, y=-100)
+    else:
+        sep = b.node("ShaderNodeSeparateXYZ", -2000, 0)
+        b.links.new(d, sep.inputs[0])
+        dx, dy, dz = sep.outputs["X"], sep.outputs["Y"], sep.outputs["Z"]
+
+    # disk point (eq. 7): divide by sqrt(1 + dz), guarded at dz = -1 (the light is off there)
+    root = b.math("SQRT", b.math("MAXIMUM", b.math("ADD", dz, 1.0, x=-1800, y=-100), 1e-6,
+                                 x=-1700, y=-100), x=-1600, y=-100)
+    x0 = b.math("DIVIDE", dx, root, x=-1500, y=100)
+    y0 = b.math("DIVIDE", dy, root, x=-1500, y=0)
+
+    # 1D steering coefficients
+    def coefficients(x, y_loc):
+        out = []
+        for i in range(1, n1 + 1):
+            phase = 3.0 * (i - 1) * math.pi / 2.0
+            arg = b.math("MULTIPLY_ADD", x, i * float(basis.w), phase, x=-1300, y=y_loc - 60 * i)
+            cos = b.math("COSINE", arg, x=-1150, y=y_loc - 60 * i)
+            out.append(b.math("MULTIPLY", cos, float(basis.a[i - 1]), x=-1000, y=y_loc - 60 * i))
+        return out
+
+    cx = coefficients(x0, 1200)
+    cy = coefficients(y0, 600)
+
+    # UV -> tile coordinates (tileable patches wrap with fract)
+    uv = b.node("ShaderNodeUVMap", -1300, -800, uv_map=uv_map).outputs["UV"]
+    if texture.frame == "tangent":
+        uv = b.vmath("FRACTION", uv, x=-1150, y=-800)
+
+    lay = atlas_layout(n, texture.resolution)
+    acc_color = None
+    acc_e = None
+    for k in range(n):
+        i, j = divmod(k, n1)
+        y_loc = 1400 - 120 * k
+        c = b.math("MULTIPLY", cx[i], cy[j], x=-700, y=y_loc)
+        su, sv, ou, ov = lay["tiles"][k]
+        mapping = b.node("ShaderNodeMapping", -500, y_loc, vector_type="POINT")
+        b.links.new(after_sum(b, uv, None if acc_color is None else b.vmath(
+            "DOT_PRODUCT", acc_color, (1.0, 0.0, 0.0), x=-900, y=y_loc), -800, y_loc),
+            mapping.inputs["Vector"])
+        mapping.inputs["Location"].default_value = (ou, ov, 0.0)
+        mapping.inputs["Scale"].default_value = (su, sv, 1.0)
+        tex = b.node("ShaderNodeTexImage", -300, y_loc, image=atlas_image,
+                     interpolation="Linear", extension="EXTEND")
+        b.links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
+        term = b.vmath("SCALE", tex.outputs["Color"], x=0, y=y_loc, scale=c)
+        acc_color = term if acc_color is None else b.vmath("ADD", acc_color, term, x=200, y=y_loc)
+        e_k = float(cal.E[k])
+        acc_e = (b.math("MULTIPLY", c, e_k, x=0, y=y_loc - 60) if acc_e is None
+                 else b.math("MULTIPLY_ADD", c, e_k, acc_e, x=200, y=y_loc - 60))
+
+    clamped = b.vmath("MAXIMUM", acc_color, (0.0, 0.0, 0.0), x=600, y=0)
+    denom = b.math("MAXIMUM", acc_e, float(cal.floor * cal.E_zenith), x=600, y=-200)
+    gain = b.math("DIVIDE", b.math("MAXIMUM", dz, 0.0, x=600, y=-300), denom, x=800, y=-250)
+    scale = b.math("MULTIPLY", gain, gin.outputs["Intensity"], x=1000, y=-250)
+    lit = b.vmath("SCALE", clamped, x=1200, y=0, scale=scale)
+    tinted = b.vmath("MULTIPLY", lit, gin.outputs["Color"], x=1400, y=0)
+    if texture.settings.get("mode") == "irradiance":
+        tinted = b.vmath("MULTIPLY", tinted, gin.outputs["Albedo"], x=1600, y=0)
+    b.links.new(tinted, gout.inputs["Color"])
+    return group
+
+
+# ---------------------------------------------------------------------------------------------
+# atlas image on disk
+
+
+def write_atlas(texture, exr_path: str) -> tuple[str, int]:
+    """Write the half-float preview atlas beside the basis EXR; returns (path, bytes)."""
+    padding = "wrap" if texture.frame == "tangent" else "edge"
+    atlas = pack_atlas(texture.basis_images, padding)
+    path = os.path.splitext(exr_path)[0] + "_atlas.exr"
+    nbytes = exrio.write_exr(path, {c: atlas[..., i] for i, c in enumerate("RGB")},
+                             {"format": "relightable_textures.atlas", "tiles": len(texture.basis_images),
+                              "resolution": texture.resolution, "padding": padding},
+                             pixel_type="half")
+    return path, nbytes
+
+
+def load_atlas_image(path: str, name: str):
+    """Load (or reload) the atlas as a non-colour float image with a relative path if possible."""
+    image = bpy.data.images.get(name)
+    if image is not None and bpy.path.abspath(image.filepath) == os.path.abspath(path):
+        image.reload()
+    else:
+        image = bpy.data.images.load(path, check_existing=False)
+        image.name = name
+    image.colorspace_settings.name = "Non-Color"
+    image.alpha_mode = "NONE"
+    if bpy.data.filepath:
+        try:
+            image.filepath = bpy.path.relpath(path)
+        except ValueError:
+            pass
+    image[_TAG] = True
+    return image
+
+
+# ---------------------------------------------------------------------------------------------
+# scene sliders and drivers
+
+
+def ensure_sliders(scene) -> None:
+    """Create the scene slider custom properties (with UI ranges) if missing."""
+    for key, (default, lo, hi, desc) in SLIDERS.items():
+        if key not in scene:
+            scene[key] = default
+        ui = scene.id_properties_ui(key)
+        ui.update(min=lo, max=hi, soft_min=max(lo, -180.0) if "azimuth" in key else lo,
+                  soft_max=hi, description=desc, default=default)
+    if COLOR_SLIDER not in scene:
+        scene[COLOR_SLIDER] = (1.0, 1.0, 1.0)
+    scene.id_properties_ui(COLOR_SLIDER).update(subtype="COLOR", min=0.0, soft_max=1.0,
+                                                description="Light colour (linear RGB)")
+
+
+def _drive(socket_owner, path: str, index: int, id_type: str, id_block, data_path: str,
+           expression: str = "var"):
+    fcurve = socket_owner.driver_add(path, index) if index >= 0 else socket_owner.driver_add(path)
+    drv = fcurve.driver
+    drv.type = "SCRIPTED"
+    while drv.variables:
+        drv.variables.remove(drv.variables[0])
+    var = drv.variables.new()
+    var.name = "var"
+    var.type = "SINGLE_PROP"
+    var.targets[0].id_type = id_type
+    var.targets[0].id = id_block
+    var.targets[0].data_path = data_path
+    drv.expression = expression  # a "simple expression": no Python needed
+    return fcurve
+
+
+def _controls(b, scene, sun, x, y):
+    """Nodes turning the scene sliders (and the Sun) into the group's direction/intensity/colour."""
+    az = b.node("ShaderNodeValue", x, y, label="Azimuth (deg)")
+    el = b.node("ShaderNodeValue", x, y - 100, label="Elevation (deg)")
+    inten = b.node("ShaderNodeValue", x, y - 200, label="Intensity")
+    follow = b.node("ShaderNodeValue", x, y - 300, label="Follow Sun")
+    color = b.node("ShaderNodeRGB", x, y - 400, label="Light Color")
+    sun_dir = b.node("ShaderNodeCombineXYZ", x, y - 600, label="Sun Direction")
+    for node, key in ((az, "relight_azimuth"), (el, "relight_elevation"),
+                      (inten, "relight_intensity"), (follow, "relight_follow_sun")):
+        node.outputs[0].default_value = float(scene[key])
+        _drive(node.outputs[0], "default_value", -1, "SCENE", scene, f'["{key}"]')
+    for i in range(3):
+        color.outputs[0].default_value[i] = float(scene[COLOR_SLIDER][i])
+        _drive(color.outputs[0], "default_value", i, "SCENE", scene, f'["{COLOR_SLIDER}"][{i}]')
+    set_sun_drivers(sun_dir, sun)
+    # direction from azimuth / elevation (degrees)
+    az_r = b.math("RADIANS", az.outputs[0], x=x + 200, y=y)
+    el_r = b.math("RADIANS", el.outputs[0], x=x + 200, y=y - 100)
+    cos_el = b.math("COSINE", el_r, x=x + 350, y=y - 100)
+    dir_x = b.math("MULTIPLY", cos_el, b.math("COSINE", az_r, x=x + 350, y=y), x=x + 500, y=y)
+    dir_y = b.math("MULTIPLY", cos_el, b.math("SINE", az_r, x=x + 350, y=y + 100), x=x + 500, y=y - 50)
+    dir_z = b.math("SINE", el_r, x=x + 500, y=y - 100)
+    slider_dir = b.node("ShaderNodeCombineXYZ", x + 650, y)
+    for i, s in enumerate((dir_x, dir_y, dir_z)):
+        b.links.new(s, slider_dir.inputs[i])
+    mix = b.node("ShaderNodeMix", x + 850, y - 200, data_type="VECTOR", clamp_factor=True)
+    b.links.new(follow.outputs[0], mix.inputs["Factor"])
+    b.links.new(slider_dir.outputs[0], mix.inputs[4])  # A (vector)
+    b.links.new(sun_dir.outputs[0], mix.inputs[5])  # B (vector)
+    return mix.outputs[1], inten.outputs[0], color.outputs[0], sun_dir
+
+
+def set_sun_drivers(sun_dir_node, sun) -> None:
+    """Drive the Sun Direction node from ``sun``'s local +z axis (the direction towards it)."""
+    for i in range(3):
+        sun_dir_node.inputs[i].driver_remove("default_value")
+        if sun is not None:
+            # RNA stores matrices column-major: matrix_world[2][i] is mathutils' m[i][2],
+            # component i of the local +z axis
+            _drive(sun_dir_node.inputs[i], "default_value", -1, "OBJECT", sun,
+                   f"matrix_world[2][{i}]")
+        else:
+            sun_dir_node.inputs[i].default_value = (0.0, 0.0, 1.0)[i]
+
+
+# ---------------------------------------------------------------------------------------------
+# material wiring
+
+
+#: custom property naming the bake kind a preview node belongs to (its frame, nodes and output)
+_KIND = "relight_preview_kind"
+
+
+def _preview_nodes(tree, kind: str | None = None):
+    """Our nodes in ``tree`` (of one bake ``kind``, or all)."""
+    if tree is None:
+        return []
+    return [n for n in tree.nodes if n.get(_TAG) and (kind is None or n.get(_KIND) == kind)]
+
+
+def preview_kinds(obj) -> list:
+    """The bake kinds whose previews the object's materials hold, the shown one first."""
+    kinds, shown = [], None
+    for mat in {s.material for s in obj.material_slots if s.material}:
+        for n in _preview_nodes(mat.node_tree):
+            if n.bl_idname == "ShaderNodeOutputMaterial" and n.get(_KIND):
+                kinds.append(n[_KIND])
+                if n.is_active_output:
+                    shown = n[_KIND]
+    kinds = sorted(set(kinds))
+    return ([shown] if shown else []) + [k for k in kinds if k != shown]
+
+
+def activate_preview(obj, kind: str) -> bool:
+    """Show the object's existing preview of ``kind`` (previews of different bakes coexist in
+    a material, each with its own output; this makes its output the active one). False when a
+    material of the object holds no preview of that kind (nothing changed then)."""
+    mats = [m for m in {s.material for s in obj.material_slots if s.material}]
+    outs = []
+    for mat in mats:
+        ours = [n for n in _preview_nodes(mat.node_tree, kind)
+                if n.bl_idname == "ShaderNodeOutputMaterial"]
+        if not ours:
+            return False
+        outs.append((mat, ours[0]))
+    for mat, out in outs:
+        for node in mat.node_tree.nodes:
+            if node.bl_idname == "ShaderNodeOutputMaterial":
+                node.is_active_output = node == out
+    return bool(outs)
+
+
+def remove_preview(obj, scene=None, purge: bool = True, kind: str | None = None) -> int:
+    """Remove our preview from the object's materials completely: the tagged nodes and the
+    drivers on them, then our node groups and atlas images nothing uses any more, and -- given
+    ``scene`` and when no material shows a preview any more -- the scene's light sliders (so the
+    Preview Light panel offers no sliders that drive nothing). Returns how many materials
+    changed. The user's own nodes, images and properties are never touched. ``purge=False``
+    keeps the unused groups and images (a new preview about to use them is being wired)."""
+    changed = 0
+    for mat in {s.material for s in obj.material_slots if s.material}:
+        tree = mat.node_tree
+        ours = _preview_nodes(tree, kind)
+        if not ours:
+            continue
+        names = {f'nodes["{n.name}"]' for n in ours}
+        anim = tree.animation_data
+        if anim is not None:
+            for fc in [fc for fc in anim.drivers if fc.data_path.split(".")[0] in names]:
+                anim.drivers.remove(fc)
+        for node in ours:
+            tree.nodes.remove(node)
+        outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+        if outputs and not any(n.is_active_output for n in outputs):
+            # the user's own output, not another bake's preview
+            (next((n for n in outputs if not n.get(_TAG)), outputs[0])).is_active_output = True
+        changed += 1
+    if not purge:
+        return changed
+    # A group only a fake user holds is the other light mode of a transport preview: unused
+    # once no group of the same object is in a material any more.
+    ours = [g for g in bpy.data.node_groups if g.get(_TAG)]
+    shown = {g.get(OWNER) for g in ours if g.users > int(g.use_fake_user)}
+    for group in [g for g in ours if g.users == 0
+                  or (g.use_fake_user and g.users == 1 and g.get(OWNER) not in shown)]:
+        bpy.data.node_groups.remove(group)
+    for image in [i for i in bpy.data.images if i.get(_TAG) and i.users == 0]:
+        bpy.data.images.remove(image)
+    if scene is not None and not any(_preview_nodes(m.node_tree) for m in bpy.data.materials
+                                     if m.node_tree is not None):
+        for key in (*SLIDERS, COLOR_SLIDER):
+            if key in scene:
+                del scene[key]
+    return changed
+
+
+def _wire_preview(obj, build_color, kind: str) -> None:
+    """Put a preview of bake ``kind`` into every material of ``obj``: ``build_color(builder)``
+    adds the nodes computing the preview colour and returns its socket; it is shown through an
+    Emission and our own Material Output, made active. All new nodes are tagged with the kind
+    and framed, so :func:`remove_preview` can take them out again and previews of other kinds
+    stay (switched by :func:`activate_preview`); the user's nodes are not touched."""
+    remove_preview(obj, purge=False, kind=kind)
+    if not obj.material_slots or not any(s.material for s in obj.material_slots):
+        obj.data.materials.append(bpy.data.materials.new(f"{obj.name} Relight"))
+    for mat in {s.material for s in obj.material_slots if s.material}:
+        tree = ensure_node_tree(mat)
+        before = {nd.name for nd in tree.nodes}
+        b = _Builder(tree)
+        frame = b.node("NodeFrame", -200, 900, label=f"{FRAME_NAME}: {kind.replace('_', ' ')}")
+        color = build_color(b)
+        emission = b.node("ShaderNodeEmission", 1100, 700)
+        emission.inputs["Strength"].default_value = 1.0
+        b.links.new(color, emission.inputs["Color"])
+        out = b.node("ShaderNodeOutputMaterial", 1300, 700, label="Relight Preview Output",
+                     target="ALL")
+        b.links.new(emission.outputs[0], out.inputs["Surface"])
+        for node in tree.nodes:
+            if node.bl_idname == "ShaderNodeOutputMaterial":
+                node.is_active_output = node == out
+        for nd in tree.nodes:
+            if nd.name not in before:
+                nd[_TAG] = True
+                nd[_KIND] = kind
+                if nd != frame:
+                    nd.parent = frame
+        # each kind's frame in its own band of the node editor, so coexisting previews
+        # do not overlap
+        frame.location.y -= 1600 * PREVIEW_KINDS.index(kind)
+
+
+def install_preview(scene, obj, exr_path: str, texture, sun=None) -> dict:
+    """Write the atlas, build the group and wire it into every material of ``obj``.
+
+    Replaces an earlier preview of the same object. Returns {"atlas": path, "atlas_bytes": n,
+    "group": name, "group_nodes": count}.
+    """
+    atlas_path, atlas_bytes = write_atlas(texture, exr_path)
+    image = load_atlas_image(atlas_path, f"{obj.name} steerable atlas")
+    uv_map = next((uv.name for uv in obj.data.uv_layers if uv.active_render),
+                  obj.data.uv_layers[0].name)
+    old = bpy.data.node_groups.get(f"{GROUP_PREFIX} ({obj.name})")
+    group = build_group(texture, image, uv_map, name=f"{GROUP_PREFIX} ({obj.name})")
+    if old is not None:
+        bpy.data.node_groups.remove(old)
+        group.name = f"{GROUP_PREFIX} ({obj.name})"
+    ensure_sliders(scene)
+    if sun is None:
+        sun = scene.get("relight_sun")
+
+    def steered_color(b):
+        direction, intensity, color, _ = _controls(b, scene, sun, -200, 800)
+        gnode = b.node("ShaderNodeGroup", 900, 700, node_tree=group,
+                       label="Steerable Illumination")
+        b.links.new(direction, gnode.inputs["Light Direction"])
+        b.links.new(intensity, gnode.inputs["Intensity"])
+        b.links.new(color, gnode.inputs["Color"])
+        return gnode.outputs["Color"]
+
+    _wire_preview(obj, steered_color, "steerable_texture")
+    return {"atlas": atlas_path, "atlas_bytes": atlas_bytes, "group": group.name,
+            "group_nodes": len(group.nodes)}
+
+
+def set_follow_sun(scene, sun) -> int:
+    """Point every preview's Sun Direction drivers at ``sun`` (None: detach); returns count."""
+    changed = 0
+    for mat in bpy.data.materials:
+        if mat.node_tree is None:
+            continue
+        for node in mat.node_tree.nodes:
+            if node.get(_TAG) and node.bl_idname == "ShaderNodeCombineXYZ" and \
+                    node.label == "Sun Direction":
+                set_sun_drivers(node, sun)
+                changed += 1
+    if sun is not None:
+        scene["relight_sun"] = sun
+    elif "relight_sun" in scene:
+        del scene["relight_sun"]
+    return changed
+
+
+def _base_color(b):
+    """The material's own diffuse colour as a socket of ``b.tree``: whatever feeds the first
+    Principled / Diffuse BSDF's Base Color (a texture keeps working), or its constant colour;
+    None for a material without one."""
+    for node in b.tree.nodes:
+        if node.get(_TAG):
+            continue
+        name = {"ShaderNodeBsdfPrincipled": "Base Color",
+                "ShaderNodeBsdfDiffuse": "Color"}.get(node.bl_idname)
+        if name is None:
+            continue
+        socket = node.inputs[name]
+        if socket.is_linked:
+            return socket.links[0].from_socket
+        rgb = b.node("ShaderNodeRGB", 900, 1100, label="Base Color")
+        rgb.outputs[0].default_value = tuple(socket.default_value)
+        return rgb.outputs[0]
+    return None
+
+
+def install_attribute_preview(obj, attribute: str, kind: str = "eigentransport",
+                              base_color: bool = True) -> None:
+    """Show a colour attribute as emission: white-surface radiance (the per-vertex
+    eigentransport preview) multiplied by the material's own base colour (issue 12: an orange
+    object previewed grey), or with ``base_color=False`` the attribute as it is (the material
+    edits' preview, which holds the edited colours already)."""
+    def build(b):
+        light = b.node("ShaderNodeVertexColor", 900, 900, layer_name=attribute).outputs["Color"]
+        base = _base_color(b) if base_color else None
+        if base is None:
+            return light
+        mul = b.node("ShaderNodeVectorMath", 1000, 1000, operation="MULTIPLY",
+                     label="Light x Base Color")
+        b.links.new(light, mul.inputs[0])
+        b.links.new(base, mul.inputs[1])
+        return mul.outputs[0]
+
+    _wire_preview(obj, build, kind)

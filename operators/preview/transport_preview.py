@@ -1,0 +1,750 @@
+"""Live viewport preview of a transport-texture bake: no Python per light change (bpy).
+
+Two sun groups, chosen by the bake's ``viewport`` setting (:func:`install_transport_preview`):
+
+* **from T itself** (:func:`build_sparse_group`): an 8-bit atlas of T, three directions per
+  RGB tile, and sparse kernel tables over the hemisphere disk
+  (:mod:`..lt_addon.transport.sparse_tables`): per pixel the four table texels around the
+  light's disk point, six directions each. Keeps cast shadows on large receivers; its NumPy
+  twin is :func:`viewport_relight_sparse`;
+* **from the PCA** (:func:`build_group`), described below; the World light always uses the PCA.
+
+The model relights a sun from ``w0`` as ``albedo * sum_k c_k(w0) U_k`` (+ the indirect term).
+``c_k`` is tabulated over the hemisphere disk (:func:`..lt_addon.transport.texture.
+coefficient_tables`), so the node group only needs texture lookups:
+
+1. the light's disk point ``(x0, y0) = (dx, dy) / sqrt(1 + dz)`` -> table coordinate
+   ``((x0 + 1) / 2, (y0 + 1) / 2)``;
+2. per group of three components, one lookup in the *table atlas* (coefficients in R, G, B)
+   and one in the *eigen atlas* at the texel's UV (eigen-textures in R, G, B); their dot
+   product, summed -- both atlases padded tiles, one GPU sampler each;
+3. times the albedo tile of the eigen atlas, gated to 0 below the horizon;
+4. plus the indirect term through the steerable group of :mod:`.preview_nodes`;
+5. times intensity and colour.
+
+:func:`viewport_relight` is the same computation in NumPy (bilinear table lookup, half-float
+atlases), which the tests compare with a Cycles render of the group. The sun size is baked
+into the tables; changing it rewrites them (:func:`install_transport_preview`, a few ms).
+
+**The world's environment** (the scene's *Texture Light* set to World): an environment is
+``sum_s L(w_s) dw_s T[s]``, so each component gets one RGB coefficient ``C[:, k] = sum_s L_s
+dw_s V[s, k]`` and each steerable indirect basis image one ``G[:, j] = sum_s L_s dw_s gain(w_s)
+c_j(w_s)``. The *environment groups* (:func:`build_env_group`, :func:`build_env_indirect_group`)
+have the sun groups' sockets, so switching swaps the groups' trees and keeps every link; they
+hold ``C`` and ``G`` as constants that Python rewrites when the world, its Mapping Z rotation or
+the Environment Rotation / Strength change (:func:`update_environment_previews`, one small
+matrix product: no re-bake, no texture rewrite). :func:`viewport_relight_env` is its NumPy twin.
+"""
+
+from __future__ import annotations
+
+import os
+
+import bpy
+import numpy as np
+
+import time
+
+from ...lt_addon.io import exrio
+from ...lt_addon.transport import sparse_tables as sp
+from ...lt_addon.transport import texture as tt
+from ...lt_addon.io.atlas import atlas_layout, pack_atlas
+from . import preview_nodes as pn
+
+GROUP_PREFIX = "Relight Transport"
+ENV_PREFIX = "Relight Transport env"
+#: Scene property holding the last environment-preview warning (shown in the panel).
+ENV_WARNING_KEY = "relight_texture_env_warning"
+
+
+def _tiles3(arr):
+    """(K, R, R) -> (ceil(K/3), R, R, 3), zero-padded."""
+    K, R = arr.shape[0], arr.shape[1]
+    n = -(-K // 3)
+    out = np.zeros((n * 3, R, R), np.float32)
+    out[:K] = arr
+    return out.reshape(n, 3, R, R).transpose(0, 2, 3, 1)
+
+
+def preview_arrays(model: tt.TexturePCA, albedo, directions, sun_angle: float, table_size: int,
+                   kernel: str = "linear"):
+    """(eigen tiles (n+1, R, R, 3) with the albedo last, table tiles (n, D, D, 3)), float32."""
+    R = model.resolution
+    U = model.U.reshape(model.k, R, R)
+    eig = np.concatenate([_tiles3(U), np.asarray(albedo, np.float32)[None]], axis=0)
+    tables = tt.coefficient_tables(model.V, directions, table_size, sun_angle, kernel)
+    return eig, _tiles3(tables)
+
+
+def viewport_relight(eig_tiles, table_tiles, direction) -> np.ndarray:
+    """NumPy twin of the node group (direct light only, intensity 1): (R, R, 3)."""
+    eig = np.asarray(eig_tiles, np.float64)
+    tab = np.asarray(table_tiles, np.float64)
+    n = tab.shape[0]
+    coeffs = tt.table_lookup(tab.transpose(0, 3, 1, 2).reshape(n * 3, *tab.shape[1:3]),
+                             direction).reshape(n, 3)
+    e = np.einsum("tc,tyxc->yx", coeffs, eig[:n])
+    return (e[..., None] * eig[n]).astype(np.float32)
+
+
+def write_preview_files(base: str, eig, tables) -> dict:
+    """Write the two half-float atlases; returns their paths and bytes."""
+    out = {}
+    for name, arr in (("eigen", eig), ("tables", tables)):
+        atlas = pack_atlas(arr.astype(np.float32), "edge")
+        path = f"{base}_preview_{name}.exr"
+        out[name] = path
+        out[f"{name}_bytes"] = exrio.write_exr(
+            path, {c: atlas[..., i] for i, c in enumerate("RGB")},
+            {"format": "relightable_textures.transport_preview", "tiles": len(arr),
+             "resolution": arr.shape[1]}, pixel_type="half")
+    return out
+
+
+def _lookup(b, image, uv, tile, x, y):
+    su, sv, ou, ov = tile
+    mapping = b.node("ShaderNodeMapping", x, y, vector_type="POINT")
+    b.links.new(uv, mapping.inputs["Vector"])
+    mapping.inputs["Location"].default_value = (ou, ov, 0.0)
+    mapping.inputs["Scale"].default_value = (su, sv, 1.0)
+    tex = b.node("ShaderNodeTexImage", x + 200, y, image=image, interpolation="Linear",
+                 extension="EXTEND")
+    b.links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
+    return tex.outputs["Color"]
+
+
+def _sun_group_head(name: str, x_in: float, x_out: float):
+    """A new sun group (light inputs, Color output) and the light's unit direction: returns
+    (group, builder, group input, group output, (dx, dy, dz) sockets, sqrt(1 + dz) socket --
+    the disk map's denominator)."""
+    group = pn.new_light_group(name)
+    group.interface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
+    b = pn._Builder(group)
+    gin = b.node("NodeGroupInput", x_in, 0)
+    gout = b.node("NodeGroupOutput", x_out, 0)
+    d = b.vmath("NORMALIZE", gin.outputs["Light Direction"], x=x_in + 200, y=0)
+    sep = b.node("ShaderNodeSeparateXYZ", x_in + 400, 0)
+    b.links.new(d, sep.inputs[0])
+    dz = sep.outputs["Z"]
+    root = b.math("SQRT", b.math("MAXIMUM", b.math("ADD", dz, 1.0, x=x_in + 600, y=-100), 1e-6,
+                                 x=x_in + 700, y=-100), x=x_in + 800, y=-100)
+    return group, b, gin, gout, (sep.outputs["X"], sep.outputs["Y"], dz), root
+
+
+def _sun_group_tail(b, gin, gout, irradiance, albedo, dz, x: float) -> None:
+    """Output ``albedo * irradiance * Intensity * Color``, 0 with the light below the horizon."""
+    lit = b.math("GREATER_THAN", dz, 0.0, x=x, y=-200)
+    scale = b.math("MULTIPLY", b.math("MULTIPLY", irradiance, lit, x=x + 200, y=-100),
+                   gin.outputs["Intensity"], x=x + 400, y=-100)
+    color = b.vmath("SCALE", albedo, x=x + 600, y=-300, scale=scale)
+    color = b.vmath("MULTIPLY", color, gin.outputs["Color"], x=x + 800, y=-300)
+    b.links.new(color, gout.inputs["Color"])
+
+
+def build_group(n_tiles: int, resolution: int, table_size: int, eig_image, table_image,
+                uv_map: str, name: str):
+    """The node group: inputs Light Direction, Intensity, Color; output Color (direct light)."""
+    group, b, gin, gout, (dx, dy, dz), root = _sun_group_head(name, -1800, 1600)
+    tx = b.math("MULTIPLY_ADD", b.math("DIVIDE", dx, root, x=-900, y=100), 0.5, 0.5, x=-800, y=100)
+    ty = b.math("MULTIPLY_ADD", b.math("DIVIDE", dy, root, x=-900, y=0), 0.5, 0.5, x=-800, y=0)
+    table_uv = b.node("ShaderNodeCombineXYZ", -700, 50)
+    b.links.new(tx, table_uv.inputs[0])
+    b.links.new(ty, table_uv.inputs[1])
+    uv = b.node("ShaderNodeUVMap", -700, -400, uv_map=uv_map).outputs["UV"]
+    lay_e = atlas_layout(n_tiles + 1, resolution)
+    lay_t = atlas_layout(n_tiles, table_size)
+    acc = None
+    for t in range(n_tiles):
+        y = 600 - 220 * t
+        c = _lookup(b, table_image, pn.after_sum(b, table_uv.outputs[0], acc, -700, y), lay_t["tiles"][t],
+                    -500, y)
+        e = _lookup(b, eig_image, pn.after_sum(b, uv, acc, -700, y - 100), lay_e["tiles"][t], -500,
+                    y - 100)
+        dot = b.vmath("DOT_PRODUCT", c, e, x=-50, y=y)
+        acc = dot if acc is None else b.math("ADD", acc, dot, x=150, y=y)
+    albedo = _lookup(b, eig_image, uv, lay_e["tiles"][n_tiles], -500, -600)
+    _sun_group_tail(b, gin, gout, acc, albedo, dz, 150)
+    return group
+
+
+# ---------------------------------------------------------------------------------------------
+# the viewport from T itself: sparse kernel tables (lt_addon/transport/sparse_tables.py)
+
+
+def viewport_relight_sparse(tiles, indices, weights, albedo, direction) -> np.ndarray:
+    """NumPy twin of :func:`build_sparse_group` (direct light, intensity 1): (R, R, 3) from the
+    8-bit atlas tiles (uint8, read as ``q / 255``), the scaled weights and the albedo tile."""
+    e = sp.viewport_relight(tiles, indices, weights, direction, 1.0 / 255.0)
+    return (e[..., None] * np.asarray(albedo, np.float64)).astype(np.float32)
+
+
+def table_parts(arr) -> np.ndarray:
+    """(D, D, K) -> (D, (K/3) D, 3): taps 0-2 in the first part, 3-5 in the next, ... (one
+    image, one sampler, one lookup per part and table texel)."""
+    a = np.asarray(arr)
+    return np.concatenate([a[..., i:i + 3] for i in range(0, a.shape[-1], 3)], axis=1)
+
+
+def tables_from_parts(img) -> np.ndarray:
+    """Inverse of :func:`table_parts`: (D, (K/3) D, 3) -> (D, D, K)."""
+    a = np.asarray(img)
+    D = a.shape[0]
+    return np.concatenate([a[:, i:i + D] for i in range(0, a.shape[1], D)], axis=-1)
+
+
+def write_sparse_tables(base: str, indices, weights, scales, sun_angle: float) -> dict:
+    """The index table and the weight table (times the directions' atlas scales) as float
+    EXRs (indices are exact integers), each (D, (K/3) D) RGB: :func:`table_parts`."""
+    out = {}
+    for name, arr in (("sparse_index", table_parts(np.asarray(indices, np.float32))),
+                      ("sparse_weights", table_parts(sp.scaled_weights(indices, weights,
+                                                                       scales)))):
+        path = f"{base}_preview_{name}.exr"
+        out[name] = path
+        out[f"{name}_bytes"] = exrio.write_exr(
+            path, {c: arr[..., i] for i, c in enumerate("RGB")},
+            {"format": "relightable_textures.transport_sparse_table", "size": arr.shape[0],
+             "sun_angle": sun_angle}, pixel_type="float")
+    return out
+
+
+def write_sparse_atlas(base: str, store) -> dict:
+    """T's 8-bit atlas (PNG, three directions per RGB tile) and its per-direction scales
+    (JSON beside it); returns paths, bytes and the scales."""
+    from ...lt_addon.io import atomic
+    from ...lt_addon.io.contact_sheet import write_png
+
+    from ..bakes.texture_transport import quantized
+
+    tiles, scales = quantized(store)
+    path = f"{base}_preview_transport.png"
+    atlas = pack_atlas(tiles, "edge")
+    nbytes = write_png(path, atlas[::-1])       # PNG rows top first, Blender's bottom first
+    meta = f"{base}_preview_transport.json"
+    atomic.write_json(meta, {"format": "relightable_textures.transport_sparse_atlas",
+                             "tiles": len(tiles), "resolution": tiles.shape[1],
+                             "directions": int(len(scales)), "scales": scales.tolist(),
+                             "meaning": "texel = q / 255 * scales[direction]"})
+    return {"transport_atlas": path, "transport_atlas_bytes": nbytes,
+            "transport_scales": meta}, scales
+
+
+def _scales(path: str) -> np.ndarray:
+    import json
+
+    with open(path) as fh:
+        return np.asarray(json.load(fh)["scales"], np.float64)
+
+
+def _closest(b, image, vector, x, y):
+    tex = b.node("ShaderNodeTexImage", x, y, image=image, interpolation="Closest",
+                 extension="EXTEND")
+    b.links.new(vector, tex.inputs["Vector"])
+    sep = b.node("ShaderNodeSeparateColor", x + 200, y)
+    b.links.new(tex.outputs["Color"], sep.inputs[0])
+    return sep.outputs
+
+
+def build_sparse_group(n_directions: int, resolution: int, table_size: int, taps: int,
+                       atlas_image, index_image, weight_image, albedo_image, albedo_tile,
+                       uv_map: str, name: str):
+    """The sun group relighting from T: the sockets of :func:`build_group`.
+
+    At the light's disk point the four surrounding table texels are read with Closest lookups
+    (``taps`` direction indices, ``taps`` scaled weights each, in ``taps / 3`` parts of the
+    tables) and weighted bilinearly; each index ``i`` selects tile ``i // 3`` of the 8-bit atlas
+    (its offset computed in the tree) and channel ``i % 3``. 4 x (2 taps / 3 + taps) lookups,
+    plus the albedo
+    (``albedo_tile`` of the half-float ``albedo_image``: 8 bits would cost a dark albedo its
+    precision)."""
+    group, b, gin, gout, (dx, dy, dz), root = _sun_group_head(name, -2600, 2200)
+    D = int(table_size)
+    cell, frac = [], []
+    for axis, comp in enumerate((dx, dy)):
+        y = 200 - 200 * axis
+        p = b.math("DIVIDE", comp, root, x=-1700, y=y)
+        f = b.math("MULTIPLY_ADD", p, 0.5 * D, 0.5 * D - 0.5, x=-1600, y=y)
+        f = b.math("MINIMUM", b.math("MAXIMUM", f, 0.0, x=-1500, y=y), D - 1.0, x=-1400, y=y)
+        c0 = b.math("MINIMUM", b.math("FLOOR", f, x=-1300, y=y), D - 2.0, x=-1200, y=y)
+        cell.append(c0)
+        frac.append(b.math("SUBTRACT", f, c0, x=-1100, y=y))
+    uv = b.node("ShaderNodeUVMap", -1400, -600, uv_map=uv_map).outputs["UV"]
+    lay = atlas_layout(-(-n_directions // 3), resolution)
+    cols, stride, W, H = lay["cols"], lay["stride"], lay["width"], lay["height"]
+    acc = None
+    y = 1200
+    for cy in (0, 1):
+        for cx in (0, 1):
+            fu = frac[0] if cx else b.math("SUBTRACT", 1.0, frac[0], x=-1000, y=y)
+            fv = frac[1] if cy else b.math("SUBTRACT", 1.0, frac[1], x=-1000, y=y - 60)
+            factor = b.math("MULTIPLY", fu, fv, x=-900, y=y)
+            tv = b.math("MULTIPLY_ADD", cell[1], 1.0 / D, (cy + 0.5) / D, x=-1000, y=y - 180)
+            idx, wts = [], []
+            parts = taps // 3
+            for part in range(parts):   # part p of the tables holds taps 3p .. 3p + 2
+                yp = y - 400 * part
+                tuv = b.node("ShaderNodeCombineXYZ", -900, yp - 120)
+                b.links.new(b.math("MULTIPLY_ADD", cell[0], 1.0 / (parts * D),
+                                   (cx + 0.5 + part * D) / (parts * D), x=-1000, y=yp - 120),
+                            tuv.inputs[0])
+                b.links.new(tv, tuv.inputs[1])
+                at = pn.after_sum(b, tuv.outputs[0], acc, -800, yp - 120)
+                idx += list(_closest(b, index_image, at, -700, yp))[:3]
+                wts += list(_closest(b, weight_image, at, -700, yp - 200))[:3]
+            for k in range(len(idx)):
+                yk = y - 120 * k
+                i = idx[k]
+                tile = b.math("FLOOR", b.math("MULTIPLY_ADD", i, 1.0 / 3.0, 0.5 / 3.0, x=-300,
+                                              y=yk), x=-200, y=yk)
+                ch = b.math("MULTIPLY_ADD", tile, -3.0, i, x=-100, y=yk)
+                row = b.math("FLOOR", b.math("MULTIPLY_ADD", tile, 1.0 / cols, 0.5 / cols,
+                                             x=0, y=yk), x=100, y=yk)
+                col = b.math("MULTIPLY_ADD", row, -float(cols), tile, x=200, y=yk)
+                off = b.node("ShaderNodeCombineXYZ", 300, yk)
+                b.links.new(b.math("MULTIPLY_ADD", col, stride / W, 1.0 / W, x=250, y=yk),
+                            off.inputs[0])
+                b.links.new(b.math("MULTIPLY_ADD", row, stride / H, 1.0 / H, x=250, y=yk - 40),
+                            off.inputs[1])
+                m = b.node("ShaderNodeVectorMath", 400, yk, operation="MULTIPLY_ADD")
+                b.links.new(pn.after_sum(b, uv, acc, 350, yk), m.inputs[0])
+                m.inputs[1].default_value = (resolution / W, resolution / H, 0.0)
+                b.links.new(off.outputs[0], m.inputs[2])
+                tex = b.node("ShaderNodeTexImage", 500, yk, image=atlas_image,
+                             interpolation="Linear", extension="EXTEND")
+                b.links.new(m.outputs["Vector"], tex.inputs["Vector"])
+                onehot = b.node("ShaderNodeCombineXYZ", 600, yk - 40)
+                for c in range(3):
+                    b.links.new(b.math("COMPARE", ch, float(c), 0.5, x=550, y=yk - 40 * c),
+                                onehot.inputs[c])
+                value = b.vmath("DOT_PRODUCT", tex.outputs["Color"], onehot.outputs[0], x=700,
+                                y=yk)
+                term = b.math("MULTIPLY", value, b.math("MULTIPLY", wts[k], factor, x=700,
+                                                        y=yk - 60), x=800, y=yk)
+                acc = term if acc is None else b.math("ADD", acc, term, x=900, y=yk)
+            y -= 400 * parts + 200
+    albedo = _lookup(b, albedo_image, uv, albedo_tile, 700, y - 200)
+    _sun_group_tail(b, gin, gout, acc, albedo, dz, 1100)
+    return group
+
+
+def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: float | None = None,
+                              sun=None) -> dict:
+    """Write the atlases, build the group(s) and wire them into ``obj``'s materials (replacing
+    an earlier preview of ``obj``). The indirect term, when baked, goes through the steerable
+    group of :mod:`.preview_nodes`."""
+    s = report["settings"]
+    angle = float(s["sun_angle"] if sun_angle is None else sun_angle)
+    model = bake.model
+    if not getattr(model, "live_preview", False):
+        raise ValueError("the live preview shows PCA models (model 'pca'); this bake has "
+                         f"{report['model']['kind']!r}")
+    eig, tables = preview_arrays(model, bake.albedo, store.directions, angle, s["table_size"],
+                                 s.get("kernel", "linear"))
+    base = os.path.splitext(report["report"])[0].removesuffix("_texture_report")
+    files = write_preview_files(base, eig, tables)
+    eig_img = pn.load_atlas_image(files["eigen"], f"{obj.name} transport eigen atlas")
+    tab_img = pn.load_atlas_image(files["tables"], f"{obj.name} transport tables")
+    uv_map = next((uv.name for uv in obj.data.uv_layers if uv.active_render),
+                  obj.data.uv_layers[0].name)
+    gname = f"{GROUP_PREFIX} ({obj.name})"
+    old = bpy.data.node_groups.get(gname)
+    viewport, why = sp.choose_viewport(s.get("viewport", "pca"), store.directions.size,
+                                       model.resolution)
+    sparse = {}
+    if viewport == "transport":
+        D = max(sp.TABLE_SIZE, int(s["table_size"]))
+        idx, wts, kept = sp.cached_tables(store.directions, D, angle, s.get("kernel", "linear"))
+        atlas_files, scales = write_sparse_atlas(base, store)
+        sparse = {**atlas_files, **write_sparse_tables(base, idx, wts, scales, angle),
+                  "sparse_table_size": D, "taps": int(idx.shape[-1]),
+                  "kernel_mass_kept": round(kept, 4)}
+        t_img = pn.load_atlas_image(sparse["transport_atlas"], f"{obj.name} transport T atlas")
+        i_img = pn.load_atlas_image(sparse["sparse_index"], f"{obj.name} transport T index")
+        w_img = pn.load_atlas_image(sparse["sparse_weights"], f"{obj.name} transport T weights")
+        group = build_sparse_group(store.directions.size, model.resolution, D, idx.shape[-1],
+                                   t_img, i_img, w_img, eig_img,
+                                   atlas_layout(len(eig), model.resolution)["tiles"][-1],
+                                   uv_map, gname + " new")
+        group["relight_taps"] = int(idx.shape[-1])
+    else:
+        group = build_group(len(tables), model.resolution, s["table_size"], eig_img, tab_img,
+                            uv_map, gname + " new")
+    if old is not None:
+        bpy.data.node_groups.remove(old)
+    group.name = gname
+    group["relight_viewport"] = viewport
+    group["relight_report"] = report["report"]
+    group[pn.OWNER] = obj.name
+    indirect_group = None
+    if bake.indirect is not None:
+        iname = f"{GROUP_PREFIX} indirect ({obj.name})"
+        ipath = report["files"]["indirect"]
+        atlas_path, _ = pn.write_atlas(bake.indirect, ipath)
+        iimg = pn.load_atlas_image(atlas_path, f"{obj.name} indirect atlas")
+        old = bpy.data.node_groups.get(iname)
+        indirect_group = pn.build_group(bake.indirect, iimg, uv_map, name=iname + " new")
+        if old is not None:
+            bpy.data.node_groups.remove(old)
+        indirect_group.name = iname
+        indirect_group[pn.OWNER] = obj.name
+    pn.ensure_sliders(scene)
+    if sun is None:
+        sun = scene.get("relight_sun")
+
+    def color(b):
+        direction, intensity, col, _ = pn._controls(b, scene, sun, -200, 800)
+        g = b.node("ShaderNodeGroup", 700, 800, node_tree=group, label="Relight Transport")
+        for k, v in (("Light Direction", direction), ("Intensity", intensity), ("Color", col)):
+            b.links.new(v, g.inputs[k])
+        out = g.outputs["Color"]
+        if indirect_group is not None:
+            gi = b.node("ShaderNodeGroup", 700, 600, node_tree=indirect_group,
+                        label="Indirect (steerable)")
+            for k, v in (("Light Direction", direction), ("Intensity", intensity),
+                         ("Color", col)):
+                b.links.new(v, gi.inputs[k])
+            out = b.vmath("ADD", out, gi.outputs["Color"], x=900, y=700)
+        return out
+
+    pn._wire_preview(obj, color, "transport_texture")
+    # environment groups of an earlier bake are stale: rebuilt from this one when shown
+    for name in (f"{ENV_PREFIX} ({obj.name})", f"{ENV_PREFIX} indirect ({obj.name})"):
+        stale = bpy.data.node_groups.get(name)
+        if stale is not None:
+            bpy.data.node_groups.remove(stale)
+    _ENV_CACHE.pop(obj.name, None)
+    props = getattr(scene, "relight", None)
+    if props is not None and props.texture_light == "WORLD":
+        set_light_mode(scene, obj, "WORLD")
+    return {**files, **sparse, "group": gname, "group_nodes": len(group.nodes),
+            "sun_angle": angle, "tiles": len(tables), "viewport": viewport,
+            "viewport_why": why}
+
+
+def rewrite_tables(obj, report: dict, bake, store, sun_angle: float) -> None:
+    """Re-tabulate the coefficients for ``sun_angle`` and reload the table image in place."""
+    s = report["settings"]
+    tables = _tiles3(tt.coefficient_tables(bake.model.V, store.directions, s["table_size"],
+                                           sun_angle, s.get("kernel", "linear")))
+    base = os.path.splitext(report["report"])[0].removesuffix("_texture_report")
+    atlas = pack_atlas(tables, "edge")
+    path = f"{base}_preview_tables.exr"
+    exrio.write_exr(path, {c: atlas[..., i] for i, c in enumerate("RGB")},
+                    {"format": "relightable_textures.transport_preview", "tiles": len(tables),
+                     "resolution": tables.shape[1], "sun_angle": sun_angle}, pixel_type="half")
+    pn.load_atlas_image(path, f"{obj.name} transport tables")
+    group = bpy.data.node_groups.get(f"{GROUP_PREFIX} ({obj.name})")
+    if group is not None and group.get("relight_viewport") == "transport":
+        D = max(sp.TABLE_SIZE, int(s["table_size"]))
+        idx, wts, _ = sp.cached_tables(store.directions, D, sun_angle, s.get("kernel", "linear"))
+        files = write_sparse_tables(base, idx, wts, _scales(f"{base}_preview_transport.json"),
+                                    sun_angle)
+        i_img = pn.load_atlas_image(files["sparse_index"], f"{obj.name} transport T index")
+        w_img = pn.load_atlas_image(files["sparse_weights"], f"{obj.name} transport T weights")
+        if group.get("relight_taps") != idx.shape[-1]:   # a wider sun needs more taps
+            uv_map = next((uv.name for uv in obj.data.uv_layers if uv.active_render),
+                          obj.data.uv_layers[0].name)
+            eig_img = bpy.data.images.get(f"{obj.name} transport eigen atlas")
+            new = build_sparse_group(
+                store.directions.size, bake.model.resolution, D, idx.shape[-1],
+                bpy.data.images.get(f"{obj.name} transport T atlas"), i_img, w_img, eig_img,
+                atlas_layout(-(-bake.model.k // 3) + 1, bake.model.resolution)["tiles"][-1],
+                uv_map, group.name + " new")
+            for key in group.keys():
+                new[key] = group[key]
+            new["relight_taps"] = int(idx.shape[-1])
+            for node in _group_nodes(obj, (group,)):
+                node.node_tree = new
+            new.use_fake_user = group.use_fake_user
+            name = group.name
+            bpy.data.node_groups.remove(group)
+            new.name = name
+
+
+# ---------------------------------------------------------------------------------------------
+# the world's environment: constant coefficients rewritten from Python per change
+
+
+def env_coefficients(V, B, directions, env, rotation_deg: float, strength: float = 1.0,
+                     row_order: str = "bottom_first", validate: bool = True):
+    """RGB coefficients of an environment for the environment groups.
+
+    Parameters
+    ----------
+    V : ndarray, shape (S, K)
+        The PCA's light loadings (T ~ V U).
+    B : ndarray, shape (S, J) or None
+        :func:`..lt_addon.transport.texture.steering_matrix` (None: no indirect term).
+    env : ndarray, shape (H, W, 3) or (H, W)
+        Equirectangular radiance (W m^-2 sr^-1), rows in ``row_order``.
+    rotation_deg : float
+        As :func:`..lt_addon.transport.texture.environment_weights` (``-`` the Mapping Z
+        rotation).
+
+    Returns
+    -------
+    C : ndarray, shape (3, K), float64 -- per colour channel, per component (W m^-2)
+    G : ndarray, shape (3, J), float64, or None
+    """
+    W = tt.environment_weights(directions, env, row_order=row_order, rotation_deg=rotation_deg,
+                               validate=validate)
+    if W.ndim == 1:
+        W = np.repeat(W[:, None], 3, axis=1)
+    W = float(strength) * W[:, :3]
+    C = W.T @ np.asarray(V, np.float64)
+    G = None if B is None else W.T @ B
+    return C, G
+
+
+def viewport_relight_env(eig_tiles, C, indirect_images=None, G=None) -> np.ndarray:
+    """NumPy twin of the environment groups: (R, R, 3). ``eig_tiles`` as
+    :func:`preview_arrays` (albedo last); ``indirect_images`` (J, R, R, 3) at the same
+    resolution (the node tree samples the indirect atlas at the texture's own texels)."""
+    eig = np.asarray(eig_tiles, np.float64)
+    n = eig.shape[0] - 1
+    Cp = np.zeros((3, 3 * n))
+    Cp[:, :C.shape[1]] = C
+    e = np.einsum("ctk,tyxk->yxc", Cp.reshape(3, n, 3), eig[:n])
+    out = e * eig[n]
+    if G is not None:
+        ind = np.einsum("cj,jyxc->yxc", G, np.asarray(indirect_images, np.float64))
+        out = out + np.maximum(ind, 0.0)
+    return out.astype(np.float32)
+
+
+def build_env_group(n_tiles: int, resolution: int, eig_image, uv_map: str, name: str):
+    """Direct light under an environment: per tile of three components, the eigen lookup
+    dotted with three constant vectors (the components' R, G and B coefficients, nodes named
+    ``C{t}{R|G|B}``, driven from the group's :data:`ENV_VALUES`), summed per channel, times the
+    albedo tile."""
+    group = pn.new_light_group(name)
+    group.interface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
+    b = pn._Builder(group)
+    b.node("NodeGroupInput", -1400, 0)
+    gout = b.node("NodeGroupOutput", 1400, 0)
+    uv = b.node("ShaderNodeUVMap", -1200, -400, uv_map=uv_map).outputs["UV"]
+    lay = atlas_layout(n_tiles + 1, resolution)
+    acc = [None, None, None]
+    driven = []
+    for t in range(n_tiles):
+        y = 600 - 300 * t
+        e = _lookup(b, eig_image, pn.after_sum(b, uv, acc[0], -1200, y), lay["tiles"][t], -1000, y)
+        for ch, cname in enumerate("RGB"):
+            const = b.node("ShaderNodeCombineXYZ", -500, y - 80 * ch)
+            const.name = const.label = f"C{t}{cname}"
+            driven += [(const, i) for i in range(3)]
+            dot = b.vmath("DOT_PRODUCT", const.outputs[0], e, x=-300, y=y - 80 * ch)
+            acc[ch] = dot if acc[ch] is None else b.math("ADD", acc[ch], dot, x=-100 + 60 * ch,
+                                                         y=y - 80 * ch)
+    rgb = b.node("ShaderNodeCombineXYZ", 300, 0)
+    for ch in range(3):
+        b.links.new(acc[ch], rgb.inputs[ch])
+    albedo = _lookup(b, eig_image, uv, lay["tiles"][n_tiles], -1000, -900)
+    color = b.vmath("MULTIPLY", rgb.outputs[0], albedo, x=600, y=0)
+    b.links.new(color, gout.inputs["Color"])
+    _drive_constants(group, driven)
+    return group
+
+
+def build_env_indirect_group(texture, atlas_image, uv_map: str, name: str):
+    """The steerable indirect term under an environment: ``max(0, sum_j G[:, j] * I_j)``
+    (constant RGB vectors named ``G{j}``, driven from :data:`ENV_VALUES`), times the Albedo input in irradiance mode -- the
+    sockets of :func:`.preview_nodes.build_group`."""
+    group = pn.new_light_group(name)
+    s = group.interface.new_socket("Albedo", in_out="INPUT", socket_type="NodeSocketColor")
+    s.default_value = (0.8, 0.8, 0.8, 1.0)
+    group.interface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
+    b = pn._Builder(group)
+    gin = b.node("NodeGroupInput", -1400, 0)
+    gout = b.node("NodeGroupOutput", 1000, 0)
+    uv = b.node("ShaderNodeUVMap", -1200, -400, uv_map=uv_map).outputs["UV"]
+    n = len(texture.basis_images)
+    lay = atlas_layout(n, texture.resolution)
+    acc = None
+    driven = []
+    for j in range(n):
+        y = 600 - 160 * j
+        img = _lookup(b, atlas_image, pn.after_sum(b, uv, None if acc is None else b.vmath(
+            "DOT_PRODUCT", acc, (1.0, 0.0, 0.0), x=-1300, y=y), -1200, y), lay["tiles"][j],
+            -1000, y)
+        const = b.node("ShaderNodeCombineXYZ", -500, y)
+        const.name = const.label = f"G{j}"
+        driven += [(const, ch) for ch in range(3)]
+        term = b.vmath("MULTIPLY", const.outputs[0], img, x=-300, y=y)
+        acc = term if acc is None else b.vmath("ADD", acc, term, x=-100, y=y)
+    out = b.vmath("MAXIMUM", acc, (0.0, 0.0, 0.0), x=300, y=0)
+    if texture.settings.get("mode") == "irradiance":
+        out = b.vmath("MULTIPLY", out, gin.outputs["Albedo"], x=500, y=0)
+    b.links.new(out, gout.inputs["Color"])
+    _drive_constants(group, driven)
+    return group
+
+
+#: ID property of an environment group holding its constants (driven into its nodes)
+ENV_VALUES = "relight_env_values"
+
+
+def _drive_constants(group, nodes_inputs) -> None:
+    """Drive each (node, input index) from ``group[ENV_VALUES][k]`` in order (simple
+    expressions: no Python when they evaluate). Writing 300 socket values from Python costs
+    ~0.6 ms each (every write runs the node tree's update); one array property and one
+    depsgraph update cost about a millisecond in all."""
+    group[ENV_VALUES] = [0.0] * len(nodes_inputs)
+    for k, (node, i) in enumerate(nodes_inputs):
+        pn._drive(node.inputs[i], "default_value", -1, "NODETREE", group,
+                  f'["{ENV_VALUES}"][{k}]')
+
+
+def set_env_constants(group, prefix: str, values) -> None:
+    """Write (3, K) coefficients into the group's driven constants: ``C`` (per tile of three
+    components, the R, G, B rows; components beyond K get 0) or ``G`` (per basis image)."""
+    values = np.asarray(values, np.float64)
+    n = len(group[ENV_VALUES])
+    if prefix == "C":
+        tiles = n // 9
+        padded = np.zeros((3, 3 * tiles))
+        padded[:, :values.shape[1]] = values
+        flat = padded.reshape(3, tiles, 3).transpose(1, 0, 2).ravel()   # [t][ch][i]
+    else:
+        flat = values.T.ravel()                                         # [j][ch]
+    group[ENV_VALUES] = flat.tolist()
+    group.update_tag()
+
+
+_ENV_CACHE: dict = {}
+
+
+def _env_data(obj):
+    """The object's previewed transport bake as the environment preview needs it (loaded once
+    per file): {"V", "B", "directions", "bake"}, or None without a PCA preview."""
+    from ..bakes.texture_transport import load_bake
+
+    group = bpy.data.node_groups.get(f"{GROUP_PREFIX} ({obj.name})")
+    path = None if group is None else group.get("relight_report")
+    if not path or not os.path.exists(path):
+        return None
+    key = (path, os.path.getmtime(path))
+    hit = _ENV_CACHE.get(obj.name)
+    if hit is not None and hit["key"] == key:
+        return hit
+    bake, store, _ = load_bake(path)
+    if not getattr(bake.model, "live_preview", False):
+        return None
+    B = None if bake.indirect is None else tt.steering_matrix(bake.indirect, store.directions)
+    data = {"key": key, "V": np.asarray(bake.model.V, np.float64), "B": B,
+            "directions": store.directions, "bake": bake}
+    _ENV_CACHE[obj.name] = data
+    return data
+
+
+def _group_nodes(obj, trees):
+    """Group nodes in ``obj``'s materials whose tree is one of ``trees``."""
+    out = []
+    for mat in {s.material for s in obj.material_slots if s.material}:
+        if mat.node_tree is None:
+            continue
+        out += [n for n in mat.node_tree.nodes
+                if n.bl_idname == "ShaderNodeGroup" and n.node_tree in trees]
+    return out
+
+
+def set_light_mode(scene, obj, mode: str) -> bool:
+    """Show ``obj``'s transport-texture preview lit by the sun sliders (``"SUN"``) or by the
+    world's environment (``"WORLD"``): swaps the preview's group trees (building the
+    environment groups the first time) and, for the world, writes its coefficients. False
+    when ``obj`` has no such preview."""
+    sun_g = bpy.data.node_groups.get(f"{GROUP_PREFIX} ({obj.name})")
+    sun_i = bpy.data.node_groups.get(f"{GROUP_PREFIX} indirect ({obj.name})")
+    env_name, envi_name = f"{ENV_PREFIX} ({obj.name})", f"{ENV_PREFIX} indirect ({obj.name})"
+    if sun_g is None:
+        return False
+    env_g, env_i = bpy.data.node_groups.get(env_name), bpy.data.node_groups.get(envi_name)
+    if mode == "WORLD":
+        data = _env_data(obj)
+        if data is None:
+            return False
+        if env_g is None:
+            bake = data["bake"]
+            n_tiles = -(-bake.model.k // 3)
+            eig_img = bpy.data.images.get(f"{obj.name} transport eigen atlas")
+            uv_map = next((uv.name for uv in obj.data.uv_layers if uv.active_render),
+                          obj.data.uv_layers[0].name)
+            env_g = build_env_group(n_tiles, bake.model.resolution, eig_img, uv_map, env_name)
+            env_g[pn.OWNER] = obj.name
+            if sun_i is not None and bake.indirect is not None:
+                iimg = bpy.data.images.get(f"{obj.name} indirect atlas")
+                env_i = build_env_indirect_group(bake.indirect, iimg, uv_map, envi_name)
+                env_i[pn.OWNER] = obj.name
+        swaps = ((sun_g, env_g), (sun_i, env_i))
+    else:
+        swaps = ((env_g, sun_g), (env_i, sun_i))
+    for old, new in swaps:
+        if old is None or new is None:
+            continue
+        for node in _group_nodes(obj, (old,)):
+            node.node_tree = new
+        # the group not shown is kept for switching back (Remove Preview purges both)
+        old.use_fake_user, new.use_fake_user = True, False
+    if mode == "WORLD":
+        update_environment_previews(scene, [obj])
+    return True
+
+
+_FINITE: list = [None, False]
+
+
+def _finite(env) -> bool:
+    """All texels finite? Checked once per image array (the world's pixels are cached)."""
+    if _FINITE[0] is not env:
+        _FINITE[:] = [env, bool(np.all(np.isfinite(env)))]
+    return _FINITE[1]
+
+
+def update_environment_previews(scene, objects=None) -> dict:
+    """Rewrite the environment coefficients of every object (or of ``objects``) whose
+    transport preview shows the world; returns {object: ms} and ``"warnings"`` (also kept in
+    ``scene[ENV_WARNING_KEY]`` for the panel)."""
+    from .vertex_relight import shade_rotation, world_light, world_rotation
+
+    props = getattr(scene, "relight", None)
+    timings, messages = {}, []
+    objs = [o for o in (objects if objects is not None else scene.objects)
+            if o.type == "MESH" and bpy.data.node_groups.get(f"{ENV_PREFIX} ({o.name})")]
+    objs = [o for o in objs
+            if _group_nodes(o, (bpy.data.node_groups[f"{ENV_PREFIX} ({o.name})"],))]
+    if objs:
+        t0 = time.perf_counter()
+        env, world_strength = world_light(scene)
+        world_z, note = world_rotation(scene)
+        rotation = shade_rotation(world_z + (props.env_rotation if props else 0.0))
+        strength = world_strength * (props.env_strength if props else 1.0)
+        read_ms = 1e3 * (time.perf_counter() - t0)
+        if env is not None and not _finite(env):
+            messages.append("the world's Environment Texture has NaN or inf texels: the "
+                            "environment preview is black")
+            env = None
+        if env is None and not messages:
+            messages.append("the world has no Environment Texture or plain Background colour "
+                            "the preview can read: the environment preview is black")
+        if env is None:
+            env = np.zeros((8, 16, 3))
+        elif note:
+            messages.append(note)
+        for o in objs:
+            t1 = time.perf_counter()
+            data = _env_data(o)
+            if data is None:
+                continue
+            C, G = env_coefficients(data["V"], data["B"], data["directions"], env, rotation,
+                                    strength, validate=False)
+            set_env_constants(bpy.data.node_groups[f"{ENV_PREFIX} ({o.name})"], "C", C)
+            gi = bpy.data.node_groups.get(f"{ENV_PREFIX} indirect ({o.name})")
+            if G is not None and gi is not None:
+                set_env_constants(gi, "G", G)
+            timings[o.name] = {"read_world_ms": read_ms,
+                               "update_ms": 1e3 * (time.perf_counter() - t1)}
+    text = "; ".join(messages)
+    if scene.get(ENV_WARNING_KEY, "") != text:
+        scene[ENV_WARNING_KEY] = text
+    timings["warnings"] = messages
+    return timings

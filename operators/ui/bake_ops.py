@@ -1,0 +1,519 @@
+"""Operators: bake relightable textures and per-vertex transport (modal, progress, Esc to
+cancel), follow a Sun, remove the preview (bpy).
+
+The modal operator drives the same generator as the CLI (:mod:`.steerable_bake`), one Cycles
+bake per timer tick, so the UI stays responsive between bakes and Esc cancels cleanly: closing
+the generator restores the scene and nothing is written, so the previous bake, its files and the
+material stay as they were. ``execute`` (used from scripts and in background mode) runs the
+same generator to completion.
+"""
+
+from __future__ import annotations
+
+import os
+
+import bpy
+
+from ..base import jobs
+from ..preview import preview_nodes
+from ..bakes import steerable_bake
+from ..base.cycles_bake import BakeInputError, check_bakeable
+from .properties import settings_from_scene
+
+
+def _output_dir(props) -> str:
+    path = bpy.path.abspath(props.output_dir or "//relight/")
+    if path.startswith("//") or not os.path.isabs(path):  # unsaved file: no '//' base
+        raise BakeInputError("save the .blend first or choose an absolute output folder")
+    return path
+
+
+def _transport_objects(context):
+    """The active mesh plus every other selected mesh (baked in the same Cycles calls)."""
+    active = context.active_object
+    others = [o for o in context.selected_objects if o.type == "MESH" and o != active]
+    return [active] + sorted(others, key=lambda o: o.name)
+
+
+#: Scene property holding the last texture bake's summary lines, shown in the panel.
+LAST_BAKE_KEY = "relight_last_bake"
+
+
+def _finish(operator, scene, result):
+    """Report what a texture bake job did (it wrote everything already) -- a
+    :class:`.texture_transport.TextureBakeOutput` or a :class:`.steerable_bake.LobesBakeOutput`
+    -- and keep the lines for the panel."""
+    reports = result.reports if hasattr(result, "reports") else [result.report]
+    lines = []
+    for rep in reports:
+        t, gt = rep["timings"], rep.get("ground_truth") or {}
+        size = rep["bytes"].get("total", rep["bytes"].get("exr_file", 0))
+        lines.append(f"Baked {rep['object']}: {t['wall_total']:.1f} s in all, "
+                     f"{size / 2**20:.1f} MiB"
+                     + (f", error vs Cycles {gt['headline_rel_rmse']:.3f}"
+                        if "headline_rel_rmse" in gt else ""))
+        if rep.get("glossy", {}).get("materials"):
+            operator.report({"WARNING"}, rep["glossy"]["note"])
+        fid = rep.get("model_vs_T") or {}
+        if "headline" in fid:
+            via = "T" if fid.get("viewport") == "transport" else "PCA"
+            lines.append(f"{rep['object']}: the preview ({via}) is {fid['headline']:.3f} from "
+                         f"the bake itself (worst {fid['worst']['rel']:.3f} at "
+                         f"{fid['worst']['elevation']:g} deg)")
+    cmp = reports[0].get("comparison", {})
+    if "png" in cmp:
+        lines.append(f"Camera comparison: {os.path.basename(cmp['png'])} (rel. RMSE "
+                     f"{cmp['rel_rmse_covered_pixels']:.3f})")
+    for line in lines:
+        operator.report({"INFO"}, line)
+    scene[LAST_BAKE_KEY] = "\n".join(lines)
+
+
+class _ModalBake:
+    """A bake job driven one step per timer tick (progress, status text, Esc cancels), or to
+    completion by ``execute`` (scripts, background mode). Subclasses give ``_prepare`` (the
+    job generator) and ``_finish`` (write and preview). A mixin, not an Operator: Blender
+    cannot subclass a registered operator class."""
+
+    _timer = None
+    _gen = None
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        return obj is not None and obj.type == "MESH"
+
+    def _prepare(self, context):
+        raise NotImplementedError
+
+    def _cancel_note(self, context) -> str:
+        """What a cancelled run of this operator keeps for the next one."""
+        return ""
+
+    def _finish(self, context, result):
+        raise NotImplementedError
+
+    def _job(self, context):
+        """``_prepare``'s job with its Cycles bakes on the panel's Device (resolved here, before
+        any bake: Device GPU without a GPU is one error line); the device is shown in the
+        panel (*Baked On*). Run On Dask passes the Device to the command, whose workers'
+        machines resolve it, not this one."""
+        from ..base import cycles_device
+
+        props = context.scene.relight
+        if props.run_on != "HERE":
+            return self._prepare(context)
+        device = cycles_device.resolve(props.device, context.scene)
+        gen = self._prepare(context)
+        props.device_used = device.describe() + (f" ({device.note})" if device.note else "")
+        if device.note:
+            self.report({"INFO"}, f"Baking on {device.describe()}: {device.note}")
+        return cycles_device.stepped(gen, device)
+
+    def _make_out_dir(self, props):
+        self.out_dir = _output_dir(props)
+        os.makedirs(self.out_dir, exist_ok=True)
+
+    def _external(self, context, verb: str, args: list):
+        """The job of Run On Dask: ``relight VERB FILE ARGS --out DIR --force`` with the
+        panel's ``--workers`` / ``--scheduler``, run by the Relight Command on the saved file
+        (:mod:`.external_bake`)."""
+        from ..farm import external_bake as eb
+
+        props = context.scene.relight
+        command = eb.relight_command(props)
+        path = eb.saved_blend()
+        self._make_out_dir(props)
+        return eb.external_job([command, verb, path, *args, "--out", self.out_dir, "--force",
+                                "--device", props.device, *eb.distribution_args(props)], path)
+
+    def _done(self, context, result):
+        """``_finish`` for a job of this process; for a Dask job, its summary, and the open file
+        reloaded to show what the command saved into it."""
+        from ..farm.external_bake import ExternalResult, reload_when_idle
+
+        if not isinstance(result, ExternalResult):
+            return self._finish(context, result)
+        self.report({"INFO"}, result.summary)
+        if not bpy.app.background:
+            reload_when_idle(result.blend_path)
+
+    def execute(self, context):
+        try:
+            gen = self._job(context)
+
+            def warn(step):
+                if step.message.startswith("warning:"):
+                    self.report({"WARNING"}, step.message[len("warning: "):])
+
+            result = jobs.run(gen, on_progress=warn)
+            self._done(context, result)
+        except (BakeInputError, OSError, ValueError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if bpy.app.background:
+            return self.execute(context)
+        try:
+            self._gen = self._job(context)
+        except (BakeInputError, OSError, ValueError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.01, window=context.window)
+        wm.progress_begin(0, 1000)
+        wm.modal_handler_add(self)
+        context.workspace.status_text_set("Relight bake: starting (Esc to cancel)")
+        return {"RUNNING_MODAL"}
+
+    def _end(self, context):
+        wm = context.window_manager
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        context.workspace.status_text_set(None)
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            self._gen.close()  # restores the scene; nothing was written
+            self._end(context)
+            self.report({"WARNING"}, "Bake cancelled; the previous bake is unchanged"
+                                     + self._cancel_note(context))
+            return {"CANCELLED"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        try:
+            step = next(self._gen)
+        except StopIteration as stop:
+            self._end(context)
+            try:
+                self._done(context, stop.value)
+            except (OSError, ValueError) as exc:
+                self.report({"ERROR"}, f"Could not write the bake: {exc}")
+                return {"CANCELLED"}
+            return {"FINISHED"}
+        except Exception as exc:  # Cycles failure: the generator has restored the scene
+            self._end(context)
+            self.report({"ERROR"}, f"Bake failed: {exc}")
+            return {"CANCELLED"}
+        if step.message.startswith("warning:"):
+            self.report({"WARNING"}, step.message[len("warning: "):])
+        context.window_manager.progress_update(int(1000 * step.done / step.total))
+        context.workspace.status_text_set(f"Relight bake: {step.message} (Esc to cancel)")
+        return {"RUNNING_MODAL"}
+
+
+class RELIGHT_OT_bake_textures(_ModalBake, bpy.types.Operator):
+    """Bake relightable textures of the active object (and the other selected meshes) with
+    Cycles (Esc cancels)"""
+
+    bl_idname = "relight.bake_textures"
+    bl_label = "Bake Relightable Texture"
+    bl_options = {"REGISTER"}
+
+    def _prepare(self, context):
+        props = context.scene.relight
+        obj = context.active_object
+        if props.method == "transport":
+            from ..bakes import texture_transport as tx
+            from .properties import transport_settings_from_scene
+
+            objects = _transport_objects(context)
+            for o in objects:
+                check_bakeable(o)
+            self.settings = transport_settings_from_scene(props)
+            self.settings.validate()
+            if props.run_on != "HERE":
+                args = [a for o in objects for a in ("--object", o.name)]
+                for k in ("directions", "resolution", "bounces", "model", "tol", "components",
+                          "indirect_samples", "indirect_resolution", "sun_angle",
+                          "table_size", "viewport", "seed"):
+                    if getattr(self.settings, k) is not None:   # --tol: no preset components
+                        args += [f"--{k.replace('_', '-')}", str(getattr(self.settings, k))]
+                return self._external(context, "bake-textures",
+                                      args + ["--truth", str(props.truth_lights)])
+            self._make_out_dir(props)
+            return tx.bake_job(context.scene, objects, self.settings, self.out_dir,
+                               truth=props.truth_lights)
+        check_bakeable(obj)
+        self.settings = settings_from_scene(props)
+        self.settings.validate()
+        if props.run_on != "HERE":
+            args = ["--object", obj.name, "--method", "lobes"]
+            for k in ("frame", "order", "resolution", "samples", "bounces", "storage", "mode",
+                      "world_sampling", "seed"):
+                args += [f"--{k.replace('_', '-')}", str(getattr(self.settings, k))]
+            return self._external(context, "bake-textures",
+                                  args + ["--truth", str(props.truth_lights)])
+        self._make_out_dir(props)
+        return steerable_bake.lobes_job(context.scene, obj, self.settings, self.out_dir,
+                                        truth=props.truth_lights, sun=props.sun)
+
+    def _finish(self, context, result):
+        _finish(self, context.scene, result)
+
+    def _cancel_note(self, context) -> str:
+        if context.scene.relight.method != "transport":
+            return "; its finished basis-light bakes are kept, so baking again resumes"
+        return "; its finished chunks are kept, so baking again resumes"
+
+
+class RELIGHT_OT_bake_transport(_ModalBake, bpy.types.Operator):
+    """Bake the active object's per-vertex light transport with Cycles and fit eigentransport
+    (Nowrouzezahrai 2008); the vertex preview then shades it under the world (Esc cancels)"""
+
+    bl_idname = "relight.bake_transport"
+    bl_label = "Bake Vertex Transport"
+    bl_options = {"REGISTER"}
+
+    def _prepare(self, context):
+        from ..bakes import transport_bake
+
+        props = context.scene.relight
+        obj = context.active_object
+        check_bakeable(obj, need_uv=False)
+        settings = transport_bake.TransportSettings(
+            directions=props.vertex_directions, bounces=props.vertex_bounces,
+            energy=props.vertex_energy)
+        settings.validate()
+        if props.run_on != "HERE":
+            return self._external(context, "bake-transport", [
+                "--object", obj.name, "--directions", settings.directions, "--bounces",
+                str(settings.bounces), "--energy", repr(settings.energy)])
+        self._make_out_dir(props)
+        # the same job as `relight bake-transport`: bake, fit, files, preview
+        return transport_bake.transport_job(context.scene, obj, settings, self.out_dir)
+
+    def _cancel_note(self, context) -> str:
+        return "; its finished chunks of directions are kept, so baking again resumes"
+
+    def _finish(self, context, result):
+        report, t = result.report, result.report["timings"]
+        for message in report.get("preview", {}).get("warnings", []):
+            self.report({"WARNING"}, message)
+        self.report({"INFO"}, f"Baked {report['object']}: {report['vertices']} vertices x "
+                              f"{report['directions']} directions in {t['wall_total']:.1f} s "
+                              f"in all, d = {report.get('d', '?')}, preview "
+                              f"{report.get('preview', {}).get('shade_ms', 0):.0f} ms")
+
+
+class RELIGHT_OT_analyze(_ModalBake, bpy.types.Operator):
+    """How many CPCA clusters the active object's transport needs (Mahajan 2007): reuses the
+    samples of its vertex transport bake when the directions and bounces match, bakes them
+    otherwise, and writes <object>_analysis.json into the output folder (Esc cancels the bake)"""
+
+    bl_idname = "relight.analyze"
+    bl_label = "Analyze Clusters"
+    bl_options = {"REGISTER"}
+
+    def _prepare(self, context):
+        from ..bakes import analyze, transport_bake
+
+        props = context.scene.relight
+        obj = context.active_object
+        check_bakeable(obj, need_uv=False)
+        direction_set = transport_bake.TransportSettings(
+            directions=props.vertex_directions, bounces=props.vertex_bounces).validate()
+        self._make_out_dir(props)
+        return analyze.analysis_job(context.scene, obj, direction_set, self.out_dir,
+                                    props.vertex_bounces)
+
+    def _finish(self, context, result):
+        from ..bakes import analyze
+
+        text = analyze.summary(result.report)
+        context.scene[analyze.SUMMARY_KEY] = text   # the panel shows the last analysis
+        self.report({"INFO"}, text)
+
+
+def show_preview(scene, obj, kind: str, reinstall: bool = False) -> str:
+    """Show the preview of ``obj``'s existing bake of ``kind`` (no bake):
+    ``steerable_texture``, ``transport_texture`` or ``eigentransport``. Previews of different
+    kinds coexist in the object's materials: when one of ``kind`` is there it is switched on,
+    otherwise (or with ``reinstall``) it is installed from the bake's files. Returns the file.
+    Raises ValueError / FileNotFoundError with what to do."""
+    from ..base.blend_files import bake_file
+
+    what = {"steerable_texture": "steerable texture", "transport_texture": "transport texture",
+            "eigentransport": "vertex transport", "material_tensors": "material"}.get(kind)
+    if what is None:
+        raise ValueError(f"unknown bake kind {kind!r}")
+    path = bake_file(obj, kind, what)
+    if kind == "material_tensors":     # one bake, several receivers: all of them
+        from ..bakes import material_edit
+
+        tensors = dict(material_edit.scene_bakes(scene)).get(obj)
+        if tensors is None:
+            raise FileNotFoundError(f"{obj.name}'s material bake file cannot be read: {path}")
+        receivers = [scene.objects.get(n) for n, _ in tensors.objects]
+        if reinstall or not all(o is not None and preview_nodes.activate_preview(o, kind)
+                                for o in receivers):
+            material_edit.install_preview(scene, tensors)
+        else:
+            material_edit.update_preview(scene)
+        return path
+    if not reinstall and preview_nodes.activate_preview(obj, kind):
+        if kind == "eigentransport":      # the colour attribute follows the current lighting
+            from ..preview import vertex_relight
+
+            vertex_relight.update_preview(scene)
+        return path
+    if kind == "steerable_texture":
+        from ...lt_addon.steerable.texture import SteerableTexture
+
+        preview_nodes.install_preview(scene, obj, path, SteerableTexture.load(path),
+                                      sun=scene.relight.sun)
+    elif kind == "transport_texture":
+        from ..bakes import texture_transport as tx
+
+        bake, store, report = tx.load_bake(path)
+        tx.install_transport_preview(scene, obj, report, bake, store,
+                                     sun_angle=scene.relight.sun_angle, sun=scene.relight.sun)
+    else:
+        from ..preview import vertex_relight
+
+        vertex_relight.update_preview(scene)
+        preview_nodes.install_attribute_preview(obj, vertex_relight.SHADING_ATTRIBUTE)
+    return path
+
+
+class RELIGHT_OT_show_preview(bpy.types.Operator):
+    """Show the preview of one of the active object's existing bakes (no re-bake): switches to
+    it when the material already holds it (previews of different bakes coexist), else installs
+    it from the bake's files"""
+
+    bl_idname = "relight.show_preview"
+    bl_label = "Show Preview"
+    bl_options = {"REGISTER", "UNDO"}
+
+    kind: bpy.props.EnumProperty(name="Bake", items=[
+        ("transport_texture", "Transport texture", ""),
+        ("steerable_texture", "Steerable texture", ""),
+        ("eigentransport", "Vertex transport", ""),
+        ("material_tensors", "Material edits", "")])
+    reinstall: bpy.props.BoolProperty(name="Reinstall", default=False,
+                                      description="Rebuild the preview from the bake's files "
+                                                  "even when the material holds it")
+
+    @classmethod
+    def poll(cls, context):
+        return context.active_object is not None and context.active_object.type == "MESH"
+
+    def execute(self, context):
+        try:
+            path = show_preview(context.scene, context.active_object, self.kind, self.reinstall)
+        except (ValueError, OSError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"Showing {os.path.basename(path)}")
+        return {"FINISHED"}
+
+
+class RELIGHT_OT_follow_sun(bpy.types.Operator):
+    """Make the preview follow the chosen Sun lamp's direction (or stop following it)"""
+
+    bl_idname = "relight.follow_sun"
+    bl_label = "Follow Sun"
+    bl_options = {"REGISTER", "UNDO"}
+
+    follow: bpy.props.BoolProperty(name="Follow", default=True)
+
+    def execute(self, context):
+        scene = context.scene
+        sun = scene.relight.sun
+        if self.follow and sun is None:
+            self.report({"ERROR"}, "Choose a Sun lamp in the Relight panel first")
+            return {"CANCELLED"}
+        preview_nodes.ensure_sliders(scene)
+        changed = preview_nodes.set_follow_sun(scene, sun if self.follow else None)
+        scene["relight_follow_sun"] = 1.0 if self.follow else 0.0
+        scene.update_tag()
+        self.report({"INFO"}, f"{'Following ' + sun.name if self.follow else 'Sliders drive the light'}"
+                              f" ({changed} preview materials)")
+        return {"FINISHED"}
+
+
+class RELIGHT_OT_remove_preview(bpy.types.Operator):
+    """Remove the relight preview nodes from the active object's materials"""
+
+    bl_idname = "relight.remove_preview"
+    bl_label = "Remove Preview"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.active_object is not None and context.active_object.type == "MESH"
+
+    def execute(self, context):
+        n = preview_nodes.remove_preview(context.active_object, context.scene)
+        self.report({"INFO"}, f"Removed the preview from {n} material(s)")
+        return {"FINISHED"}
+
+
+def kept_chunks(context, kind: str | None = None) -> list:
+    """The chunk folders that cancelled or failed bakes of the active object (its texture bake,
+    alone or with other meshes, its vertex bake or a material bake it comes first in) keep in
+    the output folder, as ``[(folder, chunk count)]``; [] when there are none or no output
+    folder yet. ``kind`` "texture", "vertex" or "materials" keeps only that bake's."""
+    import glob
+
+    from ...lt_addon.io.atomic import safe_name
+    from ..bakes.texture_transport import CACHE_FOLDER
+
+    obj = context.active_object
+    try:
+        root = os.path.join(_output_dir(context.scene.relight), CACHE_FOLDER)
+    except BakeInputError:
+        return []
+    if obj is None or not os.path.isdir(root):
+        return []
+    active = safe_name(obj.name)
+    out = []
+    for folder in sorted(glob.glob(os.path.join(root, "*"))):
+        base = os.path.basename(folder)   # "A+B" (baked together), "A_vertex", "A_materials",
+        what = next((k for k in ("vertex", "materials") if base.endswith("_" + k)), "texture")
+        if kind not in (None, what):      # "A_lobes" (the lobes method: a texture bake)
+            continue
+        if (base == f"{active}_{what}" if what != "texture" else
+                base == f"{active}_lobes" or active in base.split("+")):
+            n = len(glob.glob(os.path.join(folder, "**", "*_[0-9][0-9][0-9][0-9][0-9].npy"),
+                              recursive=True))   # with stages nested: "A/indirect/<key>/"
+            if n:
+                out.append((folder, n))
+    return out
+
+
+class RELIGHT_OT_discard_chunks(bpy.types.Operator):
+    """Delete the finished chunks that a cancelled bake of the active object kept (the next
+    bake then starts from nothing)"""
+
+    bl_idname = "relight.discard_chunks"
+    bl_label = "Discard Kept Chunks"
+    bl_options = {"REGISTER"}
+
+    kind: bpy.props.EnumProperty(
+        name="Bake", default="ALL", description="Whose chunks: one bake's, or every bake's",
+        items=[("ALL", "All", "Every bake of the active object"),
+               ("texture", "Texture", "The texture bake (either method)"),
+               ("vertex", "Vertex", "The vertex transport bake"),
+               ("materials", "Materials", "The material bake")])
+
+    def execute(self, context):
+        import shutil
+
+        kept = kept_chunks(context, None if self.kind == "ALL" else self.kind)
+        for folder, _ in kept:
+            shutil.rmtree(folder, ignore_errors=True)
+        root = os.path.dirname(kept[0][0]) if kept else None
+        if root and os.path.isdir(root) and not os.listdir(root):
+            os.rmdir(root)
+        self.report({"INFO"}, f"Discarded {sum(n for _, n in kept)} kept chunk(s)")
+        return {"FINISHED"}
+
+
+CLASSES = (RELIGHT_OT_bake_textures, RELIGHT_OT_bake_transport, RELIGHT_OT_analyze,
+           RELIGHT_OT_show_preview, RELIGHT_OT_follow_sun, RELIGHT_OT_remove_preview,
+           RELIGHT_OT_discard_chunks)

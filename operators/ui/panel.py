@@ -1,0 +1,322 @@
+"""The "Relight" tab in the 3D viewport sidebar (bpy)."""
+
+from __future__ import annotations
+
+import bpy
+
+from ..bakes.analyze import SUMMARY_KEY
+from ..base.blend_files import object_bakes
+from ..bakes.presets import preset_figures
+from .properties import preset_differences
+from ..preview.preview_nodes import COLOR_SLIDER, SLIDERS
+
+
+class _RelightTab:
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Relight"
+
+
+class _RelightSubPanel(_RelightTab):
+    bl_parent_id = "VIEW3D_PT_relight"
+
+
+class VIEW3D_PT_relight(_RelightTab, bpy.types.Panel):
+    """Relightable data of the active object"""
+
+    bl_label = "Relightable Textures"
+
+    def draw(self, context):
+        layout = self.layout
+        obj = context.active_object
+        if obj is None:
+            layout.label(text="Select a mesh object to relight", icon="INFO")
+            return
+        if obj.type != "MESH":
+            layout.label(text=f"{obj.name} is a {obj.type.lower()}, not a mesh", icon="ERROR")
+            layout.label(text="Relighting works on mesh objects only")
+            return
+        box = layout.box()
+        box.label(text=obj.name, icon="MESH_DATA")
+        mesh = obj.data
+        box.label(text=f"{len(mesh.vertices)} vertices, {len(mesh.polygons)} faces")
+        if not mesh.uv_layers:
+            box.label(text="No UV map: texture bakes need one", icon="ERROR")
+        bakes = object_bakes(obj)
+        if not bakes:
+            box.label(text="No relightable data yet")
+        for bake in bakes:
+            col = box.column(align=True)
+            row = col.row()
+            row.label(text=f"{bake.get('kind', '?')}: {bake.get('path', '?')}", icon="IMAGE_DATA")
+            if bake.get("kind") in ("steerable_texture", "transport_texture", "eigentransport",
+                                    "material_tensors"):
+                row.operator("relight.show_preview", text="Show").kind = bake["kind"]
+            if "order" in bake:
+                col.label(text=f"order {bake['order']}, {bake['resolution']} px, "
+                               f"{bake['samples']} spp, {bake['storage']}, "
+                               f"{bake.get('bake_seconds', 0):.1f} s")
+
+
+class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
+    """Bake settings and presets"""
+
+    bl_label = "Bake Relightable Texture"
+
+    def draw(self, context):
+        props = context.scene.relight
+        layout = self.layout
+        layout.prop(props, "method")
+        layout.prop(props, "preset")
+        changed = preset_differences(props)
+        if changed:
+            # the measured figures belong to the preset's values, not to these
+            layout.label(text=f"Custom: {', '.join(changed)} differ from "
+                              f"{props.preset.capitalize()}", icon="MODIFIER")
+        if props.method == "transport":
+            from ..bakes.texture_transport import PRESETS as TRANSPORT_PRESETS
+
+            fig = TRANSPORT_PRESETS[props.preset].get("measured")
+            if fig and not changed:
+                layout.label(text=f"measured: {fig['bake_seconds']:.0f} s, rel. RMSE "
+                                  f"{fig['rel_rmse']:.3f} ({fig['scene']})")
+            col = layout.column(align=True)
+            for name in ("directions", "horizon_power", "resolution", "bounces",
+                         "indirect_samples", "indirect_resolution", "transport_model",
+                         "transport_components", "transport_tol", "transport_viewport",
+                         "sun_angle", "table_size",
+                         "truth_lights", "output_dir"):
+                col.prop(props, name)
+            n = len([o for o in context.selected_objects if o.type == "MESH"])
+            if n > 1:
+                layout.label(text=f"{n} selected meshes are baked together", icon="INFO")
+            _run_on(layout, props)
+            layout.operator("relight.bake_textures", icon="RENDER_STILL")
+            _kept_chunks(layout, context, "texture")
+            _last_bake(layout, context.scene)
+            return
+        fig = preset_figures().get(props.preset)
+        if changed:
+            pass   # the preset's figures do not describe these values
+        elif fig:
+            layout.label(text=f"measured: {fig['bake_seconds']:.1f} s, rel. RMSE "
+                              f"{fig['rel_rmse']:.3f} ({fig['scene']}, {fig['machine']})")
+        else:
+            layout.label(text="preset not measured yet (make bench)", icon="INFO")
+        col = layout.column(align=True)
+        for name in ("frame", "order", "resolution", "samples", "bounces", "storage", "mode",
+                     "world_sampling", "truth_lights", "output_dir"):
+            col.prop(props, name)
+        _run_on(layout, props)
+        layout.operator("relight.bake_textures", icon="RENDER_STILL")
+        _kept_chunks(layout, context, "texture")
+        _last_bake(layout, context.scene)
+
+
+def _last_bake(layout, scene):
+    """The last texture bake's one-line summary (cost, error vs Cycles, comparison image)."""
+    from .bake_ops import LAST_BAKE_KEY
+
+    for line in str(scene.get(LAST_BAKE_KEY, "")).splitlines():
+        layout.label(text=line, icon="INFO")
+
+
+def _run_on(layout, props):
+    """Where the bake below runs: here, or on Dask through the Relight Command."""
+    col = layout.column(align=True)
+    col.prop(props, "device")
+    if props.device_used:
+        col.label(text=f"Baked On: {props.device_used}", icon="INFO")
+    col.prop(props, "run_on")
+    if props.run_on == "WORKERS":
+        col.prop(props, "dask_workers")
+    elif props.run_on == "SCHEDULER":
+        col.prop(props, "dask_scheduler")
+    if props.run_on != "HERE":
+        col.prop(props, "dask_command")
+
+
+def _kept_chunks(layout, context, kind: str):
+    """What a cancelled bake (``kind`` "texture", "vertex" or "materials") kept for the next
+    one, and the button that discards it."""
+    from .bake_ops import kept_chunks
+
+    kept = kept_chunks(context, kind)
+    if kept:
+        layout.label(text=f"{sum(n for _, n in kept)} chunks of a cancelled bake are kept: "
+                          "Bake resumes from them", icon="RECOVER_LAST")
+        layout.operator("relight.discard_chunks", icon="TRASH").kind = kind
+
+
+class VIEW3D_PT_relight_light(_RelightSubPanel, bpy.types.Panel):
+    """Light sliders of the live preview"""
+
+    bl_label = "Preview Light"
+
+    def draw(self, context):
+        scene = context.scene
+        layout = self.layout
+        if "relight_azimuth" not in scene:
+            layout.label(text="Bake first: the sliders come with the preview")
+            return
+        props = scene.relight
+        if any(g.name.startswith("Relight Transport (") for g in bpy.data.node_groups):
+            layout.row().prop(props, "texture_light", expand=True)
+        if props.texture_light == "WORLD":
+            col = layout.column(align=True)
+            col.prop(props, "env_strength")
+            col.prop(props, "env_rotation")
+            warning = scene.get("relight_texture_env_warning")
+            for line in (warning.split("; ") if warning else ()):
+                layout.label(text=line, icon="ERROR")
+            layout.label(text="Transport textures: the world; steerable previews: the sliders",
+                         icon="INFO")
+        col = layout.column(align=True)
+        for key in SLIDERS:
+            if key != "relight_follow_sun":
+                col.prop(scene, f'["{key}"]', text=key.replace("relight_", "").capitalize())
+        col.prop(scene, f'["{COLOR_SLIDER}"]', text="Color")
+        row = layout.row(align=True)
+        row.prop(scene.relight, "sun")
+        follow = scene.get("relight_follow_sun", 0.0) > 0.5
+        op = row.operator("relight.follow_sun", text="Stop" if follow else "Follow",
+                          depress=follow)
+        op.follow = not follow
+        layout.operator("relight.remove_preview", icon="X")
+
+
+class VIEW3D_PT_relight_vertex(_RelightSubPanel, bpy.types.Panel):
+    """Per-vertex eigentransport preview"""
+
+    bl_label = "Vertex Transport Preview"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        props = context.scene.relight
+        col = self.layout.column(align=True)
+        col.prop(props, "env_strength")
+        col.prop(props, "env_rotation")
+        col.prop(props, "point_light")
+        col.prop(props, "show_clusters")
+        warning = context.scene.get("relight_vertex_warning")
+        if warning:
+            for line in warning.split("; "):
+                self.layout.label(text=line, icon="ERROR")
+        col = self.layout.column(align=True)
+        col.prop(props, "vertex_directions")
+        col.prop(props, "vertex_bounces")
+        col.prop(props, "vertex_energy")
+        _run_on(self.layout, props)
+        self.layout.operator("relight.bake_transport", icon="RENDER_STILL")
+        _kept_chunks(self.layout, context, "vertex")
+        self.layout.operator("relight.analyze", icon="GRAPH")
+        summary = context.scene.get(SUMMARY_KEY)
+        if summary:
+            self.layout.label(text=summary, icon="INFO")
+
+
+class VIEW3D_PT_relight_materials(_RelightSubPanel, bpy.types.Panel):
+    """Material edits with interreflection (precomputed transfer tensors, Sun 2007)"""
+
+    bl_label = "Material Edits"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        from ..base.blend_files import object_bakes
+        from ..bakes.material_bake import KIND, finish_sockets, material_colour_socket
+        from ..bakes.material_edit import SUMMARY_KEY
+
+        layout, props = self.layout, context.scene.relight
+        meshes = [o for o in context.selected_objects if o.type == "MESH"]
+        mats = sorted({s.material for o in meshes for s in o.material_slots if s.material},
+                      key=lambda m: m.name)
+        if not mats:
+            layout.label(text="Select the meshes that receive light")
+        # metallic / roughness are editable where a bake has glossy anchors for the material
+        # (from the bake records: drawing loads no file)
+        glossy = {r for o in context.scene.objects if o.type == "MESH" for b in object_bakes(o)
+                  if b.get("kind") == KIND and b.get("anchors", "diffuse") != "diffuse"
+                  for r in b.get("regions", ())}
+        col = layout.column(align=True)
+        for mat in mats:
+            row = col.row(align=True)
+            row.prop(mat, "relight_editable", text=mat.name)
+            socket = material_colour_socket(mat)
+            if socket is not None:   # the material's own colour: edits show live after a bake
+                row.prop(socket, "default_value", text="")
+            if mat.name in glossy:
+                knobs = finish_sockets(mat)
+                if knobs:
+                    row = col.row(align=True)
+                    for k, sock in knobs.items():
+                        row.prop(sock, "default_value", text=k.title())
+        col = layout.column(align=True)
+        col.prop(props, "material_bounces")
+        col.prop(props, "material_bounce_bake")
+        col.prop(props, "material_rays" if props.material_bounce_bake == "rays"
+                 else "material_samples")
+        col.prop(props, "material_per_corner")
+        col.prop(props, "material_directions")
+        col.prop(props, "material_one_directions")
+        if props.material_bounces >= 2:
+            col.prop(props, "material_two_directions")
+        col.prop(props, "material_anchors")
+        if props.material_anchors.strip():
+            col.prop(props, "material_anchor_directions")
+            col.prop(props, "material_anchor_samples")
+        if props.material_bounce_bake == "cycles" or props.material_anchors.strip():
+            col.prop(props, "material_smoothing")
+        _run_on(layout, props)
+        layout.operator("relight.bake_materials", icon="RENDER_STILL")
+        _kept_chunks(layout, context, "materials")
+        for key in (SUMMARY_KEY, SUMMARY_KEY + "_update"):
+            if context.scene.get(key):
+                layout.label(text=context.scene[key], icon="INFO")
+
+
+class VIEW3D_PT_relight_export(_RelightSubPanel, bpy.types.Panel):
+    """Export a transport-texture bake: RTI planes with a web page, or a directional lightmap"""
+
+    bl_label = "Export"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        from .export_ops import LAST_EXPORT_KEY
+
+        layout, props = self.layout, context.scene.relight
+        col = layout.column(align=True)
+        col.prop(props, "export_format")
+        if props.export_format == "rti-hsh":
+            col.prop(props, "export_terms")
+        if props.export_format in ("sh-l1", "monosh"):
+            col.prop(props, "export_light")
+            if props.export_light == "ENV":
+                col.prop(props, "export_env")
+                col.prop(props, "export_env_rotation")
+        col.prop(props, "output_dir")
+        col.prop(props, "export_force")
+        layout.operator("relight.export", icon="EXPORT")
+        layout.operator("relight.open_export_page", icon="URL")
+        for line in context.scene.get(LAST_EXPORT_KEY, "").splitlines():
+            layout.label(text=line, icon="INFO")
+
+
+class VIEW3D_PT_relight_samples(_RelightSubPanel, bpy.types.Panel):
+    """Add the paper sample scenes"""
+
+    bl_label = "Sample Scenes"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        settings = context.scene.relight
+        col = self.layout.column()
+        col.prop(settings, "sample_name")
+        col.prop(settings, "sample_size")
+        op = col.operator("relight.add_sample_scene", icon="ADD")
+        op.name = settings.sample_name
+        op.size = settings.sample_size
+
+
+CLASSES = (VIEW3D_PT_relight, VIEW3D_PT_relight_bake, VIEW3D_PT_relight_light,
+           VIEW3D_PT_relight_vertex, VIEW3D_PT_relight_materials, VIEW3D_PT_relight_export,
+           VIEW3D_PT_relight_samples)

@@ -1,0 +1,401 @@
+"""Scene-level settings of the extension (``scene.relight``)."""
+
+from __future__ import annotations
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+
+from ...lt_addon.steerable.texture import STORAGE_MODES
+from ...samples import DESCRIPTIONS, SIZES
+from ..base.compat import path_options
+from ..bakes.presets import PRESETS, settings_from_preset
+from ..farm.external_bake import RUN_ON as _RUN_ON
+
+_SETTING_NAMES = ("frame", "order", "resolution", "samples", "bounces", "storage", "mode",
+                  "world_sampling")
+
+
+def preset_values(method: str, preset: str) -> dict:
+    """The panel fields a preset sets, by property name (what :func:`_apply_preset` writes and
+    what :func:`preset_differences` compares)."""
+    if method == "lobes":
+        lobes = settings_from_preset(preset)
+        return {name: getattr(lobes, name) for name in _SETTING_NAMES}
+    from ..bakes.texture_transport import PRESETS as TRANSPORT_PRESETS
+
+    t = TRANSPORT_PRESETS[preset]
+    count, _, power = t["directions"].partition(":")[2].partition(":")
+    return {"directions": int(count), "horizon_power": float(power or 1.0),
+            "resolution": t["resolution"], "transport_tol": t["tol"],
+            "transport_components": int(t.get("components") or 0),
+            "indirect_samples": t["indirect_samples"],
+            "indirect_resolution": t["indirect_resolution"],
+            "table_size": t.get("table_size", 32)}
+
+
+def preset_differences(props) -> list:
+    """Names of the fields that no longer hold the chosen preset's values (the panel then says
+    "Custom" instead of showing the preset's measured figures)."""
+    out = []
+    for name, value in preset_values(props.method, props.preset).items():
+        mine = getattr(props, name)
+        if (abs(mine - value) > 1e-6 * max(1.0, abs(value)) if isinstance(value, float)
+                else mine != value):
+            out.append(name)
+    return out
+
+
+def _apply_preset(self, context):
+    for name, value in preset_values(self.method, self.preset).items():
+        setattr(self, name, value)
+
+
+#: New scenes start on the balanced presets (transport, the default method, for the shared
+#: resolution), so the preset shown is the one the fields hold.
+_LOBES = preset_values("lobes", "balanced")
+_TRANSPORT = preset_values("transport", "balanced")
+
+
+def _refresh_tables(self, context):
+    """A new sun size only changes the preview's coefficient tables (no re-bake)."""
+    from ..bakes.texture_transport import refresh_preview_tables
+
+    obj = context.active_object if context is not None else None
+    if obj is not None:
+        refresh_preview_tables(context.scene, obj, self.sun_angle)
+
+
+def _sun_poll(self, obj):
+    return obj.type == "LIGHT" and obj.data.type == "SUN"
+
+
+def _point_poll(self, obj):
+    return obj.type == "LIGHT" and obj.data.type == "POINT"
+
+
+def _refresh_vertex_preview(self, context):
+    from ..preview.transport_preview import update_environment_previews
+    from ..preview.vertex_relight import update_preview
+
+    update_preview(context.scene)
+    update_environment_previews(context.scene)
+
+
+def _on_texture_light(self, context):
+    from ..preview.transport_preview import set_light_mode
+
+    for obj in context.scene.objects:
+        if obj.type == "MESH":
+            set_light_mode(context.scene, obj, self.texture_light)
+
+
+class RelightSceneSettings(bpy.types.PropertyGroup):
+    """Settings shown in the Relight sidebar tab."""
+
+    sample_name: EnumProperty(
+        name="Sample", description="Sample scene to add",
+        items=[(k, k.capitalize(), v) for k, v in DESCRIPTIONS.items()], default="bumps")
+    sample_size: EnumProperty(
+        name="Size", description="Sample scene size",
+        items=[(s, s.capitalize(), f"{s} size") for s in SIZES], default="test")
+
+    preset: EnumProperty(
+        name="Preset", description="Starting values for the bake settings (measured by make bench)",
+        items=[(k, k.capitalize(), "") for k in PRESETS], default="balanced", update=_apply_preset)
+    frame: EnumProperty(
+        name="Frame", default=_LOBES["frame"], items=[
+            ("world", "World", "Relight the object by a distant light over the world's upper "
+                               "hemisphere"),
+            ("tangent", "Tangent", "A tileable patch relit per pixel in a surface's UV tangent "
+                                   "frame")])
+    order: IntProperty(name="Order", description="Basis order N1: N = N1^2 Cycles bakes",
+                       default=_LOBES["order"], min=2, max=12)
+    resolution: IntProperty(name="Resolution", description="Texture side in texels",
+                            default=_TRANSPORT["resolution"], min=8, max=8192)
+    samples: IntProperty(name="Samples", description="Cycles samples per texel per bake",
+                         default=_LOBES["samples"], min=1, max=65536)
+    bounces: IntProperty(name="Bounces", description="Diffuse bounces (0 = direct only)",
+                         default=_LOBES["bounces"], min=0, max=64)
+    storage: EnumProperty(name="Storage", default=_LOBES["storage"],
+                          items=[(s, s, "") for s in STORAGE_MODES])
+    mode: EnumProperty(name="Bake", default=_LOBES["mode"], items=[
+        ("radiance", "Radiance", "Albedo x light with interreflection (the paper)"),
+        ("irradiance", "Light only", "Light without the albedo, so the albedo stays editable")])
+    world_sampling: EnumProperty(name="World Sampling", default=_LOBES["world_sampling"], items=[
+        ("importance", "Importance", "Lower noise at equal samples"),
+        ("none", "None", "BSDF sampling only: exactly linear in the light")])
+    output_dir: StringProperty(
+        name="Output", subtype="DIR_PATH", default="//relight/", options=path_options(),
+        description="Folder for the EXR files and the JSON report ('//' = next to the .blend)")
+    sun: PointerProperty(name="Sun", type=bpy.types.Object, poll=_sun_poll,
+                         description="Sun lamp whose direction the preview follows")
+
+    texture_light: EnumProperty(
+        name="Light", default="SUN", update=_on_texture_light,
+        description="What lights the transport-texture previews",
+        items=[("SUN", "Sun", "The Preview Light sliders, or the followed Sun lamp (no Python "
+                              "per change)"),
+               ("WORLD", "World", "The world's Environment Texture, turned by its Mapping Z "
+                                  "rotation plus Environment Rotation, times Environment "
+                                  "Strength (a few ms of Python per change)")])
+
+    # per-vertex (eigentransport) preview: NumPy shading written into one colour attribute
+    env_strength: FloatProperty(
+        name="Environment Strength", default=1.0, min=0.0, soft_max=10.0,
+        description="Scale of the world environment lighting the vertex preview and the "
+                    "texture previews lit by the World",
+        update=_refresh_vertex_preview)
+    env_rotation: FloatProperty(
+        name="Environment Rotation", default=0.0, soft_min=-180.0, soft_max=180.0,
+        description="Rotation of the environment about +z in degrees, the same way as a world "
+                    "Mapping node's Z rotation, added to it (lattice rotation, Nowrouzezahrai "
+                    "2008 sec. 5)", update=_refresh_vertex_preview)
+    point_light: PointerProperty(
+        name="Point Light", type=bpy.types.Object, poll=_point_poll,
+        description="A point lamp added to the vertex preview (nearest sample direction, "
+                    "1/r^2; valid outside the object's convex hull)",
+        update=_refresh_vertex_preview)
+    vertex_directions: StringProperty(
+        name="Directions", default="cube:8",
+        description="Hard-sun directions of the per-vertex bake: cube:N (6 N^2), halton:N, "
+                    "latlong:RxC, cubegauss:N")
+    vertex_bounces: IntProperty(
+        name="Bounces", default=0, min=0, max=64,
+        description="Diffuse bounces of the per-vertex bake (0 = visibility x cosine, exact at "
+                    "1 sample)")
+    vertex_energy: FloatProperty(
+        name="Energy Kept", default=0.99, min=0.5, max=1.0,
+        description="Fraction of the centred transport energy the eigentransports keep")
+    show_clusters: BoolProperty(
+        name="Show Clusters", default=False,
+        description="Colour the vertices by CPCA cluster (bake-transport --clusters) instead "
+                    "of the shading", update=_refresh_vertex_preview)
+
+    # direction-sampled transport textures (the default texture bake)
+    method: EnumProperty(
+        name="Method", default="transport", update=_apply_preset, items=[
+            ("transport", "Transport (hard suns)",
+             "Bake under S hard Sun lamps and relight any sun or sky from them: sharp shadows"),
+            ("lobes", "Steerable lobes",
+             "The paper's bake under order^2 broad steerable lights: soft (~27 degree) light")])
+    directions: IntProperty(
+        name="Directions", default=_TRANSPORT["directions"], min=8, max=100000,
+        description="Hard-sun bakes over the upper hemisphere (1 sample each)")
+    horizon_power: FloatProperty(
+        name="Horizon Density", default=_TRANSPORT["horizon_power"], min=1.0, max=4.0,
+        description="1: uniform over the hemisphere; above 1: more directions near the horizon, "
+                    "where grazing shadows change fastest")
+    sun_angle: FloatProperty(
+        name="Sun Size", default=2.0, min=0.0, max=30.0, update=_refresh_tables,
+        description="Angular diameter of the preview sun in degrees (re-tabulates the preview "
+                    "coefficients, no re-bake)")
+    transport_model: EnumProperty(
+        name="Model", default="pca", items=[
+            ("pca", "PCA eigen-textures", "Global PCA of the transport: live viewport preview"),
+            ("blocks", "Block PCA", "Clustered PCA over texel blocks (CLI/NumPy relight only)"),
+            ("steerable", "Steerable (quadrature)", "The paper's basis fitted noise-free from T"),
+            ("none", "None", "Keep T only")])
+    transport_viewport: EnumProperty(
+        name="Viewport", default="auto", items=[
+            ("auto", "Auto", "T itself when its atlas takes at most 256 MiB (400 directions at "
+             "256^2: 37 MiB; 1600 directions 140 MiB), else the PCA"),
+            ("transport", "Transport (T)", "Relight from T itself: a few baked directions per "
+             "pixel through sparse kernel tables; keeps cast shadows on large receivers; an "
+             "atlas of every direction in memory"),
+            ("pca", "PCA", "The fitted PCA's eigen-textures: small, smooths cast shadows on "
+             "large receivers")])
+    transport_tol: FloatProperty(
+        name="PCA Tolerance", default=_TRANSPORT["transport_tol"], min=0.001, max=0.5,
+        description="Relative residual of T the PCA keeps when Components is 0 (fewer "
+                    "components when larger)")
+    transport_components: IntProperty(
+        name="Components", default=_TRANSPORT["transport_components"], min=0, max=512,
+        description="PCA eigen-textures to keep (the presets' measured figures use a fixed "
+                    "count); 0 = as many as the tolerance needs")
+    indirect_samples: IntProperty(
+        name="Indirect Samples", default=_TRANSPORT["indirect_samples"], min=1, max=65536,
+        description="Samples of the low-order steerable bake of the indirect light")
+    indirect_resolution: IntProperty(
+        name="Indirect Resolution", default=_TRANSPORT["indirect_resolution"], min=4, max=8192,
+        description="Texture side of the indirect-light bake (interreflection is smooth: half "
+                    "the texture's is the cheap choice, the full one the accurate one)")
+    table_size: IntProperty(
+        name="Preview Table Size", default=_TRANSPORT["table_size"], min=8, max=256,
+        description="Texels across the hemisphere disk of the preview's coefficient tables "
+                    "(64 follows low suns more closely than 32; 4x the tabulation time)")
+    # material edits (transfer tensors, Sun 2007)
+    material_bounces: IntProperty(
+        name="Bounces", default=2, min=1, max=2,
+        description="Path orders baked per editable material: 1 = one bounce, 2 = also "
+                    "ordered pairs (the colour bleeding between two edited walls)")
+    material_bounce_bake: EnumProperty(
+        name="Bounces By", default="rays", items=[
+            ("rays", "Rays", "Every receiver casts rays once and the light they gather serves "
+                             "every sun direction (measured on the demo room: about the noise "
+                             "of two Cycles renders, in a third of the Cycles bakes' time)"),
+            ("cycles", "Cycles", "A Cycles bake per sun direction, material and bounce order "
+                                 "(noisier at the same time: 1.9x the noise of two Cycles "
+                                 "renders on the demo room)")])
+    material_rays: IntProperty(
+        name="Rays", default=512, min=16, max=65536,
+        description="Rays per receiver of the gathered bounce terms (512: more barely "
+                    "changed the error on the demo room)")
+    material_samples: IntProperty(
+        name="Samples", default=16, min=1, max=65536,
+        description="Cycles samples per vertex of each bounce term (16 with 128 one-bounce "
+                    "directions: measured on the demo room, more accurate than 32 with 64)")
+    material_per_corner: BoolProperty(
+        name="Per Face Corner", default=False,
+        description="A value per face corner instead of per vertex: hard edges (a box's) stay "
+                    "hard, for about 4x the data and update time on quad meshes")
+    material_directions: IntProperty(
+        name="Direct Directions", default=400, min=4, max=100000,
+        description="Hard-sun directions of the direct light (1 sample each: exact)")
+    material_one_directions: IntProperty(
+        name="1-Bounce Directions", default=128, min=2, max=10000,
+        description="Sun directions of the one-bounce terms (with Cycles bounces one bake per "
+                    "region each; with rays free, and a sun between them is made exact)")
+    material_two_directions: IntProperty(
+        name="2-Bounce Directions", default=8, min=2, max=10000,
+        description="Sun directions of the stored two-bounce terms (with Cycles bounces "
+                    "(R+1) + (R+1)^2 bakes each); the second bounce is composed from the first "
+                    "where the one-bounce directions are at least 16 and twice as many")
+    material_anchors: StringProperty(
+        name="Roughness Anchors", default="",
+        description="Comma-separated roughness values (e.g. 0.4,0.8) at which each editable "
+                    "material is also baked as a metal, so its Metallic and Roughness can be "
+                    "edited live (one more one-bounce bake per material, value and direction). "
+                    "Empty: colour edits only")
+    material_anchor_directions: IntProperty(
+        name="Anchor Directions", default=128, min=2, max=10000,
+        description="Sun directions of the glossy anchors' bakes (one Cycles bake per material, "
+                    "anchor and direction)")
+    material_anchor_samples: IntProperty(
+        name="Anchor Samples", default=64, min=1, max=65536,
+        description="Cycles samples of the glossy anchors' bakes (a metal's reflected sun is "
+                    "noisier than diffuse light)")
+    material_smoothing: FloatProperty(
+        name="Smoothing", default=2.0, min=0.0, max=20.0,
+        description="Average the Cycles-baked bounce terms and glossy anchors over this many "
+                    "vertex spacings after the bake (0: off; never across differently facing "
+                    "surfaces, never over 3% of the scene; rays' bounces stay as gathered). "
+                    "Measured on the demo room: about halves the Cycles terms' noise")
+
+    # export (relight export): directional lightmaps and RTI models of a transport bake
+    export_format: EnumProperty(name="Format", default="rti-hsh", items=[
+        ("rti-hsh", "RTI HSH", "Hemispherical harmonics planes + a relightable web page "
+                               "(relight tools' layout, as OpenLIME reads it)"),
+        ("rti-ptm", "RTI PTM", "Polynomial texture map planes (6 terms) + a web page"),
+        ("sh-l1", "L1 SH Lightmap", "Four half EXRs of L1 spherical harmonics (Godot's "
+                                    "directional lightmap layers and axes), for one lighting"),
+        ("monosh", "MonoSH Lightmap", "Bakery's MonoSH: L0 EXR + 8-bit direction (Unity axes), "
+                                      "for one lighting")])
+    export_terms: EnumProperty(name="Terms", default="9", items=[
+        ("4", "4", "HSH order 2"), ("9", "9", "HSH order 3 (OpenLIME's)"),
+        ("16", "16", "HSH order 4 (our viewer only)")])
+    export_light: EnumProperty(name="Lighting", default="SUN", items=[
+        ("SUN", "Preview Light", "A sun from the Preview Light sliders"),
+        ("ENV", "Environment", "An equirectangular EXR")])
+    export_env: StringProperty(name="Environment", subtype="FILE_PATH",
+                               options=path_options(),
+                               description="Equirectangular RGB EXR lighting the lightmap")
+    export_env_rotation: FloatProperty(
+        name="Rotation", default=0.0, soft_min=-180.0, soft_max=180.0,
+        description="The environment's rotation about +z, as a world Mapping node's Z")
+    export_force: BoolProperty(name="Replace Existing", default=False,
+                               description="Replace an earlier export of this object and format")
+
+    # which device Cycles bakes on (operators/base/cycles_device.py), and the last bake's
+    device: EnumProperty(name="Device", default="auto", items=[
+        ("auto", "Auto", "The GPU chosen in Preferences > System when the scene's Cycles device "
+                          "is GPU, else the CPU (the bake says which)"),
+        ("cpu", "CPU", "Always the CPU"),
+        ("gpu", "GPU", "The GPU of Preferences > System (or the first Cycles finds); refuses "
+                        "to bake without one")])
+    device_used: StringProperty(name="Baked On", default="",
+                                description="The device the last bake of this scene used")
+
+    # where a bake runs (operators/farm/external_bake.py): here, or through `relight` on Dask
+    run_on: EnumProperty(name="Run On", default="HERE", items=[
+        (k, label, desc) for k, label, desc in _RUN_ON])
+    dask_workers: IntProperty(
+        name="Workers", default=2, min=1, max=256,
+        description="Worker processes of the local Dask cluster (each gets its share of the "
+                    "cores as Cycles threads)")
+    dask_scheduler: StringProperty(
+        name="Scheduler", default="tcp://127.0.0.1:8786",
+        description="Address of a running Dask scheduler whose workers have this package and "
+                    "bpy, and read the .blend and the output folder at the same paths")
+    dask_command: StringProperty(
+        name="Relight Command", subtype="FILE_PATH", default="", options=path_options(),
+        description="The `relight` console script of a Python environment with bpy and Dask "
+                    "(e.g. <repository>/.venv/bin/relight); empty: `relight` on PATH")
+
+    truth_lights: IntProperty(
+        name="Check vs Cycles", default=0, min=0, max=12,
+        description="Also bake Cycles Sun truths for this many held-out lights and report the "
+                    "error (0 = skip)")
+
+
+CLASSES = (RelightSceneSettings,)
+
+
+def transport_settings_from_scene(props):
+    """TransportTextureSettings from the panel's properties."""
+    from ..bakes.texture_transport import TransportTextureSettings
+
+    power = f":{props.horizon_power:g}" if props.horizon_power != 1.0 else ""
+    return TransportTextureSettings(
+        directions=f"hemi:{props.directions}{power}", resolution=props.resolution,
+        bounces=props.bounces, model=props.transport_model, tol=props.transport_tol,
+        components=props.transport_components or None, indirect_samples=props.indirect_samples,
+        indirect_resolution=props.indirect_resolution, sun_angle=props.sun_angle,
+        table_size=props.table_size, viewport=props.transport_viewport)
+
+
+def settings_from_scene(props):
+    """TextureBakeSettings from the panel's properties."""
+    from ..bakes.steerable_bake import TextureBakeSettings
+
+    return TextureBakeSettings(**{name: getattr(props, name) for name in _SETTING_NAMES})
+
+
+@bpy.app.handlers.persistent
+def _on_depsgraph_update(scene, depsgraph):
+    """Refresh the vertex preview when the chosen point lamp moves or changes power, and the
+    texture previews lit by the World when the world changes (its image, strength, Mapping)."""
+    props = getattr(scene, "relight", None)
+    if props is None:
+        return
+    lamp = props.point_light
+    watch_world = props.texture_light == "WORLD"
+    if lamp is None and not watch_world:
+        return                          # every depsgraph update passes here: nothing to watch
+    lamp_moved = world_changed = False
+    for update in depsgraph.updates:
+        original = getattr(update.id, "original", None)
+        if lamp is not None and original in (lamp, lamp.data):
+            lamp_moved = True
+        if watch_world and isinstance(update.id, bpy.types.World) and \
+                update.id.original == scene.world:
+            world_changed = True
+    if lamp_moved:
+        from ..preview.vertex_relight import update_preview
+
+        update_preview(scene)
+    if world_changed:
+        from ..preview.transport_preview import update_environment_previews
+
+        update_environment_previews(scene)
+
+
+def register() -> None:
+    bpy.types.Scene.relight = PointerProperty(type=RelightSceneSettings)
+    bpy.app.handlers.depsgraph_update_post.append(_on_depsgraph_update)
+
+
+def unregister() -> None:
+    if _on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.remove(_on_depsgraph_update)
+    del bpy.types.Scene.relight
+
