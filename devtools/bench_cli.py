@@ -43,7 +43,7 @@ def add_parser(sub) -> None:
 
 
 def _cmd_bench(args) -> int:
-    from ..operators.cli.commands import EXIT_OK, CliError, _can_create_in, _progress_printer
+    from ..operators.cli.common import EXIT_OK, CliError, can_create_in, progress_printer
     from . import bench
 
     out_dir = os.path.abspath(args.out)
@@ -52,7 +52,7 @@ def _cmd_bench(args) -> int:
         if not os.path.isdir(parent):
             raise CliError(f"output folder's parent does not exist: {parent}")
         os.makedirs(out_dir)
-    if not _can_create_in(out_dir):
+    if not can_create_in(out_dir):
         raise CliError(f"output folder is not writable: {out_dir}")
     scenes = args.scene or ["bumps", "noise", "statue", "room"]
     if args.write_presets and "bumps" not in scenes:
@@ -61,7 +61,7 @@ def _cmd_bench(args) -> int:
     mode = "quick" if args.quick else "standard"
     if args.write_presets and args.quick:
         raise CliError("--write-presets needs the standard (demo-size) sweep; drop --quick")
-    show = _progress_printer("bench")
+    show = progress_printer("bench")
     for name in scenes:
         try:
             report = bench.bench_scene(name, mode, out_dir, on_progress=show)

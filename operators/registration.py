@@ -8,11 +8,10 @@ from __future__ import annotations
 
 import bpy
 
-from .ui import bake_ops, export_ops, panel, properties, scene_ops
+from .ui import bake_ops, export_ops, material_ops, panel, properties, scene_ops
 from . import cli
-from .bakes import material_edit
 
-CLASSES = (properties.CLASSES + scene_ops.CLASSES + bake_ops.CLASSES + material_edit.CLASSES
+CLASSES = (properties.CLASSES + scene_ops.CLASSES + bake_ops.CLASSES + material_ops.CLASSES
            + export_ops.CLASSES + panel.CLASSES)
 CLI_COMMAND = "relight"
 _cli_handles = []
@@ -22,14 +21,14 @@ def register() -> None:
     for cls in CLASSES:
         bpy.utils.register_class(cls)
     properties.register()
-    material_edit.register()
+    material_ops.register()
     _cli_handles.append(bpy.utils.register_cli_command(CLI_COMMAND, cli.run))
 
 
 def unregister() -> None:
     while _cli_handles:
         bpy.utils.unregister_cli_command(_cli_handles.pop())
-    material_edit.unregister()
+    material_ops.unregister()
     properties.unregister()
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)

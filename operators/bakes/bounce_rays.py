@@ -5,7 +5,7 @@ receiver casts do not depend on the light, so one gather serves every light dire
 module is its Blender side: :class:`GatherScene` reads every rendered mesh of the scene as the
 gated Cycles bake sees it -- each face corner with its region (editable material, or the fixed
 rest) and the diffuse colour it reflects with (white on editable regions, the material's own
-base colour elsewhere, :func:`.material_bake.material_colour`) -- casts the cosine-weighted
+base colour elsewhere, :func:`..base.materials.material_colour`) -- casts the cosine-weighted
 rays of a block of origins through the :class:`.direct_rays.ReceiverRays` BVH
 (``mathutils.bvhtree``), and gives the exact direct light at every corner (a shadow ray per
 corner origin, the same rays that equal Cycles' bounce-free bake in the tests).
@@ -65,11 +65,11 @@ class GatherScene:
         The global corners of each BVH triangle (the BVH's polygon index).
     corner_region : (C,) int16; corner_albedo : (C, 3) float64
     notes : list of str
-        Why a material reflects its viewport colour (:func:`.material_bake.material_colour`).
+        Why a material reflects its viewport colour (:func:`..base.materials.material_colour`).
     """
 
     def __init__(self, scene, regions: list):
-        from .material_bake import material_colour
+        from ..base.materials import material_colour
 
         self.scene = scene
         self.regions = list(regions)

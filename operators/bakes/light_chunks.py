@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from ..base.jobs import Progress
+from ..base.jobs import Progress, run
 
 
 def light_spec(order: int, env_height: int, resolution: int, samples: int, bounces: int,
@@ -41,6 +41,13 @@ def _sampled(order: int):
 
 def chunk_name(k: int) -> str:
     return f"light_{k:05d}"
+
+
+def lights_stage(scene, objects, spec: dict, start: int, stop: int, cache, threads: int = 0,
+                 part=None) -> float:
+    """The basis lights' chunk function for :func:`..farm.distributed.fill_chunks`: lights
+    ``start:stop`` of ``spec`` (:func:`light_spec`) into ``cache``; returns Cycles' seconds."""
+    return run(bake_lights(scene, objects, spec, range(start, stop), cache.put, threads))[0]
 
 
 def bake_lights(scene, objects, spec: dict, lights, put, threads: int = 0):
@@ -105,7 +112,7 @@ def light_stacks(scene, objects, spec: dict, cache=None, client=None,
         todo = [range(k, k + 1) for k in range(K) if k not in have]
         figures["distributed"] = yield from fill_chunks(client, blend_path, objects, spec,
                                                         cache, todo, done, total,
-                                                        stage="lights")
+                                                        lights_stage)
         for c in todo:
             arr = cache.get(chunk_name(c.start))
             if arr is not None and arr.shape == (len(objects), R, R, 3):

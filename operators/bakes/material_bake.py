@@ -52,77 +52,14 @@ from ...lt_addon.transport.texture import parse_directions
 from ..base import cycles_device
 from ..base.compat import ensure_node_tree
 from ..base.cycles_bake import BakeInputError, EnvironmentBake, SceneChanges, check_memory
-from ..base.jobs import Progress
+from ..base.jobs import Progress, run
+from ..base.materials import (finish_sockets, material_bsdf, material_colour,  # noqa: F401
+                              material_colour_socket, material_finish, scene_materials)
 from ..base.meshes import corner_vertices, polygon_arrays
 
 _PREFIX = "RelightGate"
-#: Kind of the bake record on the first object (:func:`.steerable_bake.record_kind`).
+#: Kind of the bake record on the first object (:func:`..base.blend_files.record_kind`).
 KIND = "material_tensors"
-
-
-def material_bsdf(mat):
-    """The BSDF node on the material's own active output (not a relight preview's), or None."""
-    tree = mat.node_tree if mat is not None else None
-    outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"
-            and not n.get("relight_preview")] if tree else []
-    out = next((n for n in outs if n.is_active_output), outs[0] if outs else None)
-    return (out.inputs["Surface"].links[0].from_node
-            if out is not None and out.inputs["Surface"].is_linked else None)
-
-
-def material_colour_socket(mat):
-    """The unlinked Base Color / Color socket of the BSDF on the material's own active output
-    (the colour an edit changes), or None."""
-    node = material_bsdf(mat)
-    socket = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}.get(
-        getattr(node, "bl_idname", ""))
-    return node.inputs[socket] if socket and not node.inputs[socket].is_linked else None
-
-
-def finish_sockets(mat) -> dict:
-    """The unlinked Metallic and Roughness sockets of the material's Principled BSDF
-    (``{"metallic": socket, "roughness": socket}``, fewer where linked or not Principled)."""
-    node = material_bsdf(mat)
-    if node is None or node.bl_idname != "ShaderNodeBsdfPrincipled":
-        return {}
-    return {k.lower(): node.inputs[k] for k in ("Metallic", "Roughness")
-            if not node.inputs[k].is_linked}
-
-
-def material_finish(mat) -> tuple:
-    """``(metallic, roughness)`` of the material's Principled BSDF (unlinked inputs; a linked
-    one counts as 0 / 0.5), ``(0, 0.5)`` for anything else: the finish glossy anchors edit."""
-    knobs = finish_sockets(mat)
-    return tuple(float(knobs[k].default_value) if k in knobs else default
-                 for k, default in (("metallic", 0.0), ("roughness", 0.5)))
-
-
-def material_colour(mat) -> tuple[np.ndarray, str | None]:
-    """The diffuse colour a material bakes with (RGB float64) and, when it is not an unlinked
-    Base Color / Color of its own output's BSDF, why the viewport colour stands in."""
-    if mat is None:
-        return np.full(3, 0.8), "no material: grey 0.8"
-    socket = material_colour_socket(mat)
-    if socket is not None:
-        return np.array(socket.default_value[:3], dtype=np.float64), None
-    return (np.array(mat.diffuse_color[:3], dtype=np.float64),
-            f"{mat.name!r}'s colour is not an unlinked Principled Base Color or Diffuse Color "
-            "(a texture, another node): its viewport colour stands in")
-
-
-def scene_materials(scene) -> list:
-    """Every material (or None for an empty slot list) on the scene's rendered meshes."""
-    seen, out = set(), []
-    for o in scene.objects:
-        if o.type != "MESH" or o.hide_render:
-            continue
-        mats = [s.material for s in o.material_slots] or [None]
-        for m in mats:
-            key = m.name if m is not None else None
-            if key not in seen:
-                seen.add(key)
-                out.append(m)
-    return out
 
 
 def check_regions(scene, regions) -> None:
@@ -605,6 +542,15 @@ def bake_material_chunks(scene, objects, settings: MaterialBakeSettings, chunks,
     return cycles
 
 
+def material_stage(scene, objects, settings: dict, start: int, stop: int, cache,
+                   threads: int = 0, part=None) -> float:
+    """The material bake's chunk function for :func:`..farm.distributed.fill_chunks`: the
+    :class:`MaterialChunk` ``part + (start, stop)`` of the MaterialBakeSettings ``settings``
+    (sent as a dict) into ``cache``; returns Cycles' seconds."""
+    return run(bake_material_chunks(scene, objects, MaterialBakeSettings(**settings),
+                                    [MaterialChunk(*part, start, stop)], cache.put, threads))
+
+
 def colour_notes(scene, regions) -> list:
     """Why a fixed material of ``scene`` bakes with its viewport colour (see
     :func:`material_colour`), one note per such material."""
@@ -622,7 +568,7 @@ def material_chunk_cache(scene, objects, settings: MaterialBakeSettings, out_dir
     from ...lt_addon.io.chunk_cache import ChunkCache
     from ..base.bake_inputs import scene_key
     from ..base.cycles_device import current
-    from .texture_transport import CACHE_FOLDER
+    from ..base.bake_inputs import CACHE_FOLDER
 
     baked = {k: v for k, v in dataclasses.asdict(settings).items() if k != "smoothing"}
     # what the chunks depend on, defaults resolved (a panel and a command line that mean the
@@ -701,7 +647,7 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
 
         todo = [c for c in plan if c.name not in have]
         distributed = yield from fill_chunks(client, blend_path, objects, settings, cache,
-                                             todo, done, total, stage="material")
+                                             todo, done, total, material_stage)
         for c in todo:
             arr = cache.get(c.name)
             if arr is not None and c.fits(arr, V):
@@ -1064,7 +1010,7 @@ def materials_job(scene, objects, settings: MaterialBakeSettings, out_dir: str,
     it is cancelled: with ``resume`` the finished chunks are kept in
     ``<out_dir>/.relight_cache`` until the files are written, so a rerun redoes only the
     missing ones; a Dask ``client`` bakes them on its workers from ``blend_path``."""
-    from .steerable_bake import record_kind
+    from ..base.blend_files import record_kind
 
     started = time.perf_counter()
     settings.validate()

@@ -1,5 +1,5 @@
-"""Material edits in the viewport (bpy): the bake operator, the live per-vertex preview and
-what keeps it live (Sun et al. 2007's run time).
+"""Material edits in the viewport (bpy): the bake job, the live per-vertex preview and what
+keeps it live (Sun et al. 2007's run time); the panel's operator is :mod:`..ui.material_ops`.
 
 After ``bake-materials`` (CLI or the panel's *Bake Materials*), every receiver shows the
 colour attribute :data:`ATTRIBUTE` -- outgoing diffuse radiance ``albedo / pi * E`` with the
@@ -24,7 +24,6 @@ import numpy as np
 
 from ...lt_addon.transport import ptt
 from . import material_bake
-from ..ui.bake_ops import _ModalBake, _transport_objects
 from ..base.cycles_bake import BakeInputError
 from ..base.meshes import set_color_attribute
 
@@ -276,84 +275,3 @@ def on_depsgraph_update(scene, depsgraph):
         _busy.pop()
     if timings:
         scene[SUMMARY_KEY + "_update"] = f"Last update {timings['update_ms']:.1f} ms"
-
-
-class RELIGHT_OT_bake_materials(_ModalBake, bpy.types.Operator):
-    """Bake transfer tensors of the selected meshes (Sun 2007) so the materials marked Editable
-    can be recoloured with their interreflection following live (Esc cancels)"""
-
-    bl_idname = "relight.bake_materials"
-    bl_label = "Bake Materials"
-    bl_options = {"REGISTER"}
-
-    def _prepare(self, context):
-        scene, props = context.scene, context.scene.relight
-        objects = _transport_objects(context)
-        regions = [m.name for m in material_bake.scene_materials(scene)
-                   if m is not None and m.relight_editable]
-        if not regions:
-            raise BakeInputError("mark at least one material Editable in the Material Edits "
-                                 "panel")
-        rough = ",".join(v for v in re.split(r"[,\s]+", props.material_anchors) if v)
-        settings = material_bake.MaterialBakeSettings(
-            regions=regions, bounces=props.material_bounces, samples=props.material_samples,
-            anchors=f"roughness:{rough}" if rough else "diffuse",
-            anchor_samples=props.material_anchor_samples,
-            anchor_directions=f"hemi:{props.material_anchor_directions}",
-            domain="CORNER" if props.material_per_corner else "POINT",
-            smoothing=props.material_smoothing, bounce_bake=props.material_bounce_bake,
-            rays=props.material_rays,
-            directions=(f"hemi:{props.material_directions}:1.5",
-                        f"hemi:{props.material_one_directions}",
-                        f"hemi:{props.material_two_directions}"))
-        settings.validate()
-        if props.run_on != "HERE":
-            d0, d1, d2 = settings.specs()
-            args = [a for o in objects for a in ("--object", o.name)]
-            args += [a for r in regions for a in ("--region", r)]
-            return self._external(context, "bake-materials", args + [
-                "--bounces", str(settings.bounces), "--samples", str(settings.samples),
-                "--bounce-bake", settings.bounce_bake, "--rays", str(settings.rays),
-                "--anchors", settings.anchors, "--anchor-samples", str(settings.anchor_samples),
-                "--anchor-directions", settings.anchor_spec(),
-                "--directions", d0, "--one-bounce-directions", d1, "--two-bounce-directions",
-                d2, "--smoothing", f"{settings.smoothing:g}"]
-                + (["--per-corner"] if settings.domain == "CORNER" else []))
-        self._make_out_dir(props)
-        return bake_job(scene, objects, settings, self.out_dir)
-
-    def _cancel_note(self, context) -> str:
-        return "; its finished chunks are kept, so baking again resumes"
-
-    def _finish(self, context, result):
-        rep = result.report
-        s = rep["energy_shares"]
-        g = rep.get("gather")
-        rays = f" + {g['rays_per_origin']} rays a receiver" if g else ""
-        text = (f"Baked {len(rep['objects'])} objects, {rep['vertices']} vertices: "
-                f"{rep['bake_calls']} Cycles bakes{rays} in "
-                f"{rep['timings']['wall_total']:.1f} s, "
-                f"{rep['bytes']['tensors'] / 2**20:.1f} MiB; light direct {s['direct']:.2f}, "
-                f"1 bounce {s['one_bounce']:.2f}, 2 bounces {s['two_bounce']:.2f}")
-        context.scene[SUMMARY_KEY] = text
-        for note in rep["notes"]:
-            self.report({"WARNING"}, note)
-        self.report({"INFO"}, text)
-
-
-CLASSES = (RELIGHT_OT_bake_materials,)
-
-
-def register() -> None:
-    bpy.types.Material.relight_editable = bpy.props.BoolProperty(
-        name="Editable", default=False,
-        description="Bake Materials keeps this material's colour editable, with the light it "
-                    "throws on the rest of the scene following (Sun 2007)")
-    bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
-
-
-def unregister() -> None:
-    if on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
-    del bpy.types.Material.relight_editable
-

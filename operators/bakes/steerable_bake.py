@@ -156,7 +156,7 @@ def lobes_chunk_cache(scene, obj, settings: TextureBakeSettings, out_dir: str):
     """The chunk cache of a lobes bake of ``obj`` into ``out_dir``:
     ``<out_dir>/.relight_cache/<object>_lobes/`` (:func:`.light_chunks.light_cache`)."""
     from .light_chunks import light_cache
-    from .texture_transport import CACHE_FOLDER
+    from ..base.bake_inputs import CACHE_FOLDER
 
     return light_cache(scene, [obj], lobes_spec(settings),
                        os.path.join(out_dir, CACHE_FOLDER, atomic.safe_name(obj.name) + "_lobes"))
@@ -222,23 +222,10 @@ def write_bake(result: BakeResult, obj, out_dir: str, settings: TextureBakeSetti
     return report
 
 
-def record_kind(obj, kind: str, file_path: str, fields: dict) -> None:
-    """Replace the object's bake record of ``kind`` (kept as an ID custom property), with the
-    file path relative to the .blend when it is saved."""
-    from ..base.blend_files import BAKES_KEY, object_bakes
-
-    try:
-        path = bpy.path.relpath(file_path) if bpy.data.filepath else os.path.abspath(file_path)
-    except ValueError:  # another drive on Windows
-        path = os.path.abspath(file_path)
-    entry = {"kind": kind, "path": path,
-             "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), **fields}
-    bakes = [b for b in object_bakes(obj) if b.get("kind") != kind]
-    obj[BAKES_KEY] = bakes + [entry]
-
-
 def record_bake(obj, exr_path: str, report: dict) -> None:
     """Replace the object's steerable-texture bake record."""
+    from ..base.blend_files import record_kind
+
     record_kind(obj, BAKE_KIND, exr_path, {
         "order": report["settings"]["order"],
         "resolution": report["settings"]["resolution"],

@@ -37,119 +37,21 @@ from ...lt_addon.transport import texture as tt
 from ...lt_addon.sphere.hemisphere import direction_from_az_el
 from ..base import cycles_device
 from ..base.cycles_bake import BakeInputError, EnvironmentBake, check_bakeable, check_memory
+from ..base.bake_inputs import CACHE_FOLDER
 from ..base.jobs import Progress
+# The bundle (settings, files, report, reading and relighting) is bpy-free; re-exported here for
+# the bake and its callers.
+from ...lt_addon.transport.bundle import (INDIRECT, KIND, MODELS, TRUTH_LIGHTS, VIEWPORTS,  # noqa: F401
+                                          ObjectBake, TransportTextureResult,
+                                          TransportTextureSettings, fit_model, load_bake,
+                                          model_fidelity, model_summary, preview_cost,
+                                          quantized, rel_rmse, relight, relight_environment,
+                                          steerable_from_store, upsample as _upsample,
+                                          viewport_direct, viewport_tables, write_bundle)
 
-KIND = "transport_texture"
 #: Directions per chunk of the direct stage: the unit a cancelled bake resumes from (16 hard-sun
 #: bakes at 256^2 are about 2 s here; a chunk of 16 x 256^2 half floats is 2 MiB per object).
 CHUNK_DIRECTIONS = 16
-#: The chunk cache's folder inside the output folder (hidden; removed when the bake completes).
-CACHE_FOLDER = ".relight_cache"
-MODELS = ("pca", "blocks", "steerable", "none")
-#: What the viewport shows (``auto``: T itself when its atlas fits, else the PCA; see
-#: :func:`..lt_addon.transport.sparse_tables.choose_viewport`).
-VIEWPORTS = ("auto", "transport", "pca")
-INDIRECT = ("steerable", "none")
-#: Held-out truth lights (azimuth, elevation in degrees): the four elevations of issue 13.
-TRUTH_LIGHTS = ((37.0, 10.0), (161.0, 30.0), (283.0, 55.0), (59.0, 80.0))
-
-
-@dataclass
-class TransportTextureSettings:
-    """What to bake (``directions``, ``resolution``, indirect effort) and which model to fit.
-
-    ``bounces``: the scene's diffuse bounces for the indirect term (0 = direct light only).
-    ``tol``: relative Frobenius residual of T the PCA models keep (or ``components``: a fixed
-    count for ``pca``). ``sun_angle``: the sun size (degrees) the viewport tables are made
-    for (the NumPy relight takes any size). ``viewport``: what the live preview shows --
-    ``transport`` relights from T itself (a few baked directions per pixel through sparse
-    kernel tables), ``pca`` from the fitted PCA, ``auto`` T when its preview atlas fits
-    :data:`..lt_addon.transport.sparse_tables.AUTO_BYTES`, else the PCA.
-    """
-
-    directions: str = "hemi:400:1.5"
-    resolution: int = 256
-    bounces: int = 2
-    indirect: str = "steerable"
-    indirect_order: int = 3
-    indirect_resolution: int = 128
-    indirect_samples: int = 64
-    indirect_smoothing: float = 0.75
-    model: str = "pca"
-    components: int | None = None
-    tol: float = 0.02
-    block: int = 16
-    sun_angle: float = 2.0
-    kernel: str = "linear"
-    table_size: int = 32
-    seed: int = 0
-    viewport: str = "auto"
-
-    def validate(self):
-        """Check ranges; returns the DirectionSet."""
-        try:
-            dset = tt.parse_directions(self.directions)
-        except ValueError as exc:
-            raise BakeInputError(str(exc)) from None
-        if dset.size < 8:
-            raise BakeInputError(f"need at least 8 upper-hemisphere directions, got {dset.size}")
-        if not 4 <= self.resolution <= 8192:
-            raise BakeInputError(f"resolution must be in 4..8192, got {self.resolution}")
-        if not 0 <= self.bounces <= 64:
-            raise BakeInputError(f"bounces must be in 0..64, got {self.bounces}")
-        if self.indirect not in INDIRECT:
-            raise BakeInputError(f"indirect must be one of {INDIRECT}, got {self.indirect!r}")
-        if self.model not in MODELS:
-            raise BakeInputError(f"model must be one of {MODELS}, got {self.model!r}")
-        if not 2 <= self.indirect_order <= 7:
-            raise BakeInputError(f"indirect order must be in 2..7, got {self.indirect_order}")
-        if not 4 <= self.indirect_resolution <= 8192 or self.indirect_samples < 1:
-            raise BakeInputError("indirect resolution must be in 4..8192 and samples >= 1")
-        if not 0.0 <= self.indirect_smoothing <= 16.0:
-            raise BakeInputError(f"indirect smoothing must be in 0..16 texels, got "
-                                 f"{self.indirect_smoothing}")
-        if self.components is not None and self.components < 1:
-            raise BakeInputError(f"components must be >= 1, got {self.components}")
-        if not 0.0 < self.tol < 1.0:
-            raise BakeInputError(f"tol must be in (0, 1), got {self.tol}")
-        if self.model == "blocks" and (self.block < 2 or self.resolution % self.block):
-            raise BakeInputError(f"block {self.block} must divide the resolution {self.resolution}")
-        if not 0.0 <= self.sun_angle <= 30.0:
-            raise BakeInputError(f"sun angle must be in 0..30 degrees, got {self.sun_angle}")
-        if self.kernel not in tt.KERNELS:
-            raise BakeInputError(f"kernel must be one of {tt.KERNELS}, got {self.kernel!r}")
-        if not 8 <= self.table_size <= 256:
-            raise BakeInputError(f"table size must be in 8..256, got {self.table_size}")
-        if self.viewport not in VIEWPORTS:
-            raise BakeInputError(f"viewport must be one of {VIEWPORTS}, got {self.viewport!r}")
-        return dset
-
-
-@dataclass
-class ObjectBake:
-    """What one object's bake produced (arrays in memory are small: no T)."""
-
-    name: str
-    store_path: str
-    albedo: np.ndarray                      # (R, R, 3) float32
-    indirect: object = None                 # SteerableTexture or None
-    model: object = None                    # TexturePCA / BlockPCA / SteerableTexture / None
-    fit_seconds: float = 0.0
-    store: object = None                    # the TransportStore (temporary until written)
-
-
-@dataclass
-class TransportTextureResult:
-    objects: list
-    directions: object
-    settings: TransportTextureSettings
-    seconds: dict = field(default_factory=dict)
-    bake_calls: int = 0
-    peak_rss_mb: float = 0.0         # anonymous memory above the level before the bake
-    growth_after_first_mb: float = 0.0   # ... above the level after the first direction
-    cache: object = None             # the stages' ChunkCaches, inner first (None: resume off)
-    chunks: dict = field(default_factory=dict)   # chunks_total, chunks_reused, chunk_directions
-    indirect_chunks: dict = None     # the indirect stage's light chunks (light_stacks figures)
 
 
 def _rss_mb() -> float:
@@ -250,7 +152,7 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
         try:
             distributed = yield from fill_chunks(
                 client, blend_path, objects, settings, cache,
-                [c for c, kept in zip(chunks, cached) if kept is None], 1, total)
+                [c for c, kept in zip(chunks, cached) if kept is None], 1, total, direct_stage)
         except BaseException:
             for store in stores:
                 store.abort()
@@ -341,6 +243,36 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
     return result
 
 
+def bake_directions(scene, objects, settings, start: int, stop: int, cache,
+                    threads: int = 0) -> float:
+    """Bake directions ``start:stop`` of ``settings``' direction set for ``objects`` exactly as
+    the single-process bake does (1 spp hard suns, same seed) and put them into ``cache`` as the
+    chunk ``direct_<start>`` ((objects, directions, texels), half floats); ``threads`` Cycles
+    threads (0: all cores). Returns Cycles' seconds. Used by the Dask task and ``relight
+    bake-chunk`` (farms)."""
+    dset = settings.validate()
+    if threads:   # workers sharing a machine: no more Cycles threads than their share of cores
+        scene.render.threads_mode, scene.render.threads = "FIXED", int(threads)
+    rows = [[] for _ in objects]
+    with EnvironmentBake(scene, objects, settings.resolution, 1, 0, (8, 16), mode="irradiance",
+                         seed=settings.seed, world_sampling="none", passes="direct") as session:
+        for i in range(start, stop):
+            for row, img in zip(rows, session.bake_sun_all(dset.directions[i], 1.0, 0.0)):
+                row.append(np.asarray(img[..., 0], np.float32).reshape(-1).astype(np.float16))
+        seconds = session.bake_seconds
+    cache.put(f"direct_{start:05d}", np.stack([np.stack(r) for r in rows]))
+    return seconds
+
+
+def direct_stage(scene, objects, settings: dict, start: int, stop: int, cache, threads: int = 0,
+                 part=None) -> float:
+    """The texture bake's chunk function for :func:`..farm.distributed.fill_chunks`: directions
+    ``start:stop`` of the TransportTextureSettings ``settings`` (sent as a dict) into ``cache``
+    (:func:`bake_directions`); returns Cycles' seconds."""
+    return bake_directions(scene, objects, TransportTextureSettings(**settings), start, stop,
+                           cache, threads)
+
+
 def indirect_spec(settings: TransportTextureSettings) -> dict:
     """The indirect stage's basis lights (:func:`.light_chunks.light_spec`): the paper's
     steerable basis of ``indirect_order`` on 64-row environments, the indirect pass only."""
@@ -427,103 +359,12 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
     return out
 
 
-def fit_model(store, settings: TransportTextureSettings, albedo):
-    """The chosen model of one object's store (None for ``model="none"``)."""
-    if settings.model == "pca":
-        return tt.fit_texture_pca(store, k=settings.components,
-                                  tol=None if settings.components else settings.tol)
-    if settings.model == "blocks":
-        return tt.fit_block_pca(store, block=settings.block, tol=settings.tol)
-    if settings.model == "steerable":
-        return steerable_from_store(store, albedo, order=settings.components or 7)
-    return None
-
-
-def steerable_from_store(store, albedo, order: int = 7):
-    """The steerable basis of Ashikhmin & Shirley by quadrature over the baked directions:
-    noise-free, any order, radiance of the direct light (albedo applied)."""
-    from ...lt_addon.steerable.sampled_basis import build_sampled_basis
-    from ...lt_addon.steerable.basis import paper_basis
-    from ...lt_addon.steerable.texture import SteerableTexture
-
-    basis = paper_basis(order)
-    sampled = build_sampled_basis(basis)
-    stack = tt.quadrature_sampled_lights(store, sampled)              # (K, R, R)
-    rgb = stack[..., None] * np.asarray(albedo, np.float32)[None]
-    return SteerableTexture(sampled.to_basis_images(rgb, dtype=np.float32), order, basis.width,
-                            sampled.centres, frame="world", calibration="steerable_cos",
-                            settings={"resolution": store.resolution, "mode": "radiance",
-                                      "method": "transport-quadrature",
-                                      "directions": store.directions.spec})
-
-
 # ----------------------------------------------------------------------------------------------
 # relighting (NumPy)
 
 
-def _upsample(img, R):
-    """Bilinear resize of (r, r, C) to (R, R, C) at texel centres (as a GPU sampler would)."""
-    img = np.asarray(img, np.float32)
-    r = img.shape[0]
-    if r == R:
-        return img
-    c = (np.arange(R) + 0.5) * r / R - 0.5
-    c = np.clip(c, 0.0, r - 1.0)
-    i0 = np.minimum(np.floor(c).astype(int), r - 2 if r > 1 else 0)
-    f = (c - i0)[:, None]
-    i1 = np.minimum(i0 + 1, r - 1)
-    rows = img[i0] * (1 - f)[..., None] + img[i1] * f[..., None]
-    return rows[:, i0] * (1 - f.T)[..., None] + rows[:, i1] * f.T[..., None]
-
-
-def relight(bake: ObjectBake, store, direction, sun_angle: float = 0.0, intensity: float = 1.0,
-            source: str = "transport", kernel: str = "linear") -> np.ndarray:
-    """Radiance (R, R, 3) under a sun: ``source="transport"`` relights from T itself (the
-    full-accuracy reference), ``"model"`` from the fitted model."""
-    idx, w = tt.sun_weights(store.directions, direction, sun_angle, kernel)
-    R = store.resolution
-    if source == "transport" or bake.model is None:
-        e = store.relight(idx, w)
-        direct = e[..., None] * bake.albedo
-    elif hasattr(bake.model, "relight") and hasattr(bake.model, "V"):
-        e = bake.model.relight(idx, w)
-        direct = e[..., None] * bake.albedo
-    else:   # steerable texture
-        direct = bake.model.relight(np.asarray(direction, np.float64))
-    out = direct
-    if bake.indirect is not None:
-        out = out + _upsample(bake.indirect.relight(np.asarray(direction, np.float64)), R)
-    return (intensity * out).astype(np.float32)
-
-
-def relight_environment(bake: ObjectBake, store, env_image, rotation_deg: float = 0.0,
-                        *, row_order: str = "top_first", source: str = "transport") -> np.ndarray:
-    """Radiance (R, R, 3) under an equirectangular environment (upper hemisphere): direct
-    light from T (``source="transport"``) or from the PCA model (``"model"``, what the
-    viewport shows), plus the indirect term steered by the same environment
-    (:func:`..lt_addon.transport.texture.steer_environment`)."""
-    w = tt.environment_weights(store.directions, env_image, row_order=row_order,
-                               rotation_deg=rotation_deg)
-    model = bake.model
-    if source == "model" and hasattr(model, "relight_dense") and hasattr(model, "V"):
-        e = model.relight_dense(w)
-    else:
-        e = store.relight_dense(w)
-    out = (e if e.ndim == 3 else e[..., None]) * bake.albedo
-    if bake.indirect is not None:
-        B = tt.steering_matrix(bake.indirect, store.directions)
-        out = out + _upsample(tt.steer_environment(bake.indirect, B, w), store.resolution)
-    return out.astype(np.float32)
-
-
 # ----------------------------------------------------------------------------------------------
 # ground truth and the report
-
-
-def rel_rmse(estimate, truth) -> float:
-    e, t = np.asarray(estimate, np.float64), np.asarray(truth, np.float64)
-    den = np.linalg.norm(t)
-    return float(np.linalg.norm(e - t) / den) if den > 0 else float(np.linalg.norm(e) > 0)
 
 
 def truth_bakes(scene, objects, lights, sun_angle: float, bounces: int, samples: int,
@@ -580,206 +421,21 @@ def truth_errors(result: TransportTextureResult, truths: dict, sun_angle: float,
 
 def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: dict | None = None,
                started: float | None = None) -> list:
-    """Write per object: albedo + indirect EXRs, the model (NPZ) and the report JSON; record the
-    bake on the object. Returns the reports."""
-    from ...lt_addon.steerable.texture import SteerableTexture
-    from .steerable_bake import record_kind
+    """Write the bundle of every object (:func:`..lt_addon.transport.bundle.write_bundle`) and
+    record the bake on the object. Returns the reports."""
+    from ..base.blend_files import record_kind
 
-    t0 = time.perf_counter()
-    reports = []
-    for b, obj in zip(result.objects, objects):
-        base = os.path.join(out_dir, atomic.safe_name(b.name))
-        if b.store is not None and getattr(b.store, "_tmp", None):
-            b.store_path = b.store.commit()
-        files = {"transport": b.store_path}
-        files["albedo"] = base + "_albedo.exr"
-        exrio.write_exr(files["albedo"], {c: b.albedo[..., i] for i, c in enumerate("RGB")},
-                        {"format": "relightable_textures.albedo"}, pixel_type="half")
-        if b.indirect is not None:
-            files["indirect"] = base + "_indirect.exr"
-            b.indirect.save(files["indirect"], "half")
-        if b.model is not None:
-            if isinstance(b.model, SteerableTexture):
-                files["model"] = base + "_transport_steerable.exr"
-                b.model.save(files["model"], "half")
-            else:
-                files["model"] = base + "_transport_model.npz"
-                tt.save_model(files["model"], b.model, result.directions.spec)
-        nbytes = {k: os.path.getsize(v) for k, v in files.items()}
-        s = result.settings
-        store = b.store or tt.TransportStore.open(b.store_path)
-        report = {
-            "kind": KIND, "object": b.name, "method": "transport",
-            "settings": asdict(s), "directions": result.directions.size,
-            "direction_set": result.directions.spec,
-            "objects_baked_together": [o.name for o in objects],
-            "files": {k: os.path.abspath(v) for k, v in files.items()},
-            "bytes": {**nbytes, "total": int(sum(nbytes.values())),
-                      **(b.model.storage_bytes() if hasattr(b.model, "storage_bytes") else {})},
-            "model": model_summary(b.model, result.directions.size),
-            "timings": {k: round(v, 3) for k, v in result.seconds.items()},
-            "device": cycles_device.current().report(),
-            "bake_calls": result.bake_calls,
-            "peak_rss_above_start_mb": round(result.peak_rss_mb, 1),
-            "rss_growth_while_streaming_mb": round(result.growth_after_first_mb, 1),
-            "preview_cost": preview_cost(b.model, s, store),
-            "model_vs_T": model_fidelity(b, store, s),
-            **result.chunks,
-            **(figures or {}),
-        }
-        report["timings"]["write"] = round(time.perf_counter() - t0, 3)
-        if started is not None:
-            report["timings"]["wall_total"] = round(time.perf_counter() - started, 3)
-        path = base + "_texture_report.json"
-        atomic.write_json(path, report, default=float)
-        report["report"] = os.path.abspath(path)
-        record_kind(obj, KIND, path, {"directions": result.directions.spec,
-                                      "resolution": s.resolution, "model": s.model,
-                                      "bytes": report["bytes"]["total"],
-                                      "bake_seconds": round(result.seconds.get("bake_total", 0), 2)})
-        reports.append(report)
+    reports = write_bundle(result, [o.name for o in objects], out_dir, figures, started,
+                           cycles_device.current().report(), __version__)
+    s = result.settings
+    for report, obj in zip(reports, objects):
+        record_kind(obj, KIND, report["report"],
+                    {"directions": result.directions.spec, "resolution": s.resolution,
+                     "model": s.model, "bytes": report["bytes"]["total"],
+                     "bake_seconds": round(result.seconds.get("bake_total", 0), 2)})
     for cache in result.cache or ():   # every file is written: the chunks have served
         cache.clear()
     return reports
-
-
-def viewport_tables(settings, store, sun_angle: float | None = None):
-    """The sparse kernel tables (indices, weights, kept) of the transport viewport when the
-    settings choose it for this store, else None."""
-    from ...lt_addon.transport import sparse_tables as sp
-
-    if settings.model != "pca":
-        return None
-    try:
-        viewport, _ = sp.choose_viewport(settings.viewport, store.directions.size,
-                                         store.resolution)
-    except ValueError:
-        return None
-    if viewport != "transport":
-        return None
-    return sp.cached_tables(store.directions, max(sp.TABLE_SIZE, settings.table_size),
-                            settings.sun_angle if sun_angle is None else sun_angle,
-                            settings.kernel)
-
-
-_QUANTIZED: dict = {}
-
-
-def quantized(store):
-    """(tiles, scales) of :func:`..lt_addon.transport.sparse_tables.quantize_directions` for
-    ``store`` (cached per store file and its modification time)."""
-    from ...lt_addon.transport import sparse_tables as sp
-
-    path = getattr(store, "_tmp", None) or store.path
-    key = (os.path.abspath(path), os.path.getmtime(path) if os.path.exists(path) else 0.0,
-           store.directions.size)
-    if key not in _QUANTIZED:
-        if len(_QUANTIZED) >= 4:      # a few stores (objects baked together): S * R^2 bytes each
-            _QUANTIZED.clear()
-        _QUANTIZED[key] = sp.quantize_directions(store.array)
-    return _QUANTIZED[key]
-
-
-def viewport_direct(store, tables, direction) -> np.ndarray:
-    """What the transport viewport shows of the direct light (R, R), irradiance/pi: T through
-    the sparse tables, read from its 8-bit atlas."""
-    from ...lt_addon.transport import sparse_tables as sp
-
-    tiles, scales = quantized(store)
-    return sp.viewport_relight(tiles, tables[0], sp.scaled_weights(tables[0], tables[1], scales),
-                               direction, 1.0 / 255.0)
-
-
-def model_fidelity(bake: ObjectBake, store, settings, lights=TRUTH_LIGHTS) -> dict | None:
-    """How far what the viewport shows is from T itself (the offline relight) at the held-out
-    lights, for the preview's sun size: direct light only (both add the same indirect term),
-    relative RMSE per light and combined as ``sqrt(mean(rel^2))``. The viewport is T through
-    sparse kernel tables (``viewport`` transport) or the fitted model; ``model_headline`` is
-    the fitted model's figure either way. Needs no Cycles truth, so every bake reports it.
-    None without a PCA-like model."""
-    model = bake.model
-    if model is None or not (hasattr(model, "V") or hasattr(model, "n_blocks")):
-        return None                     # none, or the steerable basis (no sparse relight)
-    tables = viewport_tables(settings, store)
-    viewport = settings.model if tables is None else "transport"
-    rows = []
-    for az, el in lights:
-        d = direction_from_az_el(az, el)
-        idx, w = tt.sun_weights(store.directions, d, settings.sun_angle, settings.kernel)
-        full = store.relight(idx, w)
-        row = {"azimuth": az, "elevation": el, "model": rel_rmse(model.relight(idx, w), full)}
-        row["rel"] = (row["model"] if tables is None else
-                      rel_rmse(viewport_direct(store, tables, d), full))
-        rows.append(row)
-    head = float(np.sqrt(np.mean([r["rel"] ** 2 for r in rows])))
-    mhead = float(np.sqrt(np.mean([r["model"] ** 2 for r in rows])))
-    worst = max(rows, key=lambda r: r["rel"])
-    return {"headline": round(head, 4), "viewport": viewport,
-            "model_headline": round(mhead, 4), "lights": rows, "sun_angle": settings.sun_angle,
-            "worst": {"rel": round(worst["rel"], 4), "elevation": worst["elevation"]},
-            "meaning": "relative RMSE of the viewport's relight against T's (direct light, "
-                       "albedo left out) at the held-out lights: how far the viewport is from "
-                       "the bake's own relight (relight --source transport); model_headline: "
-                       "the same for the fitted model. Not an error against Cycles: T blends "
-                       "neighbouring directions' shadows, and a PCA that smooths them can even "
-                       "be closer to Cycles (bumps demo, 2-degree Sun: 0.101 vs T's 0.103, "
-                       "while 0.056 apart). A global PCA loses cast shadows on large receivers "
-                       "(statue demo's ground, PCA 96: 0.064, 0.102 at 10 degrees elevation); "
-                       "the transport viewport keeps them (bumps demo, 64^2 tables: 0.005)"}
-
-
-def model_summary(model, S: int) -> dict:
-    """The report's model entry; a steerable quadrature model or none have no PCA summary."""
-    if model is None:
-        return {"kind": "none"}
-    if hasattr(model, "summary"):
-        return model.summary(S)
-    return {"kind": "steerable", "order": model.order}
-
-
-def preview_cost(model, settings, store=None) -> dict:
-    """Per-pixel cost of the live preview of ``model`` as ``settings.viewport`` shows it (the
-    transport viewport: 4 table texels x (2 K / 3 table lookups + K atlas lookups) + the
-    albedo, K the taps its tables need for the preview's sun size: 21 lookups for a point sun,
-    whatever the number of directions)."""
-    if not hasattr(model, "preview_cost"):
-        return {}
-    extra = settings.indirect_order ** 2 if settings.bounces else 0
-    tables = viewport_tables(settings, store) if store is not None else None
-    if tables is not None:
-        from ...lt_addon.transport import sparse_tables as sp
-
-        taps = tables[0].shape[-1]
-        side, nbytes = sp.atlas_layout_bytes(store.directions.size, model.resolution)
-        return {"viewport": "transport", "taps": taps,
-                "texture_lookups_per_pixel": 4 * (2 * taps // 3 + taps) + 1 + extra,
-                "multiply_adds_per_texel": 4 * taps, "python_per_light_change": False,
-                "atlas_side": side, "atlas_mib_8bit": round(nbytes / 2**20, 1)}
-    return {"viewport": "pca", **model.preview_cost(extra)}
-
-
-def load_bake(report_path: str) -> tuple:
-    """(ObjectBake, TransportStore, report) from a report written by :func:`write_bake`."""
-    from ...lt_addon.steerable.texture import SteerableTexture
-
-    with open(report_path) as fh:
-        report = json.load(fh)
-    report["report"] = os.path.abspath(report_path)
-    files = report["files"]
-    folder = os.path.dirname(report_path)
-
-    def where(p):  # the report's folder may have moved with the files
-        return p if os.path.exists(p) else os.path.join(folder, os.path.basename(p))
-
-    store = tt.TransportStore.open(where(files["transport"]))
-    ch, _ = exrio.read_exr(where(files["albedo"]))
-    albedo = np.stack([ch[c] for c in "RGB"], axis=-1).astype(np.float32)
-    indirect = SteerableTexture.load(where(files["indirect"])) if "indirect" in files else None
-    model = None
-    if "model" in files:
-        m = where(files["model"])
-        model = SteerableTexture.load(m) if m.endswith(".exr") else tt.load_model(m)
-    return ObjectBake(report["object"], store.path, albedo, indirect, model), store, report
 
 
 # ----------------------------------------------------------------------------------------------
@@ -795,6 +451,8 @@ PRESETS = {
     "production": dict(directions="hemi:1600:1.5", resolution=256, indirect_resolution=256,
                        indirect_samples=256, tol=0.01, table_size=64),
 }
+
+
 def _measured_presets() -> dict:
     """PRESETS updated from operators/bakes/transport_presets.json (written by
     ``benchmarks/bench_transport_textures.py --write-presets`` from the measured front)."""
@@ -1008,20 +666,3 @@ def glossy_note(objects) -> dict:
             "note": ("the bake is diffuse-only (Cycles DIFFUSE pass): these materials' "
                      "view-dependent reflection is not in the relit texture and the preview "
                      "shows them darker than a render") if found else "all diffuse"}
-
-
-def refresh_preview_tables(scene, obj, sun_angle: float) -> dict | None:
-    """Rewrite ``obj``'s preview coefficient tables for a new sun size (no re-bake); returns
-    {"seconds": ...} or None when ``obj`` has no transport preview."""
-    from ..base.blend_files import object_bakes
-    from ..preview.transport_preview import rewrite_tables
-
-    records = [b for b in object_bakes(obj) if b.get("kind") == KIND]
-    if not records or bpy.data.node_groups.get(f"Relight Transport ({obj.name})") is None:
-        return None
-    t0 = time.perf_counter()
-    bake, store, report = load_bake(bpy.path.abspath(records[-1]["path"]))
-    if not getattr(bake.model, "live_preview", False):
-        return None
-    rewrite_tables(obj, report, bake, store, sun_angle)
-    return {"seconds": time.perf_counter() - t0}

@@ -68,6 +68,14 @@ def bake_vertex_directions(scene, obj, spec: dict, start: int, stop: int, cache,
     return seconds
 
 
+def vertex_stage(scene, objects, spec: dict, start: int, stop: int, cache, threads: int = 0,
+                 part=None) -> float:
+    """The per-vertex bake's chunk function for :func:`..farm.distributed.fill_chunks`:
+    directions ``start:stop`` of ``spec`` (``directions`` (S, 3), ``bounces``, ``samples``,
+    ``seed``) for ``objects[0]`` into ``cache`` (:func:`bake_vertex_directions`)."""
+    return bake_vertex_directions(scene, objects[0], spec, start, stop, cache, threads)
+
+
 def vertex_chunk_cache(scene, obj, directions, bounces: int, samples, seed: int,
                        out_dir: str):
     """The chunk cache of a per-vertex bake of ``obj`` into ``out_dir``, keyed by the scene
@@ -142,7 +150,7 @@ def bake_transport(scene, obj, directions, bounces: int = 0, samples: int | None
         distributed = yield from fill_chunks(
             client, blend_path, [obj], {"directions": dirs.tolist(), "bounces": bounces,
                                         "samples": samples, "seed": seed},
-            cache, [c for c, k in zip(chunks, kept) if k is None], 0, S, stage="vertex")
+            cache, [c for c, k in zip(chunks, kept) if k is None], 0, S, vertex_stage)
         kept = [k if k is not None else cache.get(f"vertex_{c.start:05d}")
                 for c, k in zip(chunks, kept)]
     cycles, calls = 0.0, 0
@@ -294,7 +302,7 @@ def write_transport(result: TransportBakeResult, model, fit_seconds: float, obj,
 
     from ...lt_addon.transport.cpca import CPCA
     from ...lt_addon.transport.sidecar import samples_path, save_sidecar
-    from .steerable_bake import record_kind
+    from ..base.blend_files import record_kind
     from ..preview.vertex_relight import KIND, mesh_positions_normals
 
     clustered = isinstance(model, CPCA)

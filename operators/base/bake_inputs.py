@@ -20,6 +20,9 @@ import numpy as np
 
 from ... import __version__
 
+#: The chunk cache's folder inside a bake's output folder (hidden; removed when the bake
+#: completes).
+CACHE_FOLDER = ".relight_cache"
 #: Object types whose evaluated geometry Cycles renders.
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD", "VOLUME"}
 #: Node RNA properties that are layout or UI state, not shading.

@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import time
 
 import bpy
 
@@ -96,6 +97,20 @@ def _plain(value):
 def object_bakes(obj) -> list[dict]:
     """The bake records stored on ``obj`` (empty list when none)."""
     return _plain(obj.get(BAKES_KEY, [])) or []
+
+
+
+def record_kind(obj, kind: str, file_path: str, fields: dict) -> None:
+    """Replace the object's bake record of ``kind`` (kept as an ID custom property), with the
+    file path relative to the .blend when it is saved."""
+    try:
+        path = bpy.path.relpath(file_path) if bpy.data.filepath else os.path.abspath(file_path)
+    except ValueError:  # another drive on Windows
+        path = os.path.abspath(file_path)
+    entry = {"kind": kind, "path": path,
+             "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), **fields}
+    bakes = [b for b in object_bakes(obj) if b.get("kind") != kind]
+    obj[BAKES_KEY] = bakes + [entry]
 
 
 def bake_file(obj, kind: str, what: str) -> str:

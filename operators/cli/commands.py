@@ -23,12 +23,12 @@ import numpy as np
 
 from ... import __version__
 from ...lt_addon.io import atomic
+from .common import (CliError, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, add_device_option,
+                     add_distribution_options, bake_device, can_create_in, check_bake_inputs,
+                    check_input_blend, check_output_dir, check_output_path, open_object,
+                     open_objects, parse_az_el, parse_point_light, parse_rgb, print_chunks,
+                     refuse_existing, run_bake, run_job)
 
-EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
-
-
-class CliError(Exception):
-    """A user-facing error: printed as one line, exit code 2."""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -128,8 +128,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "degrees, none a sample centre) and put the errors in the report")
     p.add_argument("--contact-sheet", metavar="PNG", help="with --truth: write a PNG of steered | "
                    "Cycles truth | difference x4 | Cycles Sun for up to 4 directions")
-    _add_device_option(p)
-    _add_distribution_options(p, "")
+    add_device_option(p)
+    add_distribution_options(p, "")
     p.add_argument("--no-compare", action="store_true",
                    help="with --truth and a scene camera, the bake also renders "
                         "<object>[_steerable]_compare.png (preview | Cycles Sun | difference x4 "
@@ -157,17 +157,17 @@ def build_parser() -> argparse.ArgumentParser:
                    help="Cycles threads (default 0: all cores)")
     p.add_argument("--out", metavar="DIR", help="the bake's output folder (default: next to "
                    "the .blend, <name>_relight/)")
-    _add_device_option(p)
+    add_device_option(p)
     p.set_defaults(func=_cmd_bake_chunk)
 
     p = sub.add_parser("relight", help="relight a stored steerable texture for one light (NumPy)")
     p.add_argument("file", metavar="FILE.blend")
     p.add_argument("--object", required=True, metavar="NAME")
-    p.add_argument("--light", type=_az_el, metavar="AZ,EL",
+    p.add_argument("--light", type=parse_az_el, metavar="AZ,EL",
                    help="light azimuth and elevation in degrees (bake frame, z up)")
     p.add_argument("--intensity", type=float, default=1.0,
                    help="normal irradiance, as a Sun lamp's strength (default 1)")
-    p.add_argument("--color", type=_rgb, default=(1.0, 1.0, 1.0), metavar="R,G,B")
+    p.add_argument("--color", type=parse_rgb, default=(1.0, 1.0, 1.0), metavar="R,G,B")
     p.add_argument("--sun-angle", type=float, default=None, metavar="DEG",
                    help="transport bakes: sun size in degrees (default: the bake's)")
     p.add_argument("--env", metavar="HDR.exr", help="transport bakes: relight under this "
@@ -188,7 +188,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "writes preview | Cycles | |difference| x 4 as one PNG. The "
                                    ".blend is not changed.")
     p.add_argument("file", metavar="FILE.blend")
-    p.add_argument("--light", required=True, type=_az_el, metavar="AZ,EL")
+    p.add_argument("--light", required=True, type=parse_az_el, metavar="AZ,EL")
     p.add_argument("--sun-angle", type=float, default=2.0, metavar="DEG")
     p.add_argument("--samples", type=int, default=128, help="Cycles samples of the Sun render")
     p.add_argument("--resolution", type=int, help="square render size (default: the scene's)")
@@ -201,7 +201,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "light the relight uses, so its Cycles ground truth can be "
                                    "rendered anywhere (Environment Texture, strength 1).")
     p.add_argument("--order", type=int, default=7, help="basis order N1 (default 7)")
-    p.add_argument("--light", required=True, type=_az_el, metavar="AZ,EL")
+    p.add_argument("--light", required=True, type=parse_az_el, metavar="AZ,EL")
     p.add_argument("--height", type=int, default=256, help="image rows (width = 2 x height)")
     p.add_argument("--intensity", type=float, default=1.0)
     p.add_argument("--calibration", choices=CALIBRATIONS, default="steerable_cos")
@@ -231,8 +231,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", help="output folder (default <blend>_relight/)")
     p.add_argument("--force", action="store_true",
                    help="replace an existing transport bake of the same object in --out")
-    _add_device_option(p)
-    _add_distribution_options(p, "")
+    add_device_option(p)
+    add_distribution_options(p, "")
     p.set_defaults(func=_cmd_bake_transport)
 
     p = sub.add_parser("analyze", help="how many CPCA clusters an object's transport needs "
@@ -256,7 +256,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", help="output folder (default <blend>_relight/)")
     p.add_argument("--force", action="store_true",
                    help="replace an existing analysis of the same object in --out")
-    _add_device_option(p)
+    add_device_option(p)
     p.set_defaults(func=_cmd_analyze)
 
     try:   # development verbs (bench) exist in a source checkout only, not in the extension
@@ -273,7 +273,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rotate", type=float, default=0.0, metavar="DEG",
                    help="rotate the environment about +z like a world Mapping node's Z "
                         "rotation (Point type), added to the world's own Mapping rotation")
-    p.add_argument("--point-light", type=_point_light, metavar="X,Y,Z,POWER",
+    p.add_argument("--point-light", type=parse_point_light, metavar="X,Y,Z,POWER",
                    help="add an isotropic point light (W); valid outside the convex hull")
     p.add_argument("--out", required=True, metavar="shading.npy",
                    help="per-vertex RGB, shape (V, 3), float32")
@@ -346,7 +346,7 @@ def _cmd_scene(args) -> int:
 
     if args.name not in SCENES:
         raise CliError(f"unknown scene {args.name!r}; choose one of: {', '.join(SCENES)}")
-    out = _check_output_path(args.out, ".blend", args.force)
+    out = check_output_path(args.out, ".blend", args.force)
     from ..base import blend_files
 
     try:
@@ -366,7 +366,7 @@ def _cmd_info(args) -> int:
         if not path:
             raise CliError("no FILE.blend given and no file is open")
     else:
-        path = _check_input_blend(args.file)
+        path = check_input_blend(args.file)
     listing = blend_files.relightable_listing(path)
     if args.json:
         print(json.dumps(listing, indent=2))
@@ -394,216 +394,6 @@ def _cmd_validate(args) -> int:
     return EXIT_OK
 
 
-def _az_el(text: str) -> tuple[float, float]:
-    try:
-        az, el = (float(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected AZ,EL in degrees, got {text!r}") from None
-    if not (np.isfinite(az) and np.isfinite(el)) or not -90.0 <= el <= 90.0:
-        raise argparse.ArgumentTypeError(f"elevation must be in [-90, 90] degrees, got {text!r}")
-    return az, el
-
-
-def _rgb(text: str) -> tuple[float, float, float]:
-    try:
-        rgb = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        rgb = ()
-    if len(rgb) != 3 or not all(np.isfinite(rgb)) or min(rgb) < 0:
-        raise argparse.ArgumentTypeError(f"expected R,G,B (three non-negative numbers), got {text!r}")
-    return rgb
-
-
-def _point_light(text: str):
-    try:
-        x, y, z, power = (float(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected X,Y,Z,POWER, got {text!r}") from None
-    if not all(np.isfinite([x, y, z, power])) or power < 0:
-        raise argparse.ArgumentTypeError(f"need finite X,Y,Z and POWER >= 0, got {text!r}")
-    return (x, y, z), power
-
-
-def _run_job(job, verb: str, device=None):
-    """Drive ``job`` (a :mod:`.jobs` generator) to the end, printing its progress; returns its
-    result. Its Cycles bakes run on ``device`` (a :class:`.cycles_device.Device`; None: the
-    CPU, as for a job driven by a script that never chose). Ctrl-C (SIGINT) cancels it
-    between two steps -- Cycles runs Python callbacks that would swallow a KeyboardInterrupt
-    raised in the middle of a bake -- so the job closes cleanly (its ``finally`` blocks
-    restore the scene and drop temporary files); a second Ctrl-C stops at once. A cancelled
-    job raises KeyboardInterrupt here."""
-    import signal
-
-    from ..base import jobs
-
-    asked = []
-
-    def on_sigint(signum, frame):
-        if asked:
-            raise KeyboardInterrupt
-        asked.append(True)
-        print(f"{verb}: cancelling after the current step (Ctrl-C again to stop at once)",
-              file=sys.stderr, flush=True)
-
-    # SIGBREAK: Windows' Ctrl-Break, which the panel's Run On sends its command
-    signums = [signal.SIGINT] + ([signal.SIGBREAK] if hasattr(signal, "SIGBREAK") else [])
-    previous = {}
-    try:
-        for signum in signums:
-            previous[signum] = signal.signal(signum, on_sigint)
-    except ValueError:   # not the main thread (Blender's own console, say): Ctrl-C as before
-        pass
-    import contextlib
-
-    from ..base import cycles_device
-
-    printer = _progress_printer(verb)
-    said = []
-
-    def on_progress(step):   # the device, once the bake has started (a refused one: not at all)
-        if device is not None and not said:
-            note = f": {device.note}" if device.note else ""
-            print(f"{verb}: baking on {device.describe()}{note}", file=sys.stderr, flush=True)
-            said.append(True)
-        printer(step)
-
-    try:
-        with cycles_device.use(device) if device else contextlib.nullcontext():
-            result = jobs.run(job, on_progress=on_progress, should_cancel=lambda: bool(asked))
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
-    if asked and result is None:
-        raise KeyboardInterrupt
-    return result
-
-
-def _add_device_option(p) -> None:
-    """--device, shared by the verbs that bake with Cycles."""
-    p.add_argument("--device", choices=("auto", "cpu", "gpu"),
-                   default=os.environ.get("RELIGHT_DEVICE", "auto"),
-                   help="where Cycles bakes (default: $RELIGHT_DEVICE, else auto): auto uses "
-                        "the GPU the user chose -- the scene's Cycles device and "
-                        "Preferences > System in Blender, the first "
-                        "GPU backend Cycles finds in the venv CLI -- else the CPU, and says "
-                        "so; cpu forces the CPU; gpu refuses to bake without a GPU. The "
-                        "report records the device (CPU and GPU bakes of one seed are different "
-                        "sample sets: a resumed bake on another device bakes its chunks again)")
-
-
-def _bake_device(args, verb: str):
-    """The device ``--device`` gives for the open scene, or CliError before any bake call
-    (``gpu`` without a GPU). :func:`_run_job` says which on stderr when the bake starts."""
-    import bpy
-
-    from ..base import cycles_device
-
-    if args.device not in cycles_device.CHOICES:   # only a default from the environment can be
-        raise CliError(f"$RELIGHT_DEVICE must be one of {', '.join(cycles_device.CHOICES)}, "
-                       f"got {args.device!r}")
-    try:
-        return cycles_device.resolve(args.device, bpy.context.scene)
-    except cycles_device.DeviceError as exc:
-        raise CliError(str(exc)) from None
-
-
-def _add_distribution_options(p, what: str) -> None:
-    """--no-resume / --workers / --scheduler, shared by the verbs that bake in chunks."""
-    p.add_argument("--no-resume", action="store_true",
-                   help=f"{what}keep no chunks (by default each finished chunk -- 16 "
-                        "directions, one basis light or one material term's 16 directions -- "
-                        "is kept in <out>/.relight_cache/ until the bake completes, so a "
-                        "cancelled or crashed bake run again redoes only the missing ones)")
-    p.add_argument("--workers", type=int, metavar="N",
-                   help=f"{what}bake the chunks on a local Dask cluster of N worker processes "
-                        "(needs dask[distributed])")
-    p.add_argument("--scheduler", metavar="ADDRESS",
-                   help=f"{what}bake the chunks on the Dask cluster at ADDRESS (e.g. "
-                        "tcp://host:8786); its workers need this package and bpy, and must "
-                        "read the .blend and --out at the same paths")
-    p.add_argument("--connect-timeout", type=float, default=10.0, metavar="SECONDS",
-                   help="with --scheduler: how long to wait for the scheduler to answer before "
-                        "giving up (default 10; a scheduler still starting may need more)")
-
-
-def _dask_client(args):
-    """The Dask client the options ask for (None: bake here); the caller closes it."""
-    if args.workers is None and not args.scheduler:
-        return None
-    from ..farm import distributed
-
-    if args.workers is not None and args.scheduler:
-        raise CliError("give --workers N (a local cluster) or --scheduler ADDRESS, not both")
-    if args.no_resume:
-        raise CliError("--workers / --scheduler hand chunks to the workers through the chunk "
-                       "cache; drop --no-resume")
-    if not args.connect_timeout > 0:
-        raise CliError(f"--connect-timeout must be > 0 seconds, got {args.connect_timeout:g}")
-    try:
-        return distributed.connect(args.workers, args.scheduler, timeout=args.connect_timeout)
-    except distributed.DistributedError as exc:
-        raise CliError(str(exc)) from None
-
-
-def _progress_printer(prefix: str):
-    def show(step):   # a jobs.Progress
-        print(f"{prefix} [{step.done}/{step.total}] {step.message}", file=sys.stderr,
-              flush=True)
-    return show
-
-
-def _open_object(path: str, name: str):
-    """Open ``path`` and return its object ``name`` (a CliError names the meshes if missing)."""
-    import bpy
-
-    from ..base.blend_files import blender_log_to_stderr
-
-    with blender_log_to_stderr():
-        bpy.ops.wm.open_mainfile(filepath=path, load_ui=False)
-    obj = bpy.data.objects.get(name)
-    if obj is None:
-        meshes = sorted(o.name for o in bpy.data.objects if o.type == "MESH")
-        raise CliError(f"no object {name!r} in {path}; mesh objects: {', '.join(meshes) or 'none'}")
-    from ..base.blend_files import activate_scene_of
-    from ..base.cycles_bake import BakeInputError
-
-    try:
-        activate_scene_of(obj, path)
-    except BakeInputError as exc:
-        raise CliError(str(exc)) from None
-    return obj
-
-
-def _open_objects(path: str, names: list) -> list:
-    """Open ``path`` and return its objects ``names``, all in the first one's scene (objects
-    baked together share one scene); a CliError names what is wrong."""
-    import bpy
-
-    if len(set(names)) != len(names):
-        raise CliError("an --object is given twice")
-    objects = [_open_object(path, names[0])]
-    for name in names[1:]:
-        obj = bpy.data.objects.get(name)
-        if obj is None:
-            meshes = sorted(o.name for o in bpy.data.objects if o.type == "MESH")
-            raise CliError(f"no object {name!r} in {path}; mesh objects: {', '.join(meshes)}")
-        if obj.name not in bpy.context.view_layer.objects:
-            raise CliError(f"{obj.name!r} is not in scene {bpy.context.scene.name!r} with "
-                           f"{objects[0].name!r}; objects baked together share one scene")
-        objects.append(obj)
-    return objects
-
-
-def _refuse_existing(out_dir: str, obj_name: str, suffixes, force: bool, what: str) -> None:
-    """Refuse (before any work) to replace ``<out_dir>/<object><suffix>`` without --force."""
-    safe = atomic.safe_name(obj_name)
-    if force:
-        return
-    for suffix in suffixes:
-        if os.path.exists(os.path.join(out_dir, safe + suffix)):
-            raise CliError(f"{what} of {obj_name} exists in {out_dir} (use --force to replace it)")
-
-
 def _cmd_bake_textures(args) -> int:
     if args.method == "transport":
         return _cmd_bake_texture_transport(args)
@@ -620,12 +410,11 @@ def _cmd_bake_textures(args) -> int:
     args.object = args.object[0]
     import bpy
 
-    from ..base import blend_files
     from ..bakes import steerable_bake
     from ..base.cycles_bake import BakeInputError
     from ..bakes.presets import settings_from_preset
 
-    path = _check_input_blend(args.file)
+    path = check_input_blend(args.file)
     overrides = {k: getattr(args, k) for k in ("frame", "order", "resolution", "samples",
                                                "bounces", "storage", "mode", "world_sampling",
                                                "seed") if getattr(args, k) is not None}
@@ -640,39 +429,26 @@ def _cmd_bake_textures(args) -> int:
     if args.contact_sheet:
         if not args.truth:
             raise CliError("--contact-sheet needs --truth K (K >= 1 directions)")
-        sheet = _check_output_path(args.contact_sheet, ".png", True)
-    out_dir = _check_output_dir(args.out, path)
-    if not _can_create_in(os.path.dirname(path)):
+        sheet = check_output_path(args.contact_sheet, ".png", True)
+    out_dir = check_output_dir(args.out, path)
+    if not can_create_in(os.path.dirname(path)):
         raise CliError(f"cannot update {path}: its folder is not writable")
     started = time.perf_counter()
-    obj = _open_object(path, args.object)
-    _refuse_existing(out_dir, obj.name, ("_steerable.exr", "_steerable.json"), args.force,
+    obj = open_object(path, args.object)
+    refuse_existing(out_dir, obj.name, ("_steerable.exr", "_steerable.json"), args.force,
                      "a steerable bake")
-    device = _bake_device(args, "bake-textures")
-    client = _dask_client(args)
-    try:   # the same job as the panel's Bake: bake, truths, files, preview
-        report = _run_job(steerable_bake.lobes_job(bpy.context.scene, obj, settings, out_dir,
-                                                   truth=args.truth, sheet_path=sheet,
-                                                   compare=not args.no_compare,
-                                                   resume=not args.no_resume, client=client,
-                                                   blend_path=path),
-                          "bake-textures", device).report
-    except BakeInputError as exc:
-        raise CliError(str(exc)) from None
-    except RuntimeError as exc:
-        if type(exc).__name__ != "DistributedError":
-            raise
-        raise CliError(f"{exc}; the finished chunks are kept, the same command resumes") from None
-    except KeyboardInterrupt:
-        kept = "" if args.no_resume else (
-            "; the finished basis lights are kept and the same command resumes from them")
-        print(f"bake-textures: cancelled; nothing was written{kept}", file=sys.stderr)
+    out = run_bake(   # the same job as the panel's Bake: bake, truths, files, preview
+        args, "bake-textures", path,
+        lambda client: steerable_bake.lobes_job(bpy.context.scene, obj, settings, out_dir,
+                                                truth=args.truth, sheet_path=sheet,
+                                                compare=not args.no_compare,
+                                                resume=not args.no_resume, client=client,
+                                                blend_path=path),
+        kept="; the finished basis lights are kept and the same command resumes from them",
+        cancelled="nothing was written")
+    if out is None:
         return 130
-    finally:
-        if client is not None:
-            from ..farm.distributed import close
-            close(client)
-    blend_files.save_atomically(path)
+    report = out.report
     t = report["timings"]
     print(f"baked {obj.name}: {report['exr']} ({report['bytes']['exr_file']} bytes); "
           f"{t['wall_total']:.2f} s in all: bake {t['total_seconds']:.2f} s "
@@ -690,28 +466,8 @@ def _cmd_bake_textures(args) -> int:
               f"light {e['same_light']['rel_fro']:.4f}"
               + (f", 4x samples {e['same_light_4x']['rel_fro']:.4f}" if "same_light_4x" in e else "")
               + (f", vs Sun lamp {e['sun']['rel_fro']:.4f}" if "sun" in e else ""))
-    _print_chunks(report)
+    print_chunks(report)
     return EXIT_OK
-
-
-def _print_chunks(rep: dict) -> None:
-    """A chunked bake's resume and distribution figures, when there are any."""
-    for dev, n in (rep.get("other_device_chunks") or {}).items():
-        print(f"  note: {n} chunks an interrupted bake left were baked on {dev}; this bake runs "
-              f"on {rep.get('device', {}).get('device', 'CPU')}, a different sample set, so "
-              "they were baked again")
-    if rep.get("chunks_reused"):
-        of = ("chunks (one basis light each)" if "chunk_directions" not in rep else
-              f"chunks ({rep['indirect_chunks']} of them indirect lights, the others "
-              f"{rep['chunk_directions']} directions each)" if rep.get("indirect_chunks") else
-              f"chunks of {rep['chunk_directions']} directions")
-        print(f"  resumed: {rep['chunks_reused']} of {rep['chunks_total']} {of} reused from an "
-              "interrupted bake")
-    dist = rep.get("distributed")
-    if dist:
-        print(f"  distributed: {dist['chunks']} chunks on {len(dist['workers'])} worker "
-              f"processes in {dist['wall_seconds']:.1f} s ({dist['cycles_seconds']:.1f} s "
-              f"of Cycles, {dist['file_loads']} .blend loads)")
 
 
 def _print_comparison(cmp: dict | None) -> None:
@@ -729,7 +485,6 @@ def _print_comparison(cmp: dict | None) -> None:
 def _cmd_bake_texture_transport(args) -> int:
     import bpy
 
-    from ..base import blend_files
     from ..bakes import texture_transport as tx
     from ..base.cycles_bake import BakeInputError
 
@@ -739,7 +494,7 @@ def _cmd_bake_texture_transport(args) -> int:
     if lobes_only:
         raise CliError(f"{', '.join(lobes_only)} apply to --method lobes; the transport method "
                        "takes --directions, --resolution, --bounces, --model, --sun-angle")
-    path = _check_input_blend(args.file)
+    path = check_input_blend(args.file)
     names = {"directions": "directions", "resolution": "resolution", "bounces": "bounces",
              "seed": "seed", "sun_angle": "sun_angle", "model": "model",
              "components": "components", "tol": "tol", "indirect_samples": "indirect_samples",
@@ -757,42 +512,27 @@ def _cmd_bake_texture_transport(args) -> int:
         raise CliError(f"--truth-samples must be >= 1, got {args.truth_samples}")
     if args.target_error is not None and not 0.0 < args.target_error < 1.0:
         raise CliError(f"--target-error must be in (0, 1), got {args.target_error}")
-    out_dir = _check_output_dir(args.out, path)
-    if not _can_create_in(os.path.dirname(path)):
+    out_dir = check_output_dir(args.out, path)
+    if not can_create_in(os.path.dirname(path)):
         raise CliError(f"cannot update {path}: its folder is not writable")
-    objects = _open_objects(path, args.object)
+    objects = open_objects(path, args.object)
     if not args.force:
         for o in objects:
             rp = os.path.join(out_dir, f"{atomic.safe_name(o.name)}_texture_report.json")
             if os.path.exists(rp):
                 raise CliError(f"a bake of {o.name} exists in {out_dir} (use --force to "
                                "replace it)")
-    device = _bake_device(args, "bake-textures")
-    client = _dask_client(args)
-    try:
-        reports = _run_job(tx.bake_job(bpy.context.scene, objects, settings, out_dir,
-                                       truth=args.truth, truth_samples=args.truth_samples,
-                                       target_error=args.target_error,
-                                       compare=not args.no_compare, resume=not args.no_resume,
-                                       client=client, blend_path=path),
-                           "bake-textures", device).reports
-    except BakeInputError as exc:
-        raise CliError(str(exc)) from None
-    except RuntimeError as exc:
-        if type(exc).__name__ != "DistributedError":
-            raise
-        raise CliError(f"{exc}; the finished chunks are kept, the same command resumes") from None
-    except KeyboardInterrupt:
-        kept = "" if args.no_resume else (
-            f"; the finished chunks are kept in {os.path.join(out_dir, tx.CACHE_FOLDER)} and "
-            "the same command resumes from them")
-        print(f"bake-textures: cancelled; no bake file was written{kept}", file=sys.stderr)
+    out = run_bake(
+        args, "bake-textures", path,
+        lambda client: tx.bake_job(bpy.context.scene, objects, settings, out_dir,
+                                   truth=args.truth, truth_samples=args.truth_samples,
+                                   target_error=args.target_error, compare=not args.no_compare,
+                                   resume=not args.no_resume, client=client, blend_path=path),
+        kept=(f"; the finished chunks are kept in {os.path.join(out_dir, tx.CACHE_FOLDER)} and "
+              "the same command resumes from them"))
+    if out is None:
         return 130
-    finally:
-        if client is not None:
-            from ..farm.distributed import close
-            close(client)
-    blend_files.save_atomically(path)
+    reports = out.reports
     for rep in reports:
         t = rep["timings"]
         print(f"baked {rep['object']}: {rep['directions']} directions at "
@@ -815,7 +555,7 @@ def _cmd_bake_texture_transport(args) -> int:
                   f"{fid['worst']['elevation']:g} deg{extra}; relight --source transport "
                   "shows T)")
         if rep is reports[0]:
-            _print_chunks(rep)
+            print_chunks(rep)
         gt = rep.get("ground_truth")
         if gt and rep is reports[0]:   # one headline over all objects baked together
             print(f"  error vs Cycles Sun ({gt['sun_angle']:g} deg, {gt['truth_samples']} spp, "
@@ -840,9 +580,9 @@ def _cmd_bake_chunk(args) -> int:
 
     from ..bakes import texture_transport as tx
     from ..base.cycles_bake import BakeInputError, check_bakeable
-    from ..farm.distributed import bake_directions
+    from ..bakes.texture_transport import bake_directions
 
-    path = _check_input_blend(args.file)
+    path = check_input_blend(args.file)
     overrides = {k: getattr(args, k) for k in ("directions", "resolution", "seed")
                  if getattr(args, k) is not None}
     try:
@@ -856,8 +596,8 @@ def _cmd_bake_chunk(args) -> int:
                        f"{tx.CHUNK_DIRECTIONS}), got {args.chunk}")
     if args.threads < 0:
         raise CliError(f"--threads must be >= 0, got {args.threads}")
-    out_dir = _check_output_dir(args.out, path)
-    objects = _open_objects(path, args.object)
+    out_dir = check_output_dir(args.out, path)
+    objects = open_objects(path, args.object)
     try:
         for o in objects:
             check_bakeable(o)
@@ -867,7 +607,7 @@ def _cmd_bake_chunk(args) -> int:
     stop = min(start + tx.CHUNK_DIRECTIONS, dset.size)
     from ..base import cycles_device
 
-    device = _bake_device(args, "bake-chunk")
+    device = bake_device(args, "bake-chunk")
     with cycles_device.use(device):   # the chunk cache's key names the device
         cache = tx.direct_chunk_cache(bpy.context.scene, objects, settings, out_dir)
         name = f"direct_{start:05d}"
@@ -890,9 +630,7 @@ def _cmd_bake_chunk(args) -> int:
 def _cmd_bake_transport(args) -> int:
     import bpy
 
-    from ..base import blend_files
     from ..bakes import transport_bake
-    from ..base.cycles_bake import BakeInputError
 
     settings = transport_bake.TransportSettings(
         directions=args.directions, bounces=args.bounces, samples=args.samples,
@@ -900,39 +638,25 @@ def _cmd_bake_transport(args) -> int:
         clusters=args.clusters)
     if settings.energy is None and settings.coeffs is None:
         settings.energy = 0.99
-    path, out_dir = _check_bake_inputs(args, settings)
+    path, out_dir = check_bake_inputs(args, settings)
     started = time.perf_counter()
-    obj = _open_object(path, args.object)
-    _refuse_existing(out_dir, obj.name, ("_transport.npz", "_transport.json",
+    obj = open_object(path, args.object)
+    refuse_existing(out_dir, obj.name, ("_transport.npz", "_transport.json",
                                           "_transport_samples.npy"), args.force,
                      "a transport bake")
     n_vertices = len(obj.data.vertices) if obj.type == "MESH" else 0
     if isinstance(settings.clusters, int) and settings.clusters > n_vertices > 0:
         raise CliError(f"--clusters {settings.clusters} exceeds {obj.name}'s {n_vertices} "
                        f"vertices; use at most {n_vertices} or 'auto'")
-    device = _bake_device(args, "bake-transport")
-    client = _dask_client(args)
-    try:
-        out = _run_job(transport_bake.transport_job(
+    out = run_bake(
+        args, "bake-transport", path,
+        lambda client: transport_bake.transport_job(
             bpy.context.scene, obj, settings, out_dir, truth_samples=256 if args.truth else 0,
-            resume=not args.no_resume, client=client, blend_path=path), "bake-transport",
-            device)
-    except (BakeInputError, ValueError) as exc:
-        raise CliError(f"nothing was written: {exc}") from None
-    except RuntimeError as exc:
-        if type(exc).__name__ != "DistributedError":
-            raise
-        raise CliError(f"{exc}; the finished chunks are kept, the same command resumes") from None
-    except KeyboardInterrupt:
-        kept = "" if args.no_resume else (
-            "; the finished chunks are kept and the same command resumes from them")
-        print(f"bake-transport: cancelled; no bake file was written{kept}", file=sys.stderr)
+            resume=not args.no_resume, client=client, blend_path=path),
+        kept="; the finished chunks are kept and the same command resumes from them",
+        errors=(ValueError,), prefix="nothing was written: ")
+    if out is None:
         return 130
-    finally:
-        if client is not None:
-            from ..farm.distributed import close
-            close(client)
-    blend_files.save_atomically(path)
     report, t = out.report, out.report["timings"]
     for w in report.get("preview", {}).get("warnings", []):
         print(f"relight: warning: {w}", file=sys.stderr)
@@ -953,7 +677,7 @@ def _cmd_bake_transport(args) -> int:
     if "all_directions_rel_rms_error" in report.get("ground_truth", {}):
         print(f"  all {report['directions']} directions, no PCA: "
               f"{report['ground_truth']['all_directions_rel_rms_error']:.4f} (sampling floor)")
-    _print_chunks(report)
+    print_chunks(report)
     return EXIT_OK
 
 
@@ -963,7 +687,7 @@ def _cmd_analyze(args) -> int:
     from ..bakes import analyze, transport_bake
     from ..base.cycles_bake import BakeInputError
 
-    path = _check_input_blend(args.file)
+    path = check_input_blend(args.file)
     try:  # the same direction / bounce checks as bake-transport
         ds = transport_bake.TransportSettings(directions=args.directions,
                                               bounces=args.bounces).validate()
@@ -973,14 +697,14 @@ def _cmd_analyze(args) -> int:
         raise CliError(f"--tol must be in [0, 1], got {args.tol}")
     if args.seeds < 1:
         raise CliError(f"--seeds must be >= 1, got {args.seeds}")
-    out_dir = _check_output_dir(args.out, path)
+    out_dir = check_output_dir(args.out, path)
     started = time.perf_counter()
-    obj = _open_object(path, args.object)
-    _refuse_existing(out_dir, obj.name, ("_analysis.json", "_dimensionality.png", "_cost.png"),
+    obj = open_object(path, args.object)
+    refuse_existing(out_dir, obj.name, ("_analysis.json", "_dimensionality.png", "_cost.png"),
                      args.force, "an analysis")
-    device = _bake_device(args, "analyze")
+    device = bake_device(args, "analyze")
     try:
-        out = _run_job(analyze.analysis_job(bpy.context.scene, obj, ds, out_dir, args.bounces,
+        out = run_job(analyze.analysis_job(bpy.context.scene, obj, ds, out_dir, args.bounces,
                                             None, args.tol, args.seeds,
                                             reuse=not args.rebake), "analyze", device)
     except BakeInputError as exc:
@@ -1012,38 +736,6 @@ def _cmd_analyze(args) -> int:
     return EXIT_OK
 
 
-def _check_bake_inputs(args, settings) -> tuple[str, str]:
-    """What every bake verb checks before opening the file: the input .blend, the settings
-    (``settings.validate()``; a BakeInputError becomes one CLI line), the output folder and
-    that the .blend can be saved again. Returns ``(blend path, output folder)``."""
-    from ..base.cycles_bake import BakeInputError
-
-    path = _check_input_blend(args.file)
-    try:
-        settings.validate()
-    except BakeInputError as exc:
-        raise CliError(str(exc)) from None
-    out_dir = _check_output_dir(args.out, path)
-    if not _can_create_in(os.path.dirname(path)):
-        raise CliError(f"cannot update {path}: its folder is not writable")
-    return path, out_dir
-
-
-def _check_output_dir(out: str | None, blend_path: str) -> str:
-    """The output folder (default next to the .blend), checked creatable and writable."""
-    from ..bakes.steerable_bake import default_output_dir
-
-    out_dir = os.path.abspath(out) if out else default_output_dir(blend_path)
-    parent = os.path.dirname(out_dir)
-    if not os.path.isdir(parent):
-        raise CliError(f"output folder's parent does not exist: {parent}")
-    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
-        raise CliError(f"output exists and is not a folder: {out_dir}")
-    if not _can_create_in(out_dir if os.path.isdir(out_dir) else parent):
-        raise CliError(f"output folder is not writable: {out_dir}")
-    return out_dir
-
-
 def _cmd_relight_vertices(args) -> int:
     import warnings
 
@@ -1052,8 +744,8 @@ def _cmd_relight_vertices(args) -> int:
     from ...lt_addon.transport.sidecar import read_environment_exr
     from ..preview import vertex_relight
 
-    path = _check_input_blend(args.file)
-    out = _check_output_path(args.out, ".npy", args.force)
+    path = check_input_blend(args.file)
+    out = check_output_path(args.out, ".npy", args.force)
     env = None
     if args.env:
         if not os.path.isfile(args.env):
@@ -1062,7 +754,7 @@ def _cmd_relight_vertices(args) -> int:
             env = read_environment_exr(args.env)
         except (ValueError, OSError) as exc:
             raise CliError(str(exc)) from None
-    obj = _open_object(path, args.object)
+    obj = open_object(path, args.object)
     world_z = 0.0
     if env is None and args.point_light is None:
         env = vertex_relight.world_environment(bpy.context.scene)
@@ -1096,11 +788,11 @@ def _cmd_relight(args) -> int:
     from ...lt_addon.sphere.hemisphere import direction_from_az_el
     from ..bakes import steerable_bake
 
-    path = _check_input_blend(args.file)
-    out = _check_output_path(args.out, ".exr", args.force) if args.out else None
+    path = check_input_blend(args.file)
+    out = check_output_path(args.out, ".exr", args.force) if args.out else None
     if (args.light is None) == (args.env is None):
         raise CliError("give exactly one of --light AZ,EL and --env HDR.exr")
-    obj = _open_object(path, args.object)
+    obj = open_object(path, args.object)
     from ..base.blend_files import object_bakes
 
     kinds = [b.get("kind") for b in object_bakes(obj)]
@@ -1177,8 +869,8 @@ def _cmd_compare(args) -> int:
     from ..base.blend_files import blender_log_to_stderr
     from ..base.cycles_bake import BakeInputError
 
-    path = _check_input_blend(args.file)
-    out = _check_output_path(args.out, ".png", args.force)
+    path = check_input_blend(args.file)
+    out = check_output_path(args.out, ".png", args.force)
     if not 0.0 <= args.sun_angle <= 30.0:
         raise CliError(f"--sun-angle must be in 0..30 degrees, got {args.sun_angle}")
     if args.samples < 1 or (args.resolution is not None and not 8 <= args.resolution <= 4096):
@@ -1209,7 +901,7 @@ def _cmd_light_env(args) -> int:
         raise CliError(f"--order must be in 2..12, got {args.order}")
     if not 8 <= args.height <= 8192:
         raise CliError(f"--height must be in 8..8192, got {args.height}")
-    out = _check_output_path(args.out, ".exr", args.force)
+    out = check_output_path(args.out, ".exr", args.force)
     az, el = args.light
     d = direction_from_az_el(az, el)
     basis = paper_basis(args.order)
@@ -1228,49 +920,4 @@ def _cmd_light_env(args) -> int:
 # ---------------------------------------------------------------------------------------------
 # Input checks (no bpy needed, so they fail fast and identically in every launcher)
 
-BLEND_MAGICS = (b"BLENDER", b"\x28\xb5\x2f\xfd", b"\x1f\x8b")  # plain, zstd, gzip (old)
 
-
-def _check_input_blend(path: str) -> str:
-    path = os.path.abspath(path)
-    if not os.path.exists(path):
-        raise CliError(f"input file not found: {path}")
-    if os.path.isdir(path):
-        raise CliError(f"input is a directory, not a .blend file: {path}")
-    if not path.lower().endswith(".blend"):
-        raise CliError(f"input must be a .blend file: {path}")
-    with open(path, "rb") as fh:
-        head = fh.read(7)
-    if not head.startswith(BLEND_MAGICS):
-        raise CliError(f"not a Blender file (bad header): {path}")
-    return path
-
-
-def _can_create_in(folder: str) -> bool:
-    """Really try to create (and remove) a file: permission bits lie for root and odd mounts."""
-    probe = os.path.join(folder, f".relight-write-probe-{os.getpid()}")
-    try:
-        with open(probe, "xb"):
-            pass
-    except OSError:
-        return False
-    os.remove(probe)
-    return True
-
-
-def _check_output_path(path: str, suffix: str, force: bool) -> str:
-    path = os.path.abspath(path)
-    if not path.lower().endswith(suffix):
-        raise CliError(f"output must end in {suffix}: {path}")
-    folder = os.path.dirname(path)
-    if not os.path.isdir(folder):
-        raise CliError(f"output directory does not exist: {folder}")
-    if not _can_create_in(folder):
-        raise CliError(f"output directory is not writable: {folder}")
-    if os.path.isdir(path):
-        raise CliError(f"output is a directory: {path}")
-    if os.path.exists(path) and not force:
-        raise CliError(f"output exists (use --force to overwrite): {path}")
-    if os.path.exists(path) and not os.access(path, os.W_OK):
-        raise CliError(f"output exists and is not writable: {path}")
-    return path

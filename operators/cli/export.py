@@ -9,7 +9,7 @@ import sys
 
 
 def add_parsers(sub) -> None:
-    from .commands import _az_el, _rgb
+    from .common import parse_az_el, parse_rgb
     from ..bakes.export import FORMATS
 
     p = sub.add_parser(
@@ -31,12 +31,12 @@ def add_parsers(sub) -> None:
     p.add_argument("--env", metavar="HDR.exr", help="SH formats: light by this equirect EXR")
     p.add_argument("--rotate", type=float, default=0.0, metavar="DEG",
                    help="with --env: its rotation about +z, as a world Mapping node's Z")
-    p.add_argument("--sun", type=_az_el, metavar="AZ,EL",
+    p.add_argument("--sun", type=parse_az_el, metavar="AZ,EL",
                    help="SH formats: light by a sun (azimuth, elevation in degrees)")
     p.add_argument("--sun-angle", type=float, default=0.0, metavar="DEG")
     p.add_argument("--strength", type=float, default=1.0,
                    help="the light's strength (sun: W/m^2; env: a multiplier)")
-    p.add_argument("--color", type=_rgb, default=(1.0, 1.0, 1.0), metavar="R,G,B")
+    p.add_argument("--color", type=parse_rgb, default=(1.0, 1.0, 1.0), metavar="R,G,B")
     p.add_argument("--exposure", type=float, metavar="X",
                    help="RTI: radiance scale before sRGB encoding (default: the 99.5th "
                         "percentile of the brightest lights maps to 1)")
@@ -45,20 +45,20 @@ def add_parsers(sub) -> None:
     p.add_argument("--out", metavar="DIR", help="output folder (default: next to the .blend, "
                    "<name>_relight/)")
     p.add_argument("--force", action="store_true", help="replace existing export files")
-    from .commands import _add_device_option
-    _add_device_option(p)
+    from .common import add_device_option
+    add_device_option(p)
     p.set_defaults(func=_cmd_export)
 
 
 def _cmd_export(args) -> int:
     import bpy
 
-    from .commands import (EXIT_OK, CliError, _bake_device, _check_input_blend, _check_output_dir,
-                           _open_object, _run_job)
+    from .common import (EXIT_OK, CliError, bake_device, check_input_blend, check_output_dir,
+                           open_object, run_job)
     from ..base.cycles_bake import BakeInputError
     from ..bakes.export import ExportSettings, export_job
 
-    path = _check_input_blend(args.file)
+    path = check_input_blend(args.file)
     settings = ExportSettings(format=args.format, terms=args.terms,
                               env=os.path.abspath(args.env) if args.env else None,
                               rotate=args.rotate, sun=args.sun, sun_angle=args.sun_angle,
@@ -70,12 +70,12 @@ def _cmd_export(args) -> int:
         raise CliError(str(exc)) from None
     if settings.env is not None and not os.path.isfile(settings.env):
         raise CliError(f"environment not found: {settings.env}")
-    out_dir = _check_output_dir(args.out, path)
-    obj = _open_object(path, args.object)
-    device = _bake_device(args, "export")
+    out_dir = check_output_dir(args.out, path)
+    obj = open_object(path, args.object)
+    device = bake_device(args, "export")
     os.makedirs(out_dir, exist_ok=True)
     try:
-        result = _run_job(export_job(bpy.context.scene, obj, settings, out_dir, args.force),
+        result = run_job(export_job(bpy.context.scene, obj, settings, out_dir, args.force),
                           "export", device)
     except (BakeInputError, ValueError) as exc:
         raise CliError(f"nothing was written: {exc}") from None

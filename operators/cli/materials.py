@@ -24,8 +24,8 @@ def _set_edit(text: str):
     if not sep or not dot or not mat:
         raise argparse.ArgumentTypeError(f"expected MATERIAL.color=R,G,B, got {text!r}")
     if prop == "color":
-        from .commands import _rgb
-        return mat, prop, _rgb(value)
+        from .common import parse_rgb
+        return mat, prop, parse_rgb(value)
     if prop in ("roughness", "metallic"):
         try:
             x = float(value)
@@ -39,7 +39,7 @@ def _set_edit(text: str):
 
 
 def add_parsers(sub) -> None:
-    from .commands import _az_el, _rgb
+    from .common import parse_az_el, parse_rgb
 
     p = sub.add_parser(
         "bake-materials", help="bake per-vertex transfer tensors so material colours can be "
@@ -113,9 +113,9 @@ def add_parsers(sub) -> None:
     p.add_argument("--out", metavar="DIR", help="output folder (default <blend>_relight/)")
     p.add_argument("--force", action="store_true",
                    help="replace an existing material bake of the same object in --out")
-    from .commands import _add_device_option, _add_distribution_options
-    _add_device_option(p)
-    _add_distribution_options(p, "")
+    from .common import add_device_option, add_distribution_options
+    add_device_option(p)
+    add_distribution_options(p, "")
     p.set_defaults(func=_cmd_bake_materials)
 
     p = sub.add_parser("relight-materials", help="shade a material bake with edited colours "
@@ -129,7 +129,7 @@ def add_parsers(sub) -> None:
                         "MATERIAL.metallic=X / MATERIAL.roughness=X; without it, the file's "
                         "materials")
     group = p.add_mutually_exclusive_group()
-    group.add_argument("--sun", type=_az_el, metavar="AZ,EL",
+    group.add_argument("--sun", type=parse_az_el, metavar="AZ,EL",
                        help="a hard distant light (azimuth from +x toward +y, degrees)")
     group.add_argument("--env", metavar="HDR.exr", help="an equirect RGB EXR environment")
     p.add_argument("--rotate", type=float, default=0.0, metavar="DEG",
@@ -137,7 +137,7 @@ def add_parsers(sub) -> None:
     p.add_argument("--sun-angle", type=float, default=0.0, metavar="DEG")
     p.add_argument("--strength", type=float, default=1.0,
                    help="sun normal irradiance or environment multiplier (default 1)")
-    p.add_argument("--color", type=_rgb, default=(1.0, 1.0, 1.0), metavar="R,G,B",
+    p.add_argument("--color", type=parse_rgb, default=(1.0, 1.0, 1.0), metavar="R,G,B",
                    help="sun colour")
     p.add_argument("--direct", choices=("rays", "rays-at-edges", "baked"), default="rays",
                    help="a sun's direct light: rays (default; a shadow ray per vertex against "
@@ -160,11 +160,9 @@ def add_parsers(sub) -> None:
 def _cmd_bake_materials(args) -> int:
     import bpy
 
-    from ..base import blend_files
     from ..bakes import material_bake, material_edit
-    from .commands import (CliError, _bake_device, _check_bake_inputs, _dask_client, _open_objects,
-                           _print_chunks, _refuse_existing, _run_job)
-    from ..base.cycles_bake import BakeInputError
+    from .common import (CliError, check_bake_inputs, open_objects, print_chunks,
+                         refuse_existing, run_bake)
 
     settings = material_bake.MaterialBakeSettings(
         regions=list(args.region), anchors=args.anchors, bounces=args.bounces,
@@ -174,37 +172,24 @@ def _cmd_bake_materials(args) -> int:
         bounce_bake=args.bounce_bake,
         **({} if args.rays is None else {"rays": args.rays}),
         **({} if args.smoothing is None else {"smoothing": args.smoothing}))
-    path, out_dir = _check_bake_inputs(args, settings)
+    path, out_dir = check_bake_inputs(args, settings)
     started = time.perf_counter()
-    objects = _open_objects(path, args.object)
+    objects = open_objects(path, args.object)
     for o in objects:
         if o.type != "MESH":
             raise CliError(f"{o.name!r} is a {o.type.lower()}, not a mesh")
-    _refuse_existing(out_dir, objects[0].name, ("_materials.npz", "_materials.json"),
+    refuse_existing(out_dir, objects[0].name, ("_materials.npz", "_materials.json"),
                      args.force, "a material bake")
-    device = _bake_device(args, "bake-materials")
-    client = _dask_client(args)
-    try:
-        out = _run_job(material_edit.bake_job(
+    out = run_bake(
+        args, "bake-materials", path,
+        lambda client: material_edit.bake_job(
             bpy.context.scene, objects, settings, out_dir,
             truth_samples=args.truth_samples if args.truth else 0, resume=not args.no_resume,
-            client=client, blend_path=path), "bake-materials", device)
-    except (BakeInputError, ValueError) as exc:
-        raise CliError(f"nothing was written: {exc}") from None
-    except RuntimeError as exc:
-        if type(exc).__name__ != "DistributedError":
-            raise
-        raise CliError(f"{exc}; the finished chunks are kept, the same command resumes") from None
-    except KeyboardInterrupt:
-        kept = "" if args.no_resume else (
-            "; the finished chunks are kept and the same command resumes from them")
-        print(f"bake-materials: cancelled; no bake file was written{kept}", file=sys.stderr)
+            client=client, blend_path=path),
+        kept="; the finished chunks are kept and the same command resumes from them",
+        errors=(ValueError,), prefix="nothing was written: ")
+    if out is None:
         return 130
-    finally:
-        if client is not None:
-            from ..farm.distributed import close
-            close(client)
-    blend_files.save_atomically(path)
     rep, t = out.report, out.report["timings"]
     shares = rep["energy_shares"]
     what = "face corners" if rep["domain"] == "CORNER" else "vertices"
@@ -223,7 +208,7 @@ def _cmd_bake_materials(args) -> int:
         print(f"  vs Cycles ({truth['samples']} spp, {truth['light']}): rel. error "
               f"{truth['rel_error']:.4f}, noise floor {truth['noise_floor']:.4f} (two truth "
               f"seeds); without the two-bounce term {truth['rel_error_without_two_bounce']:.4f}")
-    _print_chunks(rep)
+    print_chunks(rep)
     for note in rep["notes"]:
         print(f"relight: warning: {note}", file=sys.stderr)
     return 0
@@ -236,11 +221,11 @@ def _cmd_relight_materials(args) -> int:
     from ...lt_addon.transport.sidecar import read_environment_exr
     from ...lt_addon.sphere.hemisphere import direction_from_az_el
     from ..bakes import material_bake
-    from .commands import CliError, _check_input_blend, _check_output_path, _open_objects
+    from .common import CliError, check_input_blend, check_output_path, open_objects
 
-    path = _check_input_blend(args.file)
-    out = _check_output_path(args.out, ".npy", args.force)
-    png = _check_output_path(args.compare, ".png", args.force) if args.compare else None
+    path = check_input_blend(args.file)
+    out = check_output_path(args.out, ".npy", args.force)
+    png = check_output_path(args.compare, ".png", args.force) if args.compare else None
     if png and (args.sun is not None or args.env):
         raise CliError("--compare renders under the scene's Sun lamp: drop --sun / --env")
     if args.compare_samples < 1:
@@ -257,7 +242,7 @@ def _cmd_relight_materials(args) -> int:
             env = read_environment_exr(args.env)
         except (ValueError, OSError) as exc:
             raise CliError(str(exc)) from None
-    objects = _open_objects(path, args.object[:1])
+    objects = open_objects(path, args.object[:1])
     try:
         tensors = material_bake.load_tensors(bpy.context.scene, objects[0])
     except (FileNotFoundError, ValueError) as exc:

@@ -1,6 +1,7 @@
 """Bake a bake's chunks on a Dask cluster (``--workers N`` / ``--scheduler ADDRESS``): the
 transport bakes' ranges of directions (texture and vertex), basis lights (the lobes bake and the
-indirect stage, :mod:`.light_chunks`) and material terms (:mod:`.material_bake`).
+indirect stage, :mod:`..bakes.light_chunks`) and material terms (:mod:`..bakes.material_bake`).
+Each bake hands :func:`fill_chunks` its own chunk function; nothing here imports a bake.
 
 The coordinator (the CLI process, with the .blend open) knows the bake's chunks and which of
 them the chunk cache (:mod:`..lt_addon.io.chunk_cache`) still misses. It submits one Dask task
@@ -151,17 +152,18 @@ def worker_device(cache_key: dict):
 
 
 def bake_chunk(blend_path: str, object_names: list, settings: dict, start: int, stop: int,
-               cache_root: str, cache_key: dict, threads: int = 0, stage: str = "texture",
+               cache_root: str, cache_key: dict, threads: int = 0, stage=None,
                part: tuple | None = None) -> dict:
     """Worker task: bake directions ``start:stop`` into the chunk cache with ``threads`` Cycles
-    threads (0: Cycles' own choice, all cores); returns the chunk's figures. ``stage``
-    "texture": ``settings`` is a TransportTextureSettings as a dict (:func:`bake_directions`);
-    "vertex": a dict of ``directions`` (S, 3), ``bounces``, ``samples``, ``seed`` for the
-    per-vertex bake (:func:`.transport_bake.bake_vertex_directions`); "lights": a
-    :func:`.light_chunks.light_spec` and ``start:stop`` its basis lights; "material": a
-    MaterialBakeSettings as a dict and ``part`` the chunk's ``(kind, last, before)``
-    (:class:`.material_bake.MaterialChunk`). Raises DistributedError when the worker's scene
-    does not have ``cache_key``."""
+    threads (0: Cycles' own choice, all cores); returns the chunk's figures. ``stage`` is the
+    bake's own chunk function, ``stage(scene, objects, settings, start, stop, cache, threads,
+    part) -> Cycles seconds`` with ``settings`` as the coordinator sent them (a dict) -- the
+    texture bake's :func:`..bakes.texture_transport.direct_chunk`, the vertex bake's, the basis
+    lights' or the material terms' (``part`` a material chunk's ``(kind, last, before)``), sent
+    as its name ``"module:function"`` (:func:`stage_name`) and imported here once the worker has
+    opened the file (a bake module imports bpy, which Dask must not do while it unpickles the
+    task), so this module never imports a bake. Raises DistributedError when the worker's
+    scene does not have ``cache_key``."""
     t0 = time.perf_counter()
     loads = _OPENED.get("loads", 0)
     scene, objects = _worker_scene(blend_path, object_names, cache_key)
@@ -171,70 +173,12 @@ def bake_chunk(blend_path: str, object_names: list, settings: dict, start: int, 
 
     device = worker_device(cache_key)
     cache = ChunkCache(cache_root, cache_key)
+    run_stage = _resolve(stage)
     with cycles_device.use(device):
-        cycles = _bake_stage(scene, objects, settings, start, stop, cache, threads, stage, part)
+        cycles = run_stage(scene, objects, settings, start, stop, cache, threads, part)
     return {"start": start, "pid": os.getpid(), "open_seconds": round(opened, 3),
             "opened_file": _OPENED.get("loads", 0) > loads, "cycles_seconds": round(cycles, 3),
             "seconds": round(time.perf_counter() - t0, 3), "device": device.describe()}
-
-
-def _bake_stage(scene, objects, settings, start, stop, cache, threads, stage, part) -> float:
-    """Bake one chunk of ``stage`` (see :func:`bake_chunk`); returns Cycles' seconds."""
-    if stage == "vertex":
-        from ..bakes.transport_bake import bake_vertex_directions
-
-        cycles = bake_vertex_directions(scene, objects[0], settings, start, stop, cache, threads)
-    elif stage == "lights":
-        from ..bakes.light_chunks import bake_lights
-
-        cycles = _drain(bake_lights(scene, objects, settings, range(start, stop), cache.put,
-                                    threads))[0]
-    elif stage == "material":
-        from ..bakes.material_bake import MaterialBakeSettings, MaterialChunk, bake_material_chunks
-
-        gen = bake_material_chunks(scene, objects, MaterialBakeSettings(**settings),
-                                   [MaterialChunk(*part, start, stop)], cache.put, threads)
-        cycles = _drain(gen)
-    else:
-        from ..bakes.texture_transport import TransportTextureSettings
-
-        cycles = bake_directions(scene, objects, TransportTextureSettings(**settings), start,
-                                 stop, cache, threads)
-    return cycles
-
-
-def _drain(gen):
-    """Run a generator to its end; its return value."""
-    while True:
-        try:
-            next(gen)
-        except StopIteration as stop:
-            return stop.value
-
-
-def bake_directions(scene, objects, settings, start: int, stop: int, cache,
-                    threads: int = 0) -> float:
-    """Bake directions ``start:stop`` of ``settings``' direction set for ``objects`` exactly as
-    the single-process bake does (1 spp hard suns, same seed) and put them into ``cache`` as the
-    chunk ``direct_<start>`` ((objects, directions, texels), half floats); ``threads`` Cycles
-    threads (0: all cores). Returns Cycles' seconds. Used by the Dask task and ``relight
-    bake-chunk`` (farms)."""
-    import numpy as np
-
-    from ..base.cycles_bake import EnvironmentBake
-
-    dset = settings.validate()
-    if threads:   # workers sharing a machine: no more Cycles threads than their share of cores
-        scene.render.threads_mode, scene.render.threads = "FIXED", int(threads)
-    rows = [[] for _ in objects]
-    with EnvironmentBake(scene, objects, settings.resolution, 1, 0, (8, 16), mode="irradiance",
-                         seed=settings.seed, world_sampling="none", passes="direct") as session:
-        for i in range(start, stop):
-            for row, img in zip(rows, session.bake_sun_all(dset.directions[i], 1.0, 0.0)):
-                row.append(np.asarray(img[..., 0], np.float32).reshape(-1).astype(np.float16))
-        seconds = session.bake_seconds
-    cache.put(f"direct_{start:05d}", np.stack([np.stack(r) for r in rows]))
-    return seconds
 
 
 def _label(chunk) -> str:
@@ -242,8 +186,23 @@ def _label(chunk) -> str:
     return getattr(chunk, "name", f"{chunk.start:05d}")
 
 
+def stage_name(stage) -> str:
+    """A chunk function as the name a worker imports it by (``"module:function"``)."""
+    return f"{stage.__module__}:{stage.__qualname__}"
+
+
+def _resolve(stage):
+    """The chunk function a worker runs: ``stage`` itself, or imported by its name."""
+    if callable(stage):
+        return stage
+    import importlib
+
+    module, _, name = str(stage).partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
 def fill_chunks(client, blend_path: str, objects, settings, cache, chunks, step0: int,
-                total: int, stage: str = "texture"):
+                total: int, stage):
     """Generator (a job step source): bake the ``chunks`` (ranges of directions) the cache is
     missing on ``client``'s workers (``settings`` and ``stage`` as :func:`bake_chunk` takes
     them; a dataclass is sent as a dict); yields Progress as chunks finish; returns the figures
@@ -258,9 +217,10 @@ def fill_chunks(client, blend_path: str, objects, settings, cache, chunks, step0
     if dataclasses.is_dataclass(settings):
         settings = dataclasses.asdict(settings)
     futures = {client.submit(bake_chunk, blend_path, names, settings, c.start, c.stop,
-                             cache.root, cache.key, threads, stage, getattr(c, "part", None),
+                             cache.root, cache.key, threads, stage_name(stage),
+                             getattr(c, "part", None),
                              retries=1, pure=False,
-                             key=f"relight-{stage}-{cache.digest[:12]}-{_label(c)}"): c
+                             key=f"relight-{stage.__name__}-{cache.digest[:12]}-{_label(c)}"): c
                for c in chunks}
     done, rows = 0, []
     try:

@@ -88,7 +88,7 @@ def compare(scene, objects, azimuth: float, elevation: float, sun_angle: float, 
     from ...lt_addon.sphere.hemisphere import direction_from_az_el
     from mathutils import Vector
 
-    from ..bakes.texture_transport import refresh_preview_tables
+    from .transport_preview import refresh_preview_tables
 
     if scene.camera is None:
         raise BakeInputError(f"scene {scene.name!r} has no camera to render the comparison from")

@@ -214,7 +214,7 @@ def write_sparse_atlas(base: str, store) -> dict:
     from ...lt_addon.io import atomic
     from ...lt_addon.io.contact_sheet import write_png
 
-    from ..bakes.texture_transport import quantized
+    from ...lt_addon.transport.bundle import quantized
 
     tiles, scales = quantized(store)
     path = f"{base}_preview_transport.png"
@@ -617,7 +617,7 @@ _ENV_CACHE: dict = {}
 def _env_data(obj):
     """The object's previewed transport bake as the environment preview needs it (loaded once
     per file): {"V", "B", "directions", "bake"}, or None without a PCA preview."""
-    from ..bakes.texture_transport import load_bake
+    from ...lt_addon.transport.bundle import load_bake
 
     group = bpy.data.node_groups.get(f"{GROUP_PREFIX} ({obj.name})")
     path = None if group is None else group.get("relight_report")
@@ -748,3 +748,20 @@ def update_environment_previews(scene, objects=None) -> dict:
         scene[ENV_WARNING_KEY] = text
     timings["warnings"] = messages
     return timings
+
+
+def refresh_preview_tables(scene, obj, sun_angle: float) -> dict | None:
+    """Rewrite ``obj``'s preview coefficient tables for a new sun size (no re-bake); returns
+    {"seconds": ...} or None when ``obj`` has no transport preview."""
+    from ...lt_addon.transport.bundle import KIND, load_bake
+    from ..base.blend_files import object_bakes
+
+    records = [b for b in object_bakes(obj) if b.get("kind") == KIND]
+    if not records or bpy.data.node_groups.get(f"Relight Transport ({obj.name})") is None:
+        return None
+    t0 = time.perf_counter()
+    bake, store, report = load_bake(bpy.path.abspath(records[-1]["path"]))
+    if not getattr(bake.model, "live_preview", False):
+        return None
+    rewrite_tables(obj, report, bake, store, sun_angle)
+    return {"seconds": time.perf_counter() - t0}

@@ -461,7 +461,7 @@ def kept_chunks(context, kind: str | None = None) -> list:
     import glob
 
     from ...lt_addon.io.atomic import safe_name
-    from ..bakes.texture_transport import CACHE_FOLDER
+    from ..base.bake_inputs import CACHE_FOLDER
 
     obj = context.active_object
     try:

@@ -58,7 +58,7 @@ _TRANSPORT = preset_values("transport", "balanced")
 
 def _refresh_tables(self, context):
     """A new sun size only changes the preview's coefficient tables (no re-bake)."""
-    from ..bakes.texture_transport import refresh_preview_tables
+    from ..preview.transport_preview import refresh_preview_tables
 
     obj = context.active_object if context is not None else None
     if obj is not None:

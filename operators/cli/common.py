@@ -1,0 +1,361 @@
+"""What the ``relight`` verbs share: the one-line error, argument parsers for lights and colours,
+the device and Dask options, opening a .blend's objects, the output checks, driving a job with
+progress and Ctrl-C, and :func:`run_bake`, the tail every bake verb ends with."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+import numpy as np
+
+from ...lt_addon.io import atomic
+
+EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
+
+
+class CliError(Exception):
+    """A user-facing error: printed as one line, exit code 2."""
+
+
+def parse_az_el(text: str) -> tuple[float, float]:
+    try:
+        az, el = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected AZ,EL in degrees, got {text!r}") from None
+    if not (np.isfinite(az) and np.isfinite(el)) or not -90.0 <= el <= 90.0:
+        raise argparse.ArgumentTypeError(f"elevation must be in [-90, 90] degrees, got {text!r}")
+    return az, el
+
+
+def parse_rgb(text: str) -> tuple[float, float, float]:
+    try:
+        rgb = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        rgb = ()
+    if len(rgb) != 3 or not all(np.isfinite(rgb)) or min(rgb) < 0:
+        raise argparse.ArgumentTypeError(f"expected R,G,B (three non-negative numbers), got {text!r}")
+    return rgb
+
+
+def parse_point_light(text: str):
+    try:
+        x, y, z, power = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y,Z,POWER, got {text!r}") from None
+    if not all(np.isfinite([x, y, z, power])) or power < 0:
+        raise argparse.ArgumentTypeError(f"need finite X,Y,Z and POWER >= 0, got {text!r}")
+    return (x, y, z), power
+
+
+def run_job(job, verb: str, device=None):
+    """Drive ``job`` (a :mod:`.jobs` generator) to the end, printing its progress; returns its
+    result. Its Cycles bakes run on ``device`` (a :class:`.cycles_device.Device`; None: the
+    CPU, as for a job driven by a script that never chose). Ctrl-C (SIGINT) cancels it
+    between two steps -- Cycles runs Python callbacks that would swallow a KeyboardInterrupt
+    raised in the middle of a bake -- so the job closes cleanly (its ``finally`` blocks
+    restore the scene and drop temporary files); a second Ctrl-C stops at once. A cancelled
+    job raises KeyboardInterrupt here."""
+    import signal
+
+    from ..base import jobs
+
+    asked = []
+
+    def on_sigint(signum, frame):
+        if asked:
+            raise KeyboardInterrupt
+        asked.append(True)
+        print(f"{verb}: cancelling after the current step (Ctrl-C again to stop at once)",
+              file=sys.stderr, flush=True)
+
+    # SIGBREAK: Windows' Ctrl-Break, which the panel's Run On sends its command
+    signums = [signal.SIGINT] + ([signal.SIGBREAK] if hasattr(signal, "SIGBREAK") else [])
+    previous = {}
+    try:
+        for signum in signums:
+            previous[signum] = signal.signal(signum, on_sigint)
+    except ValueError:   # not the main thread (Blender's own console, say): Ctrl-C as before
+        pass
+    import contextlib
+
+    from ..base import cycles_device
+
+    printer = progress_printer(verb)
+    said = []
+
+    def on_progress(step):   # the device, once the bake has started (a refused one: not at all)
+        if device is not None and not said:
+            note = f": {device.note}" if device.note else ""
+            print(f"{verb}: baking on {device.describe()}{note}", file=sys.stderr, flush=True)
+            said.append(True)
+        printer(step)
+
+    try:
+        with cycles_device.use(device) if device else contextlib.nullcontext():
+            result = jobs.run(job, on_progress=on_progress, should_cancel=lambda: bool(asked))
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    if asked and result is None:
+        raise KeyboardInterrupt
+    return result
+
+
+def add_device_option(p) -> None:
+    """--device, shared by the verbs that bake with Cycles."""
+    p.add_argument("--device", choices=("auto", "cpu", "gpu"),
+                   default=os.environ.get("RELIGHT_DEVICE", "auto"),
+                   help="where Cycles bakes (default: $RELIGHT_DEVICE, else auto): auto uses "
+                        "the GPU the user chose -- the scene's Cycles device and "
+                        "Preferences > System in Blender, the first "
+                        "GPU backend Cycles finds in the venv CLI -- else the CPU, and says "
+                        "so; cpu forces the CPU; gpu refuses to bake without a GPU. The "
+                        "report records the device (CPU and GPU bakes of one seed are different "
+                        "sample sets: a resumed bake on another device bakes its chunks again)")
+
+
+def bake_device(args, verb: str):
+    """The device ``--device`` gives for the open scene, or CliError before any bake call
+    (``gpu`` without a GPU). :func:`run_job` says which on stderr when the bake starts."""
+    import bpy
+
+    from ..base import cycles_device
+
+    if args.device not in cycles_device.CHOICES:   # only a default from the environment can be
+        raise CliError(f"$RELIGHT_DEVICE must be one of {', '.join(cycles_device.CHOICES)}, "
+                       f"got {args.device!r}")
+    try:
+        return cycles_device.resolve(args.device, bpy.context.scene)
+    except cycles_device.DeviceError as exc:
+        raise CliError(str(exc)) from None
+
+
+def add_distribution_options(p, what: str) -> None:
+    """--no-resume / --workers / --scheduler, shared by the verbs that bake in chunks."""
+    p.add_argument("--no-resume", action="store_true",
+                   help=f"{what}keep no chunks (by default each finished chunk -- 16 "
+                        "directions, one basis light or one material term's 16 directions -- "
+                        "is kept in <out>/.relight_cache/ until the bake completes, so a "
+                        "cancelled or crashed bake run again redoes only the missing ones)")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help=f"{what}bake the chunks on a local Dask cluster of N worker processes "
+                        "(needs dask[distributed])")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help=f"{what}bake the chunks on the Dask cluster at ADDRESS (e.g. "
+                        "tcp://host:8786); its workers need this package and bpy, and must "
+                        "read the .blend and --out at the same paths")
+    p.add_argument("--connect-timeout", type=float, default=10.0, metavar="SECONDS",
+                   help="with --scheduler: how long to wait for the scheduler to answer before "
+                        "giving up (default 10; a scheduler still starting may need more)")
+
+
+def dask_client(args):
+    """The Dask client the options ask for (None: bake here); the caller closes it."""
+    if args.workers is None and not args.scheduler:
+        return None
+    from ..farm import distributed
+
+    if args.workers is not None and args.scheduler:
+        raise CliError("give --workers N (a local cluster) or --scheduler ADDRESS, not both")
+    if args.no_resume:
+        raise CliError("--workers / --scheduler hand chunks to the workers through the chunk "
+                       "cache; drop --no-resume")
+    if not args.connect_timeout > 0:
+        raise CliError(f"--connect-timeout must be > 0 seconds, got {args.connect_timeout:g}")
+    try:
+        return distributed.connect(args.workers, args.scheduler, timeout=args.connect_timeout)
+    except distributed.DistributedError as exc:
+        raise CliError(str(exc)) from None
+
+
+def progress_printer(prefix: str):
+    def show(step):   # a jobs.Progress
+        print(f"{prefix} [{step.done}/{step.total}] {step.message}", file=sys.stderr,
+              flush=True)
+    return show
+
+
+def open_object(path: str, name: str):
+    """Open ``path`` and return its object ``name`` (a CliError names the meshes if missing)."""
+    import bpy
+
+    from ..base.blend_files import blender_log_to_stderr
+
+    with blender_log_to_stderr():
+        bpy.ops.wm.open_mainfile(filepath=path, load_ui=False)
+    obj = bpy.data.objects.get(name)
+    if obj is None:
+        meshes = sorted(o.name for o in bpy.data.objects if o.type == "MESH")
+        raise CliError(f"no object {name!r} in {path}; mesh objects: {', '.join(meshes) or 'none'}")
+    from ..base.blend_files import activate_scene_of
+    from ..base.cycles_bake import BakeInputError
+
+    try:
+        activate_scene_of(obj, path)
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    return obj
+
+
+def open_objects(path: str, names: list) -> list:
+    """Open ``path`` and return its objects ``names``, all in the first one's scene (objects
+    baked together share one scene); a CliError names what is wrong."""
+    import bpy
+
+    if len(set(names)) != len(names):
+        raise CliError("an --object is given twice")
+    objects = [open_object(path, names[0])]
+    for name in names[1:]:
+        obj = bpy.data.objects.get(name)
+        if obj is None:
+            meshes = sorted(o.name for o in bpy.data.objects if o.type == "MESH")
+            raise CliError(f"no object {name!r} in {path}; mesh objects: {', '.join(meshes)}")
+        if obj.name not in bpy.context.view_layer.objects:
+            raise CliError(f"{obj.name!r} is not in scene {bpy.context.scene.name!r} with "
+                           f"{objects[0].name!r}; objects baked together share one scene")
+        objects.append(obj)
+    return objects
+
+
+def refuse_existing(out_dir: str, obj_name: str, suffixes, force: bool, what: str) -> None:
+    """Refuse (before any work) to replace ``<out_dir>/<object><suffix>`` without --force."""
+    safe = atomic.safe_name(obj_name)
+    if force:
+        return
+    for suffix in suffixes:
+        if os.path.exists(os.path.join(out_dir, safe + suffix)):
+            raise CliError(f"{what} of {obj_name} exists in {out_dir} (use --force to replace it)")
+
+
+def print_chunks(rep: dict) -> None:
+    """A chunked bake's resume and distribution figures, when there are any."""
+    for dev, n in (rep.get("other_device_chunks") or {}).items():
+        print(f"  note: {n} chunks an interrupted bake left were baked on {dev}; this bake runs "
+              f"on {rep.get('device', {}).get('device', 'CPU')}, a different sample set, so "
+              "they were baked again")
+    if rep.get("chunks_reused"):
+        of = ("chunks (one basis light each)" if "chunk_directions" not in rep else
+              f"chunks ({rep['indirect_chunks']} of them indirect lights, the others "
+              f"{rep['chunk_directions']} directions each)" if rep.get("indirect_chunks") else
+              f"chunks of {rep['chunk_directions']} directions")
+        print(f"  resumed: {rep['chunks_reused']} of {rep['chunks_total']} {of} reused from an "
+              "interrupted bake")
+    dist = rep.get("distributed")
+    if dist:
+        print(f"  distributed: {dist['chunks']} chunks on {len(dist['workers'])} worker "
+              f"processes in {dist['wall_seconds']:.1f} s ({dist['cycles_seconds']:.1f} s "
+              f"of Cycles, {dist['file_loads']} .blend loads)")
+
+
+def check_bake_inputs(args, settings) -> tuple[str, str]:
+    """What every bake verb checks before opening the file: the input .blend, the settings
+    (``settings.validate()``; a BakeInputError becomes one CLI line), the output folder and
+    that the .blend can be saved again. Returns ``(blend path, output folder)``."""
+    from ..base.cycles_bake import BakeInputError
+
+    path = check_input_blend(args.file)
+    try:
+        settings.validate()
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    out_dir = check_output_dir(args.out, path)
+    if not can_create_in(os.path.dirname(path)):
+        raise CliError(f"cannot update {path}: its folder is not writable")
+    return path, out_dir
+
+
+def check_output_dir(out: str | None, blend_path: str) -> str:
+    """The output folder (default next to the .blend), checked creatable and writable."""
+    from ..bakes.steerable_bake import default_output_dir
+
+    out_dir = os.path.abspath(out) if out else default_output_dir(blend_path)
+    parent = os.path.dirname(out_dir)
+    if not os.path.isdir(parent):
+        raise CliError(f"output folder's parent does not exist: {parent}")
+    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
+        raise CliError(f"output exists and is not a folder: {out_dir}")
+    if not can_create_in(out_dir if os.path.isdir(out_dir) else parent):
+        raise CliError(f"output folder is not writable: {out_dir}")
+    return out_dir
+
+
+BLEND_MAGICS = (b"BLENDER", b"\x28\xb5\x2f\xfd", b"\x1f\x8b")  # plain, zstd, gzip (old)
+
+
+def check_input_blend(path: str) -> str:
+    path = os.path.abspath(path)
+    if not os.path.exists(path):
+        raise CliError(f"input file not found: {path}")
+    if os.path.isdir(path):
+        raise CliError(f"input is a directory, not a .blend file: {path}")
+    if not path.lower().endswith(".blend"):
+        raise CliError(f"input must be a .blend file: {path}")
+    with open(path, "rb") as fh:
+        head = fh.read(7)
+    if not head.startswith(BLEND_MAGICS):
+        raise CliError(f"not a Blender file (bad header): {path}")
+    return path
+
+
+def can_create_in(folder: str) -> bool:
+    """Really try to create (and remove) a file: permission bits lie for root and odd mounts."""
+    probe = os.path.join(folder, f".relight-write-probe-{os.getpid()}")
+    try:
+        with open(probe, "xb"):
+            pass
+    except OSError:
+        return False
+    os.remove(probe)
+    return True
+
+
+def check_output_path(path: str, suffix: str, force: bool) -> str:
+    path = os.path.abspath(path)
+    if not path.lower().endswith(suffix):
+        raise CliError(f"output must end in {suffix}: {path}")
+    folder = os.path.dirname(path)
+    if not os.path.isdir(folder):
+        raise CliError(f"output directory does not exist: {folder}")
+    if not can_create_in(folder):
+        raise CliError(f"output directory is not writable: {folder}")
+    if os.path.isdir(path):
+        raise CliError(f"output is a directory: {path}")
+    if os.path.exists(path) and not force:
+        raise CliError(f"output exists (use --force to overwrite): {path}")
+    if os.path.exists(path) and not os.access(path, os.W_OK):
+        raise CliError(f"output exists and is not writable: {path}")
+    return path
+
+
+
+def run_bake(args, verb: str, path: str, make_job, *, kept: str,
+             cancelled: str = "no bake file was written", errors: tuple = (), prefix: str = ""):
+    """The tail every bake verb ends with: the device and Dask options (``args``), the job
+    ``make_job(client)`` driven with progress and Ctrl-C (:func:`run_job`), its errors as one
+    line (a bad input, ``errors`` too, prefixed with ``prefix``; a failed Dask chunk), the
+    client closed, and the .blend at ``path`` saved with the bake's records. Returns the job's
+    result, or None when cancelled (the verb exits 130; ``kept`` says what a resume reuses,
+    left out with --no-resume)."""
+    from ..base import blend_files
+    from ..base.cycles_bake import BakeInputError
+    from ..farm.distributed import DistributedError, close
+
+    device = bake_device(args, verb)
+    client = dask_client(args)
+    try:
+        out = run_job(make_job(client), verb, device)
+    except (BakeInputError, *errors) as exc:
+        raise CliError(f"{prefix}{exc}") from None
+    except DistributedError as exc:
+        raise CliError(f"{exc}; the finished chunks are kept, the same command resumes") from None
+    except KeyboardInterrupt:
+        note = "" if args.no_resume else kept
+        print(f"{verb}: cancelled; {cancelled}{note}", file=sys.stderr)
+        return None
+    finally:
+        if client is not None:
+            close(client)
+    blend_files.save_atomically(path)
+    return out
