@@ -22,6 +22,7 @@ import time
 import bpy
 import numpy as np
 
+from ...lt_addon.errors import InputError
 from . import cycles_device
 from .compat import ensure_node_tree
 from .meshes import (color_attribute, corner_vertices, image_pixels, polygon_arrays,
@@ -38,8 +39,9 @@ WORLD_SAMPLING = ("importance", "none")
 _PREFIX = "RelightBake"
 
 
-class BakeInputError(ValueError):
-    """The object or settings cannot be baked; the message says what to change."""
+#: The object or settings cannot be baked; the message says what to change. The core's own
+#: error class (its settings and bundle readers raise it), under the bpy layer's name.
+BakeInputError = InputError
 
 
 def dark_material_reason(material) -> str | None:
