@@ -103,8 +103,9 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_materials.py --size demo --anchors roughness:0.4,0.8 \
 	  --settings hemi:400:1.5/hemi:128/hemi:8@16
 
-## bench-full: the standard (demo-size) sweeps behind the README tables and the presets
-##   (~2 h): writes docs/bench and operators/bakes/presets.json, plus the deeper per-method benchmarks
+## bench-full: the standard (demo-size) sweeps behind the tables in docs/ (results.md and the
+##   method pages) and the presets (~2 h): writes docs/bench and operators/bakes/presets.json,
+##   plus the deeper per-method benchmarks
 bench-full: $(STAMP)
 	mkdir -p $(OUT)/bench docs/bench $(BLENDER_USER_RESOURCES)
 	$(VENV)/bin/relight bench --scene bumps --write-presets --out docs/bench
