@@ -24,7 +24,7 @@ import numpy as np
 
 from ...lt_addon.geometry.barycentric import barycentric
 from ...lt_addon.transport import gathered_transfer as gt
-from ..base.direct_rays import ReceiverRays, _casters
+from ..base.direct_rays import ReceiverRays, shadow_casters
 
 #: Origins per gather chunk (a cancelled bake resumes from whole chunks; about 1.3 s of rays
 #: at 1,024 rays each here).
@@ -74,7 +74,7 @@ class GatherScene:
         self.scene = scene
         self.regions = list(regions)
         depsgraph = bpy.context.evaluated_depsgraph_get()
-        casters = _casters(scene)
+        casters = shadow_casters(scene)
         self.objects, tris, region, albedo, self.notes, offset = [], [], [], [], [], 0
         for o in casters:
             ev = o.evaluated_get(depsgraph)

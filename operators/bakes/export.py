@@ -181,7 +181,7 @@ def object_rotation(obj) -> np.ndarray:
 def _indirect_over_pi(bake, store, settings) -> np.ndarray | None:
     """Bounce light as ``E_ind / pi`` (P, 3) under the sun (None for an environment: the bake's
     indirect term is tabulated per sun direction only)."""
-    from .texture_transport import _upsample
+    from ...lt_addon.transport.bundle import upsample as _upsample
 
     if bake.indirect is None or settings.sun is None:
         return None
@@ -261,7 +261,7 @@ def held_out_lights(count: int) -> np.ndarray:
 
 def _radiance_at(bake, store, s_index: int, T) -> np.ndarray:
     """Radiance (P, 3) under a unit sun exactly at baked direction ``s_index``."""
-    from .texture_transport import _upsample
+    from ...lt_addon.transport.bundle import upsample as _upsample
 
     out = np.asarray(T[s_index], np.float64)[:, None] * bake.albedo.reshape(-1, 3)
     if bake.indirect is not None:

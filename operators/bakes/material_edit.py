@@ -155,7 +155,7 @@ def compare_edit(scene, tensors, edits: dict, out_png: str, samples: int = 64,
 
     from ...lt_addon.io.contact_sheet import linear_to_srgb8, write_png
     from ...lt_addon.io.label import labelled_grid
-    from ..preview.compare_render import _render, _saved_render_settings
+    from ..preview.compare_render import render_camera, saved_render_settings
 
     light = preview_light(scene)
     if scene.camera is None or light is None:
@@ -166,7 +166,7 @@ def compare_edit(scene, tensors, edits: dict, out_png: str, samples: int = 64,
                                                   "sample_clamp_direct", "sample_clamp_indirect")]
     res = (scene.render.resolution_x, scene.render.resolution_y,
            scene.render.resolution_percentage)
-    world, render = scene.world, _saved_render_settings(scene)
+    world, render = scene.world, saved_render_settings(scene)
     hidden = [(o, o.hide_render) for o in scene.objects if o.type == "LIGHT"]
     sockets = {r: material_bake.material_colour_socket(bpy.data.materials[r])
                for r in tensors.regions}
@@ -209,7 +209,7 @@ def compare_edit(scene, tensors, edits: dict, out_png: str, samples: int = 64,
                             knobs[r][k].default_value = float(v)
                 update_preview(scene)
                 bpy.context.view_layer.update()
-                preview = _render(scene, os.path.join(tmp, f"p_{label}.exr"), 1)
+                preview = render_camera(scene, os.path.join(tmp, f"p_{label}.exr"), 1)
                 colours = {**material_bake.file_colours(tensors), **edit}
                 metal = {k: v for k, v in material_bake.file_finish(tensors).items() if v[0] > 0}
                 cyc.glossy_bounces = tensors.bounces if metal else 0
@@ -219,7 +219,7 @@ def compare_edit(scene, tensors, edits: dict, out_png: str, samples: int = 64,
                                                       gloss=bool(metal)) as gates:
                         gates.set_gates("all", "all")
                         gates.set_finish(metal)
-                        truth = _render(scene, os.path.join(tmp, f"t_{label}.exr"), samples)
+                        truth = render_camera(scene, os.path.join(tmp, f"t_{label}.exr"), samples)
                 finally:
                     scene.collection.objects.unlink(sun)
                 mask = preview.sum(-1) > 0

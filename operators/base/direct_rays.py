@@ -45,7 +45,7 @@ RAY_OFFSET = 1e-4
 CASTER_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
 
 
-def _casters(scene):
+def shadow_casters(scene):
     """The scene's rendered shadow casters (instances and point clouds, volumes not)."""
     return [o for o in scene.objects if o.type in CASTER_TYPES and not o.hide_render
             and getattr(o, "visible_shadow", True)]
@@ -120,7 +120,7 @@ class ReceiverRays:
 
         depsgraph = bpy.context.evaluated_depsgraph_get()
         verts, tris, offset = [], [], 0
-        for o in _casters(scene):
+        for o in shadow_casters(scene):
             co, _, _, tri, _, _, _ = _mesh_arrays(o, depsgraph, receiver=False)
             verts.append(co)
             tris.append(tri + offset)
@@ -359,7 +359,7 @@ def _scene_stamp(scene) -> str:
 
     depsgraph = bpy.context.evaluated_depsgraph_get()
     h = hashlib.sha1()
-    for o in sorted(_casters(scene), key=lambda o: o.name):
+    for o in sorted(shadow_casters(scene), key=lambda o: o.name):
         h.update(o.name.encode())
         h.update(np.asarray(o.matrix_world, np.float32).tobytes())
         data = o.evaluated_get(depsgraph).data   # a mesh's: after modifiers and poses

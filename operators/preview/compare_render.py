@@ -24,7 +24,7 @@ from ...lt_addon.io.label import labelled_row
 from ..base.cycles_bake import BakeInputError
 
 
-def _render(scene, path: str, samples: int) -> np.ndarray:
+def render_camera(scene, path: str, samples: int) -> np.ndarray:
     scene.render.engine = "CYCLES"
     scene.cycles.samples = samples
     scene.cycles.use_denoising = False
@@ -37,8 +37,8 @@ def _render(scene, path: str, samples: int) -> np.ndarray:
     return np.stack([ch["R"], ch["G"], ch["B"]], -1).astype(np.float64)
 
 
-def _saved_render_settings(scene):
-    """What :func:`_render` changes, saved; returns the callable that restores it."""
+def saved_render_settings(scene):
+    """What :func:`render_camera` changes, saved; returns the callable that restores it."""
     r, c, im = scene.render, scene.cycles, scene.render.image_settings
     saved = [(r, "engine", r.engine), (r, "filepath", r.filepath),
              (c, "samples", c.samples), (c, "use_denoising", c.use_denoising),
@@ -101,7 +101,7 @@ def compare(scene, objects, azimuth: float, elevation: float, sun_angle: float, 
                                        "relight_intensity", "relight_follow_sun")}
     world, res = scene.world, (scene.render.resolution_x, scene.render.resolution_y,
                                scene.render.resolution_percentage)
-    render = _saved_render_settings(scene)
+    render = saved_render_settings(scene)
     hidden = [(o, o.hide_render) for o in scene.objects if o.type == "LIGHT"]
     undo = []
     data = bpy.data.lights.new("RelightCompareSun", type="SUN")
@@ -123,13 +123,13 @@ def compare(scene, objects, azimuth: float, elevation: float, sun_angle: float, 
         bpy.context.view_layer.update()
         with tempfile.TemporaryDirectory() as tmp:
             undo += _set_preview_outputs(previews, True)
-            preview = _render(scene, os.path.join(tmp, "preview.exr"), 1)
+            preview = render_camera(scene, os.path.join(tmp, "preview.exr"), 1)
             undo += _set_preview_outputs(previews, False)
             scene.collection.objects.link(sun)
             data.energy, data.angle = 1.0, math.radians(sun_angle)
             towards = Vector(direction_from_az_el(azimuth, elevation).tolist())
             sun.rotation_euler = (-towards).to_track_quat("-Z", "Y").to_euler()
-            truth = _render(scene, os.path.join(tmp, "truth.exr"), samples)
+            truth = render_camera(scene, os.path.join(tmp, "truth.exr"), samples)
         diff = np.abs(preview - truth)
         mask = preview.sum(-1) > 0
         err = (float(np.linalg.norm((preview - truth)[mask]) / np.linalg.norm(truth[mask]))

@@ -28,7 +28,7 @@ def _output_dir(props) -> str:
     return path
 
 
-def _transport_objects(context):
+def transport_objects(context):
     """The active mesh plus every other selected mesh (baked in the same Cycles calls)."""
     active = context.active_object
     others = [o for o in context.selected_objects if o.type == "MESH" and o != active]
@@ -69,7 +69,7 @@ def _finish(operator, scene, result):
     scene[LAST_BAKE_KEY] = "\n".join(lines)
 
 
-class _ModalBake:
+class ModalBake:
     """A bake job driven one step per timer tick (progress, status text, Esc cancels), or to
     completion by ``execute`` (scripts, background mode). Subclasses give ``_prepare`` (the
     job generator) and ``_finish`` (write and preview). A mixin, not an Operator: Blender
@@ -206,7 +206,7 @@ class _ModalBake:
         return {"RUNNING_MODAL"}
 
 
-class RELIGHT_OT_bake_textures(_ModalBake, bpy.types.Operator):
+class RELIGHT_OT_bake_textures(ModalBake, bpy.types.Operator):
     """Bake relightable textures of the active object (and the other selected meshes) with
     Cycles (Esc cancels)"""
 
@@ -221,7 +221,7 @@ class RELIGHT_OT_bake_textures(_ModalBake, bpy.types.Operator):
             from ..bakes import texture_transport as tx
             from .properties import transport_settings_from_scene
 
-            objects = _transport_objects(context)
+            objects = transport_objects(context)
             for o in objects:
                 check_bakeable(o)
             self.settings = transport_settings_from_scene(props)
@@ -261,7 +261,7 @@ class RELIGHT_OT_bake_textures(_ModalBake, bpy.types.Operator):
         return "; its finished chunks are kept, so baking again resumes"
 
 
-class RELIGHT_OT_bake_transport(_ModalBake, bpy.types.Operator):
+class RELIGHT_OT_bake_transport(ModalBake, bpy.types.Operator):
     """Bake the active object's per-vertex light transport with Cycles and fit eigentransport
     (Nowrouzezahrai 2008); the vertex preview then shades it under the world (Esc cancels)"""
 
@@ -300,7 +300,7 @@ class RELIGHT_OT_bake_transport(_ModalBake, bpy.types.Operator):
                               f"{report.get('preview', {}).get('shade_ms', 0):.0f} ms")
 
 
-class RELIGHT_OT_analyze(_ModalBake, bpy.types.Operator):
+class RELIGHT_OT_analyze(ModalBake, bpy.types.Operator):
     """How many CPCA clusters the active object's transport needs (Mahajan 2007): reuses the
     samples of its vertex transport bake when the directions and bounces match, bakes them
     otherwise, and writes <object>_analysis.json into the output folder (Esc cancels the bake)"""

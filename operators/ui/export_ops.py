@@ -6,7 +6,7 @@ import os
 
 import bpy
 
-from .bake_ops import _ModalBake
+from .bake_ops import ModalBake
 from ..base.cycles_bake import BakeInputError
 
 #: Scene property holding the last export's summary lines, shown in the panel.
@@ -40,7 +40,7 @@ def settings_from_scene(scene):
                           else None, **kw)
 
 
-class RELIGHT_OT_export(_ModalBake, bpy.types.Operator):
+class RELIGHT_OT_export(ModalBake, bpy.types.Operator):
     """Export the active object's transport-texture bake as an RTI model with a relightable
     web page, or as a directional lightmap for a game engine, and report its error against
     our own relight (Esc cancels)"""

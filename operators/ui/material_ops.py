@@ -10,10 +10,10 @@ import bpy
 from ..bakes import material_bake
 from ..bakes.material_edit import SUMMARY_KEY, bake_job, on_depsgraph_update
 from ..base.cycles_bake import BakeInputError
-from .bake_ops import _ModalBake, _transport_objects
+from .bake_ops import ModalBake, transport_objects
 
 
-class RELIGHT_OT_bake_materials(_ModalBake, bpy.types.Operator):
+class RELIGHT_OT_bake_materials(ModalBake, bpy.types.Operator):
     """Bake transfer tensors of the selected meshes (Sun 2007) so the materials marked Editable
     can be recoloured with their interreflection following live (Esc cancels)"""
 
@@ -23,7 +23,7 @@ class RELIGHT_OT_bake_materials(_ModalBake, bpy.types.Operator):
 
     def _prepare(self, context):
         scene, props = context.scene, context.scene.relight
-        objects = _transport_objects(context)
+        objects = transport_objects(context)
         regions = [m.name for m in material_bake.scene_materials(scene)
                    if m is not None and m.relight_editable]
         if not regions:
