@@ -66,7 +66,7 @@ def equal_count(report_path: str, held_out: int) -> list:
     from relightable_textures.lt_addon.export import rti
     from relightable_textures.lt_addon.transport import texture as tt
     from relightable_textures.operators.bakes import texture_transport as tx
-    from relightable_textures.operators.bakes.export import _radiance_at, held_out_lights
+    from relightable_textures.lt_addon.export.fitting import held_out_lights, radiance_at as _radiance_at
 
     bake, store, _ = tx.load_bake(report_path)
     dset = store.directions

@@ -11,15 +11,7 @@ drop temporary files, so a cancelled job leaves nothing behind.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
-
-@dataclass
-class Progress:
-    """One step of a job: ``done`` of ``total`` units, and what it is doing now."""
-    done: int
-    total: int
-    message: str
+from ...lt_addon.progress import Progress  # noqa: F401  (the core's jobs yield it too)
 
 
 def run(generator, on_progress=None, should_cancel=None):

@@ -174,7 +174,7 @@ def _float_fit_display(folder, light, H, W):
     bake, store, _ = tx.load_bake(str(folder / "bumps_relight" / "Bumps_texture_report.json"))
     info = json.loads((folder / "bumps_relight" / "Bumps_rti-hsh9" / "info.json").read_text())
     dset = store.directions
-    from relightable_textures.operators.bakes.export import _radiance_at
+    from relightable_textures.lt_addon.export.fitting import radiance_at as _radiance_at
 
     vals = np.stack([rti.to_display(_radiance_at(bake, store, s, store.array),
                                     info["exposure"]) for s in range(dset.size)])
