@@ -131,6 +131,7 @@ def test_zip_contents(extension_zip):
         assert required in names
     assert not any(n.startswith(("tests/", ".venv/", ".git/", "tools/", "benchmarks/",
                                  "devtools/")) for n in names)
+    assert not {"setup.py", "pyproject.toml", "Makefile"} & names       # the wheel's build files
     # only the product: no benchmark, Pareto or chart code anywhere in the zip, and no module
     # that imports matplotlib (Blender does not ship it)
     modules = sorted(n for n in names if n.endswith(".py"))
