@@ -16,7 +16,6 @@ whose Metallic and Roughness re-shade the preview too) is black in it.
 from __future__ import annotations
 
 import os
-import re
 import time
 
 import bpy

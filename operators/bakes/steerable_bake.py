@@ -18,6 +18,7 @@ import numpy as np
 
 from ... import __version__
 from ...lt_addon.io import atomic
+from ...lt_addon.settings import setting
 from ...lt_addon.steerable.sampled_basis import build_sampled_basis
 from ...lt_addon.steerable.basis import paper_basis
 from ...lt_addon.steerable.texture import FRAMES, STORAGE_MODES, SteerableTexture
@@ -35,17 +36,28 @@ UV_OVERLAP_WARNING = 0.01
 class TextureBakeSettings:
     """What to bake. Defaults follow the paper (N1 = 7, outgoing radiance)."""
 
-    order: int = 7
-    resolution: int = 512
-    samples: int = 64
-    bounces: int = 4
-    frame: str = "world"
-    mode: str = "radiance"
-    storage: str = "half"
+    order: int = setting(7, lo=2, hi=12, help="Basis order N1: N = N1^2 Cycles bakes")
+    resolution: int = setting(512, lo=1, hi=16384, help="Texture side in texels")
+    samples: int = setting(64, lo=1, hi=65536, help="Cycles samples per texel per bake")
+    bounces: int = setting(4, lo=0, hi=64, help="Diffuse bounces (0 = direct light only)")
+    frame: str = setting("world", choices=(
+        ("world", "World", "Relight the object by a distant light over the world's upper "
+                           "hemisphere"),
+        ("tangent", "Tangent", "A tileable patch relit per pixel in a surface's UV tangent "
+                               "frame")), help="The frame the light directions are in")
+    mode: str = setting("radiance", label="Bake", choices=(
+        ("radiance", "Radiance", "Albedo x light with interreflection (the paper)"),
+        ("irradiance", "Light only", "Light without the albedo, so the albedo stays editable")),
+        help="What the bake holds")
+    storage: str = setting("half", choices=tuple((m, m, "") for m in STORAGE_MODES),
+                           help="EXR precision (u8: 8-bit + min/max)")
     calibration: str = "steerable_cos"
     env_height: int = 128
-    seed: int = 0
-    world_sampling: str = "importance"
+    seed: int = setting(0, lo=0, help="Cycles seed")
+    world_sampling: str = setting("importance", label="World Sampling", choices=(
+        ("importance", "Importance", "Lower noise at equal samples"),
+        ("none", "None", "BSDF sampling only: exactly linear in the light")),
+        help="How Cycles samples the steered world light")
 
     def validate(self) -> None:
         if not 2 <= self.order <= 12:

@@ -24,7 +24,7 @@ import numpy as np
 from ... import __version__
 from ...lt_addon.io import atomic
 from .common import (CliError, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, add_device_option,
-                     add_distribution_options, bake_device, can_create_in, check_bake_inputs,
+                     add_distribution_options, add_setting_options, bake_device, can_create_in, check_bake_inputs,
                     check_input_blend, check_output_dir, check_output_path, open_object,
                      open_objects, parse_az_el, parse_point_light, parse_rgb, print_chunks,
                      refuse_existing, run_bake, run_job)
@@ -38,11 +38,19 @@ class _Parser(argparse.ArgumentParser):
         raise CliError(message)
 
 
+#: bake-textures' options, made from the settings dataclasses (lt_addon/settings.py): the
+#: transport method's own, the three both methods take, the lobes method's own.
+TRANSPORT_OPTIONS = ("directions", "sun_angle", "model", "components", "tol", "indirect_samples",
+                     "indirect_resolution", "table_size", "viewport")
+SHARED_OPTIONS = ("resolution", "bounces", "seed")
+LOBES_OPTIONS = ("frame", "order", "samples", "storage", "mode", "world_sampling")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from ...lt_addon.steerable.calibration import METHODS as CALIBRATIONS
-    from ...lt_addon.steerable.texture import FRAMES, STORAGE_MODES
+    from ...lt_addon.transport.bundle import TransportTextureSettings
     from ...samples import DESCRIPTIONS, SIZES
-    from ..base.cycles_bake import BAKE_MODES, WORLD_SAMPLING
+    from ..bakes.steerable_bake import TextureBakeSettings
 
     parser = _Parser(
         prog="relight",
@@ -86,24 +94,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "paper's steerable-lobe environment bake")
     p.add_argument("--preset", choices=("draft", "balanced", "production"), default="balanced",
                    help="starting values for the settings below (default balanced)")
-    p.add_argument("--directions", metavar="SPEC", help="transport: sun directions, hemi:N[:P] "
-                   "(N directions over the upper hemisphere, P > 1 denser near the horizon)")
-    p.add_argument("--sun-angle", type=float, help="transport: sun size in degrees for the "
-                   "preview and the truth (default 2)")
-    p.add_argument("--model", choices=("pca", "blocks", "steerable", "none"),
-                   help="transport: pca eigen-textures (live preview), blocks (clustered PCA "
-                        "over texel blocks), steerable (the paper's basis by quadrature), none")
-    p.add_argument("--components", type=int, help="transport: PCA components (default: from "
-                   "--tol) or the steerable order")
-    p.add_argument("--tol", type=float, help="transport: relative residual the PCA keeps")
-    p.add_argument("--indirect-samples", type=int, help="transport: samples of the indirect bake")
-    p.add_argument("--indirect-resolution", type=int, help="transport: indirect texture side")
-    p.add_argument("--table-size", type=int, help="transport: texels across the preview's "
-                   "coefficient tables (hemisphere disk; 8..256)")
-    p.add_argument("--viewport", choices=("auto", "transport", "pca"), help="transport: what "
-                   "the live preview shows -- T itself through sparse kernel tables (keeps "
-                   "cast shadows; an atlas of all directions), the PCA, or auto (T when its "
-                   "atlas takes at most 256 MiB; default)")
+    add_setting_options(p, TransportTextureSettings, TRANSPORT_OPTIONS, what="transport: ")
     p.add_argument("--target-error", type=float, metavar="E", help="transport: a pilot bake "
                    "chooses the directions and the PCA tolerance to reach relative RMSE E on "
                    "held-out lights; the report says what it chose and achieved")
@@ -111,18 +102,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="transport: Cycles samples of the truth bakes (default 256)")
     p.add_argument("--force", action="store_true",
                    help="replace an existing bake of the same object in --out")
-    p.add_argument("--frame", choices=FRAMES, help="world: relight by a distant world light; "
-                   "tangent: a tileable patch relit per pixel in a surface's UV tangent frame")
-    p.add_argument("--order", type=int, help="basis order N1 (N = N1^2 bakes), 2..12")
-    p.add_argument("--resolution", type=int, help="texture side in texels")
-    p.add_argument("--samples", type=int, help="Cycles samples per texel per bake")
-    p.add_argument("--bounces", type=int, help="diffuse bounces (0 = direct light only)")
-    p.add_argument("--storage", choices=STORAGE_MODES, help="EXR precision (u8: 8-bit + min/max)")
-    p.add_argument("--mode", choices=BAKE_MODES, help="radiance: albedo x light (the paper); "
-                   "irradiance: light only, so the albedo stays editable")
-    p.add_argument("--world-sampling", choices=WORLD_SAMPLING,
-                   help="importance (lower noise, default) or none (exactly linear)")
-    p.add_argument("--seed", type=int, help="Cycles seed (default 0)")
+    add_setting_options(p, TransportTextureSettings, SHARED_OPTIONS)
+    add_setting_options(p, TextureBakeSettings, LOBES_OPTIONS, what="lobes: ")
     p.add_argument("--truth", type=int, default=0, metavar="K",
                    help="also bake Cycles ground truth for K light directions (elevations 5..85 "
                         "degrees, none a sample centre) and put the errors in the report")
@@ -397,10 +378,7 @@ def _cmd_validate(args) -> int:
 def _cmd_bake_textures(args) -> int:
     if args.method == "transport":
         return _cmd_bake_texture_transport(args)
-    lobes_only = [f"--{k.replace('_', '-')}" for k in ("directions", "sun_angle", "model",
-                                                       "components", "tol", "indirect_samples",
-                                                       "indirect_resolution", "table_size",
-                                                       "viewport", "target_error")
+    lobes_only = [f"--{k.replace('_', '-')}" for k in TRANSPORT_OPTIONS + ("target_error",)
                   if getattr(args, k) is not None]
     if lobes_only:
         raise CliError(f"{', '.join(lobes_only)} apply to --method transport, not lobes")
@@ -415,9 +393,8 @@ def _cmd_bake_textures(args) -> int:
     from ..bakes.presets import settings_from_preset
 
     path = check_input_blend(args.file)
-    overrides = {k: getattr(args, k) for k in ("frame", "order", "resolution", "samples",
-                                               "bounces", "storage", "mode", "world_sampling",
-                                               "seed") if getattr(args, k) is not None}
+    overrides = {k: getattr(args, k) for k in SHARED_OPTIONS + LOBES_OPTIONS
+                 if getattr(args, k) is not None}
     try:
         settings = settings_from_preset(args.preset, **overrides)
         settings.validate()
@@ -488,19 +465,14 @@ def _cmd_bake_texture_transport(args) -> int:
     from ..bakes import texture_transport as tx
     from ..base.cycles_bake import BakeInputError
 
-    lobes_only = [f"--{k.replace('_', '-')}" for k in ("frame", "order", "samples", "storage",
-                                                       "mode", "world_sampling", "contact_sheet")
+    lobes_only = [f"--{k.replace('_', '-')}" for k in LOBES_OPTIONS + ("contact_sheet",)
                   if getattr(args, k) is not None]
     if lobes_only:
         raise CliError(f"{', '.join(lobes_only)} apply to --method lobes; the transport method "
                        "takes --directions, --resolution, --bounces, --model, --sun-angle")
     path = check_input_blend(args.file)
-    names = {"directions": "directions", "resolution": "resolution", "bounces": "bounces",
-             "seed": "seed", "sun_angle": "sun_angle", "model": "model",
-             "components": "components", "tol": "tol", "indirect_samples": "indirect_samples",
-             "indirect_resolution": "indirect_resolution", "table_size": "table_size",
-             "viewport": "viewport"}
-    overrides = {v: getattr(args, k) for k, v in names.items() if getattr(args, k) is not None}
+    overrides = {k: getattr(args, k) for k in TRANSPORT_OPTIONS + SHARED_OPTIONS
+                 if getattr(args, k) is not None}
     try:
         settings = tx.settings_from_preset(args.preset, **overrides)
         settings.validate()

@@ -359,3 +359,38 @@ def run_bake(args, verb: str, path: str, make_job, *, kept: str,
             close(client)
     blend_files.save_atomically(path)
     return out
+
+
+def add_setting_options(p, cls, names=None, *, what: str = "", defaults: bool = False) -> None:
+    """One CLI option per declared field of ``cls`` (:func:`...lt_addon.settings.declared`):
+    its flag, type, choices and help. ``defaults`` False: the option's default is None (the
+    verb then takes the preset's value); ``what`` prefixes the help ("transport: ") where one
+    verb takes two bakes' options."""
+    from ...lt_addon.settings import declared
+
+    for s in declared(cls, names):
+        kw = {"help": what + s.help}
+        if s.choices:
+            kw["choices"] = [c[0] for c in s.choices]
+            said = [f"{v}: {desc}" for v, _, desc in s.choices if desc]
+            if said:
+                kw["help"] += " -- " + "; ".join(said)
+        elif s.kind in ("int", "float"):
+            kw["type"] = s.parse
+            kw["metavar"] = "N" if s.kind == "int" else "X"
+            if s.lo is not None and s.hi is not None:
+                kw["help"] += f" ({s.lo:g}..{s.hi:g})"
+            elif s.lo is not None:
+                kw["help"] += f" (>= {s.lo:g})"
+        if s.metavar:
+            kw["metavar"] = s.metavar
+        if s.kind == "bool":
+            kw = {"help": kw["help"], "action": "store_true"}
+        elif defaults:
+            kw["default"] = s.default
+            if s.default is not None:
+                kw["help"] += f" (default {s.default})"
+        else:
+            kw["default"] = None
+        kw["help"] = kw["help"].replace("%", "%%")     # argparse formats help with %
+        p.add_argument(s.flag, **kw)

@@ -39,7 +39,8 @@ def _set_edit(text: str):
 
 
 def add_parsers(sub) -> None:
-    from .common import parse_az_el, parse_rgb
+    from ..bakes.material_bake import MaterialBakeSettings
+    from .common import add_setting_options, parse_az_el, parse_rgb
 
     p = sub.add_parser(
         "bake-materials", help="bake per-vertex transfer tensors so material colours can be "
@@ -60,30 +61,9 @@ def add_parsers(sub) -> None:
                         "this order)")
     p.add_argument("--region", required=True, action="append", metavar="MATERIAL",
                    help="an editable material (repeat for several)")
-    p.add_argument("--anchors", default="diffuse", metavar="diffuse|roughness:R1,R2,...",
-                   help="material anchors per region: 'diffuse' (colour edits) or "
-                        "'roughness:0.4,0.8' (also metallic and roughness edits of a Principled "
-                        "material: one more one-bounce bake per region, anchor and direction, "
-                        "the region reflecting as a metal of that roughness; a roughness "
-                        "between anchors blends them). Below about 0.4 a metal's reflected "
-                        "sun is a caustic: raise --anchor-samples")
-    p.add_argument("--anchor-samples", type=int, default=64, metavar="N",
-                   help="Cycles samples of the glossy anchors' bakes (default 64; measured on "
-                        "the demo room: 16 left the metal's light on the floor blotchy)")
-    p.add_argument("--anchor-directions", default=None, metavar="SPEC",
-                   help="sun directions of the glossy anchors' bakes (default hemi:128; with "
-                        "--bounce-bake cycles the one-bounce set)")
-    p.add_argument("--bounce-bake", choices=("rays", "cycles"), default="rays",
-                   help="how the diffuse bounce terms are made: rays (default: every receiver "
-                        "casts --rays cosine-weighted rays once and the transfer they gather "
-                        "serves every light direction; measured on the demo room at 7 held-out "
-                        "suns: 0.93x the noise floor of two Cycles truths in 48 s, against "
-                        "1.9x in 168 s) or cycles (one Cycles bake per direction, region and "
-                        "gate at --samples)")
-    p.add_argument("--rays", type=int, default=None, metavar="N",
-                   help="rays per receiver of the gathered bounces (default 512; 256 / 1024 "
-                        "measured 1.16x / 1.12x the floor before the receiver transfer)")
-    p.add_argument("--bounces", type=int, default=2, choices=(1, 2))
+    add_setting_options(p, MaterialBakeSettings, ("anchors", "anchor_samples", "anchor_directions",
+                                                  "bounce_bake", "rays", "bounces"),
+                        defaults=True)
     p.add_argument("--directions", default="hemi:400:1.5", metavar="SPEC",
                    help="direct-light directions (default hemi:400:1.5; 1 sample each)")
     p.add_argument("--one-bounce-directions", default=None, metavar="SPEC",
@@ -91,20 +71,11 @@ def add_parsers(sub) -> None:
                         "the demo room, a sun's shadow edges between them made exact; with "
                         "Cycles bakes 128 at 16 spp erred 9%% less than 64 at 32 spp)")
     p.add_argument("--two-bounce-directions", default="hemi:8", metavar="SPEC")
-    p.add_argument("--samples", type=int, default=16,
-                   help="Cycles samples per vertex of the bounce terms with --bounce-bake "
-                        "cycles (default 16)")
-    p.add_argument("--seed", type=int, default=0)
+    add_setting_options(p, MaterialBakeSettings, ("samples", "seed"), defaults=True)
     p.add_argument("--per-corner", action="store_true",
                    help="a value per face corner instead of per vertex: hard edges stay hard "
                         "(about 4x the data and update time on quad meshes)")
-    p.add_argument("--smoothing", type=float, default=None, metavar="SPACINGS",
-                   help="average the Cycles-baked bounce terms (and glossy anchors) over this "
-                        "many median vertex spacings after the bake (default 2; 0: off; the "
-                        "gathered ones are not noise-bound and stay as they are). Measured on "
-                        "the demo room: the 32-sample one-bounce term's error at baked "
-                        "directions went from 0.030-0.039 to 0.014-0.022. Not in the chunk "
-                        "key: kept chunks of a cancelled bake serve any smoothing")
+    add_setting_options(p, MaterialBakeSettings, ("smoothing",), defaults=True)
     p.add_argument("--truth", action="store_true",
                    help="also bake Cycles truths (two seeds) under the scene's Sun with the "
                         "file's colours and report the error next to their noise floor")
@@ -169,9 +140,7 @@ def _cmd_bake_materials(args) -> int:
         anchor_samples=args.anchor_samples, anchor_directions=args.anchor_directions,
         directions=(args.directions, args.one_bounce_directions, args.two_bounce_directions),
         samples=args.samples, seed=args.seed, domain="CORNER" if args.per_corner else "POINT",
-        bounce_bake=args.bounce_bake,
-        **({} if args.rays is None else {"rays": args.rays}),
-        **({} if args.smoothing is None else {"smoothing": args.smoothing}))
+        bounce_bake=args.bounce_bake, rays=args.rays, smoothing=args.smoothing)
     path, out_dir = check_bake_inputs(args, settings)
     started = time.perf_counter()
     objects = open_objects(path, args.object)

@@ -14,6 +14,7 @@ import os
 
 import bpy
 
+from ...lt_addon.settings import to_argv
 from ..base import jobs
 from ..preview import preview_nodes
 from ..bakes import steerable_bake
@@ -228,11 +229,7 @@ class RELIGHT_OT_bake_textures(ModalBake, bpy.types.Operator):
             self.settings.validate()
             if props.run_on != "HERE":
                 args = [a for o in objects for a in ("--object", o.name)]
-                for k in ("directions", "resolution", "bounces", "model", "tol", "components",
-                          "indirect_samples", "indirect_resolution", "sun_angle",
-                          "table_size", "viewport", "seed"):
-                    if getattr(self.settings, k) is not None:   # --tol: no preset components
-                        args += [f"--{k.replace('_', '-')}", str(getattr(self.settings, k))]
+                args += to_argv(self.settings)   # components None: --tol, no preset components
                 return self._external(context, "bake-textures",
                                       args + ["--truth", str(props.truth_lights)])
             self._make_out_dir(props)
@@ -242,10 +239,7 @@ class RELIGHT_OT_bake_textures(ModalBake, bpy.types.Operator):
         self.settings = settings_from_scene(props)
         self.settings.validate()
         if props.run_on != "HERE":
-            args = ["--object", obj.name, "--method", "lobes"]
-            for k in ("frame", "order", "resolution", "samples", "bounces", "storage", "mode",
-                      "world_sampling", "seed"):
-                args += [f"--{k.replace('_', '-')}", str(getattr(self.settings, k))]
+            args = ["--object", obj.name, "--method", "lobes"] + to_argv(self.settings)
             return self._external(context, "bake-textures",
                                   args + ["--truth", str(props.truth_lights)])
         self._make_out_dir(props)

@@ -10,7 +10,10 @@ import bpy
 from ..bakes import material_bake
 from ..bakes.material_edit import SUMMARY_KEY, bake_job, on_depsgraph_update
 from ..base.cycles_bake import BakeInputError
+from ...lt_addon.settings import to_argv
 from .bake_ops import ModalBake, transport_objects
+from .properties import MATERIAL_FIELDS, MATERIAL_PROPS
+from .settings_props import values
 
 
 class RELIGHT_OT_bake_materials(ModalBake, bpy.types.Operator):
@@ -31,29 +34,22 @@ class RELIGHT_OT_bake_materials(ModalBake, bpy.types.Operator):
                                  "panel")
         rough = ",".join(v for v in re.split(r"[,\s]+", props.material_anchors) if v)
         settings = material_bake.MaterialBakeSettings(
-            regions=regions, bounces=props.material_bounces, samples=props.material_samples,
-            anchors=f"roughness:{rough}" if rough else "diffuse",
-            anchor_samples=props.material_anchor_samples,
+            regions=regions, anchors=f"roughness:{rough}" if rough else "diffuse",
             anchor_directions=f"hemi:{props.material_anchor_directions}",
             domain="CORNER" if props.material_per_corner else "POINT",
-            smoothing=props.material_smoothing, bounce_bake=props.material_bounce_bake,
-            rays=props.material_rays,
             directions=(f"hemi:{props.material_directions}:1.5",
                         f"hemi:{props.material_one_directions}",
-                        f"hemi:{props.material_two_directions}"))
+                        f"hemi:{props.material_two_directions}"),
+            **values(material_bake.MaterialBakeSettings, props, MATERIAL_FIELDS,
+                     rename=MATERIAL_PROPS))
         settings.validate()
         if props.run_on != "HERE":
             d0, d1, d2 = settings.specs()
             args = [a for o in objects for a in ("--object", o.name)]
             args += [a for r in regions for a in ("--region", r)]
-            return self._external(context, "bake-materials", args + [
-                "--bounces", str(settings.bounces), "--samples", str(settings.samples),
-                "--bounce-bake", settings.bounce_bake, "--rays", str(settings.rays),
-                "--anchors", settings.anchors, "--anchor-samples", str(settings.anchor_samples),
-                "--anchor-directions", settings.anchor_spec(),
+            return self._external(context, "bake-materials", args + to_argv(settings) + [
                 "--directions", d0, "--one-bounce-directions", d1, "--two-bounce-directions",
-                d2, "--smoothing", f"{settings.smoothing:g}"]
-                + (["--per-corner"] if settings.domain == "CORNER" else []))
+                d2] + (["--per-corner"] if settings.domain == "CORNER" else []))
         self._make_out_dir(props)
         return bake_job(scene, objects, settings, self.out_dir)
 

@@ -5,11 +5,11 @@ from __future__ import annotations
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
-from ...lt_addon.steerable.texture import STORAGE_MODES
 from ...samples import DESCRIPTIONS, SIZES
 from ..base.compat import path_options
 from ..bakes.presets import PRESETS, settings_from_preset
 from ..farm.external_bake import RUN_ON as _RUN_ON
+from .settings_props import properties, values
 
 _SETTING_NAMES = ("frame", "order", "resolution", "samples", "bounces", "storage", "mode",
                   "world_sampling")
@@ -102,28 +102,6 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
     preset: EnumProperty(
         name="Preset", description="Starting values for the bake settings (measured by make bench)",
         items=[(k, k.capitalize(), "") for k in PRESETS], default="balanced", update=_apply_preset)
-    frame: EnumProperty(
-        name="Frame", default=_LOBES["frame"], items=[
-            ("world", "World", "Relight the object by a distant light over the world's upper "
-                               "hemisphere"),
-            ("tangent", "Tangent", "A tileable patch relit per pixel in a surface's UV tangent "
-                                   "frame")])
-    order: IntProperty(name="Order", description="Basis order N1: N = N1^2 Cycles bakes",
-                       default=_LOBES["order"], min=2, max=12)
-    resolution: IntProperty(name="Resolution", description="Texture side in texels",
-                            default=_TRANSPORT["resolution"], min=8, max=8192)
-    samples: IntProperty(name="Samples", description="Cycles samples per texel per bake",
-                         default=_LOBES["samples"], min=1, max=65536)
-    bounces: IntProperty(name="Bounces", description="Diffuse bounces (0 = direct only)",
-                         default=_LOBES["bounces"], min=0, max=64)
-    storage: EnumProperty(name="Storage", default=_LOBES["storage"],
-                          items=[(s, s, "") for s in STORAGE_MODES])
-    mode: EnumProperty(name="Bake", default=_LOBES["mode"], items=[
-        ("radiance", "Radiance", "Albedo x light with interreflection (the paper)"),
-        ("irradiance", "Light only", "Light without the albedo, so the albedo stays editable")])
-    world_sampling: EnumProperty(name="World Sampling", default=_LOBES["world_sampling"], items=[
-        ("importance", "Importance", "Lower noise at equal samples"),
-        ("none", "None", "BSDF sampling only: exactly linear in the light")])
     output_dir: StringProperty(
         name="Output", subtype="DIR_PATH", default="//relight/", options=path_options(),
         description="Folder for the EXR files and the JSON report ('//' = next to the .blend)")
@@ -189,61 +167,7 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         name="Sun Size", default=2.0, min=0.0, max=30.0, update=_refresh_tables,
         description="Angular diameter of the preview sun in degrees (re-tabulates the preview "
                     "coefficients, no re-bake)")
-    transport_model: EnumProperty(
-        name="Model", default="pca", items=[
-            ("pca", "PCA eigen-textures", "Global PCA of the transport: live viewport preview"),
-            ("blocks", "Block PCA", "Clustered PCA over texel blocks (CLI/NumPy relight only)"),
-            ("steerable", "Steerable (quadrature)", "The paper's basis fitted noise-free from T"),
-            ("none", "None", "Keep T only")])
-    transport_viewport: EnumProperty(
-        name="Viewport", default="auto", items=[
-            ("auto", "Auto", "T itself when its atlas takes at most 256 MiB (400 directions at "
-             "256^2: 37 MiB; 1600 directions 140 MiB), else the PCA"),
-            ("transport", "Transport (T)", "Relight from T itself: a few baked directions per "
-             "pixel through sparse kernel tables; keeps cast shadows on large receivers; an "
-             "atlas of every direction in memory"),
-            ("pca", "PCA", "The fitted PCA's eigen-textures: small, smooths cast shadows on "
-             "large receivers")])
-    transport_tol: FloatProperty(
-        name="PCA Tolerance", default=_TRANSPORT["transport_tol"], min=0.001, max=0.5,
-        description="Relative residual of T the PCA keeps when Components is 0 (fewer "
-                    "components when larger)")
-    transport_components: IntProperty(
-        name="Components", default=_TRANSPORT["transport_components"], min=0, max=512,
-        description="PCA eigen-textures to keep (the presets' measured figures use a fixed "
-                    "count); 0 = as many as the tolerance needs")
-    indirect_samples: IntProperty(
-        name="Indirect Samples", default=_TRANSPORT["indirect_samples"], min=1, max=65536,
-        description="Samples of the low-order steerable bake of the indirect light")
-    indirect_resolution: IntProperty(
-        name="Indirect Resolution", default=_TRANSPORT["indirect_resolution"], min=4, max=8192,
-        description="Texture side of the indirect-light bake (interreflection is smooth: half "
-                    "the texture's is the cheap choice, the full one the accurate one)")
-    table_size: IntProperty(
-        name="Preview Table Size", default=_TRANSPORT["table_size"], min=8, max=256,
-        description="Texels across the hemisphere disk of the preview's coefficient tables "
-                    "(64 follows low suns more closely than 32; 4x the tabulation time)")
     # material edits (transfer tensors, Sun 2007)
-    material_bounces: IntProperty(
-        name="Bounces", default=2, min=1, max=2,
-        description="Path orders baked per editable material: 1 = one bounce, 2 = also "
-                    "ordered pairs (the colour bleeding between two edited walls)")
-    material_bounce_bake: EnumProperty(
-        name="Bounces By", default="rays", items=[
-            ("rays", "Rays", "Every receiver casts rays once and the light they gather serves "
-                             "every sun direction (measured on the demo room: about the noise "
-                             "of two Cycles renders, in a third of the Cycles bakes' time)"),
-            ("cycles", "Cycles", "A Cycles bake per sun direction, material and bounce order "
-                                 "(noisier at the same time: 1.9x the noise of two Cycles "
-                                 "renders on the demo room)")])
-    material_rays: IntProperty(
-        name="Rays", default=512, min=16, max=65536,
-        description="Rays per receiver of the gathered bounce terms (512: more barely "
-                    "changed the error on the demo room)")
-    material_samples: IntProperty(
-        name="Samples", default=16, min=1, max=65536,
-        description="Cycles samples per vertex of each bounce term (16 with 128 one-bounce "
-                    "directions: measured on the demo room, more accurate than 32 with 64)")
     material_per_corner: BoolProperty(
         name="Per Face Corner", default=False,
         description="A value per face corner instead of per vertex: hard edges (a box's) stay "
@@ -270,17 +194,6 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         name="Anchor Directions", default=128, min=2, max=10000,
         description="Sun directions of the glossy anchors' bakes (one Cycles bake per material, "
                     "anchor and direction)")
-    material_anchor_samples: IntProperty(
-        name="Anchor Samples", default=64, min=1, max=65536,
-        description="Cycles samples of the glossy anchors' bakes (a metal's reflected sun is "
-                    "noisier than diffuse light)")
-    material_smoothing: FloatProperty(
-        name="Smoothing", default=2.0, min=0.0, max=20.0,
-        description="Average the Cycles-baked bounce terms and glossy anchors over this many "
-                    "vertex spacings after the bake (0: off; never across differently facing "
-                    "surfaces, never over 3% of the scene; rays' bounces stay as gathered). "
-                    "Measured on the demo room: about halves the Cycles terms' noise")
-
     # export (relight export): directional lightmaps and RTI models of a transport bake
     export_format: EnumProperty(name="Format", default="rti-hsh", items=[
         ("rti-hsh", "RTI HSH", "Hemispherical harmonics planes + a relightable web page "
@@ -337,6 +250,34 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
                     "error (0 = skip)")
 
 
+# The bakes' own settings, declared once on their dataclasses (lt_addon/settings.py): the lobes
+# bake's, the two the methods share (one field each in the panel), and the transport bake's
+# (a transport_ prefix where the word is ambiguous). New scenes hold the balanced presets.
+#: Panel property of each transport setting whose name alone would be ambiguous.
+TRANSPORT_PROPS = {"model": "transport_model", "viewport": "transport_viewport",
+                   "tol": "transport_tol", "components": "transport_components"}
+#: Panel property of each declared material-bake setting (the panel's Material Edits box).
+MATERIAL_FIELDS = ("bounces", "bounce_bake", "rays", "samples", "anchor_samples", "smoothing")
+MATERIAL_PROPS = {f: "material_" + f for f in MATERIAL_FIELDS}
+LOBES_FIELDS = ("frame", "order", "samples", "storage", "mode", "world_sampling")
+TRANSPORT_FIELDS = ("model", "viewport", "tol", "components", "indirect_samples",
+                    "indirect_resolution", "table_size")
+
+
+def _declared_properties() -> dict:
+    from ..bakes.steerable_bake import TextureBakeSettings
+    from ..bakes.material_bake import MaterialBakeSettings
+    from ..bakes.texture_transport import TransportTextureSettings
+
+    return {**properties(TextureBakeSettings, LOBES_FIELDS, defaults=_LOBES),
+            **properties(MaterialBakeSettings, MATERIAL_FIELDS, rename=MATERIAL_PROPS),
+            **properties(TransportTextureSettings, ("resolution",), defaults=_TRANSPORT),
+            **properties(TransportTextureSettings, ("bounces",), defaults=_LOBES),
+            **properties(TransportTextureSettings, TRANSPORT_FIELDS, rename=TRANSPORT_PROPS,
+                         defaults=_TRANSPORT)}
+
+
+RelightSceneSettings.__annotations__.update(_declared_properties())
 CLASSES = (RelightSceneSettings,)
 
 
@@ -346,18 +287,16 @@ def transport_settings_from_scene(props):
 
     power = f":{props.horizon_power:g}" if props.horizon_power != 1.0 else ""
     return TransportTextureSettings(
-        directions=f"hemi:{props.directions}{power}", resolution=props.resolution,
-        bounces=props.bounces, model=props.transport_model, tol=props.transport_tol,
-        components=props.transport_components or None, indirect_samples=props.indirect_samples,
-        indirect_resolution=props.indirect_resolution, sun_angle=props.sun_angle,
-        table_size=props.table_size, viewport=props.transport_viewport)
+        directions=f"hemi:{props.directions}{power}", sun_angle=props.sun_angle,
+        **values(TransportTextureSettings, props, ("resolution", "bounces") + TRANSPORT_FIELDS,
+                 rename=TRANSPORT_PROPS))
 
 
 def settings_from_scene(props):
     """TextureBakeSettings from the panel's properties."""
     from ..bakes.steerable_bake import TextureBakeSettings
 
-    return TextureBakeSettings(**{name: getattr(props, name) for name in _SETTING_NAMES})
+    return TextureBakeSettings(**values(TextureBakeSettings, props, _SETTING_NAMES))
 
 
 @bpy.app.handlers.persistent
