@@ -26,6 +26,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io import atomic, exrio
+from ..settings import setting
 from ..sphere.hemisphere import direction_from_az_el
 from . import texture as tt
 
@@ -63,23 +64,53 @@ class TransportTextureSettings:
     :data:`..lt_addon.transport.sparse_tables.AUTO_BYTES`, else the PCA.
     """
 
-    directions: str = "hemi:400:1.5"
-    resolution: int = 256
-    bounces: int = 2
+    directions: str = setting(
+        "hemi:400:1.5", metavar="SPEC", panel=False,
+        help="sun directions, hemi:N[:P] (N hard-sun bakes over the upper hemisphere, 1 sample "
+             "each; P > 1 denser near the horizon)")
+    resolution: int = setting(256, lo=4, hi=8192, help="Texture side in texels")
+    bounces: int = setting(2, lo=0, hi=64, help="Diffuse bounces (0 = direct light only)")
     indirect: str = "steerable"
     indirect_order: int = 3
-    indirect_resolution: int = 128
-    indirect_samples: int = 64
+    indirect_resolution: int = setting(
+        128, lo=4, hi=8192, label="Indirect Resolution",
+        help="Texture side of the indirect-light bake (interreflection is smooth: half the "
+             "texture's is the cheap choice, the full one the accurate one)")
+    indirect_samples: int = setting(
+        64, lo=1, hi=65536, label="Indirect Samples",
+        help="Samples of the low-order steerable bake of the indirect light")
     indirect_smoothing: float = 0.75
-    model: str = "pca"
-    components: int | None = None
-    tol: float = 0.02
+    model: str = setting("pca", label="Model", choices=(
+        ("pca", "PCA eigen-textures", "Global PCA of the transport: live viewport preview"),
+        ("blocks", "Block PCA", "Clustered PCA over texel blocks (CLI/NumPy relight only)"),
+        ("steerable", "Steerable (quadrature)", "The paper's basis fitted noise-free from T"),
+        ("none", "None", "Keep T only")), help="What is fitted to T")
+    components: int | None = setting(
+        None, lo=0, hi=512, label="Components",
+        help="PCA eigen-textures to keep (the presets' measured figures use a fixed count), or "
+             "the steerable order; none (0 in the panel) = as many as the tolerance needs")
+    tol: float = setting(0.02, lo=0.001, hi=0.5, label="PCA Tolerance",
+                         help="Relative residual of T the PCA keeps when no component count is "
+                              "given (fewer components when larger)")
     block: int = 16
-    sun_angle: float = 2.0
+    sun_angle: float = setting(
+        2.0, lo=0.0, hi=30.0, label="Sun Size", panel=False,
+        help="Angular diameter of the preview sun in degrees, for the preview's tables and the "
+             "truths (changing it re-tabulates the preview, no re-bake)")
     kernel: str = "linear"
-    table_size: int = 32
-    seed: int = 0
-    viewport: str = "auto"
+    table_size: int = setting(
+        32, lo=8, hi=256, label="Preview Table Size",
+        help="Texels across the hemisphere disk of the preview's coefficient tables (64 "
+             "follows low suns more closely than 32; 4x the tabulation time)")
+    seed: int = setting(0, lo=0, help="Cycles seed")
+    viewport: str = setting("auto", label="Viewport", choices=(
+        ("auto", "Auto", "T itself when its atlas takes at most 256 MiB (400 directions at "
+         "256^2: 37 MiB; 1600 directions 140 MiB), else the PCA"),
+        ("transport", "Transport (T)", "Relight from T itself: a few baked directions per "
+         "pixel through sparse kernel tables; keeps cast shadows on large receivers; an atlas "
+         "of every direction in memory"),
+        ("pca", "PCA", "The fitted PCA's eigen-textures: small, smooths cast shadows on large "
+         "receivers")), help="What the live preview shows")
 
     def validate(self):
         """Check ranges; returns the DirectionSet."""
