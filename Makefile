@@ -104,7 +104,8 @@ bench: $(STAMP)
 	  --settings hemi:400:1.5/hemi:128/hemi:8@16
 
 ## bench-full: the standard (demo-size) sweeps behind the tables in docs/ (results.md and the
-##   method pages) and the presets (~2 h): writes docs/bench and operators/bakes/presets.json,
+##   method pages) and the presets (~2 h): writes docs/bench (presets.json among it: copy it over
+##   operators/bakes/presets.json to adopt them; tooling never writes into the package),
 ##   plus the deeper per-method benchmarks
 bench-full: $(STAMP)
 	mkdir -p $(OUT)/bench docs/bench $(BLENDER_USER_RESOURCES)

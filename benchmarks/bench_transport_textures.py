@@ -264,7 +264,13 @@ def table(rows, title):
     return "\n".join(lines)
 
 
-def write_presets(report, scene):
+#: The extension's transport presets (operators/bakes/presets.py reads them): read here, never
+#: written; the tools write theirs into --out.
+PACKAGE_PRESETS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                               "operators", "bakes", "transport_presets.json")
+
+
+def write_presets(report, scene, out_dir):
     """Presets from the measured front of PCA points (they have a live preview): cheapest,
     knee and most accurate by the 10-degree error (devtools.pareto.choose_presets)."""
     from relightable_textures.devtools.pareto import choose_presets
@@ -272,24 +278,28 @@ def write_presets(report, scene):
     rows = [r for r in report["scenes"][scene]["rows"]
             if r["method"] == "transport" and r["model"] == "pca"]
     chosen = choose_presets(rows, cost_key="bake_seconds", error_key="err_10deg")
-    out = {"rule": "Pareto front of bake time vs rel. RMSE against a 10-degree Cycles Sun with 2 "
-                   "bounces (4 held-out lights), PCA models only; cheapest / knee / lowest error",
-           "scene": scene, "size": report["size"], "machine": report["machine"], "presets": {}}
+    out = {"source": {
+        "rule": "Pareto front of bake time vs rel. RMSE against a 10-degree Cycles Sun with 2 "
+                "bounces (4 held-out lights), PCA models only; cheapest / knee / lowest error",
+        "command": "python benchmarks/bench_transport_textures.py --write-presets",
+        "scene": scene, "size": report["size"], "machine": report["machine"],
+        "date": time.strftime("%Y-%m-%d")}, "presets": {}}
     for name, r in chosen.items():
         out["presets"][name] = {
-            "directions": f"hemi:{r['S']}:1.5", "resolution": r["resolution"],
-            "indirect_resolution": r.get("indirect_resolution") or max(8, r["resolution"] // 2),
-            "table_size": 64 if name == "production" else 32,
-            "indirect_samples": r["indirect_samples"], "components": r["model_arg"],
-            "measured": {"bake_seconds": r["bake_seconds"], "rel_rmse": r["err_10deg"],
-                         "rel_rmse_2deg": r["err_2deg"], "scene": f"{scene} {report['size']}",
-                         "why": r["why"]}}
-    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                        "operators", "bakes", "transport_presets.json")
+            "settings": {
+                "directions": f"hemi:{r['S']}:1.5", "resolution": r["resolution"],
+                "indirect_resolution": (r.get("indirect_resolution")
+                                        or max(8, r["resolution"] // 2)),
+                "table_size": 64 if name == "production" else 32,
+                "indirect_samples": r["indirect_samples"], "components": r["model_arg"]},
+            "figures": {"bake_seconds": r["bake_seconds"], "rel_rmse": r["err_10deg"],
+                        "rel_rmse_2deg": r["err_2deg"], "scene": f"{scene} {report['size']}"},
+            "why": r["why"]}
+    path = os.path.join(out_dir, "transport_presets.json")   # never into the package
     from relightable_textures.lt_addon.io import atomic
 
     atomic.write_json(path, out, indent=1)
-    print(f"presets written to {path}")
+    print(f"presets written to {path}; to adopt them: cp {path} {PACKAGE_PRESETS}")
 
 
 def measure_presets(out_dir, truth_spp=256):
@@ -300,9 +310,7 @@ def measure_presets(out_dir, truth_spp=256):
     from relightable_textures.lt_addon.transport import sparse_tables as sp
     from relightable_textures.lt_addon.transport.texture import parse_directions
 
-    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                        "operators", "bakes", "transport_presets.json")
-    with open(path) as fh:
+    with open(PACKAGE_PRESETS) as fh:
         data = json.load(fh)
     scene, objects = build("bumps", "demo")
     R = 256
@@ -311,7 +319,8 @@ def measure_presets(out_dir, truth_spp=256):
     truth = truths(scene, objects, R, truth_spp)
     rows = []
     with tempfile.TemporaryDirectory(dir=out_dir) as folder:
-        for name, p in data["presets"].items():
+        for name, row in data["presets"].items():
+            p = row["settings"]
             S = parse_directions(p["directions"]).size
             got = transport_points(scene, objects, truth, R, S, p["indirect_samples"],
                                    p["resolution"], [("T", None), ("pca", p["components"]),
@@ -324,7 +333,7 @@ def measure_presets(out_dir, truth_spp=256):
             t_row, pca_row, v_row = got
             viewport, _ = sp.choose_viewport("auto", S, p["resolution"])
             m_row = v_row if viewport == "transport" else pca_row
-            p["measured"] = {
+            row["figures"] = {
                 "viewport": viewport, "bake_seconds": m_row["bake_seconds"],
                 "rel_rmse": m_row["err_10deg"], "rel_rmse_2deg": m_row["err_2deg"],
                 "rel_rmse_from_T": t_row["err_10deg"], "rel_rmse_pca": pca_row["err_10deg"],
@@ -333,12 +342,12 @@ def measure_presets(out_dir, truth_spp=256):
                 "single_bake_seconds": round(one, 2), "peak_mem_mb": m_row["peak_mem_mb"],
                 "stored_bytes": m_row["stored_bytes"], "transport_bytes": m_row["transport_bytes"],
                 "preview_lookups": m_row["preview_lookups"], "scene": "bumps demo",
-                "truth_samples": truth_spp, "date": time.strftime("%Y-%m-%d"),
-                "why": p.get("measured", {}).get("why", "")}
+                "truth_samples": truth_spp, "date": time.strftime("%Y-%m-%d")}
+    path = os.path.join(out_dir, "transport_presets.json")   # never into the package
     atomic.write_json(path, data, indent=1)
     print(table(rows, f"transport presets (bumps demo, {R}^2; one 64-spp bake {one:.2f} s; "
                       f"truths {truth_spp} spp, 2 bounces)"))
-    print(f"measured figures written to {path}")
+    print(f"measured figures written to {path}; to adopt them: cp {path} {PACKAGE_PRESETS}")
     return rows
 
 
@@ -353,12 +362,12 @@ def main(argv=None):
     ap.add_argument("--resolution", type=int, help="texture side (default 256; 64 with --quick)")
     ap.add_argument("--write-presets", action="store_true",
                     help="choose draft / balanced / production from the first scene's front of "
-                         "viewport (PCA) points and write operators/bakes/transport_presets.json")
+                         "viewport (PCA) points and write transport_presets.json into --out")
     ap.add_argument("--truth-samples", type=int, help="Cycles samples of the truths (default "
                     "256; 64 with --quick); one 256-spp truth's own noise is 0.011 here")
     ap.add_argument("--measure-presets", action="store_true",
                     help="bake and measure the three transport presets as defined (bumps demo) "
-                         "and write their figures into operators/bakes/transport_presets.json")
+                         "and write the presets file with their figures into --out")
     args = ap.parse_args(argv)
     if args.measure_presets:
         os.makedirs(args.out, exist_ok=True)
@@ -414,7 +423,7 @@ def main(argv=None):
     from relightable_textures.devtools.pareto import write_csv
 
     if args.write_presets:
-        write_presets(report, next(iter(report["scenes"])))
+        write_presets(report, next(iter(report["scenes"])), args.out)
     write_csv(os.path.join(args.out, f"transport_textures_{tag}.csv"),
               [{"scene": s, **r} for s, v in report["scenes"].items() for r in v["rows"]])
     return 0

@@ -1,9 +1,11 @@
 """`relight bench` (development only): sweep every knob that costs time or bytes.
 
 Registered by :func:`..operators.cli.build_parser` when this folder is importable (a source
-checkout), absent from the installed extension. ``--write-presets`` stores the presets chosen
-from the bumps sweep in the checkout's ``operators/bakes/presets.json`` (:data:`PRESETS_PATH`), the
-file the extension reads; nothing is ever written into an installed package.
+checkout), absent from the installed extension. ``--write-presets`` writes the presets chosen
+from the bumps sweep as ``presets.json`` in ``--out``, in the schema of
+``operators/bakes/presets.py``; adopting them is copying that file over
+``operators/bakes/presets.json`` (:data:`PRESETS_PATH`) in a commit. Tooling never writes into
+the package.
 """
 
 from __future__ import annotations
@@ -14,7 +16,8 @@ import time
 
 from ..lt_addon.io import atomic
 
-#: the checkout's preset file, next to the module that reads it (operators/bakes/presets.py)
+#: the extension's preset file, next to the module that reads it (operators/bakes/presets.py):
+#: read here, never written
 PRESETS_PATH = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
                             "operators", "bakes", "presets.json")
 
@@ -72,14 +75,14 @@ def _cmd_bench(args) -> int:
         print(bench.format_report(report))
         if args.write_presets and name == "bumps":
             try:
-                path = write_presets(report)
+                path = write_presets(report, os.path.join(out_dir, "presets.json"))
             except ValueError as exc:
                 raise CliError(str(exc)) from None
-            print(f"  presets written to {path}")
+            print(f"  presets written to {path}; to adopt them: cp {path} {PRESETS_PATH}")
     return EXIT_OK
 
 
-def write_presets(report: dict, path: str = PRESETS_PATH) -> str:
+def write_presets(report: dict, path: str) -> str:
     """Store the presets a ``standard`` bench report of a texture scene chose (atomically).
 
     Raises ValueError for a quick (test-size) sweep: its tiny resolutions are not presets."""

@@ -1,69 +1,120 @@
-"""Bake presets (Draft / Balanced / Production), chosen from measured data.
+"""Bake presets (Draft / Balanced / Production) of both texture methods, chosen from measured
+data: one system, one file format.
 
-``presets.json`` next to this file holds, per preset, the settings chosen from the Pareto front
-of bake time vs error that ``relight bench --scene bumps --write-presets`` measured (draft: the
-cheapest front point; production: the most accurate; balanced: the knee, see
-:func:`..devtools.pareto.choose_presets`), the figures measured for it and the rule that chose
-it. The panel and ``relight bake-textures --preset`` read it. ``FALLBACK`` is used only if the
-file is missing or unreadable, and the panel then says the presets are not measured.
+Each method's presets live in a JSON file next to this module (``presets.json`` for the lobes
+bake, ``transport_presets.json`` for transport textures), in one schema::
+
+    {"source": {"command": ..., "scene": ..., "machine": ..., "date" or "rule": ...},
+     "presets": {"draft": {"settings": {field: value, ...},
+                           "figures": {"bake_seconds": ..., "rel_rmse": ..., ...},
+                           "why": "the rule that chose it"}, ...}}
+
+``settings`` are fields of the method's settings dataclass (:class:`Presets` ignores others);
+``figures`` what was measured for exactly those settings. The measuring tools (``relight bench
+--write-presets``, ``benchmarks/bench_transport_textures.py --write-presets``) write their file
+into their output folder, never into the package; adopting new presets is copying that file
+here in a commit. ``fallback`` serves when the file is missing or unreadable, and the panel then
+says the presets are not measured.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
-from dataclasses import replace
 
+from ...lt_addon.errors import InputError
+from ...lt_addon.transport.bundle import TransportTextureSettings
 from .steerable_bake import TextureBakeSettings
 
 PRESET_NAMES = ("draft", "balanced", "production")
-PRESETS_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "presets.json")
-#: settings keys a preset may set
-SETTING_KEYS = ("order", "resolution", "samples", "bounces", "storage")
-
-FALLBACK = {
-    "draft": TextureBakeSettings(order=5, resolution=128, samples=16, bounces=1, storage="u8"),
-    "balanced": TextureBakeSettings(order=7, resolution=256, samples=64, bounces=2, storage="half"),
-    "production": TextureBakeSettings(order=7, resolution=512, samples=128, bounces=3,
-                                      storage="half"),
-}
+HERE = os.path.dirname(os.path.abspath(__file__))
 
 
-def _read() -> dict:
-    try:
-        with open(PRESETS_PATH) as fh:
-            data = json.load(fh)
-        return data if set(PRESET_NAMES) <= set(data.get("presets", {})) else {}
-    except (OSError, ValueError):
-        return {}
+class Presets:
+    """The presets of one settings dataclass ``cls``, read from ``filename`` next to this
+    module. ``drops``: an override of the key drops the preset's values of the fields listed
+    (a --tol of one's own replaces the preset's fixed component count)."""
+
+    def __init__(self, cls, filename: str, fallback: dict, drops: dict | None = None):
+        self.cls, self.path, self.drops = cls, os.path.join(HERE, filename), drops or {}
+        self._fallback = fallback
+        fields = {f.name for f in dataclasses.fields(cls)}
+        data = self._read()
+        self.measured = bool(data)
+        self._rows = {}
+        for name in PRESET_NAMES:
+            row = data["presets"][name] if data else {"settings": fallback[name]}
+            self._rows[name] = {
+                "settings": {k: v for k, v in row["settings"].items() if k in fields},
+                "figures": ({**row.get("figures", {}), "why": row.get("why", ""),
+                             "scene": row.get("figures", {}).get(
+                                 "scene", data["source"].get("scene", "?")),
+                             "machine": data["source"].get("machine", "?")}
+                            if data else {})}
+
+    def _read(self) -> dict:
+        try:
+            with open(self.path) as fh:
+                data = json.load(fh)
+        except (OSError, ValueError):
+            return {}
+        ok = (isinstance(data.get("presets"), dict) and set(PRESET_NAMES) <= set(data["presets"])
+              and all("settings" in data["presets"][n] for n in PRESET_NAMES))
+        return data if ok else {}
+
+    @property
+    def names(self) -> tuple:
+        return PRESET_NAMES
+
+    def values(self, name: str) -> dict:
+        """The fields preset ``name`` sets (unknown names raise InputError)."""
+        if name not in self._rows:
+            raise InputError(f"unknown preset {name!r}; choose one of {', '.join(PRESET_NAMES)}")
+        return dict(self._rows[name]["settings"])
+
+    def settings(self, name: str, **overrides):
+        """A settings object of preset ``name`` with ``overrides`` applied."""
+        values = self.values(name)
+        for key in overrides:
+            for dropped in self.drops.get(key, ()):
+                values.pop(dropped, None)
+        return self.cls(**{**values, **overrides})
+
+    def figures(self, name: str) -> dict:
+        """What was measured for preset ``name`` (``bake_seconds``, ``rel_rmse`` ..., ``why``,
+        ``scene``, ``machine``); {} when not measured."""
+        return dict(self._rows[name]["figures"])
 
 
-def _load_presets() -> dict:
-    data = _read()
-    if not data:
-        return dict(FALLBACK)
-    return {name: TextureBakeSettings(**{k: data["presets"][name]["settings"][k]
-                                         for k in SETTING_KEYS})
-            for name in PRESET_NAMES}
+#: The lobes bake's presets (relight bench --scene bumps --write-presets).
+LOBES = Presets(TextureBakeSettings, "presets.json", {
+    "draft": dict(order=5, resolution=128, samples=16, bounces=1, storage="u8"),
+    "balanced": dict(order=7, resolution=256, samples=64, bounces=2, storage="half"),
+    "production": dict(order=7, resolution=512, samples=128, bounces=3, storage="half")})
 
+#: The transport bake's presets (benchmarks/bench_transport_textures.py --write-presets).
+TRANSPORT = Presets(TransportTextureSettings, "transport_presets.json", {
+    "draft": dict(directions="hemi:100:1.5", resolution=128, indirect_resolution=64,
+                  indirect_samples=16, tol=0.03),
+    "balanced": dict(directions="hemi:400:1.5", resolution=256, indirect_resolution=128,
+                     indirect_samples=64, tol=0.02),
+    "production": dict(directions="hemi:1600:1.5", resolution=256, indirect_resolution=256,
+                       indirect_samples=256, tol=0.01, table_size=64)},
+    drops={"tol": ("components",), "components": ("components",)})
 
-PRESETS = _load_presets()
+#: Each texture method's presets, by the panel's and the CLI's method name.
+BY_METHOD = {"lobes": LOBES, "transport": TRANSPORT}
+#: The lobes bake's presets as settings objects (what the panel's lobes fields start from).
+PRESETS = {name: LOBES.settings(name) for name in PRESET_NAMES}
 
 
 def settings_from_preset(name: str, **overrides) -> TextureBakeSettings:
-    """A copy of preset ``name`` with ``overrides`` applied (unknown names raise ValueError)."""
-    if name not in PRESETS:
-        raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
-    return replace(PRESETS[name], **overrides)
+    """A lobes bake's settings: preset ``name`` with ``overrides`` (the transport bake's are
+    :func:`.texture_transport.settings_from_preset`)."""
+    return LOBES.settings(name, **overrides)
 
 
 def preset_figures() -> dict:
-    """Measured figures per preset name (``bake_seconds``, ``rel_rmse``, ``stored_bytes`` ...,
-    plus ``why``, ``scene`` and ``machine``); {} when not measured."""
-    data = _read()
-    if not data:
-        return {}
-    source = data.get("source", {})
-    return {name: {**p["figures"], "why": p["why"], "scene": source.get("scene", "?"),
-                   "machine": source.get("machine", "?")}
-            for name, p in data["presets"].items()}
+    """The lobes presets' measured figures by name; {} when not measured."""
+    return {n: LOBES.figures(n) for n in PRESET_NAMES} if LOBES.measured else {}

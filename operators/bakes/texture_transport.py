@@ -22,17 +22,15 @@ returning the result; stopping it restores the scene and deletes the partial sto
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import shutil
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass
 
-import bpy
 import numpy as np
 
 from ... import __version__
-from ...lt_addon.io import atomic, exrio
+from ...lt_addon.io import atomic
 from ...lt_addon.transport import texture as tt
 from ...lt_addon.sphere.hemisphere import direction_from_az_el
 from ..base import cycles_device
@@ -442,37 +440,6 @@ def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: d
 # presets, the pilot for --target-error, and the whole job
 
 
-#: Starting points for ``--method transport`` (see the README for how they were measured).
-PRESETS = {
-    "draft": dict(directions="hemi:100:1.5", resolution=128, indirect_resolution=64,
-                  indirect_samples=16, tol=0.03),
-    "balanced": dict(directions="hemi:400:1.5", resolution=256, indirect_resolution=128,
-                     indirect_samples=64, tol=0.02),
-    "production": dict(directions="hemi:1600:1.5", resolution=256, indirect_resolution=256,
-                       indirect_samples=256, tol=0.01, table_size=64),
-}
-
-
-def _measured_presets() -> dict:
-    """PRESETS updated from operators/bakes/transport_presets.json (written by
-    ``benchmarks/bench_transport_textures.py --write-presets`` from the measured front)."""
-    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), "transport_presets.json")
-    out = {k: dict(v) for k, v in PRESETS.items()}
-    try:
-        with open(path) as fh:
-            data = json.load(fh)["presets"]
-    except (OSError, ValueError, KeyError):
-        return out
-    for name in out:
-        if name in data:
-            out[name].update({k: v for k, v in data[name].items()
-                              if k in TransportTextureSettings.__dataclass_fields__
-                              or k == "measured"})
-    return out
-
-
-PRESETS = _measured_presets()
-
 #: Direction counts the pilot tries for ``--target-error``, cheapest first.
 PILOT_COUNTS = (64, 100, 200, 400, 800, 1600)
 
@@ -489,12 +456,11 @@ def truth_lights(count: int) -> list:
 
 
 def settings_from_preset(name: str, **overrides) -> TransportTextureSettings:
-    if name not in PRESETS:
-        raise BakeInputError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
-    values = {k: v for k, v in PRESETS[name].items() if k != "measured"}
-    if "components" in overrides or "tol" in overrides:
-        values.pop("components", None)
-    return TransportTextureSettings(**{**values, **overrides})
+    """A transport bake's settings: preset ``name`` (:data:`.presets.TRANSPORT`) with
+    ``overrides``; a --tol or --components of one's own replaces the preset's count."""
+    from .presets import TRANSPORT
+
+    return TRANSPORT.settings(name, **overrides)
 
 
 def pilot(scene, objects, settings: TransportTextureSettings, target: float, out_dir: str,

@@ -6,7 +6,7 @@ import bpy
 
 from ..bakes.analyze import SUMMARY_KEY
 from ..base.blend_files import object_bakes
-from ..bakes.presets import preset_figures
+from ..bakes.presets import BY_METHOD
 from .properties import preset_differences
 from ..preview.preview_nodes import COLOR_SLIDER, SLIDERS
 
@@ -73,13 +73,16 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
             # the measured figures belong to the preset's values, not to these
             layout.label(text=f"Custom: {', '.join(changed)} differ from "
                               f"{props.preset.capitalize()}", icon="MODIFIER")
+        presets = BY_METHOD[props.method]
+        fig = presets.figures(props.preset)
+        if changed:
+            pass   # the preset's figures do not describe these values
+        elif fig:
+            layout.label(text=f"measured: {fig['bake_seconds']:.1f} s, rel. RMSE "
+                              f"{fig['rel_rmse']:.3f} ({fig['scene']}, {fig['machine']})")
+        else:
+            layout.label(text="preset not measured yet (make bench)", icon="INFO")
         if props.method == "transport":
-            from ..bakes.texture_transport import PRESETS as TRANSPORT_PRESETS
-
-            fig = TRANSPORT_PRESETS[props.preset].get("measured")
-            if fig and not changed:
-                layout.label(text=f"measured: {fig['bake_seconds']:.0f} s, rel. RMSE "
-                                  f"{fig['rel_rmse']:.3f} ({fig['scene']})")
             col = layout.column(align=True)
             for name in ("directions", "horizon_power", "resolution", "bounces",
                          "indirect_samples", "indirect_resolution", "transport_model",
@@ -95,14 +98,6 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
             _kept_chunks(layout, context, "texture")
             _last_bake(layout, context.scene)
             return
-        fig = preset_figures().get(props.preset)
-        if changed:
-            pass   # the preset's figures do not describe these values
-        elif fig:
-            layout.label(text=f"measured: {fig['bake_seconds']:.1f} s, rel. RMSE "
-                              f"{fig['rel_rmse']:.3f} ({fig['scene']}, {fig['machine']})")
-        else:
-            layout.label(text="preset not measured yet (make bench)", icon="INFO")
         col = layout.column(align=True)
         for name in ("frame", "order", "resolution", "samples", "bounces", "storage", "mode",
                      "world_sampling", "truth_lights", "output_dir"):

@@ -7,7 +7,7 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, Po
 
 from ...samples import DESCRIPTIONS, SIZES
 from ..base.compat import path_options
-from ..bakes.presets import PRESETS, settings_from_preset
+from ..bakes.presets import PRESET_NAMES, TRANSPORT, settings_from_preset
 from ..farm.external_bake import RUN_ON as _RUN_ON
 from .settings_props import properties, values
 
@@ -21,16 +21,13 @@ def preset_values(method: str, preset: str) -> dict:
     if method == "lobes":
         lobes = settings_from_preset(preset)
         return {name: getattr(lobes, name) for name in _SETTING_NAMES}
-    from ..bakes.texture_transport import PRESETS as TRANSPORT_PRESETS
-
-    t = TRANSPORT_PRESETS[preset]
-    count, _, power = t["directions"].partition(":")[2].partition(":")
+    t = TRANSPORT.settings(preset)
+    count, _, power = t.directions.partition(":")[2].partition(":")
     return {"directions": int(count), "horizon_power": float(power or 1.0),
-            "resolution": t["resolution"], "transport_tol": t["tol"],
-            "transport_components": int(t.get("components") or 0),
-            "indirect_samples": t["indirect_samples"],
-            "indirect_resolution": t["indirect_resolution"],
-            "table_size": t.get("table_size", 32)}
+            "resolution": t.resolution, "transport_tol": t.tol,
+            "transport_components": int(t.components or 0),
+            "indirect_samples": t.indirect_samples,
+            "indirect_resolution": t.indirect_resolution, "table_size": t.table_size}
 
 
 def preset_differences(props) -> list:
@@ -101,7 +98,8 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
 
     preset: EnumProperty(
         name="Preset", description="Starting values for the bake settings (measured by make bench)",
-        items=[(k, k.capitalize(), "") for k in PRESETS], default="balanced", update=_apply_preset)
+        items=[(k, k.capitalize(), "") for k in PRESET_NAMES], default="balanced",
+        update=_apply_preset)
     output_dir: StringProperty(
         name="Output", subtype="DIR_PATH", default="//relight/", options=path_options(),
         description="Folder for the EXR files and the JSON report ('//' = next to the .blend)")

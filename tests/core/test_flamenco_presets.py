@@ -14,4 +14,5 @@ def test_flamenco_preset_direction_counts_are_the_presets():
     (table,) = re.findall(r"const PRESET_DIRECTIONS = \{([^}]*)\}", js)
     counts = {k: int(v) for k, v in re.findall(r"(\w+):\s*(\d+)", table)}
     presets = json.loads((ROOT / "operators" / "bakes" / "transport_presets.json").read_text())["presets"]
-    assert counts == {name: int(p["directions"].split(":")[1]) for name, p in presets.items()}
+    assert counts == {name: int(p["settings"]["directions"].split(":")[1])
+                      for name, p in presets.items()}
