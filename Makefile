@@ -23,6 +23,9 @@ $(STAMP): requirements.txt pyproject.toml
 	$(PIP_OFFLINE) $(VENV_PKGS) 2>/dev/null || { \
 	  $(PY) -m pip download --quiet -d $(WHEELHOUSE) pip setuptools -r requirements.txt && \
 	  $(PIP_OFFLINE) $(VENV_PKGS); }
+	# an egg-info left in the checkout by an older setuptools shadows the venv's entry points
+	# (the plugins of lt_addon/plugins.py) wherever the checkout is on sys.path
+	rm -rf relightable_textures.egg-info
 	$(PIP_OFFLINE) --no-deps --no-build-isolation -e .
 	touch $(STAMP)
 

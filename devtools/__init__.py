@@ -2,8 +2,9 @@
 
 Not part of the extension: the zip leaves this folder out (``blender_manifest.toml``
 ``paths_exclude_pattern``, checked by ``tests/blender/test_extension_install.py``), and it may
-use packages Blender does not ship (matplotlib, in requirements.txt). From a source checkout
-the ``relight`` command gains the ``bench`` verb (:mod:`.bench_cli`) and ``relight analyze``
-draws its charts (:mod:`.charts`). Presets measured here are written into the checkout's
-``operators/bakes/presets.json``, never into an installed package.
+use packages Blender does not ship (matplotlib, in requirements.txt). Where this package is
+installed (a source checkout's venv) the ``relight`` command gains the ``bench`` verb
+(:mod:`.bench_cli`) and ``relight analyze`` draws its charts (:mod:`.charts`), through the entry
+points of ``pyproject.toml`` (:mod:`..lt_addon.plugins`): the product never imports this
+package. Presets measured here are written into the output folder, never into the package.
 """

@@ -1,7 +1,8 @@
 """`relight bench` (development only): sweep every knob that costs time or bytes.
 
-Registered by :func:`..operators.cli.build_parser` when this folder is importable (a source
-checkout), absent from the installed extension. ``--write-presets`` writes the presets chosen
+Added to the ``relight`` parser as the ``verb:bench`` plugin (``pyproject.toml``,
+:mod:`..lt_addon.plugins`) where this package is installed (a source checkout's venv), absent
+from the installed extension. ``--write-presets`` writes the presets chosen
 from the bumps sweep as ``presets.json`` in ``--out``, in the schema of
 ``operators/bakes/presets.py``; adopting them is copying that file over
 ``operators/bakes/presets.json`` (:data:`PRESETS_PATH`) in a commit. Tooling never writes into

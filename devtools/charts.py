@@ -161,3 +161,9 @@ def analysis_charts(report: dict, out_dir: str, stem: str) -> dict:
                 title=f"{report['object']}: CPCA cost, N = {report['N']}, tol {report['tol']:g}",
                 xlabel="clusters", ylabel="multiply-adds per vertex", logx=True, vlines=marks)
     return paths
+
+
+def analysis_charts_plugin(report: dict, out_dir: str, stem: str) -> dict:
+    """The ``analysis-charts`` plugin (:mod:`..lt_addon.plugins`): :func:`analysis_charts`
+    where matplotlib is installed, else nothing."""
+    return analysis_charts(report, out_dir, stem) if available() else {}

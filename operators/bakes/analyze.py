@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...lt_addon import plugins
 from ...lt_addon.io import atomic
 from ...lt_addon.transport import cluster_analysis
 from ...lt_addon.transport.sidecar import samples_path
@@ -120,11 +121,8 @@ def write_analysis(report: dict, out_dir: str) -> dict:
     os.makedirs(out_dir, exist_ok=True)
     safe = atomic.safe_name(report["object"])
     paths = {"json": os.path.join(out_dir, f"{safe}_analysis.json")}
-    try:   # charts need matplotlib, a development extra: the installed extension has neither
-        from ...devtools import charts
-    except ImportError:
-        charts = None
-    if charts is not None and charts.available():
-        paths.update(charts.analysis_charts(report, out_dir, safe))
+    draw = plugins.get("analysis-charts")   # the development tools' (matplotlib), if installed
+    if draw is not None:
+        paths.update(draw(report, out_dir, safe))
     atomic.write_json(paths["json"], dict(report, outputs=paths))
     return paths

@@ -22,6 +22,7 @@ import time
 import numpy as np
 
 from ... import __version__
+from ...lt_addon import plugins
 from ...lt_addon.io import atomic
 from .common import (CliError, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, add_device_option,
                      add_distribution_options, add_setting_options, bake_device, can_create_in, check_bake_inputs,
@@ -240,12 +241,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_device_option(p)
     p.set_defaults(func=_cmd_analyze)
 
-    try:   # development verbs (bench) exist in a source checkout only, not in the extension
-        from ...devtools import bench_cli
-    except ImportError:
-        pass
-    else:
-        bench_cli.add_parser(sub)
+    for add_parser in plugins.verbs():   # a source checkout's development verbs (bench)
+        add_parser(sub)
 
     p = sub.add_parser("relight-vertices", help="shade a stored eigentransport bake (NumPy)")
     p.add_argument("file", metavar="FILE.blend")

@@ -106,9 +106,9 @@ def test_the_wheel_holds_every_module_and_data_file_and_nothing_else(installed):
     assert not sorted(want - ours), "not in the wheel"
     assert not sorted(ours - want), "in the wheel, not in the checkout's package folders"
     # what issue 31 lacked, by name: a rename that empties the folders above still fails here
-    for need in ("blender_manifest.toml", "lt_addon/export/rti.py", "operators/cli.py",
+    for need in ("blender_manifest.toml", "lt_addon/export/rti.py", "operators/cli/__init__.py",
                  "lt_addon/export/web/template.html", "lt_addon/export/web/viewer.js",
-                 "operators/presets.json"):
+                 "operators/bakes/presets.json", "operators/bakes/transport_presets.json"):
         assert need in ours
     assert not [n for n in names if not n.startswith((PKG + "/", PKG + "-"))]   # tests/, tools/
 

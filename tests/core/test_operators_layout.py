@@ -148,3 +148,12 @@ def test_each_room_says_what_it_holds(name):
     """docs/architecture.md has a paragraph per room (the newcomer's map)."""
     text = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
     assert f"`operators/{name}/`" in text, f"docs/architecture.md does not describe {name}/"
+
+
+def test_the_product_never_imports_the_development_tools():
+    """devtools/ adds `relight bench` and the analysis charts through entry points
+    (lt_addon/plugins.py); the product does not import it, not even under a try."""
+    graph = {**GRAPH, **{k: v for k, v in import_graph(ROOT / "lt_addon").items()}}
+    found = [f"{a}:{line}" for a, edges in graph.items() for b, line in edges
+             if b.split(".")[0] == "devtools"]
+    assert not found, f"imports of devtools/ in the product: {found}"
