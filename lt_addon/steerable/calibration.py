@@ -282,3 +282,19 @@ def flat_plane_calibration_error(basis: SteerableBasis1D, method: str,
         "rms_error": float(np.sqrt(np.mean(err ** 2))),
         "max_abs_error_above_10deg": float(np.max(np.abs(err[hi]))) if np.any(hi) else 0.0,
     }
+
+
+def light_environment(order: int, calibration: str, direction, height: int,
+                      intensity: float = 1.0):
+    """The equirectangular image (height, 2 * height) of the calibrated steerable light of
+    ``order`` centred on ``direction`` (3,), scaled by ``intensity``, row 0 at the bottom, and
+    the calibration's gain: what ``relight light-env`` writes (its negative lobes are part of
+    the light). float64."""
+    from ..sphere.hemisphere import hemisphere_to_disk
+    from .basis import environment_image, paper_basis
+
+    basis = paper_basis(order)
+    gain, _ = make_calibration(basis, calibration).gain_offset(direction)
+    env = environment_image(basis, hemisphere_to_disk(direction), height, 2 * height,
+                            row_order="bottom_first", dtype=np.float64)
+    return env * float(gain) * intensity, float(gain)

@@ -274,3 +274,78 @@ def on_depsgraph_update(scene, depsgraph):
         _busy.pop()
     if timings:
         scene[SUMMARY_KEY + "_update"] = f"Last update {timings['update_ms']:.1f} ms"
+
+
+def shade_edits(scene, obj, sets, *, env=None, env_path: str | None = None, rotate: float = 0.0,
+                sun=None, sun_angle: float = 0.0, strength: float = 1.0, color=(1.0, 1.0, 1.0),
+                direct: str = "rays", compare_png: str | None = None,
+                compare_samples: int = 64) -> tuple:
+    """``relight-materials``' work: the material bake of ``obj`` (its first object) shaded with
+    the edits ``sets`` (``(material, "color" | "metallic" | "roughness", value)`` rows) applied
+    to the file's colours and finish, under the environment ``env`` (turned by ``rotate``
+    degrees), a sun at ``sun`` (azimuth, elevation) of ``sun_angle`` degrees, or else the
+    scene's Sun lamp, times ``strength``. A sun's direct light comes from rays (``direct``
+    "rays": everywhere; "auto": where the baked directions disagree; "baked": not). With
+    ``compare_png`` the edit is also rendered next to Cycles (:func:`compare_edit`), written
+    atomically. Returns radiance (V, 3) float32, what was done, and warnings."""
+    from ...lt_addon.errors import InputError
+    from ...lt_addon.io import atomic
+    from ...lt_addon.sphere.hemisphere import direction_from_az_el
+
+    try:
+        tensors = material_bake.load_tensors(scene, obj)
+    except (FileNotFoundError, ValueError) as exc:
+        raise InputError(str(exc)) from None
+    edits = material_bake.file_colours(tensors)
+    finish = material_bake.file_finish(tensors)
+    finish_edits: dict = {}
+    warnings = []
+    for mat, prop, value in sets:
+        if mat not in tensors.regions:
+            raise InputError(f"{mat!r} is not an editable region of this bake (regions: "
+                             f"{', '.join(tensors.regions)}); bake it with --region {mat}")
+        if prop == "color":
+            edits[mat] = value
+            continue
+        if not tensors.roughness:
+            raise InputError(f"{mat}.{prop}: this bake has only the diffuse anchor; bake it "
+                             "with --anchors roughness:R1,R2,... for metallic / roughness edits")
+        m, rho = finish[mat]
+        finish[mat] = (value, rho) if prop == "metallic" else (m, value)
+        finish_edits.setdefault(mat, {})[prop] = value
+        if prop not in material_bake.finish_sockets(bpy.data.materials.get(mat)):
+            warnings.append(f"{mat}'s {prop} is not an unlinked input of a Principled BSDF: "
+                            "shaded as asked, but the file's material cannot show it")
+    if env is not None:
+        light = ptt.Environment(env, "bottom_first", -rotate, strength)
+        what = {"env": os.path.abspath(env_path) if env_path else "given", "rotate": rotate}
+    elif sun is not None:
+        light = ptt.Sun(tuple(direction_from_az_el(*sun)), sun_angle, strength, color)
+        what = {"sun": list(sun), "sun_angle": sun_angle}
+    else:
+        lamp = material_bake.reference_sun(scene)
+        if lamp is None:
+            raise InputError("the scene has no Sun lamp: give --sun AZ,EL or --env HDR.exr")
+        light = ptt.Sun(tuple(lamp[0]), lamp[1], lamp[2] * strength, color)
+        what = {"sun": "the scene's Sun lamp", "sun_angle": lamp[1]}
+    exact = None
+    t = time.perf_counter()
+    if isinstance(light, ptt.Sun) and direct != "baked":
+        from ..base.direct_rays import exact_direct
+
+        exact = exact_direct(scene, tensors, light, everywhere=direct == "rays")
+    values = tensors.shade(light, edits, direct=exact, finish=finish).astype(np.float32)
+    ms = (time.perf_counter() - t) * 1e3
+    what["direct"] = direct if exact is not None else "baked"
+    info = {"objects": [n for n, _ in tensors.objects], "vertices": int(len(values)), **what,
+            "edits": {k: [float(x) for x in v] for k, v in edits.items()},
+            "finish": {k: {"metallic": float(v[0]), "roughness": float(v[1])}
+                       for k, v in finish.items()},
+            "update_ms": round(ms, 3), "mean": [float(v) for v in values.mean(axis=0)]}
+    if compare_png:
+        changed = {m: rgb for m, prop, rgb in sets if prop == "color"}
+        with atomic.atomic_path(compare_png) as tmp:
+            info["compare"] = compare_edit(scene, tensors, changed, tmp, compare_samples,
+                                           finish=finish_edits)
+        info["compare"]["png"] = compare_png
+    return values, info, warnings

@@ -706,12 +706,11 @@ def _cmd_analyze(args) -> int:
 
 
 def _cmd_relight_vertices(args) -> int:
-    import warnings
-
     import bpy
 
+    from ...lt_addon.errors import InputError
     from ...lt_addon.transport.sidecar import read_environment_exr
-    from ..preview import vertex_relight
+    from ..preview.relight import relight_vertices
 
     path = check_input_blend(args.file)
     out = check_output_path(args.out, ".npy", args.force)
@@ -724,108 +723,39 @@ def _cmd_relight_vertices(args) -> int:
         except (ValueError, OSError) as exc:
             raise CliError(str(exc)) from None
     obj = open_object(path, args.object)
-    world_z = 0.0
-    if env is None and args.point_light is None:
-        env = vertex_relight.world_environment(bpy.context.scene)
-        if env is None:
-            raise CliError("the scene world has no environment image or colour; pass --env")
-        world_z, note = vertex_relight.world_rotation(bpy.context.scene)
-        if note:
-            print(f"relight: warning: {note}", file=sys.stderr)
     try:
-        data = vertex_relight.transport_data(obj)
-    except (ValueError, FileNotFoundError) as exc:
+        values, info, warnings = relight_vertices(bpy.context.scene, obj, env=env,
+                                                  point_light=args.point_light,
+                                                  rotate=args.rotate)
+    except InputError as exc:
         raise CliError(str(exc)) from None
-    light = None
-    if args.point_light is not None:
-        light = (np.array(args.point_light[0]), args.point_light[1], (1.0, 1.0, 1.0))
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        values = data.shade(env, vertex_relight.shade_rotation(world_z + args.rotate), 1.0,
-                            light).astype(np.float32)
-    for w in caught:
-        print(f"relight: warning: {w.message}", file=sys.stderr)
+    for w in warnings:
+        print(f"relight: warning: {w}", file=sys.stderr)
     with atomic.atomic_path(out) as tmp:
         np.save(tmp, values)
-    print(json.dumps({"object": obj.name, "vertices": int(values.shape[0]), "d": data.model.d,
-                      "mean": [float(v) for v in values.mean(axis=0)], "out": out}))
+    print(json.dumps({**info, "out": out}))
     return EXIT_OK
 
 
 def _cmd_relight(args) -> int:
+    from ...lt_addon.errors import InputError
     from ...lt_addon.io import exrio
-    from ...lt_addon.sphere.hemisphere import direction_from_az_el
-    from ..bakes import steerable_bake
+    from ..preview.relight import relight_texture
 
     path = check_input_blend(args.file)
     out = check_output_path(args.out, ".exr", args.force) if args.out else None
     if (args.light is None) == (args.env is None):
         raise CliError("give exactly one of --light AZ,EL and --env HDR.exr")
     obj = open_object(path, args.object)
-    from ..base.blend_files import object_bakes
-
-    kinds = [b.get("kind") for b in object_bakes(obj)]
-    if "transport_texture" in kinds and (args.env or kinds.index("transport_texture") >
-                                         (kinds.index("steerable_texture")
-                                          if "steerable_texture" in kinds else -1)):
-        return _relight_transport(args, obj, out)
-    if args.env:
-        raise CliError(f"{obj.name}'s bake is a lobes bake; --env needs a transport bake "
-                       "(bake-textures --method transport)")
     try:
-        texture = steerable_bake.load_texture(obj)
-    except (FileNotFoundError, ValueError) as exc:
+        img, info = relight_texture(obj, light=args.light, env_path=args.env, rotate=args.rotate,
+                                    sun_angle=args.sun_angle, intensity=args.intensity,
+                                    color=args.color, source=args.source)
+    except InputError as exc:
         raise CliError(str(exc)) from None
-    az, el = args.light
-    img = texture.relight(direction_from_az_el(az, el), args.intensity, args.color)
     if out:
-        exrio.write_exr(out, {c: img[..., i] for i, c in enumerate("RGB")},
-                        {"light_azimuth": az, "light_elevation": el,
-                         "intensity": args.intensity, "color": list(args.color),
-                         "source": texture.settings}, pixel_type="float")
-    print(json.dumps({"object": obj.name, "light": [az, el], "mean": [float(v) for v in img.mean(axis=(0, 1))],
-                      "max": float(img.max()), "out": out}))
-    return EXIT_OK
-
-
-def _relight_transport(args, obj, out) -> int:
-    from ...lt_addon.io import exrio
-    from ...lt_addon.sphere.hemisphere import direction_from_az_el
-    from ..bakes import texture_transport as tx
-    from ..base.blend_files import bake_file
-
-    try:
-        bake, store, report = tx.load_bake(bake_file(obj, tx.KIND, "transport texture"))
-    except (FileNotFoundError, ValueError, KeyError) as exc:
-        raise CliError(str(exc)) from None
-    angle = report["settings"]["sun_angle"] if args.sun_angle is None else args.sun_angle
-    if not 0.0 <= angle <= 90.0:
-        raise CliError(f"--sun-angle must be in 0..90 degrees, got {angle}")
-    info = {"object": obj.name, "method": "transport"}
-    if args.env:
-        from ..base.cycles_bake import BakeInputError
-        from ..bakes.export import read_environment
-
-        env_path = os.path.abspath(args.env)
-        try:
-            env = read_environment(env_path)        # row 0 at the bottom (exrio)
-        except BakeInputError as exc:
-            raise CliError(str(exc)) from None
-        img = tx.relight_environment(bake, store, env, -args.rotate,   # Mapping convention
-                                     row_order="bottom_first", source=args.source)
-        img = img * args.intensity * np.asarray(args.color, np.float32)
-        info.update(env=env_path, rotate=args.rotate, source=args.source,
-                    indirect=("steered by the environment" if bake.indirect is not None
-                              else "none baked (bounces 0)"))
-    else:
-        az, el = args.light
-        img = tx.relight(bake, store, direction_from_az_el(az, el), angle, args.intensity,
-                         source=args.source, kernel=report["settings"].get("kernel", "linear"))
-        img = img * np.asarray(args.color, np.float32)
-        info.update(light=[az, el], sun_angle=angle, source=args.source)
-    if out:
-        exrio.write_exr(out, {c: img[..., i] for i, c in enumerate("RGB")},
-                        {k: v for k, v in info.items()}, pixel_type="float")
+        exrio.write_exr(out, {c: img[..., i] for i, c in enumerate("RGB")}, info,
+                        pixel_type="float")
     print(json.dumps({**info, "mean": [float(v) for v in img.mean(axis=(0, 1))],
                       "max": float(img.max()), "out": out}))
     return EXIT_OK
@@ -862,9 +792,7 @@ def _cmd_compare(args) -> int:
 def _cmd_light_env(args) -> int:
     from ...lt_addon.io import exrio
     from ...lt_addon.sphere.hemisphere import direction_from_az_el
-    from ...lt_addon.steerable.basis import environment_image, paper_basis
-    from ...lt_addon.steerable.calibration import make_calibration
-    from ...lt_addon.sphere.hemisphere import hemisphere_to_disk
+    from ...lt_addon.steerable.calibration import light_environment
 
     if not 2 <= args.order <= 12:
         raise CliError(f"--order must be in 2..12, got {args.order}")
@@ -872,14 +800,11 @@ def _cmd_light_env(args) -> int:
         raise CliError(f"--height must be in 8..8192, got {args.height}")
     out = check_output_path(args.out, ".exr", args.force)
     az, el = args.light
-    d = direction_from_az_el(az, el)
-    basis = paper_basis(args.order)
-    gain, _ = make_calibration(basis, args.calibration).gain_offset(d)
-    env = environment_image(basis, hemisphere_to_disk(d), args.height, 2 * args.height,
-                            row_order="bottom_first", dtype=np.float64) * float(gain) * args.intensity
+    env, gain = light_environment(args.order, args.calibration, direction_from_az_el(az, el),
+                                  args.height, args.intensity)
     nbytes = exrio.write_exr(out, {c: env for c in "RGB"},
                              {"order": args.order, "light_azimuth": az, "light_elevation": el,
-                              "calibration": args.calibration, "gain": float(gain),
+                              "calibration": args.calibration, "gain": gain,
                               "intensity": args.intensity}, pixel_type="float")
     print(f"wrote {out} ({args.height}x{2 * args.height}, {nbytes} bytes; "
           f"min {env.min():.4g}, max {env.max():.4g}: negative lobes are part of the light)")

@@ -186,10 +186,9 @@ def _cmd_bake_materials(args) -> int:
 def _cmd_relight_materials(args) -> int:
     import bpy
 
-    from ...lt_addon.transport import ptt
+    from ...lt_addon.errors import InputError
     from ...lt_addon.transport.sidecar import read_environment_exr
-    from ...lt_addon.sphere.hemisphere import direction_from_az_el
-    from ..bakes import material_bake
+    from ..bakes import material_edit
     from .common import CliError, check_input_blend, check_output_path, open_objects
 
     path = check_input_blend(args.file)
@@ -213,72 +212,16 @@ def _cmd_relight_materials(args) -> int:
             raise CliError(str(exc)) from None
     objects = open_objects(path, args.object[:1])
     try:
-        tensors = material_bake.load_tensors(bpy.context.scene, objects[0])
-    except (FileNotFoundError, ValueError) as exc:
+        values, info, warnings = material_edit.shade_edits(
+            bpy.context.scene, objects[0], args.set, env=env, env_path=args.env,
+            rotate=args.rotate, sun=args.sun, sun_angle=args.sun_angle, strength=args.strength,
+            color=args.color, direct=args.direct, compare_png=png,
+            compare_samples=args.compare_samples)
+    except InputError as exc:
         raise CliError(str(exc)) from None
-    edits = material_bake.file_colours(tensors)
-    finish = material_bake.file_finish(tensors)
-    finish_edits: dict = {}
-    for mat, prop, value in args.set:
-        if mat not in tensors.regions:
-            raise CliError(f"{mat!r} is not an editable region of this bake (regions: "
-                           f"{', '.join(tensors.regions)}); bake it with --region {mat}")
-        if prop == "color":
-            edits[mat] = value
-            continue
-        if not tensors.roughness:
-            raise CliError(f"{mat}.{prop}: this bake has only the diffuse anchor; bake it "
-                           "with --anchors roughness:R1,R2,... for metallic / roughness edits")
-        m, rho = finish[mat]
-        finish[mat] = (value, rho) if prop == "metallic" else (m, value)
-        finish_edits.setdefault(mat, {})[prop] = value
-        if prop not in material_bake.finish_sockets(bpy.data.materials.get(mat)):
-            print(f"relight: warning: {mat}'s {prop} is not an unlinked input of a Principled "
-                  "BSDF: shaded as asked, but the file's material cannot show it",
-                  file=sys.stderr)
-    if env is not None:
-        light = ptt.Environment(env, "bottom_first", -args.rotate, args.strength)
-        what = {"env": os.path.abspath(args.env), "rotate": args.rotate}
-    elif args.sun is not None:
-        light = ptt.Sun(tuple(direction_from_az_el(*args.sun)), args.sun_angle, args.strength,
-                        args.color)
-        what = {"sun": list(args.sun), "sun_angle": args.sun_angle}
-    else:
-        sun = material_bake.reference_sun(bpy.context.scene)
-        if sun is None:
-            raise CliError("the scene has no Sun lamp: give --sun AZ,EL or --env HDR.exr")
-        light = ptt.Sun(tuple(sun[0]), sun[1], sun[2] * args.strength, args.color)
-        what = {"sun": "the scene's Sun lamp", "sun_angle": sun[1]}
-    exact = None
-    t = time.perf_counter()
-    if isinstance(light, ptt.Sun) and args.direct != "baked":
-        from ..base.direct_rays import exact_direct
-
-        exact = exact_direct(bpy.context.scene, tensors, light,
-                             everywhere=args.direct == "rays")
-    values = tensors.shade(light, edits, direct=exact, finish=finish).astype(np.float32)
-    ms = (time.perf_counter() - t) * 1e3
-    what["direct"] = args.direct if exact is not None else "baked"
+    for w in warnings:
+        print(f"relight: warning: {w}", file=sys.stderr)
     with atomic.atomic_path(out) as tmp:
         np.save(tmp, values)
-    info = {"objects": [n for n, _ in tensors.objects], "vertices": int(len(values)), **what,
-            "edits": {k: [float(x) for x in v] for k, v in edits.items()},
-            "finish": {k: {"metallic": float(v[0]), "roughness": float(v[1])}
-                       for k, v in finish.items()},
-            "update_ms": round(ms, 3), "mean": [float(v) for v in values.mean(axis=0)],
-            "out": out}
-    if png:
-        from ..bakes import material_edit
-        from ..base.cycles_bake import BakeInputError
-
-        changed = {m: rgb for m, prop, rgb in args.set if prop == "color"}
-        try:
-            with atomic.atomic_path(png) as tmp:
-                info["compare"] = material_edit.compare_edit(
-                    bpy.context.scene, tensors, changed, tmp, args.compare_samples,
-                    finish=finish_edits)
-        except BakeInputError as exc:
-            raise CliError(str(exc)) from None
-        info["compare"]["png"] = png
-    print(json.dumps(info))
+    print(json.dumps({**info, "out": out}))
     return 0

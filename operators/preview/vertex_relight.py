@@ -170,6 +170,19 @@ def transport_data(obj) -> TransportData:
     return _CACHE[key]
 
 
+def shade(data, env, rotation, strength: float = 1.0, light=None) -> tuple:
+    """One bake's vertex radiance (V, 3) under the environment ``env`` (turned by the lattice
+    ``rotation``, :func:`shade_rotation`) times ``strength`` plus the point ``light`` (position,
+    power, colour) or None, and the warnings the shading raised, as text. What the preview and
+    ``relight relight-vertices`` both show."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        values = data.shade(env, rotation, strength, light)
+    return values, [str(w.message) for w in caught]
+
+
 def update_preview(scene) -> dict:
     """Recompute the shading of every object with a transport bake; returns ms timings per
     object and ``"warnings"`` (also kept in ``scene[WARNING_KEY]`` for the panel).
@@ -205,12 +218,8 @@ def update_preview(scene) -> dict:
             lamp = props.point_light
             light = (np.array(lamp.matrix_world.translation), float(lamp.data.energy),
                      tuple(lamp.data.color))
-        import warnings
-
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            values = data.shade(env, rotation, props.env_strength if props else 1.0, light)
-        messages += [f"{obj.name}: {w.message}" for w in caught]
+        values, said = shade(data, env, rotation, props.env_strength if props else 1.0, light)
+        messages += [f"{obj.name}: {w}" for w in said]
         t1 = time.perf_counter()
         write_shading(obj, values)
         timings[obj.name] = {"shade_ms": 1e3 * (t1 - t0),
