@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...lt_addon.io import atomic
+from ...lt_addon.settings import setting
 from ..base import cycles_device
 from ..base.cycles_bake import BakeInputError, EnvironmentBake, check_bakeable, check_memory
 from ..base.jobs import Progress
@@ -208,11 +209,21 @@ class TransportSettings:
     cluster keeps the fewest vectors leaving at most 1 - E of its energy (``coeffs`` = a fixed
     count per cluster; "auto" needs ``energy``)."""
 
-    directions: str = "cube:8"
-    bounces: int = 0
-    samples: int | None = None
-    energy: float | None = 0.99
-    coeffs: int | None = None
+    directions: str = setting(
+        "cube:8", metavar="SPEC",
+        help="Hard-sun directions of the per-vertex bake: halton:N | latlong:RxC | "
+             "cube:N (6 N^2) | cubegauss:N (cube:8 = 384)")
+    bounces: int = setting(0, lo=0, hi=64,
+                           help="Diffuse bounces of the per-vertex bake (0 = visibility x cosine, "
+                                "exact at 1 sample)")
+    samples: int | None = setting(None, lo=1, panel=False,
+                                  help="Cycles samples per vertex (default 1 without bounces: "
+                                       "exact for a hard Sun; 64 with bounces)")
+    energy: float | None = setting(
+        0.99, lo=0.5, hi=1.0, label="Energy Kept",
+        help="Fraction of the centred transport energy the eigentransports keep (default 0.99)")
+    coeffs: int | None = setting(None, lo=1, panel=False,
+                                 help="keep exactly d eigentransports")
     seed: int = 0
     clusters: int | str | None = None
 

@@ -199,12 +199,11 @@ def build_parser() -> argparse.ArgumentParser:
                                    "sidecar and a JSON report; the .blend gets the bake record "
                                    "and a per-vertex preview.")
     _add_transport_source_args(p)
-    p.add_argument("--samples", type=int, help="Cycles samples per vertex (default 1 without "
-                   "bounces: exact for a hard Sun; 64 with bounces)")
-    group = p.add_mutually_exclusive_group()
-    group.add_argument("--energy", type=float, help="keep d capturing this fraction of the "
-                       "centred transport energy (default 0.99)")
-    group.add_argument("--coeffs", type=int, help="keep exactly d eigentransports")
+    from ..bakes.transport_bake import TransportSettings
+
+    add_setting_options(p, TransportSettings, ("samples",))
+    add_setting_options(p.add_mutually_exclusive_group(), TransportSettings,
+                        ("energy", "coeffs"))     # default None: the verb's 0.99 when neither
     p.add_argument("--clusters", metavar="auto|K", help="clustered PCA (Mahajan 2007) instead of "
                    "one global PCA: K clusters, or 'auto' for adaptive subdivision by cost; "
                    "--energy is then each cluster's tolerance")
@@ -274,9 +273,9 @@ def _add_transport_source_args(p) -> None:
     """FILE, --object, --directions and --bounces: what a per-vertex transport bake reads."""
     p.add_argument("file", metavar="FILE.blend")
     p.add_argument("--object", required=True, metavar="NAME")
-    p.add_argument("--directions", default="cube:8",
-                   help="halton:N | latlong:RxC | cube:N | cubegauss:N (default cube:8 = 384)")
-    p.add_argument("--bounces", type=int, default=0)
+    from ..bakes.transport_bake import TransportSettings
+
+    add_setting_options(p, TransportSettings, ("directions", "bounces"), defaults=True)
 
 
 def run(argv: list[str]) -> int:

@@ -19,7 +19,8 @@ from ..base import jobs
 from ..preview import preview_nodes
 from ..bakes import steerable_bake
 from ..base.cycles_bake import BakeInputError, check_bakeable
-from .properties import settings_from_scene
+from .properties import VERTEX_FIELDS, VERTEX_PROPS, settings_from_scene
+from .settings_props import values
 
 
 def _output_dir(props) -> str:
@@ -270,13 +271,11 @@ class RELIGHT_OT_bake_transport(ModalBake, bpy.types.Operator):
         obj = context.active_object
         check_bakeable(obj, need_uv=False)
         settings = transport_bake.TransportSettings(
-            directions=props.vertex_directions, bounces=props.vertex_bounces,
-            energy=props.vertex_energy)
+            **values(transport_bake.TransportSettings, props, VERTEX_FIELDS, rename=VERTEX_PROPS))
         settings.validate()
         if props.run_on != "HERE":
-            return self._external(context, "bake-transport", [
-                "--object", obj.name, "--directions", settings.directions, "--bounces",
-                str(settings.bounces), "--energy", repr(settings.energy)])
+            return self._external(context, "bake-transport", ["--object", obj.name] + to_argv(
+                settings, VERTEX_FIELDS))
         self._make_out_dir(props)
         # the same job as `relight bake-transport`: bake, fit, files, preview
         return transport_bake.transport_job(context.scene, obj, settings, self.out_dir)
@@ -309,8 +308,9 @@ class RELIGHT_OT_analyze(ModalBake, bpy.types.Operator):
         props = context.scene.relight
         obj = context.active_object
         check_bakeable(obj, need_uv=False)
-        direction_set = transport_bake.TransportSettings(
-            directions=props.vertex_directions, bounces=props.vertex_bounces).validate()
+        direction_set = transport_bake.TransportSettings(**values(
+            transport_bake.TransportSettings, props, ("directions", "bounces"),
+            rename=VERTEX_PROPS)).validate()
         self._make_out_dir(props)
         return analyze.analysis_job(context.scene, obj, direction_set, self.out_dir,
                                     props.vertex_bounces)

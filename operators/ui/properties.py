@@ -131,17 +131,6 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         description="A point lamp added to the vertex preview (nearest sample direction, "
                     "1/r^2; valid outside the object's convex hull)",
         update=_refresh_vertex_preview)
-    vertex_directions: StringProperty(
-        name="Directions", default="cube:8",
-        description="Hard-sun directions of the per-vertex bake: cube:N (6 N^2), halton:N, "
-                    "latlong:RxC, cubegauss:N")
-    vertex_bounces: IntProperty(
-        name="Bounces", default=0, min=0, max=64,
-        description="Diffuse bounces of the per-vertex bake (0 = visibility x cosine, exact at "
-                    "1 sample)")
-    vertex_energy: FloatProperty(
-        name="Energy Kept", default=0.99, min=0.5, max=1.0,
-        description="Fraction of the centred transport energy the eigentransports keep")
     show_clusters: BoolProperty(
         name="Show Clusters", default=False,
         description="Colour the vertices by CPCA cluster (bake-transport --clusters) instead "
@@ -254,6 +243,9 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
 #: Panel property of each transport setting whose name alone would be ambiguous.
 TRANSPORT_PROPS = {"model": "transport_model", "viewport": "transport_viewport",
                    "tol": "transport_tol", "components": "transport_components"}
+#: Panel property of each declared per-vertex bake setting (the Vertex Transport box).
+VERTEX_FIELDS = ("directions", "bounces", "energy")
+VERTEX_PROPS = {f: "vertex_" + f for f in VERTEX_FIELDS}
 #: Panel property of each declared material-bake setting (the panel's Material Edits box).
 MATERIAL_FIELDS = ("bounces", "bounce_bake", "rays", "samples", "anchor_samples", "smoothing")
 MATERIAL_PROPS = {f: "material_" + f for f in MATERIAL_FIELDS}
@@ -266,8 +258,10 @@ def _declared_properties() -> dict:
     from ..bakes.steerable_bake import TextureBakeSettings
     from ..bakes.material_bake import MaterialBakeSettings
     from ..bakes.texture_transport import TransportTextureSettings
+    from ..bakes.transport_bake import TransportSettings
 
     return {**properties(TextureBakeSettings, LOBES_FIELDS, defaults=_LOBES),
+            **properties(TransportSettings, VERTEX_FIELDS, rename=VERTEX_PROPS),
             **properties(MaterialBakeSettings, MATERIAL_FIELDS, rename=MATERIAL_PROPS),
             **properties(TransportTextureSettings, ("resolution",), defaults=_TRANSPORT),
             **properties(TransportTextureSettings, ("bounces",), defaults=_LOBES),
