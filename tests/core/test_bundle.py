@@ -78,3 +78,40 @@ def test_a_newer_bundle_and_another_kind_are_refused_in_one_line(tmp_path):
     open(path, "w").write(json.dumps(data))
     with pytest.raises(InputError, match="not a transport texture bake"):
         bundle.load_bake(path)
+
+
+def test_one_entry_point_reads_every_kind_of_bake(tmp_path):
+    """lt_addon/bundles.load_bake: a transport report, a steerable texture (its basis images
+    back as written, float storage) and a per-vertex sidecar each come back as the object that
+    relights them; another file, or none, is refused in one line."""
+    from relightable_textures.lt_addon import bundles
+    from relightable_textures.lt_addon.sphere import directions as D
+    from relightable_textures.lt_addon.steerable.texture import (SteerableTexture,
+                                                                 build_from_sampled_bakes)
+    from relightable_textures.lt_addon.transport import eigentransport as ET
+    from relightable_textures.lt_addon.transport.sidecar import TransportData, save_sidecar
+
+    report, T, _, dset = _bundle(tmp_path)
+    bake, store, rep = bundles.load_bake(report["report"])
+    assert rep["object"] == "Patch" and store.directions.size == S
+
+    rng = np.random.default_rng(0)
+    stack = rng.uniform(0.0, 1.0, size=(25, 6, 6, 3)).astype(np.float32)
+    tex = build_from_sampled_bakes(stack, order=5, frame="tangent")
+    tex.save(str(tmp_path / "P_steerable.exr"), "float")
+    back = bundles.load_bake(str(tmp_path / "P_steerable.exr"))
+    assert isinstance(back, SteerableTexture)
+    np.testing.assert_allclose(back.basis_images, tex.basis_images, rtol=1e-6, atol=1e-6)
+
+    ds = D.cubemap(2)
+    Tv = np.maximum(rng.normal(size=(40, 3)) @ rng.normal(size=(3, ds.directions.shape[0])), 0)
+    model = ET.fit_eigentransport(Tv, d=24)
+    save_sidecar(str(tmp_path / "O_transport.npz"), model, ds, rng.normal(size=(40, 3)),
+                 np.tile([0.0, 0.0, 1.0], (40, 1)), {"object": "O", "bounces": 0})
+    assert isinstance(bundles.load_bake(str(tmp_path / "O_transport.npz")), TransportData)
+
+    (tmp_path / "notes.txt").write_text("x")
+    with pytest.raises(InputError, match="not a bake file"):
+        bundles.load_bake(str(tmp_path / "notes.txt"))
+    with pytest.raises(InputError, match="no bake file"):
+        bundles.load_bake(str(tmp_path / "missing.exr"))
