@@ -53,8 +53,9 @@ def relight_texture(obj, *, light=None, env_path: str | None = None, rotate: flo
         except (FileNotFoundError, ValueError) as exc:
             raise InputError(str(exc)) from None
         img = texture.relight(direction_from_az_el(*light), intensity, color)
-        return img, {"object": obj.name, "light": list(light), "source": texture.settings,
-                     "intensity": intensity, "color": list(color)}
+        return img, {"object": obj.name, "light": list(light), "light_azimuth": light[0],
+                     "light_elevation": light[1], "intensity": intensity, "color": list(color),
+                     "source": texture.settings}
     try:
         bake, store, report = bundle.load_bake(bake_file(obj, bundle.KIND, "transport texture"))
     except (FileNotFoundError, ValueError, KeyError) as exc:
