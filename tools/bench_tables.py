@@ -1,10 +1,11 @@
-"""Markdown tables for the README from `relight bench` / bench_cpca JSON output.
+"""Markdown tables for docs/ (results.md and the method pages) from `relight bench` /
+bench_cpca JSON output.
 
 Usage: python tools/bench_tables.py [DIR]   (default docs/bench)
 
 Prints, for every ``<scene>.json`` in DIR, the chosen presets (texture scenes) and the Pareto
 front of error vs bake time; for ``cpca.json`` the cost per vertex of each method at each target
-shading error. Paste the output into the README (it is how the README tables were made).
+shading error. Paste the output into the docs page (it is how those tables were made).
 """
 
 from __future__ import annotations

@@ -88,7 +88,7 @@ def update_preview(scene) -> dict:
     for _, tensors in bakes:
         t0 = time.perf_counter()
         # rays only where the baked directions disagree: at 13K vertices the update took
-        # 12-18 ms where a ray to every receiver took 27-30 ms (README, measured)
+        # 12-18 ms where a ray to every receiver took 27-30 ms (benchmarks/bench_materials.py)
         values = tensors.shade(light, material_bake.file_colours(tensors),
                                direct=exact_direct(scene, tensors, light, everywhere=False),
                                finish=material_bake.file_finish(tensors))
