@@ -10,9 +10,9 @@ place. Fields whose panel form differs from the dataclass's (a count of directio
 CLI takes a ``hemi:N`` spec) keep their own panel property; their CLI option and argv still come
 from here.
 
-Validation stays with each dataclass (``validate()``), which knows the cross-field rules;
-:func:`range_errors` checks the declared ranges and choices for the tests that keep the two in
-step.
+Validation stays with each dataclass (``validate()``), which knows the cross-field rules and
+says them in its own words; it ends with :func:`check_ranges`, so the declared ranges and
+choices are enforced whatever set the value.
 """
 
 from __future__ import annotations
@@ -58,6 +58,7 @@ class Setting:
     flag: str
     metavar: str
     panel: bool
+    required: bool = False      # no default: the CLI option is required
 
     def parse(self, text: str):
         """A value of this setting from its command-line text."""
@@ -99,6 +100,8 @@ def declared(cls, names=None) -> list:
         f = fields[name]
         meta = f.metadata[_KEY]
         kind, optional = _kind(f.type)
+        required = (f.default is dataclasses.MISSING
+                    and f.default_factory is dataclasses.MISSING)
         default = (f.default if f.default is not dataclasses.MISSING else
                    f.default_factory() if f.default_factory is not dataclasses.MISSING
                    else None)
@@ -106,7 +109,7 @@ def declared(cls, names=None) -> list:
             name=name, kind=kind, default=default, optional=optional, help=meta["help"],
             label=meta["label"] or name.replace("_", " ").title(), lo=meta["lo"], hi=meta["hi"],
             choices=meta["choices"], flag=meta["flag"] or "--" + name.replace("_", "-"),
-            metavar=meta["metavar"], panel=meta["panel"]))
+            metavar=meta["metavar"], panel=meta["panel"], required=required))
     return out
 
 
@@ -139,3 +142,14 @@ def range_errors(settings) -> list:
         if s.lo is not None and value < s.lo or s.hi is not None and value > s.hi:
             out.append(f"{s.name} must be in {s.lo}..{s.hi}, got {value}")
     return out
+
+
+def check_ranges(settings) -> None:
+    """Raise :class:`.errors.InputError` with the first declared range or choice ``settings``
+    breaks: each dataclass's ``validate()`` ends with it, so the declared range is the one
+    enforced, whatever set the value."""
+    from .errors import InputError
+
+    errors = range_errors(settings)
+    if errors:
+        raise InputError(errors[0])

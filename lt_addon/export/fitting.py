@@ -17,6 +17,7 @@ import numpy as np
 from ..errors import InputError
 from ..io import atomic, exrio
 from ..progress import Progress
+from ..settings import check_ranges, setting
 from ..sphere.directions import hemisphere_fibonacci, parse_direction_spec
 from ..sphere.hemisphere import direction_from_az_el
 from ..transport import texture as tt
@@ -60,16 +61,33 @@ DECODE = {
 @dataclass
 class ExportSettings:
     """What ``relight export`` fits and under which light (see the CLI's help)."""
-    format: str
-    terms: int | None = None            # rti-hsh: 4, 9 or 16 (default 9)
+    format: str = setting(label="Format", choices=(
+        ("rti-hsh", "RTI HSH", "Hemispherical harmonics planes + a relightable web page "
+                               "(relight tools' layout, as OpenLIME reads it)"),
+        ("rti-ptm", "RTI PTM", "Polynomial texture map planes (6 terms) + a web page"),
+        ("sh-l1", "L1 SH Lightmap", "Four half EXRs of L1 spherical harmonics (Godot's "
+                                    "directional lightmap layers and axes), for one lighting"),
+        ("monosh", "MonoSH Lightmap", "Bakery's MonoSH: L0 EXR + 8-bit direction (Unity "
+                                      "axes), for one lighting")), help="What is exported")
+    terms: int | None = setting(None, metavar="K", panel=False,
+                                help="rti-hsh: 4, 9 (default) or 16 terms (OpenLIME reads 4 "
+                                     "and 9)")
     env: str | None = None              # SH formats: an equirect EXR ...
-    rotate: float = 0.0                 # ... turned like a world Mapping node's Z rotation
+    rotate: float = setting(0.0, metavar="DEG", panel=False,
+                            help="with --env: its rotation about +z, as a world Mapping node's Z")
     sun: tuple | None = None            # ... or a sun (azimuth, elevation) in degrees
-    sun_angle: float = 0.0
-    strength: float = 1.0
+    sun_angle: float = setting(0.0, lo=0.0, hi=30.0, metavar="DEG", panel=False,
+                               help="SH formats: the sun's size in degrees")
+    strength: float = setting(1.0, panel=False,
+                              help="the light's strength (sun: W/m^2; env: a multiplier)")
     color: tuple = (1.0, 1.0, 1.0)
-    exposure: float | None = None       # RTI: display scale (default: 99.5th percentile -> 1)
-    held_out: int = 16                  # RTI: held-out lights the error is measured at
+    exposure: float | None = setting(
+        None, metavar="X", panel=False,
+        help="RTI: radiance scale before sRGB encoding (default: the 99.5th percentile of the "
+             "brightest lights maps to 1)")
+    held_out: int = setting(16, lo=1, hi=1024, panel=False,
+                            help="RTI: light directions off the baked ones the error is "
+                                 "measured at")
     normal_samples: int = 4             # SH: Cycles samples of the normal bake
 
     def validate(self) -> None:
@@ -96,6 +114,7 @@ class ExportSettings:
             raise InputError(f"exposure must be > 0, got {self.exposure}")
         if not 1 <= self.held_out <= 1024:
             raise InputError(f"held-out lights must be in 1..1024, got {self.held_out}")
+        check_ranges(self)
 
     @property
     def kind(self) -> str:

@@ -26,7 +26,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io import atomic, exrio
-from ..settings import setting
+from ..settings import check_ranges, setting
 from ..sphere.hemisphere import direction_from_az_el
 from . import texture as tt
 
@@ -86,7 +86,7 @@ class TransportTextureSettings:
         ("steerable", "Steerable (quadrature)", "The paper's basis fitted noise-free from T"),
         ("none", "None", "Keep T only")), help="What is fitted to T")
     components: int | None = setting(
-        None, lo=0, hi=512, label="Components",
+        None, lo=0, label="Components",
         help="PCA eigen-textures to keep (the presets' measured figures use a fixed count), or "
              "the steerable order; none (0 in the panel) = as many as the tolerance needs")
     tol: float = setting(0.02, lo=0.001, hi=0.5, label="PCA Tolerance",
@@ -149,6 +149,7 @@ class TransportTextureSettings:
             raise InputError(f"table size must be in 8..256, got {self.table_size}")
         if self.viewport not in VIEWPORTS:
             raise InputError(f"viewport must be one of {VIEWPORTS}, got {self.viewport!r}")
+        check_ranges(self)
         return dset
 
 

@@ -47,7 +47,7 @@ import bpy
 import numpy as np
 
 from ...lt_addon.io import atomic
-from ...lt_addon.settings import setting
+from ...lt_addon.settings import check_ranges, setting
 from ...lt_addon.transport import bounce_transfer, gathered_transfer, ptt
 from ...lt_addon.transport.texture import parse_directions
 from ..base import cycles_device
@@ -416,6 +416,7 @@ class MaterialBakeSettings:
                                  f"{self.bounce_bake!r}")
         if not 16 <= int(self.rays) <= 65536:
             raise BakeInputError(f"rays must be 16..65536 per receiver, got {self.rays}")
+        check_ranges(self)
         try:
             parse_directions(self.anchor_spec())
             return [parse_directions(s) for s in self.specs()]

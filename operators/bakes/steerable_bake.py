@@ -18,7 +18,7 @@ import numpy as np
 
 from ... import __version__
 from ...lt_addon.io import atomic
-from ...lt_addon.settings import setting
+from ...lt_addon.settings import check_ranges, setting
 from ...lt_addon.steerable.sampled_basis import build_sampled_basis
 from ...lt_addon.steerable.basis import paper_basis
 from ...lt_addon.steerable.texture import FRAMES, STORAGE_MODES, SteerableTexture
@@ -80,6 +80,7 @@ class TextureBakeSettings:
         if not 8 <= self.env_height <= 4096:
             raise BakeInputError(f"env_height must be in 8..4096, got {self.env_height}")
         # basis images are float32 (N, R, R, 3) plus the sampled stack of the same size
+        check_ranges(self)
         check_memory(2 * self.order ** 2 * self.resolution ** 2 * 3 * 4,
                      f"order {self.order} at {self.resolution}^2",
                      "lower the resolution or the order")

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...lt_addon.io import atomic
-from ...lt_addon.settings import setting
+from ...lt_addon.settings import check_ranges, setting
 from ..base import cycles_device
 from ..base.cycles_bake import BakeInputError, EnvironmentBake, check_bakeable, check_memory
 from ..base.jobs import Progress
@@ -220,7 +220,7 @@ class TransportSettings:
                                   help="Cycles samples per vertex (default 1 without bounces: "
                                        "exact for a hard Sun; 64 with bounces)")
     energy: float | None = setting(
-        0.99, lo=0.5, hi=1.0, label="Energy Kept",
+        0.99, lo=0.0, hi=1.0, label="Energy Kept",
         help="Fraction of the centred transport energy the eigentransports keep (default 0.99)")
     coeffs: int | None = setting(None, lo=1, panel=False,
                                  help="keep exactly d eigentransports")
@@ -246,6 +246,7 @@ class TransportSettings:
         if self.clusters == "auto" and self.energy is None:
             raise BakeInputError("--clusters auto chooses the clusters by cost at a tolerance; "
                                  "use --energy instead of --coeffs")
+        check_ranges(self)
         return ds
 
 

@@ -386,6 +386,8 @@ def add_setting_options(p, cls, names=None, *, what: str = "", defaults: bool = 
             kw["metavar"] = s.metavar
         if s.kind == "bool":
             kw = {"help": kw["help"], "action": "store_true"}
+        elif s.required:
+            kw["required"] = True
         elif defaults:
             kw["default"] = s.default
             if s.default is not None:

@@ -9,8 +9,8 @@ import sys
 
 
 def add_parsers(sub) -> None:
-    from .common import parse_az_el, parse_rgb
-    from ..bakes.export import FORMATS
+    from ..bakes.export import ExportSettings
+    from .common import add_setting_options, parse_az_el, parse_rgb
 
     p = sub.add_parser(
         "export", help="export a transport-texture bake as a directional lightmap (L1 SH, "
@@ -25,23 +25,14 @@ def add_parsers(sub) -> None:
                     "mouse.")
     p.add_argument("file", metavar="FILE.blend")
     p.add_argument("--object", required=True, metavar="NAME")
-    p.add_argument("--format", required=True, choices=FORMATS)
-    p.add_argument("--terms", type=int, metavar="K",
-                   help="rti-hsh: 4, 9 (default) or 16 terms (OpenLIME reads 4 and 9)")
+    add_setting_options(p, ExportSettings, ("format", "terms"), defaults=True)
     p.add_argument("--env", metavar="HDR.exr", help="SH formats: light by this equirect EXR")
-    p.add_argument("--rotate", type=float, default=0.0, metavar="DEG",
-                   help="with --env: its rotation about +z, as a world Mapping node's Z")
+    add_setting_options(p, ExportSettings, ("rotate",), defaults=True)
     p.add_argument("--sun", type=parse_az_el, metavar="AZ,EL",
                    help="SH formats: light by a sun (azimuth, elevation in degrees)")
-    p.add_argument("--sun-angle", type=float, default=0.0, metavar="DEG")
-    p.add_argument("--strength", type=float, default=1.0,
-                   help="the light's strength (sun: W/m^2; env: a multiplier)")
+    add_setting_options(p, ExportSettings, ("sun_angle", "strength"), defaults=True)
     p.add_argument("--color", type=parse_rgb, default=(1.0, 1.0, 1.0), metavar="R,G,B")
-    p.add_argument("--exposure", type=float, metavar="X",
-                   help="RTI: radiance scale before sRGB encoding (default: the 99.5th "
-                        "percentile of the brightest lights maps to 1)")
-    p.add_argument("--held-out", type=int, default=16, metavar="N",
-                   help="RTI: light directions off the baked ones the error is measured at")
+    add_setting_options(p, ExportSettings, ("exposure", "held_out"), defaults=True)
     p.add_argument("--out", metavar="DIR", help="output folder (default: next to the .blend, "
                    "<name>_relight/)")
     p.add_argument("--force", action="store_true", help="replace existing export files")

@@ -182,14 +182,6 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         description="Sun directions of the glossy anchors' bakes (one Cycles bake per material, "
                     "anchor and direction)")
     # export (relight export): directional lightmaps and RTI models of a transport bake
-    export_format: EnumProperty(name="Format", default="rti-hsh", items=[
-        ("rti-hsh", "RTI HSH", "Hemispherical harmonics planes + a relightable web page "
-                               "(relight tools' layout, as OpenLIME reads it)"),
-        ("rti-ptm", "RTI PTM", "Polynomial texture map planes (6 terms) + a web page"),
-        ("sh-l1", "L1 SH Lightmap", "Four half EXRs of L1 spherical harmonics (Godot's "
-                                    "directional lightmap layers and axes), for one lighting"),
-        ("monosh", "MonoSH Lightmap", "Bakery's MonoSH: L0 EXR + 8-bit direction (Unity axes), "
-                                      "for one lighting")])
     export_terms: EnumProperty(name="Terms", default="9", items=[
         ("4", "4", "HSH order 2"), ("9", "9", "HSH order 3 (OpenLIME's)"),
         ("16", "16", "HSH order 4 (our viewer only)")])
@@ -256,6 +248,7 @@ TRANSPORT_FIELDS = ("model", "viewport", "tol", "components", "indirect_samples"
 
 def _declared_properties() -> dict:
     from ..bakes.steerable_bake import TextureBakeSettings
+    from ..bakes.export import ExportSettings
     from ..bakes.material_bake import MaterialBakeSettings
     from ..bakes.texture_transport import TransportTextureSettings
     from ..bakes.transport_bake import TransportSettings
@@ -263,6 +256,8 @@ def _declared_properties() -> dict:
     return {**properties(TextureBakeSettings, LOBES_FIELDS, defaults=_LOBES),
             **properties(TransportSettings, VERTEX_FIELDS, rename=VERTEX_PROPS),
             **properties(MaterialBakeSettings, MATERIAL_FIELDS, rename=MATERIAL_PROPS),
+            **properties(ExportSettings, ("format",), rename={"format": "export_format"},
+                         defaults={"export_format": "rti-hsh"}),
             **properties(TransportTextureSettings, ("resolution",), defaults=_TRANSPORT),
             **properties(TransportTextureSettings, ("bounces",), defaults=_LOBES),
             **properties(TransportTextureSettings, TRANSPORT_FIELDS, rename=TRANSPORT_PROPS,

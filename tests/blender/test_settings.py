@@ -1,0 +1,100 @@
+"""Settings declared once (lt_addon/settings.py): what the panel's Run On sends is what the CLI
+parses back, the panel's properties carry the declared ranges, and the declared ranges are
+the ones a bake enforces.
+
+Independent of the declarations' own code paths: the argv goes through the real ``relight``
+parser (argparse), the properties are read back from Blender's RNA after registration."""
+
+import dataclasses
+
+import pytest
+
+pytestmark = pytest.mark.blender
+
+
+def _cases():
+    from relightable_textures.lt_addon.export.fitting import ExportSettings
+    from relightable_textures.lt_addon.transport.bundle import TransportTextureSettings
+    from relightable_textures.operators.bakes.material_bake import MaterialBakeSettings
+    from relightable_textures.operators.bakes.steerable_bake import TextureBakeSettings
+    from relightable_textures.operators.bakes.transport_bake import TransportSettings
+
+    head = ["f.blend", "--object", "X"]
+    return [  # (verb and its required arguments, settings with every declared value changed)
+        (["bake-textures"] + head,
+         TransportTextureSettings(directions="hemi:64:2", resolution=96, bounces=3,
+                                  indirect_resolution=48, indirect_samples=7, model="blocks",
+                                  components=5, tol=0.05, sun_angle=4.5, table_size=48,
+                                  seed=9, viewport="pca")),
+        (["bake-textures", "--method", "lobes"] + head,
+         TextureBakeSettings(order=5, resolution=64, samples=9, bounces=1, frame="tangent",
+                             mode="irradiance", storage="u8", seed=3, world_sampling="none")),
+        (["bake-materials", "--region", "M"] + head,
+         MaterialBakeSettings(regions=["M"], anchors="roughness:0.4,0.8", anchor_samples=17,
+                              bounces=1, samples=5, seed=2, smoothing=0.5, bounce_bake="cycles",
+                              rays=64, anchor_directions="hemi:32")),
+        (["bake-transport", "f.blend", "--object", "X"],
+         TransportSettings(directions="halton:64", bounces=2, samples=8, energy=0.95)),
+        (["export", "f.blend", "--object", "X"],
+         ExportSettings(format="rti-ptm", terms=6, rotate=30.0, sun_angle=3.0, strength=2.5,
+                        exposure=1.5, held_out=8)),
+    ]
+
+
+def test_run_on_argv_parses_back_to_the_same_settings():
+    """to_argv(settings) through the real parser gives every declared value back (a declared
+    field the CLI lacks, or a flag spelt differently, fails here)."""
+    from relightable_textures.lt_addon.settings import declared, to_argv
+    from relightable_textures.operators.cli import build_parser
+
+    parser = build_parser()
+    for verb, settings in _cases():
+        args = parser.parse_args(verb + to_argv(settings))
+        for s in declared(type(settings)):
+            want = getattr(settings, s.name)
+            assert getattr(args, s.name) == want, (verb[0], s.name)
+
+
+def test_declared_ranges_are_the_enforced_ones():
+    """One past each declared bound, every bake's validate() refuses, naming the field."""
+    from relightable_textures.lt_addon.errors import InputError
+    from relightable_textures.lt_addon.settings import declared
+
+    checked = 0
+    for _, settings in _cases():
+        for s in declared(type(settings)):
+            for bad in ([s.hi + (1 if s.kind == "int" else 0.5)] if s.hi is not None else []) + \
+                       ([s.lo - (1 if s.kind == "int" else 0.5)] if s.lo is not None else []):
+                broken = dataclasses.replace(settings, **{s.name: bad})
+                with pytest.raises(InputError):
+                    broken.validate()
+                checked += 1
+    assert checked >= 30       # the declarations above carry at least this many bounds
+
+
+def test_the_panel_properties_carry_the_declared_ranges_and_help(fresh_scene):
+    import bpy
+
+    import relightable_textures
+    from relightable_textures.lt_addon.settings import declared
+    from relightable_textures.lt_addon.transport.bundle import TransportTextureSettings
+    from relightable_textures.operators.bakes.material_bake import MaterialBakeSettings
+    from relightable_textures.operators.ui import properties as pr
+
+    relightable_textures.register()
+    try:
+        rna = bpy.types.Scene.bl_rna.properties["relight"].fixed_type.properties
+        rows = [(TransportTextureSettings, pr.TRANSPORT_FIELDS, pr.TRANSPORT_PROPS),
+                (MaterialBakeSettings, pr.MATERIAL_FIELDS, pr.MATERIAL_PROPS)]
+        for cls, fields, rename in rows:
+            for s in declared(cls, fields):
+                prop = rna[rename.get(s.name, s.name)]
+                assert prop.description == s.help
+                if s.lo is not None:
+                    assert prop.hard_min == pytest.approx(s.lo), s.name
+                if s.hi is not None:
+                    assert prop.hard_max == pytest.approx(s.hi), s.name
+                if s.choices:
+                    assert [i.identifier for i in prop.enum_items] == [c[0] for c in s.choices]
+    finally:
+        relightable_textures.unregister()
