@@ -305,7 +305,7 @@ def write_presets(report, scene, out_dir):
 def measure_presets(out_dir, truth_spp=256):
     """Bake each transport preset exactly as defined (operators/bakes/transport_presets.json) on the
     bumps demo at 256^2, measure it as the sweep does (plus T itself and one 64-spp Cycles bake
-    in the same run) and write the figures into the presets file's ``measured`` blocks."""
+    in the same run) and write the figures into the presets file's ``figures`` blocks."""
     from relightable_textures.lt_addon.io import atomic
     from relightable_textures.lt_addon.transport import sparse_tables as sp
     from relightable_textures.lt_addon.transport.texture import parse_directions

@@ -24,20 +24,21 @@ _KEY = "relightable_textures.setting"
 
 
 def setting(default=dataclasses.MISSING, *, help: str, label: str = "", lo=None, hi=None,
-            choices=None, flag: str = "", metavar: str = "", panel: bool = True,
+            choices=None, flag: str = "", metavar: str = "", panel: bool = True, soft=None,
             default_factory=dataclasses.MISSING):
     """A dataclass field with its user-facing description.
 
     ``label``: the panel's name for it (default: the field name, capitalised); ``lo``/``hi``:
     its range (inclusive); ``choices``: the allowed values, as ``(value, label, description)``
     rows or plain values; ``flag``: its CLI option (default ``--field-name``); ``panel``: False
-    when the panel shows it in another form (it then declares its own property)."""
+    when the panel shows it in another form (it then declares its own property); ``soft``:
+    ``(lo, hi)`` of the panel's slider where the useful range is narrower than the valid one."""
     rows = None
     if choices is not None:
         rows = tuple(c if isinstance(c, tuple) else (c, str(c).capitalize(), "")
                      for c in choices)
     meta = {_KEY: {"help": help, "label": label, "lo": lo, "hi": hi, "choices": rows,
-                   "flag": flag, "metavar": metavar, "panel": panel}}
+                   "flag": flag, "metavar": metavar, "panel": panel, "soft": soft}}
     if default_factory is not dataclasses.MISSING:
         return dataclasses.field(default_factory=default_factory, metadata=meta)
     return dataclasses.field(default=default, metadata=meta)
@@ -59,6 +60,7 @@ class Setting:
     metavar: str
     panel: bool
     required: bool = False      # no default: the CLI option is required
+    soft: tuple | None = None   # the panel slider's (lo, hi), when narrower than the range
 
     def parse(self, text: str):
         """A value of this setting from its command-line text."""
@@ -109,7 +111,8 @@ def declared(cls, names=None) -> list:
             name=name, kind=kind, default=default, optional=optional, help=meta["help"],
             label=meta["label"] or name.replace("_", " ").title(), lo=meta["lo"], hi=meta["hi"],
             choices=meta["choices"], flag=meta["flag"] or "--" + name.replace("_", "-"),
-            metavar=meta["metavar"], panel=meta["panel"], required=required))
+            metavar=meta["metavar"], panel=meta["panel"], required=required,
+            soft=meta.get("soft")))
     return out
 
 

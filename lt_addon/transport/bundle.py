@@ -68,7 +68,7 @@ class TransportTextureSettings:
         "hemi:400:1.5", metavar="SPEC", panel=False,
         help="sun directions, hemi:N[:P] (N hard-sun bakes over the upper hemisphere, 1 sample "
              "each; P > 1 denser near the horizon)")
-    resolution: int = setting(256, lo=4, hi=8192, help="Texture side in texels")
+    resolution: int = setting(256, lo=4, hi=8192, soft=(8, 8192), help="Texture side in texels")
     bounces: int = setting(2, lo=0, hi=64, help="Diffuse bounces (0 = direct light only)")
     indirect: str = "steerable"
     indirect_order: int = 3
@@ -86,10 +86,10 @@ class TransportTextureSettings:
         ("steerable", "Steerable (quadrature)", "The paper's basis fitted noise-free from T"),
         ("none", "None", "Keep T only")), help="What is fitted to T")
     components: int | None = setting(
-        None, lo=0, label="Components",
+        None, lo=0, soft=(0, 512), label="Components",
         help="PCA eigen-textures to keep (the presets' measured figures use a fixed count), or "
              "the steerable order; none (0 in the panel) = as many as the tolerance needs")
-    tol: float = setting(0.02, lo=0.001, hi=0.5, label="PCA Tolerance",
+    tol: float = setting(0.02, lo=1e-6, hi=0.999, soft=(0.001, 0.5), label="PCA Tolerance",
                          help="Relative residual of T the PCA keeps when no component count is "
                               "given (fewer components when larger)")
     block: int = 16

@@ -10,11 +10,12 @@ bake, ``transport_presets.json`` for transport textures), in one schema::
                            "why": "the rule that chose it"}, ...}}
 
 ``settings`` are fields of the method's settings dataclass (:class:`Presets` ignores others);
-``figures`` what was measured for exactly those settings. The measuring tools (``relight bench
+``figures`` what was measured for exactly those settings; a field the file leaves out keeps
+the preset's built-in value (``fallback``). The measuring tools (``relight bench
 --write-presets``, ``benchmarks/bench_transport_textures.py --write-presets``) write their file
 into their output folder, never into the package; adopting new presets is copying that file
-here in a commit. ``fallback`` serves when the file is missing or unreadable, and the panel then
-says the presets are not measured.
+here in a commit. ``fallback`` alone serves when the file is missing or unreadable, and the
+panel then says the presets are not measured.
 """
 
 from __future__ import annotations
@@ -44,9 +45,12 @@ class Presets:
         self.measured = bool(data)
         self._rows = {}
         for name in PRESET_NAMES:
-            row = data["presets"][name] if data else {"settings": fallback[name]}
+            row = data["presets"][name] if data else {"settings": {}}
+            # the file's values over the built-in ones: a file that leaves a field out (the
+            # transport presets' tol) keeps the preset's own value, not the dataclass default
+            merged = {**fallback[name], **row["settings"]}
             self._rows[name] = {
-                "settings": {k: v for k, v in row["settings"].items() if k in fields},
+                "settings": {k: v for k, v in merged.items() if k in fields},
                 "figures": ({**row.get("figures", {}), "why": row.get("why", ""),
                              "scene": row.get("figures", {}).get(
                                  "scene", data["source"].get("scene", "?")),

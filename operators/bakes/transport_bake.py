@@ -220,7 +220,7 @@ class TransportSettings:
                                   help="Cycles samples per vertex (default 1 without bounces: "
                                        "exact for a hard Sun; 64 with bounces)")
     energy: float | None = setting(
-        0.99, lo=0.0, hi=1.0, label="Energy Kept",
+        0.99, lo=0.0, hi=1.0, soft=(0.5, 1.0), label="Energy Kept",
         help="Fraction of the centred transport energy the eigentransports keep (default 0.99)")
     coeffs: int | None = setting(None, lo=1, panel=False,
                                  help="keep exactly d eigentransports")

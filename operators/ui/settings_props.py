@@ -31,6 +31,8 @@ def properties(cls, names=None, *, rename=None, defaults=None, update=None) -> d
                 default=str(default), **kw)
             continue
         limits = {k: v for k, v in (("min", s.lo), ("max", s.hi)) if v is not None}
+        if s.soft is not None:
+            limits.update(soft_min=s.soft[0], soft_max=s.soft[1])
         if s.kind == "int":
             out[prop] = bpy.props.IntProperty(default=int(default or 0), **limits, **kw)
         elif s.kind == "float":

@@ -98,3 +98,22 @@ def test_the_panel_properties_carry_the_declared_ranges_and_help(fresh_scene):
                     assert [i.identifier for i in prop.enum_items] == [c[0] for c in s.choices]
     finally:
         relightable_textures.unregister()
+
+
+def test_a_preset_keeps_the_values_its_file_leaves_out():
+    """transport_presets.json states no tol: each preset keeps its own (draft 0.03, balanced
+    0.02, production 0.01, the built-in table), not the dataclass default 0.02 -- the reading
+    the one preset system first got wrong (found in review, 2026-12-02)."""
+    import json
+    import pathlib
+
+    from relightable_textures.operators.bakes.presets import TRANSPORT
+
+    path = pathlib.Path(TRANSPORT.path)
+    assert all("tol" not in p["settings"]
+               for p in json.loads(path.read_text())["presets"].values())
+    assert [TRANSPORT.settings(n).tol for n in ("draft", "balanced", "production")] == [
+        0.03, 0.02, 0.01]
+    # a --tol of one's own drops the preset's fixed component count (PCA by tolerance)
+    assert TRANSPORT.settings("balanced").components == 96
+    assert TRANSPORT.settings("balanced", tol=0.05).components is None
