@@ -9,6 +9,12 @@ JSON. A rerun with the same key finds them; a changed scene or setting gives ano
 a stale chunk is never read, and :meth:`ChunkCache.prune_others` drops the stale folders. The
 cache is a means to finish a bake, not a product: the bake removes it once its files are
 complete (:meth:`ChunkCache.clear`).
+
+A chunk is checked before it is reused: beside it, ``<chunk>.sha256`` holds the SHA-256 of its
+shape, dtype and bytes, written once the chunk is in place. A chunk whose checksum is missing or
+differs (a worker or a disk that wrote something else, a file edited by hand) or whose floating
+values are not all finite (NaN, inf: a faulty bake) is removed and baked again, and counted in
+:attr:`ChunkCache.rejected`.
 """
 
 from __future__ import annotations
@@ -22,13 +28,21 @@ import numpy as np
 
 from . import atomic
 
-__all__ = ["digest", "ChunkCache"]
+__all__ = ["digest", "checksum", "ChunkCache"]
 
 
 def digest(key) -> str:
     """SHA-256 (hex) of ``key``'s canonical JSON (sorted keys, no spaces; other types by str)."""
     text = json.dumps(key, sort_keys=True, separators=(",", ":"), default=str)
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def checksum(array) -> str:
+    """SHA-256 (hex) of an array's shape, dtype and bytes (C order)."""
+    a = np.ascontiguousarray(array)
+    h = hashlib.sha256(f"{a.shape}|{a.dtype.str}|".encode())
+    h.update(a.tobytes())
+    return h.hexdigest()
 
 
 class ChunkCache:
@@ -40,6 +54,9 @@ class ChunkCache:
         ``<root>/<first 20 hex digits of the key's digest>``.
     reused, written : int
         Chunks :meth:`get` found and :meth:`put` stored since this object was made.
+    rejected : int
+        Chunks :meth:`get` found but refused (unreadable, checksum, non-finite values) and
+        removed, so the bake made them again.
     """
 
     def __init__(self, root: str, key: dict):
@@ -49,6 +66,7 @@ class ChunkCache:
         self.folder = os.path.join(self.root, self.digest[:20])
         self.reused = 0
         self.written = 0
+        self.rejected = 0
         #: {device: chunk count} of the folders :meth:`prune_others` removed whose key differs
         #: from this one only in its ``device`` (a bake resumed on another device: those chunks
         #: are another sample set, so they are baked again, and the bake says so)
@@ -66,8 +84,17 @@ class ChunkCache:
             return None
         try:
             arr = np.load(p, allow_pickle=False)
+            with open(p + ".sha256") as fh:
+                ok = fh.read().strip() == checksum(arr)
         except (OSError, ValueError, EOFError):
-            os.remove(p)
+            ok = False
+        if ok and arr.dtype.kind == "f":
+            ok = bool(np.isfinite(arr).all())
+        if not ok:
+            for q in (p, p + ".sha256"):
+                if os.path.exists(q):
+                    os.remove(q)
+            self.rejected += 1
             return None
         self.reused += 1
         return arr
@@ -78,8 +105,10 @@ class ChunkCache:
         key_file = os.path.join(self.folder, "key.json")
         if not os.path.exists(key_file):   # what the chunks depend on, for a person to read
             atomic.write_json(key_file, self.key, default=str)
+        array = np.asarray(array)
         with atomic.atomic_path(self.path(chunk)) as tmp:
-            np.save(tmp, np.asarray(array), allow_pickle=False)
+            np.save(tmp, array, allow_pickle=False)
+        atomic.write_text(self.path(chunk) + ".sha256", checksum(array) + "\n")
         self.written += 1
 
     def prune_others(self) -> int:

@@ -747,7 +747,8 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
     base = np.array([material_colour(bpy.data.materials[r])[0] for r in settings.regions])
     finish = np.array([material_finish(bpy.data.materials[r]) for r in settings.regions])
     chunks = {"chunks_total": len(plan), "chunks_reused": reused,
-              "chunk_directions": CHUNK_DIRECTIONS}
+              "chunk_directions": CHUNK_DIRECTIONS,
+              "chunks_rejected": cache.rejected if cache is not None else 0}
     if distributed is not None:
         chunks["distributed"] = distributed
     meta = {"anchors": settings.anchors, "bounces": settings.bounces, "domain": settings.domain,

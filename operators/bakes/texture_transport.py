@@ -220,7 +220,9 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
     result.chunks = {"chunks_total": len(chunks) + ind.get("chunks_total", 0),
                      "chunks_reused": reused + ind.get("chunks_reused", 0),
                      "chunk_directions": CHUNK_DIRECTIONS,
-                     "direct_chunks": len(chunks), "indirect_chunks": ind.get("chunks_total", 0)}
+                     "direct_chunks": len(chunks), "indirect_chunks": ind.get("chunks_total", 0),
+                     # kept chunks refused on reuse (checksum, NaN) and baked again
+                     "chunks_rejected": sum(c.rejected for c in result.cache)}
     other = {}
     for c in result.cache:
         for dev, n in c.other_devices.items():

@@ -175,7 +175,7 @@ def bake_transport(scene, obj, directions, bounces: int = 0, samples: int | None
     figures = None
     if cache is not None:
         figures = {"chunks_total": len(chunks), "chunks_reused": reused,
-                   "chunk_directions": CHUNK_DIRECTIONS,
+                   "chunk_directions": CHUNK_DIRECTIONS, "chunks_rejected": cache.rejected,
                    **({"other_device_chunks": cache.other_devices} if cache.other_devices
                       else {})}
         if distributed is not None:

@@ -55,3 +55,27 @@ def test_a_nested_stage_cache_survives_the_outer_prune_and_both_clear(tmp_path):
     lights.clear()
     direct.clear()
     assert os.listdir(tmp_path / "out") == []
+
+
+def test_a_chunk_with_other_bytes_or_non_finite_values_is_baked_again(tmp_path):
+    """Issue 34's faulty chunk: a valid .npy whose values are NaN (what a faulty worker or disk
+    can leave) was reused and the bake died at the end. Now a chunk is reused only when its
+    checksum (written by put) matches and its floats are finite; otherwise it is removed with
+    its checksum and counted as rejected, so the bake makes it again."""
+    c = ChunkCache(str(tmp_path), {"k": 1})
+    good = np.linspace(0, 1, 64, dtype=np.float16).reshape(8, 8)
+    for name in ("same", "nan", "edited", "unsigned"):
+        c.put(name, good)
+    np.save(c.path("nan"), np.full_like(good, np.nan))          # replaced behind put's back
+    bad = good.copy()
+    bad[3, 3] += np.float16(0.25)
+    np.save(c.path("edited"), bad)                               # finite, but not what put wrote
+    os.remove(c.path("unsigned") + ".sha256")                    # killed between the two writes
+    np.testing.assert_array_equal(c.get("same"), good)
+    for name in ("nan", "edited", "unsigned"):
+        assert c.get(name) is None, name
+        assert not os.path.exists(c.path(name)) and not os.path.exists(c.path(name) + ".sha256")
+    assert (c.reused, c.rejected, c.written) == (1, 3, 4)
+    # a NaN the bake itself put is refused too (a faulty Cycles result is not kept)
+    c.put("nan_put", np.full(4, np.nan, np.float32))
+    assert c.get("nan_put") is None and c.rejected == 4
