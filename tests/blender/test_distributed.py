@@ -351,7 +351,7 @@ def test_basis_light_stages_distribute_and_resume_bit_for_bit(blend, tmp_path):
             break
     gen.close()
     nested = list(out.glob(".relight_cache/Bumps/indirect/*/light_*.npy"))
-    assert len(nested) == 5 and len(list(out.glob(".relight_cache/Bumps/*/direct_*"))) == 3
+    assert len(nested) == 5 and len(list(out.glob(".relight_cache/Bumps/*/direct_*.npy"))) == 3
     res = run(tx.bake_transport_textures(scene, [obj], ts, str(out)))
     assert res.chunks["chunks_reused"] == 3 + 5 and res.chunks["chunks_total"] == 12
     tx.write_bake(res, [obj], str(out))

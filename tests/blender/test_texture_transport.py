@@ -116,14 +116,26 @@ def test_a_cancelled_bake_resumes_from_its_finished_chunks_bit_for_bit(bumps, tm
     cancel_after(40)
     assert os.listdir(out) == [tx.CACHE_FOLDER]     # no store, no report: only the chunks
     (folder,) = list((out / tx.CACHE_FOLDER / "Bumps").iterdir())
-    assert sorted(p.name for p in folder.iterdir()) == ["direct_00000.npy", "direct_00016.npy",
-                                                        "key.json"]
+    assert sorted(p.name for p in folder.iterdir()) == [
+        "direct_00000.npy", "direct_00000.npy.sha256", "direct_00016.npy",
+        "direct_00016.npy.sha256", "key.json"]
     res = bake(scene, [obj], out, model="none")
     assert res.chunks == {"chunks_total": 3, "chunks_reused": 2, "chunk_directions": 16,
-                          "direct_chunks": 3, "indirect_chunks": 0}
+                          "direct_chunks": 3, "indirect_chunks": 0, "chunks_rejected": 0}
     np.testing.assert_array_equal(np.load(res.objects[0].store_path), T_ref)
     reports = tx.write_bake(res, [obj], str(out))
     assert reports[0]["chunks_reused"] == 2 and tx.CACHE_FOLDER not in os.listdir(out)
+
+    # issue 34: a kept chunk whose values are NaN (a faulty worker or disk: a valid .npy) is
+    # refused on reuse and baked again; the result is still the uninterrupted bake's, bit for bit
+    cancel_after(40)
+    (folder,) = list((out / tx.CACHE_FOLDER / "Bumps").iterdir())
+    kept = np.load(folder / "direct_00016.npy")
+    np.save(folder / "direct_00016.npy", np.full_like(kept, np.nan))
+    res = bake(scene, [obj], out, model="none")
+    assert (res.chunks["chunks_reused"], res.chunks["chunks_rejected"]) == (1, 1)
+    np.testing.assert_array_equal(np.load(res.objects[0].store_path), T_ref)
+    tx.write_bake(res, [obj], str(out))
 
     cancel_after(20)
     obj.location.x += 0.01                          # the scene changed: no chunk may be reused
