@@ -2,7 +2,8 @@
 report it is written as, reading it back and relighting it (NumPy).
 
 The bundle of one object, in the bake's output folder (``<name>`` its object's safe name):
-``<name>_transport.npy``-style store (:class:`.texture.TransportStore`, T as float16, S x R x R),
+``<name>_transport_texture.npy`` with its ``.json`` header (:class:`.texture.TransportStore`,
+T as float16, S x R x R),
 ``<name>_albedo.exr``, ``<name>_indirect.exr`` (a steerable texture, when the scene bounces),
 the fitted model (``_transport_model.npz`` or ``_transport_steerable.exr``) and
 ``<name>_texture_report.json``: ``kind`` :data:`KIND`, ``format`` :data:`FORMAT`, the settings,

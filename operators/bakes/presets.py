@@ -105,7 +105,7 @@ TRANSPORT = Presets(TransportTextureSettings, "transport_presets.json", {
                      indirect_samples=64, tol=0.02),
     "production": dict(directions="hemi:1600:1.5", resolution=256, indirect_resolution=256,
                        indirect_samples=256, tol=0.01, table_size=64)},
-    drops={"tol": ("components",), "components": ("components",)})
+    drops={"tol": ("components",)})
 
 #: Each texture method's presets, by the panel's and the CLI's method name.
 BY_METHOD = {"lobes": LOBES, "transport": TRANSPORT}

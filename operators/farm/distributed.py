@@ -152,7 +152,7 @@ def worker_device(cache_key: dict):
 
 
 def bake_chunk(blend_path: str, object_names: list, settings: dict, start: int, stop: int,
-               cache_root: str, cache_key: dict, threads: int = 0, stage=None,
+               cache_root: str, cache_key: dict, threads: int = 0, stage: str = "",
                part: tuple | None = None) -> dict:
     """Worker task: bake directions ``start:stop`` into the chunk cache with ``threads`` Cycles
     threads (0: Cycles' own choice, all cores); returns the chunk's figures. ``stage`` is the
@@ -191,10 +191,8 @@ def stage_name(stage) -> str:
     return f"{stage.__module__}:{stage.__qualname__}"
 
 
-def _resolve(stage):
-    """The chunk function a worker runs: ``stage`` itself, or imported by its name."""
-    if callable(stage):
-        return stage
+def _resolve(stage: str):
+    """The chunk function a worker runs, imported by its name (:func:`stage_name`)."""
     import importlib
 
     module, _, name = str(stage).partition(":")
