@@ -46,6 +46,8 @@ VIEWPORTS = ("auto", "transport", "pca")
 
 
 INDIRECT = ("steerable", "none")
+#: How the direct transport is baked: rays where the scene allows (auto), rays or refuse, Cycles calls.
+DIRECT = ("auto", "rays", "cycles")
 
 
 #: Held-out truth lights (azimuth, elevation in degrees): the four elevations of issue 13.
@@ -71,6 +73,13 @@ class TransportTextureSettings:
              "each; P > 1 denser near the horizon)")
     resolution: int = setting(256, lo=4, hi=8192, soft=(8, 8192), help="Texture side in texels")
     bounces: int = setting(2, lo=0, hi=64, help="Diffuse bounces (0 = direct light only)")
+    direct: str = setting("auto", label="Direct Light", choices=(
+        ("auto", "Auto", "Ray-traced (Embree) when the scene allows it, else one Cycles call per "
+         "direction; the report says which and why"),
+        ("rays", "Rays", "Ray-traced direct light; refuse a scene rays cannot reproduce (alpha "
+         "shadows, hair, volumes, true displacement)"),
+        ("cycles", "Cycles", "One Cycles bake call per direction: the reference path")),
+        help="How the direct transport is baked")
     indirect: str = "steerable"
     indirect_order: int = 3
     indirect_resolution: int = setting(
@@ -148,6 +157,8 @@ class TransportTextureSettings:
             raise InputError(f"kernel must be one of {tt.KERNELS}, got {self.kernel!r}")
         if not 8 <= self.table_size <= 256:
             raise InputError(f"table size must be in 8..256, got {self.table_size}")
+        if self.direct not in DIRECT:
+            raise InputError(f"direct must be one of {DIRECT}, got {self.direct!r}")
         if self.viewport not in VIEWPORTS:
             raise InputError(f"viewport must be one of {VIEWPORTS}, got {self.viewport!r}")
         check_ranges(self)
@@ -179,6 +190,7 @@ class TransportTextureResult:
     cache: object = None             # the stages' ChunkCaches, inner first (None: resume off)
     chunks: dict = field(default_factory=dict)   # chunks_total, chunks_reused, chunk_directions
     indirect_chunks: dict = None     # the indirect stage's light chunks (light_stacks figures)
+    direct: dict = None              # which engine baked the direct term, why, and its figures
 
 
 def fit_model(store, settings: TransportTextureSettings, albedo):
@@ -460,6 +472,7 @@ def write_bundle(result: TransportTextureResult, names: list, out_dir: str,
             "model": model_summary(b.model, result.directions.size),
             "timings": {k: round(v, 3) for k, v in result.seconds.items()},
             "device": device or {},
+            "direct": result.direct or {"engine": "cycles"},
             "bake_calls": result.bake_calls,
             "peak_rss_above_start_mb": round(result.peak_rss_mb, 1),
             "rss_growth_while_streaming_mb": round(result.growth_after_first_mb, 1),

@@ -297,6 +297,16 @@ class TransportStore:
         self._array[s] = img.astype(np.float16)
         self._array.flush()
 
+    def write_rows(self, start: int, rows) -> None:
+        """Store directions ``start:start + n`` at once, rows (n, R*R); flushed once."""
+        rows = np.asarray(rows, dtype=np.float32)
+        if rows.ndim != 2 or rows.shape[1] != self.n_texels:
+            raise ValueError(f"rows must have shape (n, {self.n_texels}), got {rows.shape}")
+        if np.any(np.abs(rows) > 65504.0):
+            raise OverflowError("a transport value exceeds the float16 range")
+        self._array[start:start + len(rows)] = rows.astype(np.float16)
+        self._array.flush()
+
     def finish(self) -> "TransportStore":
         """Flush and close for writing; returns a reader of the still-temporary store (its
         header beside it). :meth:`commit` renames both into place, :meth:`abort` drops them."""

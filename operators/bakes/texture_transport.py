@@ -121,10 +121,22 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
     calls = 0
     seconds = {}
 
-    # 1. albedo (colour pass only)
+    # which engine bakes the direct term (rays where the scene allows, else Cycles calls)
+    from . import ray_direct
+
+    engine = ray_direct.choose(scene, objects, settings)
+    rays = engine["engine"] == "rays"
+    mapped = ray_direct.needs_normals(objects) if rays else [False] * len(objects)
+
+    # 1. albedo (colour pass only), and the shading normals rays need for normal maps
+    normals = [None] * len(objects)
     with EnvironmentBake(scene, objects, R, 1, 0, (8, 16), mode="irradiance", seed=settings.seed,
                          world_sampling="none", passes="color") as session:
         albedos = session.bake_all(np.zeros((8, 16), np.float32))
+        if any(mapped):
+            baked = session.bake_normals()
+            normals = [ray_direct.world_normals(o, n) if m else None
+                       for o, n, m in zip(objects, baked, mapped)]
         seconds["albedo_cycles"] = session.bake_seconds
         calls += session.bake_calls
     yield Progress(1, total, "albedo baked")
@@ -133,14 +145,18 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
     # also kept in the chunk cache, so a cancelled or killed bake run again redoes only the
     # chunks it is missing (the cache goes once the bake's files are written)
     os.makedirs(out_dir, exist_ok=True)
+    # (rays put no chunks in the cache: a rerun casts them again in less time than reading them
+    # back; the cache folder still holds the indirect stage's chunks)
     cache = direct_chunk_cache(scene, objects, settings, out_dir) if resume else None
     stores = [tt.TransportStore.create(
         os.path.join(out_dir, f"{atomic.safe_name(o.name)}_transport_texture.npy"), dset, R,
         {"object": o.name, "kind": "direct_irradiance_over_pi", "samples": 1,
-         "seed": settings.seed,
-         "texel_sampling": "1 sample at the texel centre (Cycles' first bake sample)",
+         "seed": settings.seed, "direct_engine": engine["engine"],
+         "texel_sampling": "1 sample at the texel centre (Cycles' first bake sample)"
+         + ("; rays from Cycles' shading point and shadow-ray rules" if rays else ""),
          "addon_version": __version__}) for o in objects]
-    chunks = [range(a, min(a + CHUNK_DIRECTIONS, S)) for a in range(0, S, CHUNK_DIRECTIONS)]
+    chunks = ([] if rays else
+              [range(a, min(a + CHUNK_DIRECTIONS, S)) for a in range(0, S, CHUNK_DIRECTIONS)])
     cached = [cache.get(f"direct_{c.start:05d}") if cache else None for c in chunks]
     reused = sum(c is not None for c in cached)
     distributed = None
@@ -162,6 +178,11 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
     first = peak
     seconds["direct_cycles"] = 0.0
     try:
+        if rays:
+            engine.update((yield from ray_direct.bake(scene, objects, settings, dset, stores,
+                                                      normals, 2, total)))
+            seconds["direct_rays"] = engine["seconds"]
+            peak = first = max(peak, _rss_mb())
         missing = any(c is None for c in cached)
         with (EnvironmentBake(scene, objects, R, 1, 0, (8, 16), mode="irradiance",
                               seed=settings.seed, world_sampling="none", passes="direct")
@@ -215,6 +236,7 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
         for r in readers:
             r.abort()
         raise
+    result.direct = engine
     result.cache = [c for c in (lights, cache) if c is not None]   # cleared in this order
     ind = result.indirect_chunks or {}
     result.chunks = {"chunks_total": len(chunks) + ind.get("chunks_total", 0),

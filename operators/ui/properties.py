@@ -234,6 +234,7 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
 # (a transport_ prefix where the word is ambiguous). New scenes hold the balanced presets.
 #: Panel property of each transport setting whose name alone would be ambiguous.
 TRANSPORT_PROPS = {"model": "transport_model", "viewport": "transport_viewport",
+                   "direct": "transport_direct",
                    "tol": "transport_tol", "components": "transport_components"}
 #: Panel property of each declared per-vertex bake setting (the Vertex Transport box).
 VERTEX_FIELDS = ("directions", "bounces", "energy")
@@ -242,7 +243,7 @@ VERTEX_PROPS = {f: "vertex_" + f for f in VERTEX_FIELDS}
 MATERIAL_FIELDS = ("bounces", "bounce_bake", "rays", "samples", "anchor_samples", "smoothing")
 MATERIAL_PROPS = {f: "material_" + f for f in MATERIAL_FIELDS}
 LOBES_FIELDS = ("frame", "order", "samples", "storage", "mode", "world_sampling")
-TRANSPORT_FIELDS = ("model", "viewport", "tol", "components", "indirect_samples",
+TRANSPORT_FIELDS = ("direct", "model", "viewport", "tol", "components", "indirect_samples",
                     "indirect_resolution", "table_size")
 
 

@@ -1,0 +1,112 @@
+"""The occlusion-ray engine: Embree through ``embreex`` (a wheel per platform and Python, bundled
+with the extension like SciPy). Where it cannot be imported, :func:`available` says why and the bake
+falls back to Cycles calls.
+
+Rays are cast in batches from worker threads: ``embreex`` loops over a batch without the GIL, so
+threads scale with cores (one batch per thread; NumPy's work between batches also releases it).
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+#: Rays per engine call: big enough to amortise Python, small enough to keep threads busy.
+BATCH = 1 << 16
+
+
+def available() -> tuple[bool, str]:
+    """(True, "embreex <version>") when the engine can be used, else (False, the reason)."""
+    try:
+        import embreex  # noqa: F401
+        from embreex import rtcore_scene  # noqa: F401
+        from embreex.mesh_construction import TriangleMesh  # noqa: F401
+    except Exception as exc:   # ImportError, or a wheel that does not load here
+        return False, f"embreex cannot be imported ({type(exc).__name__}: {exc})"
+    try:
+        from importlib.metadata import version
+
+        return True, f"embreex {version('embreex')}"
+    except Exception:
+        return True, "embreex"
+
+
+def default_threads() -> int:
+    """Threads for ray casting: every core the process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:   # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+class Occluder:
+    """A BVH over world-space triangles that answers "is this ray blocked?".
+
+    Parameters
+    ----------
+    vertices : array_like, shape (N, 3)
+        World-space vertex positions (metres).
+    triangles : array_like, shape (T, 3)
+        Vertex indices of every shadow-casting triangle.
+    threads : int, optional
+        Threads for :meth:`occluded` (0: :func:`default_threads`).
+    """
+
+    def __init__(self, vertices, triangles, threads: int = 0):
+        ok, why = available()
+        if not ok:
+            raise RuntimeError(why)
+        from embreex import rtcore_scene
+        from embreex.mesh_construction import TriangleMesh
+
+        v = np.ascontiguousarray(vertices, dtype=np.float32)
+        t = np.ascontiguousarray(triangles, dtype=np.int32)
+        if v.ndim != 2 or v.shape[1] != 3 or t.ndim != 2 or t.shape[1] != 3:
+            raise ValueError(f"need vertices (N, 3) and triangles (T, 3), got {v.shape}, {t.shape}")
+        if t.size and (t.min() < 0 or t.max() >= len(v)):
+            raise ValueError("triangle indices out of range")
+        if not np.all(np.isfinite(v)):
+            raise ValueError("vertices contain NaN or inf")
+        self.n_triangles = int(len(t))
+        self.threads = int(threads) or default_threads()
+        self._scene = rtcore_scene.EmbreeScene()
+        if len(t):
+            TriangleMesh(self._scene, v, t)
+        self.rays = 0
+
+    def occluded(self, origins, directions) -> np.ndarray:
+        """Whether each ray ``origins[i] + t directions[i]`` (t > 0) meets a triangle.
+
+        Parameters
+        ----------
+        origins : array_like, shape (M, 3)
+        directions : array_like, shape (M, 3) or (3,)
+            Unit directions (one for all rays when given once).
+
+        Returns
+        -------
+        ndarray, shape (M,), bool
+        """
+        o = np.ascontiguousarray(origins, dtype=np.float32).reshape(-1, 3)
+        d = np.ascontiguousarray(directions, dtype=np.float32).reshape(-1, 3)
+        if len(d) not in (1, len(o)):
+            raise ValueError(f"{len(d)} directions for {len(o)} origins")
+        out = np.zeros(len(o), bool)
+        if not len(o) or not self.n_triangles:
+            return out
+        self.rays += len(o)
+        starts = range(0, len(o), BATCH)
+
+        def run(a):
+            b = min(a + BATCH, len(o))
+            dd = d if len(d) == 1 else d[a:b]
+            out[a:b] = self._scene.run(o[a:b], dd, query="OCCLUDED") == 0
+        if self.threads == 1 or len(starts) == 1:
+            for a in starts:
+                run(a)
+        else:
+            with ThreadPoolExecutor(self.threads) as pool:
+                list(pool.map(run, starts))
+        return out

@@ -1,0 +1,198 @@
+"""Shading points of a bake and Cycles' rules for the shadow ray leaving them (bpy-free).
+
+A texel's shading point is the barycentric point of its triangle (:mod:`.texels`). What Cycles
+does there for a sun (``kernel/light/sample.h``, ``kernel/closure/bsdf.h``; Blender 4.2-5.x):
+
+* **cosine**: a diffuse closure evaluates ``max(0, dot(Ns, L))`` with the closure's normal ``Ns``
+  -- the smooth interpolated normal ``N`` (flat faces: the geometric normal ``Ng``), or the
+  normal/bump-mapped one. Where ``Ns != N``, the diffuse eval is multiplied by the bump shadowing
+  term of Chiang et al. 2019 (:func:`bump_shadowing`).
+* **shadow-ray origin** (``shadow_ray_offset``): on a smooth-shaded triangle of an object whose
+  *shadow terminator geometry offset* (``cutoff``, 0.1 by default) is positive, the origin is lifted
+  along the interpolated normal by Hanika's parabolic surface estimate
+  (``shadow_ray_smooth_surface_offset``), by an amount that fades in as the light nears the
+  terminator; the triangle itself is then skipped only if the light is above its plane.
+  Otherwise the ray starts at ``P`` and skips its own triangle.
+* Self-intersection: Embree has no "skip this primitive", so the origin is pushed off the
+  triangle's plane by :data:`EPSILON` (relative to the coordinates' size) to the side the skip rule
+  leaves the ray on.
+
+All arrays are float64 in world space (metres); normals are unit vectors.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Origin push off the triangle's plane, relative to max(1, |P|) (float32 rays carry ~6e-8).
+EPSILON = 2e-5
+
+
+@dataclass
+class ShadingPoints:
+    """What a bake samples at each of its ``P`` points (one per covered texel).
+
+    Attributes
+    ----------
+    P : (P, 3) position;  Ng : (P, 3) geometric normal (winding, mirrored objects flipped);
+    N : (P, 3) smooth normal (``Ng`` on flat faces);  Ns : (P, 3) closure normal (``N`` unless
+    a normal or bump map changes it);  lift : (P, 3) Hanika's offset vector ``n * h`` for
+    ``L`` above ``Ng`` (zeros on flat faces);  cutoff : (P,) the object's terminator geometry
+    offset (0: no lift).
+    """
+
+    P: np.ndarray
+    Ng: np.ndarray
+    N: np.ndarray
+    Ns: np.ndarray
+    lift: np.ndarray
+    cutoff: np.ndarray
+
+    @property
+    def size(self) -> int:
+        return len(self.P)
+
+    def mapped(self):
+        """Indices of the points whose closure normal differs from ``N`` (None if none)."""
+        if getattr(self, "_mapped_for", None) is not self.Ns:
+            m = np.nonzero(np.any(np.abs(self.Ns - self.N) > 1e-6, axis=1))[0]
+            self._mapped, self._mapped_for = (m if m.size else None), self.Ns
+        return self._mapped
+
+    def compact(self) -> dict:
+        """float32 copies for the per-direction ray set-up (made once, then cached)."""
+        c = getattr(self, "_compact", None)
+        if c is None:
+            eps = EPSILON * np.maximum(1.0, np.abs(self.P).max(axis=1))
+            c = {"P": self.P.astype(np.float32), "N": self.N.astype(np.float32),
+                 "Ng": self.Ng.astype(np.float32), "lift": self.lift.astype(np.float32),
+                 "cutoff": self.cutoff.astype(np.float32),
+                 "epsNg": (eps[:, None] * self.Ng).astype(np.float32)}
+            self._compact = c
+        return c
+
+
+def _unit(v):
+    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-30)
+
+
+def shading_points(vertices, triangles, corner_normals, smooth, triangle, bary,
+                   cutoff: float = 0.1, mirrored: bool = False, Ns=None) -> ShadingPoints:
+    """Shading points on a mesh.
+
+    Parameters
+    ----------
+    vertices : (V, 3) world positions;  triangles : (T, 3) vertex indices;
+    corner_normals : (T, 3, 3) world unit normals at each triangle corner (Cycles' vertex normals:
+    Blender splits vertices at sharp edges, so these are the corner normals);
+    smooth : (T,) bool, smooth-shaded faces;  triangle : (P,) the sampled triangle;
+    bary : (P, 3) barycentric weights;  cutoff : the object's shadow terminator geometry offset;
+    mirrored : the object's transform has a negative determinant (Cycles flips ``Ng``);
+    Ns : (P, 3) closure normals (normal maps) or None.
+    """
+    V = np.asarray(vertices, np.float64)
+    tri = np.asarray(triangles, np.int64)[triangle]
+    w = np.asarray(bary, np.float64)
+    Vt = V[tri]                                              # (P, 3 corners, 3)
+    Nt = np.asarray(corner_normals, np.float64)[triangle]    # (P, 3, 3)
+    P = np.einsum("pk,pkj->pj", w, Vt)
+    Ng = _unit(np.cross(Vt[:, 1] - Vt[:, 0], Vt[:, 2] - Vt[:, 0]))
+    if mirrored:
+        Ng = -Ng
+    sm = np.asarray(smooth, bool)[triangle]
+    n = np.einsum("pk,pkj->pj", w, Nt)                       # Cycles does not normalise it here
+    N = np.where(sm[:, None], _unit(n), Ng)
+    lift = np.zeros_like(P)
+    if cutoff > 0 and sm.any():
+        lift[sm] = smooth_surface_lift(Vt[sm], Nt[sm], w[sm], n[sm], Ng[sm])
+    Ns = N if Ns is None else _unit(np.asarray(Ns, np.float64))
+    return ShadingPoints(P, Ng, N, Ns, lift, np.where(sm, float(cutoff), 0.0))
+
+
+def smooth_surface_lift(Vt, Nt, w, n, Ng):
+    """Cycles' ``shadow_ray_smooth_surface_offset`` for lights above ``Ng`` (non-transmission):
+    the vector ``n * h`` from the flat triangle to Hanika's smooth-surface estimate.
+
+    Vt, Nt : (P, 3, 3) corner positions and unit normals;  w : (P, 3) barycentrics (Cycles'
+    u = w0, v = w1, w = w2 of its own ``1 - u - v, u, v``);  n : (P, 3) unnormalised interpolated
+    normal;  Ng : (P, 3).
+    """
+    u, v, ww = w[:, 0], w[:, 1], w[:, 2]
+    V0, V1, V2 = Vt[:, 0], Vt[:, 1], Vt[:, 2]
+    N0, N1, N2 = Nt[:, 0], Nt[:, 1], Nt[:, 2]
+    dot = lambda a, b: np.einsum("pj,pj->p", a, b)   # noqa: E731
+    P = V0 * u[:, None] + V1 * v[:, None] + V2 * ww[:, None]
+    a = dot(N2 - N0, V0 - V2)
+    b = dot(N2 - N1, V1 - V2)
+    c = dot(N1 - N0, V1 - V0)
+    h = a * u * (u - 1) + (a + b + c) * u * v + b * v * (v - 1)
+    front = dot(n, Ng) > 0
+    # front: local linear envelope above the corners' tangent planes
+    h0 = np.maximum(np.maximum(dot(V1 - V0, N0), dot(V2 - V0, N0)), 0.0)
+    h1 = np.maximum(np.maximum(dot(V0 - V1, N1), dot(V2 - V1, N1)), 0.0)
+    h2 = np.maximum(np.maximum(dot(V0 - V2, N2), dot(V1 - V2, N2)), 0.0)
+    h0 = np.maximum(dot(V0 - P, N0) + h0, 0.0)
+    h1 = np.maximum(dot(V1 - P, N1) + h1, 0.0)
+    h2 = np.maximum(dot(V2 - P, N2) + h2, 0.0)
+    hf = np.maximum(np.minimum(np.minimum(h0, h1), h2), h * 0.5)
+    # flipped normals
+    g0 = np.maximum(np.maximum(dot(V0 - V1, N0), dot(V0 - V2, N0)), 0.0)
+    g1 = np.maximum(np.maximum(dot(V1 - V0, N1), dot(V1 - V2, N1)), 0.0)
+    g2 = np.maximum(np.maximum(dot(V2 - V0, N2), dot(V2 - V1, N2)), 0.0)
+    g0 = np.maximum(dot(P - V0, N0) + g0, 0.0)
+    g1 = np.maximum(dot(P - V1, N1) + g1, 0.0)
+    g2 = np.maximum(dot(P - V2, N2) + g2, 0.0)
+    hb = np.minimum(-np.minimum(np.minimum(g0, g1), g2), h * 0.5)
+    return n * np.where(front, hf, hb)[:, None]
+
+
+def bump_shadowing(N, Ns, L):
+    """Chiang et al.'s bump shadowing term on a diffuse eval where ``Ns != N`` (Cycles'
+    ``bump_shadowing_term(sd->N, sc->N, wo)``); (P,) from (P, 3) normals and (3,) ``L``."""
+    cosNI = Ns @ L
+    Ng = np.where((cosNI < 0)[:, None], -N, N)
+    den = cosNI * np.einsum("pj,pj->p", Ng, Ns)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g = np.where(den != 0, (Ng @ L) / den, 0.0)
+    g2 = g * g
+    return np.where(g >= 1, 1.0, np.where(g < 0, 0.0, -g2 * g + g2 + g))
+
+
+def cosine(points: ShadingPoints, L) -> np.ndarray:
+    """The diffuse closure's cosine factor (P,) for unit ``L`` (3,), before visibility."""
+    cos = np.maximum(points.Ns @ L, 0.0)
+    mapped = points.mapped()
+    if mapped is not None:
+        cos[mapped] *= bump_shadowing(points.N[mapped], points.Ns[mapped], L)
+    return cos
+
+
+def shadow_origins(points: ShadingPoints, L, idx=None) -> np.ndarray:
+    """Origins (M, 3) float32 of the shadow rays towards unit ``L`` from ``points`` (or its
+    ``idx``): Cycles' ``shadow_ray_offset`` plus the self-intersection push (module docstring).
+    Computed in float32, the precision the rays are cast in."""
+    c = points.compact()
+    L = np.asarray(L, np.float32)
+    NL = c["N"] @ L
+    NgL = c["Ng"] @ L
+    transmit = NL < 0
+    NL = np.abs(NL)
+    NgL_s = np.where(transmit, -NgL, NgL)
+    cutoff = c["cutoff"]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        amount = np.where(NL < cutoff, np.clip(2.0 - (NgL_s + NL) / cutoff, 0, 1),
+                          np.clip(1.0 - NgL_s / cutoff, 0, 1))
+    amount = np.where((cutoff > 0) & ~transmit, amount, 0.0).astype(np.float32)
+    # the lift of a transmission direction is the flipped branch; the diffuse bake never needs
+    # it (its cosine is 0), so only the reflection lift is applied
+    lifted = amount > 0
+    skip_self = ~lifted | (NgL_s > 0)
+    # where Cycles skips its own triangle the ray must leave from the side L points to; where it
+    # does not, from the triangle's front (it may then meet its own triangle, as in Cycles)
+    side = np.where(skip_self, np.where(NgL >= 0, 1.0, -1.0), 1.0).astype(np.float32)
+    origin = c["P"] + side[:, None] * c["epsNg"]
+    if lifted.any():
+        origin += c["lift"] * amount[:, None]
+    return origin if idx is None else origin[idx]

@@ -1,0 +1,96 @@
+"""The texture transport bake's direct stage by rays (bpy): choose the engine, read the scene into
+arrays, and stream ``T[s]`` into the stores in chunks of directions.
+
+Cycles keeps what only it can do -- albedo, the shading normals of normal-mapped materials (one
+NORMAL bake), the indirect term and every truth; rays give visibility x cosine
+(:mod:`...lt_addon.rays`). A scene rays cannot reproduce (alpha-transparent casters, hair, volumes,
+true displacement) is baked by Cycles calls under ``--direct auto`` and refused under
+``--direct rays``; the report says which engine baked and why.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ...lt_addon.errors import InputError
+from ...lt_addon.rays import engine as ray_engine
+from ...lt_addon.rays.direct import direct_rows
+from ...lt_addon.rays.texels import margin_sources
+from ..base import ray_scene
+from ..base.jobs import Progress
+
+#: Directions per ray chunk (one engine call each; 64 x 65k texels = 4 M rays).
+RAY_CHUNK = 64
+
+
+def choose(scene, objects, settings) -> dict:
+    """Which engine bakes the direct term: ``{"engine": "rays" | "cycles", "why": ...}``.
+    ``--direct rays`` on a scene rays cannot reproduce raises InputError with the reasons."""
+    if settings.direct == "cycles":
+        return {"engine": "cycles", "why": "asked for (--direct cycles)"}
+    ok, lib = ray_engine.available()
+    if not ok:
+        if settings.direct == "rays":
+            raise InputError(f"--direct rays: the ray engine is not available here: {lib}")
+        return {"engine": "cycles", "why": f"no ray engine: {lib}"}
+    with ray_scene.RenderGeometry(scene) as depsgraph:
+        why = ray_scene.unsupported(scene, depsgraph, objects)
+    if why:
+        if settings.direct == "rays":
+            raise InputError("--direct rays cannot reproduce this scene's direct light: "
+                             + "; ".join(why) + " (use --direct cycles or auto)")
+        return {"engine": "cycles", "why": "rays cannot reproduce: " + "; ".join(why)}
+    return {"engine": "rays", "why": "the scene is supported", "library": lib,
+            "threads": ray_engine.default_threads()}
+
+
+def needs_normals(objects) -> list:
+    """Which objects need Cycles' shading normals (normal or bump mapped), as booleans."""
+    return [ray_scene.normal_mapped(o) for o in objects]
+
+
+def world_normals(obj, object_normals):
+    """Object-space unit normals (R, R, 3) of a Cycles NORMAL bake -> world space (zeros kept)."""
+    M = np.array(obj.matrix_world, np.float64)[:3, :3]
+    n = object_normals @ np.linalg.pinv(M)      # n_world = inv(M)^T n  (row vectors)
+    length = np.linalg.norm(n, axis=-1, keepdims=True)
+    return np.where(length > 0, n / np.maximum(length, 1e-30), 0.0)
+
+
+def bake(scene, objects, settings, dset, stores, normals, step: int, total: int, margin: int = 4):
+    """Generator: fill ``stores`` (one per object, (S, R*R)) with the ray-traced direct
+    transport; ``normals``: per object world closure normals (R, R, 3) or None. Yields Progress
+    from ``step``; returns figures (seconds, rays, rays per second, casters, triangles)."""
+    R = settings.resolution
+    t0 = time.perf_counter()
+    with ray_scene.RenderGeometry(scene) as depsgraph:
+        V, T, n_casters = ray_scene.casters(depsgraph)
+        occluder = ray_engine.Occluder(V, T)
+        receivers = [ray_scene.receiver_points(o, depsgraph, R, nrm)
+                     for o, nrm in zip(objects, normals)]
+    t_scene = time.perf_counter() - t0
+    margins = [margin_sources(smp.covered(), margin) for smp, _ in receivers]
+    S = dset.size
+    t1 = time.perf_counter()
+    eta = None
+    for a in range(0, S, RAY_CHUNK):
+        D = dset.directions[a:a + RAY_CHUNK]
+        for store, (smp, pts), (dst, src) in zip(stores, receivers, margins):
+            rows = np.zeros((len(D), R * R), np.float32)
+            rows[:, smp.texel] = direct_rows(occluder, pts, D)
+            rows[:, dst] = rows[:, src]
+            store.write_rows(a, rows)
+        done = min(a + RAY_CHUNK, S)
+        rate = (time.perf_counter() - t1) / done
+        eta = rate * (S - done)
+        yield Progress(step + done - 1, total,
+                       f"direction {done}/{S} (rays, about {eta:.0f} s left)")
+    seconds = time.perf_counter() - t0
+    rays = occluder.rays
+    return {"engine": "rays", "seconds": round(seconds, 3), "scene_seconds": round(t_scene, 3),
+            "rays": int(rays), "rays_per_second": round(rays / max(seconds - t_scene, 1e-9)),
+            "casters": int(n_casters), "caster_triangles": int(len(T)),
+            "texels": [int(smp.size) for smp, _ in receivers],
+            "margin_texels": margin, "threads": occluder.threads}

@@ -1,0 +1,238 @@
+"""The scene as arrays for the ray engine (bpy): shadow casters, receivers' shading points, and what
+rays cannot reproduce.
+
+The geometry is read from the evaluated depsgraph -- modifiers, instances (collection instances,
+instancing by vertices and faces, geometry nodes), curves and text -- with the modifiers' render
+settings and render visibility, as Cycles bakes it: for the read the viewport settings of every
+modifier and object are set to their render settings and restored (:class:`RenderGeometry`).
+The core of :mod:`...lt_addon.rays` does the rest.
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+from ...lt_addon.rays.shading import shading_points
+from ...lt_addon.rays.texels import texel_samples
+from .meshes import uv_corners
+
+#: Object types whose evaluated geometry Blender can triangulate (to_mesh).
+CASTER_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
+#: Object types rays do not reproduce: their shadows need Cycles.
+UNSUPPORTED_TYPES = {"CURVES": "hair curves", "POINTCLOUD": "a point cloud", "VOLUME": "a volume"}
+
+
+class RenderGeometry:
+    """Context manager: the depsgraph evaluated with every modifier's and object's render
+    settings (viewport levels, show_viewport, hide_viewport), restored on exit. Yields the
+    evaluated depsgraph."""
+
+    def __init__(self, scene):
+        self.scene = scene
+        self._restore = []
+
+    def _set(self, owner, name, value):
+        old = getattr(owner, name)
+        if old != value:
+            self._restore.append((owner, name, old))
+            setattr(owner, name, value)
+
+    def __enter__(self):
+        view_layer = bpy.context.view_layer
+        for o in self.scene.objects:
+            self._set(o, "hide_viewport", o.hide_render)
+            if not o.hide_render and o.hide_get(view_layer=view_layer):
+                o.hide_set(False)
+                self._restore.append((o, "hide_set", True))
+            for m in getattr(o, "modifiers", ()):
+                self._set(m, "show_viewport", m.show_render)
+                if m.type == "SUBSURF" or m.type == "MULTIRES":
+                    lv = "levels" if m.type == "SUBSURF" else "levels"
+                    render = m.render_levels
+                    self._set(m, lv, render)
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        depsgraph.update()
+        return depsgraph
+
+    def __exit__(self, *exc):
+        for owner, name, old in reversed(self._restore):
+            if name == "hide_set":
+                owner.hide_set(old)
+            else:
+                setattr(owner, name, old)
+        self._restore.clear()
+        bpy.context.evaluated_depsgraph_get().update()
+        return False
+
+
+def _to_world_mesh(obj_eval, matrix):
+    """World vertices (V, 3), loop triangles (T, 3) of an evaluated object (None if empty)."""
+    mesh = obj_eval.to_mesh()
+    try:
+        if mesh is None or not len(mesh.vertices):
+            return None
+        co = np.empty(len(mesh.vertices) * 3)
+        mesh.vertices.foreach_get("co", co)
+        M = np.array(matrix, np.float64)
+        co = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
+        mesh.calc_loop_triangles()
+        tri = np.empty(len(mesh.loop_triangles) * 3, np.int64)
+        mesh.loop_triangles.foreach_get("vertices", tri)
+        return co, tri.reshape(-1, 3)
+    finally:
+        obj_eval.to_mesh_clear()
+
+
+def casters(depsgraph, exclude_names=()):
+    """World-space triangles of every shadow caster: (vertices (N, 3), triangles (T, 3),
+    count of objects and instances). Objects whose ``visible_shadow`` is off are left out, as
+    Cycles leaves them out of shadow rays."""
+    verts, tris, n, offset = [], [], 0, 0
+    for inst in depsgraph.object_instances:
+        ob = inst.object
+        if ob.type not in CASTER_TYPES:
+            continue
+        original = ob.original
+        parent = inst.parent.original if inst.is_instance and inst.parent else None
+        if not getattr(original, "visible_shadow", True) or (
+                parent is not None and not getattr(parent, "visible_shadow", True)):
+            continue
+        got = _to_world_mesh(ob, inst.matrix_world)
+        if got is None:
+            continue
+        co, tri = got
+        verts.append(co)
+        tris.append(tri + offset)
+        offset += len(co)
+        n += 1
+    if not verts:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), 0
+    return np.concatenate(verts), np.concatenate(tris), n
+
+
+def _material_trees(obj):
+    for slot in getattr(obj, "material_slots", ()):
+        mat = slot.material
+        if mat is not None and mat.use_nodes and mat.node_tree is not None:
+            yield mat, mat.node_tree
+
+
+def _alpha_reason(mat, tree):
+    for node in tree.nodes:
+        if node.bl_idname in ("ShaderNodeBsdfTransparent", "ShaderNodeHoldout"):
+            return f"material {mat.name!r} has a {node.bl_label} node (see-through shadows)"
+        alpha = node.inputs.get("Alpha") if node.bl_idname == "ShaderNodeBsdfPrincipled" else None
+        if alpha is not None and (alpha.is_linked or alpha.default_value < 1.0):
+            return f"material {mat.name!r} has an alpha below 1 (see-through shadows)"
+    return None
+
+
+def _output_linked(tree, socket: str) -> bool:
+    for node in tree.nodes:
+        if node.bl_idname == "ShaderNodeOutputMaterial" and node.is_active_output:
+            s = node.inputs.get(socket)
+            return bool(s is not None and s.is_linked)
+    return False
+
+
+def _displacement_reason(mat, tree):
+    method = getattr(mat, "displacement_method", None) or getattr(
+        getattr(mat, "cycles", None), "displacement_method", "BUMP")
+    if method in ("DISPLACEMENT", "BOTH") and _output_linked(tree, "Displacement"):
+        return f"material {mat.name!r} uses true displacement"
+    return None
+
+
+def unsupported(scene, depsgraph, receivers) -> list:
+    """Why rays cannot reproduce Cycles' direct light in this scene ([] when they can): hair,
+    point clouds, volumes, see-through (alpha, transparent) shadow casters, true displacement,
+    volume shaders."""
+    why = []
+    seen = set()
+    for inst in depsgraph.object_instances:
+        ob = inst.object.original
+        if ob.name in seen:
+            continue
+        seen.add(ob.name)
+        if ob.type in UNSUPPORTED_TYPES:
+            if getattr(ob, "visible_shadow", True):
+                why.append(f"{ob.name} is {UNSUPPORTED_TYPES[ob.type]}")
+            continue
+        if ob.type not in CASTER_TYPES:
+            continue
+        for ps in getattr(ob, "particle_systems", ()):
+            if ps.settings.type == "HAIR" and ps.settings.render_type == "PATH":
+                why.append(f"{ob.name} has hair particles")
+        caster = getattr(ob, "visible_shadow", True)
+        for mat, tree in _material_trees(ob):
+            reason = _alpha_reason(mat, tree) if caster else None
+            reason = reason or _displacement_reason(mat, tree)
+            if reason is None and _output_linked(tree, "Volume"):
+                reason = f"material {mat.name!r} has a volume shader"
+            if reason:
+                why.append(f"{ob.name}: {reason}")
+    world = scene.world
+    if world is not None and world.use_nodes and world.node_tree is not None:
+        for node in world.node_tree.nodes:
+            if node.bl_idname == "ShaderNodeOutputWorld" and node.inputs["Volume"].is_linked:
+                why.append("the world has a volume shader")
+    return sorted(set(why))
+
+
+def normal_mapped(obj) -> bool:
+    """Whether a material of ``obj`` changes the shading normal (a link into a BSDF's Normal
+    input, or bump through the Displacement output)."""
+    for mat, tree in _material_trees(obj):
+        if _output_linked(tree, "Displacement"):
+            return True
+        for node in tree.nodes:
+            s = node.inputs.get("Normal") if node.bl_idname.startswith("ShaderNodeBsdf") else None
+            if s is not None and s.is_linked:
+                return True
+    return False
+
+
+def receiver_points(obj, depsgraph, resolution: int, Ns_image=None):
+    """(TexelSamples, ShadingPoints) of ``obj``'s texture bake at ``resolution``: the evaluated
+    mesh in world space, its active render UV map, corner normals, smooth flags and the object's
+    shadow-terminator geometry offset. ``Ns_image``: (R, R, 3) world closure normals (a Cycles
+    normal bake) for normal-mapped materials, or None."""
+    ev = obj.evaluated_get(depsgraph)
+    mesh = ev.to_mesh()
+    try:
+        M = np.array(obj.matrix_world, np.float64)
+        co = np.empty(len(mesh.vertices) * 3)
+        mesh.vertices.foreach_get("co", co)
+        co = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
+        mesh.calc_loop_triangles()
+        T = len(mesh.loop_triangles)
+        tri = np.empty(T * 3, np.int64)
+        mesh.loop_triangles.foreach_get("vertices", tri)
+        loops = np.empty(T * 3, np.int64)
+        mesh.loop_triangles.foreach_get("loops", loops)
+        poly = np.empty(T, np.int64)
+        mesh.loop_triangles.foreach_get("polygon_index", poly)
+        smooth_face = np.empty(len(mesh.polygons), bool)
+        mesh.polygons.foreach_get("use_smooth", smooth_face)
+        cn = np.empty(len(mesh.loops) * 3)
+        mesh.corner_normals.foreach_get("vector", cn)
+        normal_matrix = np.linalg.pinv(M[:3, :3]).T
+        cn = cn.reshape(-1, 3) @ normal_matrix.T
+        cn /= np.maximum(np.linalg.norm(cn, axis=1, keepdims=True), 1e-30)
+        uv = uv_corners(mesh)[loops].reshape(-1, 3, 2)
+    finally:
+        ev.to_mesh_clear()
+    samples = texel_samples(uv, resolution)
+    Ns = None if Ns_image is None else np.asarray(Ns_image, np.float64).reshape(-1, 3)[samples.texel]
+    if Ns is not None:   # texels the normal bake left empty keep the smooth normal
+        Ns = np.where(np.linalg.norm(Ns, axis=1, keepdims=True) > 0.5, Ns, np.nan)
+    points = shading_points(co, tri.reshape(-1, 3), cn[loops].reshape(-1, 3, 3),
+                            smooth_face[poly], samples.triangle, samples.bary,
+                            cutoff=float(getattr(obj, "shadow_terminator_geometry_offset", 0.1)),
+                            mirrored=np.linalg.det(M[:3, :3]) < 0, Ns=None)
+    if Ns is not None:
+        bad = np.isnan(Ns).any(axis=1)
+        Ns[bad] = points.N[bad]
+        points.Ns = Ns / np.linalg.norm(Ns, axis=1, keepdims=True)
+    return samples, points
