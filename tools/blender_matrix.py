@@ -77,7 +77,8 @@ def judge_suite(stdout: str) -> tuple[bool, list[str]]:
     return not problems, problems
 
 #: Extra packages of the full-suite venv (bpy brings numpy; scipy/OpenEXR as in the zip).
-SUITE_PACKAGES = ["scipy==1.17.1", "OpenEXR==3.5.3", "pytest==9.2.0", "hypothesis==6.170.17",
+SUITE_PACKAGES = ["scipy==1.17.1", "OpenEXR==3.5.3", "embreex==4.4.0.post1", "pytest==9.2.0",
+                  "hypothesis==6.170.17",
                   "matplotlib==3.11.2", "dask==2026.8.0", "distributed==2026.8.0",
                   "setuptools==84.2.1"]
 

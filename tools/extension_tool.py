@@ -36,6 +36,15 @@ PIP_PLATFORMS = {
     "macos-arm64": ("macosx_14_0_arm64",),
     "macos-x64": ("macosx_10_15_x86_64",),
 }
+#: Packages whose wheels need a newer platform than :data:`PIP_PLATFORMS` names (embreex 4.4
+#: is built for macOS 13 on Intel Macs), downloaded with these tags instead.
+NEWER_PLATFORMS = {"embreex": {"macos-x64": ("macosx_13_0_x86_64",)}}
+
+
+def requirements() -> list[str]:
+    """The pinned lines of requirements-wheels.txt."""
+    with open(os.path.join(ROOT, "requirements-wheels.txt")) as fh:
+        return [ln.split("#")[0].strip() for ln in fh if ln.split("#")[0].strip()]
 
 
 def blender_ext_script() -> str:
@@ -104,13 +113,15 @@ def ensure_wheels() -> list[str]:
     if any(not os.path.exists(w) for w in wanted):
         for platform in m.get("platforms", []):
             for python in PYTHONS:
-                cmd = [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps",
-                       "--only-binary=:all:", "--python-version", python,
-                       "--implementation", "cp", "-d", os.path.join(ROOT, "wheels"),
-                       "-r", os.path.join(ROOT, "requirements-wheels.txt")]
-                for tag in PIP_PLATFORMS[platform]:
-                    cmd += ["--platform", tag]
-                subprocess.run(cmd, check=True)
+                for req in requirements():
+                    name = req.split("==")[0].strip().lower()
+                    tags = NEWER_PLATFORMS.get(name, {}).get(platform, PIP_PLATFORMS[platform])
+                    cmd = [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps",
+                           "--only-binary=:all:", "--python-version", python,
+                           "--implementation", "cp", "-d", os.path.join(ROOT, "wheels"), req]
+                    for tag in tags:
+                        cmd += ["--platform", tag]
+                    subprocess.run(cmd, check=True)
     still = [w for w in wanted if not os.path.exists(w)]
     if still:
         raise SystemExit("extension_tool: manifest wheels not downloaded (check the file names "
@@ -129,12 +140,12 @@ def ensure_wheels() -> list[str]:
 
 
 def check_zip(zip_path: str, platform: str, wheels: list[str]) -> None:
-    """The zip holds exactly the manifest's wheels for ``platform``: both Pythons, both
-    packages, nothing of another platform."""
+    """The zip holds exactly the manifest's wheels for ``platform``: both Pythons, every
+    package of requirements-wheels.txt, nothing of another platform."""
     inside = sorted(os.path.basename(n) for n in zipfile.ZipFile(zip_path).namelist()
                     if n.endswith(".whl"))
     expected = sorted(os.path.basename(w) for w in wheels if wheel_platform(w) == platform)
-    if inside != expected or len(expected) != 2 * len(PYTHONS):
+    if inside != expected or len(expected) != len(requirements()) * len(PYTHONS):
         raise SystemExit(f"extension_tool: {os.path.basename(zip_path)} holds wheels {inside}, "
                          f"expected {expected}")
 

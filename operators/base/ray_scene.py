@@ -19,6 +19,9 @@ from .meshes import uv_corners
 
 #: Object types whose evaluated geometry Blender can triangulate (to_mesh).
 CASTER_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
+#: The first Blender whose Cycles has the Conty Estevez bump terminator term (4.5.15 has it,
+#: 4.2.13 has Chiang et al.'s; 4.3-4.4 are assumed to be as 4.5, not checked).
+BUMP_CONTY_FROM = (4, 5, 0)
 #: Object types rays do not reproduce: their shadows need Cycles.
 UNSUPPORTED_TYPES = {"CURVES": "hair curves", "POINTCLOUD": "a point cloud", "VOLUME": "a volume"}
 
@@ -213,6 +216,8 @@ def receiver_points(obj, depsgraph, resolution: int, Ns_image=None):
         mesh.loop_triangles.foreach_get("loops", loops)
         poly = np.empty(T, np.int64)
         mesh.loop_triangles.foreach_get("polygon_index", poly)
+        mat_index = np.empty(len(mesh.polygons), np.int64)
+        mesh.polygons.foreach_get("material_index", mat_index)
         smooth_face = np.empty(len(mesh.polygons), bool)
         mesh.polygons.foreach_get("use_smooth", smooth_face)
         cn = np.empty(len(mesh.loops) * 3)
@@ -223,6 +228,14 @@ def receiver_points(obj, depsgraph, resolution: int, Ns_image=None):
         uv = uv_corners(mesh)[loops].reshape(-1, 3, 2)
     finally:
         ev.to_mesh_clear()
+    # Cycles' bump terminator term: Conty Estevez et al.'s, its smoothing gated per material by
+    # the bump map correction, in 4.5.15 and 5.x; Chiang et al.'s in 4.2.13 (both measured
+    # against Cycles' bake in tests/blender/test_ray_direct.py; 4.3 and 4.4 not checked)
+    corr_of_slot = np.array([bool(getattr(getattr(s.material, "cycles", None),
+                                          "use_bump_map_correction", True))
+                             for s in obj.material_slots] or [True])
+    correction = corr_of_slot[np.clip(mat_index[poly], 0, len(corr_of_slot) - 1)]
+    bump = "conty" if bpy.app.version >= BUMP_CONTY_FROM else "chiang"
     samples = texel_samples(uv, resolution)
     Ns = None if Ns_image is None else np.asarray(Ns_image, np.float64).reshape(-1, 3)[samples.texel]
     if Ns is not None:   # texels the normal bake left empty keep the smooth normal
@@ -230,7 +243,8 @@ def receiver_points(obj, depsgraph, resolution: int, Ns_image=None):
     points = shading_points(co, tri.reshape(-1, 3), cn[loops].reshape(-1, 3, 3),
                             smooth_face[poly], samples.triangle, samples.bary,
                             cutoff=float(getattr(obj, "shadow_terminator_geometry_offset", 0.1)),
-                            mirrored=np.linalg.det(M[:3, :3]) < 0, Ns=None)
+                            mirrored=np.linalg.det(M[:3, :3]) < 0, Ns=None, bump=bump,
+                            correction=correction)
     if Ns is not None:
         bad = np.isnan(Ns).any(axis=1)
         Ns[bad] = points.N[bad]
