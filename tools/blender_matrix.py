@@ -3,10 +3,10 @@ bake through the installed operator; run the full test suite on the newest bpy a
 version-sensitive subset on 5.2 LTS (both Python 3.13; ``make test`` runs the full suite on 5.0.1).
 
 For each Blender in :data:`MATRIX` a venv holding only ``bpy`` (and what its wheel requires:
-numpy, ...) -- never scipy or OpenEXR, so the zip's bundled wheels must do their job -- runs
+numpy, ...) -- never scipy, OpenEXR or embreex, so the zip's bundled wheels must do their job -- runs
 :data:`CHECK` in a fresh temporary ``BLENDER_USER_RESOURCES``: install the zip through
 ``bpy.ops.extensions.package_install_files``, check that the add-on is enabled and its operators
-registered, that scipy and OpenEXR import from the extension's own site-packages, and bake a
+registered, that scipy, OpenEXR and embreex import from the extension's own site-packages, and bake a
 tiny texture through ``bpy.ops.relight.bake_textures``. A Blender that must refuse the zip
 (4.2.0: no Python-tag wheel filter, below ``blender_version_min``) must refuse it.
 Then a second venv per suite version (scipy, OpenEXR, pytest, ... plus this package through
@@ -90,7 +90,8 @@ def out():
     print("MATRIX " + json.dumps(rep), flush=True)
 try:
     import importlib.util
-    rep["clean_venv"] = not any(importlib.util.find_spec(m) for m in ("scipy", "OpenEXR"))
+    rep["clean_venv"] = not any(importlib.util.find_spec(m)
+                                for m in ("scipy", "OpenEXR", "embreex"))
     import bpy
     rep["blender"] = bpy.app.version_string
     user = os.environ["BLENDER_USER_RESOURCES"]
@@ -109,8 +110,8 @@ try:
     rep["enables"] = (mod in bpy.context.preferences.addons and "bake_textures" in ops
                       and "RELIGHT_OT_bake_textures" in dir(bpy.types))
     if rep["enables"]:
-        import scipy, scipy.linalg, OpenEXR
-        rep["wheels_from"] = {m.__name__: m.__file__ for m in (scipy, OpenEXR)}
+        import scipy, scipy.linalg, OpenEXR, embreex
+        rep["wheels_from"] = {m.__name__: m.__file__ for m in (scipy, OpenEXR, embreex)}
         rep["wheels"] = all(f.startswith(site) for f in rep["wheels_from"].values())
         bpy.ops.relight.add_sample_scene(name="bumps", size="test")
         props = bpy.context.scene.relight
@@ -132,6 +133,7 @@ try:
             # the viewport from T: its group is built with this Blender's nodes
             group = bpy.data.node_groups.get("Relight Transport (Bumps)")
             rep["bake"] = (bake_rep["directions"] == 24
+                           and bake_rep["direct"]["engine"] == "rays"
                            and bake_rep["preview"]["viewport"] == "transport"
                            and group is not None and group.get("relight_viewport") == "transport")
 except Exception:

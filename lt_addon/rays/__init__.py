@@ -8,7 +8,7 @@ feeds these modules arrays: world-space triangles of every shadow caster, and ea
 evaluated mesh with its UV map.
 
 * :mod:`.texels` -- which triangle and which barycentric point each texel samples, as Blender's bake
-  rasterizes UV triangles, and the margin beyond UV islands;
+  rasterizes UV triangles, and Blender's Extend margin beyond UV islands;
 * :mod:`.shading` -- shading points (P, Ng, N) and the shadow-ray origins of Cycles' kernel
   (``kernel/light/sample.h``: the shadow-terminator geometry offset, self-intersection);
 * :mod:`.engine` -- the occlusion-ray engine (Embree when its wheel is installed);

@@ -6,9 +6,9 @@ pixel-aligned UVs; a texel covered by two triangles keeps the later one. Cycles'
 bake is the texel centre, so at 1 spp the sample point of texel ``(row, col)`` is the barycentric
 point of UV ``((col + 0.5 + 0.001) / R, (row + 0.5 + 0.002) / R)`` in its triangle.
 
-Texels outside every island get a value from the nearest covered texel within the bake's margin
-(:func:`margin_sources`), as Blender's *Extend* margin does, so bilinear lookups at island borders
-do not fetch black.
+Texels outside every island within the bake's margin are filled as Blender's *Extend* margin
+fills them (:func:`extend_margin`; the bakes set that margin type), so bilinear lookups at island
+borders do not fetch black and the ray bake equals the Cycles bake there too.
 """
 
 from __future__ import annotations
@@ -117,30 +117,67 @@ def texel_samples(uv_triangles, resolution: int) -> TexelSamples:
     return TexelSamples(r, texel, owner[texel], bary[texel])
 
 
-def margin_sources(covered: np.ndarray, margin: int):
-    """Texels within ``margin`` texels of an island and the covered texel each copies from.
+def extend_margin(covered: np.ndarray, margin: int):
+    """Blender's *Extend* bake margin as a linear operator (``IMB_filter_extend``).
+
+    ``margin`` passes; each pass gives every unassigned texel with an assigned 4-neighbour the
+    weighted mean of its assigned 8-neighbours (weights 2 edge-adjacent, 1 diagonal), reading
+    the previous pass. Linear in the covered texels, so it is built once and applied to every
+    direction with one sparse product.
 
     Parameters
     ----------
     covered : ndarray, shape (R, R), bool
     margin : int
-        Margin in texels (Chebyshev distance, as Blender's margin grows island borders).
+        Passes (the bake's margin in texels).
 
     Returns
     -------
-    dst, src : ndarray, shape (M,), int64
-        Flat indices: texel ``dst[i]`` takes the value of covered texel ``src[i]`` (the nearest
-        in Euclidean distance).
+    dst : ndarray, shape (M,), int64
+        Flat indices of the margin texels.
+    op : scipy.sparse.csr_matrix, shape (M, P)
+        ``values[dst] = op @ values[covered_flat]`` with the covered texels in ascending flat
+        order (:attr:`TexelSamples.texel`).
     """
-    import scipy.ndimage as ndi
+    import scipy.sparse as sp
 
     covered = np.asarray(covered, bool)
-    if margin <= 0 or covered.all() or not covered.any():
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    grown = ndi.binary_dilation(covered, structure=np.ones((3, 3), bool), iterations=int(margin))
-    ring = grown & ~covered
-    _, (iy, ix) = ndi.distance_transform_edt(~covered, return_indices=True)
-    r = covered.shape[1]
-    dst = np.nonzero(ring.ravel())[0]
-    src = (iy.ravel()[dst] * r + ix.ravel()[dst]).astype(np.int64)
-    return dst.astype(np.int64), src
+    R0, R1 = covered.shape
+    n = R0 * R1
+    flat = covered.ravel()
+    cov_idx = np.nonzero(flat)[0]
+    if margin <= 0 or not cov_idx.size or cov_idx.size == n:
+        return np.zeros(0, np.int64), sp.csr_matrix((0, cov_idx.size))
+    yy, xx = np.divmod(np.arange(n), R1)
+
+    def adjacency(offsets):
+        rows, cols, vals = [], [], []
+        for dy, dx, w in offsets:
+            y2, x2 = yy + dy, xx + dx
+            ok = (y2 >= 0) & (y2 < R0) & (x2 >= 0) & (x2 < R1)
+            rows.append(np.nonzero(ok)[0])
+            cols.append((y2 * R1 + x2)[ok])
+            vals.append(np.full(int(ok.sum()), float(w)))
+        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                             shape=(n, n))
+
+    four = adjacency([(0, -1, 1), (0, 1, 1), (-1, 0, 1), (1, 0, 1)])
+    eight = adjacency([(dy, dx, 1 if dy and dx else 2)
+                       for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx])
+    # V: every texel's value as a combination of the covered texels (rows of unassigned: 0)
+    V = sp.csr_matrix((np.ones(cov_idx.size), (cov_idx, np.arange(cov_idx.size))),
+                      shape=(n, cov_idx.size))
+    assigned = flat.astype(np.float64)
+    for _ in range(int(margin)):
+        frontier = np.nonzero((assigned == 0) & (four @ assigned > 0))[0]
+        if not frontier.size:
+            break
+        den = eight[frontier] @ assigned
+        num = eight[frontier] @ V
+        new = sp.diags(1.0 / den) @ num
+        V = V.tolil()
+        V[frontier] = new
+        V = V.tocsr()
+        assigned[frontier] = 1.0
+    dst = np.nonzero((assigned > 0) & ~flat)[0]
+    return dst.astype(np.int64), V[dst].tocsr()

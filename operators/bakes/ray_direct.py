@@ -17,7 +17,7 @@ import numpy as np
 from ...lt_addon.errors import InputError
 from ...lt_addon.rays import engine as ray_engine
 from ...lt_addon.rays.direct import direct_rows
-from ...lt_addon.rays.texels import margin_sources
+from ...lt_addon.rays.texels import extend_margin
 from ..base import ray_scene
 from ..base.jobs import Progress
 
@@ -61,7 +61,8 @@ def world_normals(obj, object_normals):
 
 def bake(scene, objects, settings, dset, stores, normals, step: int, total: int, margin: int = 4):
     """Generator: fill ``stores`` (one per object, (S, R*R)) with the ray-traced direct
-    transport; ``normals``: per object world closure normals (R, R, 3) or None. Yields Progress
+    transport; ``normals``: per object world closure normals (R, R, 3) or None; ``margin``: the
+    bake sessions' margin (EnvironmentBake's, Extend type), filled alike. Yields Progress
     from ``step``; returns figures (seconds, rays, rays per second, casters, triangles)."""
     R = settings.resolution
     t0 = time.perf_counter()
@@ -71,16 +72,18 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
         receivers = [ray_scene.receiver_points(o, depsgraph, R, nrm)
                      for o, nrm in zip(objects, normals)]
     t_scene = time.perf_counter() - t0
-    margins = [margin_sources(smp.covered(), margin) for smp, _ in receivers]
+    margins = [extend_margin(smp.covered(), margin) for smp, _ in receivers]
     S = dset.size
     t1 = time.perf_counter()
     eta = None
     for a in range(0, S, RAY_CHUNK):
         D = dset.directions[a:a + RAY_CHUNK]
-        for store, (smp, pts), (dst, src) in zip(stores, receivers, margins):
+        for store, (smp, pts), (dst, op) in zip(stores, receivers, margins):
             rows = np.zeros((len(D), R * R), np.float32)
-            rows[:, smp.texel] = direct_rows(occluder, pts, D)
-            rows[:, dst] = rows[:, src]
+            inside = direct_rows(occluder, pts, D)
+            rows[:, smp.texel] = inside
+            if dst.size:
+                rows[:, dst] = (op @ inside.T).T
             store.write_rows(a, rows)
         done = min(a + RAY_CHUNK, S)
         rate = (time.perf_counter() - t1) / done

@@ -207,7 +207,7 @@ class EnvironmentBake(SceneChanges):
     mode : {"radiance", "irradiance"}
         See the module docstring.
     margin : int
-        Texel margin Cycles extends beyond UV islands.
+        Texel margin Cycles extends beyond UV islands (Blender's Extend margin).
     world_sampling : {"importance", "none"}
         See :data:`WORLD_SAMPLING`.
     importance_map_size : int
@@ -285,6 +285,9 @@ class EnvironmentBake(SceneChanges):
         self._save_attr(bake, "use_pass_indirect", self.passes in ("all", "indirect"))
         self._save_attr(bake, "use_pass_color", self.mode == "radiance" or self.passes == "color")
         self._save_attr(bake, "margin", self.margin)
+        # Extend (Blender's IMB_filter_extend): a margin the ray bake reproduces exactly
+        # (lt_addon/rays/texels.py); the default Adjacent Faces samples across UV seams in 3D
+        self._save_attr(bake, "margin_type", "EXTEND")
         self._save_attr(bake, "target", "VERTEX_COLORS" if self.per_vertex else "IMAGE_TEXTURES")
         self._save_attr(bake, "use_selected_to_active", False)
 
@@ -498,7 +501,8 @@ class EnvironmentBake(SceneChanges):
         set_image_pixels(self.env_image, env)
         self.env_image.update()
         start = time.perf_counter()
-        result = bpy.ops.object.bake(type="DIFFUSE", use_clear=True, margin=self.margin)
+        result = bpy.ops.object.bake(type="DIFFUSE", use_clear=True, margin=self.margin,
+                                     margin_type="EXTEND")
         self.bake_seconds += time.perf_counter() - start
         self.bake_calls += 1
         if "FINISHED" not in result:
@@ -569,7 +573,7 @@ class EnvironmentBake(SceneChanges):
             raise BakeInputError("normals are baked into textures, not per vertex")
         start = time.perf_counter()
         result = bpy.ops.object.bake(type="NORMAL", normal_space="OBJECT", use_clear=True,
-                                     margin=self.margin)
+                                     margin=self.margin, margin_type="EXTEND")
         self.bake_seconds += time.perf_counter() - start
         self.bake_calls += 1
         if "FINISHED" not in result:

@@ -33,7 +33,12 @@ from .common import (CliError, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, add_device_opt
 
 
 class _Parser(argparse.ArgumentParser):
-    """ArgumentParser that raises instead of exiting, so Blender's process survives."""
+    """ArgumentParser that raises instead of exiting, so Blender's process survives. No
+    abbreviated options: ``--direct`` must never be taken for ``--directions``."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message):
         raise CliError(message)
@@ -133,6 +138,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--chunk", required=True, type=int, metavar="K")
     p.add_argument("--preset", choices=("draft", "balanced", "production"), default="balanced")
     p.add_argument("--directions", metavar="SPEC")
+    p.add_argument("--direct", choices=("cycles",), default="cycles",
+                   help="chunks are Cycles calls (cycles, the only choice: the final "
+                        "`bake-textures` must say --direct cycles to use them)")
     p.add_argument("--resolution", type=int)
     p.add_argument("--seed", type=int)
     p.add_argument("--threads", type=int, default=0,

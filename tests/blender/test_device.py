@@ -129,7 +129,7 @@ def test_a_resumed_bake_bakes_another_devices_chunks_again(tmp_path):
 
     blend = make_scene("bumps", tmp_path / "b.blend")
     args = [blend, "--object", "Bumps", "--preset", "draft", "--directions", "hemi:32",
-            "--resolution", "8", "--device", "cpu"]
+            "--resolution", "8", "--device", "cpu", "--direct", "cycles"]
     results = {}
     for label in ("same device", "other device"):
         out = tmp_path / label.replace(" ", "_")

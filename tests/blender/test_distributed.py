@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 from relight_cli import BIN, assert_refused, make_scene, relight
 
+# the direct stage as Cycles calls: what a farm distributes (rays bake it locally in seconds)
 TINY = ["--object", "Bumps", "--directions", "hemi:400", "--resolution", "16", "--bounces",
-        "0", "--model", "none", "--no-compare"]
+        "0", "--model", "none", "--no-compare", "--direct", "cycles"]
 
 
 @pytest.fixture(scope="module")
@@ -304,7 +305,7 @@ def test_basis_light_stages_distribute_and_resume_bit_for_bit(blend, tmp_path):
     path, _ = blend
     args = ["bake-textures", path, "--object", "Bumps", "--directions", "hemi:48",
             "--resolution", "16", "--bounces", "1", "--indirect-samples", "4",
-            "--indirect-resolution", "8", "--model", "none", "--no-compare"]
+            "--indirect-resolution", "8", "--model", "none", "--no-compare", "--direct", "cycles"]
     assert relight(*args, "--no-resume", "--out", tmp_path / "ref").returncode == 0
     r = relight(*args, "--workers", "2", "--out", tmp_path / "dist")
     assert r.returncode == 0, r.stderr[-2000:]
@@ -343,7 +344,8 @@ def test_basis_light_stages_distribute_and_resume_bit_for_bit(blend, tmp_path):
     assert ".relight_cache" not in os.listdir(out)
 
     ts = tx.TransportTextureSettings(directions="hemi:48", resolution=16, bounces=1,
-                                     indirect_samples=4, indirect_resolution=8, model="none")
+                                     indirect_samples=4, indirect_resolution=8, model="none",
+                                     direct="cycles")
     out = tmp_path / "tresume"
     gen = tx.bake_transport_textures(scene, [obj], ts, str(out))
     for step in gen:                   # the albedo, 48 directions, then indirect lights

@@ -31,7 +31,7 @@ INSTALL_SCRIPT = textwrap.dedent(r"""
 
     class OnlyBundledWheels:
         def find_spec(self, name, path=None, target=None):
-            if "." not in name and name in ("scipy", "OpenEXR"):
+            if "." not in name and name in ("scipy", "OpenEXR", "embreex"):
                 return importlib.machinery.PathFinder.find_spec(name, [site]) or \
                     importlib.machinery.ModuleSpec(name, None)  # None loader: ImportError
             return None
@@ -60,9 +60,9 @@ INSTALL_SCRIPT = textwrap.dedent(r"""
                                             "RELIGHT_OT_remove_preview",
                                             "RELIGHT_OT_show_preview") if n in dir(bpy.types)]
     # The bundled wheels import from the extension's own site-packages.
-    import scipy, scipy.linalg, OpenEXR
+    import scipy, scipy.linalg, OpenEXR, embreex
     report["site"] = site
-    report["imported_from"] = {m.__name__: m.__file__ for m in (scipy, OpenEXR)}
+    report["imported_from"] = {m.__name__: m.__file__ for m in (scipy, OpenEXR, embreex)}
     report["property"] = hasattr(bpy.types.Scene, "relight") and \
         bpy.context.scene.relight.preset == "balanced"
     report["panels"] = [n for n in ("VIEW3D_PT_relight", "VIEW3D_PT_relight_bake",
@@ -82,6 +82,13 @@ INSTALL_SCRIPT = textwrap.dedent(r"""
     bpy.context.view_layer.objects.active = bpy.data.objects["Bumps"]
     report["bake"] = list(bpy.ops.relight.bake_textures())
     report["bake_files"] = sorted(os.listdir(props.output_dir))
+    # ... and the default transport bake, its direct light by the bundled ray engine
+    props.method = "transport"
+    props.directions, props.resolution, props.bounces = 16, 16, 0
+    props.output_dir = os.path.join(os.path.dirname(blend_out), "op_transport") + os.sep
+    report["transport_bake"] = list(bpy.ops.relight.bake_textures())
+    with open(os.path.join(props.output_dir, "Bumps_texture_report.json")) as fh:
+        report["transport_direct"] = json.load(fh)["direct"]
     # The same CLI verbs, registered as Blender's `--command relight`; the bpy module cannot
     # dispatch --command, so call the registered function itself.
     from bl_ext.user_default.relightable_textures.operators import cli, registration
@@ -151,11 +158,12 @@ def test_zip_contents(extension_zip):
     assert set(product) <= names
     # the exported RTI page's viewer travels with the extension
     assert {"lt_addon/export/web/viewer.js", "lt_addon/export/web/template.html"} <= names
-    # This platform's SciPy and OpenEXR for both Pythons Blender uses (3.11 and 3.13), no other.
+    # This platform's SciPy, OpenEXR and embreex (the ray engine) for both Pythons Blender uses
+    # (3.11 and 3.13), no other.
     wheels = sorted(n.split("-")[0] + "-" + n.split("-")[2] for n in names
                     if n.startswith("wheels/") and n.endswith(".whl"))
-    assert wheels == ["wheels/openexr-cp311", "wheels/openexr-cp313", "wheels/scipy-cp311",
-                      "wheels/scipy-cp313"]
+    assert wheels == ["wheels/embreex-cp311", "wheels/embreex-cp313", "wheels/openexr-cp311",
+                      "wheels/openexr-cp313", "wheels/scipy-cp311", "wheels/scipy-cp313"]
     assert all("x86_64" in n for n in names if n.endswith(".whl"))
 
 
@@ -188,6 +196,9 @@ def test_install_enable_use_uninstall_in_temporary_user_dir(extension_zip, tmp_p
                              "VIEW3D_PT_relight_materials", "VIEW3D_PT_relight_export",
                              "VIEW3D_PT_relight_samples"]
     assert rep["bake"] == ["FINISHED"]
+    assert rep["transport_bake"] == ["FINISHED"]
+    assert rep["transport_direct"]["engine"] == "rays", rep["transport_direct"]
+    assert rep["transport_direct"]["library"].startswith("embreex")
     assert rep["bake_files"] == ["Bumps_steerable.exr", "Bumps_steerable.json",
                                  "Bumps_steerable_atlas.exr"]
     assert rep["op_result"] == ["FINISHED"] and rep["op_vertices"] == 33 * 33

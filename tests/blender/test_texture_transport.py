@@ -67,9 +67,10 @@ def sun_bake(scene, objects, direction, angle=0.0, spp=1, bounces=0, passes="dir
 def test_relight_at_a_sample_direction_with_a_point_sun_equals_that_directions_bake(bumps,
                                                                                      tmp_path):
     """The linear kernel is exact at a baked direction (0-degree sun); the store keeps half
-    floats, so the bake agrees to half precision (2^-11 relative)."""
+    floats, so the bake agrees to half precision (2^-11 relative). T from Cycles calls: the
+    reference is Cycles' bake (rays against it: test_ray_direct.py)."""
     scene, obj = bumps
-    res = bake(scene, [obj], tmp_path, model="none")
+    res = bake(scene, [obj], tmp_path, model="none", direct="cycles")
     store = tt.TransportStore.open(res.objects[0].store_path)
     for s in (0, 20, 47):
         d = store.directions.directions[s]
@@ -79,12 +80,14 @@ def test_relight_at_a_sample_direction_with_a_point_sun_equals_that_directions_b
         assert np.abs(relit - fresh).max() <= 2.0 ** -11 * fresh.max() + 1e-7
 
 
-def test_stores_are_streamed_and_cancel_leaves_nothing(bumps, tmp_path):
+@pytest.mark.parametrize("direct,steps", [("cycles", 10), ("rays", 2)])
+def test_stores_are_streamed_and_cancel_leaves_nothing(bumps, tmp_path, direct, steps):
     from relightable_textures.operators.bakes import texture_transport as tx
 
     scene, obj = bumps
-    gen = tx.bake_transport_textures(scene, [obj], settings(), str(tmp_path))
-    for _ in range(10):
+    # rays: the albedo, then the first chunk of directions (all 48 here) is in the store
+    gen = tx.bake_transport_textures(scene, [obj], settings(direct=direct), str(tmp_path))
+    for _ in range(steps):
         next(gen)
     partial = [p for p in os.listdir(tmp_path) if p.endswith(".npy")]
     assert partial and all(p.startswith(".") for p in partial)   # temporary name while baking
@@ -102,13 +105,15 @@ def test_a_cancelled_bake_resumes_from_its_finished_chunks_bit_for_bit(bumps, tm
     from relightable_textures.operators.bakes import texture_transport as tx
 
     scene, obj = bumps
-    ref = bake(scene, [obj], tmp_path / "ref", resume=False, model="none")
+    # the chunk cache keeps Cycles calls' directions (rays need none: a rerun casts them again)
+    ref = bake(scene, [obj], tmp_path / "ref", resume=False, model="none", direct="cycles")
     assert ref.chunks == {} or ref.chunks["chunks_reused"] == 0
     T_ref = np.load(ref.objects[0].store_path)
     out = tmp_path / "out"
 
     def cancel_after(directions):
-        gen = tx.bake_transport_textures(scene, [obj], settings(model="none"), str(out))
+        gen = tx.bake_transport_textures(scene, [obj], settings(model="none", direct="cycles"),
+                                         str(out))
         for _ in range(1 + directions):            # the albedo, then the directions
             next(gen)
         gen.close()
@@ -119,7 +124,7 @@ def test_a_cancelled_bake_resumes_from_its_finished_chunks_bit_for_bit(bumps, tm
     assert sorted(p.name for p in folder.iterdir()) == [
         "direct_00000.npy", "direct_00000.npy.sha256", "direct_00016.npy",
         "direct_00016.npy.sha256", "key.json"]
-    res = bake(scene, [obj], out, model="none")
+    res = bake(scene, [obj], out, model="none", direct="cycles")
     assert res.chunks == {"chunks_total": 3, "chunks_reused": 2, "chunk_directions": 16,
                           "direct_chunks": 3, "indirect_chunks": 0, "chunks_rejected": 0}
     np.testing.assert_array_equal(np.load(res.objects[0].store_path), T_ref)
@@ -132,14 +137,14 @@ def test_a_cancelled_bake_resumes_from_its_finished_chunks_bit_for_bit(bumps, tm
     (folder,) = list((out / tx.CACHE_FOLDER / "Bumps").iterdir())
     kept = np.load(folder / "direct_00016.npy")
     np.save(folder / "direct_00016.npy", np.full_like(kept, np.nan))
-    res = bake(scene, [obj], out, model="none")
+    res = bake(scene, [obj], out, model="none", direct="cycles")
     assert (res.chunks["chunks_reused"], res.chunks["chunks_rejected"]) == (1, 1)
     np.testing.assert_array_equal(np.load(res.objects[0].store_path), T_ref)
     tx.write_bake(res, [obj], str(out))
 
     cancel_after(20)
     obj.location.x += 0.01                          # the scene changed: no chunk may be reused
-    res = bake(scene, [obj], out, model="none")
+    res = bake(scene, [obj], out, model="none", direct="cycles")
     assert res.chunks["chunks_reused"] == 0
     assert len(list((out / tx.CACHE_FOLDER / "Bumps").iterdir())) == 1   # the stale one pruned
     obj.location.x -= 0.01
@@ -693,7 +698,8 @@ def test_cli_bake_interrupted_by_sigint_resumes_with_the_same_command(tmp_path):
     blend = tmp_path / "b.blend"
     make_scene("bumps", blend)
     args = ["bake-textures", str(blend), "--object", "Bumps", "--directions", "hemi:400",
-            "--resolution", "16", "--bounces", "0", "--model", "none", "--no-compare"]
+            "--resolution", "16", "--bounces", "0", "--model", "none", "--no-compare",
+            "--direct", "cycles"]                  # chunks are what Cycles calls keep
     out = tmp_path / "b_relight"
     proc = subprocess.Popen([str(BIN / "relight"), *args], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
@@ -734,7 +740,8 @@ def test_panel_lists_the_chunks_a_cancelled_bake_kept_and_discards_them(bumps, t
         scene.relight.output_dir = str(tmp_path) + os.sep
         bpy.context.view_layer.objects.active = obj
         assert bake_ops.kept_chunks(bpy.context) == []
-        gen = tx.bake_transport_textures(scene, [obj], settings(model="none"), str(tmp_path))
+        gen = tx.bake_transport_textures(scene, [obj], settings(model="none", direct="cycles"),
+                                         str(tmp_path))
         for _ in range(1 + 20):                     # the albedo and 20 directions: 1 chunk
             next(gen)
         gen.close()

@@ -61,6 +61,9 @@ function bakeArgs(settings) {
         }
     }
     args.push("--preset", settings.preset || "balanced");
+    // A farm distributes Cycles calls: one per direction. (With the default ray-traced direct
+    // light a workstation bakes the directions in seconds; the chunk tasks would go unused.)
+    args.push("--direct", "cycles");
     if (settings.directions) {
         args.push("--directions", settings.directions);
     }

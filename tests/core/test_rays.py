@@ -1,0 +1,216 @@
+"""The bpy-free ray core (lt_addon/rays) against independent computations: texel sample points
+against the UV point they must reproduce, occlusion against analytic shadows, Cycles' terminator
+lift against the sphere it approximates, and the direct transport against cos/pi."""
+
+import numpy as np
+import pytest
+
+from relightable_textures.lt_addon.rays import engine
+from relightable_textures.lt_addon.rays.direct import direct_rows
+from relightable_textures.lt_addon.rays.shading import (bump_correction, shading_points,
+                                                        shadow_origins, smooth_surface_lift)
+from relightable_textures.lt_addon.rays.texels import NUDGE, extend_margin, texel_samples
+
+needs_engine = pytest.mark.skipif(not engine.available()[0], reason="embreex not installed")
+
+
+def test_texel_points_are_the_nudged_texel_centres():
+    rng = np.random.default_rng(3)
+    tris = rng.random((40, 3, 2))
+    R = 24
+    smp = texel_samples(tris, R)
+    assert smp.size > 100
+    row, col = np.divmod(smp.texel, R)
+    want = np.stack([(col + 0.5 + NUDGE[0]) / R, (row + 0.5 + NUDGE[1]) / R], axis=1)
+    got = np.einsum("pk,pkj->pj", smp.bary, tris[smp.triangle])
+    assert np.abs(got - want).max() < 1e-12
+    assert (smp.bary >= -1e-12).all() and np.allclose(smp.bary.sum(1), 1)
+    # brute force: every texel centre inside some triangle is covered, by the last such one
+    for t in range(R * R):
+        r, c = divmod(t, R)
+        p = np.array([(c + 0.5 + NUDGE[0]) / R, (r + 0.5 + NUDGE[1]) / R])
+        inside = []
+        for f, (a, b, cc) in enumerate(tris):
+            m = np.column_stack([b - a, cc - a])
+            if abs(np.linalg.det(m)) < 1e-14:
+                continue
+            u, v = np.linalg.solve(m, p - a)
+            if u >= -1e-12 and v >= -1e-12 and u + v <= 1 + 1e-12:
+                inside.append(f)
+        if inside:
+            k = np.searchsorted(smp.texel, t)
+            assert smp.texel[k] == t and smp.triangle[k] == inside[-1]
+        else:
+            assert t not in set(smp.texel.tolist())
+
+
+def test_texel_batches_give_the_same_answer(monkeypatch):
+    from relightable_textures.lt_addon.rays import texels
+
+    rng = np.random.default_rng(4)
+    tris = rng.random((60, 3, 2))
+    whole = texel_samples(tris, 32)
+    monkeypatch.setattr(texels, "CANDIDATES", 50)
+    parts = texel_samples(tris, 32)
+    assert np.array_equal(whole.texel, parts.texel)
+    assert np.array_equal(whole.triangle, parts.triangle)
+
+
+def _extend_reference(img, covered, passes):
+    """Blender's IMB_filter_extend, pixel by pixel (the C loop, transcribed)."""
+    img = img.copy()
+    mask = covered.copy()
+    H, W = img.shape
+    w = {(-1, -1): 1, (-1, 0): 2, (-1, 1): 1, (0, -1): 2, (0, 1): 2, (1, -1): 1, (1, 0): 2,
+         (1, 1): 1}
+    for _ in range(passes):
+        out, newmask = img.copy(), mask.copy()
+        for y in range(H):
+            for x in range(W):
+                if mask[y, x]:
+                    continue
+                if not any(0 <= y + dy < H and 0 <= x + dx < W and mask[y + dy, x + dx]
+                           for dy, dx in ((0, -1), (0, 1), (-1, 0), (1, 0))):
+                    continue
+                acc = tot = 0.0
+                for (dy, dx), wt in w.items():
+                    if 0 <= y + dy < H and 0 <= x + dx < W and mask[y + dy, x + dx]:
+                        acc += wt * img[y + dy, x + dx]
+                        tot += wt
+                out[y, x], newmask[y, x] = acc / tot, True
+        img, mask = out, newmask
+    return img, mask
+
+
+def test_extend_margin_is_blenders_filter_extend():
+    rng = np.random.default_rng(6)
+    covered = np.zeros((14, 15), bool)
+    covered[3:7, 2:6] = True
+    covered[9:12, 8:14] = True
+    covered[0, 14] = True                                 # at the image's corner
+    img = np.where(covered, rng.random(covered.shape), 0.0)
+    want, mask = _extend_reference(img, covered, 3)
+    dst, op = extend_margin(covered, 3)
+    assert np.array_equal(np.sort(dst), np.nonzero((mask & ~covered).ravel())[0])
+    got = op @ img.ravel()[np.nonzero(covered.ravel())[0]]
+    assert np.abs(got - want.ravel()[dst]).max() < 1e-12
+
+
+@needs_engine
+def test_occluder_casts_the_analytic_shadow_of_a_square():
+    # a 1 m square at z = 1 over points on z = 0; sun from elevation 45 degrees along +x
+    V = np.array([[0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
+    occ = engine.Occluder(V, [[0, 1, 2], [0, 2, 3]], threads=2)
+    xs = np.linspace(-1.5, 1.5, 61) + 0.0123
+    P = np.stack(np.meshgrid(xs, xs), -1).reshape(-1, 2)
+    O = np.column_stack([P, np.zeros(len(P))])
+    L = np.array([1.0, 0.0, 1.0]) / np.sqrt(2)
+    hit = occ.occluded(O, L)
+    # the shadow is the square shifted by -1 m in x (height 1, 45 degrees)
+    want = (P[:, 0] > -1) & (P[:, 0] < 0) & (P[:, 1] > 0) & (P[:, 1] < 1)
+    assert np.array_equal(hit, want)
+    assert occ.rays == len(O)
+
+
+def test_available_says_why_without_embree(monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "embreex", None)
+    ok, why = engine.available()
+    assert not ok and "embreex cannot be imported" in why
+
+
+def _sphere_patch():
+    """A triangle on the unit sphere with its vertex normals (the positions)."""
+    V = np.array([[0.2, 0.1, 0.0], [-0.1, 0.25, 0.0], [0.0, -0.2, 0.0]])
+    V[:, 2] = np.sqrt(1 - (V[:, :2] ** 2).sum(1))
+    return V, V.copy()
+
+
+def test_terminator_lift_moves_a_flat_point_towards_the_smooth_surface():
+    V, N = _sphere_patch()
+    w = np.array([[1 / 3, 1 / 3, 1 / 3], [0.6, 0.2, 0.2], [0.1, 0.45, 0.45]])
+    P = w @ V
+    n = w @ N
+    Ng = np.cross(V[1] - V[0], V[2] - V[0])
+    Ng /= np.linalg.norm(Ng)
+    lift = smooth_surface_lift(np.repeat(V[None], 3, 0), np.repeat(N[None], 3, 0), w, n,
+                               np.repeat(Ng[None], 3, 0))
+    before = np.abs(np.linalg.norm(P, axis=1) - 1)
+    after = np.abs(np.linalg.norm(P + lift, axis=1) - 1)
+    assert (before > 1e-3).all() and (after < before).all()
+    assert (np.einsum("pj,pj->p", lift, n) > 0).all()        # outwards, along the normal
+    # a flat triangle (normals = Ng) is not lifted
+    flat = smooth_surface_lift(np.repeat(V[None], 3, 0), np.repeat(np.tile(Ng, (3, 1))[None], 3, 0),
+                               w, np.tile(Ng, (3, 1)), np.repeat(Ng[None], 3, 0))
+    assert np.abs(flat).max() < 1e-12
+
+
+def test_shadow_origins_follow_cycles_rules():
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
+    tilted = np.array([[0.3, 0, 1], [0, 0.3, 1], [-0.2, -0.2, 1]], float)
+    tilted /= np.linalg.norm(tilted, axis=1, keepdims=True)
+    pts = shading_points(V, [[0, 1, 2]], tilted[None], [True], np.zeros(2, int),
+                         [[0.5, 0.25, 0.25], [0.2, 0.4, 0.4]], cutoff=0.1)
+    high = np.array([0.0, 0.0, 1.0])                   # far from the terminator: no lift
+    o = shadow_origins(pts, high)
+    assert np.allclose(o[:, :2], pts.P[:, :2], atol=1e-6) and (o[:, 2] > 0).all()
+    assert (o[:, 2] < 1e-4).all()
+    grazing = np.array([np.cos(np.radians(2)), 0.0, np.sin(np.radians(2))])
+    og = shadow_origins(pts, grazing)                  # near the terminator: lifted along n
+    assert (og[:, 2] - pts.P[:, 2] > 1e-3).all()
+    flat = shading_points(V, [[0, 1, 2]], tilted[None], [False], np.zeros(2, int),
+                          [[0.5, 0.25, 0.25], [0.2, 0.4, 0.4]], cutoff=0.1)
+    assert (shadow_origins(flat, grazing)[:, 2] < 1e-4).all()   # flat faces: never lifted
+
+
+def test_backfacing_points_flip_both_normals():
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)   # winding: Ng = +z
+    down = np.tile([0.0, 0.0, -1.0], (3, 1))                 # smooth normals point down
+    pts = shading_points(V, [[0, 1, 2]], down[None], [True], [0], [[0.4, 0.3, 0.3]])
+    # Cycles views a bake's point along its smooth normal: here from below, so the point is
+    # backfacing and both normals flip (a sun from above then falls on the back: cosine 0)
+    assert np.allclose(pts.Ng[0], [0, 0, -1]) and np.allclose(pts.N[0], [0, 0, 1])
+
+
+def test_bump_correction_limits():
+    N = np.array([[0.0, 0.0, 1.0]])
+    Ns = np.array([[np.sin(0.3), 0.0, np.cos(0.3)]])
+    L_up = np.array([0.0, 0.0, 1.0])
+    assert bump_correction(N, Ns, L_up, np.array([True]))[0] == pytest.approx(1.0, abs=1e-9)
+    below = np.array([1.0, 0.0, -0.05]) / np.linalg.norm([1.0, 0.0, -0.05])   # above Ns only
+    assert bump_correction(N, Ns, below, np.array([True]))[0] == 0.0   # other side of N
+    grazing = np.array([np.cos(0.05), 0.0, np.sin(0.05)])
+    g = bump_correction(N, Ns, grazing, np.array([True]))[0]
+    assert 0.0 < g < 1.0
+    assert bump_correction(N, Ns, grazing, np.array([False]))[0] == 1.0   # correction off
+
+
+@needs_engine
+def test_direct_rows_are_cos_over_pi_with_the_square_shadow():
+    # a floor of two triangles under a square roof
+    floor = np.array([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]], float)
+    roof = np.array([[0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
+    V = np.concatenate([floor, roof])
+    T = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    occ = engine.Occluder(V, T)
+    rng = np.random.default_rng(5)
+    P = np.column_stack([rng.uniform(-1.9, 1.9, (400, 2)), np.zeros(400)])
+    # barycentrics of P in the floor's first triangle where it lies, else the second
+    up = np.tile([0.0, 0.0, 1.0], (4, 1))
+    tri = np.where(P[:, 0] >= P[:, 1], 0, 1)
+    bary = np.zeros((400, 3))
+    for i, (p, t) in enumerate(zip(P, tri)):
+        a, b, c = floor[T[t]]
+        u, v = np.linalg.solve(np.column_stack([b - a, c - a])[:2], (p - a)[:2])
+        bary[i] = [1 - u - v, u, v]
+    pts = shading_points(V, T[:2], np.repeat(up[None, :3], 2, 0), [False, False], tri, bary)
+    D = np.array([[0.0, 0.0, 1.0], [np.cos(np.radians(30)), 0.0, np.sin(np.radians(30))]])
+    rows = direct_rows(occ, pts, D)
+    cos = D[:, 2] / np.pi
+    shift = 1.0 / np.tan(np.radians(30))
+    for s, dx in enumerate((0.0, shift)):
+        shadow = ((P[:, 0] + dx > 0) & (P[:, 0] + dx < 1) & (P[:, 1] > 0) & (P[:, 1] < 1))
+        want = np.where(shadow, 0.0, cos[s])
+        assert np.abs(rows[s] - want).max() < 1e-6
+        assert shadow.sum() > 5
