@@ -109,7 +109,7 @@ def errors_for(relight_fn, truth, R):
 
 
 def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder,
-                     ind_res=None, label=None):
+                     ind_res=None, label=None, direct="auto"):
     """Bake once at (S, ind_spp, res; indirect at ``ind_res``, default res / 2); one row per
     model fitted from that store."""
     from relightable_textures.lt_addon.transport import sparse_tables as sp
@@ -120,12 +120,14 @@ def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder,
     ind_res = ind_res or max(8, res // 2)
     st = tx.TransportTextureSettings(directions=f"hemi:{S}:1.5", resolution=res, bounces=2,
                                      indirect_resolution=ind_res,
-                                     indirect_samples=ind_spp, model="none")
+                                     indirect_samples=ind_spp, model="none", direct=direct)
     t0 = time.perf_counter()
-    result = run(tx.bake_transport_textures(scene, objects, st, folder))
+    # resume=False: a kept indirect stage of the previous point (same lights) is not reused
+    result = run(tx.bake_transport_textures(scene, objects, st, folder, resume=False))
     bake_s = time.perf_counter() - t0
     cycles = result.seconds.get("direct_cycles", 0) + result.seconds.get("indirect_cycles", 0) \
         + result.seconds.get("albedo_cycles", 0)
+    direct_s = result.seconds.get("direct_total", 0.0)
     stores = [b.store for b in result.objects]
     t_bytes = sum(os.path.getsize(s.path) for s in stores)
     ind_bytes = sum(b.indirect.basis_images.nbytes // 2 for b in result.objects if b.indirect)
@@ -197,6 +199,8 @@ def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder,
             "indirect_samples": ind_spp, "indirect_resolution": ind_res, "model": kind,
             "model_arg": arg,
             "bake_seconds": round(bake_s + fit_s, 2), "cycles_seconds": round(cycles, 2),
+            "direct_engine": (result.direct or {}).get("engine", "cycles"),
+            "direct_seconds": round(direct_s, 2),
             "peak_mem_mb": round(result.peak_rss_mb, 1),
             "stored_bytes": int(model_bytes + ind_bytes + alb_bytes), "transport_bytes": t_bytes,
             "preview_lookups": lookups, "preview_madds_per_texel": madds,

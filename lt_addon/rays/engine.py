@@ -2,8 +2,9 @@
 with the extension like SciPy). Where it cannot be imported, :func:`available` says why and the bake
 falls back to Cycles calls.
 
-Rays are cast in batches from worker threads: ``embreex`` loops over a batch without the GIL, so
-threads scale with cores (one batch per thread; NumPy's work between batches also releases it).
+Rays are cast in batches from a pool of worker threads kept by the :class:`Occluder`: ``embreex``
+loops over a batch without the GIL, so threads scale with cores (measured on 2 cores: 1.18 s on
+one thread, 0.66 s on two for 524k random rays).
 """
 
 from __future__ import annotations
@@ -13,8 +14,9 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-#: Rays per engine call: big enough to amortise Python, small enough to keep threads busy.
-BATCH = 1 << 16
+#: Rays per thread task: big enough to amortise Python, small enough to keep threads busy
+#: (1 << 14 and 1 << 15 measured no faster on 400 directions at 256^2, 2 cores).
+BATCH = 1 << 15
 
 
 def available() -> tuple[bool, str]:
@@ -107,6 +109,21 @@ class Occluder:
             for a in starts:
                 run(a)
         else:
-            with ThreadPoolExecutor(self.threads) as pool:
-                list(pool.map(run, starts))
+            if getattr(self, "_pool", None) is None or self._pool_size != self.threads:
+                self.close()
+                self._pool, self._pool_size = ThreadPoolExecutor(self.threads), self.threads
+            list(self._pool.map(run, starts))
         return out
+
+    def close(self) -> None:
+        """Stop the worker threads (a later call starts them again)."""
+        pool = getattr(self, "_pool", None)
+        if pool is not None:
+            pool.shutdown(wait=True)
+        self._pool = None
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
