@@ -165,6 +165,15 @@ class TransportTextureSettings:
         return dset
 
 
+def direct_summary(direct: dict, directions: int) -> str:
+    """One line on how a transport bake's direct light was baked (its report's ``direct``)."""
+    if direct.get("engine") == "rays":
+        return (f"Direct light: {directions} directions by rays ({direct.get('library', '')}, "
+                f"{direct.get('seconds', 0):.1f} s, "
+                f"{direct.get('rays_per_second', 0) / 1e6:.1f} M rays/s)")
+    return f"Direct light: {directions} Cycles calls ({direct.get('why', 'asked for')})"
+
+
 @dataclass
 class ObjectBake:
     """What one object's bake produced (arrays in memory are small: no T)."""

@@ -27,9 +27,9 @@ UNSUPPORTED_TYPES = {"CURVES": "hair curves", "POINTCLOUD": "a point cloud", "VO
 
 
 class RenderGeometry:
-    """Context manager: the depsgraph evaluated with every modifier's and object's render
-    settings (viewport levels, show_viewport, hide_viewport), restored on exit. Yields the
-    evaluated depsgraph."""
+    """Context manager: the depsgraph evaluated with every modifier's, object's and collection's
+    render settings (subdivision levels, show_viewport, hide_viewport), restored on exit. Yields
+    the evaluated depsgraph."""
 
     def __init__(self, scene):
         self.scene = scene
@@ -43,6 +43,8 @@ class RenderGeometry:
 
     def __enter__(self):
         view_layer = bpy.context.view_layer
+        for coll in self.scene.collection.children_recursive:   # what renders, as a collection
+            self._set(coll, "hide_viewport", coll.hide_render)
         for o in self.scene.objects:
             self._set(o, "hide_viewport", o.hide_render)
             if not o.hide_render and o.hide_get(view_layer=view_layer):
@@ -50,10 +52,8 @@ class RenderGeometry:
                 self._restore.append((o, "hide_set", True))
             for m in getattr(o, "modifiers", ()):
                 self._set(m, "show_viewport", m.show_render)
-                if m.type == "SUBSURF" or m.type == "MULTIRES":
-                    lv = "levels" if m.type == "SUBSURF" else "levels"
-                    render = m.render_levels
-                    self._set(m, lv, render)
+                if m.type in ("SUBSURF", "MULTIRES"):      # viewport levels = render levels
+                    self._set(m, "levels", m.render_levels)
         depsgraph = bpy.context.evaluated_depsgraph_get()
         depsgraph.update()
         return depsgraph

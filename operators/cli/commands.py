@@ -24,6 +24,7 @@ import numpy as np
 from ... import __version__
 from ...lt_addon import plugins
 from ...lt_addon.io import atomic
+from ...lt_addon.transport.bundle import direct_summary
 from .common import (CliError, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, add_device_option,
                      add_distribution_options, add_setting_options, bake_device, can_create_in, check_bake_inputs,
                     check_input_blend, check_output_dir, check_output_path, open_object,
@@ -517,6 +518,7 @@ def _cmd_bake_texture_transport(args) -> int:
               f"(bake {t['bake_total']:.1f} s: "
               + (f"direct on the workers {t['distributed_wall']:.1f} s, "
                  if "distributed_wall" in t else
+                 f"direct by rays {t['direct_rays']:.1f} s, " if "direct_rays" in t else
                  f"Cycles direct {t.get('direct_cycles', 0):.1f} s, ")
               + f"indirect {t.get('indirect_cycles', 0):.1f} s; fit {t['fit']:.1f} s; camera "
               f"comparison {t.get('compare_seconds', 0.0):.1f} s); report {rep['report']}")
@@ -531,6 +533,7 @@ def _cmd_bake_texture_transport(args) -> int:
                   f"{fid['worst']['elevation']:g} deg{extra}; relight --source transport "
                   "shows T)")
         if rep is reports[0]:
+            print("  " + direct_summary(rep.get("direct") or {}, rep["directions"]))
             print_chunks(rep)
         gt = rep.get("ground_truth")
         if gt and rep is reports[0]:   # one headline over all objects baked together

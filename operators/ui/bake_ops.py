@@ -15,6 +15,7 @@ import os
 import bpy
 
 from ...lt_addon.settings import to_argv
+from ...lt_addon.transport.bundle import direct_summary
 from ..base import jobs
 from ..preview import preview_nodes
 from ..bakes import steerable_bake
@@ -56,6 +57,9 @@ def _finish(operator, scene, result):
                         if "headline_rel_rmse" in gt else ""))
         if rep.get("glossy", {}).get("materials"):
             operator.report({"WARNING"}, rep["glossy"]["note"])
+        direct = rep.get("direct")
+        if direct and rep is reports[0]:
+            lines.append(direct_summary(direct, rep["directions"]))
         fid = rep.get("model_vs_T") or {}
         if "headline" in fid:
             via = "T" if fid.get("viewport") == "transport" else "PCA"

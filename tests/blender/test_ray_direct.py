@@ -214,3 +214,27 @@ def test_texture_bake_by_rays_equals_the_cycles_bake(fresh_scene, tmp_path, scen
     assert np.mean(d < 2e-3) > 0.998 and d.max() < 0.05, (np.mean(d < 2e-3), d.max())
     assert res.direct["engine"] == "cycles"
     assert T["rays"].max() > 0.2
+
+
+def test_render_settings_decide_the_geometry(fresh_scene):
+    """Rays see what Cycles renders, not what the viewport shows: a caster hidden in the
+    viewport but rendered casts its shadow, one that does not render casts none, and a
+    subdivision modifier counts at its render levels (all restored afterwards)."""
+    import bpy
+
+    from relightable_textures.operators.base import ray_scene
+
+    _plane("Floor", 4.0, material=bpy.data.materials.new("M"))
+    bpy.ops.mesh.primitive_cube_add(size=0.5, location=(0, 0, 1))
+    shown = bpy.context.active_object
+    shown.hide_viewport = True                       # renders: a caster
+    sub = shown.modifiers.new("Sub", "SUBSURF")
+    sub.levels, sub.render_levels = 0, 2
+    bpy.ops.mesh.primitive_cube_add(size=0.5, location=(1, 1, 1))
+    gone = bpy.context.active_object
+    gone.hide_render = True                          # does not render: no shadow
+    with ray_scene.RenderGeometry(fresh_scene) as depsgraph:
+        V, T, n = ray_scene.casters(depsgraph)
+    assert n == 2                                    # the floor and the subdivided cube
+    assert len(T) == 2 * 8 * 8 + 12 * 16             # 8x8 grid, the cube at 2 render levels
+    assert shown.hide_viewport and sub.levels == 0 and gone.hide_render   # restored
