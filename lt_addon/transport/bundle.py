@@ -46,6 +46,33 @@ VIEWPORTS = ("auto", "transport", "pca")
 
 
 INDIRECT = ("steerable", "none")
+#: Directions along an animated Sun's path: added when the scene's Sun moves (auto), or not.
+SUN_PATH = ("auto", "off")
+#: The suffix of a --directions spec that asks for them: ``hemi:1600:1.5+sun-path[:STEP_DEG]``.
+SUN_PATH_SUFFIX = "+sun-path"
+
+
+def split_sun_path(spec: str):
+    """``(base spec, step in degrees or None)`` of a --directions spec with an optional
+    ``+sun-path[:STEP]`` suffix (None: no suffix; the step defaults to 0.5)."""
+    text = str(spec).strip()
+    base, sep, rest = text.lower().partition(SUN_PATH_SUFFIX)
+    if not sep:
+        return text, None
+    rest = rest.strip()
+    if rest and not rest.startswith(":"):
+        raise InputError(f"bad direction spec {spec!r}: expected '...+sun-path' or "
+                         "'...+sun-path:STEP' (degrees between path directions)")
+    try:
+        step = float(rest[1:]) if rest else 0.5
+    except ValueError:
+        raise InputError(f"bad direction spec {spec!r}: the sun-path step must be a number of "
+                         "degrees, e.g. 'hemi:1600:1.5+sun-path:0.5'") from None
+    if not 0.05 <= step <= 10.0:
+        raise InputError(f"the sun-path step must be in 0.05..10 degrees, got {step:g}")
+    return text[:len(base)], step
+
+
 #: How the direct transport is baked: rays where the scene allows (auto), rays or refuse, Cycles calls.
 DIRECT = ("auto", "rays", "cycles")
 
@@ -70,7 +97,17 @@ class TransportTextureSettings:
     directions: str = setting(
         "hemi:400:1.5", metavar="SPEC", panel=False,
         help="sun directions, hemi:N[:P] (N hard-sun bakes over the upper hemisphere, 1 sample "
-             "each; P > 1 denser near the horizon)")
+             "each; P > 1 denser near the horizon), optionally +sun-path[:STEP] (directions STEP "
+             "degrees apart along the scene Sun's animated path; 0.5 by default)")
+    sun_path: str = setting("auto", label="Sun Path", choices=(
+        ("auto", "Auto", "When the scene's Sun is animated (keyframes, drivers, the Sun Position "
+         "add-on), add directions along its path, --sun-path-step apart"),
+        ("off", "Off", "The direction set only")),
+        help="Directions along the animated Sun's path")
+    sun_path_step: float = setting(
+        0.5, lo=0.05, hi=10.0, label="Sun Path Step",
+        help="Degrees between the directions added along the Sun's path (0.5 holds a 2-degree "
+             "Sun's shadows)")
     resolution: int = setting(256, lo=4, hi=8192, soft=(8, 8192), help="Texture side in texels")
     bounces: int = setting(2, lo=0, hi=64, help="Diffuse bounces (0 = direct light only)")
     direct: str = setting("auto", label="Direct Light", choices=(
@@ -124,10 +161,13 @@ class TransportTextureSettings:
 
     def validate(self):
         """Check ranges; returns the DirectionSet."""
+        base, _ = split_sun_path(self.directions)
         try:
-            dset = tt.parse_directions(self.directions)
+            dset = tt.parse_directions(base)
         except ValueError as exc:
             raise InputError(str(exc)) from None
+        if self.sun_path not in SUN_PATH:
+            raise InputError(f"sun path must be one of {SUN_PATH}, got {self.sun_path!r}")
         if dset.size < 8:
             raise InputError(f"need at least 8 upper-hemisphere directions, got {dset.size}")
         if not 4 <= self.resolution <= 8192:

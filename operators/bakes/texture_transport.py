@@ -102,7 +102,7 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
     its workers from the saved ``blend_path`` first (:mod:`.distributed`); the result is the
     same bit for bit. Returns a TransportTextureResult.
     """
-    dset = settings.validate()
+    dset, path_info = resolve_directions(scene, settings)
     if client is not None and (not resume or not blend_path):
         raise BakeInputError("a distributed bake needs the chunk cache (no --no-resume) and a "
                              "saved .blend the workers can open")
@@ -125,6 +125,8 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
     from . import ray_direct
 
     engine = ray_direct.choose(scene, objects, settings)
+    engine["direction_set"] = {"size": dset.size, "spec": settings.directions,
+                               **({"sun_path": path_info} if path_info else {})}
     rays = engine["engine"] == "rays"
     mapped = ray_direct.needs_normals(objects) if rays else [False] * len(objects)
 
@@ -265,6 +267,36 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
     return result
 
 
+def resolve_directions(scene, settings):
+    """The bake's direction set and where it came from: the settings' set, plus directions
+    along the scene Sun's animated path (``sun_path`` auto and a Sun that moves, or a
+    ``+sun-path[:STEP]`` spec, which requires one). Returns ``(DirectionSet, info or None)``."""
+    from ...lt_addon.sphere.sun_path import with_path
+    from ...lt_addon.transport.bundle import split_sun_path
+    from ..base.scene_sun import sun_path
+
+    base = settings.validate()
+    _, forced = split_sun_path(settings.directions)
+    if forced is None and settings.sun_path == "off":
+        return base, None
+    path = sun_path(scene)
+    if path is None:
+        if forced is not None:
+            raise BakeInputError("--directions ...+sun-path: the scene has no Sun lamp that "
+                                 "moves over its frame range (animate its rotation, or drop "
+                                 "+sun-path)")
+        return base, None
+    step = forced if forced is not None else settings.sun_path_step
+    dset = with_path(base, path["directions"], step)
+    info = {"object": path["object"], "frames": path["frames"],
+            "frames_sampled": path["samples"], "base": base.spec,
+            "base_directions": dset.params["base_kept"],
+            "path_directions": dset.params["sun_path_directions"],
+            "step_deg": step, "elevation_deg": dset.params["sun_path_elevation_deg"],
+            "why": "asked for (+sun-path)" if forced is not None else "the scene's Sun is animated"}
+    return dset, info
+
+
 def bake_directions(scene, objects, settings, start: int, stop: int, cache,
                     threads: int = 0) -> float:
     """Bake directions ``start:stop`` of ``settings``' direction set for ``objects`` exactly as
@@ -272,7 +304,7 @@ def bake_directions(scene, objects, settings, start: int, stop: int, cache,
     chunk ``direct_<start>`` ((objects, directions, texels), half floats); ``threads`` Cycles
     threads (0: all cores). Returns Cycles' seconds. Used by the Dask task and ``relight
     bake-chunk`` (farms)."""
-    dset = settings.validate()
+    dset, _ = resolve_directions(scene, settings)
     if threads:   # workers sharing a machine: no more Cycles threads than their share of cores
         scene.render.threads_mode, scene.render.threads = "FIXED", int(threads)
     rows = [[] for _ in objects]
@@ -309,12 +341,15 @@ def direct_chunk_cache(scene, objects, settings: TransportTextureSettings, out_d
     """The chunk cache of the direct stage of a bake of ``objects`` into ``out_dir``: keyed
     by the scene content the bake depends on (:func:`.bake_inputs.scene_key`) and the settings
     the direct bakes use; the folders of other keys (stale chunks) are removed."""
-    from ...lt_addon.io.chunk_cache import ChunkCache
+    from ...lt_addon.io.chunk_cache import ChunkCache, digest
     from ..base.bake_inputs import scene_key
     from ..base.cycles_device import current
 
+    dset, _ = resolve_directions(scene, settings)
     key = {"stage": "direct", "scene": scene_key(scene, objects), "device": current().id,
            "directions": settings.directions, "resolution": settings.resolution,
+           **({"direction_set": digest(dset.directions.round(9).tolist())}
+              if dset.kind == "custom" else {}),
            "seed": settings.seed, "chunk_directions": CHUNK_DIRECTIONS}
     root = os.path.join(out_dir, CACHE_FOLDER, "+".join(atomic.safe_name(o.name) for o in objects))
     cache = ChunkCache(root, key)

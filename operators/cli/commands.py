@@ -47,8 +47,9 @@ class _Parser(argparse.ArgumentParser):
 
 #: bake-textures' options, made from the settings dataclasses (lt_addon/settings.py): the
 #: transport method's own, the three both methods take, the lobes method's own.
-TRANSPORT_OPTIONS = ("directions", "direct", "sun_angle", "model", "components", "tol",
-                     "indirect_samples", "indirect_resolution", "table_size", "viewport")
+TRANSPORT_OPTIONS = ("directions", "direct", "sun_path", "sun_path_step", "sun_angle", "model",
+                     "components", "tol", "indirect_samples", "indirect_resolution",
+                     "table_size", "viewport")
 SHARED_OPTIONS = ("resolution", "bounces", "seed")
 LOBES_OPTIONS = ("frame", "order", "samples", "storage", "mode", "world_sampling")
 

@@ -1,0 +1,107 @@
+"""Benchmark: an animated Sun over a day, with and without directions along its path (issue 32).
+
+The bumps demo at ``--resolution`` with a Sun keyframed over a day (azimuth 80 -> 280 degrees,
+elevation -3 -> 50 -> -3 over 49 frames). The balanced preset's bake, with ``--sun-path auto``
+(directions every ``--step`` degrees along the path on top of the preset's set) and ``off``, is
+relit for a 2-degree Sun at points of the path at 5-10 degrees of elevation and compared with
+Cycles' radiance bakes of those Suns (the scene's 2 bounces, ``--truth-samples``). Prints the
+relative RMSE per light and combined (``sqrt(mean(rel^2))``), bake time and direction counts.
+
+Usage: python benchmarks/bench_sun_path.py [--resolution 256] [--step 0.5] [--out out/bench]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--resolution", type=int, default=256)
+    ap.add_argument("--step", type=float, default=0.5)
+    ap.add_argument("--truth-samples", type=int, default=256)
+    ap.add_argument("--out", default="out/bench")
+    args = ap.parse_args(argv)
+
+    import bpy
+
+    from relightable_textures import samples
+    from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
+    from relightable_textures.lt_addon.transport.bundle import relight, rel_rmse, viewport_direct
+    from relightable_textures.lt_addon.transport import sparse_tables as sp
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.base.jobs import run
+
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                    "tests", "blender"))
+    from test_sun_path import _animate_sun
+
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = bpy.context.scene
+    samples.build("bumps", scene, "demo")
+    obj = bpy.data.objects["Bumps"]
+    _animate_sun(scene)
+    R = args.resolution
+    # lights on the path at elevations 5..10 degrees, morning and evening
+    lights = []
+    for el in (5.0, 7.5, 10.0):
+        t = math.asin((el + 3) / 53) / math.pi
+        lights += [(80 + 200 * t, el), (80 + 200 * (1 - t), el)]
+    t0 = time.perf_counter()
+    truths = run(tx.truth_bakes(scene, [obj], lights, 2.0, 2, args.truth_samples, R))
+    print(f"truths: {len(lights)} lights, {args.truth_samples} spp, "
+          f"{time.perf_counter() - t0:.1f} s", flush=True)
+    rows = []
+    import tempfile
+    with tempfile.TemporaryDirectory() as folder:
+        for mode in ("off", "auto"):
+            s = tx.settings_from_preset("balanced", resolution=R, sun_path=mode,
+                                        sun_path_step=args.step, model="none")
+            t0 = time.perf_counter()
+            res = run(tx.bake_transport_textures(scene, [obj], s, os.path.join(folder, mode),
+                                                 resume=False))
+            bake_s = time.perf_counter() - t0
+            b = res.objects[0]
+            tables = sp.cached_tables(b.store.directions, sp.TABLE_SIZE, 2.0, "linear")
+            per, per_view = [], []
+            for az, el in lights:
+                d = direction_from_az_el(az, el)
+                truth = truths[(az, el)][0]
+                per.append(rel_rmse(relight(b, b.store, d, 2.0), truth))
+                view = viewport_direct(b.store, tables, d)[..., None] * b.albedo
+                if b.indirect is not None:
+                    view = view + tx._upsample(b.indirect.relight(d), R)
+                per_view.append(rel_rmse(view, truth))
+            row = {"sun_path": mode, "directions": b.store.directions.size,
+                   "path": (res.direct or {}).get("direction_set", {}).get("sun_path"),
+                   "bake_seconds": round(bake_s, 2),
+                   "viewport_fits": sp.choose_viewport("auto", b.store.directions.size, R)[0],
+                   "rel_rmse_T": [round(e, 4) for e in per],
+                   "rel_rmse_viewport": [round(e, 4) for e in per_view],
+                   "combined_T": round(float(np.sqrt(np.mean(np.square(per)))), 4),
+                   "combined_viewport": round(float(np.sqrt(np.mean(np.square(per_view)))), 4)}
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+            b.store.abort()
+    print("| sun path | directions | bake | 2° Sun at 5-10° on the path: from T | viewport (T through sparse tables) |")
+    print("|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['sun_path']} | {r['directions']} | {r['bake_seconds']:.1f} s | "
+              f"{r['combined_T']:.3f} | {r['combined_viewport']:.3f} |")
+    os.makedirs(args.out, exist_ok=True)
+    with open(os.path.join(args.out, "sun_path.json"), "w") as fh:
+        json.dump({"date": time.strftime("%Y-%m-%d"), "lights": lights, "rows": rows}, fh,
+                  indent=1)
+
+
+if __name__ == "__main__":
+    main()

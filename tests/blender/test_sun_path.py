@@ -1,0 +1,90 @@
+"""Directions along the scene Sun's animated path (issue 32): read from the frames, added to
+the bake's set, and what they buy at a low sun -- against Cycles' bake of that sun."""
+
+import math
+
+import numpy as np
+import pytest
+
+from relightable_textures import samples
+from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
+
+
+def _animate_sun(scene, frames=(1, 49)):
+    """A Sun over a day: azimuth 80 -> 280 degrees, elevation -3 -> 50 -> -3 (keyframes)."""
+    import bpy
+    from mathutils import Vector
+
+    data = bpy.data.lights.new("DaySun", "SUN")
+    sun = bpy.data.objects.new("DaySun", data)
+    scene.collection.objects.link(sun)
+    scene.frame_start, scene.frame_end = frames
+    n = frames[1] - frames[0] + 1
+    for i, f in enumerate(range(frames[0], frames[1] + 1)):
+        t = i / (n - 1)
+        az, el = 80 + 200 * t, -3 + 53 * math.sin(math.pi * t)
+        towards = Vector(direction_from_az_el(az, el).tolist())
+        sun.rotation_mode = "QUATERNION"
+        sun.rotation_quaternion = (-towards).to_track_quat("-Z", "Y")
+        sun.keyframe_insert("rotation_quaternion", frame=f)
+    return sun
+
+
+def _settings(**kw):
+    from relightable_textures.operators.bakes.texture_transport import TransportTextureSettings
+
+    base = dict(directions="hemi:100:1.5", resolution=32, bounces=0, model="none")
+    base.update(kw)
+    return TransportTextureSettings(**base)
+
+
+def test_the_path_is_read_from_the_frames_and_added(fresh_scene):
+    from relightable_textures.lt_addon.errors import InputError
+    from relightable_textures.operators.bakes.texture_transport import resolve_directions
+
+    samples.build("bumps", fresh_scene, "test")
+    # the sample scene's own Sun does not move: nothing is added, and +sun-path is refused
+    d, info = resolve_directions(fresh_scene, _settings())
+    assert info is None and d.size == 100
+    with pytest.raises(InputError, match="no Sun lamp that moves"):
+        resolve_directions(fresh_scene, _settings(directions="hemi:100:1.5+sun-path"))
+    fresh_scene.frame_set(7)
+    _animate_sun(fresh_scene)
+    d, info = resolve_directions(fresh_scene, _settings())
+    assert info["object"] == "DaySun" and info["frames"] == [1, 49]
+    assert fresh_scene.frame_current == 7                  # the frame is restored
+    # the day's arc above the horizon, every half degree (about 200 deg of azimuth at up to
+    # 50 deg of elevation: a few hundred directions)
+    assert 250 < info["path_directions"] < 600 and d.size == info["base_directions"] + \
+        info["path_directions"]
+    assert info["elevation_deg"][0] < 1.0 and info["elevation_deg"][1] == pytest.approx(50, abs=0.5)
+    d1, info1 = resolve_directions(fresh_scene, _settings(directions="hemi:100:1.5+sun-path:1"))
+    assert info1["path_directions"] < 0.6 * info["path_directions"]
+    d0, info0 = resolve_directions(fresh_scene, _settings(sun_path="off"))
+    assert info0 is None and d0.size == 100
+
+
+def test_a_low_sun_on_the_path_relights_closer_to_cycles(fresh_scene, tmp_path):
+    """The bake with the path against the bake without, for a 2-degree Sun at 8 degrees of
+    elevation on the path, against Cycles' own bake of that Sun (direct light, 256 spp)."""
+    from relightable_textures.lt_addon.transport.bundle import relight
+    from relightable_textures.operators.bakes.texture_transport import (
+        bake_transport_textures, truth_bakes)
+    from relightable_textures.operators.base.jobs import run
+
+    samples.build("bumps", fresh_scene, "test")
+    obj = fresh_scene.objects["Bumps"]
+    _animate_sun(fresh_scene)
+    t = math.asin(11 / 53) / math.pi                      # elevation 8 on the rising side
+    az, el = 80 + 200 * t, 8.0
+    truth = run(truth_bakes(fresh_scene, [obj], [(az, el)], 2.0, 0, 256, 32))[(az, el)][0]
+    errs = {}
+    for mode in ("auto", "off"):
+        res = run(bake_transport_textures(fresh_scene, [obj], _settings(sun_path=mode),
+                                          str(tmp_path / mode), resume=False))
+        b = res.objects[0]
+        img = relight(b, b.store, direction_from_az_el(az, el), 2.0)
+        errs[mode] = float(np.linalg.norm(img - truth) / np.linalg.norm(truth))
+        b.store.abort()
+    assert res.direct["direction_set"]["size"] == 100              # "off": the set alone
+    assert errs["auto"] < 0.6 * errs["off"], errs
