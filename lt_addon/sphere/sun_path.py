@@ -52,12 +52,31 @@ def upper_voronoi_areas(dirs) -> np.ndarray:
     return areas * (2.0 * np.pi / areas.sum())
 
 
-def with_path(base: DirectionSet, path, step_deg: float = 0.5) -> DirectionSet:
+def band(pts, step_deg: float, width_deg: float) -> np.ndarray:
+    """Parallel copies of a densified path (M, 3) offset sideways by multiples of ``step_deg``
+    up to ``width_deg / 2`` on either side (a sun disc on the path reaches that far off it)."""
+    k = int(np.floor(width_deg / 2.0 / step_deg + 1e-9))
+    if k <= 0 or len(pts) < 2:
+        return pts
+    t = np.gradient(pts, axis=0)                              # along the path
+    side = np.cross(pts, t)
+    side /= np.maximum(np.linalg.norm(side, axis=1, keepdims=True), 1e-30)
+    out = [pts]
+    for j in range(1, k + 1):
+        a = np.radians(j * step_deg)
+        for sgn in (1.0, -1.0):
+            out.append(pts * np.cos(a) + sgn * side * np.sin(a))
+    allp = np.concatenate(out)
+    return allp[allp[:, 2] > 0.0]
+
+
+def with_path(base: DirectionSet, path, step_deg: float = 0.5,
+              width_deg: float = 0.0) -> DirectionSet:
     """``base`` (upper hemisphere) plus directions every ``step_deg`` along ``path`` (F, 3: the
-    sun's directions over its animation, in order); base directions closer than one step to the
-    path are dropped (they would duplicate it). Kind ``custom``; ``params`` say where each part
-    came from."""
-    pts = densify(path, step_deg)
+    sun's directions over its animation, in order), in a band ``width_deg`` wide (0: the curve
+    alone); base directions closer than one step to them are dropped (they would duplicate
+    them). Kind ``custom``; ``params`` say where each part came from."""
+    pts = band(densify(path, step_deg), step_deg, width_deg)
     if not len(pts):
         return base
     cos_step = np.cos(np.radians(step_deg))

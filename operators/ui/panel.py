@@ -84,8 +84,8 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
             layout.label(text="preset not measured yet (make bench)", icon="INFO")
         if props.method == "transport":
             col = layout.column(align=True)
-            for name in ("directions", "horizon_power", "resolution", "transport_direct",
-                         "bounces", "indirect_samples", "indirect_resolution", "transport_model",
+            for name in ("directions", "horizon_power", "sun_path", "sun_path_step",
+                         "resolution", "transport_direct", "bounces", "indirect_samples", "indirect_resolution", "transport_model",
                          "transport_components", "transport_tol", "transport_viewport",
                          "sun_angle", "table_size",
                          "truth_lights", "output_dir"):

@@ -54,3 +54,14 @@ def test_the_spec_suffix():
     for bad in ("hemi:400+sun-path:x", "hemi:400+sun-path:20", "hemi:400+sun-pathX"):
         with pytest.raises(InputError):
             split_sun_path(bad)
+
+
+def test_a_band_is_parallel_copies_step_apart():
+    from relightable_textures.lt_addon.sphere.sun_path import band
+
+    pts = densify(_day(), 0.5)
+    b = band(pts, 0.5, 1.0)                           # offsets -0.5, 0, +0.5 degrees
+    assert len(b) <= 3 * len(pts) and len(b) > 2.9 * len(pts)
+    off = np.degrees(np.arccos(np.clip(b[len(pts):2 * len(pts)] @ pts.T, -1, 1)).min(axis=1))
+    assert np.abs(off[10:-10] - 0.5).max() < 0.02     # half a degree off the curve
+    assert len(band(pts, 0.5, 0.0)) == len(pts)
