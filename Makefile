@@ -95,6 +95,8 @@ test-core: $(STAMP)
 bench: $(STAMP)
 	mkdir -p $(OUT)/bench $(BLENDER_USER_RESOURCES)
 	$(PY) benchmarks/bench_transport_textures.py --out $(OUT)/bench
+	$(PY) benchmarks/bench_ray_direct.py --out $(OUT)/bench
+	$(PY) benchmarks/bench_sun_path.py --out $(OUT)/bench
 	$(VENV)/bin/relight bench --quick --out $(OUT)/bench
 	$(PY) benchmarks/bench_cpca.py --scenes statue,room --out $(OUT)/bench
 	$(PY) benchmarks/bench_distributed.py

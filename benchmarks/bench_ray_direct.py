@@ -80,8 +80,8 @@ def main(argv=None):
     ap.add_argument("--out", default="out/bench")
     args = ap.parse_args(argv)
     rows = [measure(s, args.resolution, args.directions) for s in args.scenes.split(",")]
-    print(f"| scene | texels | triangles | Cycles call, ms/direction | rays, ms/direction | "
-          f"scene read (rays) | speed-up | rays/s | T rays vs Cycles (median / worst) |")
+    print("| scene | texels | triangles | Cycles call, ms/direction | rays, ms/direction | "
+          "scene read (rays) | speed-up | rays/s | T rays vs Cycles (median / worst) |")
     print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['scene']} {r['resolution']}² | {r['texels']} | {r['triangles']} | "
