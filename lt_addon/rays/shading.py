@@ -151,22 +151,18 @@ def smooth_surface_lift(Vt, Nt, w, n, Ng):
     c = dot(N1 - N0, V1 - V0)
     h = a * u * (u - 1) + (a + b + c) * u * v + b * v * (v - 1)
     front = dot(n, Ng) > 0
-    # front: local linear envelope above the corners' tangent planes
-    h0 = np.maximum(np.maximum(dot(V1 - V0, N0), dot(V2 - V0, N0)), 0.0)
-    h1 = np.maximum(np.maximum(dot(V0 - V1, N1), dot(V2 - V1, N1)), 0.0)
-    h2 = np.maximum(np.maximum(dot(V0 - V2, N2), dot(V1 - V2, N2)), 0.0)
-    h0 = np.maximum(dot(V0 - P, N0) + h0, 0.0)
-    h1 = np.maximum(dot(V1 - P, N1) + h1, 0.0)
-    h2 = np.maximum(dot(V2 - P, N2) + h2, 0.0)
-    hf = np.maximum(np.minimum(np.minimum(h0, h1), h2), h * 0.5)
-    # flipped normals
-    g0 = np.maximum(np.maximum(dot(V0 - V1, N0), dot(V0 - V2, N0)), 0.0)
-    g1 = np.maximum(np.maximum(dot(V1 - V0, N1), dot(V1 - V2, N1)), 0.0)
-    g2 = np.maximum(np.maximum(dot(V2 - V0, N2), dot(V2 - V1, N2)), 0.0)
-    g0 = np.maximum(dot(P - V0, N0) + g0, 0.0)
-    g1 = np.maximum(dot(P - V1, N1) + g1, 0.0)
-    g2 = np.maximum(dot(P - V2, N2) + g2, 0.0)
-    hb = np.minimum(-np.minimum(np.minimum(g0, g1), g2), h * 0.5)
+
+    def envelope(sign):
+        """Cycles' local linear envelope of the corners' tangent planes: above the triangle
+        (``sign`` +1, normals with Ng) or below it (-1, flipped normals)."""
+        hs = []
+        for Vi, Ni, Vj, Vk in ((V0, N0, V1, V2), (V1, N1, V0, V2), (V2, N2, V0, V1)):
+            hi = np.maximum(np.maximum(sign * dot(Vj - Vi, Ni), sign * dot(Vk - Vi, Ni)), 0.0)
+            hs.append(np.maximum(sign * dot(Vi - P, Ni) + hi, 0.0))
+        return np.minimum(np.minimum(hs[0], hs[1]), hs[2])
+
+    hf = np.maximum(envelope(1.0), h * 0.5)
+    hb = np.minimum(-envelope(-1.0), h * 0.5)
     return n * np.where(front, hf, hb)[:, None]
 
 

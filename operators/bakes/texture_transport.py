@@ -149,7 +149,7 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
     os.makedirs(out_dir, exist_ok=True)
     # (rays put no chunks in the cache: a rerun casts them again in less time than reading them
     # back; the cache folder still holds the indirect stage's chunks)
-    cache = direct_chunk_cache(scene, objects, settings, out_dir) if resume else None
+    cache = direct_chunk_cache(scene, objects, settings, out_dir, dset) if resume else None
     stores = [tt.TransportStore.create(
         os.path.join(out_dir, f"{atomic.safe_name(o.name)}_transport_texture.npy"), dset, R,
         {"object": o.name, "kind": "direct_irradiance_over_pi", "samples": 1,
@@ -337,15 +337,19 @@ def indirect_spec(settings: TransportTextureSettings) -> dict:
                       "importance", passes="indirect")
 
 
-def direct_chunk_cache(scene, objects, settings: TransportTextureSettings, out_dir: str):
+def direct_chunk_cache(scene, objects, settings: TransportTextureSettings, out_dir: str,
+                       dset=None):
     """The chunk cache of the direct stage of a bake of ``objects`` into ``out_dir``: keyed
     by the scene content the bake depends on (:func:`.bake_inputs.scene_key`) and the settings
-    the direct bakes use; the folders of other keys (stale chunks) are removed."""
+    the direct bakes use, ``dset`` the resolved direction set (None: resolved here, which steps
+    through the frames for an animated Sun); the folders of other keys (stale chunks) are
+    removed."""
     from ...lt_addon.io.chunk_cache import ChunkCache, digest
     from ..base.bake_inputs import scene_key
     from ..base.cycles_device import current
 
-    dset, _ = resolve_directions(scene, settings)
+    if dset is None:
+        dset, _ = resolve_directions(scene, settings)
     key = {"stage": "direct", "scene": scene_key(scene, objects), "device": current().id,
            "directions": settings.directions, "resolution": settings.resolution,
            **({"direction_set": digest(dset.directions.round(9).tolist())}
