@@ -15,14 +15,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from ..io import atomic, exrio
+from ..io import atomic, exrio, jpeg
 from ..progress import Progress
 from ..settings import check_ranges, setting
 from ..sphere.directions import hemisphere_fibonacci, parse_direction_spec
 from ..sphere.hemisphere import direction_from_az_el
 from ..transport import texture as tt
 from ..transport.bundle import relight, upsample
-from . import rti
+from . import rti, rti_files
 from . import sh_lightmap as sh
 
 
@@ -70,8 +70,8 @@ class ExportSettings:
         ("monosh", "MonoSH Lightmap", "Bakery's MonoSH: L0 EXR + 8-bit direction (Unity "
                                       "axes), for one lighting")), help="What is exported")
     terms: int | None = setting(None, metavar="K", panel=False,
-                                help="rti-hsh: 4, 9 (default) or 16 terms (OpenLIME reads 4 "
-                                     "and 9)")
+                                help="rti-hsh: 4 or 9 (default) terms (OpenLIME evaluates at "
+                                     "most 9; 16 is refused)")
     env: str | None = None              # SH formats: an equirect EXR ...
     rotate: float = setting(0.0, metavar="DEG", panel=False,
                             help="with --env: its rotation about +z, as a world Mapping node's Z")
@@ -102,8 +102,12 @@ class ExportSettings:
             if self.env is not None or self.sun is not None:
                 raise InputError(f"{self.format} keeps the light free (the viewer moves "
                                      "it): --env and --sun are for the SH formats")
-        if self.format == "rti-hsh" and self.terms not in (None, 4, 9, 16):
-            raise InputError(f"rti-hsh has 4, 9 or 16 terms, got {self.terms}")
+        if self.format == "rti-hsh" and self.terms == 16:
+            raise InputError("rti-hsh with 16 terms is not written: OpenLIME and the relight "
+                             "tools evaluate 9 HSH terms and would drop terms 10-16 "
+                             "silently; use --terms 9 (or 4)")
+        if self.format == "rti-hsh" and self.terms not in (None, 4, 9):
+            raise InputError(f"rti-hsh has 4 or 9 terms, got {self.terms}")
         if self.format == "rti-ptm" and self.terms not in (None, 6):
             raise InputError(f"rti-ptm has 6 terms, got {self.terms}")
         if not 0.0 <= self.sun_angle <= 30.0:
@@ -309,25 +313,40 @@ def rti_export(source: RadianceSource, settings, progress_every=None):
         sample = np.concatenate([source.at_sample(int(s)) for s in top])
         p = float(np.percentile(sample, 99.5))
         exposure = 1.0 / p if p > 0 else 1.0
-    P = source.resolution ** 2
+    R = source.resolution
+    P = R * R
     coef = np.zeros((P, terms, 3))
     for s in range(dset.size):
         v = rti.to_display(source.at_sample(s), exposure)
         coef += M[:, s][None, :, None] * v[:, None, :]
         if progress_every and s % progress_every == 0:
             yield Progress(s, dset.size, f"fitting {settings.format}: light {s + 1}/{dset.size}")
+    coef, nonneg = rti.keep_nonnegative(coef, settings.kind, dset.directions,
+                                        dset.solid_angles)
     q, scale, bias = rti.quantize(coef)
     deq = rti.dequantize(q, scale, bias)
-    per_light = []
+    # what the files hold: the planes as a JPEG decoder shows them (rows top first on disk)
+    qj = np.stack([jpeg.reconstruct(np.ascontiguousarray(q[:, k].reshape(R, R, 3)[::-1]),
+                                    rti_files.JPEG_QUALITY)[::-1].reshape(P, 3)
+                   for k in range(terms)], axis=1)
+    deq_jpeg = rti.dequantize(qj, scale, bias)
+    per_light, planes_8bit, negative = [], [], 0
     for d in held_out_lights(settings.held_out):
         truth = rti.to_display(source.at_direction(d), exposure)
-        est = np.clip(rti.evaluate(deq, d, settings.kind), 0.0, 1.0)
-        e, psnr = rti.rmse_psnr(est, truth)
+        raw = rti.evaluate(deq_jpeg, d, settings.kind)
+        negative += int(np.count_nonzero(raw < 0))
+        e, psnr = rti.rmse_psnr(np.clip(raw, 0.0, 1.0), truth)
         per_light.append({"light": [round(float(x), 4) for x in d], "rmse": round(e, 5),
                           "psnr_db": round(psnr, 2)})
+        planes_8bit.append(rti.rmse_psnr(np.clip(rti.evaluate(deq, d, settings.kind), 0, 1),
+                                         truth)[0])
     rm = [p["rmse"] for p in per_light]
     errors = {"held_out_lights": len(per_light), "rmse_mean": round(float(np.mean(rm)), 5),
               "rmse_max": round(float(np.max(rm)), 5),
               "psnr_mean_db": round(float(np.mean([p["psnr_db"] for p in per_light])), 2),
+              "rmse_mean_lossless_8bit_planes": round(float(np.mean(planes_8bit)), 5),
+              "jpeg_quality": rti_files.JPEG_QUALITY,
+              "negative_values_at_held_out_lights": negative,
+              "nonnegative_fit": nonneg,
               "per_light": per_light, "design_condition": round(cond, 2)}
     return q, scale, bias, exposure, errors

@@ -8,7 +8,8 @@ files the OpenLIME web viewer reads):
 * PTM (Malzbender et al. 2001), 6 terms in the light's image-plane components (lu, lv):
   ``1, lu, lv, lu^2, lu lv, lv^2``;
 * HSH (hemispherical harmonics, Gautron et al. 2004), 4, 9 or 16 terms
-  (orders 2, 3, 4), orthonormal on the upper hemisphere.
+  (orders 2, 3, 4), orthonormal on the upper hemisphere; exports write 4 or 9 (OpenLIME
+  evaluates 9 and would drop terms 10-16 silently).
 
 The light frame is the bake's: z up (the hemisphere the transport texture samples), lu = x
 (texture right for a plane facing +z with the usual UVs), lv = y (texture up).
@@ -61,8 +62,11 @@ def _assoc_legendre(l: int, m: int, x: np.ndarray) -> np.ndarray:
     return pll
 
 
-#: The relight tools clamp the light's polar angle below the horizon by this (rad).
-HSH_MIN_ELEVATION = 0.01
+#: HSH's light is clamped to this elevation (rad) -- OpenLIME's ``HSH.minElevation``
+#: (src/ShaderRTI.js at 5b4e27b). The relight tools' own fitter clamps at 0.01 rad; a
+#: different clamp from the viewer's shows another image below it (measured: 46 levels at
+#: the horizon), so the fit, our page and OpenLIME all use this one.
+HSH_MIN_ELEVATION = 0.15
 
 
 def hsh_basis(light, order: int = 3) -> np.ndarray:
@@ -182,3 +186,80 @@ def rmse_psnr(estimate, truth) -> tuple[float, float]:
     e = float(np.sqrt(np.mean((np.asarray(estimate, np.float64)
                                - np.asarray(truth, np.float64)) ** 2)))
     return e, (float("inf") if e == 0 else float(20.0 * np.log10(1.0 / e)))
+
+
+def check_lights(kind: str, lights) -> np.ndarray:
+    """Lights (S', 3) a fit must stay non-negative at: the fitted ``lights`` plus two rings of
+    72 azimuths, on the horizon and (HSH) at its clamp elevation -- every light a viewer can
+    show is one of these or between them (HSH shows the clamp ring below it)."""
+    az = np.radians(np.arange(72) * 5.0)
+    els = [0.0] + ([HSH_MIN_ELEVATION] if kind == "hsh" else [])
+    rings = [np.stack([np.cos(e) * np.cos(az), np.cos(e) * np.sin(az),
+                       np.full(az.shape, np.sin(e))], axis=1) for e in els]
+    return np.concatenate([np.asarray(lights, np.float64), *rings])
+
+
+#: Below this the relit display value of a fit is raised (1/4 of an 8-bit level): OpenLIME
+#: turns display values to linear with ``pow(v, 2.2)`` (src/Shader.js ``srgb2linear``),
+#: undefined in GLSL for v < 0, so a fit must not go negative where the light can be.
+NONNEGATIVE_MARGIN = 0.25 / 255.0
+
+
+def keep_nonnegative(coef, kind: str, lights, weights, *, penalty: float = 10.0,
+                     iterations: int = 6, chunk: int = 4096):
+    """Coefficients (P, K, C) whose relight is >= NONNEGATIVE_MARGIN at every
+    :func:`check_lights` light, changed only where it was not.
+
+    The weighted least-squares fit ``x`` of a texel and channel minimises
+    ``sum_s w_s (v_s - b_s . x)^2``; where it dips below the margin (ringing at grazing light,
+    where the truth is 0 or near it) it is refitted with a penalty on the dipping lights,
+    ``+ mu sum_(s in A) w_s (b_s . x - margin)^2`` (A grows over a few iterations), which
+    keeps the fit close to the data elsewhere. The normal equations need no data: the
+    unconstrained fit's right-hand side is ``G0 x`` with ``G0 = B^T W B``. A residual dip is
+    then lifted through the constant term. float64 throughout; ``G`` is K x K (K <= 16) and
+    positive definite (G0 is, by the fit's conditioning check).
+
+    Returns (coef, stats): how many (texel, channel) curves were refitted and lifted, and the
+    largest lift (display units).
+    """
+    coef = np.array(coef, np.float64, copy=True)
+    P, K, C = coef.shape
+    lights = np.asarray(lights, np.float64)
+    w = np.asarray(weights, np.float64)
+    B = basis(kind, lights, K)
+    G0 = (B * w[:, None]).T @ B
+    chk = check_lights(kind, lights)
+    Bc = basis(kind, chk, K)                                             # (Sc, K)
+    wc = np.concatenate([w, np.full(chk.shape[0] - w.size, w.mean())])
+    b0 = float(Bc[0, 0])                                                 # the constant term
+    m = NONNEGATIVE_MARGIN
+    refitted, lifted, top = 0, 0, 0.0
+    for a in range(0, P, chunk):
+        x = coef[a:a + chunk].transpose(0, 2, 1).reshape(-1, K)          # (n C, K)
+        pred = x @ Bc.T                                                  # (n C, Sc)
+        bad = np.flatnonzero((pred < m).any(axis=1))
+        if bad.size == 0:
+            continue
+        xb = x[bad]
+        rhs0 = xb @ G0
+        active = pred[bad] < m
+        for _ in range(iterations):
+            aw = active * (penalty * wc)[None, :]                        # (b, Sc)
+            G = G0[None] + np.einsum("bs,sk,sl->bkl", aw, Bc, Bc)
+            rhs = rhs0 + m * (aw @ Bc)
+            xb = np.linalg.solve(G, rhs[:, :, None])[:, :, 0]
+            p2 = xb @ Bc.T
+            grow = (p2 < m) & ~active
+            if not grow.any():
+                break
+            active |= grow
+        low = (xb @ Bc.T).min(axis=1)
+        lift = np.where(low < m, (m - low) / b0, 0.0)
+        xb[:, 0] += lift
+        refitted += bad.size
+        lifted += int(np.count_nonzero(lift))
+        top = max(top, float((lift * b0).max()))
+        x[bad] = xb
+        coef[a:a + chunk] = x.reshape(-1, C, K).transpose(0, 2, 1)
+    return coef, {"refitted_curves": refitted, "lifted_curves": lifted,
+                  "max_lift": round(top, 6), "check_lights": int(chk.shape[0])}

@@ -3,13 +3,15 @@
 A folder holds
 
 * ``info.json`` -- as the relight tools write it and OpenLIME reads it: ``width``,
-  ``height``, ``format`` ("png"), ``type`` ("ptm" or "hsh"), ``colorspace`` ("rgb"),
+  ``height``, ``format`` ("jpg"), ``type`` ("ptm" or "hsh"), ``colorspace`` ("rgb"),
   ``nplanes`` (3 x terms), ``materials[0].scale`` and ``.bias`` (one per plane, plane
   ``3 k + c`` = coefficient ``k`` of channel ``c``); and ours: ``exposure``, ``values``
   ("srgb display"), ``light_frame``;
-* ``plane_<k>.png`` -- coefficient ``k`` of R, G, B as an 8-bit RGB image, top row first
-  (texture v = 1), lossless so the only loss is the 8-bit quantisation
-  (``c = (q / 255 - bias) * scale``);
+* ``plane_<k>.jpg`` -- coefficient ``k`` of R, G, B as an 8-bit RGB image, top row first
+  (texture v = 1), ``c = (q / 255 - bias) * scale``. JPEG because OpenLIME and the relight
+  tools request ``plane_<k>.jpg`` whatever ``format`` says; written by our own encoder
+  (:mod:`..io.jpeg`) at JPEG_QUALITY with no chroma subsampling (a plane's "colour" is three
+  channels' coefficients, not a colour);
 * ``index.html`` -- a page that embeds the above and relights it with the mouse
   (``web/viewer.js``): it opens from disk or any static host, no server or package needed.
 
@@ -26,22 +28,20 @@ import shutil
 
 import numpy as np
 
-from ..io import atomic
-from ..io.contact_sheet import read_png, write_png
+from ..errors import InputError
+from ..io import atomic, jpeg
+from ..io.contact_sheet import read_png
 from . import rti
 
 FORMAT = "relightable_textures.rti"
 WEB = os.path.join(os.path.dirname(__file__), "web")
-
-
-def _png_bytes(rgb8: np.ndarray, scratch: str) -> bytes:
-    write_png(scratch, rgb8)
-    with open(scratch, "rb") as fh:
-        return fh.read()
+#: JPEG quality of the planes (IJG scale, 4:4:4). Measured on the bumps demo's HSH planes
+#: (docs/exports.md): see JPEG_ERROR_NOTE.
+JPEG_QUALITY = 95
 
 
 def write(folder: str, q, scale, bias, kind: str, *, exposure: float = 1.0,
-          title: str = "Relightable texture") -> str:
+          title: str = "Relightable texture", quality: int = JPEG_QUALITY) -> str:
     """Write an RTI folder atomically (built under a temporary name, renamed when complete;
     an existing folder of that name is replaced).
 
@@ -63,7 +63,7 @@ def write(folder: str, q, scale, bias, kind: str, *, exposure: float = 1.0,
         shutil.rmtree(tmp)
     os.makedirs(tmp)
     try:
-        info = {"width": W, "height": H, "format": "png", "type": kind, "colorspace": "rgb",
+        info = {"width": W, "height": H, "format": "jpg", "type": kind, "colorspace": "rgb",
                 "nplanes": 3 * K,
                 "materials": [{"scale": [float(v) for v in np.asarray(scale).reshape(-1)],
                                "bias": [float(v) for v in np.asarray(bias).reshape(-1)]}],
@@ -74,8 +74,10 @@ def write(folder: str, q, scale, bias, kind: str, *, exposure: float = 1.0,
         uris = []
         for k in range(K):
             img = q[::-1, :, k, :]                                   # top row first
-            data = _png_bytes(img, os.path.join(tmp, f"plane_{k}.png"))
-            uris.append("data:image/png;base64," + base64.b64encode(data).decode("ascii"))
+            data = jpeg.encode(np.ascontiguousarray(img), quality)
+            with open(os.path.join(tmp, f"plane_{k}.jpg"), "wb") as fh:
+                fh.write(data)
+            uris.append("data:image/jpeg;base64," + base64.b64encode(data).decode("ascii"))
         with open(os.path.join(WEB, "template.html")) as fh:
             page = fh.read()
         with open(os.path.join(WEB, "viewer.js")) as fh:
@@ -92,16 +94,30 @@ def write(folder: str, q, scale, bias, kind: str, *, exposure: float = 1.0,
     return folder
 
 
+def _read_plane(folder: str, k: int, fmt: str) -> np.ndarray:
+    if fmt == "png":
+        return read_png(os.path.join(folder, f"plane_{k}.png"))
+    try:
+        from PIL import Image
+    except ImportError:
+        raise InputError("reading JPEG planes needs Pillow (pip install pillow); Blender "
+                         "does not ship it") from None
+    with Image.open(os.path.join(folder, f"plane_{k}.jpg")) as im:
+        return np.asarray(im.convert("RGB"))
+
+
 def read(folder: str):
     """(q (R, R, K, 3) uint8 with row 0 at v = 0, scale (K, 3), bias (K, 3), info) of a folder
-    written by :func:`write` (or any relight-layout rgb PTM/HSH folder with PNG planes)."""
+    written by :func:`write` (or any relight-layout rgb PTM/HSH folder with JPEG or PNG
+    planes; JPEG is decoded with Pillow, a development dependency)."""
     with open(os.path.join(folder, "info.json")) as fh:
         info = json.load(fh)
     if info.get("colorspace") != "rgb" or info.get("type") not in ("ptm", "hsh"):
         raise ValueError(f"{folder}: only rgb PTM/HSH planes are read, got "
                          f"{info.get('type')}/{info.get('colorspace')}")
     K = int(info["nplanes"]) // 3
-    planes = [read_png(os.path.join(folder, f"plane_{k}.png"))[::-1] for k in range(K)]
+    fmt = info.get("format", "jpg")
+    planes = [_read_plane(folder, k, fmt)[::-1] for k in range(K)]
     q = np.stack(planes, axis=2)
     scale = np.asarray(info["materials"][0]["scale"], np.float64).reshape(K, 3)
     bias = np.asarray(info["materials"][0]["bias"], np.float64).reshape(K, 3)

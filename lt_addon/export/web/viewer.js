@@ -38,10 +38,11 @@
   function factorial(n) { let f = 1; for (let i = 2; i <= n; i++) f *= i; return f; }
 
   // hemispherical harmonics in the relight tools' conventions: per order m = +l .. -l, every
-  // m != 0 term negated, polar angle clamped 0.01 rad above the horizon
+  // m != 0 term negated, the light clamped 0.15 rad above the horizon (OpenLIME's
+  // HSH.minElevation, which the exporter fits with)
   function hshBasis(lx, ly, lz, terms) {
     const order = Math.round(Math.sqrt(terms));
-    const theta = Math.min(Math.acos(Math.min(1, Math.max(-1, lz))), Math.PI / 2 - 0.01);
+    const theta = Math.min(Math.acos(Math.min(1, Math.max(-1, lz))), Math.PI / 2 - 0.15);
     const x = 2.0 * Math.cos(theta) - 1.0;
     const phi = Math.atan2(ly, lx);
     const out = [];
