@@ -206,7 +206,7 @@ NONNEGATIVE_MARGIN = 0.25 / 255.0
 
 
 def keep_nonnegative(coef, kind: str, lights, weights, *, penalty: float = 10.0,
-                     iterations: int = 6, chunk: int = 4096):
+                     iterations: int = 6, chunk: int = 4096, lift_residual: bool = True):
     """Coefficients (P, K, C) whose relight is >= NONNEGATIVE_MARGIN at every
     :func:`check_lights` light, changed only where it was not.
 
@@ -254,7 +254,7 @@ def keep_nonnegative(coef, kind: str, lights, weights, *, penalty: float = 10.0,
                 break
             active |= grow
         low = (xb @ Bc.T).min(axis=1)
-        lift = np.where(low < m, (m - low) / b0, 0.0)
+        lift = np.where(low < m, (m - low) / b0, 0.0) if lift_residual else np.zeros(low.shape)
         xb[:, 0] += lift
         refitted += bad.size
         lifted += int(np.count_nonzero(lift))

@@ -148,7 +148,7 @@ def test_relight_export_of_the_installed_wheel_writes_the_web_page(installed, tm
     assert r.returncode == 0, r.stderr[-3000:]
     page_dir = tmp_path / "plane_relight" / "Plane_rti-hsh4"
     assert sorted(os.listdir(page_dir)) == \
-        ["index.html", "info.json"] + [f"plane_{k}.png" for k in range(4)]
+        ["index.html", "info.json"] + [f"plane_{k}.jpg" for k in range(4)]
     page = (page_dir / "index.html").read_text()
     viewer = (site / PKG / "lt_addon" / "export" / "web" / "viewer.js").read_text()
     assert viewer.strip() and viewer.strip() in page and "{{" not in page
