@@ -22,11 +22,13 @@ from ..sphere.directions import hemisphere_fibonacci, parse_direction_spec
 from ..sphere.hemisphere import direction_from_az_el
 from ..transport import texture as tt
 from ..transport.bundle import relight, upsample
-from . import rti, rti_files
+from . import godot, rti, rti_files
 from . import sh_lightmap as sh
 
 
-FORMATS = ("sh-l1", "monosh", "rti-ptm", "rti-hsh")
+FORMATS = ("sh-l1", "monosh", "godot-lightmap", "rti-ptm", "rti-hsh")
+#: The formats baked for one lighting (--env or --sun).
+LIGHTMAPS = ("sh-l1", "monosh", "godot-lightmap")
 
 
 #: Tilts (degrees) of the held-out normals the SH formats are checked at (8 azimuths each).
@@ -34,7 +36,7 @@ TILTS = (0.0, 15.0, 30.0, 45.0)
 
 
 #: Godot's axes (Y up, right-handed) from Blender's (Z up): (x, y, z)_godot = (x, z, -y).
-BLENDER_TO_GODOT = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+BLENDER_TO_GODOT = godot.BLENDER_TO_GODOT
 
 
 #: Unity's axes (Y up, left-handed) from Blender's: (x, y, z)_unity = (x, z, y).
@@ -44,16 +46,28 @@ BLENDER_TO_UNITY = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]])
 #: How each lightmap format is read back (written into the files and the report).
 DECODE = {
     "sh-l1": {
-        "axes": "Godot (Y up): x, z, -y of the object's own Blender frame",
+        "axes": "world frame in Godot's axes (Y up, right-handed): x, z, -y of Blender's world "
+                "(as Blender's glTF exporter maps them)",
         "values": "L1 SH coefficients c_lm of incident radiance (W m^-2 sr^-1), linear Rec.709",
-        "decode": "E/pi = 0.282095 L0 + 0.32573 (L1n1 n.y + L1_0 n.z + L1p1 n.x), n in the "
-                  "object's frame (Godot 4's LightmapGI shader with raw coefficients; builds "
-                  "that store pre-convolved terms want L0 * 0.282095 and L1 * 0.325735)",
+        "decode": "E/pi = 0.282095 L0 + 0.32573 (L1n1 n.y + L1_0 n.z + L1p1 n.x), n the world "
+                  "normal (raw coefficients, as Godot 4.0-4.3's LightmapGI shader reads them; "
+                  "--format godot-lightmap writes the files Godot loads)",
     },
     "monosh": {
-        "axes": "Unity (Y up, left-handed): x, z, y of the object's own Blender frame",
-        "values": "L0: ready-to-apply RGB (half EXR); L1: luminance direction, 8-bit PNG",
-        "decode": "Bakery MonoSH: nL1 = L1 * 2 - 1; E/pi = L0 + 2 L0 (nL1 . n) per channel",
+        "axes": "world frame in Unity's axes (Y up, left-handed): x, z, y of Blender's world "
+                "(as Unity's FBX/glTF importers place a Blender scene)",
+        "values": "L0: ready-to-apply RGB (half EXR, linear); L1: luminance direction, 8-bit "
+                  "PNG, linear data (import with sRGB off, no compression or high-quality BC7)",
+        "decode": "Bakery MonoSH: nL1 = L1 * 2 - 1; E/pi = L0 + 2 L0 (nL1 . n) per channel, "
+                  "n the world-space normal (z3y/ShaderGraph Bakery.hlsl)",
+    },
+    "godot-lightmap": {
+        "axes": "the frame of a LightmapGI node at the origin: world, Godot's axes (x, z, -y "
+                "of Blender's)",
+        "values": "one half EXR, 4 layers stacked vertically (L0, L1 y, L1 z, L1 x), linear",
+        "decode": {"4.4": "f(n) = L0 + 4 L0 (2 t - 1) . n, t = (L1y, L1z, L1x) layers "
+                          "(packed, pre-convolved L1; _uses_packed_directional)",
+                   "4.3": "f(n) = 0.282095 L0 + 0.32573 (L1y n.y + L1z n.z + L1x n.x) (raw)"},
     },
 }
 
@@ -68,7 +82,15 @@ class ExportSettings:
         ("sh-l1", "L1 SH Lightmap", "Four half EXRs of L1 spherical harmonics (Godot's "
                                     "directional lightmap layers and axes), for one lighting"),
         ("monosh", "MonoSH Lightmap", "Bakery's MonoSH: L0 EXR + 8-bit direction (Unity "
-                                      "axes), for one lighting")), help="What is exported")
+                                      "axes), for one lighting"),
+        ("godot-lightmap", "Godot Lightmap", "A folder Godot loads: stacked directional "
+                                             "lightmap EXR + .import, LightmapGIData .tres, "
+                                             "the object as glTF (UV2 = the bake's UVs) and a "
+                                             "scene; for one lighting")),
+        help="What is exported")
+    godot: str = setting("4.4", choices=(("4.4", "Godot 4.4+", "Packed, pre-convolved L1"),
+                                         ("4.3", "Godot 4.0-4.3", "Raw L1 coefficients")),
+                         label="Godot", help="godot-lightmap: the Godot release it is for")
     terms: int | None = setting(None, metavar="K", panel=False,
                                 help="rti-hsh: 4 or 9 (default) terms (OpenLIME evaluates at "
                                      "most 9; 16 is refused)")
@@ -94,7 +116,7 @@ class ExportSettings:
         if self.format not in FORMATS:
             raise InputError(f"format must be one of {', '.join(FORMATS)}, got "
                                  f"{self.format!r}")
-        if self.format.startswith("sh") or self.format == "monosh":
+        if self.format in LIGHTMAPS:
             if (self.env is None) == (self.sun is None):
                 raise InputError(f"{self.format} is baked light for one lighting: give "
                                      "exactly one of --env HDR.exr and --sun AZ,EL")
@@ -140,7 +162,7 @@ def output_names(obj_name: str, settings: "ExportSettings") -> list:
         return [f"{base}_{k}.exr" for k in ("L0", "L1n1", "L1_0", "L1p1")] + [base + ".json"]
     if fmt == "monosh":
         return [f"{base}_L0.exr", f"{base}_L1.png", base + ".json"]
-    return [base, base + ".json"]              # a folder (info.json, planes, index.html)
+    return [base, base + ".json"]              # a folder (RTI: info.json, planes, index.html)
 
 
 def read_environment(path: str) -> np.ndarray:
@@ -181,16 +203,20 @@ def indirect_over_pi(bake, store, settings) -> np.ndarray | None:
     return np.where(albedo > 0.02, rad / np.maximum(albedo, 0.02), 0.0) * tint
 
 
-def sh_export(T, dset, weights, normals, indirect):
+def sh_export(T, dset, weights, normals, indirect, variants=None):
     """Per-texel SH (P, 4, 3) and the error figures at held-out normals.
 
     T: (S, P) float16 store array; weights (S, 3); normals (P, 3) world (zero: uncovered).
+    ``variants``: {name: f(SH (n, 4, 3)) -> SH (n, 4, 3)}, further stored forms whose error
+    is measured the same way (e.g. Godot's packed layers as its shader decodes them).
     Streams over texel chunks (float64 working set of about ``tt.CHUNK_BYTES`` each)."""
     S, P = T.shape
     covered = np.linalg.norm(normals, axis=1) > 0
     L = np.zeros((P, 4, 3))
     az = np.arange(8) * 45.0 + 22.5
-    sums = {t: {"sh": 0.0, "monosh": 0.0, "sh_half": 0.0, "ref": 0.0} for t in TILTS}
+    variants = variants or {}
+    sums = {t: {"sh": 0.0, "monosh": 0.0, "sh_half": 0.0, "ref": 0.0, **{k: 0.0 for k in variants}}
+            for t in TILTS}
     step = tt.chunk_texels(S)
     for a in range(0, P, step):
         sl = slice(a, min(P, a + step))
@@ -205,6 +231,7 @@ def sh_export(T, dset, weights, normals, indirect):
         Lh = Lc.astype(np.float16).astype(np.float64)
         L0m, dm = sh.to_monosh(Lh)                       # as stored: half L0, 8-bit direction
         Lm = sh.from_monosh(L0m.astype(np.float16).astype(np.float64), np.rint(dm * 255) / 255)
+        Lv = {k: f(Lc) for k, f in variants.items()}
         for tilt in TILTS:
             for phi in (az if tilt > 0 else az[:1]):
                 n2 = sh.tilted_normals(n, tilt, phi)
@@ -214,8 +241,10 @@ def sh_export(T, dset, weights, normals, indirect):
                 s["sh"] += float(np.sum((sh.irradiance(Lc, n2).clip(0) - ref) ** 2))
                 s["sh_half"] += float(np.sum((sh.irradiance(Lh, n2).clip(0) - ref) ** 2))
                 s["monosh"] += float(np.sum((sh.irradiance(Lm, n2).clip(0) - ref) ** 2))
+                for k, Lk in Lv.items():
+                    s[k] += float(np.sum((sh.irradiance(Lk, n2).clip(0) - ref) ** 2))
     errors = {}
-    for key in ("sh_half", "monosh"):
+    for key in ("sh_half", "monosh", *variants):
         errors[key] = {f"tilt_{int(t)}": round(float(np.sqrt(sums[t][key] / sums[t]["ref"])), 5)
                        if sums[t]["ref"] > 0 else None for t in TILTS}
     errors["sh_float64"] = {f"tilt_{int(t)}": round(float(np.sqrt(sums[t]["sh"]
@@ -224,13 +253,12 @@ def sh_export(T, dset, weights, normals, indirect):
     return L, errors, int(covered.sum())
 
 
-def godot_layers(L_world, rotation) -> dict:
-    """Godot's four lightmap layers (each (P, 3)) from world-frame SH (P, 4, 3): the L1 vector
-    turned into the object's frame, then into Godot's axes (Y up); Godot evaluates
-    ``0.282095 L0 + 0.32573 (L1n1 n.y + L1_0 n.z + L1p1 n.x)`` with the object-space normal."""
+def godot_layers(L_world) -> dict:
+    """The sh-l1 format's four layers (each (P, 3)) from world-frame SH (P, 4, 3): the L1
+    vector in Godot's axes (Y up); raw coefficients, decoded as
+    ``0.282095 L0 + 0.32573 (L1n1 n.y + L1_0 n.z + L1p1 n.x)`` with the world normal."""
     vec = np.stack([L_world[:, 3], L_world[:, 1], L_world[:, 2]], axis=1)   # (P, xyz, 3)
-    local = np.einsum("ji,pjc->pic", rotation, vec)                          # R^T v
-    g = np.einsum("ij,pjc->pic", BLENDER_TO_GODOT, local)
+    g = np.einsum("ij,pjc->pic", BLENDER_TO_GODOT, vec)
     return {"L0": L_world[:, 0], "L1n1": g[:, 1], "L1_0": g[:, 2], "L1p1": g[:, 0]}
 
 

@@ -16,10 +16,10 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ...lt_addon.export import rti_files
+from ...lt_addon.export import godot, rti_files
 # Formats, settings and fitting are bpy-free (lt_addon/export/fitting.py), re-exported here.
-from ...lt_addon.export.fitting import (BLENDER_TO_UNITY, DECODE, FORMATS, TILTS,  # noqa: F401
-                                        ExportSettings, RadianceSource, godot_layers,
+from ...lt_addon.export.fitting import (BLENDER_TO_UNITY, DECODE, FORMATS, LIGHTMAPS,  # noqa: F401
+                                        TILTS, ExportSettings, RadianceSource, godot_layers,
                                         held_out_lights, indirect_over_pi, light_weights,
                                         lobes_source, output_names, output_stem,
                                         radiance_at, read_environment, rti_export, sh_export,
@@ -56,13 +56,6 @@ def texel_normals(scene, obj, resolution: int, samples: int) -> np.ndarray:
     n = n_obj @ np.linalg.inv(M)             # (M^-T n)^T = n^T M^-1
     length = np.linalg.norm(n, axis=1, keepdims=True)
     return np.where(length > 0, n / np.maximum(length, 1e-12), 0.0)
-
-
-def object_rotation(obj) -> np.ndarray:
-    """The rotation (3, 3) of ``obj``'s world matrix (scale removed)."""
-    M = np.array(obj.matrix_world, np.float64)[:3, :3]
-    u, _, vt = np.linalg.svd(M)
-    return u @ vt
 
 
 # ----------------------------------------------------------------------------------------------
@@ -118,7 +111,7 @@ def export_job(scene, obj, settings: ExportSettings, out_dir: str, force: bool =
     base = os.path.join(out_dir, output_stem(obj.name, settings))
     files, figures = {}, {}
     seconds = {}
-    if settings.format in ("sh-l1", "monosh"):
+    if settings.format in LIGHTMAPS:
         t0 = time.perf_counter()
         normals = texel_normals(scene, obj, R, settings.normal_samples)
         seconds["normal_bake"] = time.perf_counter() - t0
@@ -126,24 +119,40 @@ def export_job(scene, obj, settings: ExportSettings, out_dir: str, force: bool =
         t0 = time.perf_counter()
         weights = light_weights(settings, store.directions, kernel)
         indirect = indirect_over_pi(bake, store, settings)
+        variants = {}
+        if settings.format == "godot-lightmap":
+            ver = settings.godot
+            variants[f"godot_{ver}"] = lambda Lc: godot.decoded_sh(
+                godot.encode(Lc, ver).astype(np.float16).astype(np.float64), ver)
         L, errors, covered = sh_export(store.array, store.directions, weights, normals,
-                                       indirect)
+                                       indirect, variants)
         seconds["fit"] = time.perf_counter() - t0
-        rot = object_rotation(obj)
-        layers = godot_layers(L, rot)
         meta = {"format": f"relightable_textures.{settings.format}", "object": obj.name,
-                **DECODE[settings.format]}
+                **{k: (v if isinstance(v, str) else v[settings.godot])
+                   for k, v in DECODE[settings.format].items()}}
         if settings.format == "sh-l1":
-            for key, img in layers.items():
+            for key, img in godot_layers(L).items():
                 path = f"{base}_{key}.exr"
                 exrio.write_exr(path, {c: img[:, i].reshape(R, R) for i, c in enumerate("RGB")},
                                 {**meta, "layer": key}, pixel_type="half")
                 files[key] = path
             err = errors["sh_half"]
             bytes_per_texel = 4 * 3 * 2
+        elif settings.format == "godot-lightmap":
+            yield Progress(2, 3, f"{obj.name}: writing the Godot {settings.godot} folder")
+            import tempfile
+
+            from ..base.gltf import write_glb
+            with tempfile.TemporaryDirectory(prefix="relight-gltf-") as tmp:
+                glb = os.path.join(tmp, "object.glb")
+                gltf_info = write_glb(scene, obj, glb)
+                files.update(godot.write(base, L, R, settings.godot, gltf_info["node"], glb,
+                                         meta))
+            err = errors[f"godot_{settings.godot}"]
+            bytes_per_texel = 4 * 3 * 2
         else:
             L0m, dm = sh.to_monosh(L)
-            v = np.einsum("ji,pj->pi", rot, 2.0 * dm - 1.0)                 # object frame
+            v = 2.0 * dm - 1.0                                               # world frame
             d8 = np.rint(np.clip((v @ BLENDER_TO_UNITY.T) * 0.5 + 0.5, 0, 1) * 255)
             exrio.write_exr(f"{base}_L0.exr", {c: L0m[:, i].reshape(R, R)
                                                for i, c in enumerate("RGB")},
@@ -158,6 +167,7 @@ def export_job(scene, obj, settings: ExportSettings, out_dir: str, force: bool =
                                     "tilted 0/15/30/45 deg (8 azimuths) from the baked normal, "
                                     "vs the transport's own irradiance at that normal",
                    "covered_texels": covered, "bytes_per_texel": bytes_per_texel,
+                   "frame": DECODE[settings.format]["axes"],
                    "lighting": ({"env": os.path.abspath(settings.env), "rotate": settings.rotate}
                                 if settings.env else {"sun": list(settings.sun),
                                                       "sun_angle": settings.sun_angle}),
@@ -166,6 +176,9 @@ def export_job(scene, obj, settings: ExportSettings, out_dir: str, force: bool =
                                 "not included" + (" (environment lighting: the bake's bounce "
                                                   "term is per sun)" if settings.env else
                                                   " (the bake has none)"))}
+        if settings.format == "godot-lightmap":
+            figures["godot"] = {"version": settings.godot, "gltf": gltf_info,
+                                "exposure_normalization": 1.0}
     else:
         t0 = time.perf_counter()
         gen = rti_export(source, settings, progress_every=max(1, S // 20))

@@ -17,15 +17,18 @@ def add_parsers(sub) -> None:
         "MonoSH) or an RTI model (PTM, HSH) with a relightable web page",
         description="Fits a format from the object's transport-texture bake (bake-textures "
                     "--method transport) and reports its error against our own relight. "
-                    "sh-l1: four half EXRs of L1 SH coefficients in Godot's layer order and "
-                    "axes; monosh: Bakery's MonoSH (L0 EXR + 8-bit direction PNG, Unity axes) "
-                    "-- both baked for one lighting, --env or --sun. rti-ptm / rti-hsh: a "
-                    "folder in the relight tools' layout (info.json, plane_<k>.png, as "
-                    "OpenLIME reads it) plus index.html, a page that relights it with the "
-                    "mouse.")
+                    "godot-lightmap: a folder Godot 4.4+ (or 4.3: --godot 4.3) loads as it "
+                    "is: the stacked directional lightmap EXR and its .import, a "
+                    "LightmapGIData .tres, the object as glTF (UV2 = the bake's UV map) and a "
+                    "scene; sh-l1: four half EXRs of raw L1 SH coefficients (world frame, "
+                    "Godot's axes); monosh: Bakery's MonoSH (L0 EXR + 8-bit direction PNG, "
+                    "world frame, Unity axes) -- all baked for one lighting, --env or --sun. "
+                    "rti-ptm / rti-hsh: a folder in the relight tools' layout (info.json, "
+                    "plane_<k>.jpg, as OpenLIME reads it) plus index.html, a page that "
+                    "relights it with the mouse.")
     p.add_argument("file", metavar="FILE.blend")
     p.add_argument("--object", required=True, metavar="NAME")
-    add_setting_options(p, ExportSettings, ("format", "terms"), defaults=True)
+    add_setting_options(p, ExportSettings, ("format", "terms", "godot"), defaults=True)
     p.add_argument("--env", metavar="HDR.exr", help="SH formats: light by this equirect EXR")
     add_setting_options(p, ExportSettings, ("rotate",), defaults=True)
     p.add_argument("--sun", type=parse_az_el, metavar="AZ,EL",
@@ -50,7 +53,7 @@ def _cmd_export(args) -> int:
     from ..bakes.export import ExportSettings, export_job
 
     path = check_input_blend(args.file)
-    settings = ExportSettings(format=args.format, terms=args.terms,
+    settings = ExportSettings(format=args.format, terms=args.terms, godot=args.godot,
                               env=os.path.abspath(args.env) if args.env else None,
                               rotate=args.rotate, sun=args.sun, sun_angle=args.sun_angle,
                               strength=args.strength, color=args.color,

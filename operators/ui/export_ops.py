@@ -17,12 +17,12 @@ LAST_PAGE_KEY = "relight_last_export_page"
 
 def settings_from_scene(scene):
     """ExportSettings from the panel's properties and the Preview Light sliders."""
-    from ..bakes.export import ExportSettings
+    from ..bakes.export import LIGHTMAPS, ExportSettings
 
     props = scene.relight
     fmt = props.export_format
     kw = {}
-    if fmt in ("sh-l1", "monosh"):
+    if fmt in LIGHTMAPS:
         if props.export_light == "ENV":
             if not props.export_env:
                 raise BakeInputError("choose an environment EXR (or light it by the Preview "
@@ -37,7 +37,7 @@ def settings_from_scene(scene):
                       strength=float(scene.get("relight_intensity", 1.0)),
                       color=tuple(scene.get("relight_color", (1.0, 1.0, 1.0)))[:3])
     return ExportSettings(format=fmt, terms=int(props.export_terms) if fmt == "rti-hsh"
-                          else None, **kw)
+                          else None, godot=props.export_godot, **kw)
 
 
 class RELIGHT_OT_export(ModalBake, bpy.types.Operator):

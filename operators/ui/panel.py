@@ -283,7 +283,9 @@ class VIEW3D_PT_relight_export(_RelightSubPanel, bpy.types.Panel):
         col.prop(props, "export_format")
         if props.export_format == "rti-hsh":
             col.prop(props, "export_terms")
-        if props.export_format in ("sh-l1", "monosh"):
+        if props.export_format == "godot-lightmap":
+            col.prop(props, "export_godot")
+        if props.export_format in ("sh-l1", "monosh", "godot-lightmap"):
             col.prop(props, "export_light")
             if props.export_light == "ENV":
                 col.prop(props, "export_env")

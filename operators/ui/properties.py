@@ -183,8 +183,7 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
                     "anchor and direction)")
     # export (relight export): directional lightmaps and RTI models of a transport bake
     export_terms: EnumProperty(name="Terms", default="9", items=[
-        ("4", "4", "HSH order 2"), ("9", "9", "HSH order 3 (OpenLIME's)"),
-        ("16", "16", "HSH order 4 (our viewer only)")])
+        ("4", "4", "HSH order 2"), ("9", "9", "HSH order 3 (OpenLIME evaluates at most 9)")])
     export_light: EnumProperty(name="Lighting", default="SUN", items=[
         ("SUN", "Preview Light", "A sun from the Preview Light sliders"),
         ("ENV", "Environment", "An equirectangular EXR")])
@@ -258,7 +257,8 @@ def _declared_properties() -> dict:
     return {**properties(TextureBakeSettings, LOBES_FIELDS, defaults=_LOBES),
             **properties(TransportSettings, VERTEX_FIELDS, rename=VERTEX_PROPS),
             **properties(MaterialBakeSettings, MATERIAL_FIELDS, rename=MATERIAL_PROPS),
-            **properties(ExportSettings, ("format",), rename={"format": "export_format"},
+            **properties(ExportSettings, ("format", "godot"),
+                         rename={"format": "export_format", "godot": "export_godot"},
                          defaults={"export_format": "rti-hsh"}),
             **properties(TransportTextureSettings, ("resolution",), defaults=_TRANSPORT),
             **properties(TransportTextureSettings, ("bounces",), defaults=_LOBES),
