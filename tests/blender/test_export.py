@@ -444,6 +444,16 @@ def _panel_export(bpy, tmp_path):
     assert bpy.ops.relight.export() == {"FINISHED"}
     rep = json.loads((tmp_path / "Plane_sh-l1.json").read_text())
     assert rep["lighting"] == {"sun": [30.0, 45.0], "sun_angle": 0.0}
+    # the Godot folder from the panel: its glTF is written by Blender's exporter from here too
+    props.export_format = "godot-lightmap"
+    props.export_godot = "4.3"
+    assert bpy.ops.relight.export() == {"FINISHED"}
+    folder = tmp_path / "Plane_godot-lightmap"
+    assert sorted(p.name for p in folder.iterdir()) == sorted(
+        f"Plane_godot-lightmap{ext}" for ext in (".exr", ".exr.import", ".tres", ".tscn", ".glb"))
+    assert "_uses_packed_directional" not in (folder / "Plane_godot-lightmap.tres").read_text()
+    assert [o.name for o in bpy.data.objects] == ["Plane"]            # the copy is gone
+    assert len(bpy.data.meshes) == 1 and not bpy.data.collections
     props.export_light = "ENV"
     with pytest.raises(RuntimeError, match="choose an environment"):
         bpy.ops.relight.export()
