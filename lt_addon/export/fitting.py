@@ -26,7 +26,7 @@ from . import godot, rti, rti_files
 from . import sh_lightmap as sh
 
 
-FORMATS = ("sh-l1", "monosh", "godot-lightmap", "rti-ptm", "rti-hsh")
+FORMATS = ("sh-l1", "monosh", "godot-lightmap", "sun-indirect", "rti-ptm", "rti-hsh")
 #: The formats baked for one lighting (--env or --sun).
 LIGHTMAPS = ("sh-l1", "monosh", "godot-lightmap")
 
@@ -86,8 +86,14 @@ class ExportSettings:
         ("godot-lightmap", "Godot Lightmap", "A folder Godot loads: stacked directional "
                                              "lightmap EXR + .import, LightmapGIData .tres, "
                                              "the object as glTF (UV2 = the bake's UVs) and a "
-                                             "scene; for one lighting")),
+                                             "scene; for one lighting"),
+        ("sun-indirect", "Sun-Moving Bounce", "The bounce light of a moving sun: a few basis "
+                                              "lightmaps, a table of their weights over the "
+                                              "sun's direction and a Godot shader")),
         help="What is exported")
+    components: int | None = setting(None, metavar="K", panel=False,
+                                     help="sun-indirect: basis lightmaps (1..8; default: the "
+                                          "fewest whose held-out error is under 1 percent, at most 8)")
     godot: str = setting("4.4", choices=(("4.4", "Godot 4.4+", "Packed, pre-convolved L1"),
                                          ("4.3", "Godot 4.0-4.3", "Raw L1 coefficients")),
                          label="Godot", help="godot-lightmap: the Godot release it is for")
@@ -124,6 +130,9 @@ class ExportSettings:
             if self.env is not None or self.sun is not None:
                 raise InputError(f"{self.format} keeps the light free (the viewer moves "
                                      "it): --env and --sun are for the SH formats")
+        if self.components is not None and (self.format != "sun-indirect"
+                                            or not 1 <= self.components <= 8):
+            raise InputError("--components is for sun-indirect, 1..8")
         if self.format == "rti-hsh" and self.terms == 16:
             raise InputError("rti-hsh with 16 terms is not written: OpenLIME and the relight "
                              "tools evaluate 9 HSH terms and would drop terms 10-16 "

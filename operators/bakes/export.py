@@ -98,6 +98,9 @@ def export_job(scene, obj, settings: ExportSettings, out_dir: str, force: bool =
                                      "(bake-textures --method transport)")
             from .steerable_bake import load_texture
 
+            if settings.format == "sun-indirect":
+                raise BakeInputError(f"{obj.name}'s bake is a lobes bake; sun-indirect needs "
+                                     "a transport bake's bounce term")
             source = lobes_source(load_texture(obj))
             report = {"report": bake_file(obj, "steerable_texture", "steerable texture")}
         else:
@@ -106,6 +109,8 @@ def export_job(scene, obj, settings: ExportSettings, out_dir: str, force: bool =
             source = transport_source(bake, store, kernel)
     except (FileNotFoundError, ValueError, KeyError) as exc:
         raise BakeInputError(str(exc)) from None
+    if settings.format == "sun-indirect":
+        return (yield from _sun_indirect(obj, settings, out_dir, bake, report, started))
     R, S = source.resolution, source.lights.size
     yield Progress(0, 3, f"{obj.name}: {settings.format} from {S} directions at {R}x{R}")
     base = os.path.join(out_dir, output_stem(obj.name, settings))
@@ -210,4 +215,41 @@ def export_job(scene, obj, settings: ExportSettings, out_dir: str, force: bool =
     atomic.write_json(base + ".json", rep, default=float)
     files["report"] = base + ".json"
     yield Progress(3, 3, f"{obj.name}: {settings.format} written")
+    return ExportOutput(rep, files)
+
+
+def _sun_indirect(obj, settings, out_dir, bake, report, started):
+    """The sun-indirect export (see :mod:`...lt_addon.export.sun_indirect`)."""
+    from ...lt_addon.export import sun_indirect
+
+    if bake.indirect is None:
+        raise BakeInputError(f"{obj.name}'s bake has no bounce term (it was baked with "
+                             "--bounces 0); sun-indirect exports the bounce light")
+    Ri = int(bake.indirect.resolution)
+    yield Progress(1, 3, f"{obj.name}: sampling the bounce light at "
+                         f"{sun_indirect.GRID[0] * sun_indirect.GRID[1]} sun directions "
+                         f"({Ri}x{Ri})")
+    t0 = time.perf_counter()
+    basis, table, figures = sun_indirect.fit(lambda d: bake.indirect.relight(d),
+                                             held_out_lights(settings.held_out),
+                                             settings.components)
+    fit_s = time.perf_counter() - t0
+    yield Progress(2, 3, f"{obj.name}: writing {figures['components']} basis lightmaps")
+    base = os.path.join(out_dir, output_stem(obj.name, settings))
+    meta = {"format": "relightable_textures.sun-indirect", "object": obj.name,
+            "frame": "UV2 = the bake's UV map; sun az/el in Blender's world frame (Godot: "
+                     "(x, y, z) = Blender (x, z, -y))"}
+    files = sun_indirect.write(base, basis, table, figures, meta)
+    rep = {"kind": KIND, "object": obj.name, "format": settings.format,
+           "settings": asdict(settings), "source": report.get("report"),
+           "resolution": Ri, "files": files, **figures,
+           "bytes_per_texel": 3 * 2 * figures["components"],
+           "error_measure": "relative RMS radiance over all texels at held-out sun "
+                            "directions (above 10 deg), the bilinear table vs the bake's own "
+                            "bounce term",
+           "timings": {"fit": round(fit_s, 3),
+                       "wall_total": round(time.perf_counter() - started, 3)}}
+    atomic.write_json(base + ".json", rep, default=float)
+    files["report"] = base + ".json"
+    yield Progress(3, 3, f"{obj.name}: sun-indirect written")
     return ExportOutput(rep, files)

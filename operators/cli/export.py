@@ -22,13 +22,16 @@ def add_parsers(sub) -> None:
                     "LightmapGIData .tres, the object as glTF (UV2 = the bake's UV map) and a "
                     "scene; sh-l1: four half EXRs of raw L1 SH coefficients (world frame, "
                     "Godot's axes); monosh: Bakery's MonoSH (L0 EXR + 8-bit direction PNG, "
-                    "world frame, Unity axes) -- all baked for one lighting, --env or --sun. "
+                    "world frame, Unity axes) -- all baked for one lighting, --env or --sun; "
+                    "sun-indirect: the bounce light of a moving sun as a few basis lightmaps, "
+                    "a table of their weights over the sun's direction and a Godot shader. "
                     "rti-ptm / rti-hsh: a folder in the relight tools' layout (info.json, "
                     "plane_<k>.jpg, as OpenLIME reads it) plus index.html, a page that "
                     "relights it with the mouse.")
     p.add_argument("file", metavar="FILE.blend")
     p.add_argument("--object", required=True, metavar="NAME")
-    add_setting_options(p, ExportSettings, ("format", "terms", "godot"), defaults=True)
+    add_setting_options(p, ExportSettings, ("format", "terms", "components", "godot"),
+                        defaults=True)
     p.add_argument("--env", metavar="HDR.exr", help="SH formats: light by this equirect EXR")
     add_setting_options(p, ExportSettings, ("rotate",), defaults=True)
     p.add_argument("--sun", type=parse_az_el, metavar="AZ,EL",
@@ -54,6 +57,7 @@ def _cmd_export(args) -> int:
 
     path = check_input_blend(args.file)
     settings = ExportSettings(format=args.format, terms=args.terms, godot=args.godot,
+                              components=args.components,
                               env=os.path.abspath(args.env) if args.env else None,
                               rotate=args.rotate, sun=args.sun, sun_angle=args.sun_angle,
                               strength=args.strength, color=args.color,

@@ -554,3 +554,64 @@ def test_openlime_itself_loads_the_export_and_shows_our_relight(bumps, tmp_path,
         else:
             assert plain <= frame + 0.2
         assert ours.mean() > 20                                      # not a black picture
+
+
+def test_sun_indirect_files_decode_with_the_shaders_arithmetic_to_the_bake(bumps):
+    """The sun-moving bounce export read back as the .gdshader reads it -- its table
+    coordinates parsed from the shader text, a GPU's bilinear fetch (repeat in u, clamp in v,
+    texel centres) written out here, K fetches of the stacked basis -- matches the bake's own
+    bounce term at held-out suns to the report's stated error (+ 1e-3 for the half-float
+    basis), and the stated error is what the chosen K measured."""
+    import re
+
+    from relightable_textures.lt_addon.export.fitting import held_out_lights
+    from relightable_textures.operators.bakes import texture_transport as tx
+
+    folder, blend = bumps
+    r = relight("export", blend, "--object", "Bumps", "--format", "sun-indirect", "--force")
+    assert r.returncode == 0, r.stderr[-2000:]
+    out = folder / "bumps_relight"
+    rep = json.loads((out / "Bumps_sun-indirect.json").read_text())
+    K, R = rep["components"], rep["resolution"]
+    assert rep["error_vs_our_relight"] == rep["error_by_components"][str(K)]
+    d = out / "Bumps_sun-indirect"
+    shader = (d / "Bumps_sun-indirect.gdshader").read_text()
+    hu, vs, hv = map(float, re.search(
+        r"vec2 t = vec2\(az / TAU \+ ([0-9.]+), el / \(PI / 2\.0\) \* ([0-9.]+) \+ ([0-9.]+)\)",
+        shader).groups())
+    assert f"k < {K};" in shader
+    ch, meta = exrio.read_exr(str(d / "Bumps_sun-indirect_basis.exr"))
+    img = np.stack([ch[c] for c in "RGB"], -1).astype(np.float64)[::-1]   # top row first
+    basis = np.stack([img[k * R:(k + 1) * R][::-1] for k in range(K)])   # row 0 at v = 0
+    tables = []
+    for t in (0, 1):
+        ch, _ = exrio.read_exr(str(d / f"Bumps_sun-indirect_table_{t}.exr"))
+        tables.append(np.stack([ch[c] for c in "RGBA"], -1).astype(np.float64)[::-1])
+    table = np.concatenate(tables, axis=-1)                               # (NE, NA, 8) top first
+    NE, NA = table.shape[:2]
+
+    def fetch(u, v):
+        x, y = u * NA - 0.5, v * NE - 0.5
+        x0, y0 = int(np.floor(x)), int(np.floor(y))
+        fx, fy = x - x0, y - y0
+        row = lambda j: table[min(max(j, 0), NE - 1)]
+        lerp = lambda j: (1 - fx) * row(j)[x0 % NA] + fx * row(j)[(x0 + 1) % NA]
+        return (1 - fy) * lerp(y0) + fy * lerp(y0 + 1)
+
+    bake, store, _ = tx.load_bake(str(out / "Bumps_texture_report.json"))
+    num = den = 0.0
+    for s in held_out_lights(16):
+        g = np.array([s[0], s[2], -s[1]])                 # the sun in Godot's axes
+        az = np.arctan2(-g[2], g[0]) % (2 * np.pi)
+        el = np.arcsin(np.clip(g[1], 0, 1))
+        w = fetch(az / (2 * np.pi) + hu, el / (np.pi / 2) * vs + hv)[:K]
+        got = np.einsum("k,kxyc->xyc", w, basis)
+        want = np.asarray(bake.indirect.relight(s), np.float64)
+        num += np.mean((got - want) ** 2)
+        den += np.mean(want ** 2)
+    err = np.sqrt(num / den)
+    assert err <= rep["error_vs_our_relight"] + 1e-3, (err, rep["error_vs_our_relight"])
+    assert rep["error_vs_our_relight"] < 0.05
+    # the basis is imported as a 2D array of K slices, the tables as floats
+    assert f"slices/vertical={K}" in (d / "Bumps_sun-indirect_basis.exr.import").read_text()
+    assert "compress/mode=3" in (d / "Bumps_sun-indirect_table_0.exr.import").read_text()

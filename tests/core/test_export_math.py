@@ -273,3 +273,37 @@ def test_nonnegative_fit_lifts_only_dipping_curves_and_stays_close_to_the_data()
         e0 = np.sqrt(np.sum(w[:, None] * (fit[:, 0] - values[:, 0]) ** 2) / w.sum())
         e1 = np.sqrt(np.sum(w[:, None] * (new[:, 0] - values[:, 0]) ** 2) / w.sum())
         assert e1 < 1.25 * e0, (kind, e0, e1)          # measured 1.12 (hsh), 1.02 (ptm)
+
+
+def test_sun_indirect_fit_is_exact_for_a_low_rank_term_and_its_table_wraps():
+    """A bounce term of rank 3 in the sun direction (smooth functions of it times fixed
+    images): the SVD keeps it exactly with 3 basis images, the bilinear table reproduces it
+    at grid directions, and the table wraps in azimuth (a sun just below azimuth 360 reads
+    the texels of 350ish and 0)."""
+    from relightable_textures.lt_addon.export import sun_indirect as si
+
+    rng = np.random.default_rng(5)
+    imgs = rng.random((3, 6, 6, 3))
+
+    def sample(d):
+        return (imgs[0] * (0.5 + d[2]) + imgs[1] * d[0] + imgs[2] * d[1] * d[2])
+
+    dirs = si.grid_directions()
+    held = dirs.reshape(-1, 3)[::7]                              # grid points: exact
+    basis, table, fig = si.fit(sample, held)
+    assert fig["components"] == 3 and fig["error_by_components"]["3"] < 1e-6
+    assert fig["error_by_components"]["2"] > 0.01
+    for d in held:
+        np.testing.assert_allclose(si.evaluate(basis, table, d), sample(d), rtol=1e-4,
+                                   atol=1e-5)
+    # wrap: azimuth 359 deg interpolates between the last column (348.75) and the first (0)
+    na, ne = si.GRID
+    u, v = si.table_coordinates(np.array([np.cos(np.radians(359)), np.sin(np.radians(359)),
+                                          0.0]))
+    w = si.bilinear(table.astype(np.float64), u, v)
+    f = (359 - 348.75) / 11.25
+    np.testing.assert_allclose(w, (1 - f) * table[0, na - 1] + f * table[0, 0], rtol=1e-6)
+    assert si.evaluate(basis, table, np.array([1.0, 0.0, -0.1])).max() == 0.0
+    shader = si.gdshader("obj", 3)
+    assert "k < 3" in shader and "shader_type spatial;" in shader
+    assert shader.count("{") == shader.count("}")
