@@ -175,11 +175,42 @@ TABLE_IMPORT = ("[remap]\n\nimporter=\"texture\"\ntype=\"CompressedTexture2D\"\n
                 "compress/mode=3\nmipmaps/generate=false\ndetect_3d/compress_to=0\n")
 
 
+def exposure_for(basis, table) -> float:
+    """The page's exposure: the 99.5th percentile of the bounce light at the table's
+    directions maps to 1."""
+    vals = np.einsum("sk,kp->sp", np.asarray(table, np.float64).reshape(-1, table.shape[-1]),
+                     np.asarray(basis, np.float64).reshape(basis.shape[0], -1))
+    p = float(np.percentile(vals, 99.5))
+    return 1.0 / p if p > 0 else 1.0
+
+
+def page(basis, table, figures: dict, exposure: float, title: str) -> str:
+    """The self-contained web page (``web/sun_indirect.html`` + ``.js``): the basis and table
+    embedded as float32 base64, summed on the CPU as the sun sliders move."""
+    import base64
+    import html
+
+    web = os.path.join(os.path.dirname(__file__), "web")
+    with open(os.path.join(web, "sun_indirect.html")) as fh:
+        text = fh.read()
+    with open(os.path.join(web, "sun_indirect.js")) as fh:
+        js = fh.read()
+    K, R = basis.shape[0], basis.shape[1]
+    info = {"components": K, "resolution": R, "grid": figures["grid"],
+            "exposure": float(exposure)}
+    b64 = lambda a: base64.b64encode(np.ascontiguousarray(a, "<f4").tobytes()).decode()
+    return (text.replace("{{TITLE}}", html.escape(f"{title}: bounce light of a moving sun"))
+            .replace("{{K}}", str(K)).replace("{{INFO}}", json.dumps(info))
+            .replace("{{BASIS}}", b64(basis)).replace("{{TABLE}}", b64(table))
+            .replace("{{VIEWER}}", js))
+
+
 def write(folder: str, basis, table, figures: dict, metadata: dict, grid=GRID) -> dict:
     """Write the folder atomically: ``<stem>_basis.exr`` (K layers stacked vertically, layer 0
     on top, each band's top row v = 1, as Godot's 2D array import slices it) and its
     ``.import``, ``<stem>_table_0.exr`` / ``_1.exr`` (RGBA = weights 0-3 / 4-7; row 0 on top
-    = elevation 0), ``<stem>.gdshader``, and ``<stem>.json`` (the decode, grid and errors)."""
+    = elevation 0), ``<stem>.gdshader``, ``<stem>.json`` (the decode, grid and errors) and
+    ``index.html`` (our page: sun sliders over the same sum)."""
     from .godot import import_text
 
     folder = os.path.abspath(folder)
@@ -189,9 +220,11 @@ def write(folder: str, basis, table, figures: dict, metadata: dict, grid=GRID) -
         shutil.rmtree(tmp)
     os.makedirs(tmp)
     K, R = basis.shape[0], basis.shape[1]
+    exposure = exposure_for(basis, table)
+    figures = {**figures, "page_exposure": exposure}
     names = {"basis": f"{stem}_basis.exr", "table_0": f"{stem}_table_0.exr",
              "table_1": f"{stem}_table_1.exr", "shader": f"{stem}.gdshader",
-             "about": f"{stem}.json"}
+             "about": f"{stem}.json", "page": "index.html"}
     try:
         img = np.concatenate([b[::-1] for b in basis], axis=0)            # top row first
         exrio.write_exr(os.path.join(tmp, names["basis"]),
@@ -216,6 +249,8 @@ def write(folder: str, basis, table, figures: dict, metadata: dict, grid=GRID) -
                  "units": "outgoing radiance (W m^-2 sr^-1) per W/m^2 of sun, albedo "
                           "included, linear Rec.709"}
         atomic.write_json(os.path.join(tmp, names["about"]), about, indent=1)
+        atomic.write_text(os.path.join(tmp, names["page"]),
+                          page(basis, table, figures, exposure, metadata.get("object", stem)))
         atomic.replace_folder(tmp, folder)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)

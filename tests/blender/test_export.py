@@ -615,3 +615,44 @@ def test_sun_indirect_files_decode_with_the_shaders_arithmetic_to_the_bake(bumps
     # the basis is imported as a 2D array of K slices, the tables as floats
     assert f"slices/vertical={K}" in (d / "Bumps_sun-indirect_basis.exr.import").read_text()
     assert "compress/mode=3" in (d / "Bumps_sun-indirect_table_0.exr.import").read_text()
+
+
+def test_sun_indirect_page_in_headless_chromium_shows_the_files_sum(bumps, tmp_path):
+    """Our page for the sun-moving bounce light, driven in Chromium at three suns: every
+    pixel is the sum the files decode to (half-float basis: within 1 level, rounding of the
+    same sum), shown with the page's exposure, and it changes with the sun."""
+    folder, blend = bumps
+    if not (WEB / "node_modules" / "playwright-core").is_dir() or _chromium() is None:
+        if os.environ.get("CI"):
+            pytest.fail("CI must install Chromium and tests/web's node modules (.ci/run)")
+        pytest.skip("needs Debian's chromium and `npm ci --prefix tests/web`")
+    from relightable_textures.lt_addon.export import sun_indirect as si
+    from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
+
+    r = relight("export", blend, "--object", "Bumps", "--format", "sun-indirect", "--force")
+    assert r.returncode == 0, r.stderr[-2000:]
+    d = pathlib.Path(folder) / "bumps_relight" / "Bumps_sun-indirect"
+    about = json.loads((d / "Bumps_sun-indirect.json").read_text())
+    K, R = about["components"], about["resolution"]
+    ch, _ = exrio.read_exr(str(d / "Bumps_sun-indirect_basis.exr"))
+    img = np.stack([ch[c] for c in "RGB"], -1).astype(np.float64)[::-1]
+    basis = np.stack([img[k * R:(k + 1) * R][::-1] for k in range(K)])
+    tables = [exrio.read_exr(str(d / f"Bumps_sun-indirect_table_{t}.exr"))[0] for t in (0, 1)]
+    table = np.concatenate([np.stack([c[x] for x in "RGBA"], -1)[::-1] for c in tables],
+                           -1)[..., :K]
+    suns = [(30.0, 45.0), (200.0, 12.0), (290.0, 70.0)]
+    p = subprocess.run(["node", str(WEB / "sun_indirect.mjs"), str(d / "index.html"),
+                        str(tmp_path / "si"), *[f"{a},{e}" for a, e in suns]],
+                       capture_output=True, text=True, timeout=300,
+                       env={**os.environ, "CHROMIUM": _chromium()})
+    assert p.returncode == 0, p.stderr[-3000:]
+    shots = []
+    for line, (az, el) in zip(p.stdout.strip().splitlines(), suns):
+        shot = json.loads(line)
+        canvas = np.fromfile(shot["rgba"], np.uint8).reshape(R, R, 4)[..., :3].astype(int)
+        rad = si.evaluate(basis, table, direction_from_az_el(az, el))[::-1]   # top row first
+        want = np.rint(np.clip(rti.to_display(np.maximum(rad, 0), about["page_exposure"]),
+                               0, 1) * 255).astype(int)
+        assert np.abs(canvas - want).max() <= 1 and np.mean(canvas != want) < 0.02
+        shots.append(canvas)
+    assert np.abs(shots[0] - shots[1]).mean() > 2                   # the sun moves the light
