@@ -327,7 +327,8 @@ def lobes_source(texture) -> RadianceSource:
 
 
 def rti_export(source: RadianceSource, settings, progress_every=None):
-    """Fit ``settings.kind`` to the source's display values at every one of its lights;
+    """Fit ``settings.kind`` to the source's display values at its lights (HSH: those at or
+    above the viewers' clamp elevation);
     returns the 8-bit planes (P, K, 3) with scale and bias, the exposure used and the errors
     at held-out lights.
 
@@ -336,14 +337,20 @@ def rti_export(source: RadianceSource, settings, progress_every=None):
     squares (weights: the lights' solid angles) one light at a time."""
     dset = source.lights
     terms = settings.terms or (6 if settings.kind == "ptm" else 9)
-    B = rti.basis(settings.kind, dset.directions, terms)                 # (S, K)
-    sw = np.sqrt(dset.solid_angles)
+    # HSH: only the lights at or above the viewers' clamp. Below it OpenLIME (and our page)
+    # show the clamp elevation's image, so fitting them there only averages darker samples
+    # into it (measured on the bumps demo, 1600 suns: held-out RMSE 0.0758 -> 0.0713)
+    fitted = (np.flatnonzero(dset.directions[:, 2] >= np.sin(rti.HSH_MIN_ELEVATION) - 1e-12)
+              if settings.kind == "hsh" else np.arange(dset.size))
+    lights, solid = dset.directions[fitted], dset.solid_angles[fitted]
+    B = rti.basis(settings.kind, lights, terms)                          # (S', K)
+    sw = np.sqrt(solid)
     Bw = B * sw[:, None]
     cond = float(np.linalg.cond(Bw))
     if cond > rti.MAX_CONDITION:
         raise InputError(f"{settings.format} with {terms} terms is ill-conditioned on the "
-                             f"bake's {dset.size} directions (condition {cond:.3g})")
-    M = np.linalg.pinv(Bw) * sw[None, :]                                 # (K, S)
+                             f"bake's {fitted.size} directions (condition {cond:.3g})")
+    M = np.linalg.pinv(Bw) * sw[None, :]                                 # (K, S')
     exposure = settings.exposure
     if exposure is None:
         top = np.argsort(dset.directions[:, 2])[-8:]
@@ -353,13 +360,13 @@ def rti_export(source: RadianceSource, settings, progress_every=None):
     R = source.resolution
     P = R * R
     coef = np.zeros((P, terms, 3))
-    for s in range(dset.size):
-        v = rti.to_display(source.at_sample(s), exposure)
-        coef += M[:, s][None, :, None] * v[:, None, :]
-        if progress_every and s % progress_every == 0:
-            yield Progress(s, dset.size, f"fitting {settings.format}: light {s + 1}/{dset.size}")
-    coef, nonneg = rti.keep_nonnegative(coef, settings.kind, dset.directions,
-                                        dset.solid_angles)
+    for j, s in enumerate(fitted):
+        v = rti.to_display(source.at_sample(int(s)), exposure)
+        coef += M[:, j][None, :, None] * v[:, None, :]
+        if progress_every and j % progress_every == 0:
+            yield Progress(j, fitted.size,
+                           f"fitting {settings.format}: light {j + 1}/{fitted.size}")
+    coef, nonneg = rti.keep_nonnegative(coef, settings.kind, lights, solid)
     q, scale, bias = rti.quantize(coef)
     deq = rti.dequantize(q, scale, bias)
     # what the files hold: the planes as a JPEG decoder shows them (rows top first on disk)
@@ -385,5 +392,6 @@ def rti_export(source: RadianceSource, settings, progress_every=None):
               "jpeg_quality": rti_files.JPEG_QUALITY,
               "negative_values_at_held_out_lights": negative,
               "nonnegative_fit": nonneg,
+              "fitted_lights": int(fitted.size),
               "per_light": per_light, "design_condition": round(cond, 2)}
     return q, scale, bias, exposure, errors

@@ -66,6 +66,10 @@ class RELIGHT_OT_export(ModalBake, bpy.types.Operator):
                     f"{err['held_out_lights']} held-out lights")
             page = os.path.join(result.files["folder"], "index.html")
             context.scene[LAST_PAGE_KEY] = page
+        elif rep["format"] == "sun-indirect":
+            what = (f"{rep['components']} basis lightmaps, {err:.1%} relative RMS at "
+                    f"{rep['held_out_suns']} held-out suns")
+            context.scene[LAST_PAGE_KEY] = result.files["page"]
         else:
             what = "irradiance error " + ", ".join(
                 f"{v:.3f}" for v in err.values() if v is not None) + " at 0/15/30/45 deg tilts"
@@ -78,7 +82,7 @@ class RELIGHT_OT_export(ModalBake, bpy.types.Operator):
 
 
 class RELIGHT_OT_open_export_page(bpy.types.Operator):
-    """Open the last RTI export's web page in the system browser"""
+    """Open the last RTI or sun-indirect export's web page in the system browser"""
 
     bl_idname = "relight.open_export_page"
     bl_label = "Open Web Page"

@@ -367,7 +367,8 @@ def _float_fit_display(folder, light, H, W):
 
     vals = np.stack([rti.to_display(_radiance_at(bake, store, s, store.array),
                                     info["exposure"]) for s in range(dset.size)])
-    coef = rti.fit(vals, dset.directions, dset.solid_angles, "hsh", 9)
+    up = dset.directions[:, 2] >= np.sin(0.15)            # OpenLIME's clamp: fitted above it
+    coef = rti.fit(vals[up], dset.directions[up], dset.solid_angles[up], "hsh", 9)
     v = np.clip(rti.evaluate(coef, light, "hsh"), 0, 1).reshape(H, W, 3)
     return v[::-1]
 
@@ -454,6 +455,11 @@ def _panel_export(bpy, tmp_path):
     assert "_uses_packed_directional" not in (folder / "Plane_godot-lightmap.tres").read_text()
     assert [o.name for o in bpy.data.objects] == ["Plane"]            # the copy is gone
     assert len(bpy.data.meshes) == 1 and not bpy.data.collections
+    # the plane's bake has no bounce term: sun-indirect says so in the operator's report
+    props.export_format = "sun-indirect"
+    with pytest.raises(RuntimeError, match="no bounce term"):
+        bpy.ops.relight.export()
+    props.export_format = "sh-l1"
     props.export_light = "ENV"
     with pytest.raises(RuntimeError, match="choose an environment"):
         bpy.ops.relight.export()
@@ -503,7 +509,8 @@ def test_openlime_itself_loads_the_export_and_shows_our_relight(bumps, tmp_path,
     OpenLIME draws through an 8-bit *linear* framebuffer (pow 2.2 in, pow 1/2.2 out), which
     our page does not: dark values are re-quantised in steps of up to 21 levels (display 0.08
     becomes 0 or 21/255). So the canvas is compared with our relight twice: through that
-    framebuffer's model (it must agree to 0.1 level mean, 3 max: libjpeg IDCT rounding), and
+    framebuffer's model (it must agree to 0.1 level mean, with at most 1 % of pixels off by
+    more than a level), and
     as our page shows it (clamp and round), within 1.5 levels mean where the light is above
     30 degrees; at 8 degrees the bumps are dark and the framebuffer alone costs more, so
     there the plain difference may exceed the model's by at most 0.2 levels."""
@@ -543,7 +550,11 @@ def test_openlime_itself_loads_the_export_and_shows_our_relight(bumps, tmp_path,
         canvas = canvas[..., :3].astype(float)
         rel = rti.evaluate(coef, light, kind).reshape(H, W, 3)[::-1]   # top row first
         model = np.abs(canvas - _openlime_display(rel))
-        assert model.mean() <= 0.1 and model.max() <= 3, (light, model.mean(), model.max())
+        # libjpeg's IDCT rounding (Chromium vs Pillow) and OpenLIME's PI = 3.1415 move a value
+        # across a rounding edge now and then; at dark values the 8-bit linear framebuffer
+        # turns such a step into up to 21 levels, so the bound is on how many pixels differ
+        assert model.mean() <= 0.1 and np.mean(model > 1) <= 0.01, (light, model.mean(),
+                                                                     np.mean(model > 1))
         ours = rti_files.relight(str(export), light).astype(float)
         plain = np.abs(canvas - ours).mean()
         frame = np.abs(_openlime_display(rel) - ours).mean()
@@ -656,3 +667,24 @@ def test_sun_indirect_page_in_headless_chromium_shows_the_files_sum(bumps, tmp_p
         assert np.abs(canvas - want).max() <= 1 and np.mean(canvas != want) < 0.02
         shots.append(canvas)
     assert np.abs(shots[0] - shots[1]).mean() > 2                   # the sun moves the light
+
+
+def test_panel_sun_indirect_reports_its_error_and_keeps_its_page(bumps, tmp_path):
+    import bpy
+
+    import relightable_textures
+
+    folder, blend = bumps
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    relightable_textures.register()
+    try:
+        scene = bpy.context.scene
+        bpy.context.view_layer.objects.active = bpy.data.objects["Bumps"]
+        scene.relight.output_dir = str(tmp_path) + os.sep
+        scene.relight.export_format = "sun-indirect"
+        assert bpy.ops.relight.export() == {"FINISHED"}
+        page = tmp_path / "Bumps_sun-indirect" / "index.html"
+        assert scene["relight_last_export_page"] == str(page) and page.is_file()
+        assert "held-out suns" in scene["relight_last_export"]
+    finally:
+        relightable_textures.unregister()
