@@ -263,12 +263,11 @@ def sh_export(T, dset, weights, normals, indirect, variants=None):
 
 
 def godot_layers(L_world) -> dict:
-    """The sh-l1 format's four layers (each (P, 3)) from world-frame SH (P, 4, 3): the L1
-    vector in Godot's axes (Y up); raw coefficients, decoded as
+    """The sh-l1 format's four layers (each (P, 3)) from world-frame SH (P, 4, 3): Godot
+    4.3's raw layers (:func:`.godot.encode`), decoded as
     ``0.282095 L0 + 0.32573 (L1n1 n.y + L1_0 n.z + L1p1 n.x)`` with the world normal."""
-    vec = np.stack([L_world[:, 3], L_world[:, 1], L_world[:, 2]], axis=1)   # (P, xyz, 3)
-    g = np.einsum("ij,pjc->pic", BLENDER_TO_GODOT, vec)
-    return {"L0": L_world[:, 0], "L1n1": g[:, 1], "L1_0": g[:, 2], "L1p1": g[:, 0]}
+    lay = godot.encode(L_world, "4.3")
+    return {"L0": lay[0], "L1n1": lay[1], "L1_0": lay[2], "L1p1": lay[3]}
 
 
 def held_out_lights(count: int) -> np.ndarray:

@@ -45,30 +45,26 @@ VERSIONS = ("4.4", "4.3")
 #: Godot's axes from Blender's (glTF's +Y up): (x, y, z)_godot = (x, z, -y).
 BLENDER_TO_GODOT = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 
-#: The shader's raw-SH factors (4.0-4.3): Y00 and Y1 * 2/3 (the clamped-cosine convolution
-#: with 1/pi folded in).
-RAW_L0, RAW_L1 = 0.282095, 0.32573
-
-
-def ready_to_apply(L) -> tuple[np.ndarray, np.ndarray]:
-    """``(a (P, 3), b (P, 3, 3))`` with ``E(n)/pi = a + b . n`` per channel, ``b[:, axis, c]``
-    in Godot's axes; from world-frame SH (P, 4, 3)."""
+def _l1_godot(L) -> np.ndarray:
+    """The L1 vector of world-frame SH (P, 4, 3) in Godot's axes: (P, xyz, 3)."""
     L = np.asarray(L, np.float64)
-    a = sh.K0 * L[:, 0, :]
-    vec = sh.K1 * np.stack([L[:, 3], L[:, 1], L[:, 2]], axis=1)          # (P, xyz, C) Blender
-    b = np.einsum("ij,pjc->pic", BLENDER_TO_GODOT, vec)
-    return a, b
+    vec = np.stack([L[:, 3], L[:, 1], L[:, 2]], axis=1)                  # (P, xyz, C) Blender
+    return np.einsum("ij,pjc->pic", BLENDER_TO_GODOT, vec)
 
 
 def encode(L, version: str) -> np.ndarray:
     """The four layers (4, P, 3) float64 Godot ``version`` reads: L0, then the L1 y, z, x
-    terms (packed for 4.4+, raw for 4.3)."""
-    a, b = ready_to_apply(L)
+    terms. 4.3: the raw SH coefficients (its shader applies 0.282095 and 0.32573); 4.4+: the
+    ready-to-apply ``a = 0.282095 L00`` and ``t = clamp(b / (8 a) + 0.5)`` of
+    ``b = 0.32573 L1`` (the lm_compute pack pass)."""
+    if version not in VERSIONS:
+        raise ValueError(f"Godot version must be one of {', '.join(VERSIONS)}, got {version}")
+    L = np.asarray(L, np.float64)
+    g = _l1_godot(L)
     order = (1, 2, 0)                                                    # y, z, x
     if version == "4.3":
-        return np.stack([a / RAW_L0] + [b[:, i] / RAW_L1 for i in order])
-    if version != "4.4":
-        raise ValueError(f"Godot version must be one of {', '.join(VERSIONS)}, got {version}")
+        return np.stack([L[:, 0]] + [g[:, i] for i in order])
+    a, b = sh.K0 * L[:, 0], sh.K1 * g
     safe = np.where(a != 0, a, 1.0)
     t = [np.clip(np.where(a != 0, b[:, i] / (8.0 * safe), 0.0) + 0.5, 0.0, 1.0) for i in order]
     return np.stack([a] + t)
@@ -79,16 +75,15 @@ def decoded_sh(layers, version: str) -> np.ndarray:
     inverse of :func:`encode` after its clamps and storage (for the export's error figures)."""
     lay = np.asarray(layers, np.float64)
     if version == "4.3":
-        a = RAW_L0 * lay[0]
-        b_yzx = RAW_L1 * lay[1:]
+        L00, g_yzx = lay[0], lay[1:]
     else:
-        a = lay[0]
-        b_yzx = 4.0 * a[None] * (2.0 * lay[1:] - 1.0)
-    b = np.stack([b_yzx[2], b_yzx[0], b_yzx[1]], axis=1)                  # (P, xyz, C) Godot
-    vec = np.einsum("ji,pjc->pic", BLENDER_TO_GODOT, b)                  # back to Blender's
-    L = np.empty((a.shape[0], 4, 3))
-    L[:, 0] = a / sh.K0
-    L[:, 3], L[:, 1], L[:, 2] = vec[:, 0] / sh.K1, vec[:, 1] / sh.K1, vec[:, 2] / sh.K1
+        L00 = lay[0] / sh.K0
+        g_yzx = 4.0 * lay[0][None] * (2.0 * lay[1:] - 1.0) / sh.K1
+    g = np.stack([g_yzx[2], g_yzx[0], g_yzx[1]], axis=1)                  # (P, xyz, C) Godot
+    vec = np.einsum("ji,pjc->pic", BLENDER_TO_GODOT, g)                  # back to Blender's
+    L = np.empty((L00.shape[0], 4, 3))
+    L[:, 0] = L00
+    L[:, 3], L[:, 1], L[:, 2] = vec[:, 0], vec[:, 1], vec[:, 2]
     return L
 
 
@@ -100,7 +95,7 @@ def stacked(layers, resolution: int) -> np.ndarray:
     return np.concatenate([band[::-1] for band in lay], axis=0)
 
 
-def import_text(version: str, slices: int = 4) -> str:
+def import_text(slices: int = 4) -> str:
     """The EXR's ``.import`` as the LightmapGI bake writes it (remap and params; Godot adds
     the uid, dest files and the other params at the first import). Compression: VRAM
     Uncompressed (mode 3, what 4.3's bake uses) so the half-float values stay as measured;
@@ -156,22 +151,14 @@ def write(folder: str, L, resolution: int, version: str, node: str, glb_path: st
     folder = os.path.abspath(folder)
     stem = os.path.basename(folder)
     n = names(stem)
-    tmp = folder + ".tmp-export"
-    if os.path.exists(tmp):
-        shutil.rmtree(tmp)
-    os.makedirs(tmp)
-    try:
+    with atomic.staged_folder(folder) as tmp:
         img = stacked(encode(L, version), resolution)
         exrio.write_exr(os.path.join(tmp, n["exr"]),
                         {c: img[::-1, :, i] for i, c in enumerate("RGB")},   # exrio: row 0 at the bottom
                         {**metadata, "godot": version}, pixel_type="half")
-        atomic.write_text(os.path.join(tmp, n["import"]), import_text(version))
+        atomic.write_text(os.path.join(tmp, n["import"]), import_text())
         atomic.write_text(os.path.join(tmp, n["tres"]),
                           tres_text(n["exr"], f"../{node}/{node}", version))
         atomic.write_text(os.path.join(tmp, n["tscn"]), tscn_text(n["glb"], n["tres"], node))
         shutil.move(glb_path, os.path.join(tmp, n["glb"]))
-        atomic.replace_folder(tmp, folder)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return {k: os.path.join(folder, v) for k, v in n.items()}

@@ -24,7 +24,6 @@ import base64
 import html
 import json
 import os
-import shutil
 
 import numpy as np
 
@@ -58,11 +57,7 @@ def write(folder: str, q, scale, bias, kind: str, *, exposure: float = 1.0,
     if C != 3:
         raise ValueError(f"expected RGB coefficients, got {C} channels")
     folder = os.path.abspath(folder)
-    tmp = folder + ".tmp-export"
-    if os.path.exists(tmp):
-        shutil.rmtree(tmp)
-    os.makedirs(tmp)
-    try:
+    with atomic.staged_folder(folder) as tmp:
         info = {"width": W, "height": H, "format": "jpg", "type": kind, "colorspace": "rgb",
                 "nplanes": 3 * K,
                 "materials": [{"scale": [float(v) for v in np.asarray(scale).reshape(-1)],
@@ -87,10 +82,6 @@ def write(folder: str, q, scale, bias, kind: str, *, exposure: float = 1.0,
                 .replace("{{PLANES}}", json.dumps(uris))
                 .replace("{{VIEWER}}", js))
         atomic.write_text(os.path.join(tmp, "index.html"), page)
-        atomic.replace_folder(tmp, folder)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return folder
 
 

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 
 import numpy as np
 
@@ -215,23 +214,19 @@ def write(folder: str, basis, table, figures: dict, metadata: dict, grid=GRID) -
 
     folder = os.path.abspath(folder)
     stem = os.path.basename(folder)
-    tmp = folder + ".tmp-export"
-    if os.path.exists(tmp):
-        shutil.rmtree(tmp)
-    os.makedirs(tmp)
     K, R = basis.shape[0], basis.shape[1]
     exposure = exposure_for(basis, table)
     figures = {**figures, "page_exposure": exposure}
     names = {"basis": f"{stem}_basis.exr", "table_0": f"{stem}_table_0.exr",
              "table_1": f"{stem}_table_1.exr", "shader": f"{stem}.gdshader",
              "about": f"{stem}.json", "page": "index.html"}
-    try:
+    with atomic.staged_folder(folder) as tmp:
         img = np.concatenate([b[::-1] for b in basis], axis=0)            # top row first
         exrio.write_exr(os.path.join(tmp, names["basis"]),
                         {c: img[::-1, :, i] for i, c in enumerate("RGB")},
                         {**metadata, "layers": K}, pixel_type="half")
         atomic.write_text(os.path.join(tmp, names["basis"] + ".import"),
-                          import_text("4.4", slices=K))
+                          import_text(slices=K))
         for t in (0, 1):           # float, uncompressed: weights are signed (BC6H is not)
             atomic.write_text(os.path.join(tmp, names[f"table_{t}"] + ".import"),
                               TABLE_IMPORT)
@@ -251,8 +246,4 @@ def write(folder: str, basis, table, figures: dict, metadata: dict, grid=GRID) -
         atomic.write_json(os.path.join(tmp, names["about"]), about, indent=1)
         atomic.write_text(os.path.join(tmp, names["page"]),
                           page(basis, table, figures, exposure, metadata.get("object", stem)))
-        atomic.replace_folder(tmp, folder)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return {k: os.path.join(folder, v) for k, v in names.items()}

@@ -19,7 +19,7 @@ import secrets
 from contextlib import contextmanager
 from typing import Iterator
 
-__all__ = ["atomic_path", "write_bytes", "write_text", "write_json"]
+__all__ = ["atomic_path", "write_bytes", "write_text", "write_json", "staged_folder"]
 
 
 def _temporary_name(path: str) -> str:
@@ -89,6 +89,26 @@ def replace_folder(built: str | os.PathLike, target: str | os.PathLike) -> None:
     os.rename(target, old)
     os.rename(built, target)
     shutil.rmtree(old)
+
+
+@contextmanager
+def staged_folder(target: str | os.PathLike) -> Iterator[str]:
+    """Yield an empty folder ``<target>.tmp-export`` to build a folder's files in; on a clean
+    exit swap it in whole (:func:`replace_folder`); if the body raises, remove it and leave
+    ``target`` as it was. A leftover staging folder of an earlier run is removed first."""
+    import shutil
+
+    target = os.path.abspath(os.fspath(target))
+    tmp = target + ".tmp-export"
+    if os.path.exists(tmp):
+        shutil.rmtree(tmp)
+    os.makedirs(tmp)
+    try:
+        yield tmp
+        replace_folder(tmp, target)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
 
 
 def safe_name(name: str) -> str:

@@ -147,6 +147,14 @@ def _pack(values, lengths):
     return bits[keep].astype(np.uint8)
 
 
+def _ycc(px):
+    """JFIF's Y, Cb, Cr of RGB (..., 3) float64, level-shifted by -128 (the DCT's input)."""
+    R, G, B = px[..., 0], px[..., 1], px[..., 2]
+    return (0.299 * R + 0.587 * G + 0.114 * B - 128.0,
+            -0.168736 * R - 0.331264 * G + 0.5 * B,
+            0.5 * R - 0.418688 * G - 0.081312 * B)
+
+
 def encode(rgb, quality: int = 95) -> bytes:
     """JFIF bytes of ``rgb`` (H, W, 3) uint8, row 0 on top: baseline, 4:4:4, ``quality``
     (IJG scale)."""
@@ -169,10 +177,7 @@ def encode(rgb, quality: int = 95) -> bytes:
         px = rgb[min(y0, H - 1):min(y1, H)].astype(np.float64)
         if px.shape[0] < y1 - y0 or W < Wp:                  # replicate the edge (as libjpeg)
             px = np.pad(px, ((0, y1 - y0 - px.shape[0]), (0, Wp - W), (0, 0)), mode="edge")
-        R, G, B = px[..., 0], px[..., 1], px[..., 2]
-        ycc = (0.299 * R + 0.587 * G + 0.114 * B - 128.0,
-               -0.168736 * R - 0.331264 * G + 0.5 * B,
-               0.5 * R - 0.418688 * G - 0.081312 * B)
+        ycc = _ycc(px)
         keys, vals, lens = [], [], []
         nb = (by1 - by0) * bw
         for c in range(3):
@@ -227,10 +232,7 @@ def reconstruct(rgb, quality: int = 95) -> np.ndarray:
     ql, qc = quant_tables(quality)
     Hp, Wp = -(-H // 8) * 8, -(-W // 8) * 8
     px = np.pad(rgb.astype(np.float64), ((0, Hp - H), (0, Wp - W), (0, 0)), mode="edge")
-    R, G, B = px[..., 0], px[..., 1], px[..., 2]
-    ycc = (0.299 * R + 0.587 * G + 0.114 * B - 128.0,
-           -0.168736 * R - 0.331264 * G + 0.5 * B,
-           0.5 * R - 0.418688 * G - 0.081312 * B)
+    ycc = _ycc(px)
     out = []
     for c, q in enumerate((ql, qc, qc)):
         blocks = ycc[c].reshape(Hp // 8, 8, Wp // 8, 8).transpose(0, 2, 1, 3)
