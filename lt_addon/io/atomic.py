@@ -15,11 +15,34 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import secrets
+import socket
 from contextlib import contextmanager
 from typing import Iterator
 
-__all__ = ["atomic_path", "write_bytes", "write_text", "write_json", "staged_folder"]
+__all__ = ["atomic_path", "write_bytes", "write_text", "write_json", "staged_folder", "token",
+           "owner_of"]
+
+
+def _host() -> str:
+    return "".join(ch if ch.isalnum() else "_" for ch in socket.gethostname())[:40] or "host"
+
+
+def token() -> str:
+    """A fresh name part ``relight-<host>-<pid>-<8 hex>`` that every temporary file and folder of
+    this tool carries, so a later run can tell ours from anyone else's and whether the process
+    that made it is gone (:func:`owner_of`, :mod:`.transaction`'s sweep)."""
+    return f"relight-{_host()}-{os.getpid()}-{secrets.token_hex(4)}"
+
+
+_TOKEN = re.compile(r"relight-(?P<host>[A-Za-z0-9_]+)-(?P<pid>\d+)-[0-9a-f]{8}")
+
+
+def owner_of(name: str) -> tuple[str, int] | None:
+    """``(host, pid)`` of the process that made a temporary name of :func:`token`, else None."""
+    m = _TOKEN.search(name)
+    return (m["host"], int(m["pid"])) if m else None
 
 
 def _temporary_name(path: str) -> str:
@@ -27,7 +50,7 @@ def _temporary_name(path: str) -> str:
     stem, ext = os.path.splitext(base)
     if stem.endswith(".tar"):   # keep two-part extensions whole
         stem, ext = stem[:-4], ".tar" + ext
-    return os.path.join(folder, f".{stem}.{os.getpid()}-{secrets.token_hex(4)}.tmp{ext}")
+    return os.path.join(folder, f".{stem}.{token()}.tmp{ext}")
 
 
 @contextmanager
@@ -83,9 +106,7 @@ def replace_folder(built: str | os.PathLike, target: str | os.PathLike) -> None:
     if not os.path.exists(target):
         os.rename(built, target)
         return
-    old = target + ".old-replaced"
-    if os.path.exists(old):
-        shutil.rmtree(old)
+    old = f"{target}.{token()}.old"
     os.rename(target, old)
     os.rename(built, target)
     shutil.rmtree(old)
@@ -93,15 +114,14 @@ def replace_folder(built: str | os.PathLike, target: str | os.PathLike) -> None:
 
 @contextmanager
 def staged_folder(target: str | os.PathLike) -> Iterator[str]:
-    """Yield an empty folder ``<target>.tmp-export`` to build a folder's files in; on a clean
+    """Yield an empty folder ``<target>.<token>.tmp`` to build a folder's files in; on a clean
     exit swap it in whole (:func:`replace_folder`); if the body raises, remove it and leave
-    ``target`` as it was. A leftover staging folder of an earlier run is removed first."""
+    ``target`` as it was. Staging folders of killed runs are swept by
+    :func:`.transaction.sweep` (the export and bake commands call it first)."""
     import shutil
 
     target = os.path.abspath(os.fspath(target))
-    tmp = target + ".tmp-export"
-    if os.path.exists(tmp):
-        shutil.rmtree(tmp)
+    tmp = f"{target}.{token()}.tmp"
     os.makedirs(tmp)
     try:
         yield tmp

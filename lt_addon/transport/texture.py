@@ -280,7 +280,7 @@ class TransportStore:
         """Open a new store for writing under a temporary name (:meth:`finish` renames it)."""
         folder = os.path.dirname(os.path.abspath(path))
         os.makedirs(folder, exist_ok=True)
-        tmp = os.path.join(folder, f".{os.path.basename(path)}.{os.getpid()}.tmp.npy")
+        tmp = os.path.join(folder, f".{os.path.basename(path)}.{atomic.token()}.tmp.npy")
         arr = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float16,
                                         shape=(directions.size, resolution * resolution))
         store = cls(path, directions, int(resolution), dict(meta or {}), arr)

@@ -67,11 +67,12 @@ def test_data_that_cannot_be_encoded_changes_nothing(tmp_path):
 
 def test_no_other_module_renames_files_itself():
     """One helper everywhere: no module of the product or the tooling calls os.replace /
-    os.rename except atomic.py and the transport store's two-file commit."""
+    os.rename except atomic.py, the transport store's two-file commit and the bake transaction."""
     import pathlib
 
     root = pathlib.Path(__file__).resolve().parents[2]
-    allowed = {"lt_addon/io/atomic.py", "lt_addon/transport/texture.py"}
+    allowed = {"lt_addon/io/atomic.py", "lt_addon/transport/texture.py",
+                   "lt_addon/io/transaction.py"}
     offenders = []
     for folder in ("lt_addon", "operators", "samples", "devtools", "benchmarks", "tools"):
         for p in (root / folder).rglob("*.py"):

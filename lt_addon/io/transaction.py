@@ -1,0 +1,432 @@
+"""One bake, one transaction: a bake's files are built in a staging folder and swapped in whole.
+
+Every file of one atomic write is whole (:mod:`.atomic`), but a bake writes a *set* of files
+(T, model, albedo, indirect, previews, report) and the ``.blend`` records it. This module makes
+the set a unit, with a small journal so that a process killed at any instant leaves a state the
+next run can finish or undo:
+
+1. **Stage.** :class:`BakeTransaction` makes ``<out>/.relight-stage-<token>/`` (same folder,
+   hence the same file system: every move below is a rename). The bake writes everything there.
+   The folder ``out`` itself is not touched; a kill here leaves the previous bake as it was and
+   a stage the next run removes.
+2. **Check.** :meth:`~BakeTransaction.commit` reads every staged file back (:func:`check_file`:
+   JSON parses, NPZ CRCs, NPY/EXR/PNG headers and sizes) and rewrites the paths in the staged
+   JSON files from the stage to ``out``.
+3. **Swap.** The journal ``.journal.json`` (in the stage, written atomically) says
+   ``swapping`` and lists the entries. For each entry: the old file of that name, if any, is
+   renamed into ``<stage>/.old/``, then the new one is renamed into ``out``. Files of the
+   previous bake that the new one does not write (``retire``) go to ``.old`` too. Then the
+   journal says ``swapped``, with the identity (inode, size, mtime) of the ``.blend`` as it was.
+4. **Record.** The caller saves the ``.blend`` (itself one atomic rename), then
+   :meth:`~BakeTransaction.finish` marks the journal ``committed`` and removes the stage with
+   the old files.
+
+Undo (:meth:`~BakeTransaction.rollback`, and :func:`recover` for a killed run) needs no record
+of which renames happened: a staged entry that is gone was moved in (remove it from ``out``),
+and whatever is in ``.old`` goes back. A killed run in state ``swapped`` is rolled back when
+the ``.blend`` is unchanged (its save never happened) and forward otherwise; ``committed`` is
+only cleaned up. Windows: a rename fails while a file is open, so the bake closes its memory
+maps before the swap; a failed rename raises and is undone like any other fault.
+
+:func:`sweep` is the debris collector every bake and export runs first on its folder: it
+recovers stages and removes temporary files of this tool's processes that are gone (by the
+host and pid in their names, :func:`.atomic.token`), never anything else.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import sys
+from typing import Iterable
+
+from . import atomic
+
+__all__ = ["BakeTransaction", "sweep", "recover", "check_file", "target_of", "pid_alive",
+           "STAGE_PREFIX", "rewrite_paths"]
+
+STAGE_PREFIX = ".relight-stage-"
+JOURNAL = ".journal.json"
+OLD = ".old"
+FORMAT = "relightable_textures.commit_journal"
+FORMAT_VERSION = 1
+
+
+def target_of(folder: str) -> str:
+    """The folder a stage commits to (``folder`` itself when it is not a stage): the chunk
+    caches a bake keeps for resuming live there, outside the stage."""
+    folder = os.path.abspath(folder)
+    head, base = os.path.split(folder)
+    return head if base.startswith(STAGE_PREFIX) else folder
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` runs on this machine (a reused pid counts as alive: the sweep
+    then leaves the debris for later, it never removes a live process's files)."""
+    if pid <= 0:
+        return False
+    if sys.platform == "win32":
+        import ctypes
+
+        kernel32 = ctypes.windll.kernel32
+        handle = kernel32.OpenProcess(0x1000, False, pid)   # PROCESS_QUERY_LIMITED_INFORMATION
+        if not handle:
+            return False
+        code = ctypes.c_ulong()
+        ok = kernel32.GetExitCodeProcess(handle, ctypes.byref(code))
+        kernel32.CloseHandle(handle)
+        return bool(ok) and code.value == 259                # STILL_ACTIVE
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _remove(path: str) -> None:
+    if os.path.isdir(path) and not os.path.islink(path):
+        shutil.rmtree(path)
+    elif os.path.lexists(path):
+        os.remove(path)
+
+
+def _fsync_dir(folder: str) -> None:
+    """Make the renames in ``folder`` durable (POSIX; Windows has no directory handles)."""
+    if sys.platform == "win32":
+        return
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def file_identity(path: str | None) -> list | None:
+    """(inode, size, mtime ns) of ``path``, None when absent: an atomic save changes the inode."""
+    if not path:
+        return None
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return [st.st_ino, st.st_size, st.st_mtime_ns]
+
+
+# ------------------------------------------------------------------------------------------
+# checking staged files
+
+
+_MAGIC = {".png": b"\x89PNG\r\n\x1a\n", ".exr": b"\x76\x2f\x31\x01", ".npy": b"\x93NUMPY",
+          ".npz": b"PK", ".jpg": b"\xff\xd8\xff", ".glb": b"glTF"}
+
+
+def check_file(path: str) -> None:
+    """Raise ValueError naming ``path`` when it is not a whole file of its kind: empty, wrong
+    magic bytes, a JSON that does not parse, an NPZ whose CRCs fail, an NPY shorter than its
+    header says. Cheap: no array is loaded whole."""
+    ext = os.path.splitext(path)[1].lower()
+    size = os.path.getsize(path)
+    if size == 0:
+        raise ValueError(f"{path} is empty")
+    magic = _MAGIC.get(ext)
+    if magic is not None:
+        with open(path, "rb") as fh:
+            if fh.read(len(magic)) != magic:
+                raise ValueError(f"{path} is not a {ext[1:].upper()} file (bad signature)")
+    if ext == ".json":
+        with open(path, encoding="utf-8") as fh:
+            try:
+                json.load(fh)
+            except ValueError as exc:
+                raise ValueError(f"{path} is not valid JSON: {exc}") from None
+    elif ext == ".npz":
+        import zipfile
+
+        try:
+            with zipfile.ZipFile(path) as zf:
+                bad = zf.testzip()
+        except zipfile.BadZipFile as exc:
+            raise ValueError(f"{path} is not a whole NPZ file: {exc}") from None
+        if bad is not None:
+            raise ValueError(f"{path}: member {bad} fails its CRC")
+    elif ext == ".npy":
+        import numpy as np
+
+        with open(path, "rb") as fh:
+            version = np.lib.format.read_magic(fh)
+            shape, fortran, dtype = np.lib.format._read_array_header(fh, version)
+            offset = fh.tell()
+        need = offset + int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+        if size < need:
+            raise ValueError(f"{path} is truncated ({size} of {need} bytes)")
+
+
+# ------------------------------------------------------------------------------------------
+# paths
+
+
+def rewrite_paths(value, stage: str, target: str):
+    """``value`` (JSON-like: dicts, lists, strings) with every path inside ``stage`` moved to
+    ``target``; other values unchanged. Matching is on the stage's unique folder name, so a
+    path in any spelling (absolute, Blender's ``//`` relative, either separator) is mapped."""
+    name = os.path.basename(os.path.normpath(stage))
+    pattern = re.compile(re.escape(name) + r"[\\/]")
+
+    def fix(v):
+        if isinstance(v, str):
+            return pattern.sub("", v) if name in v else v
+        if isinstance(v, dict):
+            return {k: fix(x) for k, x in v.items()}
+        if isinstance(v, list):
+            return [fix(x) for x in v]
+        if isinstance(v, tuple):
+            return tuple(fix(x) for x in v)
+        return v
+
+    return fix(value)
+
+
+# ------------------------------------------------------------------------------------------
+# the transaction
+
+
+class BakeTransaction:
+    """Stage, check, swap and record one bake's files in ``out_dir`` (module docstring).
+
+    ``blend``: the ``.blend`` the caller saves after :meth:`commit` (None: nothing is saved,
+    e.g. the panel, whose session holds the record until the user saves). ``retire``: names
+    (globs) in ``out_dir`` of the previous bake's files that go when the new bake does not
+    write them (its previews of another kind, say); only names the bake owns.
+
+    Use::
+
+        with BakeTransaction(out, blend=path) as txn:
+            run the bake into txn.stage
+            txn.commit()
+            save the .blend
+        # clean exit: finish(); an exception: rollback(), then it propagates
+    """
+
+    def __init__(self, out_dir: str, blend: str | None = None, retire: Iterable[str] = ()):
+        self.target = os.path.abspath(out_dir)
+        self.blend = os.path.abspath(blend) if blend else None
+        self.retire_globs = list(retire)
+        self.stage = os.path.join(self.target, STAGE_PREFIX + atomic.token())
+        self.old = os.path.join(self.stage, OLD)
+        self.state = "new"
+        self.entries: list = []
+        self.retired: list = []
+        self.swept: dict = {}
+        self.blend_before = file_identity(self.blend)
+
+    # -- lifecycle
+    def begin(self) -> "BakeTransaction":
+        os.makedirs(self.target, exist_ok=True)
+        self.swept = sweep(self.target)
+        os.makedirs(self.stage)
+        self.state = "staging"
+        return self
+
+    def __enter__(self):
+        return self.begin()
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is None:
+            self.finish()
+        else:
+            self.rollback()
+        return False
+
+    def _journal(self, state: str) -> None:
+        atomic.write_json(os.path.join(self.stage, JOURNAL), {
+            "format": FORMAT, "format_version": FORMAT_VERSION, "state": state,
+            "target": self.target, "entries": self.entries, "retired": self.retired,
+            "blend": self.blend, "blend_before": self.blend_before})
+        self.state = state
+
+    def staged(self) -> list:
+        """Names of the entries in the stage (files and folders the bake wrote)."""
+        return sorted(n for n in os.listdir(self.stage) if n not in (JOURNAL, OLD))
+
+    def path(self, name: str) -> str:
+        """Where ``name`` is staged."""
+        return os.path.join(self.stage, name)
+
+    def final(self, value):
+        """``value`` with staged paths mapped to where they live after the commit."""
+        return rewrite_paths(value, self.stage, self.target)
+
+    def commit(self) -> list:
+        """Check the staged files, fix their paths and swap them into ``out_dir``; returns the
+        names swapped in. Raises (and leaves ``out_dir`` as it was) when a file is bad, the
+        ``.blend`` changed since the transaction began, or a rename fails."""
+        from .. import faults
+
+        if self.state != "staging":
+            raise RuntimeError(f"commit in state {self.state}")
+        if self.blend and file_identity(self.blend) != self.blend_before:
+            raise ChangedMeanwhile(
+                f"{self.blend} changed while the bake ran (saved by another program?); nothing "
+                "was replaced: reopen it and bake again")
+        self.entries = self.staged()
+        if not self.entries:
+            raise ValueError(f"the bake wrote no file into {self.stage}")
+        for name in self.entries:
+            p = self.path(name)
+            for root, _, files in (os.walk(p) if os.path.isdir(p) else [("", None, [p])]):
+                for f in files:
+                    q = os.path.join(root, f)
+                    check_file(q)
+                    if q.endswith(".json"):
+                        with open(q, encoding="utf-8") as fh:
+                            data = json.load(fh)
+                        fixed = self.final(data)
+                        if fixed != data:
+                            atomic.write_json(q, fixed)
+        import fnmatch
+
+        new = set(self.entries)
+        self.retired = sorted(
+            n for n in os.listdir(self.target)
+            if n not in new and any(fnmatch.fnmatchcase(n, g) for g in self.retire_globs))
+        self._journal("swapping")
+        os.makedirs(self.old)
+        for name in self.retired:
+            os.rename(os.path.join(self.target, name), os.path.join(self.old, name))
+        for i, name in enumerate(self.entries):
+            dest = os.path.join(self.target, name)
+            if os.path.lexists(dest):
+                os.rename(dest, os.path.join(self.old, name))
+            os.rename(self.path(name), dest)
+            if i == 0:
+                faults.checkpoint("commit")
+        _fsync_dir(self.target)
+        self._journal("swapped")
+        return list(self.entries)
+
+    def finish(self) -> None:
+        """Keep the commit (after the ``.blend`` is saved) and remove the stage and old files;
+        an uncommitted transaction is rolled back instead."""
+        if self.state != "swapped":
+            self.rollback()
+            return
+        self._journal("committed")
+        shutil.rmtree(self.stage, ignore_errors=True)
+        self.state = "done"
+
+    def rollback(self) -> None:
+        """Undo whatever part of the swap happened and remove the stage."""
+        if self.state in ("done", "rolled back", "new"):
+            return
+        if os.path.isdir(self.stage):
+            _undo(self.stage, self.target, self.entries, self.retired)
+        self.state = "rolled back"
+
+
+class ChangedMeanwhile(RuntimeError):
+    """The ``.blend`` a bake would record into changed on disk while the bake ran."""
+
+
+def _undo(stage: str, target: str, entries: list, retired: list) -> None:
+    old = os.path.join(stage, OLD)
+    for name in list(entries) + list(retired):
+        dest = os.path.join(target, name)
+        moved_in = name in entries and not os.path.lexists(os.path.join(stage, name))
+        kept = os.path.join(old, name)
+        if moved_in and os.path.lexists(dest):
+            _remove(dest)
+        if os.path.lexists(kept) and not os.path.lexists(dest):
+            os.rename(kept, dest)
+    _fsync_dir(target)
+    shutil.rmtree(stage, ignore_errors=True)
+
+
+def recover(stage: str) -> str:
+    """Finish or undo the stage of a process that is gone (by its journal); returns what was
+    done: ``removed`` (never swapped: the previous bake is untouched), ``rolled back`` or
+    ``rolled forward``."""
+    try:
+        with open(os.path.join(stage, JOURNAL), encoding="utf-8") as fh:
+            j = json.load(fh)
+    except (OSError, ValueError):
+        j = None
+    if not j or j.get("state") not in ("swapping", "swapped", "committed"):
+        shutil.rmtree(stage, ignore_errors=True)
+        return "removed"
+    if j["state"] == "committed" or (
+            j["state"] == "swapped" and j.get("blend")
+            and file_identity(j["blend"]) != j.get("blend_before")):
+        shutil.rmtree(stage, ignore_errors=True)   # the .blend was saved: keep the new bake
+        return "rolled forward"
+    _undo(stage, os.path.dirname(os.path.abspath(stage)), j.get("entries", []),
+          j.get("retired", []))
+    return "rolled back"
+
+
+#: Temporary names of earlier versions (before :func:`.atomic.token`): ``.<name>.<pid>-<hex>.tmp.<ext>``
+#: (atomic writes) and ``.<name>.npy.<pid>.tmp.npy`` (transport stores); their pid is all they hold.
+_LEGACY = (re.compile(r"^\..+\.(\d+)-[0-9a-f]{8}\.tmp(\.[A-Za-z0-9]+)*$"),
+           re.compile(r"^\..+\.(\d+)\.tmp\.npy$"),
+           re.compile(r"^\..+\.(\d+)\.tmp\.json$"))
+
+
+def _debris_owner(name: str):
+    """(host or None, pid) when ``name`` is a temporary name of this tool, else None."""
+    own = atomic.owner_of(name)
+    if own is not None:
+        return own
+    for rx in _LEGACY:
+        m = rx.match(name)
+        if m:
+            return None, int(m.group(1))
+    return None
+
+
+def sweep(folder: str) -> dict:
+    """Recover the stages and remove the temporary files and folders in ``folder`` (and its
+    chunk cache, ``.relight_cache``) that processes of this tool on this host left when they
+    were killed. A name counts only when it carries our token (or an earlier version's temporary
+    pattern) and its pid is not running; anything else is left alone. Returns
+    ``{"removed": [...], "rolled_back": [...], "rolled_forward": [...]}`` (names)."""
+    out = {"removed": [], "rolled_back": [], "rolled_forward": []}
+    if not os.path.isdir(folder):
+        return out
+    host = atomic._host()
+    places = [folder]
+    cache = os.path.join(folder, ".relight_cache")
+    if os.path.isdir(cache):
+        places += [root for root, _, _ in os.walk(cache)]
+    for place in places:
+        try:
+            names = os.listdir(place)
+        except OSError:
+            continue
+        for name in names:
+            owner = _debris_owner(name)
+            if owner is None:
+                continue
+            h, pid = owner
+            if (h is not None and h != host) or pid == os.getpid() or pid_alive(pid):
+                continue
+            p = os.path.join(place, name)
+            rel = os.path.relpath(p, folder)
+            if name.startswith(STAGE_PREFIX) and os.path.isdir(p):
+                done = recover(p)
+                out[{"removed": "removed", "rolled back": "rolled_back",
+                     "rolled forward": "rolled_forward"}[done]].append(rel)
+                continue
+            try:
+                _remove(p)
+            except OSError:
+                continue
+            out["removed"].append(rel)
+    return out
