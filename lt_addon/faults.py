@@ -3,7 +3,8 @@
 A bake calls :func:`checkpoint` at each stage (``directions``, ``indirect``, ``fit``, ``write``,
 ``preview``, ``commit``, ``blend``); with the variable unset it returns at once. ``kill`` ends
 the process as ``kill -9`` would (SIGKILL: no ``finally``, no atexit), ``raise`` raises
-:class:`InjectedFault` there. The tests run real bakes in subprocesses with it set and check
+:class:`InjectedFault` there, ``eacces`` / ``enospc`` raise the OSError a denied permission or a
+full disk gives (for machines where the tests run as root, whom permissions do not stop). The tests run real bakes in subprocesses with it set and check
 that the previous bake is intact byte for byte (tests/blender/test_bake_faults.py).
 """
 
@@ -19,8 +20,9 @@ class InjectedFault(RuntimeError):
     """Raised at a checkpoint named by :data:`ENV` with ``raise``."""
 
 
-def checkpoint(stage: str) -> None:
-    """Kill the process or raise here when :data:`ENV` names ``stage``."""
+def checkpoint(stage: str, path: str | None = None) -> None:
+    """Kill the process or raise here when :data:`ENV` names ``stage`` (``path``: the file an
+    injected OSError names)."""
     spec = os.environ.get(ENV)
     if not spec:
         return
@@ -34,4 +36,9 @@ def checkpoint(stage: str) -> None:
             if hasattr(signal, "SIGKILL"):
                 os.kill(os.getpid(), signal.SIGKILL)
             os._exit(137)
+        if action in ("eacces", "enospc"):
+            import errno
+
+            code = errno.EACCES if action == "eacces" else errno.ENOSPC
+            raise OSError(code, os.strerror(code), path or f"<{stage}>")
         raise InjectedFault(f"injected fault at the {stage} stage ({ENV}={spec})")

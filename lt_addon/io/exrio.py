@@ -74,6 +74,10 @@ def write_exr(path: str, channels: dict, metadata: dict | None = None,
     OpenEXR = _openexr()
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     if metadata is not None:
+        if "format" in metadata and "format_version" not in metadata:   # every file versioned
+            from .versions import version_of
+
+            metadata = {**metadata, "format_version": version_of(metadata["format"])}
         header[METADATA_KEY] = json.dumps(metadata, sort_keys=True)
     with atomic.atomic_path(path) as tmp, OpenEXR.File(header, data) as exr:
         exr.write(tmp)

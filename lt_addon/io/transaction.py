@@ -12,14 +12,16 @@ next run can finish or undo:
 2. **Check.** :meth:`~BakeTransaction.commit` reads every staged file back (:func:`check_file`:
    JSON parses, NPZ CRCs, NPY/EXR/PNG headers and sizes) and rewrites the paths in the staged
    JSON files from the stage to ``out``.
-3. **Swap.** The journal ``.journal.json`` (in the stage, written atomically) says
-   ``swapping`` and lists the entries. For each entry: the old file of that name, if any, is
+3. **Swap.** The caller first writes the new ``.blend`` under a temporary name (the slow part
+   of saving). Then the journal ``.journal.json`` (in the stage, written atomically) says
+   ``swapping`` and lists the entries and that temporary ``.blend``. For each entry: the old file of that name, if any, is
    renamed into ``<stage>/.old/``, then the new one is renamed into ``out``. Files of the
    previous bake that the new one does not write (``retire``) go to ``.old`` too. Then the
    journal says ``swapped``, with the identity (inode, size, mtime) of the ``.blend`` as it was.
-4. **Record.** The caller saves the ``.blend`` (itself one atomic rename), then
+4. **Record.** The caller renames the new ``.blend`` into place, then
    :meth:`~BakeTransaction.finish` marks the journal ``committed`` and removes the stage with
-   the old files.
+   the old files. Steps 3 and 4 are renames only: a kill lands between them only in a window
+   of milliseconds, and leaves a journal the next run acts on.
 
 Undo (:meth:`~BakeTransaction.rollback`, and :func:`recover` for a killed run) needs no record
 of which renames happened: a staged entry that is gone was moved in (remove it from ``out``),
@@ -42,7 +44,7 @@ import shutil
 import sys
 from typing import Iterable
 
-from . import atomic
+from . import atomic, versions
 
 __all__ = ["BakeTransaction", "sweep", "recover", "check_file", "target_of", "pid_alive",
            "STAGE_PREFIX", "rewrite_paths"]
@@ -51,7 +53,6 @@ STAGE_PREFIX = ".relight-stage-"
 JOURNAL = ".journal.json"
 OLD = ".old"
 FORMAT = "relightable_textures.commit_journal"
-FORMAT_VERSION = 1
 
 
 def target_of(folder: str) -> str:
@@ -108,6 +109,18 @@ def _fsync_dir(folder: str) -> None:
         pass
     finally:
         os.close(fd)
+
+
+def _prune_empty(folder: str) -> None:
+    """Remove ``folder`` and its subfolders bottom-up where they hold nothing (a chunk cache
+    whose bakes are all committed)."""
+    if not os.path.isdir(folder):
+        return
+    for root, _, _ in sorted(os.walk(folder), key=lambda w: -len(w[0])):
+        try:
+            os.rmdir(root)
+        except OSError:
+            pass
 
 
 def file_identity(path: str | None) -> list | None:
@@ -248,9 +261,10 @@ class BakeTransaction:
 
     def _journal(self, state: str) -> None:
         atomic.write_json(os.path.join(self.stage, JOURNAL), {
-            "format": FORMAT, "format_version": FORMAT_VERSION, "state": state,
+            **versions.stamp(FORMAT), "state": state,
             "target": self.target, "entries": self.entries, "retired": self.retired,
-            "blend": self.blend, "blend_before": self.blend_before})
+            "blend": self.blend, "blend_before": self.blend_before,
+            "blend_tmp": getattr(self, "blend_tmp", None)})
         self.state = state
 
     def staged(self) -> list:
@@ -265,18 +279,21 @@ class BakeTransaction:
         """``value`` with staged paths mapped to where they live after the commit."""
         return rewrite_paths(value, self.stage, self.target)
 
-    def commit(self) -> list:
-        """Check the staged files, fix their paths and swap them into ``out_dir``; returns the
-        names swapped in. Raises (and leaves ``out_dir`` as it was) when a file is bad, the
-        ``.blend`` changed since the transaction began, or a rename fails."""
-        from .. import faults
+    def final_result(self, result):
+        """A job's result object with its staged paths replaced by the committed ones (its
+        report dicts, lists and strings; objects such as models are left as they are)."""
+        for name, value in list(vars(result).items()):
+            if isinstance(value, (dict, list, str)):
+                setattr(result, name, self.final(value))
+        return result
 
+    def prepare(self) -> list:
+        """Check the staged files and fix the paths in their JSON documents (nothing in
+        ``out_dir`` changes); returns the staged names. Raises when a file is bad, a folder of
+        the user's stands where a file goes, or the ``.blend`` changed meanwhile."""
         if self.state != "staging":
-            raise RuntimeError(f"commit in state {self.state}")
-        if self.blend and file_identity(self.blend) != self.blend_before:
-            raise ChangedMeanwhile(
-                f"{self.blend} changed while the bake ran (saved by another program?); nothing "
-                "was replaced: reopen it and bake again")
+            raise RuntimeError(f"prepare in state {self.state}")
+        self._check_blend()
         self.entries = self.staged()
         if not self.entries:
             raise ValueError(f"the bake wrote no file into {self.stage}")
@@ -292,12 +309,41 @@ class BakeTransaction:
                         fixed = self.final(data)
                         if fixed != data:
                             atomic.write_json(q, fixed)
+        for name in self.entries:   # a folder where a file goes (or the reverse) is not a bake's
+            dest = os.path.join(self.target, name)
+            if os.path.lexists(dest) and os.path.isdir(dest) != os.path.isdir(self.path(name)):
+                import errno
+
+                code = errno.EISDIR if os.path.isdir(dest) else errno.ENOTDIR
+                raise OSError(code, os.strerror(code), dest)
         import fnmatch
 
         new = set(self.entries)
         self.retired = sorted(
             n for n in os.listdir(self.target)
             if n not in new and any(fnmatch.fnmatchcase(n, g) for g in self.retire_globs))
+        self.state = "checked"
+        return list(self.entries)
+
+    def _check_blend(self) -> None:
+        if self.blend and file_identity(self.blend) != self.blend_before:
+            raise ChangedMeanwhile(
+                f"{self.blend} changed while the bake ran (saved by another program?); nothing "
+                "was replaced: reopen it and bake again")
+
+    def swap(self, blend_tmp: str | None = None) -> list:
+        """Swap the checked files into ``out_dir`` (renames only: the window a kill can land in
+        is milliseconds, and the journal covers it). ``blend_tmp``: the new ``.blend``, already
+        written under a temporary name, that the caller renames onto ``blend`` right after;
+        a recovery removes it. Returns the names swapped in."""
+        from .. import faults
+
+        if self.state == "staging":
+            self.prepare()
+        if self.state != "checked":
+            raise RuntimeError(f"swap in state {self.state}")
+        self._check_blend()
+        self.blend_tmp = blend_tmp
         self._journal("swapping")
         os.makedirs(self.old)
         for name in self.retired:
@@ -313,6 +359,11 @@ class BakeTransaction:
         self._journal("swapped")
         return list(self.entries)
 
+    def commit(self) -> list:
+        """:meth:`prepare` and :meth:`swap`, for a transaction without a ``.blend`` to save."""
+        self.prepare()
+        return self.swap()
+
     def finish(self) -> None:
         """Keep the commit (after the ``.blend`` is saved) and remove the stage and old files;
         an uncommitted transaction is rolled back instead."""
@@ -322,6 +373,7 @@ class BakeTransaction:
         self._journal("committed")
         shutil.rmtree(self.stage, ignore_errors=True)
         self.state = "done"
+        _prune_empty(os.path.join(self.target, ".relight_cache"))
 
     def rollback(self) -> None:
         """Undo whatever part of the swap happened and remove the stage."""
@@ -369,6 +421,9 @@ def recover(stage: str) -> str:
         return "rolled forward"
     _undo(stage, os.path.dirname(os.path.abspath(stage)), j.get("entries", []),
           j.get("retired", []))
+    tmp = j.get("blend_tmp")
+    if tmp and os.path.isfile(tmp) and atomic.owner_of(os.path.basename(tmp)):
+        os.remove(tmp)   # the new .blend that was never renamed into place
     return "rolled back"
 
 
@@ -391,7 +446,7 @@ def _debris_owner(name: str):
     return None
 
 
-def sweep(folder: str) -> dict:
+def sweep(folder: str, stages: bool = True) -> dict:
     """Recover the stages and remove the temporary files and folders in ``folder`` (and its
     chunk cache, ``.relight_cache``) that processes of this tool on this host left when they
     were killed. A name counts only when it carries our token (or an earlier version's temporary
@@ -403,7 +458,7 @@ def sweep(folder: str) -> dict:
     host = atomic._host()
     places = [folder]
     cache = os.path.join(folder, ".relight_cache")
-    if os.path.isdir(cache):
+    if stages and os.path.isdir(cache):
         places += [root for root, _, _ in os.walk(cache)]
     for place in places:
         try:
@@ -420,6 +475,8 @@ def sweep(folder: str) -> dict:
             p = os.path.join(place, name)
             rel = os.path.relpath(p, folder)
             if name.startswith(STAGE_PREFIX) and os.path.isdir(p):
+                if not stages:
+                    continue
                 done = recover(p)
                 out[{"removed": "removed", "rolled back": "rolled_back",
                      "rolled forward": "rolled_forward"}[done]].append(rel)

@@ -26,7 +26,8 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..errors import InputError
-from ..io import atomic, exrio
+from .. import faults
+from ..io import atomic, exrio, versions
 from ..settings import check_ranges, setting
 from ..sphere.hemisphere import direction_from_az_el
 from . import texture as tt
@@ -468,7 +469,9 @@ def load_bake(report_path: str) -> tuple:
         return p if os.path.exists(p) else os.path.join(folder, os.path.basename(p))
 
     store = tt.TransportStore.open(where(files["transport"]))
-    ch, _ = exrio.read_exr(where(files["albedo"]))
+    ch, meta = exrio.read_exr(where(files["albedo"]))
+    if meta:   # (albedos before versioning carry a format but no version: 1)
+        versions.check(meta, "relightable_textures.albedo", where(files["albedo"]), "an albedo")
     albedo = np.stack([ch[c] for c in "RGB"], axis=-1).astype(np.float32)
     indirect = SteerableTexture.load(where(files["indirect"])) if "indirect" in files else None
     model = None
@@ -497,6 +500,7 @@ def write_bundle(result: TransportTextureResult, names: list, out_dir: str,
         files["albedo"] = base + "_albedo.exr"
         exrio.write_exr(files["albedo"], {c: b.albedo[..., i] for i, c in enumerate("RGB")},
                         {"format": "relightable_textures.albedo"}, pixel_type="half")
+        faults.checkpoint("write", files["albedo"])
         if b.indirect is not None:
             files["indirect"] = base + "_indirect.exr"
             b.indirect.save(files["indirect"], "half")

@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.spatial
 
+from ..io import atomic, versions
 from ..sphere.directions import DirectionSet, hull_barycentric, parse_direction_spec
 from ..sphere.hemisphere import disk_to_hemisphere, hemisphere_to_disk, normalize_directions
 
@@ -51,6 +52,7 @@ def chunk_texels(n_directions: int) -> int:
     """Texels per streamed chunk so one (S, chunk) float64 block is about CHUNK_BYTES."""
     return max(256, CHUNK_BYTES // (8 * max(int(n_directions), 1)))
 STORE_FORMAT = "relightable_textures.transport_texture"
+MODEL_FORMAT = "relightable_textures.transport_model"
 
 
 # ----------------------------------------------------------------------------------------------
@@ -313,7 +315,7 @@ class TransportStore:
         self._array.flush()
         del self._array
         self._array = None
-        header = {"format": STORE_FORMAT, "resolution": self.resolution,
+        header = {**versions.stamp(STORE_FORMAT), "resolution": self.resolution,
                   "directions": self.directions.to_dict(include_arrays=True), **self.meta}
         with open(self.header_path(self._tmp), "w") as fh:
             json.dump(header, fh, indent=1)
@@ -344,11 +346,11 @@ class TransportStore:
     def open(cls, path: str) -> "TransportStore":
         with open(cls.header_path(path)) as fh:
             header = json.load(fh)
-        if header.get("format") != STORE_FORMAT:
-            raise ValueError(f"{path} is not a transport texture store")
+        versions.check(header, STORE_FORMAT, path, "a transport texture store")
         dset = DirectionSet.from_dict(header.pop("directions"))
         res = int(header.pop("resolution"))
         header.pop("format")
+        header.pop("format_version", None)
         return cls(path, dset, res, header)
 
     # -- relighting --------------------------------------------------------------------------
@@ -609,12 +611,17 @@ def save_model(path: str, model, directions_spec: str) -> None:
     from ..io import atomic
 
     with atomic.atomic_path(path) as tmp:
-        np.savez(tmp, directions_spec=np.array(directions_spec), **model.to_arrays())
+        np.savez(tmp, directions_spec=np.array(directions_spec), **model.to_arrays(),
+                 **{k: np.array(v) for k, v in versions.stamp(MODEL_FORMAT).items()})
 
 
 def load_model(path: str):
     """The model written by :func:`save_model`; a clear ValueError for an unknown kind."""
     with np.load(path, allow_pickle=False) as z:
+        if "format" in z.files:   # (files before versioning have none: version 1)
+            versions.check({"format": str(z["format"]),
+                            "format_version": int(z["format_version"])}, MODEL_FORMAT, path,
+                           "a transport model")
         kind = str(z["kind"])
         if kind not in MODEL_KINDS:
             raise ValueError(f"{path}: unknown model kind {kind!r} "

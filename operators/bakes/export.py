@@ -83,11 +83,13 @@ def export_job(scene, obj, settings: ExportSettings, out_dir: str, force: bool =
     settings.validate()
     started = time.perf_counter()
     names = output_names(obj.name, settings)
-    if not force:
+    if not force:   # (out_dir may be the staging folder of the export's transaction)
+        from ...lt_addon.io.transaction import target_of
+
         for n in names:
-            if os.path.exists(os.path.join(out_dir, n)):
-                raise BakeInputError(f"{os.path.join(out_dir, n)} exists; use --force to "
-                                     "replace it")
+            if os.path.exists(os.path.join(target_of(out_dir), n)):
+                raise BakeInputError(f"{os.path.join(target_of(out_dir), n)} exists; use "
+                                     "--force to replace it")
     kinds = [b.get("kind") for b in object_bakes(obj)]
     lobes = "transport_texture" not in kinds and "steerable_texture" in kinds
     try:

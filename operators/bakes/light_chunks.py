@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 
+from ...lt_addon import faults
 from ..base.jobs import Progress, run
 
 
@@ -135,6 +136,7 @@ def light_stacks(scene, objects, spec: dict, cache=None, client=None,
                 break
             done += 1
             yield Progress(done, total, f"{label} {k + 1}/{K}")
+            faults.checkpoint("indirect")
         figures["bake_seconds"] = time.perf_counter() - t0
     stacks = [np.stack([have[k][i] for k in range(K)]) for i in range(len(objects))]
     return stacks, figures

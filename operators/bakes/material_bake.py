@@ -605,7 +605,7 @@ def material_chunk_cache(scene, objects, settings: MaterialBakeSettings, out_dir
     from ...lt_addon.io.chunk_cache import ChunkCache
     from ..base.bake_inputs import scene_key
     from ..base.cycles_device import current
-    from ..base.bake_inputs import CACHE_FOLDER
+    from ..base.bake_inputs import cache_root
 
     baked = {k: v for k, v in dataclasses.asdict(settings).items() if k != "smoothing"}
     # what the chunks depend on, defaults resolved (a panel and a command line that mean the
@@ -618,7 +618,7 @@ def material_chunk_cache(scene, objects, settings: MaterialBakeSettings, out_dir
            "device": current().id, "settings": baked, "chunk_directions": CHUNK_DIRECTIONS,
            "seeds": "per direction"}   # chunks of the one-seed bakes are not these
     folder = atomic.safe_name(objects[0].name) + "_materials"
-    cache = ChunkCache(os.path.join(out_dir, CACHE_FOLDER, folder), key)
+    cache = ChunkCache(os.path.join(cache_root(out_dir), folder), key)
     cache.prune_others()
     return cache
 

@@ -169,10 +169,10 @@ def lobes_chunk_cache(scene, obj, settings: TextureBakeSettings, out_dir: str):
     """The chunk cache of a lobes bake of ``obj`` into ``out_dir``:
     ``<out_dir>/.relight_cache/<object>_lobes/`` (:func:`.light_chunks.light_cache`)."""
     from .light_chunks import light_cache
-    from ..base.bake_inputs import CACHE_FOLDER
+    from ..base.bake_inputs import cache_root
 
     return light_cache(scene, [obj], lobes_spec(settings),
-                       os.path.join(out_dir, CACHE_FOLDER, atomic.safe_name(obj.name) + "_lobes"))
+                       os.path.join(cache_root(out_dir), atomic.safe_name(obj.name) + "_lobes"))
 
 
 def default_output_dir(blend_path: str) -> str:

@@ -30,12 +30,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ... import __version__
+from ...lt_addon import faults
 from ...lt_addon.io import atomic
 from ...lt_addon.transport import texture as tt
 from ...lt_addon.sphere.hemisphere import direction_from_az_el
 from ..base import cycles_device
 from ..base.cycles_bake import BakeInputError, EnvironmentBake, check_bakeable, check_memory
-from ..base.bake_inputs import CACHE_FOLDER
+from ..base.bake_inputs import CACHE_FOLDER, cache_root
 from ..base.jobs import Progress
 # The bundle (settings, files, report, reading and relighting) is bpy-free; re-exported here for
 # the bake and its callers.
@@ -184,6 +185,7 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
             engine.update((yield from ray_direct.bake(scene, objects, settings, dset, stores,
                                                       normals, 2, total)))
             seconds["direct_rays"] = engine["seconds"]
+            faults.checkpoint("directions")
             peak = first = max(peak, _rss_mb())
         missing = any(c is None for c in cached)
         with (EnvironmentBake(scene, objects, R, 1, 0, (8, 16), mode="irradiance",
@@ -208,6 +210,7 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
                     cache.put(f"direct_{chunk.start:05d}",
                               np.stack([np.asarray(st._array[chunk.start:chunk.stop])
                                         for st in stores]))
+                faults.checkpoint("directions")   # (tests: killed with a chunk kept)
             if session is not None:
                 seconds["direct_cycles"] = session.bake_seconds
                 calls += session.bake_calls
@@ -355,7 +358,7 @@ def direct_chunk_cache(scene, objects, settings: TransportTextureSettings, out_d
            **({"direction_set": digest(dset.directions.round(9).tolist())}
               if dset.kind == "custom" else {}),
            "seed": settings.seed, "chunk_directions": CHUNK_DIRECTIONS}
-    root = os.path.join(out_dir, CACHE_FOLDER, "+".join(atomic.safe_name(o.name) for o in objects))
+    root = os.path.join(cache_root(out_dir), "+".join(atomic.safe_name(o.name) for o in objects))
     cache = ChunkCache(root, key)
     cache.prune_others()
     return cache
@@ -404,6 +407,7 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
         seconds["indirect_total"] = time.perf_counter() - t0
 
     # 4. models
+    faults.checkpoint("fit")
     results = []
     for i, o in enumerate(objects):
         t0 = time.perf_counter()
@@ -478,6 +482,18 @@ def truth_errors(result: TransportTextureResult, truths: dict, sun_angle: float,
             "meaning": "relative RMSE ||relit - Cycles||_F / ||Cycles||_F over texels and RGB "
                        "against Cycles Sun-lamp radiance bakes (with the bake's bounces) at "
                        "held-out lights; combined as sqrt(mean(rel^2)); 0.05 = 5 %"}
+
+
+def retire_globs(objects) -> tuple:
+    """Names of a previous texture bake's files in the output folder that a new bake of
+    ``objects`` removes when it does not write them again (a preview of another viewport, an
+    indirect term, a model kind, a camera comparison): they would belong to no bake."""
+    out = []
+    for o in objects:
+        safe = atomic.safe_name(o.name)
+        out += [f"{safe}_preview_*", f"{safe}_indirect.exr", f"{safe}_indirect_atlas.exr",
+                f"{safe}_transport_model.npz", f"{safe}_transport_steerable.exr"]
+    return tuple(out) + (f"{atomic.safe_name(objects[0].name)}_compare.png",)
 
 
 def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: dict | None = None,
@@ -622,6 +638,7 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
             t_prev = time.perf_counter()
             store = tt.TransportStore.open(b.store_path)
             rep["preview"] = install_transport_preview(scene, obj, rep, b, store)
+            faults.checkpoint("preview")
             rep["timings"]["preview_seconds"] = round(time.perf_counter() - t_prev, 3)
     if truth and previewed and compare:
         from ..preview.compare_render import report_comparison

@@ -86,7 +86,7 @@ def vertex_chunk_cache(scene, obj, directions, bounces: int, samples, seed: int,
     import os
 
     from ...lt_addon.io.chunk_cache import ChunkCache
-    from ..base.bake_inputs import scene_key
+    from ..base.bake_inputs import cache_root, scene_key
     from ..base.cycles_device import current
 
     dirs = np.ascontiguousarray(directions, dtype=np.float64)
@@ -95,7 +95,7 @@ def vertex_chunk_cache(scene, obj, directions, bounces: int, samples, seed: int,
            "bounces": int(bounces), "samples": _default_samples(samples, bounces),
            "seed": int(seed), "chunk_directions": CHUNK_DIRECTIONS}
     safe = atomic.safe_name(obj.name)
-    cache = ChunkCache(os.path.join(out_dir, ".relight_cache", safe + "_vertex"), key)
+    cache = ChunkCache(os.path.join(cache_root(out_dir), safe + "_vertex"), key)
     cache.prune_others()
     return cache
 

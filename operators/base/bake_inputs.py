@@ -14,6 +14,8 @@ cost seconds per bake).
 
 from __future__ import annotations
 
+import os
+
 import hashlib
 
 import bpy
@@ -24,6 +26,15 @@ from ... import __version__
 #: The chunk cache's folder inside a bake's output folder (hidden; removed when the bake
 #: completes).
 CACHE_FOLDER = ".relight_cache"
+
+
+def cache_root(out_dir: str) -> str:
+    """The chunk cache folder of a bake into ``out_dir``: in the output folder itself, also
+    when ``out_dir`` is the bake's staging folder (the chunks outlive a killed or failed run,
+    the stage does not)."""
+    from ...lt_addon.io.transaction import target_of
+
+    return os.path.join(target_of(out_dir), CACHE_FOLDER)
 #: Object types whose evaluated geometry Cycles renders.
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD", "VOLUME"}
 #: Node RNA properties that are layout or UI state, not shading.

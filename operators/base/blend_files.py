@@ -59,10 +59,15 @@ def save_atomically(path: str) -> None:
     """
     # A fresh temporary name: Blender would keep a .blend1 backup of an existing file.
     with atomic.atomic_path(path) as tmp:
-        with blender_log_to_stderr():
-            result = bpy.ops.wm.save_as_mainfile(filepath=tmp, copy=True, check_existing=False)
-        if "FINISHED" not in result or not os.path.exists(tmp) or not os.path.getsize(tmp):
-            raise RuntimeError(f"Blender could not save {tmp}")
+        save_copy(tmp)
+
+
+def save_copy(tmp: str) -> None:
+    """Save the open session as a copy at ``tmp`` (a temporary name the caller renames)."""
+    with blender_log_to_stderr():
+        result = bpy.ops.wm.save_as_mainfile(filepath=tmp, copy=True, check_existing=False)
+    if "FINISHED" not in result or not os.path.exists(tmp) or not os.path.getsize(tmp):
+        raise RuntimeError(f"Blender could not save {tmp}")
 
 
 def write_sample_scene(name: str, size: str, path: str) -> dict:
@@ -98,6 +103,35 @@ def object_bakes(obj) -> list[dict]:
     """The bake records stored on ``obj`` (empty list when none)."""
     return _plain(obj.get(BAKES_KEY, [])) or []
 
+
+
+def move_staged_paths(stage: str, target: str) -> int:
+    """After a bake's files moved from its staging folder ``stage`` to ``target``
+    (:mod:`...lt_addon.io.transaction`): point the session's data at them -- image file paths
+    and the string custom properties (bake records, preview groups' report paths) of objects,
+    materials, node groups, scenes and images. Returns how many values changed."""
+    from ...lt_addon.io.transaction import rewrite_paths
+
+    name = os.path.basename(os.path.normpath(stage))
+    changed = 0
+    for image in bpy.data.images:
+        if name in image.filepath:
+            image.filepath = rewrite_paths(image.filepath, stage, target)
+            changed += 1
+    for coll in (bpy.data.objects, bpy.data.materials, bpy.data.node_groups, bpy.data.scenes,
+                 bpy.data.images, bpy.data.meshes):
+        for idb in coll:
+            for key in list(idb.keys()):
+                try:
+                    value = idb[key]
+                except KeyError:
+                    continue
+                plain = _plain(value)
+                if name not in repr(plain):
+                    continue
+                idb[key] = rewrite_paths(plain, stage, target)
+                changed += 1
+    return changed
 
 
 def record_kind(obj, kind: str, file_path: str, fields: dict) -> None:

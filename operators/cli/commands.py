@@ -299,6 +299,11 @@ def run(argv: list[str]) -> int:
         return EXIT_USAGE
     except SystemExit as exc:  # --help / --version
         return int(exc.code or 0) if not isinstance(exc.code, str) else EXIT_USAGE
+    except Exception as exc:   # a fault (disk, permission, a bug): one line, the rest in a log
+        from ...lt_addon.errors import one_line
+
+        print(f"relight: error: {one_line(exc, 'relight ' + ' '.join(argv))}", file=sys.stderr)
+        return EXIT_USAGE
 
 
 def _keep_stdout_for_results() -> None:
@@ -422,11 +427,12 @@ def _cmd_bake_textures(args) -> int:
                      "a steerable bake")
     out = run_bake(   # the same job as the panel's Bake: bake, truths, files, preview
         args, "bake-textures", path,
-        lambda client: steerable_bake.lobes_job(bpy.context.scene, obj, settings, out_dir,
+        lambda client, stage: steerable_bake.lobes_job(bpy.context.scene, obj, settings, stage,
                                                 truth=args.truth, sheet_path=sheet,
                                                 compare=not args.no_compare,
                                                 resume=not args.no_resume, client=client,
                                                 blend_path=path),
+        out_dir=out_dir,
         kept="; the finished basis lights are kept and the same command resumes from them",
         cancelled="nothing was written")
     if out is None:
@@ -502,10 +508,11 @@ def _cmd_bake_texture_transport(args) -> int:
                                "replace it)")
     out = run_bake(
         args, "bake-textures", path,
-        lambda client: tx.bake_job(bpy.context.scene, objects, settings, out_dir,
+        lambda client, stage: tx.bake_job(bpy.context.scene, objects, settings, stage,
                                    truth=args.truth, truth_samples=args.truth_samples,
                                    target_error=args.target_error, compare=not args.no_compare,
                                    resume=not args.no_resume, client=client, blend_path=path),
+        out_dir=out_dir, retire=tx.retire_globs(objects),
         kept=(f"; the finished chunks are kept in {os.path.join(out_dir, tx.CACHE_FOLDER)} and "
               "the same command resumes from them"))
     if out is None:
@@ -630,9 +637,10 @@ def _cmd_bake_transport(args) -> int:
                        f"vertices; use at most {n_vertices} or 'auto'")
     out = run_bake(
         args, "bake-transport", path,
-        lambda client: transport_bake.transport_job(
-            bpy.context.scene, obj, settings, out_dir, truth_samples=256 if args.truth else 0,
+        lambda client, stage: transport_bake.transport_job(
+            bpy.context.scene, obj, settings, stage, truth_samples=256 if args.truth else 0,
             resume=not args.no_resume, client=client, blend_path=path),
+        out_dir=out_dir,
         kept="; the finished chunks are kept and the same command resumes from them",
         errors=(ValueError,), prefix="nothing was written: ")
     if out is None:

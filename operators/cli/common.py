@@ -330,35 +330,92 @@ def check_output_path(path: str, suffix: str, force: bool) -> str:
 
 
 
-def run_bake(args, verb: str, path: str, make_job, *, kept: str,
-             cancelled: str = "no bake file was written", errors: tuple = (), prefix: str = ""):
-    """The tail every bake verb ends with: the device and Dask options (``args``), the job
-    ``make_job(client)`` driven with progress and Ctrl-C (:func:`run_job`), its errors as one
-    line (a bad input, ``errors`` too, prefixed with ``prefix``; a failed Dask chunk), the
-    client closed, and the .blend at ``path`` saved with the bake's records. Returns the job's
-    result, or None when cancelled (the verb exits 130; ``kept`` says what a resume reuses,
-    left out with --no-resume)."""
+def run_bake(args, verb: str, path: str, make_job, *, out_dir: str, kept: str,
+             retire: tuple = (), cancelled: str = "no bake file was written",
+             errors: tuple = (), prefix: str = ""):
+    """The tail every bake verb ends with, as one transaction (:mod:`...lt_addon.io.transaction`):
+    the device and Dask options (``args``), the job ``make_job(client, stage)`` writing into
+    the staging folder ``stage`` of ``out_dir``, driven with progress and Ctrl-C
+    (:func:`run_job`); its errors as one line (a bad input, ``errors`` too, prefixed with
+    ``prefix``; a failed Dask chunk); the staged files checked and swapped in, the Blender
+    data's paths moved with them, and the .blend at ``path`` saved with the bake's records. A
+    failure or a kill at any point leaves ``out_dir`` and the .blend as they were (``retire``:
+    globs of the previous bake's files that go when the new bake does not write them). Returns
+    the job's result (its paths are the committed ones), or None when cancelled (the verb exits
+    130; ``kept`` says what a resume reuses, left out with --no-resume)."""
+    from ...lt_addon import faults
+    from ...lt_addon.io.transaction import BakeTransaction, ChangedMeanwhile
     from ..base import blend_files
     from ..base.cycles_bake import BakeInputError
     from ..farm.distributed import DistributedError, close
 
+    from ...lt_addon.io.transaction import sweep
+
     device = bake_device(args, verb)
-    client = dask_client(args)
-    try:
-        out = run_job(make_job(client), verb, device)
-    except (BakeInputError, *errors) as exc:
-        raise CliError(f"{prefix}{exc}") from None
-    except DistributedError as exc:
-        raise CliError(f"{exc}; the finished chunks are kept, the same command resumes") from None
-    except KeyboardInterrupt:
-        note = "" if args.no_resume else kept
-        print(f"{verb}: cancelled; {cancelled}{note}", file=sys.stderr)
-        return None
-    finally:
-        if client is not None:
-            close(client)
-    blend_files.save_atomically(path)
+    blend_swept = sweep(os.path.dirname(path), stages=False)   # a killed run's temporary .blend
+    txn = BakeTransaction(out_dir, blend=path, retire=retire)
+    with txn:
+        swept = {k: v + blend_swept.get(k, []) for k, v in txn.swept.items()}
+        if any(swept.values()):
+            print(f"{verb}: {describe_sweep(swept)}", file=sys.stderr)
+        client = dask_client(args)
+        try:
+            out = run_job(make_job(client, txn.stage), verb, device)
+        except (BakeInputError, *errors) as exc:
+            raise CliError(f"{prefix}{exc}") from None
+        except DistributedError as exc:
+            raise CliError(f"{exc}; the finished chunks are kept, the same command resumes") from None
+        except KeyboardInterrupt:
+            note = "" if args.no_resume else kept
+            print(f"{verb}: cancelled; {cancelled}{note}", file=sys.stderr)
+            txn.rollback()
+            return None
+        except Exception as exc:
+            txn.rollback()
+            raise BakeFailed(exc, out_dir, path, txn.stage) from exc
+        finally:
+            if client is not None:
+                close(client)
+        try:   # check; the new .blend under a temporary name; then only renames
+            txn.prepare()
+            blend_files.move_staged_paths(txn.stage, txn.target)
+            out = txn.final_result(out)
+            with atomic.atomic_path(path) as tmp:
+                blend_files.save_copy(tmp)
+                faults.checkpoint("blend")
+                txn.swap(blend_tmp=tmp)
+        except ChangedMeanwhile as exc:
+            raise CliError(f"{exc}{'' if args.no_resume else kept}") from None
+        except Exception as exc:   # a fault: undone (the with block), told in one line
+            txn.rollback()
+            raise BakeFailed(exc, out_dir, path, txn.stage) from exc
     return out
+
+
+class BakeFailed(CliError):
+    """A bake that failed after it started: one line (the cause, the file, that the previous
+    bake is as it was, and the log with the traceback)."""
+
+    def __init__(self, exc: BaseException, out_dir: str, blend: str, stage: str | None = None):
+        from ...lt_addon.errors import one_line
+        from ...lt_addon.io.transaction import rewrite_paths
+
+        line = one_line(exc, f"bake into {out_dir} of {blend}",
+                        f"nothing was replaced in {out_dir} or {os.path.basename(blend)}")
+        # a file of the stage is named where it was going
+        super().__init__(rewrite_paths(line, stage, out_dir) if stage else line)
+
+
+def describe_sweep(swept: dict) -> str:
+    """One line on what the sweep of the output folder did (killed runs' debris)."""
+    parts = []
+    if swept.get("rolled_back"):
+        parts.append(f"undid the half-committed bake of a killed run ({len(swept['rolled_back'])})")
+    if swept.get("rolled_forward"):
+        parts.append(f"finished the commit of a killed run ({len(swept['rolled_forward'])})")
+    if swept.get("removed"):
+        parts.append(f"removed {len(swept['removed'])} temporary file(s) of killed runs")
+    return "; ".join(parts)
 
 
 def add_setting_options(p, cls, names=None, *, what: str = "", defaults: bool = False) -> None:

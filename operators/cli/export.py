@@ -71,15 +71,26 @@ def _cmd_export(args) -> int:
     out_dir = check_output_dir(args.out, path)
     obj = open_object(path, args.object)
     device = bake_device(args, "export")
-    os.makedirs(out_dir, exist_ok=True)
-    try:
-        result = run_job(export_job(bpy.context.scene, obj, settings, out_dir, args.force),
-                          "export", device)
-    except (BakeInputError, ValueError) as exc:
-        raise CliError(f"nothing was written: {exc}") from None
-    except KeyboardInterrupt:
-        print("export: cancelled; nothing was written", file=sys.stderr)
-        return 130
+    from ...lt_addon.io.transaction import BakeTransaction
+    from .common import BakeFailed
+
+    with BakeTransaction(out_dir) as txn:   # the export's files swap in whole, or not at all
+        try:
+            result = run_job(export_job(bpy.context.scene, obj, settings, txn.stage,
+                                        args.force), "export", device)
+        except (BakeInputError, ValueError) as exc:
+            txn.rollback()
+            raise CliError(f"nothing was written: {exc}") from None
+        except KeyboardInterrupt:
+            txn.rollback()
+            print("export: cancelled; nothing was written", file=sys.stderr)
+            return 130
+        try:
+            txn.commit()
+        except Exception as exc:
+            txn.rollback()
+            raise BakeFailed(exc, out_dir, path, txn.stage) from exc
+        result = txn.final_result(result)
     rep = result.report
     print(json.dumps({k: rep[k] for k in ("object", "format", "bytes_per_texel",
                                           "error_vs_our_relight", "timings")

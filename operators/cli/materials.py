@@ -151,10 +151,11 @@ def _cmd_bake_materials(args) -> int:
                      args.force, "a material bake")
     out = run_bake(
         args, "bake-materials", path,
-        lambda client: material_edit.bake_job(
-            bpy.context.scene, objects, settings, out_dir,
+        lambda client, stage: material_edit.bake_job(
+            bpy.context.scene, objects, settings, stage,
             truth_samples=args.truth_samples if args.truth else 0, resume=not args.no_resume,
             client=client, blend_path=path),
+        out_dir=out_dir,
         kept="; the finished chunks are kept and the same command resumes from them",
         errors=(ValueError,), prefix="nothing was written: ")
     if out is None:

@@ -222,6 +222,7 @@ def write_sparse_atlas(base: str, store) -> dict:
     nbytes = write_png(path, atlas[::-1])       # PNG rows top first, Blender's bottom first
     meta = f"{base}_preview_transport.json"
     atomic.write_json(meta, {"format": "relightable_textures.transport_sparse_atlas",
+                             "format_version": 1,
                              "tiles": len(tiles), "resolution": tiles.shape[1],
                              "directions": int(len(scales)), "scales": scales.tolist(),
                              "meaning": "texel = q / 255 * scales[direction]"})
@@ -232,8 +233,12 @@ def write_sparse_atlas(base: str, store) -> dict:
 def _scales(path: str) -> np.ndarray:
     import json
 
+    from ...lt_addon.io.versions import check
+
     with open(path) as fh:
-        return np.asarray(json.load(fh)["scales"], np.float64)
+        meta = json.load(fh)
+    check(meta, "relightable_textures.transport_sparse_atlas", path, "a transport atlas's scales")
+    return np.asarray(meta["scales"], np.float64)
 
 
 def _closest(b, image, vector, x, y):

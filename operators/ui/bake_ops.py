@@ -75,6 +75,15 @@ def _finish(operator, scene, result):
     scene[LAST_BAKE_KEY] = "\n".join(lines)
 
 
+def _fault_line(exc, op) -> str:
+    """The panel's one line for a bake that failed (:func:`...lt_addon.errors.one_line`)."""
+    from ...lt_addon.errors import one_line
+
+    folder = getattr(op, "out_dir", None)
+    return "Bake failed: " + one_line(exc, f"panel bake into {folder}",
+                                      f"nothing was replaced in {folder}" if folder else "")
+
+
 class ModalBake:
     """A bake job driven one step per timer tick (progress, status text, Esc cancels), or to
     completion by ``execute`` (scripts, background mode). Subclasses give ``_prepare`` (the
@@ -116,9 +125,41 @@ class ModalBake:
             self.report({"INFO"}, f"Baking on {device.describe()}: {device.note}")
         return cycles_device.stepped(gen, device)
 
-    def _make_out_dir(self, props):
+    txn = None
+
+    def _make_out_dir(self, props) -> str:
+        """The bake's output folder, and its transaction (:mod:`...lt_addon.io.transaction`):
+        returns the staging folder the job writes into; :meth:`_done` swaps it in whole, a
+        cancel or a failure removes it and the folder stays as it was."""
+        from ...lt_addon.io.transaction import BakeTransaction
+
         self.out_dir = _output_dir(props)
-        os.makedirs(self.out_dir, exist_ok=True)
+        self.txn = BakeTransaction(self.out_dir).begin()
+        return self.txn.stage
+
+    def _abort(self):
+        """Undo the transaction of a cancelled or failed bake (nothing to do for a finished one)."""
+        if self.txn is not None:
+            self.txn.rollback()
+            self.txn = None
+
+    def _commit(self, result):
+        """Swap the staged files in and point the session's data at them; returns ``result``
+        with the committed paths."""
+        from ..base import blend_files
+
+        txn, self.txn = self.txn, None
+        if txn is None:
+            return result
+        try:
+            txn.commit()
+            blend_files.move_staged_paths(txn.stage, txn.target)
+            result = txn.final_result(result)
+        except BaseException:
+            txn.rollback()
+            raise
+        txn.finish()
+        return result
 
     def _external(self, context, verb: str, args: list):
         """The job of Run On Dask: ``relight VERB FILE ARGS --out DIR --force`` with the
@@ -129,7 +170,8 @@ class ModalBake:
         props = context.scene.relight
         command = eb.relight_command(props)
         path = eb.saved_blend()
-        self._make_out_dir(props)
+        self.out_dir = _output_dir(props)
+        os.makedirs(self.out_dir, exist_ok=True)
         return eb.external_job([command, verb, path, *args, "--out", self.out_dir, "--force",
                                 "--device", props.device, *eb.distribution_args(props)], path)
 
@@ -139,7 +181,7 @@ class ModalBake:
         from ..farm.external_bake import ExternalResult, reload_when_idle
 
         if not isinstance(result, ExternalResult):
-            return self._finish(context, result)
+            return self._finish(context, self._commit(result))
         self.report({"INFO"}, result.summary)
         if not bpy.app.background:
             reload_when_idle(result.blend_path)
@@ -154,8 +196,13 @@ class ModalBake:
 
             result = jobs.run(gen, on_progress=warn)
             self._done(context, result)
-        except (BakeInputError, OSError, ValueError) as exc:
+        except BakeInputError as exc:
+            self._abort()
             self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        except Exception as exc:   # a fault: one line, the traceback in the log it names
+            self._abort()
+            self.report({"ERROR"}, _fault_line(exc, self))
             return {"CANCELLED"}
         return {"FINISHED"}
 
@@ -164,8 +211,13 @@ class ModalBake:
             return self.execute(context)
         try:
             self._gen = self._job(context)
-        except (BakeInputError, OSError, ValueError) as exc:
+        except BakeInputError as exc:
+            self._abort()
             self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        except Exception as exc:
+            self._abort()
+            self.report({"ERROR"}, _fault_line(exc, self))
             return {"CANCELLED"}
         wm = context.window_manager
         self._timer = wm.event_timer_add(0.01, window=context.window)
@@ -185,6 +237,7 @@ class ModalBake:
     def modal(self, context, event):
         if event.type == "ESC":
             self._gen.close()  # restores the scene; nothing was written
+            self._abort()
             self._end(context)
             self.report({"WARNING"}, "Bake cancelled; the previous bake is unchanged"
                                      + self._cancel_note(context))
@@ -197,13 +250,20 @@ class ModalBake:
             self._end(context)
             try:
                 self._done(context, stop.value)
-            except (OSError, ValueError) as exc:
-                self.report({"ERROR"}, f"Could not write the bake: {exc}")
+            except Exception as exc:
+                self._abort()
+                self.report({"ERROR"}, _fault_line(exc, self))
                 return {"CANCELLED"}
             return {"FINISHED"}
+        except BakeInputError as exc:
+            self._end(context)
+            self._abort()
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
         except Exception as exc:  # Cycles failure: the generator has restored the scene
             self._end(context)
-            self.report({"ERROR"}, f"Bake failed: {exc}")
+            self._abort()
+            self.report({"ERROR"}, _fault_line(exc, self))
             return {"CANCELLED"}
         if step.message.startswith("warning:"):
             self.report({"WARNING"}, step.message[len("warning: "):])
@@ -237,8 +297,9 @@ class RELIGHT_OT_bake_textures(ModalBake, bpy.types.Operator):
                 args += to_argv(self.settings)   # components None: --tol, no preset components
                 return self._external(context, "bake-textures",
                                       args + ["--truth", str(props.truth_lights)])
-            self._make_out_dir(props)
-            return tx.bake_job(context.scene, objects, self.settings, self.out_dir,
+            stage = self._make_out_dir(props)
+            self.txn.retire_globs = list(tx.retire_globs(objects))
+            return tx.bake_job(context.scene, objects, self.settings, stage,
                                truth=props.truth_lights)
         check_bakeable(obj)
         self.settings = settings_from_scene(props)
@@ -247,8 +308,8 @@ class RELIGHT_OT_bake_textures(ModalBake, bpy.types.Operator):
             args = ["--object", obj.name, "--method", "lobes"] + to_argv(self.settings)
             return self._external(context, "bake-textures",
                                   args + ["--truth", str(props.truth_lights)])
-        self._make_out_dir(props)
-        return steerable_bake.lobes_job(context.scene, obj, self.settings, self.out_dir,
+        stage = self._make_out_dir(props)
+        return steerable_bake.lobes_job(context.scene, obj, self.settings, stage,
                                         truth=props.truth_lights, sun=props.sun)
 
     def _finish(self, context, result):
@@ -280,9 +341,9 @@ class RELIGHT_OT_bake_transport(ModalBake, bpy.types.Operator):
         if props.run_on != "HERE":
             return self._external(context, "bake-transport", ["--object", obj.name] + to_argv(
                 settings, VERTEX_FIELDS))
-        self._make_out_dir(props)
+        stage = self._make_out_dir(props)
         # the same job as `relight bake-transport`: bake, fit, files, preview
-        return transport_bake.transport_job(context.scene, obj, settings, self.out_dir)
+        return transport_bake.transport_job(context.scene, obj, settings, stage)
 
     def _cancel_note(self, context) -> str:
         return "; its finished chunks of directions are kept, so baking again resumes"
@@ -315,8 +376,8 @@ class RELIGHT_OT_analyze(ModalBake, bpy.types.Operator):
         direction_set = transport_bake.TransportSettings(**values(
             transport_bake.TransportSettings, props, ("directions", "bounces"),
             rename=VERTEX_PROPS)).validate()
-        self._make_out_dir(props)
-        return analyze.analysis_job(context.scene, obj, direction_set, self.out_dir,
+        stage = self._make_out_dir(props)
+        return analyze.analysis_job(context.scene, obj, direction_set, stage,
                                     props.vertex_bounces)
 
     def _finish(self, context, result):

@@ -54,8 +54,8 @@ class RELIGHT_OT_export(ModalBake, bpy.types.Operator):
 
         settings = settings_from_scene(context.scene)
         settings.validate()
-        self._make_out_dir(context.scene.relight)
-        return export_job(context.scene, context.active_object, settings, self.out_dir,
+        stage = self._make_out_dir(context.scene.relight)
+        return export_job(context.scene, context.active_object, settings, stage,
                           force=context.scene.relight.export_force)
 
     def _finish(self, context, result):

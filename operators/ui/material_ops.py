@@ -50,8 +50,8 @@ class RELIGHT_OT_bake_materials(ModalBake, bpy.types.Operator):
             return self._external(context, "bake-materials", args + to_argv(settings) + [
                 "--directions", d0, "--one-bounce-directions", d1, "--two-bounce-directions",
                 d2] + (["--per-corner"] if settings.domain == "CORNER" else []))
-        self._make_out_dir(props)
-        return bake_job(scene, objects, settings, self.out_dir)
+        stage = self._make_out_dir(props)
+        return bake_job(scene, objects, settings, stage)
 
     def _cancel_note(self, context) -> str:
         return "; its finished chunks are kept, so baking again resumes"

@@ -1,0 +1,52 @@
+"""Format versions of every file a bake writes, and the one check every loader makes.
+
+Each file says what it is (``format``) and in which version (``format_version``): in a JSON
+document or header, an EXR's ``relight:metadata``, or an NPZ's ``format`` / ``format_version``
+arrays. A loader calls :func:`check`, which refuses a newer version than this build reads in one
+line (``InputError``: the CLI prints ``relight: error: ...``, the panel reports it). A file of
+an earlier version without the field reads as version 1. The table of files is in
+docs/bake-files.md.
+"""
+
+from __future__ import annotations
+
+from ..errors import InputError
+
+#: format -> the version this build writes and the newest it reads
+FORMATS = {
+    "relightable_textures.transport_texture": 1,      # <object>_transport_texture.json (T's header)
+    "relightable_textures.albedo": 1,                 # <object>_albedo.exr
+    "relightable_textures.transport_model": 1,        # <object>_transport_model.npz
+    "relightable_textures.transport_preview": 1,      # <object>_preview_eigen/tables.exr
+    "relightable_textures.transport_sparse_table": 1,  # <object>_preview_sparse_*.exr
+    "relightable_textures.transport_sparse_atlas": 1,  # <object>_preview_transport.json
+    "relightable_textures.atlas": 1,                  # <object>_steerable_atlas.exr, indirect atlas
+    "relightable_textures.commit_journal": 1,         # .relight-stage-*/.journal.json
+}
+
+
+def version_of(fmt: str) -> int:
+    """The version this build writes for ``fmt`` (1 for a format not in :data:`FORMATS`)."""
+    return FORMATS.get(fmt, 1)
+
+
+def stamp(fmt: str) -> dict:
+    """``{"format": fmt, "format_version": N}`` to put into a file's header."""
+    return {"format": fmt, "format_version": version_of(fmt)}
+
+
+def check(meta: dict, fmt: str, path: str, what: str = "") -> None:
+    """Refuse ``path`` in one line unless its header ``meta`` is ``fmt`` in a version this build
+    reads."""
+    found = meta.get("format")
+    if found != fmt:
+        raise InputError(f"{path} is not {what or 'a ' + fmt.rsplit('.', 1)[-1].replace('_', ' ')}"
+                         f" file (format {found!r})")
+    try:
+        v = int(meta.get("format_version", 1))
+    except (TypeError, ValueError):
+        raise InputError(f"{path}: unreadable format_version {meta.get('format_version')!r}") \
+            from None
+    if v > version_of(fmt):
+        raise InputError(f"{path}: {fmt} version {v} is newer than this version of Relightable "
+                         f"Textures reads ({version_of(fmt)}); update the add-on")
