@@ -46,13 +46,28 @@ from typing import Iterable
 
 from . import atomic, versions
 
-__all__ = ["BakeTransaction", "sweep", "recover", "check_file", "target_of", "pid_alive",
+__all__ = ["BakeTransaction", "after_commit", "sweep", "recover", "check_file", "target_of", "pid_alive",
            "STAGE_PREFIX", "rewrite_paths"]
 
 STAGE_PREFIX = ".relight-stage-"
 JOURNAL = ".journal.json"
 OLD = ".old"
 FORMAT = "relightable_textures.commit_journal"
+
+
+#: stage folder -> what to do once its transaction is committed (:func:`after_commit`)
+_AFTER_COMMIT: dict = {}
+
+
+def after_commit(folder: str, action) -> None:
+    """Run ``action()`` once the bake writing into ``folder`` is committed -- at once when
+    ``folder`` is not a stage (a bake called directly, into a folder of its own). The chunk
+    caches go this way: a bake that fails after writing its files keeps them for the rerun."""
+    folder = os.path.abspath(folder)
+    if os.path.basename(folder).startswith(STAGE_PREFIX) and os.path.isdir(folder):
+        _AFTER_COMMIT.setdefault(folder, []).append(action)
+    else:
+        action()
 
 
 def target_of(folder: str) -> str:
@@ -373,15 +388,19 @@ class BakeTransaction:
         self._journal("committed")
         shutil.rmtree(self.stage, ignore_errors=True)
         self.state = "done"
+        for action in _AFTER_COMMIT.pop(self.stage, []):
+            action()
         _prune_empty(os.path.join(self.target, ".relight_cache"))
 
     def rollback(self) -> None:
         """Undo whatever part of the swap happened and remove the stage."""
         if self.state in ("done", "rolled back", "new"):
             return
+        _AFTER_COMMIT.pop(self.stage, None)
         if os.path.isdir(self.stage):
             _undo(self.stage, self.target, self.entries, self.retired)
         self.state = "rolled back"
+        _prune_empty(os.path.join(self.target, ".relight_cache"))
 
 
 class ChangedMeanwhile(RuntimeError):

@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
+from ...lt_addon.io.transaction import after_commit
 from ...lt_addon.io import atomic
 from ...lt_addon.settings import check_ranges, setting
 from ...lt_addon.transport import bounce_transfer, gathered_transfer, ptt
@@ -1098,8 +1099,8 @@ def materials_job(scene, objects, settings: MaterialBakeSettings, out_dir: str,
     report["tensors"] = path
     report["bytes"]["file"] = os.path.getsize(path)
     report.update(chunks)
-    if cache is not None:   # the files are written: the chunks have served
-        cache.clear()
+    if cache is not None:   # once the bake is committed the chunks have served
+        after_commit(out_dir, cache.clear)
     report["timings"]["wall_total"] = round(time.perf_counter() - started, 4)
     atomic.write_json(report_path(out_dir, objects), report)
     return MaterialsBakeOutput(report, tensors)

@@ -17,6 +17,7 @@ import bpy
 import numpy as np
 
 from ... import __version__
+from ...lt_addon.io.transaction import after_commit
 from ...lt_addon.io import atomic
 from ...lt_addon.settings import check_ranges, setting
 from ...lt_addon.steerable.sampled_basis import build_sampled_basis
@@ -346,8 +347,8 @@ def lobes_job(scene, obj, settings: TextureBakeSettings, out_dir: str, *, truth:
             gt["sun_angle_deg"], os.path.splitext(report["exr"])[0] + "_compare.png",
             4 * settings.samples)
         report["timings"]["compare_seconds"] = report["comparison"].get("seconds", 0.0)
-    if cache is not None:   # the files are written: the chunks have served
-        cache.clear()
+    if cache is not None:   # once the bake is committed the chunks have served
+        after_commit(out_dir, cache.clear)
     report["timings"]["wall_total"] = round(time.perf_counter() - started, 4)
     atomic.write_json(os.path.splitext(report["exr"])[0] + ".json", report)
     return LobesBakeOutput(report, result.texture)

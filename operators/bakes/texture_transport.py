@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ... import __version__
+from ...lt_addon.io.transaction import after_commit
 from ...lt_addon import faults
 from ...lt_addon.io import atomic
 from ...lt_addon.transport import texture as tt
@@ -510,8 +511,8 @@ def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: d
                     {"directions": result.directions.spec, "resolution": s.resolution,
                      "model": s.model, "bytes": report["bytes"]["total"],
                      "bake_seconds": round(result.seconds.get("bake_total", 0), 2)})
-    for cache in result.cache or ():   # every file is written: the chunks have served
-        cache.clear()
+    for cache in result.cache or ():   # once the bake is committed the chunks have served
+        after_commit(out_dir, cache.clear)
     return reports
 
 

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...lt_addon.io.transaction import after_commit
 from ...lt_addon.io import atomic
 from ...lt_addon.settings import check_ranges, setting
 from ..base import cycles_device
@@ -438,8 +439,8 @@ def transport_job(scene, obj, settings: TransportSettings, out_dir: str, *,
                              figures)
     if result.chunks:
         report.update(result.chunks)
-    if cache is not None:   # the files are written: the chunks have served
-        cache.clear()
+    if cache is not None:   # once the bake is committed the chunks have served
+        after_commit(out_dir, cache.clear)
     if preview:
         from ..preview import preview_nodes, vertex_relight
 

@@ -133,15 +133,34 @@ class ModalBake:
         cancel or a failure removes it and the folder stays as it was."""
         from ...lt_addon.io.transaction import BakeTransaction
 
+        from ..base.blend_files import BAKES_KEY, _plain
+
         self.out_dir = _output_dir(props)
+        # the session's bake records as they were: a failed bake puts them back
+        self._records = {o.name: _plain(o.get(BAKES_KEY)) for o in bpy.data.objects}
         self.txn = BakeTransaction(self.out_dir).begin()
         return self.txn.stage
 
     def _abort(self):
-        """Undo the transaction of a cancelled or failed bake (nothing to do for a finished one)."""
-        if self.txn is not None:
-            self.txn.rollback()
-            self.txn = None
+        """Undo the transaction of a cancelled or failed bake (nothing to do for a finished
+        one): the folder as it was, the objects' bake records as they were, and images a
+        preview loaded from the stage pointed at the folder (where the previous bake's files of
+        the same names are again)."""
+        from ..base.blend_files import BAKES_KEY, move_staged_paths
+
+        txn, self.txn = self.txn, None
+        if txn is None:
+            return
+        txn.rollback()
+        for name, value in getattr(self, "_records", {}).items():
+            obj = bpy.data.objects.get(name)
+            if obj is None:
+                continue
+            if value is None:
+                obj.pop(BAKES_KEY, None)
+            else:
+                obj[BAKES_KEY] = value
+        move_staged_paths(txn.stage, txn.target)
 
     def _commit(self, result):
         """Swap the staged files in and point the session's data at them; returns ``result``

@@ -295,3 +295,43 @@ def test_every_bake_commits_as_a_unit(tmp_path, kind, stage):
         assert "removed 2 temporary file(s) of killed runs" in r.stderr, r.stderr[-2000:]
     assert blend.read_bytes() != blend_bytes and _debris(blend.parent) == []
     assert _debris(out) == [] and set(expected) <= set(os.listdir(out))
+
+
+@pytest.mark.parametrize("stage", ["write", "preview"])
+def test_the_panel_reports_a_failed_bake_in_one_line_and_keeps_the_previous(
+        fresh_scene, tmp_path, monkeypatch, stage):
+    """The panel's Bake (bpy.ops, in process) failing while writing or after installing its
+    preview: one error line with the log, the folder byte for byte as before, no debris, and
+    the object's bake record and preview images back on the previous bake's files."""
+    import bpy
+
+    import relightable_textures
+    from relightable_textures import samples
+    from relightable_textures.operators.base.blend_files import object_bakes
+
+    samples.build("bumps", fresh_scene, "test")
+    obj = bpy.data.objects["Bumps"]
+    relightable_textures.register()
+    try:
+        props = fresh_scene.relight
+        props.preset = "draft"
+        props.directions, props.resolution, props.indirect_samples = 24, 16, 4
+        props.truth_lights, props.device = 0, "cpu"
+        props.output_dir = str(tmp_path / "bk") + os.sep
+        for o in fresh_scene.objects:
+            o.select_set(o == obj)
+        bpy.context.view_layer.objects.active = obj
+        assert bpy.ops.relight.bake_textures() == {"FINISHED"}
+        files, record = _files(tmp_path / "bk"), object_bakes(obj)
+        monkeypatch.setenv("RELIGHT_FAULT", f"{stage}:raise")
+        with pytest.raises(RuntimeError) as err:
+            bpy.ops.relight.bake_textures()
+        line = str(err.value).strip().splitlines()[-1]
+        assert f"Bake failed: injected fault at the {stage} stage" in line
+        assert f"nothing was replaced in {tmp_path / 'bk'}" in line and "(details: " in line
+        assert _files(tmp_path / "bk") == files and _debris(tmp_path / "bk") == []
+        assert object_bakes(obj) == record
+        stale = [im.filepath for im in bpy.data.images if tr.STAGE_PREFIX in im.filepath]
+        assert stale == []
+    finally:
+        relightable_textures.unregister()
