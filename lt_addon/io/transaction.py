@@ -430,6 +430,8 @@ def recover(stage: str) -> str:
             j = json.load(fh)
     except (OSError, ValueError):
         j = None
+    if j and int(j.get("format_version", 1)) > versions.version_of(FORMAT):
+        return "left"   # a newer version's journal: not ours to interpret
     if not j or j.get("state") not in ("swapping", "swapped", "committed"):
         shutil.rmtree(stage, ignore_errors=True)
         return "removed"
@@ -497,8 +499,9 @@ def sweep(folder: str, stages: bool = True) -> dict:
                 if not stages:
                     continue
                 done = recover(p)
-                out[{"removed": "removed", "rolled back": "rolled_back",
-                     "rolled forward": "rolled_forward"}[done]].append(rel)
+                if done != "left":
+                    out[{"removed": "removed", "rolled back": "rolled_back",
+                         "rolled forward": "rolled_forward"}[done]].append(rel)
                 continue
             try:
                 _remove(p)

@@ -25,6 +25,11 @@ FORMATS = {
 }
 
 
+#: the version of the bake reports (``<object>_steerable.json``, ``_transport.json``,
+#: ``_materials.json``: what was baked, how, and its figures; the files they list carry their own)
+REPORT_VERSION = 1
+
+
 def version_of(fmt: str) -> int:
     """The version this build writes for ``fmt`` (1 for a format not in :data:`FORMATS`)."""
     return FORMATS.get(fmt, 1)

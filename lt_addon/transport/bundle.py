@@ -459,8 +459,9 @@ def load_bake(report_path: str) -> tuple:
     if report.get("kind", KIND) != KIND:
         raise InputError(f"{report_path}: a {report.get('kind')!r} report, not a transport "
                          f"texture bake's")
-    if int(report.get("format", 1)) > FORMAT:
-        raise InputError(f"{report_path}: bundle format {report['format']} is newer than this "
+    found = max(int(report.get("format", 1)), int(report.get("format_version", 1)))
+    if found > FORMAT:
+        raise InputError(f"{report_path}: bundle format {found} is newer than this "
                          f"version reads ({FORMAT}); update Relightable Textures")
     files = report["files"]
     folder = os.path.dirname(report_path)
@@ -515,7 +516,7 @@ def write_bundle(result: TransportTextureResult, names: list, out_dir: str,
         s = result.settings
         store = b.store or tt.TransportStore.open(b.store_path)
         report = {
-            "kind": KIND, "format": FORMAT, "addon_version": version, "object": b.name, "method": "transport",
+            "kind": KIND, "format": FORMAT, "format_version": FORMAT, "addon_version": version, "object": b.name, "method": "transport",
             "settings": asdict(s), "directions": result.directions.size,
             "direction_set": result.directions.spec,
             "objects_baked_together": list(names),

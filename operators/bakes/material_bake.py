@@ -47,6 +47,7 @@ import bpy
 import numpy as np
 
 from ...lt_addon.io.transaction import after_commit
+from ...lt_addon.io.versions import REPORT_VERSION
 from ...lt_addon.io import atomic
 from ...lt_addon.settings import check_ranges, setting
 from ...lt_addon.transport import bounce_transfer, gathered_transfer, ptt
@@ -1102,5 +1103,5 @@ def materials_job(scene, objects, settings: MaterialBakeSettings, out_dir: str,
     if cache is not None:   # once the bake is committed the chunks have served
         after_commit(out_dir, cache.clear)
     report["timings"]["wall_total"] = round(time.perf_counter() - started, 4)
-    atomic.write_json(report_path(out_dir, objects), report)
+    atomic.write_json(report_path(out_dir, objects), {**report, "format_version": REPORT_VERSION})
     return MaterialsBakeOutput(report, tensors)

@@ -18,6 +18,7 @@ import numpy as np
 
 from ... import __version__
 from ...lt_addon.io.transaction import after_commit
+from ...lt_addon.io.versions import REPORT_VERSION
 from ...lt_addon.io import atomic
 from ...lt_addon.settings import check_ranges, setting
 from ...lt_addon.steerable.sampled_basis import build_sampled_basis
@@ -231,7 +232,7 @@ def write_bake(result: BakeResult, obj, out_dir: str, settings: TextureBakeSetti
         report.update({k: chunks[k] for k in ("chunks_total", "chunks_reused", "distributed")
                        if k in chunks})
     if write_json:
-        atomic.write_json(json_path, report)
+        atomic.write_json(json_path, {**report, "format_version": REPORT_VERSION})
     record_bake(obj, exr_path, report)
     return report
 
@@ -350,7 +351,8 @@ def lobes_job(scene, obj, settings: TextureBakeSettings, out_dir: str, *, truth:
     if cache is not None:   # once the bake is committed the chunks have served
         after_commit(out_dir, cache.clear)
     report["timings"]["wall_total"] = round(time.perf_counter() - started, 4)
-    atomic.write_json(os.path.splitext(report["exr"])[0] + ".json", report)
+    atomic.write_json(os.path.splitext(report["exr"])[0] + ".json",
+                      {**report, "format_version": REPORT_VERSION})
     return LobesBakeOutput(report, result.texture)
 
 

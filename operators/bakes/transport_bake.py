@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...lt_addon.io.transaction import after_commit
+from ...lt_addon.io.versions import REPORT_VERSION
 from ...lt_addon.io import atomic
 from ...lt_addon.settings import check_ranges, setting
 from ..base import cycles_device
@@ -335,6 +336,7 @@ def write_transport(result: TransportBakeResult, model, fit_seconds: float, obj,
     V, S = result.transport.shape
     report = {
         "kind": KIND, "object": obj.name, "sidecar": os.path.abspath(path),
+        "samples": os.path.abspath(samples_path(path)),   # (V, S) float, read by analyze
         "vertices": V, "directions": S, "direction_set": direction_set.spec,
         "settings": {"bounces": settings.bounces, "samples": meta["samples"],
                      "energy": settings.energy, "coeffs": settings.coeffs, "seed": settings.seed,
@@ -392,7 +394,7 @@ def fit_and_write(result: TransportBakeResult, obj, direction_set, settings: Tra
     model, seconds = fit(result, obj, direction_set, settings)
     report = write_transport(result, model, seconds, obj, direction_set, settings, out_dir,
                              figures)
-    atomic.write_json(report_path(out_dir, obj), report)
+    atomic.write_json(report_path(out_dir, obj), {**report, "format_version": REPORT_VERSION})
     return TransportBakeOutput(report, model)
 
 
@@ -449,7 +451,7 @@ def transport_job(scene, obj, settings: TransportSettings, out_dir: str, *,
         report["preview"] = {"shade_ms": round(timings.get(obj.name, {}).get("shade_ms", 0), 3),
                              "warnings": timings.get("warnings", [])}
     report["timings"]["wall_total"] = round(time.perf_counter() - started, 4)
-    atomic.write_json(report_path(out_dir, obj), report)
+    atomic.write_json(report_path(out_dir, obj), {**report, "format_version": REPORT_VERSION})
     return TransportBakeOutput(report, model)
 
 

@@ -335,3 +335,43 @@ def test_the_panel_reports_a_failed_bake_in_one_line_and_keeps_the_previous(
         assert stale == []
     finally:
         relightable_textures.unregister()
+
+
+def unversioned(folder) -> list:
+    """Files of a bake in ``folder`` that do not say their format version: JSON documents by
+    ``format_version``, EXRs in their metadata, NPZs in an array or their header; an NPY or
+    PNG (no room for metadata) counts when a versioned JSON of the bake names it."""
+    from relightable_textures.lt_addon.io import exrio
+
+    folder = pathlib.Path(folder)
+    docs = {}
+    for p in folder.glob("*.json"):
+        docs[p.name] = json.loads(p.read_text())
+    named = " ".join(json.dumps(d) for d in docs.values() if "format_version" in d)
+    bad = []
+    for p in sorted(folder.iterdir()):
+        if not p.is_file():
+            continue
+        if p.suffix == ".json":
+            ok = "format_version" in docs[p.name]
+        elif p.suffix == ".exr":
+            ok = "format_version" in exrio.read_exr(str(p))[1]
+        elif p.suffix == ".npz":
+            with np.load(p) as z:
+                ok = "format_version" in z.files or (
+                    "header" in z.files and "version" in json.loads(bytes(z["header"]).decode())) \
+                    or ("metadata" in z.files and "format_version" in str(z["metadata"]))
+        else:
+            ok = p.name in named
+        if not ok:
+            bad.append(p.name)
+    return bad
+
+
+def test_every_file_of_every_bake_says_its_format_version(baked, tmp_path):
+    assert unversioned(baked / "bk") == []
+    for kind, (name, args, expected) in OTHER_BAKES.items():
+        blend = make_scene(name, tmp_path / f"{name}.blend")
+        r = relight(args[0], str(blend), *args[1:], "--out", str(tmp_path / kind))
+        assert r.returncode == 0, r.stderr[-3000:]
+        assert unversioned(tmp_path / kind) == [], kind
