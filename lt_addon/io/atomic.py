@@ -64,7 +64,12 @@ def atomic_path(path: str | os.PathLike) -> Iterator[str]:
     path = os.fspath(path)
     tmp = _temporary_name(path)
     try:
-        yield tmp
+        try:
+            yield tmp
+        except OSError as exc:
+            if exc.filename is None and exc.errno is not None:   # name the file being written
+                raise OSError(exc.errno, exc.strerror, path) from exc
+            raise
         if not os.path.exists(tmp):
             raise FileNotFoundError(f"nothing was written to {tmp} for {path}")
         os.replace(tmp, path)

@@ -76,9 +76,12 @@ class ChunkCache:
         safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in str(chunk))
         return os.path.join(self.folder, safe + ".npy")
 
-    def get(self, chunk: str) -> np.ndarray | None:
-        """The stored array of ``chunk``, or None. A file that does not read (truncated by a
-        crash of the file system, say) is removed and counts as missing."""
+    def get(self, chunk: str, shape: tuple | None = None, dtype=None, lo: float | None = None,
+            hi: float | None = None) -> np.ndarray | None:
+        """The stored array of ``chunk``, or None. A chunk that fails a check -- it does not
+        read (truncated), its checksum differs, it holds NaN or inf, or it has not the expected
+        ``shape`` / ``dtype`` or values outside ``[lo, hi]`` -- is removed, counted in
+        :attr:`rejected` and treated as missing (baked again)."""
         p = self.path(chunk)
         if not os.path.isfile(p):
             return None
@@ -90,6 +93,14 @@ class ChunkCache:
             ok = False
         if ok and arr.dtype.kind == "f":
             ok = bool(np.isfinite(arr).all())
+        if ok and shape is not None:
+            ok = tuple(arr.shape) == tuple(shape)
+        if ok and dtype is not None:
+            ok = arr.dtype == np.dtype(dtype)
+        if ok and lo is not None and arr.size:
+            ok = float(arr.min()) >= lo
+        if ok and hi is not None and arr.size:
+            ok = float(arr.max()) <= hi
         if not ok:
             for q in (p, p + ".sha256"):
                 if os.path.exists(q):

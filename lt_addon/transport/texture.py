@@ -283,8 +283,13 @@ class TransportStore:
         folder = os.path.dirname(os.path.abspath(path))
         os.makedirs(folder, exist_ok=True)
         tmp = os.path.join(folder, f".{os.path.basename(path)}.{atomic.token()}.tmp.npy")
-        arr = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float16,
-                                        shape=(directions.size, resolution * resolution))
+        try:
+            arr = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float16,
+                                            shape=(directions.size, resolution * resolution))
+        except OSError as exc:   # a full disk: name the store, not its temporary name
+            if os.path.exists(tmp):
+                os.remove(tmp)
+            raise OSError(exc.errno, exc.strerror, path) from exc
         store = cls(path, directions, int(resolution), dict(meta or {}), arr)
         store._tmp = tmp
         return store

@@ -99,8 +99,8 @@ def light_stacks(scene, objects, spec: dict, cache=None, client=None,
     R = spec["resolution"]
     have = {}
     for k in range(K) if cache is not None else ():
-        arr = cache.get(chunk_name(k))
-        if arr is not None and arr.shape == (len(objects), R, R, 3):
+        arr = cache.get(chunk_name(k), (len(objects), R, R, 3))   # checked; a bad one: rebaked
+        if arr is not None:
             have[k] = arr
     reused = len(have)
     done = step0 + reused
@@ -115,8 +115,8 @@ def light_stacks(scene, objects, spec: dict, cache=None, client=None,
                                                         cache, todo, done, total,
                                                         lights_stage)
         for c in todo:
-            arr = cache.get(chunk_name(c.start))
-            if arr is not None and arr.shape == (len(objects), R, R, 3):
+            arr = cache.get(chunk_name(c.start), (len(objects), R, R, 3))
+            if arr is not None:
                 have[c.start] = arr
                 done += 1
     todo = [k for k in range(K) if k not in have]

@@ -161,7 +161,10 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
          "addon_version": __version__}) for o in objects]
     chunks = ([] if rays else
               [range(a, min(a + CHUNK_DIRECTIONS, S)) for a in range(0, S, CHUNK_DIRECTIONS)])
-    cached = [cache.get(f"direct_{c.start:05d}") if cache else None for c in chunks]
+    # a kept chunk is checked: its checksum, finite, (objects, directions, texels) in half
+    # floats, and irradiance / pi of a unit hard sun: within [0, 1]
+    cached = [cache.get(f"direct_{c.start:05d}", (len(objects), len(c), R * R), np.float16,
+                        0.0, 1.0) if cache else None for c in chunks]
     reused = sum(c is not None for c in cached)
     distributed = None
     if client is not None and reused < len(chunks):   # the workers fill the cache first

@@ -235,6 +235,9 @@ def print_chunks(rep: dict) -> None:
         print(f"  note: {n} chunks an interrupted bake left were baked on {dev}; this bake runs "
               f"on {rep.get('device', {}).get('device', 'CPU')}, a different sample set, so "
               "they were baked again")
+    if rep.get("chunks_rejected"):
+        print(f"  note: {rep['chunks_rejected']} kept chunk(s) failed their check (checksum, "
+              "NaN, shape, range) and were baked again")
     if rep.get("chunks_reused"):
         of = ("chunks (one basis light each)" if "chunk_directions" not in rep else
               f"chunks ({rep['indirect_chunks']} of them indirect lights, the others "

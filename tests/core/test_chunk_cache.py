@@ -79,3 +79,18 @@ def test_a_chunk_with_other_bytes_or_non_finite_values_is_baked_again(tmp_path):
     # a NaN the bake itself put is refused too (a faulty Cycles result is not kept)
     c.put("nan_put", np.full(4, np.nan, np.float32))
     assert c.get("nan_put") is None and c.rejected == 4
+
+
+def test_a_chunk_of_the_wrong_shape_dtype_or_range_is_baked_again(tmp_path):
+    """A kept chunk whose checksum holds but which is not what this bake needs (another
+    layout, a dtype a bug wrote, values no irradiance can have) is refused and counted."""
+    cache = ChunkCache(str(tmp_path / "c"), {"k": 1})
+    good = np.full((1, 4, 16), 0.25, np.float16)
+    for name, arr in {"shape": good.reshape(1, 16, 4), "dtype": good.astype(np.float32),
+                      "range": good + np.float16(1.0), "ok": good}.items():
+        cache.put(name, arr)
+    want = dict(shape=(1, 4, 16), dtype=np.float16, lo=0.0, hi=1.0)
+    assert [cache.get(n, **want) is None for n in ("shape", "dtype", "range")] == [True] * 3
+    assert cache.rejected == 3 and not os.path.exists(cache.path("shape"))
+    np.testing.assert_array_equal(cache.get("ok", **want), good)
+    assert cache.reused == 1
