@@ -297,7 +297,9 @@ class BakeTransaction:
     def final_result(self, result):
         """A job's result object with its staged paths replaced by the committed ones (its
         report dicts, lists and strings; objects such as models are left as they are)."""
-        for name, value in list(vars(result).items()):
+        if isinstance(result, (dict, list, tuple, str)):
+            return self.final(result)
+        for name, value in list(getattr(result, "__dict__", {}).items()):
             if isinstance(value, (dict, list, str)):
                 setattr(result, name, self.final(value))
         return result

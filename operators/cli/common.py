@@ -347,12 +347,10 @@ def run_bake(args, verb: str, path: str, make_job, *, out_dir: str, kept: str,
     the job's result (its paths are the committed ones), or None when cancelled (the verb exits
     130; ``kept`` says what a resume reuses, left out with --no-resume)."""
     from ...lt_addon import faults
-    from ...lt_addon.io.transaction import BakeTransaction, ChangedMeanwhile
+    from ...lt_addon.io.transaction import BakeTransaction, ChangedMeanwhile, sweep
     from ..base import blend_files
     from ..base.cycles_bake import BakeInputError
     from ..farm.distributed import DistributedError, close
-
-    from ...lt_addon.io.transaction import sweep
 
     device = bake_device(args, verb)
     blend_swept = sweep(os.path.dirname(path), stages=False)   # a killed run's temporary .blend

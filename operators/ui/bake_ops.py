@@ -132,7 +132,6 @@ class ModalBake:
         returns the staging folder the job writes into; :meth:`_done` swaps it in whole, a
         cancel or a failure removes it and the folder stays as it was."""
         from ...lt_addon.io.transaction import BakeTransaction
-
         from ..base.blend_files import BAKES_KEY, _plain
 
         self.out_dir = _output_dir(props)
