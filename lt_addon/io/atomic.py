@@ -101,6 +101,11 @@ def write_json(path: str | os.PathLike, data, **dump_kw) -> int:
     return write_text(path, json.dumps(data, **dump_kw))
 
 
+def move(src: str, dst: str) -> None:
+    """Move the whole file ``src`` onto ``dst`` (same file system): one atomic rename."""
+    os.replace(src, dst)
+
+
 def replace_folder(built: str | os.PathLike, target: str | os.PathLike) -> None:
     """Move the completed folder ``built`` to ``target`` (same file system). An existing
     ``target`` is renamed aside first and removed only after the new one is in place, so

@@ -71,6 +71,9 @@ class ChunkCache:
         #: from this one only in its ``device`` (a bake resumed on another device: those chunks
         #: are another sample set, so they are baked again, and the bake says so)
         self.other_devices: dict = {}
+        #: {device: chunk count} of another device's chunks taken over by
+        #: ``prune_others(adopt_devices=True)`` (``--mix-devices``): reused, not baked again
+        self.mixed_devices: dict = {}
 
     def path(self, chunk: str) -> str:
         safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in str(chunk))
@@ -122,10 +125,16 @@ class ChunkCache:
         atomic.write_text(self.path(chunk) + ".sha256", checksum(array) + "\n")
         self.written += 1
 
-    def prune_others(self) -> int:
+    def prune_others(self, adopt_devices: bool = False) -> int:
         """Remove the folders of other keys under ``root`` (stale after a scene or settings
         change); returns how many were removed. Only key folders (20 hex digits) go: a
-        folder of another name is another stage's cache nested here, with its own key."""
+        folder of another name is another stage's cache nested here, with its own key.
+
+        A folder whose key differs only in its ``device`` holds the same chunks baked on
+        another device (another sample set). By default it is removed and counted in
+        :attr:`other_devices` (those chunks are baked again). With ``adopt_devices`` (the user
+        agreed: ``--mix-devices``) its chunks this key lacks move into this key's folder first,
+        counted in :attr:`mixed_devices`, and are reused."""
         if not os.path.isdir(self.root):
             return 0
         gone = 0
@@ -134,12 +143,34 @@ class ChunkCache:
             if (os.path.isdir(p) and p != self.folder and len(name) == 20
                     and all(ch in "0123456789abcdef" for ch in name)):
                 device = self._other_device(p)
-                if device is not None:
+                if device is not None and adopt_devices:
+                    n = self._adopt(p)
+                    if n:
+                        self.mixed_devices[device] = self.mixed_devices.get(device, 0) + n
+                elif device is not None:
                     n = sum(1 for f in os.listdir(p) if f.endswith(".npy"))
                     self.other_devices[device] = self.other_devices.get(device, 0) + n
                 shutil.rmtree(p, ignore_errors=True)
                 gone += 1
         return gone
+
+    def _adopt(self, folder: str) -> int:
+        """Move ``folder``'s chunks (with their checksums) that this key lacks into this key's
+        folder; returns how many."""
+        os.makedirs(self.folder, exist_ok=True)
+        key_file = os.path.join(self.folder, "key.json")
+        if not os.path.exists(key_file):
+            atomic.write_json(key_file, self.key, default=str)
+        n = 0
+        for f in sorted(os.listdir(folder)):
+            if not f.endswith(".npy") or os.path.exists(os.path.join(self.folder, f)):
+                continue
+            if not os.path.exists(os.path.join(folder, f + ".sha256")):
+                continue
+            atomic.move(os.path.join(folder, f + ".sha256"), os.path.join(self.folder, f + ".sha256"))
+            atomic.move(os.path.join(folder, f), os.path.join(self.folder, f))
+            n += 1
+        return n
 
     def _other_device(self, folder: str) -> str | None:
         """The device of ``folder``'s key when it equals this key but for ``device``."""

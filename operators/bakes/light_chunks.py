@@ -82,7 +82,7 @@ def light_cache(scene, objects, spec: dict, root: str):
 
     cache = ChunkCache(root, {"stage": "lights", "scene": scene_key(scene, list(objects)),
                               "device": current().id, "spec": spec})
-    cache.prune_others()
+    cache.prune_others(adopt_devices=current().mix_devices)   # --mix-devices
     return cache
 
 

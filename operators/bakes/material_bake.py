@@ -621,7 +621,7 @@ def material_chunk_cache(scene, objects, settings: MaterialBakeSettings, out_dir
            "seeds": "per direction"}   # chunks of the one-seed bakes are not these
     folder = atomic.safe_name(objects[0].name) + "_materials"
     cache = ChunkCache(os.path.join(cache_root(out_dir), folder), key)
-    cache.prune_others()
+    cache.prune_others(adopt_devices=current().mix_devices)   # --mix-devices
     return cache
 
 

@@ -254,12 +254,16 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
                      "direct_chunks": len(chunks), "indirect_chunks": ind.get("chunks_total", 0),
                      # kept chunks refused on reuse (checksum, NaN) and baked again
                      "chunks_rejected": sum(c.rejected for c in result.cache)}
-    other = {}
+    other, mixed = {}, {}
     for c in result.cache:
         for dev, n in c.other_devices.items():
             other[dev] = other.get(dev, 0) + n
+        for dev, n in c.mixed_devices.items():
+            mixed[dev] = mixed.get(dev, 0) + n
     if other:   # a resume on another device: those chunks were baked again here
         result.chunks["other_device_chunks"] = other
+    if mixed:   # ... or reused, because the user said so (--mix-devices)
+        result.chunks["mixed_device_chunks"] = mixed
     if distributed is not None or "distributed" in ind:
         both = [d for d in (distributed, ind.get("distributed")) if d]
         result.chunks["distributed"] = {
@@ -364,7 +368,7 @@ def direct_chunk_cache(scene, objects, settings: TransportTextureSettings, out_d
            "seed": settings.seed, "chunk_directions": CHUNK_DIRECTIONS}
     root = os.path.join(cache_root(out_dir), "+".join(atomic.safe_name(o.name) for o in objects))
     cache = ChunkCache(root, key)
-    cache.prune_others()
+    cache.prune_others(adopt_devices=current().mix_devices)   # --mix-devices
     return cache
 
 

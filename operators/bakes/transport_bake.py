@@ -98,7 +98,7 @@ def vertex_chunk_cache(scene, obj, directions, bounces: int, samples, seed: int,
            "seed": int(seed), "chunk_directions": CHUNK_DIRECTIONS}
     safe = atomic.safe_name(obj.name)
     cache = ChunkCache(os.path.join(cache_root(out_dir), safe + "_vertex"), key)
-    cache.prune_others()
+    cache.prune_others(adopt_devices=current().mix_devices)   # --mix-devices
     return cache
 
 
@@ -179,6 +179,8 @@ def bake_transport(scene, obj, directions, bounces: int = 0, samples: int | None
         figures = {"chunks_total": len(chunks), "chunks_reused": reused,
                    "chunk_directions": CHUNK_DIRECTIONS, "chunks_rejected": cache.rejected,
                    **({"other_device_chunks": cache.other_devices} if cache.other_devices
+                      else {}),
+                   **({"mixed_device_chunks": cache.mixed_devices} if cache.mixed_devices
                       else {})}
         if distributed is not None:
             figures["distributed"] = distributed

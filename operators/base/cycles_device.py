@@ -49,6 +49,8 @@ class Device:
     note: str | None = None
     choice: str = "auto"
     cpu_name: str = field(default="", compare=False)
+    #: reuse chunks another device baked (``--mix-devices``; by default they are baked again)
+    mix_devices: bool = field(default=False, compare=False)
 
     @property
     def id(self) -> str:

@@ -113,7 +113,13 @@ def add_device_option(p) -> None:
                         "GPU backend Cycles finds in the venv CLI -- else the CPU, and says "
                         "so; cpu forces the CPU; gpu refuses to bake without a GPU. The "
                         "report records the device (CPU and GPU bakes of one seed are different "
-                        "sample sets: a resumed bake on another device bakes its chunks again)")
+                        "sample sets: a resumed bake on another device bakes its chunks again, "
+                        "unless --mix-devices)")
+    p.add_argument("--mix-devices", action="store_true",
+                   help="resume from chunks an interrupted bake left on another device (CPU "
+                        "and GPU bake one seed as different sample sets, so the result mixes "
+                        "two; the report counts them as mixed_device_chunks). Without it those "
+                        "chunks are baked again")
 
 
 def bake_device(args, verb: str):
@@ -127,9 +133,14 @@ def bake_device(args, verb: str):
         raise CliError(f"$RELIGHT_DEVICE must be one of {', '.join(cycles_device.CHOICES)}, "
                        f"got {args.device!r}")
     try:
-        return cycles_device.resolve(args.device, bpy.context.scene)
+        device = cycles_device.resolve(args.device, bpy.context.scene)
     except cycles_device.DeviceError as exc:
         raise CliError(str(exc)) from None
+    if getattr(args, "mix_devices", False):
+        import dataclasses
+
+        device = dataclasses.replace(device, mix_devices=True)
+    return device
 
 
 def add_distribution_options(p, what: str) -> None:
@@ -235,6 +246,9 @@ def print_chunks(rep: dict) -> None:
         print(f"  note: {n} chunks an interrupted bake left were baked on {dev}; this bake runs "
               f"on {rep.get('device', {}).get('device', 'CPU')}, a different sample set, so "
               "they were baked again")
+    for dev, n in (rep.get("mixed_device_chunks") or {}).items():
+        print(f"  note: {n} chunks an interrupted bake left on {dev} were reused (--mix-devices): "
+              "the result mixes their sample set with this device's")
     if rep.get("chunks_rejected"):
         print(f"  note: {rep['chunks_rejected']} kept chunk(s) failed their check (checksum, "
               "NaN, shape, range) and were baked again")

@@ -119,6 +119,10 @@ class ModalBake:
         if props.run_on != "HERE":
             return self._prepare(context)
         device = cycles_device.resolve(props.device, context.scene)
+        if props.mix_devices:   # reuse another device's kept chunks (the user agreed)
+            import dataclasses
+
+            device = dataclasses.replace(device, mix_devices=True)
         gen = self._prepare(context)
         props.device_used = device.describe() + (f" ({device.note})" if device.note else "")
         if device.note:
@@ -191,7 +195,9 @@ class ModalBake:
         self.out_dir = _output_dir(props)
         os.makedirs(self.out_dir, exist_ok=True)
         return eb.external_job([command, verb, path, *args, "--out", self.out_dir, "--force",
-                                "--device", props.device, *eb.distribution_args(props)], path)
+                                "--device", props.device,
+                                *(["--mix-devices"] if props.mix_devices else []),
+                                *eb.distribution_args(props)], path)
 
     def _done(self, context, result):
         """``_finish`` for a job of this process; for a Dask job, its summary, and the open file

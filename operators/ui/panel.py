@@ -120,6 +120,7 @@ def _run_on(layout, props):
     """Where the bake below runs: here, or on Dask through the Relight Command."""
     col = layout.column(align=True)
     col.prop(props, "device")
+    col.prop(props, "mix_devices")
     if props.device_used:
         col.label(text=f"Baked On: {props.device_used}", icon="INFO")
     col.prop(props, "run_on")

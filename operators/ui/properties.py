@@ -203,6 +203,11 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         ("cpu", "CPU", "Always the CPU"),
         ("gpu", "GPU", "The GPU of Preferences > System (or the first Cycles finds); refuses "
                         "to bake without one")])
+    mix_devices: BoolProperty(
+        name="Mix Devices", default=False,
+        description="Resume from chunks an interrupted bake left on another device (CPU and GPU "
+                    "bake one seed as different sample sets, so the result mixes two); off: "
+                    "those chunks are baked again")
     device_used: StringProperty(name="Baked On", default="",
                                 description="The device the last bake of this scene used")
 

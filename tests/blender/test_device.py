@@ -120,30 +120,32 @@ def test_cli_says_which_device_baked_and_the_report_records_it(tmp_path):
         assert rep["note"] in said[0]
 
 
-def test_a_resumed_bake_bakes_another_devices_chunks_again(tmp_path):
+def test_a_resumed_bake_bakes_another_devices_chunks_again_unless_told_to_mix(tmp_path):
     """A farm task (``relight bake-chunk``, the CPU) bakes chunk 0 into the cache. Left as it
     is, the final bake reuses it; relabelled as a GPU's chunk (its key's device changed, under
     that key's folder, as a GPU bake would have left it), the final bake on the CPU bakes it
-    again, says so, and the result is bit for bit the same as the bake that reused it."""
+    again, says so, and the result is bit for bit the same as the bake that reused it; with
+    ``--mix-devices`` it reuses the relabelled chunk and says so."""
     from relightable_textures.lt_addon.io.chunk_cache import digest
 
     blend = make_scene("bumps", tmp_path / "b.blend")
     args = [blend, "--object", "Bumps", "--preset", "draft", "--directions", "hemi:32",
             "--resolution", "8", "--device", "cpu", "--direct", "cycles"]
     results = {}
-    for label in ("same device", "other device"):
+    for label in ("same device", "other device", "mixed"):
         out = tmp_path / label.replace(" ", "_")
         r = relight("bake-chunk", *args, "--chunk", "0", "--out", out)
         assert r.returncode == 0, r.stderr[-2000:]
         (root,) = [p for p in (out / ".relight_cache").iterdir() if p.is_dir()]
         (folder,) = [p for p in root.iterdir() if p.is_dir()]
-        if label == "other device":
+        if label != "same device":
             key = json.loads((folder / "key.json").read_text())
             assert key["device"] == "CPU"
             key["device"] = "GPU:OPTIX"
             (folder / "key.json").write_text(json.dumps(key))
             shutil.move(str(folder), str(root / digest(key)[:20]))
-        r = relight("bake-textures", *args, "--no-compare", "--out", out)
+        r = relight("bake-textures", *args, "--no-compare", "--out", out,
+                    *(["--mix-devices"] if label == "mixed" else []))
         assert r.returncode == 0, r.stderr[-2000:]
         rep = json.loads((out / "Bumps_texture_report.json").read_text())
         results[label] = (rep, np.load(out / "Bumps_transport_texture.npy"), r.stdout)
@@ -154,4 +156,11 @@ def test_a_resumed_bake_bakes_another_devices_chunks_again(tmp_path):
     assert "1 chunks an interrupted bake left were baked on GPU:OPTIX" in stdout, stdout
     same, other = results["same device"][1], results["other device"][1]
     assert np.array_equal(same.view(np.uint16), other.view(np.uint16))
+    # --mix-devices: the user agreed to reuse it; counted, said, and (the chunk was in truth
+    # baked on this CPU) bit for bit the same
+    rep, mixed, stdout = results["mixed"]
+    assert rep["chunks_reused"] == 1 and rep["mixed_device_chunks"] == {"GPU:OPTIX": 1}
+    assert "other_device_chunks" not in rep
+    assert "1 chunks an interrupted bake left on GPU:OPTIX were reused (--mix-devices)" in stdout
+    assert np.array_equal(same.view(np.uint16), mixed.view(np.uint16))
     assert not (tmp_path / "other_device" / ".relight_cache").exists()
