@@ -18,7 +18,7 @@ from ...lt_addon.errors import InputError
 from ...lt_addon.rays import engine as ray_engine
 from ...lt_addon.rays.direct import direct_rows
 from ...lt_addon.rays.texels import extend_margin
-from ..base import ray_scene
+from ..base import cycles_device, ray_scene
 from ..base.jobs import Progress
 
 #: Directions per ray chunk (one engine call each; 64 x 65k texels = 4 M rays).
@@ -59,6 +59,15 @@ def world_normals(obj, object_normals):
     return np.where(length > 0, n / np.maximum(length, 1e-30), 0.0)
 
 
+def _blas_idle():
+    """BLAS at one thread for the block, unless RELIGHT_BLAS_POLICY=off (cycles_device)."""
+    import contextlib
+
+    from ...lt_addon import blas_threads
+
+    return blas_threads.limited(1) if cycles_device.blas_policy() else contextlib.nullcontext()
+
+
 def bake(scene, objects, settings, dset, stores, normals, step: int, total: int, margin: int = 4):
     """Generator: fill ``stores`` (one per object, (S, R*R)) with the ray-traced direct
     transport; ``normals``: per object world closure normals (R, R, 3) or None; ``margin``: the
@@ -68,7 +77,7 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
     t0 = time.perf_counter()
     with ray_scene.RenderGeometry(scene) as depsgraph:
         V, T, n_casters = ray_scene.casters(depsgraph)
-        occluder = ray_engine.Occluder(V, T)
+        occluder = ray_engine.Occluder(V, T, threads=cycles_device.current().threads)
         receivers = [ray_scene.receiver_points(o, depsgraph, R, nrm)
                      for o, nrm in zip(objects, normals)]
     t_scene = time.perf_counter() - t0
@@ -78,13 +87,14 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
     eta = None
     for a in range(0, S, RAY_CHUNK):
         D = dset.directions[a:a + RAY_CHUNK]
-        for store, (smp, pts), (dst, op) in zip(stores, receivers, margins):
-            rows = np.zeros((len(D), R * R), np.float32)
-            inside = direct_rows(occluder, pts, D)
-            rows[:, smp.texel] = inside
-            if dst.size:
-                rows[:, dst] = (op @ inside.T).T
-            store.write_rows(a, rows)
+        with _blas_idle():   # the ray engine's threads have the cores
+            for store, (smp, pts), (dst, op) in zip(stores, receivers, margins):
+                rows = np.zeros((len(D), R * R), np.float32)
+                inside = direct_rows(occluder, pts, D)
+                rows[:, smp.texel] = inside
+                if dst.size:
+                    rows[:, dst] = (op @ inside.T).T
+                store.write_rows(a, rows)
         done = min(a + RAY_CHUNK, S)
         rate = (time.perf_counter() - t1) / done
         eta = rate * (S - done)

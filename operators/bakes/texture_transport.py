@@ -31,7 +31,7 @@ import numpy as np
 
 from ... import __version__
 from ...lt_addon.io.transaction import after_commit
-from ...lt_addon import faults
+from ...lt_addon import blas_threads, faults
 from ...lt_addon.io import atomic
 from ...lt_addon.transport import texture as tt
 from ...lt_addon.sphere.hemisphere import direction_from_az_el
@@ -414,12 +414,14 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
                           "object": o.name, "seed": settings.seed})
         seconds["indirect_total"] = time.perf_counter() - t0
 
-    # 4. models
+    # 4. models (BLAS on --threads N when given, else as NumPy started it: every core)
     faults.checkpoint("fit")
     results = []
+    n_fit = cycles_device.current().threads if cycles_device.blas_policy() else 0
     for i, o in enumerate(objects):
         t0 = time.perf_counter()
-        model = fit_model(readers[i], settings, albedos[i])
+        with blas_threads.limited(n_fit) if n_fit else contextlib.nullcontext():
+            model = fit_model(readers[i], settings, albedos[i])
         results.append(ObjectBake(o.name, readers[i].path, albedos[i], indirects[i], model,
                                   time.perf_counter() - t0, readers[i]))
         peak = max(peak, _rss_mb())

@@ -272,6 +272,15 @@ class EnvironmentBake(SceneChanges):
         # the device the bake was asked to use (cycles_device.use; the CPU if none was chosen)
         self.device = cycles_device.current()
         cycles_device.applied(scene, self.device, self._save_attr)
+        if self.device.threads:   # --threads N: Cycles on N threads (restored after)
+            self._save_attr(scene.render, "threads_mode", "FIXED")
+            self._save_attr(scene.render, "threads", int(self.device.threads))
+        if cycles_device.blas_policy():   # BLAS idle at one thread while Cycles has the cores
+            from ...lt_addon import blas_threads
+
+            limit = blas_threads.limited(1)
+            limit.__enter__()
+            self._restore.append(lambda: limit.__exit__(None, None, None))
         for name, value in (("samples", self.samples), ("seed", self.seed),
                             ("use_animated_seed", False), ("use_adaptive_sampling", False),
                             ("use_denoising", False), ("sample_clamp_direct", 0.0),

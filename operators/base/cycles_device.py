@@ -51,6 +51,9 @@ class Device:
     cpu_name: str = field(default="", compare=False)
     #: reuse chunks another device baked (``--mix-devices``; by default they are baked again)
     mix_devices: bool = field(default=False, compare=False)
+    #: CPU threads of the bake (``--threads``; the panel: Render > Performance's Fixed count):
+    #: Cycles, the ray engine and BLAS's fit; 0 = every core (see :func:`thread_plan`)
+    threads: int = field(default=0, compare=False)
 
     @property
     def id(self) -> str:
@@ -61,13 +64,47 @@ class Device:
         """The device as a bake report records it."""
         names = list(self.names) if self.kind == "GPU" else [self.cpu_name or "CPU"]
         return {"device": self.kind, "backend": self.backend, "names": names,
-                "choice": self.choice, **({"note": self.note} if self.note else {})}
+                "choice": self.choice, **({"note": self.note} if self.note else {}),
+                "threads": thread_plan(self)}
 
     def describe(self) -> str:
         """One line for the panel and the CLI: ``CPU (AMD EPYC)``, ``GPU OPTIX (RTX 4090)``."""
         if self.kind == "CPU":
             return f"CPU ({self.cpu_name})" if self.cpu_name else "CPU"
         return f"GPU {self.backend} ({', '.join(self.names)})"
+
+
+def cores() -> int:
+    """The cores this process may run on."""
+    import os
+
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def blas_policy() -> bool:
+    """Whether a bake sets BLAS's threads (on; ``RELIGHT_BLAS_POLICY=off`` leaves them as NumPy
+    started them, for benchmarks/bench_threads.py)."""
+    import os
+
+    return os.environ.get("RELIGHT_BLAS_POLICY", "on") != "off"
+
+
+def thread_plan(device: "Device") -> dict:
+    """The threads a bake on ``device`` uses, as its report records them. Measured on 2 cores
+    (benchmarks/bench_threads.py, docs/device.md): BLAS at one thread while Cycles renders and
+    the ray engine casts (their threads have the cores), every core (or ``--threads``) for the
+    fit."""
+    from ...lt_addon import blas_threads
+
+    n = device.threads or cores()
+    policy = blas_policy()
+    return {"cores": cores(), "cycles": n, "rays": n,
+            "blas_while_cycles_and_rays": 1 if policy else "unchanged",
+            "blas_fit": n if (policy and device.threads) else "unchanged (every core)",
+            "blas_libraries": sorted(blas_threads.threads())}
 
 
 def _cycles_prefs():

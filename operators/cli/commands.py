@@ -145,8 +145,6 @@ def build_parser() -> argparse.ArgumentParser:
                         "`bake-textures` must say --direct cycles to use them)")
     p.add_argument("--resolution", type=int)
     p.add_argument("--seed", type=int)
-    p.add_argument("--threads", type=int, default=0,
-                   help="Cycles threads (default 0: all cores)")
     p.add_argument("--out", metavar="DIR", help="the bake's output folder (default: next to "
                    "the .blend, <name>_relight/)")
     add_device_option(p)

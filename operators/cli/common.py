@@ -115,6 +115,11 @@ def add_device_option(p) -> None:
                         "report records the device (CPU and GPU bakes of one seed are different "
                         "sample sets: a resumed bake on another device bakes its chunks again, "
                         "unless --mix-devices)")
+    p.add_argument("--threads", type=int, metavar="N",
+                   default=int(os.environ.get("RELIGHT_BAKE_THREADS", "0") or 0),
+                   help="CPU threads of the bake: Cycles, the ray engine and the fit's BLAS "
+                        "(default: $RELIGHT_BAKE_THREADS, else 0 = every core). BLAS is kept at "
+                        "one thread while Cycles renders or rays are cast either way")
     p.add_argument("--mix-devices", action="store_true",
                    help="resume from chunks an interrupted bake left on another device (CPU "
                         "and GPU bake one seed as different sample sets, so the result mixes "
@@ -136,10 +141,14 @@ def bake_device(args, verb: str):
         device = cycles_device.resolve(args.device, bpy.context.scene)
     except cycles_device.DeviceError as exc:
         raise CliError(str(exc)) from None
-    if getattr(args, "mix_devices", False):
+    threads = getattr(args, "threads", 0) or 0
+    if threads < 0:
+        raise CliError(f"--threads takes 0 (every core) or a count, got {threads}")
+    if getattr(args, "mix_devices", False) or threads:
         import dataclasses
 
-        device = dataclasses.replace(device, mix_devices=True)
+        device = dataclasses.replace(device, mix_devices=bool(getattr(args, "mix_devices", False)),
+                                     threads=threads)
     return device
 
 

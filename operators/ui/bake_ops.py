@@ -119,10 +119,12 @@ class ModalBake:
         if props.run_on != "HERE":
             return self._prepare(context)
         device = cycles_device.resolve(props.device, context.scene)
-        if props.mix_devices:   # reuse another device's kept chunks (the user agreed)
+        render = context.scene.render   # Render > Performance: a Fixed thread count is kept
+        fixed = render.threads if render.threads_mode == "FIXED" else 0
+        if props.mix_devices or fixed:   # (mix: reuse another device's kept chunks)
             import dataclasses
 
-            device = dataclasses.replace(device, mix_devices=True)
+            device = dataclasses.replace(device, mix_devices=props.mix_devices, threads=fixed)
         gen = self._prepare(context)
         props.device_used = device.describe() + (f" ({device.note})" if device.note else "")
         if device.note:

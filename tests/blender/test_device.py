@@ -47,7 +47,8 @@ def test_auto_cpu_and_gpu_resolve_to_what_this_machine_has(fresh_scene):
         assert (auto.kind, auto.backend, auto.id) == ("CPU", "NONE", "CPU")
         assert auto.note == "no GPU found (OPTIX, CUDA, HIP, METAL, ONEAPI tried)"
         assert auto.report() == {"device": "CPU", "backend": "NONE", "names": [auto.cpu_name],
-                                 "choice": "auto", "note": auto.note}
+                                 "choice": "auto", "note": auto.note,
+                                 "threads": cd.thread_plan(auto)}
         with pytest.raises(cd.DeviceError, match="--device gpu: Cycles finds no GPU"):
             cd.resolve("gpu", fresh_scene)
     cpu = cd.resolve("cpu", fresh_scene)
@@ -164,3 +165,51 @@ def test_a_resumed_bake_bakes_another_devices_chunks_again_unless_told_to_mix(tm
     assert "1 chunks an interrupted bake left on GPU:OPTIX were reused (--mix-devices)" in stdout
     assert np.array_equal(same.view(np.uint16), mixed.view(np.uint16))
     assert not (tmp_path / "other_device" / ".relight_cache").exists()
+
+
+def test_the_thread_plan_reaches_cycles_and_blas_during_the_bake_and_is_undone(fresh_scene):
+    """``--threads 1`` (Device.threads): Cycles' session runs on one fixed thread and BLAS on
+    one while Cycles has the cores, both read back at every step of a real bake; afterwards the
+    scene's own Performance setting and BLAS's thread counts are as they were; the report's
+    device block records the plan."""
+    import dataclasses
+
+    import bmesh
+    import numpy  # noqa: F401  (its BLAS is loaded: what the plan sets)
+
+    from relightable_textures.lt_addon import blas_threads
+    from relightable_textures.operators.base import cycles_device as cd
+    from relightable_textures.operators.bakes import transport_bake as tb
+    from relightable_textures.operators.base.jobs import run
+    from relightable_textures.operators.base.meshes import object_from_bmesh
+
+    bm = bmesh.new()
+    bmesh.ops.create_uvsphere(bm, u_segments=8, v_segments=4, radius=1.0)
+    obj = object_from_bmesh("Ball", bm, fresh_scene.collection, smooth=True)
+    fresh_scene.render.threads_mode = "AUTO"
+    blas_before = blas_threads.threads()
+    assert blas_before, "NumPy's OpenBLAS is not found: the plan cannot set it here"
+    device = dataclasses.replace(cd.resolve("cpu", fresh_scene), threads=1)
+    seen = []
+    with cd.use(device):
+        run(tb.bake_transport(fresh_scene, obj, [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]),
+            on_progress=lambda step: seen.append((fresh_scene.render.threads_mode,
+                                                  fresh_scene.render.threads,
+                                                  set(blas_threads.threads().values()))))
+    assert seen and all(s == ("FIXED", 1, {1}) for s in seen), seen
+    assert fresh_scene.render.threads_mode == "AUTO"
+    assert blas_threads.threads() == blas_before
+    plan = device.report()["threads"]
+    assert plan["cycles"] == plan["rays"] == plan["blas_fit"] == 1
+    assert plan["blas_while_cycles_and_rays"] == 1 and plan["blas_libraries"]
+
+
+def test_cli_threads_is_checked_and_recorded(tmp_path):
+    blend = make_scene("bumps", tmp_path / "b.blend")
+    assert_refused(tmp_path, "--threads takes 0 (every core) or a count, got -2",
+                   "bake-textures", blend, *TINY, "--threads", "-2", "--out", tmp_path / "o")
+    r = relight("bake-textures", blend, *TINY, "--threads", "1", "--no-compare",
+                "--out", tmp_path / "o")
+    assert r.returncode == 0, r.stderr[-2000:]
+    rep = json.loads((tmp_path / "o" / "Bumps_texture_report.json").read_text())
+    assert rep["device"]["threads"]["cycles"] == 1 and rep["direct"].get("threads", 1) == 1
