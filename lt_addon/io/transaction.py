@@ -258,6 +258,7 @@ class BakeTransaction:
 
     # -- lifecycle
     def begin(self) -> "BakeTransaction":
+        self.created_target = not os.path.isdir(self.target)
         os.makedirs(self.target, exist_ok=True)
         self.swept = sweep(self.target)
         os.makedirs(self.stage)
@@ -403,6 +404,11 @@ class BakeTransaction:
             _undo(self.stage, self.target, self.entries, self.retired)
         self.state = "rolled back"
         _prune_empty(os.path.join(self.target, ".relight_cache"))
+        if getattr(self, "created_target", False):   # a folder this bake made, left empty
+            try:
+                os.rmdir(self.target)
+            except OSError:
+                pass
 
 
 class ChangedMeanwhile(RuntimeError):

@@ -597,10 +597,25 @@ class TextureBakeOutput:
     models: list
 
 
+def _with_eta(gen, started: float, total_seconds: float):
+    """``gen``'s steps with the time left by the estimate appended to each message."""
+    while True:
+        try:
+            step = next(gen)
+        except StopIteration as stop:
+            return stop.value
+        left = max(0.0, total_seconds - (time.perf_counter() - started))
+        from ...lt_addon.transport.estimate import readable_seconds
+
+        msg = step.message if step.message.startswith("warning:") else \
+            f"{step.message} (about {readable_seconds(left)} left in all)"
+        yield Progress(step.done, step.total, msg)
+
+
 def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *,
              truth: int = 4, truth_samples: int = 256, target_error: float | None = None,
              preview: bool = True, compare: bool = True, resume: bool = True, client=None,
-             blend_path: str | None = None):
+             blend_path: str | None = None, estimate: bool | None = None):
     """The whole ``bake-textures --method transport`` verb as one generator: optional pilot
     (``target_error``), the bake, Cycles truths at held-out lights, files, preview and -- with
     ``truth``, a preview and ``compare`` and a scene camera -- ``<object>_compare.png`` (the
@@ -629,8 +644,18 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
         settings = replace(settings, directions=chosen["chosen_directions"], tol=chosen["tol"])
         figures["target_error"] = chosen
         truth = max(truth, 4)
-    result = yield from bake_transport_textures(scene, objects, settings, out_dir, resume,
-                                                client, blend_path)
+    from .estimate import ESTIMATE_FROM
+
+    bake = bake_transport_textures(scene, objects, settings, out_dir, resume, client, blend_path)
+    if estimate or (estimate is None and settings.resolution >= ESTIMATE_FROM and client is None):
+        from .estimate import estimate as predict   # a large bake: its cost, before it starts
+
+        e = yield from predict(scene, objects, settings, truth, truth_samples)
+        figures["estimate"] = {k: v for k, v in e.items() if k != "lines"}
+        for line in e["lines"]:
+            yield Progress(1, 1, line)
+        bake = _with_eta(bake, time.perf_counter(), e["bake"])
+    result = yield from bake
     try:
         figures.update((yield from _truth_figures(scene, objects, settings, result, truth,
                                                   truth_samples, target_error, figures)))
@@ -663,6 +688,10 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
     wall = round(time.perf_counter() - started, 3)
     for rep in reports:   # the wall time of everything the verb did, in the file too
         rep["timings"]["wall_total"] = wall
+        if "estimate" in rep:   # how good the prediction was
+            rep["estimate"]["measured_bake_seconds"] = rep["timings"].get("bake_total")
+            rep["estimate"]["measured_over_estimated"] = round(
+                rep["timings"].get("bake_total", 0.0) / max(rep["estimate"]["bake"], 1e-9), 3)
         atomic.write_json(rep["report"], {k: v for k, v in rep.items() if k != "report"},
                           default=float)
     return TextureBakeOutput(reports, [b.model for b in result.objects])

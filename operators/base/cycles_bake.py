@@ -80,6 +80,15 @@ def available_memory_bytes() -> int:
         return 16 * 2 ** 30
 
 
+def _reports_to_stderr():
+    """Operator reports Blender prints through Python's stdout, sent to stderr: the CLI's stdout
+    carries only its results."""
+    import contextlib
+    import sys
+
+    return contextlib.redirect_stdout(sys.stderr)
+
+
 def check_memory(need_bytes: int, what: str, fix: str) -> None:
     """Refuse up front when ``need_bytes`` exceeds 80% of the memory available now."""
     have = available_memory_bytes()
@@ -510,8 +519,9 @@ class EnvironmentBake(SceneChanges):
         set_image_pixels(self.env_image, env)
         self.env_image.update()
         start = time.perf_counter()
-        result = bpy.ops.object.bake(type="DIFFUSE", use_clear=True, margin=self.margin,
-                                     margin_type="EXTEND")
+        with _reports_to_stderr():   # Blender's "Info: Baking map saved ..." is not a result
+            result = bpy.ops.object.bake(type="DIFFUSE", use_clear=True, margin=self.margin,
+                                         margin_type="EXTEND")
         self.bake_seconds += time.perf_counter() - start
         self.bake_calls += 1
         if "FINISHED" not in result:
@@ -581,8 +591,9 @@ class EnvironmentBake(SceneChanges):
         if self.per_vertex:
             raise BakeInputError("normals are baked into textures, not per vertex")
         start = time.perf_counter()
-        result = bpy.ops.object.bake(type="NORMAL", normal_space="OBJECT", use_clear=True,
-                                     margin=self.margin, margin_type="EXTEND")
+        with _reports_to_stderr():
+            result = bpy.ops.object.bake(type="NORMAL", normal_space="OBJECT", use_clear=True,
+                                         margin=self.margin, margin_type="EXTEND")
         self.bake_seconds += time.perf_counter() - start
         self.bake_calls += 1
         if "FINISHED" not in result:

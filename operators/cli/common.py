@@ -369,20 +369,33 @@ def run_bake(args, verb: str, path: str, make_job, *, out_dir: str, kept: str,
     globs of the previous bake's files that go when the new bake does not write them). Returns
     the job's result (its paths are the committed ones), or None when cancelled (the verb exits
     130; ``kept`` says what a resume reuses, left out with --no-resume)."""
+    from ..farm.distributed import close
+
+    device = bake_device(args, verb)
+    client = dask_client(args)   # (an unreachable scheduler: one line, nothing made)
+    try:
+        return _bake_transaction(args, verb, path, make_job, client, device, out_dir, kept,
+                                 retire, cancelled, errors, prefix)
+    finally:
+        if client is not None:
+            close(client)
+
+
+def _bake_transaction(args, verb, path, make_job, client, device, out_dir, kept, retire,
+                      cancelled, errors, prefix):
+    """:func:`run_bake`'s transaction: sweep, stage, bake, check, save the .blend aside, swap."""
     from ...lt_addon import faults
     from ...lt_addon.io.transaction import BakeTransaction, ChangedMeanwhile, sweep
     from ..base import blend_files
     from ..base.cycles_bake import BakeInputError
-    from ..farm.distributed import DistributedError, close
+    from ..farm.distributed import DistributedError
 
-    device = bake_device(args, verb)
     blend_swept = sweep(os.path.dirname(path), stages=False)   # a killed run's temporary .blend
     txn = BakeTransaction(out_dir, blend=path, retire=retire)
     with txn:
         swept = {k: v + blend_swept.get(k, []) for k, v in txn.swept.items()}
         if any(swept.values()):
             print(f"{verb}: {describe_sweep(swept)}", file=sys.stderr)
-        client = dask_client(args)
         try:
             out = run_job(make_job(client, txn.stage), verb, device)
         except (BakeInputError, *errors) as exc:
@@ -397,9 +410,6 @@ def run_bake(args, verb: str, path: str, make_job, *, out_dir: str, kept: str,
         except Exception as exc:
             txn.rollback()
             raise BakeFailed(exc, out_dir, path, txn.stage) from exc
-        finally:
-            if client is not None:
-                close(client)
         try:   # check; the new .blend under a temporary name; then only renames
             txn.prepare()
             blend_files.move_staged_paths(txn.stage, txn.target)

@@ -1,0 +1,114 @@
+"""What a transport-texture bake will cost, predicted before it starts (issue 33).
+
+A bake's stages scale with what they work on:
+
+=================  ==========================================  ===============================
+stage              scales with                                 measured as
+=================  ==========================================  ===============================
+``direct``         texels x objects (albedo, then T's rays     ``seconds["direct_total"]``
+                   or Cycles calls)
+``indirect``       indirect texels (``indirect_resolution``)   ``seconds["indirect_total"]``
+``fit``            texels x objects (the PCA over T)           ``seconds["fit"]``
+``other``          texels x objects (store, stacking, ...)     ``bake_total`` minus the above
+``truth``          texels x objects x lights                   the truth bakes' seconds
+=================  ==========================================  ===============================
+
+:func:`fit_costs` takes the stage seconds of two calibration bakes of the same scene and settings
+at small sizes (the bpy layer runs them: ``operators/bakes/estimate.py``) and fits each stage as
+``a + b x size``. Doing this on the machine and scene at hand measures everything the figures
+depend on: cores, Cycles' speed, the scene's triangles, the sample counts. :func:`predict`
+applies the fit to the asked size. Disk, RAM and GPU memory come from the bake's own formulas
+(the transport store's bytes, the fit's working set, the viewport's atlas).
+
+Units: seconds, bytes. Sizes are texel counts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+STAGES = ("direct", "indirect", "fit", "other", "truth")
+
+
+@dataclass
+class StageCost:
+    """``seconds = fixed + per_unit * units`` of one stage."""
+
+    fixed: float
+    per_unit: float
+
+    def at(self, units: float) -> float:
+        return max(0.0, self.fixed + self.per_unit * units)
+
+
+def stage_seconds(seconds: dict) -> dict:
+    """The stage split of a bake's ``seconds`` (its report's timings):
+    {direct, indirect, fit, other} in seconds, non-negative."""
+    direct = float(seconds.get("direct_total", 0.0))
+    indirect = float(seconds.get("indirect_total", 0.0))
+    fit = float(seconds.get("fit", 0.0))
+    total = float(seconds.get("bake_total", direct + indirect + fit))
+    return {"direct": direct, "indirect": indirect, "fit": fit,
+            "other": max(0.0, total - direct - indirect - fit)}
+
+
+def units(stage: str, resolution: int, indirect_resolution: int, n_objects: int,
+          truth_lights: int) -> float:
+    """What ``stage`` scales with at these settings (texels; see the module table)."""
+    P = float(resolution) ** 2 * n_objects
+    if stage == "indirect":
+        return float(indirect_resolution) ** 2 * n_objects
+    if stage == "truth":
+        return P * truth_lights
+    return P
+
+
+def fit_costs(samples: list) -> dict:
+    """Per stage, the line through the calibration points ``samples``: a list of
+    ``(units_by_stage, seconds_by_stage)``, one per calibration bake, at two or more sizes.
+    A per-unit cost the noise made negative is 0 (the stage is then its measured fixed cost,
+    the larger calibration's seconds)."""
+    out = {}
+    for stage in STAGES:
+        pts = [(u[stage], s[stage]) for u, s in samples if stage in u and stage in s]
+        if not pts:
+            continue
+        if len(pts) == 1 or max(p[0] for p in pts) == min(p[0] for p in pts):
+            out[stage] = StageCost(max(p[1] for p in pts), 0.0)
+            continue
+        n = len(pts)
+        mx = sum(p[0] for p in pts) / n
+        my = sum(p[1] for p in pts) / n
+        sxx = sum((p[0] - mx) ** 2 for p in pts)
+        b = sum((p[0] - mx) * (p[1] - my) for p in pts) / sxx
+        if b <= 0:
+            out[stage] = StageCost(max(p[1] for p in pts), 0.0)
+        else:
+            out[stage] = StageCost(max(0.0, my - b * mx), b)
+    return out
+
+
+def predict(costs: dict, resolution: int, indirect_resolution: int, n_objects: int,
+            truth_lights: int) -> dict:
+    """{stage: seconds, "bake": the bake's seconds (direct + indirect + fit + other), "total":
+    with the truths} at the asked settings."""
+    out = {}
+    for stage, cost in costs.items():
+        if stage == "truth" and not truth_lights:
+            continue
+        if stage == "indirect" and not indirect_resolution:
+            continue
+        out[stage] = cost.at(units(stage, resolution, indirect_resolution, n_objects,
+                                   truth_lights))
+    out["bake"] = sum(out.get(s, 0.0) for s in ("direct", "indirect", "fit", "other"))
+    out["total"] = out["bake"] + out.get("truth", 0.0)
+    return out
+
+
+def readable_seconds(seconds: float) -> str:
+    """``42 s`` / ``3.5 min`` / ``1.2 h``."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"

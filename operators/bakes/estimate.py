@@ -1,0 +1,107 @@
+"""A transport-texture bake's time, disk, RAM and GPU memory, predicted before it starts (bpy).
+
+Two calibration bakes of the same objects and settings at 48^2 and 96^2 (the indirect term at
+the same sizes), and one held-out truth light at each, give each stage's fixed and per-texel
+cost on this machine and scene (:mod:`...lt_addon.transport.estimate`). These costs are then
+applied to the asked sizes. The calibration takes a few seconds. It writes nothing that stays:
+the calibration bakes go to a temporary folder, without chunk caches.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from dataclasses import replace
+
+from ...lt_addon.transport import estimate as est
+from ...lt_addon.transport import texture as tt
+from ..base.cycles_bake import _size, available_memory_bytes
+from ..base.jobs import Progress
+
+#: calibration sizes (texels across)
+CALIBRATION = (48, 96)
+#: a bake at or above this resolution is estimated (and the estimate printed) before it starts
+ESTIMATE_FROM = 512
+
+
+def calibrate(scene, objects, settings, truth: int, truth_samples: int):
+    """Generator: the calibration bakes; returns the stage costs (:func:`.est.fit_costs`) and
+    the seconds the calibration took."""
+    from .texture_transport import bake_transport_textures, truth_bakes, truth_lights
+
+    t0 = time.perf_counter()
+    samples = []
+    lights = truth_lights(1) if truth else []
+    for R in CALIBRATION:
+        s = replace(settings, resolution=R, indirect_resolution=R)
+        with tempfile.TemporaryDirectory(prefix="relight-estimate-") as tmp:
+            res = yield from bake_transport_textures(scene, objects, s, tmp, resume=False)
+            for b in res.objects:
+                if b.store is not None:
+                    b.store.abort()
+        seconds = est.stage_seconds(res.seconds)
+        u = {st: est.units(st, R, R if settings.bounces > 0 and
+                           settings.indirect == "steerable" else 0, len(objects), 1)
+             for st in est.STAGES}
+        if lights:
+            tr = yield from truth_bakes(scene, objects, lights, settings.sun_angle,
+                                        settings.bounces, truth_samples, R)
+            seconds["truth"] = tr["seconds"]
+        samples.append((u, seconds))
+        yield Progress(len(samples), len(CALIBRATION), f"calibration bake at {R}^2")
+    return est.fit_costs(samples), time.perf_counter() - t0
+
+
+def estimate(scene, objects, settings, truth: int = 4, truth_samples: int = 256):
+    """Generator: the estimate of a bake of ``objects`` with ``settings`` (its truths:
+    ``truth`` lights at ``truth_samples``). Returns a dict: ``seconds`` per stage, ``bake``
+    and ``total``; ``disk_bytes``, ``ram_bytes``, ``ram_available_bytes``,
+    ``viewport_gpu_bytes`` and the viewport it would use; ``calibration_seconds``; ``lines``
+    (what the CLI prints and the panel shows)."""
+    from ...lt_addon.transport import sparse_tables as sp
+
+    dset = settings.validate()
+    costs, cal = yield from calibrate(scene, objects, settings, truth, truth_samples)
+    ri = settings.indirect_resolution if (settings.bounces > 0 and
+                                          settings.indirect == "steerable") else 0
+    seconds = est.predict(costs, settings.resolution, ri, len(objects), truth)
+    P = settings.resolution ** 2
+    disk = len(objects) * tt.transport_bytes(dset.size, P)
+    k = settings.components or 48
+    ram = tt.CHUNK_BYTES + k * P * 4 + 8 * P * 3 * 4
+    try:
+        viewport, _ = sp.choose_viewport(settings.viewport, dset.size, settings.resolution)
+    except ValueError:
+        viewport = "pca"
+    if viewport == "transport":
+        gpu = len(objects) * sp.atlas_layout_bytes(dset.size, settings.resolution)[1]
+    else:   # eigen-textures in half floats, three per RGBA-less image
+        gpu = len(objects) * (-(-k // 3)) * 3 * P * 2
+    out = {"seconds": {k2: round(v, 2) for k2, v in seconds.items()},
+           "bake": round(seconds["bake"], 2), "total": round(seconds["total"], 2),
+           "disk_bytes": int(disk), "ram_bytes": int(ram),
+           "ram_available_bytes": int(available_memory_bytes()),
+           "viewport": viewport, "viewport_gpu_bytes": int(gpu),
+           "calibration_seconds": round(cal, 2),
+           "costs": {s: {"fixed_seconds": round(c.fixed, 4),
+                         "seconds_per_million_units": round(c.per_unit * 1e6, 4)}
+                     for s, c in costs.items()},
+           "method": f"stage costs fitted to calibration bakes at {CALIBRATION[0]}^2 and "
+                     f"{CALIBRATION[1]}^2 of the same objects and settings on this machine, "
+                     "linear in texels (lt_addon/transport/estimate.py)"}
+    out["lines"] = describe(out, settings, len(objects))
+    return out
+
+
+def describe(e: dict, settings, n_objects: int) -> list:
+    """The estimate in a few lines."""
+    s = e["seconds"]
+    parts = [f"{name} {est.readable_seconds(s[name])}" for name in
+             ("direct", "indirect", "fit", "other", "truth") if name in s]
+    return [f"estimate for {n_objects} object(s) at {settings.resolution}^2: about "
+            f"{est.readable_seconds(e['total'])} ({', '.join(parts)})",
+            f"  disk {_size(e['disk_bytes'])} for T, memory {_size(e['ram_bytes'])} of "
+            f"{_size(e['ram_available_bytes'])} available, viewport ({e['viewport']}) "
+            f"{_size(e['viewport_gpu_bytes'])} of GPU memory; calibrated in "
+            f"{e['calibration_seconds']:.1f} s"]
