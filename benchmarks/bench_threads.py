@@ -5,13 +5,15 @@ Bakes the bumps demo scene with the balanced preset (the default bake: albedo an
 Cycles, the direct term by rays, the indirect term by Cycles, the PCA fit by BLAS) under each
 configuration, alternating them (A B A B ...) so that a shared machine's drift falls on all,
 and prints the median of each stage's seconds (from the bake report) and its ratio to the
-default configuration:
+unmanaged configuration:
 
-* ``default``: what a bake does (BLAS threads as NumPy starts them; Cycles and the ray engine
-  on every core);
+* ``unmanaged``: BLAS's threads left as NumPy starts them (every core, also while Cycles
+  renders: the bake before issue 36's thread plan; ``RELIGHT_BLAS_POLICY=off``);
+* ``default``: the thread plan: BLAS at one thread while Cycles renders and rays are cast, as
+  NumPy started it (every core) for the fit;
 * ``blas1``: BLAS at one thread for the whole bake (``OPENBLAS_NUM_THREADS=1``);
-* ``fixed``: the bake's own thread setting, ``RELIGHT_BAKE_THREADS`` cores for Cycles, the
-  ray engine and BLAS alike (here 1: what a bake sharing the machine with another would use).
+* ``threads1``: ``--threads 1`` (``RELIGHT_BAKE_THREADS=1``): Cycles, the ray engine and BLAS
+  on one thread (what a bake sharing the machine would use).
 
 Usage: python benchmarks/bench_threads.py [--size demo|test] [--reps 2] [--out DIR]
 """
@@ -28,15 +30,16 @@ import tempfile
 import time
 
 BIN = os.path.dirname(sys.executable)
-CONFIGS = {"default": {}, "blas1": {"OPENBLAS_NUM_THREADS": "1"},
-           "fixed": {"RELIGHT_BAKE_THREADS": "1"}}
+CONFIGS = {"unmanaged": {"RELIGHT_BLAS_POLICY": "off"}, "default": {},
+           "blas1": {"OPENBLAS_NUM_THREADS": "1"}, "threads1": {"RELIGHT_BAKE_THREADS": "1"}}
 STAGES = ("albedo_cycles", "direct_rays", "indirect_cycles", "fit", "bake_total",
           "truth_seconds", "preview_seconds", "wall_total")
 
 
 def run(env_extra: dict, blend: str, out: str, size: str) -> tuple[dict, float]:
     env = {k: v for k, v in os.environ.items()
-           if k not in ("OPENBLAS_NUM_THREADS", "RELIGHT_BAKE_THREADS", "OMP_NUM_THREADS")}
+           if k not in ("OPENBLAS_NUM_THREADS", "RELIGHT_BAKE_THREADS", "OMP_NUM_THREADS",
+                        "RELIGHT_BLAS_POLICY")}
     env.update(env_extra)
     t0 = time.perf_counter()
     p = subprocess.run([os.path.join(BIN, "relight"), "bake-textures", blend, "--object", "Bumps",
@@ -49,7 +52,7 @@ def run(env_extra: dict, blend: str, out: str, size: str) -> tuple[dict, float]:
     t = dict(rep["timings"])
     t["truth_seconds"] = rep.get("ground_truth", {}).get("truth_seconds", 0.0)
     t["process_wall"] = wall
-    return t, rep.get("threads", {})
+    return t, rep.get("device", {}).get("threads", {})
 
 
 def main() -> int:
@@ -74,14 +77,14 @@ def main() -> int:
                if any(s in r for r in rows[c])} for c in CONFIGS}
     print(f"Measured {time.strftime('%Y-%m-%d %H:%M')} on {os.cpu_count()} cores, bumps "
           f"{args.size} size, balanced preset, median of {args.reps} alternating runs "
-          "(seconds; ratio to default)\n")
+          "(seconds; ratio to unmanaged)\n")
     print("| stage | " + " | ".join(CONFIGS) + " |")
     print("|---|" + "---|" * len(CONFIGS))
     for s in STAGES + ("process_wall",):
-        if s not in med["default"]:
+        if s not in med["unmanaged"]:
             continue
-        base = med["default"][s]
-        cells = [f"{med[c][s]:.2f}" + (f" ({med[c][s] / base:.2f}x)" if c != "default" and base
+        base = med["unmanaged"][s]
+        cells = [f"{med[c][s]:.2f}" + (f" ({med[c][s] / base:.2f}x)" if c != "unmanaged" and base
                                        else "") for c in CONFIGS]
         print(f"| {s} | " + " | ".join(cells) + " |")
     print("\nthread settings the reports recorded: " + json.dumps(threads))

@@ -113,7 +113,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "memory, the viewport's GPU memory -- from two calibration bakes at "
                         "48^2 and 96^2 on this machine (a few seconds), and bake nothing. A bake "
                         "at 512^2 or more prints this estimate before it starts, then the time "
-                        "left in its progress lines")
+                        "left in its progress lines, and its report holds estimate and measured "
+                        "time ($RELIGHT_ESTIMATE=1: at any size; 0: never)")
     p.add_argument("--force", action="store_true",
                    help="replace an existing bake of the same object in --out")
     add_setting_options(p, TransportTextureSettings, SHARED_OPTIONS)
@@ -539,7 +540,9 @@ def _cmd_bake_texture_transport(args) -> int:
         lambda client, stage: tx.bake_job(bpy.context.scene, objects, settings, stage,
                                    truth=args.truth, truth_samples=args.truth_samples,
                                    target_error=args.target_error, compare=not args.no_compare,
-                                   resume=not args.no_resume, client=client, blend_path=path),
+                                   resume=not args.no_resume, client=client, blend_path=path,
+                                   estimate={"1": True, "0": False}.get(
+                                       os.environ.get("RELIGHT_ESTIMATE", ""))),
         out_dir=out_dir, retire=tx.retire_globs(objects),
         kept=(f"; the finished chunks are kept in {os.path.join(out_dir, tx.CACHE_FOLDER)} and "
               "the same command resumes from them"))
