@@ -26,7 +26,8 @@ __all__ = ["atomic_path", "write_bytes", "write_text", "write_json", "staged_fol
 
 
 def _host() -> str:
-    return "".join(ch if ch.isalnum() else "_" for ch in socket.gethostname())[:40] or "host"
+    return "".join(ch if ch.isascii() and ch.isalnum() else "_"
+                   for ch in socket.gethostname())[:40] or "host"
 
 
 def token() -> str:

@@ -74,6 +74,7 @@ class ChunkCache:
         #: {device: chunk count} of another device's chunks taken over by
         #: ``prune_others(adopt_devices=True)`` (``--mix-devices``): reused, not baked again
         self.mixed_devices: dict = {}
+        self.adopt_devices = False
 
     def path(self, chunk: str) -> str:
         safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in str(chunk))
@@ -105,11 +106,22 @@ class ChunkCache:
         if ok and hi is not None and arr.size:
             ok = float(arr.max()) <= hi
         if not ok:
-            for q in (p, p + ".sha256"):
+            for q in (p, p + ".sha256", p + ".device"):
                 if os.path.exists(q):
                     os.remove(q)
             self.rejected += 1
             return None
+        dev_note = p + ".device"
+        if os.path.exists(dev_note):   # another device's chunk, adopted by --mix-devices
+            with open(dev_note) as fh:
+                dev = fh.read().strip()
+            if not self.adopt_devices:
+                for q in (p, p + ".sha256", dev_note):
+                    if os.path.exists(q):
+                        os.remove(q)
+                self.other_devices[dev] = self.other_devices.get(dev, 0) + 1
+                return None
+            self.mixed_devices[dev] = self.mixed_devices.get(dev, 0) + 1
         self.reused += 1
         return arr
 
@@ -120,6 +132,8 @@ class ChunkCache:
         if not os.path.exists(key_file):   # what the chunks depend on, for a person to read
             atomic.write_json(key_file, self.key, default=str)
         array = np.asarray(array)
+        if os.path.exists(self.path(chunk) + ".device"):   # baked here now, not adopted
+            os.remove(self.path(chunk) + ".device")
         with atomic.atomic_path(self.path(chunk)) as tmp:
             np.save(tmp, array, allow_pickle=False)
         atomic.write_text(self.path(chunk) + ".sha256", checksum(array) + "\n")
@@ -134,7 +148,10 @@ class ChunkCache:
         another device (another sample set). By default it is removed and counted in
         :attr:`other_devices` (those chunks are baked again). With ``adopt_devices`` (the user
         agreed: ``--mix-devices``) its chunks this key lacks move into this key's folder first,
-        counted in :attr:`mixed_devices`, and are reused."""
+        each with a ``.device`` note of where it came from; :meth:`get` reuses them (counted in
+        :attr:`mixed_devices`) only while adopting, and otherwise bakes them again (counted in
+        :attr:`other_devices`), also in a later run."""
+        self.adopt_devices = adopt_devices
         if not os.path.isdir(self.root):
             return 0
         gone = 0
@@ -144,9 +161,7 @@ class ChunkCache:
                     and all(ch in "0123456789abcdef" for ch in name)):
                 device = self._other_device(p)
                 if device is not None and adopt_devices:
-                    n = self._adopt(p)
-                    if n:
-                        self.mixed_devices[device] = self.mixed_devices.get(device, 0) + n
+                    self._adopt(p, device)   # (counted when reused: get())
                 elif device is not None:
                     n = sum(1 for f in os.listdir(p) if f.endswith(".npy"))
                     self.other_devices[device] = self.other_devices.get(device, 0) + n
@@ -154,7 +169,7 @@ class ChunkCache:
                 gone += 1
         return gone
 
-    def _adopt(self, folder: str) -> int:
+    def _adopt(self, folder: str, device: str) -> int:
         """Move ``folder``'s chunks (with their checksums) that this key lacks into this key's
         folder; returns how many."""
         os.makedirs(self.folder, exist_ok=True)
@@ -167,6 +182,7 @@ class ChunkCache:
                 continue
             if not os.path.exists(os.path.join(folder, f + ".sha256")):
                 continue
+            atomic.write_text(os.path.join(self.folder, f + ".device"), device + "\n")
             atomic.move(os.path.join(folder, f + ".sha256"), os.path.join(self.folder, f + ".sha256"))
             atomic.move(os.path.join(folder, f), os.path.join(self.folder, f))
             n += 1

@@ -24,11 +24,12 @@ next run can finish or undo:
    of milliseconds, and leaves a journal the next run acts on.
 
 Undo (:meth:`~BakeTransaction.rollback`, and :func:`recover` for a killed run) needs no record
-of which renames happened: a staged entry that is gone was moved in (remove it from ``out``),
-and whatever is in ``.old`` goes back. A killed run in state ``swapped`` is rolled back when
+of which renames happened: a staged entry that is gone was moved in (rename it back into the
+stage), and whatever is in ``.old`` goes back; both are renames, so an interrupted undo can be
+run again. A killed run in state ``swapped`` is rolled back when
 the ``.blend`` is unchanged (its save never happened) and forward otherwise; ``committed`` is
-only cleaned up. Windows: a rename fails while a file is open, so the bake closes its memory
-maps before the swap; a failed rename raises and is undone like any other fault.
+only cleaned up. Windows: a rename fails while a file is open, so the texture bake drops its
+memory maps of T before the swap; a failed rename raises and is undone like any other fault.
 
 :func:`sweep` is the debris collector every bake and export runs first on its folder: it
 recovers stages and removes temporary files of this tool's processes that are gone (by the
@@ -86,10 +87,10 @@ def pid_alive(pid: int) -> bool:
     if sys.platform == "win32":
         import ctypes
 
-        kernel32 = ctypes.windll.kernel32
+        kernel32 = ctypes.WinDLL("kernel32", use_last_error=True)
         handle = kernel32.OpenProcess(0x1000, False, pid)   # PROCESS_QUERY_LIMITED_INFORMATION
-        if not handle:
-            return False
+        if not handle:   # ERROR_INVALID_PARAMETER: no such process; anything else (access
+            return ctypes.get_last_error() != 87   # denied: another user's): alive
         code = ctypes.c_ulong()
         ok = kernel32.GetExitCodeProcess(handle, ctypes.byref(code))
         kernel32.CloseHandle(handle)
@@ -190,8 +191,11 @@ def check_file(path: str) -> None:
         import numpy as np
 
         with open(path, "rb") as fh:
-            version = np.lib.format.read_magic(fh)
-            shape, fortran, dtype = np.lib.format._read_array_header(fh, version)
+            try:
+                version = np.lib.format.read_magic(fh)
+                shape, fortran, dtype = np.lib.format._read_array_header(fh, version)
+            except ValueError as exc:
+                raise ValueError(f"{path} is truncated (its header: {exc})") from None
             offset = fh.tell()
         need = offset + int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
         if size < need:
@@ -280,7 +284,10 @@ class BakeTransaction:
             **versions.stamp(FORMAT), "state": state,
             "target": self.target, "entries": self.entries, "retired": self.retired,
             "blend": self.blend, "blend_before": self.blend_before,
-            "blend_tmp": getattr(self, "blend_tmp", None)})
+            "blend_tmp": getattr(self, "blend_tmp", None),
+            # names that existed in the target before the swap: an undo never moves one of
+            # those out unless its old file is at hand in .old to take its place
+            "existed": getattr(self, "existed", [])})
         self.state = state
 
     def staged(self) -> list:
@@ -329,10 +336,11 @@ class BakeTransaction:
                             atomic.write_json(q, fixed)
         for name in self.entries:   # a folder where a file goes (or the reverse) is not a bake's
             dest = os.path.join(self.target, name)
-            if os.path.lexists(dest) and os.path.isdir(dest) != os.path.isdir(self.path(name)):
+            is_dir = os.path.isdir(dest) and not os.path.islink(dest)
+            if os.path.lexists(dest) and is_dir != os.path.isdir(self.path(name)):
                 import errno
 
-                code = errno.EISDIR if os.path.isdir(dest) else errno.ENOTDIR
+                code = errno.EISDIR if is_dir else errno.ENOTDIR
                 raise OSError(code, os.strerror(code), dest)
         import fnmatch
 
@@ -362,6 +370,7 @@ class BakeTransaction:
             raise RuntimeError(f"swap in state {self.state}")
         self._check_blend()
         self.blend_tmp = blend_tmp
+        self.existed = [n for n in self.entries if os.path.lexists(os.path.join(self.target, n))]
         self._journal("swapping")
         os.makedirs(self.old)
         for name in self.retired:
@@ -388,11 +397,18 @@ class BakeTransaction:
         if self.state != "swapped":
             self.rollback()
             return
-        self._journal("committed")
+        self.warnings = []   # the bake is committed: what fails from here is tidying up
+        try:
+            self._journal("committed")
+        except OSError as exc:   # (a recovery still rolls forward: the .blend changed)
+            self.warnings.append(f"could not mark the commit in {self.stage}: {exc}")
         shutil.rmtree(self.stage, ignore_errors=True)
         self.state = "done"
         for action in _AFTER_COMMIT.pop(self.stage, []):
-            action()
+            try:
+                action()
+            except Exception as exc:   # e.g. a chunk cache that would not go
+                self.warnings.append(f"could not remove the chunks that served: {exc}")
         _prune_empty(os.path.join(self.target, ".relight_cache"))
 
     def rollback(self) -> None:
@@ -416,17 +432,31 @@ class ChangedMeanwhile(RuntimeError):
 
 
 def _undo(stage: str, target: str, entries: list, retired: list) -> None:
+    """Put ``target`` back as it was before the swap. Every step is a rename that leaves the
+    stage explaining the state, so an undo that is itself interrupted (a kill, a file Windows
+    holds open) can be run again: a new file moved in goes back into the stage (never deleted
+    while the old one may be missing), then the old one comes back from ``.old``."""
     old = os.path.join(stage, OLD)
     for name in list(entries) + list(retired):
         dest = os.path.join(target, name)
-        moved_in = name in entries and not os.path.lexists(os.path.join(stage, name))
+        staged = os.path.join(stage, name)
         kept = os.path.join(old, name)
-        if moved_in and os.path.lexists(dest):
-            _remove(dest)
+        if name in entries and not os.path.lexists(staged) and os.path.lexists(dest) and (
+                os.path.lexists(kept) or name not in _previous(stage)):
+            os.rename(dest, staged)          # the new file, back into the stage
         if os.path.lexists(kept) and not os.path.lexists(dest):
-            os.rename(kept, dest)
+            os.rename(kept, dest)            # the old file, back into place
     _fsync_dir(target)
     shutil.rmtree(stage, ignore_errors=True)
+
+
+def _previous(stage: str) -> set:
+    """Names the journal says existed in the target before the swap (``existed``)."""
+    try:
+        with open(os.path.join(stage, JOURNAL), encoding="utf-8") as fh:
+            return set(json.load(fh).get("existed", []))
+    except (OSError, ValueError):
+        return set()
 
 
 def recover(stage: str) -> str:
@@ -441,6 +471,9 @@ def recover(stage: str) -> str:
     if j and int(j.get("format_version", 1)) > versions.version_of(FORMAT):
         return "left"   # a newer version's journal: not ours to interpret
     if not j or j.get("state") not in ("swapping", "swapped", "committed"):
+        old = os.path.join(stage, OLD)
+        if os.path.isdir(old) and os.listdir(old):
+            return "left"   # old files without a readable journal: for a person to look at
         shutil.rmtree(stage, ignore_errors=True)
         return "removed"
     if j["state"] == "committed" or (
@@ -463,10 +496,10 @@ _LEGACY = (re.compile(r"^\..+\.(\d+)-[0-9a-f]{8}\.tmp(\.[A-Za-z0-9]+)*$"),
            re.compile(r"^\..+\.(\d+)\.tmp\.json$"))
 
 
-def _debris_owner(name: str):
+def _debris_owner(name: str, legacy: bool = True):
     """(host or None, pid) when ``name`` is a temporary name of this tool, else None."""
     own = atomic.owner_of(name)
-    if own is not None:
+    if own is not None or not legacy:
         return own
     for rx in _LEGACY:
         m = rx.match(name)
@@ -495,7 +528,7 @@ def sweep(folder: str, stages: bool = True) -> dict:
         except OSError:
             continue
         for name in names:
-            owner = _debris_owner(name)
+            owner = _debris_owner(name, legacy=stages)   # (old names: only in our folders)
             if owner is None:
                 continue
             h, pid = owner

@@ -339,6 +339,11 @@ class TransportStore:
         self._tmp = None
         return final
 
+    def close(self) -> None:
+        """Drop this object's memory map of T (it reopens on the next read). On Windows a file
+        that is mapped cannot be renamed: a bake closes its stores before they are swapped in."""
+        self._array = None
+
     def abort(self) -> None:
         """Drop a store that is being written or not yet committed: nothing is left behind."""
         self._array = None

@@ -25,6 +25,16 @@ CALIBRATION = (48, 96)
 ESTIMATE_FROM = 512
 
 
+def wanted(settings, client=None, env: str | None = None):
+    """:func:`estimate` when a bake should be estimated before it starts (at
+    :data:`ESTIMATE_FROM` texels across or more, not on Dask workers; ``env``, the value of
+    ``$RELIGHT_ESTIMATE``: "1" always, "0" never), else None: what ``bake_job`` takes as its
+    ``estimator``."""
+    if env == "1" or (env != "0" and settings.resolution >= ESTIMATE_FROM and client is None):
+        return estimate
+    return None
+
+
 def calibrate(scene, objects, settings, truth: int, truth_samples: int):
     """Generator: the calibration bakes; returns the stage costs (:func:`.est.fit_costs`) and
     the seconds the calibration took."""
@@ -76,8 +86,8 @@ def estimate(scene, objects, settings, truth: int = 4, truth_samples: int = 256)
         viewport = "pca"
     if viewport == "transport":
         gpu = len(objects) * sp.atlas_layout_bytes(dset.size, settings.resolution)[1]
-    else:   # eigen-textures in half floats, three per RGBA-less image
-        gpu = len(objects) * (-(-k // 3)) * 3 * P * 2
+    else:   # eigen-textures in half floats, three per image, uploaded as RGBA
+        gpu = len(objects) * (-(-k // 3)) * 4 * P * 2
     out = {"seconds": {k2: round(v, 2) for k2, v in seconds.items()},
            "bake": round(seconds["bake"], 2), "total": round(seconds["total"], 2),
            "disk_bytes": int(disk), "ram_bytes": int(ram),

@@ -501,7 +501,10 @@ def retire_globs(objects) -> tuple:
     out = []
     for o in objects:
         safe = atomic.safe_name(o.name)
-        out += [f"{safe}_preview_*", f"{safe}_indirect.exr", f"{safe}_indirect_atlas.exr",
+        out += [f"{safe}_preview_{part}" for part in (
+                    "eigen.exr", "tables.exr", "sparse_index.exr", "sparse_weights.exr",
+                    "transport.png", "transport.json")]
+        out += [f"{safe}_indirect.exr", f"{safe}_indirect_atlas.exr",
                 f"{safe}_transport_model.npz", f"{safe}_transport_steerable.exr"]
     return tuple(out) + (f"{atomic.safe_name(objects[0].name)}_compare.png",)
 
@@ -608,14 +611,14 @@ def _with_eta(gen, started: float, total_seconds: float):
         from ...lt_addon.transport.estimate import readable_seconds
 
         msg = step.message if step.message.startswith("warning:") else \
-            f"{step.message} (about {readable_seconds(left)} left in all)"
+            f"{step.message} (about {readable_seconds(left)} of the bake left)"
         yield Progress(step.done, step.total, msg)
 
 
 def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *,
              truth: int = 4, truth_samples: int = 256, target_error: float | None = None,
              preview: bool = True, compare: bool = True, resume: bool = True, client=None,
-             blend_path: str | None = None, estimate: bool | None = None):
+             blend_path: str | None = None, estimator=None):
     """The whole ``bake-textures --method transport`` verb as one generator: optional pilot
     (``target_error``), the bake, Cycles truths at held-out lights, files, preview and -- with
     ``truth``, a preview and ``compare`` and a scene camera -- ``<object>_compare.png`` (the
@@ -644,13 +647,9 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
         settings = replace(settings, directions=chosen["chosen_directions"], tol=chosen["tol"])
         figures["target_error"] = chosen
         truth = max(truth, 4)
-    from .estimate import ESTIMATE_FROM
-
     bake = bake_transport_textures(scene, objects, settings, out_dir, resume, client, blend_path)
-    if estimate or (estimate is None and settings.resolution >= ESTIMATE_FROM and client is None):
-        from .estimate import estimate as predict   # a large bake: its cost, before it starts
-
-        e = yield from predict(scene, objects, settings, truth, truth_samples)
+    if estimator is not None:   # (.estimate.estimate: the bake's cost, before it starts)
+        e = yield from estimator(scene, objects, settings, truth, truth_samples)
         figures["estimate"] = {k: v for k, v in e.items() if k != "lines"}
         for line in e["lines"]:
             yield Progress(1, 1, line)
@@ -688,12 +687,16 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
     wall = round(time.perf_counter() - started, 3)
     for rep in reports:   # the wall time of everything the verb did, in the file too
         rep["timings"]["wall_total"] = wall
-        if "estimate" in rep:   # how good the prediction was
+        if "estimate" in rep and not rep.get("chunks_reused"):   # how good the prediction was
             rep["estimate"]["measured_bake_seconds"] = rep["timings"].get("bake_total")
             rep["estimate"]["measured_over_estimated"] = round(
                 rep["timings"].get("bake_total", 0.0) / max(rep["estimate"]["bake"], 1e-9), 3)
         atomic.write_json(rep["report"], {k: v for k, v in rep.items() if k != "report"},
                           default=float)
+    for b in result.objects:   # no memory map of T stays open for the swap (Windows)
+        if b.store is not None:
+            b.store.close()
+        b.store = None
     return TextureBakeOutput(reports, [b.model for b in result.objects])
 
 

@@ -304,6 +304,9 @@ def run(argv: list[str]) -> int:
         return EXIT_USAGE
     except SystemExit as exc:  # --help / --version
         return int(exc.code or 0) if not isinstance(exc.code, str) else EXIT_USAGE
+    except KeyboardInterrupt:   # (a bake's own Ctrl-C is handled by run_job: exit 130 there)
+        print("relight: cancelled", file=sys.stderr)
+        return 130
     except Exception as exc:   # a fault (disk, permission, a bug): one line, the rest in a log
         from ...lt_addon.errors import one_line
 
@@ -535,14 +538,16 @@ def _cmd_bake_texture_transport(args) -> int:
             if os.path.exists(rp):
                 raise CliError(f"a bake of {o.name} exists in {out_dir} (use --force to "
                                "replace it)")
+    from ..bakes.estimate import wanted as estimate_wanted
+
     out = run_bake(
         args, "bake-textures", path,
         lambda client, stage: tx.bake_job(bpy.context.scene, objects, settings, stage,
                                    truth=args.truth, truth_samples=args.truth_samples,
                                    target_error=args.target_error, compare=not args.no_compare,
                                    resume=not args.no_resume, client=client, blend_path=path,
-                                   estimate={"1": True, "0": False}.get(
-                                       os.environ.get("RELIGHT_ESTIMATE", ""))),
+                                   estimator=estimate_wanted(
+                                       settings, client, os.environ.get("RELIGHT_ESTIMATE"))),
         out_dir=out_dir, retire=tx.retire_globs(objects),
         kept=(f"; the finished chunks are kept in {os.path.join(out_dir, tx.CACHE_FOLDER)} and "
               "the same command resumes from them"))
@@ -612,8 +617,6 @@ def _cmd_bake_chunk(args) -> int:
     if not 0 <= args.chunk < n:
         raise CliError(f"--chunk must be in 0..{n - 1} ({dset.size} directions in chunks of "
                        f"{tx.CHUNK_DIRECTIONS}), got {args.chunk}")
-    if args.threads < 0:
-        raise CliError(f"--threads must be >= 0, got {args.threads}")
     out_dir = check_output_dir(args.out, path)
     objects = open_objects(path, args.object)
     try:
@@ -636,7 +639,7 @@ def _cmd_bake_chunk(args) -> int:
         t0 = time.perf_counter()
         try:
             cycles = bake_directions(bpy.context.scene, objects, settings, start, stop, cache,
-                                     args.threads)
+                                     device.threads)
         except BakeInputError as exc:
             raise CliError(str(exc)) from None
     print(f"chunk {args.chunk} of {n}: directions {start}-{stop - 1} baked on "

@@ -5,6 +5,7 @@ progress and Ctrl-C, and :func:`run_bake`, the tail every bake verb ends with.""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 
@@ -115,8 +116,7 @@ def add_device_option(p) -> None:
                         "report records the device (CPU and GPU bakes of one seed are different "
                         "sample sets: a resumed bake on another device bakes its chunks again, "
                         "unless --mix-devices)")
-    p.add_argument("--threads", type=int, metavar="N",
-                   default=int(os.environ.get("RELIGHT_BAKE_THREADS", "0") or 0),
+    p.add_argument("--threads", type=int, metavar="N", default=None,
                    help="CPU threads of the bake: Cycles, the ray engine and the fit's BLAS "
                         "(default: $RELIGHT_BAKE_THREADS, else 0 = every core). BLAS is kept at "
                         "one thread while Cycles renders or rays are cast either way")
@@ -141,7 +141,13 @@ def bake_device(args, verb: str):
         device = cycles_device.resolve(args.device, bpy.context.scene)
     except cycles_device.DeviceError as exc:
         raise CliError(str(exc)) from None
-    threads = getattr(args, "threads", 0) or 0
+    threads = getattr(args, "threads", None)
+    if threads is None:
+        text = os.environ.get("RELIGHT_BAKE_THREADS", "").strip() or "0"
+        try:
+            threads = int(text)
+        except ValueError:
+            raise CliError(f"$RELIGHT_BAKE_THREADS must be a whole number, got {text!r}") from None
     if threads < 0:
         raise CliError(f"--threads takes 0 (every core) or a count, got {threads}")
     if getattr(args, "mix_devices", False) or threads:
@@ -410,20 +416,45 @@ def _bake_transaction(args, verb, path, make_job, client, device, out_dir, kept,
         except Exception as exc:
             txn.rollback()
             raise BakeFailed(exc, out_dir, path, txn.stage) from exc
-        try:   # check; the new .blend under a temporary name; then only renames
-            txn.prepare()
-            blend_files.move_staged_paths(txn.stage, txn.target)
-            out = txn.final_result(out)
-            with atomic.atomic_path(path) as tmp:
-                blend_files.save_copy(tmp)
-                faults.checkpoint("blend")
-                txn.swap(blend_tmp=tmp)
-        except ChangedMeanwhile as exc:
-            raise CliError(f"{exc}{'' if args.no_resume else kept}") from None
-        except Exception as exc:   # a fault: undone (the with block), told in one line
-            txn.rollback()
-            raise BakeFailed(exc, out_dir, path, txn.stage) from exc
+        with _ctrl_c_deferred(verb):   # a commit (or its undo) is not interrupted half-way
+            try:   # check; the new .blend under a temporary name; then only renames
+                txn.prepare()
+                blend_files.move_staged_paths(txn.stage, txn.target)
+                out = txn.final_result(out)
+                with atomic.atomic_path(path) as tmp:
+                    blend_files.save_copy(tmp)
+                    faults.checkpoint("blend")
+                    txn.swap(blend_tmp=tmp)
+            except ChangedMeanwhile as exc:
+                raise CliError(f"{exc}{'' if args.no_resume else kept}") from None
+            except Exception as exc:   # a fault: undone here, told in one line
+                txn.rollback()
+                raise BakeFailed(exc, out_dir, path, txn.stage) from exc
+            txn.finish()
+    for warning in getattr(txn, "warnings", []):
+        print(f"relight: warning: {warning}", file=sys.stderr)
     return out
+
+
+@contextlib.contextmanager
+def _ctrl_c_deferred(verb: str):
+    """Ctrl-C (SIGINT) held while the block runs, then said: the commit of a bake is a few
+    renames and its undo, which must not stop half-way."""
+    import signal
+
+    asked = []
+    try:
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: asked.append(True))
+    except ValueError:   # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if asked:
+            print(f"{verb}: Ctrl-C came while the bake was being committed; it was finished "
+                  "first (undone if it failed)", file=sys.stderr)
 
 
 class BakeFailed(CliError):

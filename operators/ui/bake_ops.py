@@ -172,17 +172,16 @@ class ModalBake:
         with the committed paths."""
         from ..base import blend_files
 
-        txn, self.txn = self.txn, None
+        txn = self.txn
         if txn is None:
             return result
-        try:
-            txn.commit()
-            blend_files.move_staged_paths(txn.stage, txn.target)
-            result = txn.final_result(result)
-        except BaseException:
-            txn.rollback()
-            raise
+        txn.commit()   # a failure leaves self.txn: the caller's _abort undoes it all
+        blend_files.move_staged_paths(txn.stage, txn.target)
+        result = txn.final_result(result)
+        self.txn = None
         txn.finish()
+        for warning in getattr(txn, "warnings", []):
+            self.report({"WARNING"}, warning)
         return result
 
     def _external(self, context, verb: str, args: list):
@@ -325,8 +324,11 @@ class RELIGHT_OT_bake_textures(ModalBake, bpy.types.Operator):
                                       args + ["--truth", str(props.truth_lights)])
             stage = self._make_out_dir(props)
             self.txn.retire_globs = list(tx.retire_globs(objects))
+            from ..bakes.estimate import wanted
+
+            # a large bake is estimated first: its cost in the status line, the time left
             return tx.bake_job(context.scene, objects, self.settings, stage,
-                               truth=props.truth_lights)
+                               truth=props.truth_lights, estimator=wanted(self.settings))
         check_bakeable(obj)
         self.settings = settings_from_scene(props)
         self.settings.validate()

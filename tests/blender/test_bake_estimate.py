@@ -24,8 +24,10 @@ def test_the_estimate_is_within_30_percent_of_the_bake_it_predicts(tmp_path):
     samples.build("bumps", scene, "test")
     obj = bpy.data.objects["Bumps"]
     settings = tx.settings_from_preset("draft", resolution=256)
+    from relightable_textures.operators.bakes.estimate import estimate
+
     out = run(tx.bake_job(scene, [obj], settings, str(tmp_path), truth=0, preview=False,
-                          compare=False, resume=False, estimate=True))
+                          compare=False, resume=False, estimator=estimate))
     e = out.reports[0]["estimate"]
     assert set(e["seconds"]) >= {"direct", "indirect", "fit", "other"}
     assert e["calibration_seconds"] > 0 and e["disk_bytes"] > 0

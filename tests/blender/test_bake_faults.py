@@ -297,12 +297,13 @@ def test_every_bake_commits_as_a_unit(tmp_path, kind, stage):
     assert _debris(out) == [] and set(expected) <= set(os.listdir(out))
 
 
-@pytest.mark.parametrize("stage", ["write", "preview"])
+@pytest.mark.parametrize("stage", ["write", "preview", "commit"])
 def test_the_panel_reports_a_failed_bake_in_one_line_and_keeps_the_previous(
         fresh_scene, tmp_path, monkeypatch, stage):
-    """The panel's Bake (bpy.ops, in process) failing while writing or after installing its
-    preview: one error line with the log, the folder byte for byte as before, no debris, and
-    the object's bake record and preview images back on the previous bake's files."""
+    """The panel's Bake (bpy.ops, in process) failing while writing, after installing its
+    preview, or at the commit's check (a folder where the report goes): one error line with
+    the log, the folder byte for byte as before, no debris, and the object's bake record and
+    preview images back on the previous bake's files."""
     import bpy
 
     import relightable_textures
@@ -322,12 +323,19 @@ def test_the_panel_reports_a_failed_bake_in_one_line_and_keeps_the_previous(
             o.select_set(o == obj)
         bpy.context.view_layer.objects.active = obj
         assert bpy.ops.relight.bake_textures() == {"FINISHED"}
-        files, record = _files(tmp_path / "bk"), object_bakes(obj)
-        monkeypatch.setenv("RELIGHT_FAULT", f"{stage}:raise")
+        record = object_bakes(obj)
+        if stage == "commit":
+            (tmp_path / "bk" / "Bumps_texture_report.json").unlink()
+            (tmp_path / "bk" / "Bumps_texture_report.json").mkdir()
+            want = "Bake failed: a folder is in the way where a file goes"
+        else:
+            monkeypatch.setenv("RELIGHT_FAULT", f"{stage}:raise")
+            want = f"Bake failed: injected fault at the {stage} stage"
+        files = _files(tmp_path / "bk")
         with pytest.raises(RuntimeError) as err:
             bpy.ops.relight.bake_textures()
         line = str(err.value).strip().splitlines()[-1]
-        assert f"Bake failed: injected fault at the {stage} stage" in line
+        assert want in line, line
         assert f"nothing was replaced in {tmp_path / 'bk'}" in line and "(details: " in line
         assert _files(tmp_path / "bk") == files and _debris(tmp_path / "bk") == []
         assert object_bakes(obj) == record

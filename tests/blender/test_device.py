@@ -212,4 +212,5 @@ def test_cli_threads_is_checked_and_recorded(tmp_path):
                 "--out", tmp_path / "o")
     assert r.returncode == 0, r.stderr[-2000:]
     rep = json.loads((tmp_path / "o" / "Bumps_texture_report.json").read_text())
-    assert rep["device"]["threads"]["cycles"] == 1 and rep["direct"].get("threads", 1) == 1
+    assert rep["device"]["threads"]["cycles"] == 1
+    assert rep["direct"]["engine"] == "rays" and rep["direct"]["threads"] == 1

@@ -94,3 +94,20 @@ def test_a_chunk_of_the_wrong_shape_dtype_or_range_is_baked_again(tmp_path):
     assert cache.rejected == 3 and not os.path.exists(cache.path("shape"))
     np.testing.assert_array_equal(cache.get("ok", **want), good)
     assert cache.reused == 1
+
+
+def test_an_adopted_chunk_of_another_device_is_reused_only_while_mixing(tmp_path):
+    """--mix-devices moves another device's chunks into this key's folder with a note of where
+    they came from: reused and counted while mixing; a later run without it bakes them again
+    and says whose they were."""
+    root = str(tmp_path / "c")
+    gpu = ChunkCache(root, {"k": 1, "device": "GPU:OPTIX"})
+    gpu.put("direct_00000", np.ones((1, 2, 4), np.float16))
+    mixed = ChunkCache(root, {"k": 1, "device": "CPU"})
+    mixed.prune_others(adopt_devices=True)
+    assert mixed.get("direct_00000") is not None and mixed.mixed_devices == {"GPU:OPTIX": 1}
+    later = ChunkCache(root, {"k": 1, "device": "CPU"})
+    later.prune_others()
+    assert later.get("direct_00000") is None and later.other_devices == {"GPU:OPTIX": 1}
+    later.put("direct_00000", np.zeros((1, 2, 4), np.float16))   # baked here now: its own
+    assert later.get("direct_00000") is not None and later.other_devices == {"GPU:OPTIX": 1}

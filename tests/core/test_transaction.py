@@ -64,6 +64,9 @@ def test_a_failure_anywhere_leaves_the_previous_bake_byte_for_byte(tmp_path, whe
             if where == "check":   # a truncated array: caught before anything moves
                 with open(txn.path("A_t.npy"), "r+b") as fh:
                     fh.truncate(100)
+                with pytest.raises(ValueError, match="A_t.npy is truncated"):
+                    txn.commit()
+                raise RuntimeError("the check refused it")
             txn.commit()
             raise RuntimeError("the .blend could not be saved")   # after the swap
     assert _state(out) == before
@@ -199,3 +202,29 @@ def test_rewrite_paths_maps_every_spelling_of_a_staged_path(tmp_path):
         "d": "unrelated"}
     assert tr.target_of(stage) == str(tmp_path / "bk")
     assert tr.target_of(str(tmp_path / "bk")) == str(tmp_path / "bk")
+
+
+def test_an_undo_that_is_itself_interrupted_can_be_run_again(tmp_path, monkeypatch):
+    """The swap finished, then its undo stops half-way (a rename fails: Windows holds a file
+    open, or a kill): running the undo again -- the next run's recovery -- restores the
+    previous bake byte for byte, never deleting an old file it already put back."""
+    out = tmp_path / "bk"
+    before = _previous_bake(out)
+    txn = tr.BakeTransaction(str(out), retire=["A_preview_*"]).begin()
+    _new_bake(txn.stage)
+    np.save(txn.path("A_new.npy"), np.ones(3))
+    txn.commit()
+    real, calls = os.rename, []
+
+    def flaky(src, dst):
+        calls.append(src)
+        if len(calls) == 3:
+            raise PermissionError(13, "held open", src)
+        real(src, dst)
+
+    monkeypatch.setattr(tr.os, "rename", flaky)
+    with pytest.raises(PermissionError):
+        tr._undo(txn.stage, txn.target, txn.entries, txn.retired)
+    monkeypatch.setattr(tr.os, "rename", real)
+    assert tr.recover(txn.stage) == "rolled back"
+    assert _state(out) == before
