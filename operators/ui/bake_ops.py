@@ -601,6 +601,50 @@ class RELIGHT_OT_discard_chunks(bpy.types.Operator):
         return {"FINISHED"}
 
 
-CLASSES = (RELIGHT_OT_bake_textures, RELIGHT_OT_bake_transport, RELIGHT_OT_analyze,
+#: Scene property holding the last estimate's lines, shown in the panel.
+LAST_ESTIMATE_KEY = "relight_last_estimate"
+
+
+class RELIGHT_OT_estimate(ModalBake, bpy.types.Operator):
+    """Predict what Bake Relightable Texture would cost with these settings: time per stage,
+    disk, memory and the viewport's GPU memory, from two small calibration bakes on this
+    machine (a few seconds; nothing is written; Esc cancels)"""
+
+    bl_idname = "relight.estimate"
+    bl_label = "Estimate"
+    bl_options = {"REGISTER"}
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        return (obj is not None and obj.type == "MESH"
+                and context.scene.relight.method == "transport")
+
+    def _job(self, context):   # here, on the panel's Device (Run On does not apply)
+        from ..base import cycles_device
+
+        device = cycles_device.resolve(context.scene.relight.device, context.scene)
+        return cycles_device.stepped(self._prepare(context), device)
+
+    def _prepare(self, context):
+        from ..bakes.estimate import estimate
+        from .properties import transport_settings_from_scene
+
+        props = context.scene.relight
+        objects = transport_objects(context)
+        for o in objects:
+            check_bakeable(o)
+        settings = transport_settings_from_scene(props)
+        settings.validate()
+        return estimate(context.scene, objects, settings, props.truth_lights)
+
+    def _finish(self, context, result):
+        for line in result["lines"]:
+            self.report({"INFO"}, line.strip())
+        context.scene[LAST_ESTIMATE_KEY] = "\n".join(ln.strip() for ln in result["lines"])
+
+
+CLASSES = (RELIGHT_OT_bake_textures, RELIGHT_OT_estimate, RELIGHT_OT_bake_transport,
+           RELIGHT_OT_analyze,
            RELIGHT_OT_show_preview, RELIGHT_OT_follow_sun, RELIGHT_OT_remove_preview,
            RELIGHT_OT_discard_chunks)

@@ -94,7 +94,13 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
             if n > 1:
                 layout.label(text=f"{n} selected meshes are baked together", icon="INFO")
             _run_on(layout, props)
-            layout.operator("relight.bake_textures", icon="RENDER_STILL")
+            row = layout.row(align=True)
+            row.operator("relight.bake_textures", icon="RENDER_STILL")
+            row.operator("relight.estimate", icon="TIME")
+            from .bake_ops import LAST_ESTIMATE_KEY
+
+            for line in str(context.scene.get(LAST_ESTIMATE_KEY, "")).splitlines():
+                layout.label(text=line, icon="TIME")
             _kept_chunks(layout, context, "texture")
             _last_bake(layout, context.scene)
             return

@@ -46,3 +46,30 @@ def test_cli_estimate_prints_the_cost_and_bakes_nothing(tmp_path):
     # the disk figure is T's own formula: 400 directions x 2048^2 texels x 2 bytes
     assert "disk 3.1 GiB for T" in second and "of GPU memory" in second
     assert not (tmp_path / "o").exists() and "relight: error" not in r.stderr
+
+
+def test_the_panel_estimates_the_bake_and_shows_the_figures(tmp_path):
+    """The panel's Estimate (bpy.ops, in process): the lines in the scene for the panel, and
+    nothing written to the output folder."""
+    import bpy
+
+    import relightable_textures
+    from relightable_textures import samples
+
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = bpy.context.scene
+    samples.build("bumps", scene, "test")
+    obj = bpy.data.objects["Bumps"]
+    relightable_textures.register()
+    try:
+        props = scene.relight
+        props.preset = "draft"
+        props.resolution, props.device = 1024, "cpu"
+        props.output_dir = str(tmp_path / "o") + os.sep
+        bpy.context.view_layer.objects.active = obj
+        assert bpy.ops.relight.estimate() == {"FINISHED"}
+        lines = scene["relight_last_estimate"].splitlines()
+        assert lines[0].startswith("estimate for 1 object(s) at 1024^2: about ")
+        assert "GPU memory" in lines[1] and not (tmp_path / "o").exists()
+    finally:
+        relightable_textures.unregister()
