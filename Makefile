@@ -91,7 +91,9 @@ test-core: $(STAMP)
 ##   distributed and resumed bakes (1, 2, 4 local workers), the horizon-model experiment and
 ##   the material edits' transfer tensors on the demo room (~25 min of it, ~20 more for the
 ##   metal edits of glossy anchors), and the exports
-##   of a balanced bumps bake (lightmaps, RTI, equal-coefficient comparison; ~5 min)
+##   of a balanced bumps bake (lightmaps, RTI, equal-coefficient comparison; ~5 min), the
+##   thread settings of a bake, the up-front estimate against the bake at 256^2 and 512^2, and
+##   Mahajan's figures on a 65k-texel transport texture
 bench: $(STAMP)
 	mkdir -p $(OUT)/bench $(BLENDER_USER_RESOURCES)
 	$(PY) benchmarks/bench_transport_textures.py --out $(OUT)/bench
@@ -107,6 +109,9 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_materials.py --size demo
 	$(PY) benchmarks/bench_materials.py --size demo --anchors roughness:0.4,0.8 \
 	  --settings hemi:400:1.5/hemi:128/hemi:8@16
+	$(PY) benchmarks/bench_threads.py --out $(OUT)/bench
+	$(PY) benchmarks/bench_estimate.py
+	$(PY) benchmarks/bench_texel_cpca.py --out $(OUT)/bench
 
 ## bench-full: the standard (demo-size) sweeps behind the tables in docs/ (results.md and the
 ##   method pages) and the presets (~2 h): writes docs/bench (presets.json among it: copy it over
