@@ -43,7 +43,7 @@ MODELS = ("pca", "blocks", "steerable", "none")
 
 #: What the viewport shows (``auto``: T itself when its atlas fits, else the PCA; see
 #: :func:`..lt_addon.transport.sparse_tables.choose_viewport`).
-VIEWPORTS = ("auto", "transport", "pca")
+VIEWPORTS = ("auto", "transport", "blocks", "pca")
 
 
 INDIRECT = ("steerable", "none")
@@ -91,8 +91,10 @@ class TransportTextureSettings:
     count for ``pca``). ``sun_angle``: the sun size (degrees) the viewport tables are made
     for (the NumPy relight takes any size). ``viewport``: what the live preview shows --
     ``transport`` relights from T itself (a few baked directions per pixel through sparse
-    kernel tables), ``pca`` from the fitted PCA, ``auto`` T when its preview atlas fits
-    :data:`..lt_addon.transport.sparse_tables.AUTO_BYTES`, else the PCA.
+    kernel tables), ``blocks`` from a PCA per texel block (:mod:`.block_viewport`), ``pca``
+    from the fitted global PCA, ``auto`` T when its preview atlas fits ``gpu_budget`` (MiB),
+    else the blocks, or the PCA when it is measured closer to T
+    (:func:`..lt_addon.transport.sparse_tables.choose_viewport`, :func:`fit_viewport`).
     """
 
     directions: str = setting(
@@ -152,13 +154,21 @@ class TransportTextureSettings:
              "follows low suns more closely than 32; 4x the tabulation time)")
     seed: int = setting(0, lo=0, help="Cycles seed")
     viewport: str = setting("auto", label="Viewport", choices=(
-        ("auto", "Auto", "T itself when its atlas takes at most 256 MiB (400 directions at "
-         "256^2: 37 MiB; 1600 directions 140 MiB), else the PCA"),
+        ("auto", "Auto", "T itself when its atlas fits the GPU budget (400 directions at "
+         "256^2: 37 MiB; 1600 directions 140 MiB), else a PCA per texel block, or the global PCA "
+         "when it is measured closer to T"),
         ("transport", "Transport (T)", "Relight from T itself: a few baked directions per "
          "pixel through sparse kernel tables; keeps cast shadows on large receivers; an atlas "
          "of every direction in memory"),
+        ("blocks", "Blocks (CPCA)", "A PCA per square block of texels, block size and "
+         "components chosen within the GPU budget: keeps cast shadows at large texture sizes "
+         "with few lookups per pixel"),
         ("pca", "PCA", "The fitted PCA's eigen-textures: small, smooths cast shadows on large "
          "receivers")), help="What the live preview shows")
+    gpu_budget: int = setting(
+        512, lo=8, hi=1 << 20, label="GPU Budget", metavar="MIB",
+        help="MiB of GPU memory the viewport may take: auto shows T itself when its atlas fits, "
+             "and the block viewport chooses its block size and components within it")
 
     def validate(self):
         """Check ranges; returns the DirectionSet."""
@@ -226,6 +236,8 @@ class ObjectBake:
     model: object = None                    # TexturePCA / BlockPCA / SteerableTexture / None
     fit_seconds: float = 0.0
     store: object = None                    # the TransportStore (temporary until written)
+    view: object = None                     # the BlockViewport when the viewport shows blocks
+    viewport: dict = None                   # what the viewport shows and why (the report's)
 
 
 @dataclass
@@ -253,6 +265,51 @@ def fit_model(store, settings: TransportTextureSettings, albedo):
     if settings.model == "steerable":
         return steerable_from_store(store, albedo, order=settings.components or 7)
     return None
+
+
+def fit_viewport(store, settings: TransportTextureSettings, model, lights=TRUTH_LIGHTS):
+    """What the live preview shows for one object's store: ``(BlockViewport or None, info)``.
+
+    The block viewport is fitted when the settings resolve to it
+    (:func:`.sparse_tables.choose_viewport`): its block side and components are the candidate
+    with the lowest residual on sampled regions of T within the GPU budget
+    (:func:`.block_viewport.choose`). Under ``auto`` the global PCA (``model``) is kept instead
+    when it is measured closer to T at the held-out lights (direct light, the preview's sun).
+    ``info`` is the report's ``viewport`` entry: what is shown, why, and the figures."""
+    from . import block_viewport as bv
+    from . import sparse_tables as sp
+
+    if settings.model != "pca":
+        return None, {"shows": "none", "why": f"model {settings.model!r} has no live preview"}
+    budget = int(settings.gpu_budget) << 20
+    shows, why = sp.choose_viewport(settings.viewport, store.directions.size, store.resolution,
+                                    budget_mib=settings.gpu_budget, table_size=settings.table_size)
+    info = {"shows": shows, "why": why, "gpu_budget_mib": settings.gpu_budget}
+    if shows != "blocks":
+        return None, info
+    t0 = time.perf_counter()
+    choice = bv.choose(store, settings.table_size, budget, seed=settings.seed)
+    view = bv.fit(store, choice["block"], choice["k"], seed=settings.seed)
+    rows = []
+    for az, el in lights:
+        idx, w = tt.sun_weights(store.directions, direction_from_az_el(az, el),
+                                settings.sun_angle, settings.kernel)
+        full = store.relight(idx, w)
+        rows.append((rel_rmse(view.relight_weights(idx, w), full),
+                     rel_rmse(model.relight(idx, w), full)))
+    blocks_err = float(np.sqrt(np.mean([r[0] ** 2 for r in rows])))
+    pca_err = float(np.sqrt(np.mean([r[1] ** 2 for r in rows])))
+    g = view.gpu_bytes(settings.table_size)
+    info.update({**view.summary(), "shows": "blocks", "choice": choice,
+                 "gpu_mib": round(g["total_bytes"] / 2**20, 1),
+                 "lookups_per_pixel": bv.lookups_per_pixel(view.k),
+                 "blocks_vs_T": round(blocks_err, 4), "pca_vs_T": round(pca_err, 4),
+                 "fit_seconds": round(time.perf_counter() - t0, 3)})
+    if settings.viewport == "auto" and pca_err < blocks_err:
+        info.update(shows="pca", why=f"auto: the PCA is closer to T ({pca_err:.3f}) than the "
+                                     f"block viewport ({blocks_err:.3f})")
+        return None, info
+    return view, info
 
 
 def steerable_from_store(store, albedo, order: int = 7):
@@ -391,15 +448,17 @@ def model_fidelity(bake: ObjectBake, store, settings, lights=TRUTH_LIGHTS) -> di
     model = bake.model
     if model is None or not (hasattr(model, "V") or hasattr(model, "n_blocks")):
         return None                     # none, or the steerable basis (no sparse relight)
-    tables = viewport_tables(settings, store)
-    viewport = settings.model if tables is None else "transport"
+    view = getattr(bake, "view", None)
+    tables = None if view is not None else viewport_tables(settings, store)
+    viewport = "blocks" if view is not None else settings.model if tables is None else "transport"
     rows = []
     for az, el in lights:
         d = direction_from_az_el(az, el)
         idx, w = tt.sun_weights(store.directions, d, settings.sun_angle, settings.kernel)
         full = store.relight(idx, w)
         row = {"azimuth": az, "elevation": el, "model": rel_rmse(model.relight(idx, w), full)}
-        row["rel"] = (row["model"] if tables is None else
+        row["rel"] = (rel_rmse(view.relight_weights(idx, w), full) if view is not None else
+                      row["model"] if tables is None else
                       rel_rmse(viewport_direct(store, tables, d), full))
         rows.append(row)
     head = float(np.sqrt(np.mean([r["rel"] ** 2 for r in rows])))
@@ -416,7 +475,9 @@ def model_fidelity(bake: ObjectBake, store, settings, lights=TRUTH_LIGHTS) -> di
                        "be closer to Cycles (bumps demo, 2-degree Sun: 0.101 vs T's 0.103, "
                        "while 0.056 apart). A global PCA loses cast shadows on large receivers "
                        "(statue demo's ground, PCA 96: 0.064, 0.102 at 10 degrees elevation); "
-                       "the transport viewport keeps them (bumps demo, 64^2 tables: 0.005)"}
+                       "the transport viewport keeps them (bumps demo, 64^2 tables: 0.005), "
+                       "and so does the block viewport (bumps demo 256^2, 8^2 blocks of 24 "
+                       "components: 0.025)"}
 
 
 def model_summary(model, S: int) -> dict:
@@ -428,7 +489,7 @@ def model_summary(model, S: int) -> dict:
     return {"kind": "steerable", "order": model.order}
 
 
-def preview_cost(model, settings, store=None) -> dict:
+def preview_cost(model, settings, store=None, view=None) -> dict:
     """Per-pixel cost of the live preview of ``model`` as ``settings.viewport`` shows it (the
     transport viewport: 4 table texels x (2 K / 3 table lookups + K atlas lookups) + the
     albedo, K the taps its tables need for the preview's sun size: 21 lookups for a point sun,
@@ -436,6 +497,15 @@ def preview_cost(model, settings, store=None) -> dict:
     if not hasattr(model, "preview_cost"):
         return {}
     extra = settings.indirect_order ** 2 if settings.bounces else 0
+    if view is not None:
+        from . import block_viewport as bv
+
+        g = view.gpu_bytes(settings.table_size)
+        return {"viewport": "blocks", "block": view.block, "components": view.k,
+                "texture_lookups_per_pixel": bv.lookups_per_pixel(view.k) + extra,
+                "multiply_adds_per_texel": 3 * -(-view.k // 3),
+                "python_per_light_change": False,
+                "gpu_mib": round(g["total_bytes"] / 2**20, 1)}
     tables = viewport_tables(settings, store) if store is not None else None
     if tables is not None:
         from . import sparse_tables as sp
@@ -479,7 +549,13 @@ def load_bake(report_path: str) -> tuple:
     if "model" in files:
         m = where(files["model"])
         model = SteerableTexture.load(m) if m.endswith(".exr") else tt.load_model(m)
-    return ObjectBake(report["object"], store.path, albedo, indirect, model), store, report
+    view = None
+    if "viewport_blocks" in files:
+        from . import block_viewport as bv
+
+        view = bv.load(where(files["viewport_blocks"]))
+    return ObjectBake(report["object"], store.path, albedo, indirect, model, view=view,
+                      viewport=report.get("viewport")), store, report
 
 
 def write_bundle(result: TransportTextureResult, names: list, out_dir: str,
@@ -512,6 +588,11 @@ def write_bundle(result: TransportTextureResult, names: list, out_dir: str,
             else:
                 files["model"] = base + "_transport_model.npz"
                 tt.save_model(files["model"], b.model, result.directions.spec)
+        if b.view is not None:
+            from . import block_viewport as bv
+
+            files["viewport_blocks"] = base + "_viewport_blocks.npz"
+            bv.save(files["viewport_blocks"], b.view)
         nbytes = {k: os.path.getsize(v) for k, v in files.items()}
         s = result.settings
         store = b.store or tt.TransportStore.open(b.store_path)
@@ -530,7 +611,8 @@ def write_bundle(result: TransportTextureResult, names: list, out_dir: str,
             "bake_calls": result.bake_calls,
             "peak_rss_above_start_mb": round(result.peak_rss_mb, 1),
             "rss_growth_while_streaming_mb": round(result.growth_after_first_mb, 1),
-            "preview_cost": preview_cost(b.model, s, store),
+            "preview_cost": preview_cost(b.model, s, store, b.view),
+            "viewport": b.viewport or {},
             "model_vs_T": model_fidelity(b, store, s),
             **result.chunks,
             **(figures or {}),

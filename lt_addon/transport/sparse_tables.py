@@ -47,10 +47,10 @@ MIN_KEPT = 0.85
 #: 2-degree sun, the four held-out lights of issue 13): the viewport's relight vs T's own was
 #: 0.028 at 32, 0.0047 at 64, 0.0004 at 128 (tabulation 0.2 / 0.5 / 2.0 s).
 TABLE_SIZE = 64
-#: ``auto`` shows T itself when its atlas (three directions per RGB tile, 8 bits) takes at most
-#: this much of Blender's memory (RGBA bytes; the GPU holds the same): 400 directions at 256^2
+#: ``auto`` shows T itself when its atlas (RGBA bytes in Blender's memory; the GPU holds the
+#: same) fits the GPU budget (``--gpu-budget``, MiB, 512 by default): 400 directions at 256^2
 #: take 37 MiB, 1600 directions 140 MiB, 1600 at 512^2 556 MiB.
-AUTO_BYTES = 256 << 20
+DEFAULT_BUDGET_MIB = 512
 
 
 def atlas_layout_bytes(n_directions: int, resolution: int) -> tuple[int, int]:
@@ -63,25 +63,42 @@ def atlas_layout_bytes(n_directions: int, resolution: int) -> tuple[int, int]:
 
 
 def choose_viewport(setting: str, n_directions: int, resolution: int,
-                    max_side: int = 16384) -> tuple[str, str]:
-    """``("transport" | "pca", why)`` for a viewport setting ``auto|transport|pca``.
+                    max_side: int = 16384, budget_mib: float = DEFAULT_BUDGET_MIB,
+                    table_size: int = 32) -> tuple[str, str]:
+    """``("transport" | "blocks" | "pca", why)`` for a viewport setting
+    ``auto|transport|blocks|pca`` and a GPU budget of ``budget_mib``.
 
-    ``transport`` is refused (ValueError with the figure) when the atlas side exceeds
-    ``max_side`` (the usual GPU texture limit)."""
+    ``auto``: T itself when its atlas fits the budget, else the block viewport when a block
+    size fits it (:func:`.block_viewport.candidates`; after the fit the bake keeps the PCA
+    instead when the PCA is measured closer to T), else the PCA. ``transport`` is refused
+    (ValueError with the figure) when the atlas side exceeds ``max_side`` (the usual GPU texture
+    limit), ``blocks`` when not three components per block fit the budget."""
+    from . import block_viewport as bv
+
     side, nbytes = atlas_layout_bytes(n_directions, resolution)
     mib = nbytes / 2**20
+    budget = int(budget_mib * 2**20)
     if setting == "pca":
         return "pca", "asked for"
     if setting == "transport":
         if side > max_side:
             raise ValueError(f"the T preview atlas would be {side} texels across (over "
-                             f"{max_side}); use the PCA viewport or fewer directions")
+                             f"{max_side}); use the block or PCA viewport or fewer directions")
         return "transport", f"asked for ({mib:.0f} MiB atlas)"
+    blocks = bv.candidates(resolution, table_size, budget)
+    if setting == "blocks":
+        if not blocks:
+            raise ValueError(f"the block viewport does not fit {budget_mib:g} MiB of GPU memory "
+                             f"at {resolution}^2 (raise --gpu-budget or use the PCA viewport)")
+        return "blocks", f"asked for (within {budget_mib:g} MiB)"
     if setting != "auto":
-        raise ValueError(f"viewport must be auto, transport or pca, got {setting!r}")
-    if nbytes <= AUTO_BYTES and side <= max_side:
-        return "transport", f"auto: the T atlas takes {mib:.0f} MiB (at most {AUTO_BYTES >> 20})"
-    return "pca", f"auto: the T atlas would take {mib:.0f} MiB (over {AUTO_BYTES >> 20})"
+        raise ValueError(f"viewport must be auto, transport, blocks or pca, got {setting!r}")
+    if nbytes <= budget and side <= max_side:
+        return "transport", f"auto: the T atlas takes {mib:.0f} MiB (at most {budget_mib:g})"
+    if blocks:
+        return "blocks", (f"auto: the T atlas would take {mib:.0f} MiB (over {budget_mib:g}); "
+                          "a PCA per texel block fits")
+    return "pca", f"auto: the T atlas would take {mib:.0f} MiB (over {budget_mib:g})"
 
 
 _TABLES: dict = {}

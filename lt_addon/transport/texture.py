@@ -664,24 +664,40 @@ def disk_grid(size: int) -> np.ndarray:
     return np.stack([x, y], axis=-1)
 
 
+def disk_kernel_matrix(dset: DirectionSet, size: int = 32, sun_angle_deg: float = 0.0,
+                       kernel: str = "linear"):
+    """The sun kernel at each disk texel centre as a sparse (D*D, S) matrix (CSR, float64):
+    row ``i`` holds :func:`sun_weights` of a sun at texel ``i``'s direction (row-major, row 0
+    at y = -1). Texels whose centre lies outside the unit disk (below the horizon) take the
+    nearest disk point on the rim, so bilinear lookups of tables made from it stay continuous."""
+    import scipy.sparse
+
+    xy = disk_grid(size).reshape(-1, 2)
+    r = np.hypot(xy[:, 0], xy[:, 1])
+    inside = np.where(r > 0.999, 0.999 / np.maximum(r, 1e-12), 1.0)
+    dirs = disk_to_hemisphere(xy * inside[:, None])
+    rows, cols, vals = [], [], []
+    for i, d in enumerate(dirs):
+        idx, w = sun_weights(dset, d, sun_angle_deg, kernel)
+        rows.append(np.full(len(idx), i))
+        cols.append(np.asarray(idx, np.int64))
+        vals.append(np.asarray(w, np.float64))
+    return scipy.sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows),
+                                                          np.concatenate(cols))),
+                                   shape=(size * size, dset.size))
+
+
 def coefficient_tables(V, dset: DirectionSet, size: int = 32, sun_angle_deg: float = 0.0,
                        kernel: str = "linear") -> np.ndarray:
     """``c_k(w0) = sum_s k_s(w0, a) V[s, k]`` tabulated at the disk texel centres.
 
     Returns (K, D, D) float32; texels whose centre lies outside the unit disk (below the
-    horizon) hold the value at the nearest disk point on the rim, so bilinear lookups stay
-    continuous, and the lookup itself is gated by the light's elevation."""
+    horizon) hold the value at the nearest disk point on the rim (:func:`disk_kernel_matrix`),
+    so bilinear lookups stay continuous, and the lookup itself is gated by the light's
+    elevation."""
     V = np.asarray(V, np.float64)
-    xy = disk_grid(size).reshape(-1, 2)
-    r = np.hypot(xy[:, 0], xy[:, 1])
-    inside = np.where(r > 0.999, 0.999 / np.maximum(r, 1e-12), 1.0)
-    dirs = disk_to_hemisphere(xy * inside[:, None])
-    out = np.zeros((size * size, V.shape[1]))
-    for i, d in enumerate(dirs):
-        idx, w = sun_weights(dset, d, sun_angle_deg, kernel)
-        if len(idx):
-            out[i] = w @ V[idx]
-    return out.T.reshape(V.shape[1], size, size).astype(np.float32)
+    out = disk_kernel_matrix(dset, size, sun_angle_deg, kernel) @ V
+    return np.asarray(out).T.reshape(V.shape[1], size, size).astype(np.float32)
 
 
 def table_lookup(tables, direction) -> np.ndarray:

@@ -81,11 +81,20 @@ def estimate(scene, objects, settings, truth: int = 4, truth_samples: int = 256)
     k = settings.components or 48
     ram = tt.CHUNK_BYTES + k * P * 4 + 8 * P * 3 * 4
     try:
-        viewport, _ = sp.choose_viewport(settings.viewport, dset.size, settings.resolution)
+        viewport, _ = sp.choose_viewport(settings.viewport, dset.size, settings.resolution,
+                                         budget_mib=settings.gpu_budget,
+                                         table_size=settings.table_size)
     except ValueError:
         viewport = "pca"
     if viewport == "transport":
         gpu = len(objects) * sp.atlas_layout_bytes(dset.size, settings.resolution)[1]
+    elif viewport == "blocks":   # the block size is chosen after the bake: at most this
+        from ...lt_addon.transport import block_viewport as bv
+
+        gpu = len(objects) * max(bv.gpu_bytes(settings.resolution, B, kb, settings.table_size)
+                                 ["total_bytes"] for B, kb in bv.candidates(
+                                     settings.resolution, settings.table_size,
+                                     settings.gpu_budget << 20))
     else:   # eigen-textures in half floats, three per image, uploaded as RGBA
         gpu = len(objects) * (-(-k // 3)) * 4 * P * 2
     out = {"seconds": {k2: round(v, 2) for k2, v in seconds.items()},

@@ -43,7 +43,8 @@ from ..base.jobs import Progress
 # the bake and its callers.
 from ...lt_addon.transport.bundle import (INDIRECT, KIND, MODELS, TRUTH_LIGHTS, VIEWPORTS,  # noqa: F401
                                           ObjectBake, TransportTextureResult,
-                                          TransportTextureSettings, fit_model, load_bake,
+                                          TransportTextureSettings, fit_model, fit_viewport,
+                                          load_bake,
                                           model_fidelity, model_summary, preview_cost,
                                           quantized, rel_rmse, relight, relight_environment,
                                           steerable_from_store, upsample as _upsample,
@@ -422,8 +423,9 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
         t0 = time.perf_counter()
         with blas_threads.limited(n_fit) if n_fit else contextlib.nullcontext():
             model = fit_model(readers[i], settings, albedos[i])
+            view, viewport = fit_viewport(readers[i], settings, model)
         results.append(ObjectBake(o.name, readers[i].path, albedos[i], indirects[i], model,
-                                  time.perf_counter() - t0, readers[i]))
+                                  time.perf_counter() - t0, readers[i], view, viewport))
         peak = max(peak, _rss_mb())
     seconds["fit"] = sum(r.fit_seconds for r in results)
     seconds["bake_total"] = time.perf_counter() - t_start
@@ -465,7 +467,8 @@ def truth_errors(result: TransportTextureResult, truths: dict, sun_angle: float,
     rows = []
     for oi, b in enumerate(result.objects):
         store = b.store or tt.TransportStore.open(b.store_path)
-        tables = viewport_tables(result.settings, store, sun_angle)
+        tables = None if b.view is not None else viewport_tables(result.settings, store,
+                                                                  sun_angle)
         for az, el in lights:
             truth = truths[(az, el)][oi]
             d = direction_from_az_el(az, el)
@@ -477,8 +480,13 @@ def truth_errors(result: TransportTextureResult, truths: dict, sun_angle: float,
                                                 kernel=result.settings.kernel), truth)
             ind = (None if b.indirect is None else
                    _upsample(b.indirect.relight(d), store.resolution))
-            if tables is not None:   # the viewport relights from T through sparse tables
+            view = None
+            if b.view is not None:   # the block viewport
+                idx, w = tt.sun_weights(store.directions, d, sun_angle, result.settings.kernel)
+                view = b.view.relight_weights(idx, w)[..., None] * b.albedo
+            elif tables is not None:   # the viewport relights from T through sparse tables
                 view = viewport_direct(store, tables, d)[..., None] * b.albedo
+            if view is not None:
                 row["viewport"] = rel_rmse(view if ind is None else view + ind, truth)
             if ind is not None:
                 row["indirect_share"] = float(np.sum(ind) / max(np.sum(truth), 1e-12))
@@ -503,9 +511,10 @@ def retire_globs(objects) -> tuple:
         safe = atomic.safe_name(o.name)
         out += [f"{safe}_preview_{part}" for part in (
                     "eigen.exr", "tables.exr", "sparse_index.exr", "sparse_weights.exr",
-                    "transport.png", "transport.json")]
+                    "transport.png", "transport.json", "block_eigen.exr", "block_tables.exr")]
         out += [f"{safe}_indirect.exr", f"{safe}_indirect_atlas.exr",
-                f"{safe}_transport_model.npz", f"{safe}_transport_steerable.exr"]
+                f"{safe}_transport_model.npz", f"{safe}_transport_steerable.exr",
+                f"{safe}_viewport_blocks.npz"]
     return tuple(out) + (f"{atomic.safe_name(objects[0].name)}_compare.png",)
 
 
@@ -635,7 +644,8 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
         from ...lt_addon.transport import sparse_tables as sp
 
         try:
-            sp.choose_viewport(settings.viewport, settings.validate().size, settings.resolution)
+            sp.choose_viewport(settings.viewport, settings.validate().size, settings.resolution,
+                               budget_mib=settings.gpu_budget, table_size=settings.table_size)
         except ValueError as exc:
             raise BakeInputError(str(exc)) from None
     if target_error is not None:

@@ -49,7 +49,7 @@ class _Parser(argparse.ArgumentParser):
 #: transport method's own, the three both methods take, the lobes method's own.
 TRANSPORT_OPTIONS = ("directions", "direct", "sun_path", "sun_path_step", "sun_angle", "model",
                      "components", "tol", "indirect_samples", "indirect_resolution",
-                     "table_size", "viewport")
+                     "table_size", "viewport", "gpu_budget")
 SHARED_OPTIONS = ("resolution", "bounces", "seed")
 LOBES_OPTIONS = ("frame", "order", "samples", "storage", "mode", "world_sampling")
 
@@ -569,9 +569,9 @@ def _cmd_bake_texture_transport(args) -> int:
         fid = rep.get("model_vs_T") or {}
         if "headline" in fid:
             via = {"transport": "T through sparse tables",
-                   "pca": "the PCA"}.get(fid.get("viewport"), fid.get("viewport", "the model"))
+                   "blocks": "a PCA per texel block", "pca": "the PCA"}.get(fid.get("viewport"), fid.get("viewport", "the model"))
             extra = (f"; the PCA alone {fid['model_headline']:.3f}"
-                     if fid.get("viewport") == "transport" else "")
+                     if fid.get("viewport") in ("transport", "blocks") else "")
             print(f"  the viewport ({via}) vs T itself at the held-out lights: "
                   f"{fid['headline']:.3f} (worst {fid['worst']['rel']:.3f} at elevation "
                   f"{fid['worst']['elevation']:g} deg{extra}; relight --source transport "

@@ -168,6 +168,109 @@ def build_group(n_tiles: int, resolution: int, table_size: int, eig_image, table
 
 
 # ---------------------------------------------------------------------------------------------
+# the block viewport: a PCA per texel block (lt_addon/transport/block_viewport.py)
+
+
+def _vmadd(b, a, scale, add, x, y):
+    """``a * scale + add`` per component (sockets or 3-tuples)."""
+    n = b.node("ShaderNodeVectorMath", x, y, operation="MULTIPLY_ADD")
+    for i, v in enumerate((a, scale, add)):
+        b._feed(n.inputs[i], v)
+    return n.outputs["Vector"]
+
+
+def build_block_group(n_tiles: int, resolution: int, block: int, table_size: int, eig_image,
+                      table_image, uv_map: str, name: str):
+    """The block viewport's sun group (the sockets of :func:`build_group`): per pixel its
+    block's cell of the eigen atlas and its block's cell of the table atlas, both computed in
+    the tree from the UV (:mod:`...lt_addon.transport.block_viewport`); ``n_tiles`` groups of
+    three components, the albedo the eigen atlas's last tile."""
+    group, b, gin, gout, (dx, dy, dz), root = _sun_group_head(name, -2000, 1600)
+    R, B, D = float(resolution), int(block), float(table_size)
+    nb = resolution // B
+    rp = float(nb * (B + 2))
+    uv = b.node("ShaderNodeUVMap", -1700, -400, uv_map=uv_map).outputs["UV"]
+    f = b.vmath("SCALE", uv, x=-1500, y=-400, scale=R)                       # texels
+    cell = b.vmath("FLOOR", b.vmath("SCALE", f, x=-1400, y=-400, scale=1.0 / B), x=-1300,
+                   y=-400)
+    cell = b.vmath("MINIMUM", b.vmath("MAXIMUM", cell, (0.0, 0.0, 0.0), x=-1200, y=-400),
+                   (nb - 1.0, nb - 1.0, 0.0), x=-1100, y=-400)
+    # eigen cell: (f + 2 b + 1) / Rp
+    e_uv = b.vmath("SCALE", _vmadd(b, cell, (2.0, 2.0, 0.0), f, -1000, -400), x=-900, y=-400,
+                   scale=1.0 / rp)
+    e_uv = b.vmath("ADD", e_uv, (1.0 / rp, 1.0 / rp, 0.0), x=-800, y=-400)
+    # table cell: (b D + 0.5 + g) / (nb D), g = clamp((x0 + 1) D / 2 - 0.5, 0, D - 1)
+    g = []
+    for axis, comp in enumerate((dx, dy)):
+        y = 200 - 150 * axis
+        p = b.math("DIVIDE", comp, root, x=-1500, y=y)
+        v = b.math("MULTIPLY_ADD", p, 0.5 * D, 0.5 * D - 0.5, x=-1400, y=y)
+        g.append(b.math("MINIMUM", b.math("MAXIMUM", v, 0.0, x=-1300, y=y), D - 1.0, x=-1200,
+                        y=y))
+    gv = b.node("ShaderNodeCombineXYZ", -1100, 100)
+    b.links.new(g[0], gv.inputs[0])
+    b.links.new(g[1], gv.inputs[1])
+    t_uv = _vmadd(b, cell, (D, D, 0.0), gv.outputs[0], -1000, 100)
+    t_uv = b.vmath("SCALE", b.vmath("ADD", t_uv, (0.5, 0.5, 0.0), x=-900, y=100), x=-800, y=100,
+                   scale=1.0 / (nb * D))
+    lay_e = atlas_layout(n_tiles + 1, nb * (B + 2))
+    lay_t = atlas_layout(n_tiles, nb * int(table_size))
+    acc = None
+    for t in range(n_tiles):
+        y = 600 - 220 * t
+        c = _lookup(b, table_image, pn.after_sum(b, t_uv, acc, -700, y), lay_t["tiles"][t],
+                    -500, y)
+        e = _lookup(b, eig_image, pn.after_sum(b, e_uv, acc, -700, y - 100), lay_e["tiles"][t],
+                    -500, y - 100)
+        dot = b.vmath("DOT_PRODUCT", c, e, x=-50, y=y)
+        acc = dot if acc is None else b.math("ADD", acc, dot, x=150, y=y)
+    albedo = _lookup(b, eig_image, e_uv, lay_e["tiles"][n_tiles], -500, -600)
+    _sun_group_tail(b, gin, gout, acc, albedo, dz, 150)
+    return group
+
+
+def block_preview_arrays(view, albedo, directions, sun_angle: float, table_size: int,
+                         kernel: str = "linear"):
+    """(eigen tiles (n+1, Rp, Rp, 3) in the cell layout with the albedo last, table tiles
+    (n, nb D, nb D, 3)), float32, for :func:`build_block_group`."""
+    from ...lt_addon.transport import block_viewport as bv
+
+    eig = np.concatenate([_tiles3(view.eigen),
+                          bv.to_cells(np.asarray(albedo, np.float32), view.block)[None]], axis=0)
+    tab = bv.tables(view, directions, table_size, sun_angle, kernel)
+    return eig, _tiles3(tab)
+
+
+def write_block_files(base: str, eig, tables) -> dict:
+    """Write the block viewport's two half-float atlases (cell-layout eigen images with the
+    albedo last; per-block tables); returns their paths and bytes."""
+    out = {}
+    for name, arr in (("block_eigen", eig), ("block_tables", tables)):
+        atlas = pack_atlas(arr.astype(np.float32), "edge")
+        path = f"{base}_preview_{name}.exr"
+        out[name] = path
+        out[f"{name}_bytes"] = exrio.write_exr(
+            path, {c: atlas[..., i] for i, c in enumerate("RGB")},
+            {"format": "relightable_textures.block_preview", "tiles": len(arr),
+             "resolution": arr.shape[1]}, pixel_type="half")
+    return out
+
+
+def viewport_relight_blocks(eig_tiles, table_tiles, direction, block: int, resolution: int,
+                            table_size: int) -> np.ndarray:
+    """NumPy twin of :func:`build_block_group` at the texel centres (direct light, intensity
+    1): (R, R, 3) from the tiles :func:`block_preview_arrays` makes (or read back)."""
+    from ...lt_addon.transport import block_viewport as bv
+
+    eig = np.asarray(eig_tiles, np.float64)
+    tab = np.asarray(table_tiles, np.float64)
+    n = tab.shape[0]
+    E = eig[:n].transpose(0, 3, 1, 2).reshape(3 * n, *eig.shape[1:3])
+    C = tab.transpose(0, 3, 1, 2).reshape(3 * n, *tab.shape[1:3])
+    return bv.viewport_relight(E, C, eig[n], direction, block, resolution, table_size)
+
+
+# ---------------------------------------------------------------------------------------------
 # the viewport from T itself: sparse kernel tables (lt_addon/transport/sparse_tables.py)
 
 
@@ -353,10 +456,31 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
                   obj.data.uv_layers[0].name)
     gname = f"{GROUP_PREFIX} ({obj.name})"
     old = bpy.data.node_groups.get(gname)
-    viewport, why = sp.choose_viewport(s.get("viewport", "pca"), store.directions.size,
-                                       model.resolution)
+    info = report.get("viewport") or {}
+    if bake.view is not None:
+        viewport, why = "blocks", info.get("why", "")
+    elif info.get("shows") == "pca":
+        viewport, why = "pca", info.get("why", "")
+    else:   # (reports before the block viewport: T when it fits, else the PCA)
+        viewport, why = sp.choose_viewport(s.get("viewport", "pca"), store.directions.size,
+                                           model.resolution,
+                                           budget_mib=s.get("gpu_budget",
+                                                            sp.DEFAULT_BUDGET_MIB),
+                                           table_size=s["table_size"])
+        viewport = "pca" if viewport == "blocks" else viewport
     sparse = {}
-    if viewport == "transport":
+    if viewport == "blocks":
+        view = bake.view
+        beig, btab = block_preview_arrays(view, bake.albedo, store.directions, angle,
+                                          s["table_size"], s.get("kernel", "linear"))
+        sparse = {**write_block_files(base, beig, btab), "block": view.block,
+                  "block_components": view.k}
+        be_img = pn.load_atlas_image(sparse["block_eigen"], f"{obj.name} transport block eigen")
+        bt_img = pn.load_atlas_image(sparse["block_tables"],
+                                     f"{obj.name} transport block tables")
+        group = build_block_group(len(btab), model.resolution, view.block, s["table_size"],
+                                  be_img, bt_img, uv_map, gname + " new")
+    elif viewport == "transport":
         D = max(sp.TABLE_SIZE, int(s["table_size"]))
         idx, wts, kept = sp.cached_tables(store.directions, D, angle, s.get("kernel", "linear"))
         atlas_files, scales = write_sparse_atlas(base, store)
@@ -439,6 +563,18 @@ def rewrite_tables(obj, report: dict, bake, store, sun_angle: float) -> None:
                      "resolution": tables.shape[1], "sun_angle": sun_angle}, pixel_type="half")
     pn.load_atlas_image(path, f"{obj.name} transport tables")
     group = bpy.data.node_groups.get(f"{GROUP_PREFIX} ({obj.name})")
+    if group is not None and group.get("relight_viewport") == "blocks" and bake.view is not None:
+        from ...lt_addon.transport import block_viewport as bv
+
+        btab = _tiles3(bv.tables(bake.view, store.directions, s["table_size"], sun_angle,
+                                 s.get("kernel", "linear")))
+        atlas = pack_atlas(btab, "edge")
+        path = f"{base}_preview_block_tables.exr"
+        exrio.write_exr(path, {c: atlas[..., i] for i, c in enumerate("RGB")},
+                        {"format": "relightable_textures.block_preview", "tiles": len(btab),
+                         "resolution": btab.shape[1], "sun_angle": sun_angle},
+                        pixel_type="half")
+        pn.load_atlas_image(path, f"{obj.name} transport block tables")
     if group is not None and group.get("relight_viewport") == "transport":
         D = max(sp.TABLE_SIZE, int(s["table_size"]))
         idx, wts, _ = sp.cached_tables(store.directions, D, sun_angle, s.get("kernel", "linear"))

@@ -355,6 +355,70 @@ def test_transport_viewport_rendered_by_cycles_equals_its_twin_and_T(bumps, tmp_
     assert sp.choose_viewport("auto", 48, R)[0] == "transport"
 
 
+@pytest.mark.version_sensitive
+def test_block_viewport_rendered_by_cycles_equals_its_twin_and_T(bumps, tmp_path):
+    """The block viewport (a PCA per 8 x 8 texel block, its cell and table lookups computed in
+    the tree from the UV): Cycles renders the group equal to its NumPy twin to half precision;
+    at full rank per block the twin is T's own relight within the bilinear table error, and a
+    new sun size re-tabulates it in place."""
+    import bpy
+
+    from relightable_textures.lt_addon.io import exrio
+    from relightable_textures.lt_addon.io.atlas import unpack_atlas
+    from relightable_textures.lt_addon.transport import block_viewport as bv
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.preview import transport_preview as tp
+    from relightable_textures.operators.base.jobs import run
+
+    scene, obj = bumps
+    s = settings(sun_angle=0.0, viewport="blocks", table_size=16)
+    rep = run(tx.bake_job(scene, [obj], s, str(tmp_path), truth=0)).reports[0]
+    prev, info = rep["preview"], rep["viewport"]
+    assert prev["viewport"] == "blocks" and rep["preview_cost"]["viewport"] == "blocks"
+    assert info["shows"] == "blocks" and info["block"] == 8 and prev["block"] == 8
+    assert rep["model_vs_T"]["viewport"] == "blocks"
+    k = info["components"]
+    assert k == 24 and rep["preview_cost"]["texture_lookups_per_pixel"] == bv.lookups_per_pixel(k)
+    view = bv.load(rep["files"]["viewport_blocks"])
+    assert view.k == k and view.block == 8
+
+    def rgb(path):
+        ch = exrio.read_exr(path)[0]
+        return np.stack([ch[c] for c in "RGB"], -1)
+
+    n = -(-k // 3)
+    Rp = 2 * (8 + 2)
+    eig = unpack_atlas(rgb(prev["block_eigen"]), n + 1, Rp)
+    tab = unpack_atlas(rgb(prev["block_tables"]), n, 2 * 16)
+    store = tt.TransportStore.open(rep["files"]["transport"])
+    for az, el, inten in ((40.0, 35.0, 2.0), (250.0, 12.0, 1.0)):
+        scene["relight_azimuth"], scene["relight_elevation"] = az, el
+        scene["relight_intensity"] = inten
+        img = render_rgb(scene, tmp_path, R)
+        d = direction_from_az_el(az, el)
+        twin = inten * tp.viewport_relight_blocks(eig, tab, d, 8, R, 16)
+        assert twin.max() > 0.05
+        assert np.abs(img - twin).max() <= 2.0 ** -10 * twin.max()
+        # 24 components of 64-texel blocks: T's relight up to the 16^2 tables' bilinear error
+        full = inten * store.sun(d, 0.0)[..., None] * eig[n][np.arange(Rp) % 10 % 9 != 0][
+            :, np.arange(Rp) % 10 % 9 != 0]
+        assert rel(twin, full) < 0.1, rel(twin, full)
+    scene["relight_elevation"] = -20.0         # below the horizon: off
+    assert np.abs(render_rgb(scene, tmp_path, R)).max() == 0.0
+    # a new sun size rewrites the block tables in place; the render follows
+    bake_, store_, report_ = tx.load_bake(rep["report"])
+    assert bake_.view is not None
+    tp.rewrite_tables(obj, report_, bake_, store_, 10.0)
+    tab10 = unpack_atlas(rgb(prev["block_tables"]), n, 2 * 16)
+    assert np.abs(tab10 - tab).max() > 1e-3
+    scene["relight_azimuth"], scene["relight_elevation"] = 130.0, 20.0
+    scene["relight_intensity"] = 1.0
+    img = render_rgb(scene, tmp_path, R)
+    twin = tp.viewport_relight_blocks(eig, tab10, direction_from_az_el(130, 20), 8, R, 16)
+    assert np.abs(img - twin).max() <= 2.0 ** -10 * twin.max()
+    assert bpy.data.node_groups[prev["group"]]["relight_viewport"] == "blocks"
+
+
 def test_two_objects_baked_together_shadow_each_other(statue, tmp_path):
     """Statue and ground in the same Cycles calls: each texture equals that object baked alone
     (exactly: same seed, 1 spp), and the ground shows the statue's shadow (darker than the

@@ -98,7 +98,14 @@ def test_auto_viewport_follows_the_atlas_memory():
     assert sp.choose_viewport("auto", 400, 256)[0] == "transport"
     assert sp.choose_viewport("auto", 1600, 256)[0] == "transport"
     kind, why = sp.choose_viewport("auto", 1600, 512)
-    assert kind == "pca" and "556 MiB" in why
+    assert kind == "blocks" and "556 MiB" in why and "512" in why
+    # the budget decides: 600 MiB take T's 556 MiB atlas; 1 MiB hold no block viewport at 512^2
+    assert sp.choose_viewport("auto", 1600, 512, budget_mib=600)[0] == "transport"
+    kind, why = sp.choose_viewport("auto", 1600, 512, budget_mib=1)
+    assert kind == "pca" and "over 1" in why
+    with pytest.raises(ValueError, match="does not fit 1 MiB"):
+        sp.choose_viewport("blocks", 1600, 512, budget_mib=1)
+    assert sp.choose_viewport("blocks", 48, 16)[0] == "blocks"
     assert sp.choose_viewport("transport", 1600, 512)[0] == "transport"
     assert sp.choose_viewport("pca", 48, 16)[0] == "pca"
     with pytest.raises(ValueError, match="texels across"):
