@@ -332,8 +332,8 @@ def choose(store, table_size: int, budget_bytes: int, k_max: int = K_MAX, blocks
            regions: int = REGIONS, seed: int = 0) -> dict:
     """The block side and components of the block viewport: each candidate of
     :func:`candidates` is fitted on the same ``regions`` sampled square regions of T (side: the
-    largest candidate block; the most energetic of a random draw, so empty UV space is not
-    what is compared) and the lowest relative residual wins (ties: the fewer bytes).
+    largest candidate block; a random draw among the regions with light, so empty UV space is
+    not what is compared) and the lowest relative residual wins (ties: the fewer bytes).
 
     Returns ``{"block", "k", "residual_sampled", "tried": [{block, k, residual, mib}]}``,
     ``{}`` when nothing fits the budget."""
@@ -353,7 +353,8 @@ def choose(store, table_size: int, budget_bytes: int, k_max: int = K_MAX, blocks
         start = (cy * side + side // 2) * R + cx * side
         energy.append(float(np.square(np.asarray(arr[::4, start:start + side],
                                                  np.float64)).sum()))
-    picked = [int(cells[i]) for i in np.argsort(energy)[::-1][:regions]]
+    lit = [int(c) for c, e in zip(cells, energy) if e > 0] or [int(c) for c in cells]
+    picked = lit[:regions]     # (cells is a random permutation: a random draw of lit regions)
     data = []
     for c in picked:
         cy, cx = divmod(c, n)

@@ -166,7 +166,7 @@ class TransportTextureSettings:
         ("pca", "PCA", "The fitted PCA's eigen-textures: small, smooths cast shadows on large "
          "receivers")), help="What the live preview shows")
     gpu_budget: int = setting(
-        512, lo=8, hi=1 << 20, label="GPU Budget", metavar="MIB",
+        512, lo=8, hi=65536, label="GPU Budget", metavar="MIB",
         help="MiB of GPU memory the viewport may take: auto shows T itself when its atlas fits, "
              "and the block viewport chooses its block size and components within it")
 

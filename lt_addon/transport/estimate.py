@@ -112,3 +112,45 @@ def readable_seconds(seconds: float) -> str:
     if seconds < 5400:
         return f"{seconds / 60:.1f} min"
     return f"{seconds / 3600:.1f} h"
+
+
+def _fraction(message: str, prefix: str) -> float | None:
+    """``i / n`` of a progress message ``"<prefix> i/n ..."``, or None."""
+    if not message.startswith(prefix):
+        return None
+    try:
+        i, n = message[len(prefix):].split()[0].split("/")
+        return min(max(int(i) / max(int(n), 1), 0.0), 1.0)
+    except (ValueError, IndexError):
+        return None
+
+
+def estimated_elapsed(seconds: dict, message: str) -> float | None:
+    """Seconds the estimate ``seconds`` ({stage: s}) expects a bake to have taken when it
+    prints ``message`` (its direction, indirect-bake and fit steps), None for other steps.
+    "other" (albedo, writing) is counted before the directions."""
+    other, direct = seconds.get("other", 0.0), seconds.get("direct", 0.0)
+    indirect, fit = seconds.get("indirect", 0.0), seconds.get("fit", 0.0)
+    f = _fraction(message, "direction ")
+    if f is not None:
+        return other + direct * f
+    f = _fraction(message, "indirect bake ")
+    if f is not None:
+        return other + direct + indirect * f
+    if message.startswith("models fitted"):
+        return other + direct + indirect + fit
+    return None
+
+
+def time_left(seconds: dict, message: str, elapsed: float, last: float | None = None) -> float:
+    """The bake's time left when it prints ``message`` after ``elapsed`` seconds: the estimate's
+    remaining stages scaled by how fast the bake has gone so far against the estimate
+    (measured / estimated elapsed, once a tenth of the estimate is behind), so a machine
+    slower or faster than the calibration moves the figure at once. ``last``: the previous
+    figure, kept for steps the estimate does not place."""
+    total = sum(seconds.get(s, 0.0) for s in ("direct", "indirect", "fit", "other"))
+    at = estimated_elapsed(seconds, message)
+    if at is None:
+        return max(0.0, total - elapsed) if last is None else last
+    ratio = elapsed / at if at >= 0.1 * total and at > 0 else 1.0
+    return max(0.0, (total - at) * ratio)

@@ -718,6 +718,36 @@ def table_lookup(tables, direction) -> np.ndarray:
             + (1 - ax) * ay * t[:, y0 + 1, x0] + ax * ay * t[:, y0 + 1, x0 + 1])
 
 
+def table_weights(dset: DirectionSet, direction, size: int, sun_angle_deg: float = 0.0,
+                  kernel: str = "linear") -> tuple[np.ndarray, np.ndarray]:
+    """Sparse light weights equal to a bilinear lookup of tables made by
+    :func:`coefficient_tables` (or :func:`disk_kernel_matrix`) at ``direction``: the kernels of
+    the four surrounding disk texels, weighted bilinearly. ``w @ V[idx]`` is what a viewport
+    reading such tables shows, without tabulating every texel. Empty below the horizon."""
+    d = normalize_directions(np.asarray(direction, np.float64).reshape(1, 3))[0]
+    if d[2] <= 0:
+        return np.zeros(0, np.int64), np.zeros(0)
+    D = int(size)
+    xy = hemisphere_to_disk(d[None])[0]
+    f = [float(np.clip((c + 1.0) * 0.5 * D - 0.5, 0.0, D - 1.0)) for c in xy]
+    x0, y0 = (min(int(np.floor(v)), D - 2) for v in f)
+    ax, ay = f[0] - x0, f[1] - y0
+    grid = disk_grid(D)
+    acc: dict = {}
+    for (j, i, fac) in ((x0, y0, (1 - ax) * (1 - ay)), (x0 + 1, y0, ax * (1 - ay)),
+                        (x0, y0 + 1, (1 - ax) * ay), (x0 + 1, y0 + 1, ax * ay)):
+        if fac <= 0:
+            continue
+        p = grid[i, j]
+        r = float(np.hypot(*p))
+        p = p * (0.999 / r if r > 0.999 else 1.0)
+        idx, w = sun_weights(dset, disk_to_hemisphere(p[None])[0], sun_angle_deg, kernel)
+        for a, b in zip(np.asarray(idx).tolist(), np.asarray(w).tolist()):
+            acc[a] = acc.get(a, 0.0) + fac * b
+    keys = np.array(sorted(acc), np.int64)
+    return keys, np.array([acc[k] for k in keys.tolist()])
+
+
 def parse_directions(spec: str) -> DirectionSet:
     """A direction set for a texel transport bake: ``hemi:N[:P]`` (default), or any spec of
     :func:`.directions.parse_direction_spec` restricted to its upper hemisphere."""

@@ -40,11 +40,20 @@ def calibrate(scene, objects, settings, truth: int, truth_samples: int):
     the seconds the calibration took."""
     from .texture_transport import bake_transport_textures, truth_bakes, truth_lights
 
+    from ...lt_addon.transport import sparse_tables as sp
+
     t0 = time.perf_counter()
     samples = []
     lights = truth_lights(1) if truth else []
+    try:   # the calibration fits the viewport the asked size will show (T's fits at 96^2)
+        shown, _ = sp.choose_viewport(settings.viewport, settings.validate().size,
+                                      settings.resolution, budget_mib=settings.gpu_budget,
+                                      table_size=settings.table_size)
+    except Exception:
+        shown = settings.viewport
     for R in CALIBRATION:
-        s = replace(settings, resolution=R, indirect_resolution=R)
+        s = replace(settings, resolution=R, indirect_resolution=R,
+                    viewport="blocks" if shown == "blocks" else settings.viewport)
         with tempfile.TemporaryDirectory(prefix="relight-estimate-") as tmp:
             res = yield from bake_transport_textures(scene, objects, s, tmp, resume=False)
             for b in res.objects:

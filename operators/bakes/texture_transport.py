@@ -609,16 +609,18 @@ class TextureBakeOutput:
     models: list
 
 
-def _with_eta(gen, started: float, total_seconds: float):
-    """``gen``'s steps with the time left by the estimate appended to each message."""
+def _with_eta(gen, started: float, seconds: dict):
+    """``gen``'s steps with the time left appended to each message: the estimate's stages
+    ``seconds`` scaled by the bake's own pace (:func:`..lt_addon.transport.estimate.time_left`)."""
+    from ...lt_addon.transport.estimate import readable_seconds, time_left
+
+    left = None
     while True:
         try:
             step = next(gen)
         except StopIteration as stop:
             return stop.value
-        left = max(0.0, total_seconds - (time.perf_counter() - started))
-        from ...lt_addon.transport.estimate import readable_seconds
-
+        left = time_left(seconds, step.message, time.perf_counter() - started, left)
         msg = step.message if step.message.startswith("warning:") else \
             f"{step.message} (about {readable_seconds(left)} of the bake left)"
         yield Progress(step.done, step.total, msg)
@@ -663,7 +665,7 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
         figures["estimate"] = {k: v for k, v in e.items() if k != "lines"}
         for line in e["lines"]:
             yield Progress(1, 1, line)
-        bake = _with_eta(bake, time.perf_counter(), e["bake"])
+        bake = _with_eta(bake, time.perf_counter(), e["seconds"])
     result = yield from bake
     try:
         figures.update((yield from _truth_figures(scene, objects, settings, result, truth,

@@ -118,3 +118,23 @@ def test_budget_sets_the_components():
     assert bv.gpu_bytes(2048, 64, k + 3, 32)["total_bytes"] > 512 << 20
     assert bv.largest_k(2048, 64, 32, 1 << 20) == 0
     assert bv.lookups_per_pixel(12) == 9
+
+
+def test_table_weights_are_the_tables_bilinear_lookup(store):
+    """Sparse weights standing for a bilinear table lookup: the global tables and the block
+    tables read at any light equal the loadings under those weights (what the bench uses to
+    score what the viewport shows without tabulating it)."""
+    view = bv.fit(store, block=4, k=16)
+    D = 16
+    tab = bv.tables(view, store.directions, D, 2.0)
+    for az, el in ((37, 10), (161, 30), (283, 55), (59, 80)):
+        d = direction_from_az_el(az, el)
+        idx, w = tt.table_weights(store.directions, d, D, 2.0)
+        np.testing.assert_allclose(bv.table_coefficients(tab, d, D).transpose(1, 2, 0)
+                                   .reshape(-1, 16),
+                                   np.einsum("s,bsk->bk", w, view.V[:, idx].astype(np.float64)),
+                                   rtol=1e-4, atol=1e-6)
+        gt = tt.coefficient_tables(view.V[3], store.directions, D, 2.0)
+        np.testing.assert_allclose(tt.table_lookup(gt, d), w @ view.V[3][idx], rtol=1e-4,
+                                   atol=1e-6)
+    assert len(tt.table_weights(store.directions, [1, 0, -0.2], D)[0]) == 0

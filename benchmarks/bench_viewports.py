@@ -1,0 +1,154 @@
+"""The viewport representations at real texture sizes (issue 33): size, lookups per pixel and
+error against Cycles for each, with the bake's wall time, memory and disk.
+
+Per scene and resolution: one bake with the given preset's directions (rays), then for each
+viewport representation that could show it -- T through sparse tables (its 8-bit atlas), the
+block viewport chosen within ``--gpu-budget`` (:mod:`lt_addon.transport.block_viewport`), the
+global PCA the bake fits -- its GPU memory (half-float RGBA, 8-bit for T's atlas), texture
+lookups per pixel (direct light; the indirect term adds its 9), and the relative RMSE of what it
+shows (through its own tables: :func:`lt_addon.transport.texture.table_weights`) against Cycles Sun-lamp radiance bakes with the scene's 2 bounces at the four held-out
+lights (elevations 10, 30, 55, 80 degrees), for a 2- and a 10-degree Sun, ``sqrt(mean(rel^2))``
+over lights and objects, plus the ground's figure at 10 degrees elevation. The bake's time is a
+ratio to one 64-spp Cycles bake of the same textures measured in the same run.
+
+Usage: python benchmarks/bench_viewports.py [--scenes statue,bumps] [--resolutions 512,1024]
+           [--preset balanced] [--truth-samples 64] [--gpu-budget 512] [--size demo|test]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(__file__))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenes", default="statue,bumps")
+    ap.add_argument("--resolutions", default="512,1024")
+    ap.add_argument("--preset", default="balanced")
+    ap.add_argument("--truth-samples", type=int, default=64)
+    ap.add_argument("--gpu-budget", type=int, default=512)
+    ap.add_argument("--size", default="demo", choices=("demo", "test"))
+    args = ap.parse_args(argv)
+
+    from bench_transport_textures import ANGLES, build, combined, single_bake_seconds, truths
+    from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
+    from relightable_textures.lt_addon.transport import block_viewport as bv
+    from relightable_textures.lt_addon.transport import sparse_tables as sp
+    from relightable_textures.lt_addon.transport import texture as tt
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.bakes.presets import TRANSPORT
+    from relightable_textures.operators.base.jobs import run
+
+    preset = TRANSPORT.settings(args.preset)
+    print(f"Measured {time.strftime('%Y-%m-%d %H:%M')} on {os.cpu_count()} cores: {args.preset} "
+          f"preset ({preset.directions}), truths {args.truth_samples} spp with 2 bounces, GPU "
+          f"budget {args.gpu_budget} MiB per object\n")
+    for name in args.scenes.split(","):
+        for R in (int(r) for r in args.resolutions.split(",")):
+            scene, objects = build(name, args.size)
+            one = single_bake_seconds(scene, objects, R)
+            truth = truths(scene, objects, R, args.truth_samples)
+            from dataclasses import replace
+
+            s = replace(preset, resolution=R, bounces=2, model="pca",
+                        indirect_resolution=max(preset.indirect_resolution, R // 2),
+                        viewport="auto", gpu_budget=args.gpu_budget)
+            folder = tempfile.mkdtemp(prefix=f"bench-viewports-{name}-{R}-")
+            t0 = time.perf_counter()
+            result = run(tx.bake_transport_textures(scene, objects, s, folder, resume=False))
+            bake_s = time.perf_counter() - t0
+            stores = [b.store for b in result.objects]
+            disk = sum(os.path.getsize(st.path) for st in stores)
+            print(f"\n## {name} at {R}^2 ({', '.join(o.name for o in objects)})\n")
+            print(f"bake {bake_s:.1f} s = {bake_s / one:.1f}x one 64-spp bake ({one:.1f} s); "
+                  f"stages: " + ", ".join(f"{k} {v:.1f} s" for k, v in result.seconds.items()
+                                          if k in ("direct_total", "indirect_total", "fit"))
+                  + f"; peak RSS above start {result.peak_rss_mb:.0f} MB; T on disk "
+                  f"{disk / 2**30:.2f} GiB")
+            for b in result.objects:
+                print(f"  {b.name}: viewport {b.viewport.get('shows')} ({b.viewport.get('why')})"
+                      + (f", block {b.viewport['block']} x {b.viewport['components']} comps, "
+                         f"fit {b.viewport['fit_seconds']:.1f} s, tried "
+                         f"{b.viewport['choice']['tried']}" if b.view is not None else ""))
+            rows = {}
+
+            def add(label, fn, mib, lookups):
+                errs, ground = {}, None
+                for a in ANGLES:
+                    e = []
+                    for az, el in tx.TRUTH_LIGHTS:
+                        d = direction_from_az_el(az, el)
+                        for oi, b in enumerate(result.objects):
+                            img = fn(oi, d, a)
+                            if b.indirect is not None:
+                                img = img + tx._upsample(b.indirect.relight(d), R)
+                            r = tx.rel_rmse(img, truth[a][(az, el)][oi])
+                            e.append(r)
+                            if a == 10.0 and el == 10.0 and b.name == "Ground":
+                                ground = r
+                    errs[a] = combined(e)
+                rows[label] = (errs, ground, mib, lookups)
+                print(f"| {label} | {mib:.1f} | {lookups} | {errs[2.0]:.4f} | {errs[10.0]:.4f} | "
+                      + (f"{ground:.4f}" if ground is not None else "-") + " |", flush=True)
+
+            print("\n| viewport | GPU MiB per object | lookups per pixel | 2-deg Sun | "
+                  "10-deg Sun | ground at 10 deg elevation, 10-deg Sun |")
+            print("|---|---|---|---|---|---|")
+
+            def relight_T(oi, d, a):
+                st = stores[oi]
+                return st.sun(d, a)[..., None] * result.objects[oi].albedo
+
+            add("T itself (offline, no viewport)", relight_T, 0.0, "-")
+            side, nbytes = sp.atlas_layout_bytes(stores[0].directions.size, R)
+            if side <= 16384:
+                def relight_sparse(oi, d, a):
+                    st = stores[oi]
+                    tables = sp.cached_tables(st.directions, sp.TABLE_SIZE, a, "linear")
+                    return tx.viewport_direct(st, tables, d)[..., None] * \
+                        result.objects[oi].albedo
+
+                taps = max(sp.cached_tables(stores[0].directions, sp.TABLE_SIZE, a, "linear")[0]
+                           .shape[-1] for a in ANGLES)
+                add(f"T through sparse tables ({side}^2 8-bit atlas"
+                    + (", over the budget)" if nbytes > args.gpu_budget << 20 else ")"),
+                    relight_sparse, nbytes / 2**20, 4 * (2 * taps // 3 + taps) + 1)
+            views = [b.view for b in result.objects]
+            if views[0] is None:
+                views = [bv.fit(st, **{k: v for k, v in bv.choose(
+                    st, s.table_size, args.gpu_budget << 20).items()
+                    if k in ("block", "k")}) for st in stores]
+
+            def relight_blocks(oi, d, a):   # through the viewport's tables (bilinear)
+                idx, w = tt.table_weights(stores[oi].directions, d, s.table_size, a)
+                return views[oi].relight_weights(idx, w)[..., None] * result.objects[oi].albedo
+
+            v0 = views[0]
+            add(f"blocks {v0.block}^2 x {v0.k} comps ({v0.method})", relight_blocks,
+                v0.gpu_bytes(s.table_size)["total_bytes"] / 2**20, bv.lookups_per_pixel(v0.k))
+
+            def relight_pca(oi, d, a):
+                idx, w = tt.table_weights(stores[oi].directions, d, s.table_size, a)
+                return result.objects[oi].model.relight(idx, w)[..., None] * \
+                    result.objects[oi].albedo
+
+            k = result.objects[0].model.k
+            pca_mib = ((-(-k // 3) + 1) * (R + 2) ** 2 * bv.HALF_RGBA) / 2**20
+            add(f"global PCA {k} comps" + (" (over the budget)"
+                                           if pca_mib > args.gpu_budget else ""),
+                relight_pca, pca_mib, 2 * -(-k // 3) + 1)
+            for st in stores:
+                st.abort()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
