@@ -64,17 +64,26 @@ HALF_RGBA = 8
 class BlockViewport:
     """A fitted block viewport (see the module docstring for shapes and units)."""
 
-    V: np.ndarray            # (nblocks, S, K) float32, orthonormal columns (zeros past dims)
+    V: np.ndarray | None     # (nblocks, S, K) float16, orthonormal columns (zeros past dims);
+                             # None until first needed when loaded from a file (``store``)
     eigen: np.ndarray        # (K, Rp, Rp) float32, cell layout
     dims: np.ndarray         # (nblocks,) components each block keeps
     resolution: int
     block: int
     residual: float          # relative Frobenius residual of T over all texels
     method: str              # "exact" or "randomised (K+o probes, q power iterations)"
+    store: object = None     # the TransportStore the loadings are recovered from
 
     @property
     def k(self) -> int:
-        return int(self.V.shape[2])
+        return int(self.eigen.shape[0])
+
+    def loadings(self) -> np.ndarray:
+        """V, recovered from the store on first use after :func:`load`
+        (:func:`recover_loadings`: one pass over T)."""
+        if self.V is None:
+            self.V = recover_loadings(self.store, self.eigen, self.block)
+        return self.V
 
     @property
     def per_side(self) -> int:
@@ -85,7 +94,7 @@ class BlockViewport:
         (no tables): ``sum_k (w . V_b[idx, k]) U_b[k]`` per block."""
         idx = np.asarray(indices)
         w = np.asarray(weights, np.float64)
-        c = np.einsum("s,bsk->bk", w, self.V[:, idx].astype(np.float64))   # (nblocks, K)
+        c = np.einsum("s,bsk->bk", w, self.loadings()[:, idx].astype(np.float64))   # (nb^2, K)
         return cells_relight(c.T.reshape(self.k, self.per_side, self.per_side), self.eigen,
                              self.block, self.resolution)
 
@@ -224,7 +233,7 @@ def fit(store, block: int, k: int, tol: float = 0.0, oversample: int = 10, power
     arr = store.array
     S = arr.shape[0]
     Rp = nb * (B + 2)
-    V = np.zeros((nb * nb, S, K), np.float32)
+    V = np.zeros((nb * nb, S, K), np.float16)   # (half: the tables it makes are half floats)
     E = np.zeros((K, Rp, Rp), np.float32)
     dims = np.zeros(nb * nb, np.int64)
     rng = np.random.default_rng(seed)
@@ -260,14 +269,20 @@ def fit(store, block: int, k: int, tol: float = 0.0, oversample: int = 10, power
 
 
 def tables(view: BlockViewport, dset, size: int, sun_angle_deg: float,
-           kernel: str = "linear") -> np.ndarray:
-    """(K, nb D, nb D) float32: cell ``b`` holds ``c_{b,k}`` on the ``D x D`` disk grid."""
+           kernel: str = "linear", chunk: int = 256) -> np.ndarray:
+    """(K, nb D, nb D) float32: cell ``b`` holds ``c_{b,k}`` on the ``D x D`` disk grid
+    (``chunk`` blocks at a time, so no (S, blocks K) copy of the loadings is made)."""
     W = disk_kernel_matrix(dset, size, sun_angle_deg, kernel)               # (D*D, S)
     nb, K, D = view.per_side, view.k, int(size)
-    Vs = view.V.transpose(1, 0, 2).reshape(view.V.shape[1], -1)            # (S, nblocks*K)
-    out = np.asarray(W @ Vs.astype(np.float64))                             # (D*D, nblocks*K)
-    out = out.reshape(D, D, nb, nb, K).transpose(4, 2, 0, 3, 1)             # (K, nb, D, nb, D)
-    return out.reshape(K, nb * D, nb * D).astype(np.float32)
+    out = np.empty((nb * nb, K, D * D), np.float32)
+    V = view.loadings()
+    for a in range(0, nb * nb, chunk):
+        Vc = V[a:a + chunk].astype(np.float64)                              # (c, S, K)
+        c = Vc.shape[0]
+        prod = W @ Vc.transpose(1, 0, 2).reshape(Vc.shape[1], c * K)         # (D*D, c*K)
+        out[a:a + c] = np.asarray(prod).reshape(D * D, c, K).transpose(1, 2, 0)
+    out = out.reshape(nb, nb, K, D, D).transpose(2, 0, 3, 1, 4)            # (K, nb, D, nb, D)
+    return np.ascontiguousarray(out).reshape(K, nb * D, nb * D)
 
 
 def table_coefficients(table, direction, size: int) -> np.ndarray:
@@ -383,22 +398,58 @@ def choose(store, table_size: int, budget_bytes: int, k_max: int = K_MAX, blocks
 
 
 def save(path: str, view: BlockViewport) -> None:
-    """Write the viewport (NPZ: loadings float32, eigen images half floats) atomically."""
+    """Write the viewport atomically (NPZ): the cell-layout eigen images in half floats and the
+    per-block figures. The loadings are not stored: they are T's projection on the eigen
+    images (:func:`recover_loadings`), and T is kept with every bake; stored, they would take
+    nearly T's own size at small blocks (512^2, 8^2 blocks x 24: 629 MB against T's 839)."""
     from ..io import atomic, versions
 
     with atomic.atomic_path(path) as tmp:
-        np.savez(tmp, V=view.V, eigen=view.eigen.astype(np.float16), dims=view.dims,
+        np.savez(tmp, eigen=view.eigen.astype(np.float16), dims=view.dims,
                  resolution=np.array(view.resolution), block=np.array(view.block),
                  residual=np.array(view.residual), method=np.array(view.method),
+                 components=np.array(view.k), directions=np.array(view.loadings().shape[1]),
                  **{k: np.array(v) for k, v in versions.stamp(FORMAT).items()})
 
 
-def load(path: str) -> BlockViewport:
+def recover_loadings(store, eigen, block: int) -> np.ndarray:
+    """The loadings (nblocks, S, K) float16 of a block viewport from T and its eigen images:
+    ``U_b = V_b^T X_b`` has orthogonal rows of squared norms ``s^2`` (the block's singular
+    values), so ``V_b = X_b U_b^T diag(1 / s^2)`` -- one strip of T at a time. Components
+    with ``s = 0`` (past a block's rank) stay zero. The eigen images' half floats bound the
+    error (about 1e-3 relative)."""
+    R, B = int(store.resolution), int(block)
+    nb = R // B
+    arr = store.array
+    S = arr.shape[0]
+    E = cell_interior(np.asarray(eigen, np.float32), B)                    # (K, R, R)
+    K = E.shape[0]
+    V = np.zeros((nb * nb, S, K), np.float16)
+    for by in range(nb):
+        strip = np.asarray(arr[:, by * B * R:(by + 1) * B * R], np.float32).reshape(S, B, R)
+        for bx in range(nb):
+            X = strip[:, :, bx * B:(bx + 1) * B].reshape(S, -1).astype(np.float64)
+            U = E[:, by * B:(by + 1) * B, bx * B:(bx + 1) * B].reshape(K, -1).astype(np.float64)
+            s2 = np.einsum("kp,kp->k", U, U)
+            keep = s2 > 1e-20 * max(float(s2.max()), 1e-300)
+            if keep.any():
+                V[by * nb + bx][:, keep] = (X @ U[keep].T) / s2[keep]
+    return V
+
+
+def load(path: str, store) -> BlockViewport:
+    """The viewport :func:`save` wrote; its loadings are recovered from ``store`` (T) when
+    first needed (re-tabulating for a new sun size, a relight of the model)."""
     from ..io import versions
 
     with np.load(path, allow_pickle=False) as z:
         versions.check({"format": str(z["format"]), "format_version": int(z["format_version"])},
                        FORMAT, path, "a block viewport")
-        return BlockViewport(np.asarray(z["V"]), np.asarray(z["eigen"], np.float32),
-                             np.asarray(z["dims"]), int(z["resolution"]), int(z["block"]),
-                             float(z["residual"]), str(z["method"]))
+        eigen = np.asarray(z["eigen"], np.float32)
+        block, R = int(z["block"]), int(z["resolution"])
+        if R != store.resolution or int(z["directions"]) != store.directions.size:
+            raise ValueError(f"{path} was fitted to another T ({R}^2, {int(z['directions'])} "
+                             f"directions; this T: {store.resolution}^2, "
+                             f"{store.directions.size})")
+        return BlockViewport(None, eigen, np.asarray(z["dims"]), R, block,
+                             float(z["residual"]), str(z["method"]), store)

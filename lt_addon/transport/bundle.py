@@ -167,8 +167,8 @@ class TransportTextureSettings:
          "receivers")), help="What the live preview shows")
     gpu_budget: int = setting(
         512, lo=8, hi=65536, label="GPU Budget", metavar="MIB",
-        help="MiB of GPU memory the viewport may take: auto shows T itself when its atlas fits, "
-             "and the block viewport chooses its block size and components within it")
+        help="MiB of GPU memory each object's viewport may take: auto shows T itself when its "
+             "atlas fits, and the block viewport chooses its block size and components within it")
 
     def validate(self):
         """Check ranges; returns the DirectionSet."""
@@ -553,7 +553,7 @@ def load_bake(report_path: str) -> tuple:
     if "viewport_blocks" in files:
         from . import block_viewport as bv
 
-        view = bv.load(where(files["viewport_blocks"]))
+        view = bv.load(where(files["viewport_blocks"]), store)
     return ObjectBake(report["object"], store.path, albedo, indirect, model, view=view,
                       viewport=report.get("viewport")), store, report
 

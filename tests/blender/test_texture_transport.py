@@ -379,7 +379,7 @@ def test_block_viewport_rendered_by_cycles_equals_its_twin_and_T(bumps, tmp_path
     assert rep["model_vs_T"]["viewport"] == "blocks"
     k = info["components"]
     assert k == 24 and rep["preview_cost"]["texture_lookups_per_pixel"] == bv.lookups_per_pixel(k)
-    view = bv.load(rep["files"]["viewport_blocks"])
+    view = bv.load(rep["files"]["viewport_blocks"], tt.TransportStore.open(rep["files"]["transport"]))
     assert view.k == k and view.block == 8
 
     def rgb(path):

@@ -40,12 +40,13 @@ def store(tmp_path):
 
 def test_exact_at_full_rank_per_block(store):
     """Every block keeps its full rank (4 x 4 texels: 16 <= 48 directions): the relight equals
-    T's own to float32 precision, and the exact SVD is the one used."""
+    T's own to the loadings' half-float precision (2^-11 relative per value; the GPU's tables
+    are half floats too), and the exact SVD is the one used."""
     view = bv.fit(store, block=4, k=16)
     assert view.method == "exact" and view.residual < 1e-6
     for az, el, a in ((30, 20, 0.0), (200, 65, 3.0), (111, 6, 2.0)):
         idx, w = tt.sun_weights(store.directions, direction_from_az_el(az, el), a)
-        assert rel(view.relight_weights(idx, w), store.relight(idx, w)) < 1e-5
+        assert rel(view.relight_weights(idx, w), store.relight(idx, w)) < 1e-3
 
 
 def test_rings_hold_the_neighbours_in_each_blocks_basis(store):
@@ -58,7 +59,7 @@ def test_rings_hold_the_neighbours_in_each_blocks_basis(store):
     b = 1 * 2 + 0
     ring = T[:, 7, :][:, src[:10]]                                 # (S, 10)
     want = view.V[b].astype(np.float64).T @ ring
-    np.testing.assert_allclose(view.eigen[:, 10, :10], want, rtol=1e-4, atol=1e-6)
+    np.testing.assert_allclose(view.eigen[:, 10, :10], want, rtol=2e-3, atol=2e-4)
     np.testing.assert_array_equal(bv.cell_interior(bv.to_cells(T[0], 8)[None], 8)[0], T[0])
 
 
@@ -99,13 +100,13 @@ def test_twin_at_a_table_texel_centre_is_the_kernel_relight(store):
     idx, w = tt.sun_weights(store.directions, d, 3.0)
     want = store.relight(idx, w)[..., None] * albedo
     got = bv.viewport_relight(view.eigen, tab, bv.to_cells(albedo, 4), d, 4, 16, D)
-    assert rel(got, want) < 1e-5
+    assert rel(got, want) < 1e-3
     assert np.all(bv.viewport_relight(view.eigen, tab, bv.to_cells(albedo, 4),
                                       [0.3, 0.2, -0.1], 4, 16, D) == 0)
     # the coefficients agree with the global tables of each block's loadings
     b = 5
     ref = tt.coefficient_tables(view.V[b], store.directions, D, 3.0)
-    np.testing.assert_allclose(tab[:, 1 * D:2 * D, 1 * D:2 * D], ref, rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(tab[:, 1 * D:2 * D, 1 * D:2 * D], ref, rtol=1e-5, atol=1e-6)
 
 
 def test_budget_sets_the_components():
@@ -138,3 +139,24 @@ def test_table_weights_are_the_tables_bilinear_lookup(store):
         np.testing.assert_allclose(tt.table_lookup(gt, d), w @ view.V[3][idx], rtol=1e-4,
                                    atol=1e-6)
     assert len(tt.table_weights(store.directions, [1, 0, -0.2], D)[0]) == 0
+
+
+def test_the_file_keeps_no_loadings_and_they_come_back_from_T(store, tmp_path):
+    """The loadings are T's projection on the eigen images: recovered from the store they relight
+    as the fitted ones to the eigen images' half-float precision; the file is the eigen images
+    and figures only, and refuses another T."""
+    view = bv.fit(store, block=4, k=6)
+    path = str(tmp_path / "v.npz")
+    bv.save(path, view)
+    back = bv.load(path, store)
+    assert back.k == 6 and back.block == 4 and np.array_equal(back.dims, view.dims)
+    import zipfile
+
+    assert "V.npy" not in zipfile.ZipFile(path).namelist()
+    for az, el in ((37, 10), (283, 55)):
+        idx, w = tt.sun_weights(store.directions, direction_from_az_el(az, el), 2.0)
+        assert rel(back.relight_weights(idx, w), view.relight_weights(idx, w)) < 2e-3
+    other = _store(tmp_path / "o", _shadowed(hemisphere_fibonacci(40, 1.5), 16),
+                   hemisphere_fibonacci(40, 1.5), 16) if (tmp_path / "o").mkdir() is None else None
+    with pytest.raises(ValueError, match="another T"):
+        bv.load(path, other)
