@@ -21,17 +21,20 @@ def direct_rows(occluder, points: ShadingPoints, directions) -> np.ndarray:
     The rays of all the directions go to the engine in one call (its threads share them)."""
     D = np.asarray(directions, np.float64).reshape(-1, 3)
     out = np.zeros((len(D), points.size), np.float32)
-    origins, dirs, where = [], [], []
+    origins, counts, where = [], [], []
     for s, L in enumerate(D):
         cos = cosine(points, L)
         lit = np.nonzero(cos > 0)[0]
         out[s, lit] = cos[lit] / np.pi
         if lit.size:
             origins.append(shadow_origins(points, L, lit))
-            dirs.append(np.broadcast_to(L.astype(np.float32), (lit.size, 3)))
+            counts.append(lit.size)
             where.append(s * points.size + lit)
+        else:
+            counts.append(0)
     if origins:
-        blocked = occluder.occluded(np.concatenate(origins), np.concatenate(dirs))
+        dirs = np.repeat(D.astype(np.float32), counts, axis=0)
+        blocked = occluder.occluded(np.concatenate(origins), dirs)
         out.reshape(-1)[np.concatenate(where)[blocked]] = 0.0
     return out
 

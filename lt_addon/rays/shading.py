@@ -74,10 +74,13 @@ class ShadingPoints:
             eps = EPSILON * np.maximum(1.0, np.abs(self.P).max(axis=1))
             P = self.P.astype(np.float32)
             push = (eps[:, None] * self.Ng).astype(np.float32)
+            lift = self.lift.astype(np.float32)
+            cutoff = self.cutoff.astype(np.float32)
             c = {"P": P, "N": self.N.astype(np.float32), "Ng": self.Ng.astype(np.float32),
-                 "lift": self.lift.astype(np.float32),
-                 "cutoff": self.cutoff.astype(np.float32),
-                 "P_up": P + push, "P_down": P - push}
+                 "lift": lift, "cutoff": cutoff, "P_up": P + push, "P_down": P - push,
+                 # smooth faces of objects with a terminator offset: where Cycles' offset
+                 # rules apply (flat faces have cutoff 0: the origin is the pushed point)
+                 "lifting": cutoff > 0}
             self._compact = c
         return c
 
@@ -214,31 +217,45 @@ def cosine(points: ShadingPoints, L) -> np.ndarray:
 def shadow_origins(points: ShadingPoints, L, idx=None) -> np.ndarray:
     """Origins (M, 3) float32 of the shadow rays towards unit ``L`` from ``points`` (or its
     ``idx``): Cycles' ``shadow_ray_offset`` plus the self-intersection push (module docstring).
-    Computed in float32, the precision the rays are cast in, over all the points at once (one
-    selection at the end is cheaper than many)."""
+    Computed in float32, the precision the rays are cast in, and only for the asked points;
+    the terminator rules only where they apply (smooth faces of objects with a terminator
+    offset: ``compact()["lifting"]``) -- elsewhere the origin is the pushed point on the side
+    ``L`` lies."""
     c = points.compact()
     L = np.asarray(L, np.float32)
-    NL = c["N"] @ L
-    NgL = c["Ng"] @ L
+    sel = np.arange(points.size) if idx is None else np.asarray(idx)
+    NgL = c["Ng"][sel] @ L
+    origin = c["P_up"][sel]
+    down = NgL < 0
+    if down.any():
+        origin[down] = c["P_down"][sel[down]]
+    lifting = c["lifting"][sel]
+    if not lifting.any():
+        return origin
+    k = np.nonzero(lifting)[0]
+    j = sel[k]
+    NL = c["N"][j] @ L
+    NgLk = NgL[k]
     transmit = NL < 0
     NL = np.abs(NL)
-    NgL_s = np.where(transmit, -NgL, NgL)
-    cutoff = c["cutoff"]
+    NgL_s = np.where(transmit, -NgLk, NgLk)
+    cutoff = c["cutoff"][j]
     with np.errstate(divide="ignore", invalid="ignore"):
         amount = np.where(NL < cutoff, np.clip(2.0 - (NgL_s + NL) / cutoff, 0, 1),
                           np.clip(1.0 - NgL_s / cutoff, 0, 1))
     # the lift of a transmission direction is the flipped branch; the diffuse bake never needs
     # it (its cosine is 0), so only the reflection lift is applied
-    amount = np.where((cutoff > 0) & ~transmit, amount, 0.0).astype(np.float32)
+    amount = np.where(~transmit, amount, 0.0).astype(np.float32)
     lifted = amount > 0
     # where Cycles skips its own triangle the ray leaves from the side L points to; where it
     # does not (lifted, heading below the plane) the lift alone separates the origin, as in
     # Cycles: a further push would move where a grazing ray crosses the plane (measured: 6 of
     # 256 texels at 16^2 on the bumps lit where Cycles' ray meets its own triangle near a vertex)
-    origin = np.where((NgL >= 0)[:, None], c["P_up"], c["P_down"])
     own = lifted & (NgL_s <= 0)
+    sub = origin[k]
     if own.any():
-        origin[own] = c["P"][own]
+        sub[own] = c["P"][j[own]]
     if lifted.any():
-        origin += c["lift"] * amount[:, None]
-    return origin if idx is None else origin[idx]
+        sub += c["lift"][j] * amount[:, None]
+    origin[k] = sub
+    return origin

@@ -371,6 +371,12 @@ def test_block_viewport_rendered_by_cycles_equals_its_twin_and_T(bumps, tmp_path
     from relightable_textures.operators.base.jobs import run
 
     scene, obj = bumps
+    # a budget no block viewport fits is refused with its figure before any bake call (nothing
+    # is made, not even the folder)
+    with pytest.raises(tx.BakeInputError, match="does not fit 8 MiB of GPU memory at 4096"):
+        run(tx.bake_job(scene, [obj], settings(resolution=4096, viewport="blocks",
+                                               gpu_budget=8), str(tmp_path / "no"), truth=0))
+    assert not (tmp_path / "no").exists()
     s = settings(sun_angle=0.0, viewport="blocks", table_size=16)
     rep = run(tx.bake_job(scene, [obj], s, str(tmp_path), truth=0)).reports[0]
     prev, info = rep["preview"], rep["viewport"]
