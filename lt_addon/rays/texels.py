@@ -175,9 +175,11 @@ def extend_margin(covered: np.ndarray, margin: int):
         den = eight[frontier] @ assigned
         num = eight[frontier] @ V
         new = sp.diags(1.0 / den) @ num
-        V = V.tolil()
-        V[frontier] = new
-        V = V.tocsr()
+        # the frontier's rows of V are zero: add the new rows in place with one sparse product
+        # (a LIL row assignment densified them: 38.6 GiB for the 1024^2 statue)
+        place = sp.csr_matrix((np.ones(frontier.size), (frontier, np.arange(frontier.size))),
+                              shape=(n, frontier.size))
+        V = (V + place @ new).tocsr()
         assigned[frontier] = 1.0
     dst = np.nonzero((assigned > 0) & ~flat)[0]
     return dst.astype(np.int64), V[dst].tocsr()
