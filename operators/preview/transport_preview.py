@@ -87,17 +87,18 @@ def viewport_relight(eig_tiles, table_tiles, direction) -> np.ndarray:
     return (e[..., None] * eig[n]).astype(np.float32)
 
 
-def write_preview_files(base: str, eig, tables) -> dict:
-    """Write the two half-float atlases; returns their paths and bytes."""
+def write_preview_files(base: str, eig, tables, names=("eigen", "tables"),
+                        fmt: str = "relightable_textures.transport_preview") -> dict:
+    """Write the two half-float atlases ``<base>_preview_<name>.exr`` (the PCA's by default;
+    :func:`write_block_files` the block viewport's); returns their paths and bytes."""
     out = {}
-    for name, arr in (("eigen", eig), ("tables", tables)):
+    for name, arr in zip(names, (eig, tables)):
         atlas = pack_atlas(arr.astype(np.float32), "edge")
         path = f"{base}_preview_{name}.exr"
         out[name] = path
         out[f"{name}_bytes"] = exrio.write_exr(
             path, {c: atlas[..., i] for i, c in enumerate("RGB")},
-            {"format": "relightable_textures.transport_preview", "tiles": len(arr),
-             "resolution": arr.shape[1]}, pixel_type="half")
+            {"format": fmt, "tiles": len(arr), "resolution": arr.shape[1]}, pixel_type="half")
     return out
 
 
@@ -244,16 +245,8 @@ def block_preview_arrays(view, albedo, directions, sun_angle: float, table_size:
 def write_block_files(base: str, eig, tables) -> dict:
     """Write the block viewport's two half-float atlases (cell-layout eigen images with the
     albedo last; per-block tables); returns their paths and bytes."""
-    out = {}
-    for name, arr in (("block_eigen", eig), ("block_tables", tables)):
-        atlas = pack_atlas(arr.astype(np.float32), "edge")
-        path = f"{base}_preview_{name}.exr"
-        out[name] = path
-        out[f"{name}_bytes"] = exrio.write_exr(
-            path, {c: atlas[..., i] for i, c in enumerate("RGB")},
-            {"format": "relightable_textures.block_preview", "tiles": len(arr),
-             "resolution": arr.shape[1]}, pixel_type="half")
-    return out
+    return write_preview_files(base, eig, tables, ("block_eigen", "block_tables"),
+                               "relightable_textures.block_preview")
 
 
 def viewport_relight_blocks(eig_tiles, table_tiles, direction, block: int, resolution: int,
