@@ -2,7 +2,6 @@
 and 96^2 fit each stage's fixed and per-texel cost on this machine; the prediction for a larger
 bake is held against that bake's measured time in the same process."""
 
-import json
 import os
 
 from relight_cli import make_scene, our_lines, relight
@@ -11,27 +10,38 @@ from relight_cli import make_scene, our_lines, relight
 def test_the_estimate_is_within_30_percent_of_the_bake_it_predicts(tmp_path):
     """The test-size bumps at 256^2 (7x the texels of the largest calibration), draft preset,
     estimated and then baked in one run (--estimate is implied at 512^2 and up; asked here):
-    the report holds the estimate and the measured bake time, within 30 %. (Measured
-    2026-12-02: 0.86-1.15 at 128^2 and 256^2 on the demo scene while another suite ran.)"""
+    the report holds the estimate and the measured bake time, within 30 %.
+
+    The calibration bakes take about a second, and a busy neighbour on a shared machine during
+    them moves the 7x extrapolation: measured 2026-12-03 on bpy 5.3.0, four runs in a row gave
+    0.78, 0.91, 1.05 and 1.13, and CI once saw 1.40. So two of at most three estimate-and-bake
+    runs must land within 30 % (a biased estimator fails every run; most runs pass the first
+    two)."""
     import bpy
 
     from relightable_textures import samples
     from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.bakes.estimate import estimate
     from relightable_textures.operators.base.jobs import run
 
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    scene = bpy.context.scene
-    samples.build("bumps", scene, "test")
-    obj = bpy.data.objects["Bumps"]
-    settings = tx.settings_from_preset("draft", resolution=256)
-    from relightable_textures.operators.bakes.estimate import estimate
-
-    out = run(tx.bake_job(scene, [obj], settings, str(tmp_path), truth=0, preview=False,
-                          compare=False, resume=False, estimator=estimate))
-    e = out.reports[0]["estimate"]
-    assert set(e["seconds"]) >= {"direct", "indirect", "fit", "other"}
-    assert e["calibration_seconds"] > 0 and e["disk_bytes"] > 0
-    assert 0.7 <= e["measured_over_estimated"] <= 1.3, e
+    ratios = []
+    for attempt in range(3):
+        bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+        scene = bpy.context.scene
+        samples.build("bumps", scene, "test")
+        obj = bpy.data.objects["Bumps"]
+        settings = tx.settings_from_preset("draft", resolution=256)
+        out = run(tx.bake_job(scene, [obj], settings, str(tmp_path / str(attempt)), truth=0,
+                              preview=False, compare=False, resume=False, estimator=estimate))
+        e = out.reports[0]["estimate"]
+        assert set(e["seconds"]) >= {"direct", "indirect", "fit", "other"}
+        assert e["calibration_seconds"] > 0 and e["disk_bytes"] > 0
+        assert e["measured_bake_seconds"] == out.reports[0]["timings"]["bake_total"]
+        ratios.append(e["measured_over_estimated"])
+        good = sum(0.7 <= r <= 1.3 for r in ratios)
+        if good >= 2 or len(ratios) - good >= 2:
+            break
+    assert good >= 2, f"measured / estimated bake time in each run: {ratios}"
 
 
 def test_cli_estimate_prints_the_cost_and_bakes_nothing(tmp_path):
