@@ -25,12 +25,13 @@ CALIBRATION = (48, 96)
 ESTIMATE_FROM = 512
 
 
-def wanted(settings, client=None, env: str | None = None):
+def wanted(settings, client=None, env: str | None = None, resolutions: dict | None = None):
     """:func:`estimate` when a bake should be estimated before it starts (at
-    :data:`ESTIMATE_FROM` texels across or more, not on Dask workers; ``env``, the value of
-    ``$RELIGHT_ESTIMATE``: "1" always, "0" never), else None: what ``bake_job`` takes as its
-    ``estimator``."""
-    if env == "1" or (env != "0" and settings.resolution >= ESTIMATE_FROM and client is None):
+    :data:`ESTIMATE_FROM` texels across or more -- the settings' or an object's own side in
+    ``resolutions`` --, not on Dask workers; ``env``, the value of ``$RELIGHT_ESTIMATE``: "1"
+    always, "0" never), else None: what ``bake_job`` takes as its ``estimator``."""
+    side = max([settings.resolution, *(resolutions or {}).values()])
+    if env == "1" or (env != "0" and side >= ESTIMATE_FROM and client is None):
         return estimate
     return None
 
@@ -119,6 +120,28 @@ def estimate(scene, objects, settings, truth: int = 4, truth_samples: int = 256)
                      f"{CALIBRATION[1]}^2 of the same objects and settings on this machine, "
                      "linear in texels (lt_addon/transport/estimate.py)"}
     out["lines"] = describe(out, settings, len(objects))
+    return out
+
+
+def estimate_groups(scene, objects, settings, resolutions: dict | None = None, truth: int = 4,
+                    truth_samples: int = 256):
+    """Generator: :func:`estimate` of each group of objects of one texture side
+    (``resolutions`` {name: side}, as ``texture_transport.bake_job`` bakes them). Returns
+    ``{"groups": [estimate, ...], "lines": every group's lines}``."""
+    from ...lt_addon.transport import object_resolution as orr
+    from ..base.cycles_bake import BakeInputError
+
+    objects = list(objects)
+    try:
+        parts = orr.groups([o.name for o in objects], settings.resolution, resolutions)
+    except orr.ResolutionError as exc:
+        raise BakeInputError(str(exc)) from None
+    out = {"groups": [], "lines": []}
+    for side, idx in parts:
+        e = yield from estimate(scene, [objects[i] for i in idx],
+                                replace(settings, resolution=side), truth, truth_samples)
+        out["groups"].append(e)
+        out["lines"] += e["lines"]
     return out
 
 

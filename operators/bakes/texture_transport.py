@@ -627,10 +627,64 @@ def _with_eta(gen, started: float, seconds: dict):
 
 
 def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *,
-             truth: int = 4, truth_samples: int = 256, target_error: float | None = None,
-             preview: bool = True, compare: bool = True, resume: bool = True, client=None,
-             blend_path: str | None = None, estimator=None):
-    """The whole ``bake-textures --method transport`` verb as one generator: optional pilot
+             resolutions: dict | None = None, **kw):
+    """The whole ``bake-textures --method transport`` verb (:func:`bake_group`'s arguments)
+    with a texture side per object: ``resolutions`` {object name: side} (0 or absent: the
+    settings' resolution). Objects of one side are baked together as one group, the largest
+    side first; every object of the scene casts shadows on every group. With several groups
+    the camera comparison is rendered once, after all of them, and each report says the
+    sides (``object_resolutions``). Returns a :class:`TextureBakeOutput` of all objects."""
+    from dataclasses import replace
+
+    from ...lt_addon.transport import object_resolution as orr
+
+    objects = list(objects)
+    try:
+        parts = orr.groups([o.name for o in objects], settings.resolution, resolutions)
+    except orr.ResolutionError as exc:
+        raise BakeInputError(str(exc)) from None
+    if len(parts) == 1:
+        return (yield from bake_group(scene, objects, replace(settings, resolution=parts[0][0]),
+                                      out_dir, **kw))
+    started = time.perf_counter()
+    sides = {o.name: side for side, idx in parts for o in (objects[i] for i in idx)}
+    compare = kw.pop("compare", True)
+    reports, models = [], []
+    for n, (side, idx) in enumerate(parts):
+        group = [objects[i] for i in idx]
+        yield Progress(0, 1, f"group {n + 1}/{len(parts)}: {', '.join(o.name for o in group)} "
+                             f"at {side}^2")
+        out = yield from bake_group(scene, group, replace(settings, resolution=side), out_dir,
+                                    compare=False, **kw)
+        reports += out.reports
+        models += out.models
+    truth = kw.get("truth", 4)
+    previewed = kw.get("preview", True) and settings.model == "pca"
+    cmp = None
+    if truth and previewed and compare:
+        from ..preview.compare_render import report_comparison
+
+        yield Progress(1, 1, "rendering the comparison from the scene camera")
+        png = os.path.join(out_dir, f"{atomic.safe_name(objects[0].name)}_compare.png")
+        cmp = report_comparison(scene, objects, truth_lights(truth), settings.sun_angle, png,
+                                kw.get("truth_samples", 256))
+    wall = round(time.perf_counter() - started, 3)
+    for rep in reports:   # each report: the sides of all groups, and the whole job's wall time
+        rep["object_resolutions"] = sides
+        rep["timings"]["wall_total"] = wall
+        if cmp is not None:
+            rep["comparison"] = cmp
+            rep["timings"]["compare_seconds"] = cmp.get("seconds", 0.0)
+        atomic.write_json(rep["report"], {k: v for k, v in rep.items() if k != "report"},
+                          default=float)
+    return TextureBakeOutput(reports, models)
+
+
+def bake_group(scene, objects, settings: TransportTextureSettings, out_dir: str, *,
+               truth: int = 4, truth_samples: int = 256, target_error: float | None = None,
+               preview: bool = True, compare: bool = True, resume: bool = True, client=None,
+               blend_path: str | None = None, estimator=None):
+    """Objects baked together at one texture side: the whole ``bake-textures --method transport`` verb as one generator: optional pilot
     (``target_error``), the bake, Cycles truths at held-out lights, files, preview and -- with
     ``truth``, a preview and ``compare`` and a scene camera -- ``<object>_compare.png`` (the
     first object's name): the previews next to a Cycles Sun render from the camera at the

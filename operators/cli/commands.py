@@ -97,6 +97,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--object", required=True, action="append", metavar="NAME",
                    help="mesh object with a UV map; repeat to bake several objects in the same "
                         "Cycles calls (shadows fall between them; transport method only)")
+    p.add_argument("--object-resolution", action="append", metavar="NAME=SIDE",
+                   help="transport: this object's texture side instead of --resolution (e.g. "
+                        "the ground at 2048 under an object at 1024, so its long shadows get "
+                        "texels); objects of one side are baked together, every object still "
+                        "casts shadows on the others; repeatable")
     p.add_argument("--method", choices=("transport", "lobes"), default="transport",
                    help="transport: direction-sampled hard-sun bake (default); lobes: the "
                         "paper's steerable-lobe environment bake")
@@ -397,8 +402,8 @@ def _cmd_validate(args) -> int:
 def _cmd_bake_textures(args) -> int:
     if args.method == "transport":
         return _cmd_bake_texture_transport(args)
-    lobes_only = [f"--{k.replace('_', '-')}" for k in TRANSPORT_OPTIONS + ("target_error",)
-                  if getattr(args, k) is not None]
+    lobes_only = [f"--{k.replace('_', '-')}" for k in TRANSPORT_OPTIONS + (
+                  "target_error", "object_resolution") if getattr(args, k) is not None]
     if lobes_only:
         raise CliError(f"{', '.join(lobes_only)} apply to --method transport, not lobes")
     if len(args.object) > 1:
@@ -479,19 +484,20 @@ def _print_comparison(cmp: dict | None) -> None:
         print(f"  no camera comparison: {cmp['skipped']}")
 
 
-def _estimate_only(args, objects, settings) -> int:
-    """``bake-textures --estimate``: the cost of the bake, printed; nothing baked or written."""
+def _estimate_only(args, objects, settings, sides) -> int:
+    """``bake-textures --estimate``: the cost of the bake, printed (per group of objects of
+    one texture side, ``sides`` {name: side}); nothing baked or written."""
     import bpy
 
-    from ..bakes.estimate import estimate
+    from ..bakes.estimate import estimate_groups
     from ..base import cycles_device
     from ..base.cycles_bake import BakeInputError
 
     device = bake_device(args, "bake-textures")
     try:
         with cycles_device.use(device):
-            e = run_job(estimate(bpy.context.scene, objects, settings, args.truth,
-                                 args.truth_samples), "bake-textures", device)
+            e = run_job(estimate_groups(bpy.context.scene, objects, settings, sides, args.truth,
+                                        args.truth_samples), "bake-textures", device)
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
     except KeyboardInterrupt:
@@ -526,12 +532,19 @@ def _cmd_bake_texture_transport(args) -> int:
         raise CliError(f"--truth-samples must be >= 1, got {args.truth_samples}")
     if args.target_error is not None and not 0.0 < args.target_error < 1.0:
         raise CliError(f"--target-error must be in (0, 1), got {args.target_error}")
+    from ...lt_addon.transport import object_resolution as orr
+
+    try:
+        sides = dict(orr.parse(spec) for spec in args.object_resolution or ())
+        orr.groups(args.object, settings.resolution, sides)   # a name not baked: refused
+    except orr.ResolutionError as exc:
+        raise CliError(str(exc)) from None
     out_dir = check_output_dir(args.out, path)
     if not can_create_in(os.path.dirname(path)):
         raise CliError(f"cannot update {path}: its folder is not writable")
     objects = open_objects(path, args.object)
     if args.estimate:
-        return _estimate_only(args, objects, settings)
+        return _estimate_only(args, objects, settings, sides)
     if not args.force:
         for o in objects:
             rp = os.path.join(out_dir, f"{atomic.safe_name(o.name)}_texture_report.json")
@@ -543,11 +556,12 @@ def _cmd_bake_texture_transport(args) -> int:
     out = run_bake(
         args, "bake-textures", path,
         lambda client, stage: tx.bake_job(bpy.context.scene, objects, settings, stage,
-                                   truth=args.truth, truth_samples=args.truth_samples,
+                                   resolutions=sides, truth=args.truth, truth_samples=args.truth_samples,
                                    target_error=args.target_error, compare=not args.no_compare,
                                    resume=not args.no_resume, client=client, blend_path=path,
                                    estimator=estimate_wanted(
-                                       settings, client, os.environ.get("RELIGHT_ESTIMATE"))),
+                                       settings, client, os.environ.get("RELIGHT_ESTIMATE"),
+                                       sides)),
         out_dir=out_dir, retire=tx.retire_globs(objects),
         kept=(f"; the finished chunks are kept in {os.path.join(out_dir, tx.CACHE_FOLDER)} and "
               "the same command resumes from them"))

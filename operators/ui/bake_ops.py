@@ -38,6 +38,12 @@ def transport_objects(context):
     return [active] + sorted(others, key=lambda o: o.name)
 
 
+def object_resolutions(objects) -> dict:
+    """{name: side} of the objects with their own texture side (Object Resolution > 0)."""
+    return {o.name: int(o.relight_resolution) for o in objects
+            if getattr(o, "relight_resolution", 0) > 0}
+
+
 #: Scene property holding the last texture bake's summary lines, shown in the panel.
 LAST_BAKE_KEY = "relight_last_bake"
 
@@ -317,8 +323,10 @@ class RELIGHT_OT_bake_textures(ModalBake, bpy.types.Operator):
                 check_bakeable(o)
             self.settings = transport_settings_from_scene(props)
             self.settings.validate()
+            sides = object_resolutions(objects)
             if props.run_on != "HERE":
                 args = [a for o in objects for a in ("--object", o.name)]
+                args += [a for n, r in sides.items() for a in ("--object-resolution", f"{n}={r}")]
                 args += to_argv(self.settings)   # components None: --tol, no preset components
                 return self._external(context, "bake-textures",
                                       args + ["--truth", str(props.truth_lights)])
@@ -327,8 +335,9 @@ class RELIGHT_OT_bake_textures(ModalBake, bpy.types.Operator):
             from ..bakes.estimate import wanted
 
             # a large bake is estimated first: its cost in the status line, the time left
-            return tx.bake_job(context.scene, objects, self.settings, stage,
-                               truth=props.truth_lights, estimator=wanted(self.settings))
+            return tx.bake_job(context.scene, objects, self.settings, stage, resolutions=sides,
+                               truth=props.truth_lights,
+                               estimator=wanted(self.settings, resolutions=sides))
         check_bakeable(obj)
         self.settings = settings_from_scene(props)
         self.settings.validate()
@@ -627,7 +636,7 @@ class RELIGHT_OT_estimate(ModalBake, bpy.types.Operator):
         return cycles_device.stepped(self._prepare(context), device)
 
     def _prepare(self, context):
-        from ..bakes.estimate import estimate
+        from ..bakes.estimate import estimate_groups
         from .properties import transport_settings_from_scene
 
         props = context.scene.relight
@@ -636,7 +645,8 @@ class RELIGHT_OT_estimate(ModalBake, bpy.types.Operator):
             check_bakeable(o)
         settings = transport_settings_from_scene(props)
         settings.validate()
-        return estimate(context.scene, objects, settings, props.truth_lights)
+        return estimate_groups(context.scene, objects, settings, object_resolutions(objects),
+                               props.truth_lights)
 
     def _finish(self, context, result):
         for line in result["lines"]:

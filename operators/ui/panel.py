@@ -90,9 +90,16 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
                          "gpu_budget", "sun_angle", "table_size",
                          "truth_lights", "output_dir"):
                 col.prop(props, name)
+            obj = context.active_object
+            if obj is not None and obj.type == "MESH":   # e.g. the ground at its own size
+                layout.prop(obj, "relight_resolution", text=f"{obj.name} Resolution")
             n = len([o for o in context.selected_objects if o.type == "MESH"])
             if n > 1:
-                layout.label(text=f"{n} selected meshes are baked together", icon="INFO")
+                sides = {o.relight_resolution or props.resolution
+                         for o in context.selected_objects if o.type == "MESH"}
+                layout.label(text=f"{n} selected meshes are baked together" +
+                             (f" ({len(sides)} groups by resolution)" if len(sides) > 1 else ""),
+                             icon="INFO")
             _run_on(layout, props)
             row = layout.row(align=True)
             row.operator("relight.bake_textures", icon="RENDER_STILL")

@@ -325,6 +325,12 @@ def _on_depsgraph_update(scene, depsgraph):
 
 def register() -> None:
     bpy.types.Scene.relight = PointerProperty(type=RelightSceneSettings)
+    # per object: a large receiver (the ground under a low sun's long shadows) at its own size
+    bpy.types.Object.relight_resolution = IntProperty(
+        name="Object Resolution", default=0, min=0, max=8192, soft_max=8192,
+        description="This object's texture side in a transport bake (0: the Resolution above). "
+                    "Objects of one side are baked together; every object still casts shadows "
+                    "on the others")
     bpy.app.handlers.depsgraph_update_post.append(_on_depsgraph_update)
 
 
@@ -332,4 +338,5 @@ def unregister() -> None:
     if _on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
         bpy.app.handlers.depsgraph_update_post.remove(_on_depsgraph_update)
     del bpy.types.Scene.relight
+    del bpy.types.Object.relight_resolution
 
