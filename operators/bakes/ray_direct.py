@@ -21,8 +21,19 @@ from ...lt_addon.rays.texels import extend_margin
 from ..base import cycles_device, ray_scene
 from ..base.jobs import Progress
 
-#: Directions per ray chunk (one engine call each; 64 x 65k texels = 4 M rays).
+#: Directions per ray chunk at most (one engine call each; 64 x 65k texels = 4 M rays).
 RAY_CHUNK = 64
+#: Rays per engine call at most: a call holds ~45 bytes per ray (origin, direction, index,
+#: result) next to its (directions x texels) rows, so 4 M rays keep it near 200 MB at any size
+#: (64 directions of a 1024^2 ground held 2.9 GB: the statue bake at 1024^2 peaked at 4.1 GB
+#: of anonymous memory, and 4096^2 would have asked for 46 GB).
+RAY_BUDGET = 4 << 20
+
+
+def ray_chunk(texels: int) -> int:
+    """Directions per engine call for receivers of ``texels`` shading points: as many as
+    :data:`RAY_BUDGET` allows, 1 .. :data:`RAY_CHUNK`."""
+    return int(min(RAY_CHUNK, max(1, RAY_BUDGET // max(int(texels), 1))))
 
 
 def choose(scene, objects, settings) -> dict:
@@ -83,10 +94,11 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
     t_scene = time.perf_counter() - t0
     margins = [extend_margin(smp.covered(), margin) for smp, _ in receivers]
     S = dset.size
+    chunk = ray_chunk(max(smp.size for smp, _ in receivers))
     t1 = time.perf_counter()
     eta = None
-    for a in range(0, S, RAY_CHUNK):
-        D = dset.directions[a:a + RAY_CHUNK]
+    for a in range(0, S, chunk):
+        D = dset.directions[a:a + chunk]
         with _blas_idle():   # the ray engine's threads have the cores
             for store, (smp, pts), (dst, op) in zip(stores, receivers, margins):
                 rows = np.zeros((len(D), R * R), np.float32)
@@ -95,7 +107,7 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                 if dst.size:
                     rows[:, dst] = (op @ inside.T).T
                 store.write_rows(a, rows)
-        done = min(a + RAY_CHUNK, S)
+        done = min(a + chunk, S)
         rate = (time.perf_counter() - t1) / done
         eta = rate * (S - done)
         yield Progress(step + done - 1, total,
@@ -106,4 +118,5 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
             "rays": int(rays), "rays_per_second": round(rays / max(seconds - t_scene, 1e-9)),
             "casters": int(n_casters), "caster_triangles": int(len(T)),
             "texels": [int(smp.size) for smp, _ in receivers],
-            "margin_texels": margin, "threads": occluder.threads}
+            "margin_texels": margin, "threads": occluder.threads,
+            "directions_per_call": chunk}

@@ -249,3 +249,39 @@ def test_render_settings_decide_the_geometry(fresh_scene):
     assert n == 2                                    # the floor and the subdivided cube
     assert len(T) == 2 * 8 * 8 + 12 * 16             # 8x8 grid, the cube at 2 render levels
     assert shown.hide_viewport and sub.levels == 0 and gone.hide_render   # restored
+
+
+def test_a_ray_budget_splits_the_directions_and_changes_no_bit(fresh_scene, tmp_path,
+                                                                 monkeypatch):
+    """The engine calls hold at most RAY_BUDGET rays (the 1024^2 statue held 4.1 GB in one
+    call of 64 directions): a budget of 5 directions' rays (24 directions in 5 calls, the last
+    short) bakes the same T bit for bit as one call of all 24, and says so in its figures."""
+    import bpy
+
+    from relightable_textures.operators.bakes import ray_direct
+    from relightable_textures.operators.bakes.texture_transport import (
+        TransportTextureSettings, bake_transport_textures)
+    from relightable_textures.operators.base.jobs import run
+
+    samples.build("statue", fresh_scene, "test")
+    objs = [bpy.data.objects["Statue"], bpy.data.objects["Ground"]]
+    s = TransportTextureSettings(directions="hemi:24:1.5", resolution=16, bounces=0,
+                                 model="none", direct="rays")
+    T, calls = {}, {}
+    for name, budget in (("one call", ray_direct.RAY_BUDGET), ("budget", None)):
+        if budget is None:   # 5 directions of the largest receiver's texels per call
+            from relightable_textures.lt_addon.rays.texels import texel_samples
+            from relightable_textures.operators.base.meshes import uv_triangles
+
+            most = max(texel_samples(uv_triangles(o), 16).size for o in objs)
+            monkeypatch.setattr(ray_direct, "RAY_BUDGET", 5 * most + most // 2)
+        res = run(bake_transport_textures(fresh_scene, objs, s, str(tmp_path / name),
+                                               resume=False))
+        T[name] = [np.asarray(b.store.array).copy() for b in res.objects]
+        calls[name] = res.direct["directions_per_call"]
+        for b in res.objects:
+            b.store.abort()
+    assert calls == {"one call": ray_direct.RAY_CHUNK, "budget": 5}
+    for a, b in zip(T["one call"], T["budget"]):
+        assert a.shape == b.shape and np.array_equal(a, b)
+    assert max(float(t.max()) for t in T["budget"]) > 0.2
