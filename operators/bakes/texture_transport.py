@@ -684,10 +684,10 @@ def bake_group(scene, objects, settings: TransportTextureSettings, out_dir: str,
                truth: int = 4, truth_samples: int = 256, target_error: float | None = None,
                preview: bool = True, compare: bool = True, resume: bool = True, client=None,
                blend_path: str | None = None, estimator=None):
-    """Objects baked together at one texture side: the whole ``bake-textures --method transport`` verb as one generator: optional pilot
-    (``target_error``), the bake, Cycles truths at held-out lights, files, preview and -- with
-    ``truth``, a preview and ``compare`` and a scene camera -- ``<object>_compare.png`` (the
-    first object's name): the previews next to a Cycles Sun render from the camera at the
+    """Objects baked together at one texture side: the whole ``bake-textures --method
+    transport`` verb as one generator: optional pilot (``target_error``), the bake, Cycles
+    truths at held-out lights, files, preview and -- with ``truth``, a preview and
+    ``compare`` and a scene camera -- ``<object>_compare.png`` (the first object's name): the previews next to a Cycles Sun render from the camera at the
     lowest held-out light. With ``resume`` a rerun after a cancel or crash reuses the direct
     bakes' finished chunks (``chunks_reused`` in the reports); a Dask ``client`` bakes the
     missing ones on its workers from ``blend_path``. Returns a

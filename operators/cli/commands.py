@@ -556,7 +556,8 @@ def _cmd_bake_texture_transport(args) -> int:
     out = run_bake(
         args, "bake-textures", path,
         lambda client, stage: tx.bake_job(bpy.context.scene, objects, settings, stage,
-                                   resolutions=sides, truth=args.truth, truth_samples=args.truth_samples,
+                                   resolutions=sides, truth=args.truth,
+                                   truth_samples=args.truth_samples,
                                    target_error=args.target_error, compare=not args.no_compare,
                                    resume=not args.no_resume, client=client, blend_path=path,
                                    estimator=estimate_wanted(
