@@ -686,12 +686,12 @@ def bake_group(scene, objects, settings: TransportTextureSettings, out_dir: str,
                blend_path: str | None = None, estimator=None):
     """Objects baked together at one texture side: the whole ``bake-textures --method
     transport`` verb as one generator: optional pilot (``target_error``), the bake, Cycles
-    truths at held-out lights, files, preview and -- with ``truth``, a preview and
-    ``compare`` and a scene camera -- ``<object>_compare.png`` (the first object's name):
-    the previews next to a Cycles Sun render from the camera at the lowest held-out light. With ``resume`` a rerun after a cancel or crash reuses the direct
-    bakes' finished chunks (``chunks_reused`` in the reports); a Dask ``client`` bakes the
-    missing ones on its workers from ``blend_path``. Returns a
-    :class:`TextureBakeOutput` (the reports' ``timings.wall_total`` covers all of it)."""
+    truths at held-out lights, files, preview and -- with ``truth``, a preview and ``compare``
+    and a scene camera -- ``<object>_compare.png`` (the first object's name): the previews next
+    to a Cycles Sun render from the camera at the lowest held-out light. With ``resume`` a rerun
+    after a cancel or crash reuses the direct bakes' finished chunks (``chunks_reused`` in the
+    reports); a Dask ``client`` bakes the missing ones on its workers from ``blend_path``.
+    Returns a :class:`TextureBakeOutput` (the reports' ``timings.wall_total`` covers all of it)."""
     from dataclasses import replace
 
     started = time.perf_counter()
