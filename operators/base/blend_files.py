@@ -134,6 +134,14 @@ def move_staged_paths(stage: str, target: str) -> int:
     return changed
 
 
+def _id_value(v):
+    """``v`` as an ID property can hold it: ID properties keep 32-bit integers, so a larger one
+    (a 2048^2 bake's bytes: 3.2 GB) is kept as a float (exact below 2^53)."""
+    if isinstance(v, int) and not isinstance(v, bool) and not -2 ** 31 <= v < 2 ** 31:
+        return float(v)
+    return v
+
+
 def record_kind(obj, kind: str, file_path: str, fields: dict) -> None:
     """Replace the object's bake record of ``kind`` (kept as an ID custom property), with the
     file path relative to the .blend when it is saved."""
@@ -142,7 +150,8 @@ def record_kind(obj, kind: str, file_path: str, fields: dict) -> None:
     except ValueError:  # another drive on Windows
         path = os.path.abspath(file_path)
     entry = {"kind": kind, "path": path,
-             "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), **fields}
+             "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+             **{k: _id_value(v) for k, v in fields.items()}}
     bakes = [b for b in object_bakes(obj) if b.get("kind") != kind]
     obj[BAKES_KEY] = bakes + [entry]
 
