@@ -569,8 +569,10 @@ def _cmd_bake_texture_transport(args) -> int:
     if out is None:
         return 130
     reports = out.reports
-    for rep in reports:
+    for i, rep in enumerate(reports):
         t = rep["timings"]
+        together = rep["objects_baked_together"]   # one group of one side (--object-resolution)
+        first = i == 0 or together != reports[i - 1]["objects_baked_together"]
         print(f"baked {rep['object']}: {rep['directions']} directions at "
               f"{rep['settings']['resolution']}^2, model {rep['model']['kind']}, "
               f"{rep['bytes']['total'] / 2**20:.1f} MiB; {t['wall_total']:.1f} s in all "
@@ -591,13 +593,13 @@ def _cmd_bake_texture_transport(args) -> int:
                   f"{fid['headline']:.3f} (worst {fid['worst']['rel']:.3f} at elevation "
                   f"{fid['worst']['elevation']:g} deg{extra}; relight --source transport "
                   "shows T)")
-        if rep is reports[0]:
+        if first:
             print("  " + direct_summary(rep.get("direct") or {}, rep["directions"]))
             print_chunks(rep)
         gt = rep.get("ground_truth")
-        if gt and rep is reports[0]:   # one headline over all objects baked together
+        if gt and first:   # one headline over all objects baked together
             print(f"  error vs Cycles Sun ({gt['sun_angle']:g} deg, {gt['truth_samples']} spp, "
-                  f"{rep['settings']['bounces']} bounces) at {len(gt['lights']) // len(reports)}"
+                  f"{rep['settings']['bounces']} bounces) at {len(gt['lights']) // len(together)}"
                   f" held-out lights: {gt['headline_rel_rmse']:.3f} relative RMSE "
                   f"({gt['headline_of']}; from T directly {gt['transport_rel_rmse']:.3f})")
         if rep is reports[0]:

@@ -108,3 +108,25 @@ def test_cli_object_resolution_estimates_per_group_and_refuses_bad_input(tmp_pat
     assert [ln.split(":")[0] for ln in firsts] == ["estimate for 1 object(s) at 32^2",
                                                   "estimate for 1 object(s) at 16^2"]
     assert not (tmp_path / "o").exists()
+
+
+def test_cli_bakes_two_sides_and_prints_each_groups_figures(tmp_path):
+    """The CLI's grouped bake: both objects at their sides in one folder, and each group's
+    engine line and error against its own Cycles truths printed once (1 light each)."""
+    blend = make_scene("statue", tmp_path / "s.blend")
+    r = relight("bake-textures", blend, "--object", "Statue", "--object", "Ground", "--preset",
+                "draft", "--directions", "hemi:24:1.5", "--resolution", "16",
+                "--object-resolution", "Ground=32", "--truth", "1", "--no-compare", "--out",
+                tmp_path / "o")
+    assert r.returncode == 0, r.stderr[-2000:]
+    out = r.stdout.splitlines()
+    assert [ln.split(":")[0] for ln in out if ln.startswith("baked ")] == [
+        "baked Ground", "baked Statue"]
+    assert "at 32^2" in next(ln for ln in out if ln.startswith("baked Ground"))
+    assert "at 16^2" in next(ln for ln in out if ln.startswith("baked Statue"))
+    errors = [ln for ln in out if "error vs Cycles Sun" in ln]
+    assert len(errors) == 2 and all("at 1 held-out lights" in ln for ln in errors), errors
+    assert len([ln for ln in out if ln.strip().startswith("Direct light:")]) == 2
+    for n, side in (("Statue", 16), ("Ground", 32)):
+        rep = json.loads((tmp_path / "o" / f"{n}_texture_report.json").read_text())
+        assert rep["settings"]["resolution"] == side
