@@ -11,12 +11,15 @@ Pure logic: parsing ``NAME=SIDE`` and the grouping. The bpy layer runs the group
 
 from __future__ import annotations
 
+from ..errors import InputError
+
 #: texture sides a transport bake takes (TransportTextureSettings.validate's range)
 SIDES = (4, 8192)
 
 
-class ResolutionError(ValueError):
-    """A per-object resolution that cannot be used (one line, for the CLI and the panel)."""
+class ResolutionError(InputError):
+    """A per-object resolution that cannot be used: the project's one input error (the CLI
+    prints it as one line, the panel's operators report it)."""
 
 
 def parse(spec: str) -> tuple[str, int]:

@@ -129,13 +129,9 @@ def estimate_groups(scene, objects, settings, resolutions: dict | None = None, t
     (``resolutions`` {name: side}, as ``texture_transport.bake_job`` bakes them). Returns
     ``{"groups": [estimate, ...], "lines": every group's lines}``."""
     from ...lt_addon.transport import object_resolution as orr
-    from ..base.cycles_bake import BakeInputError
 
     objects = list(objects)
-    try:
-        parts = orr.groups([o.name for o in objects], settings.resolution, resolutions)
-    except orr.ResolutionError as exc:
-        raise BakeInputError(str(exc)) from None
+    parts = orr.groups([o.name for o in objects], settings.resolution, resolutions)
     out = {"groups": [], "lines": []}
     for side, idx in parts:
         e = yield from estimate(scene, [objects[i] for i in idx],

@@ -627,7 +627,8 @@ def _with_eta(gen, started: float, seconds: dict):
 
 
 def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *,
-             resolutions: dict | None = None, **kw):
+             resolutions: dict | None = None, truth: int = 4, truth_samples: int = 256,
+             preview: bool = True, compare: bool = True, **kw):
     """The whole ``bake-textures --method transport`` verb (:func:`bake_group`'s arguments)
     with a texture side per object: ``resolutions`` {object name: side} (0 or absent: the
     settings' resolution). Objects of one side are baked together as one group, the largest
@@ -639,16 +640,13 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
     from ...lt_addon.transport import object_resolution as orr
 
     objects = list(objects)
-    try:
-        parts = orr.groups([o.name for o in objects], settings.resolution, resolutions)
-    except orr.ResolutionError as exc:
-        raise BakeInputError(str(exc)) from None
+    parts = orr.groups([o.name for o in objects], settings.resolution, resolutions)
+    kw.update(truth=truth, truth_samples=truth_samples, preview=preview)
     if len(parts) == 1:
         return (yield from bake_group(scene, objects, replace(settings, resolution=parts[0][0]),
-                                      out_dir, **kw))
+                                      out_dir, compare=compare, **kw))
     started = time.perf_counter()
     sides = {o.name: side for side, idx in parts for o in (objects[i] for i in idx)}
-    compare = kw.pop("compare", True)
     reports, models = [], []
     for n, (side, idx) in enumerate(parts):
         group = [objects[i] for i in idx]
@@ -658,23 +656,13 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
                                     compare=False, **kw)
         reports += out.reports
         models += out.models
-    truth = kw.get("truth", 4)
-    previewed = kw.get("preview", True) and settings.model == "pca"
-    cmp = None
-    if truth and previewed and compare:
-        from ..preview.compare_render import report_comparison
-
-        yield Progress(1, 1, "rendering the comparison from the scene camera")
-        png = os.path.join(out_dir, f"{atomic.safe_name(objects[0].name)}_compare.png")
-        cmp = report_comparison(scene, objects, truth_lights(truth), settings.sun_angle, png,
-                                kw.get("truth_samples", 256))
+    if truth and preview and settings.model == "pca" and compare:
+        yield from _camera_comparison(scene, objects, settings, out_dir, reports, truth,
+                                      truth_samples)
     wall = round(time.perf_counter() - started, 3)
     for rep in reports:   # each report: the sides of all groups, and the whole job's wall time
         rep["object_resolutions"] = sides
         rep["timings"]["wall_total"] = wall
-        if cmp is not None:
-            rep["comparison"] = cmp
-            rep["timings"]["compare_seconds"] = cmp.get("seconds", 0.0)
         atomic.write_json(rep["report"], {k: v for k, v in rep.items() if k != "report"},
                           default=float)
     return TextureBakeOutput(reports, models)
@@ -741,15 +729,8 @@ def bake_group(scene, objects, settings: TransportTextureSettings, out_dir: str,
             faults.checkpoint("preview")
             rep["timings"]["preview_seconds"] = round(time.perf_counter() - t_prev, 3)
     if truth and previewed and compare:
-        from ..preview.compare_render import report_comparison
-
-        yield Progress(1, 1, "rendering the comparison from the scene camera")
-        png = os.path.join(out_dir, f"{atomic.safe_name(objects[0].name)}_compare.png")
-        cmp = report_comparison(scene, objects, truth_lights(truth), settings.sun_angle, png,
-                                truth_samples)
-        for rep in reports:
-            rep["comparison"] = cmp
-            rep["timings"]["compare_seconds"] = cmp.get("seconds", 0.0)
+        yield from _camera_comparison(scene, objects, settings, out_dir, reports, truth,
+                                      truth_samples)
     wall = round(time.perf_counter() - started, 3)
     for rep in reports:   # the wall time of everything the verb did, in the file too
         rep["timings"]["wall_total"] = wall
@@ -764,6 +745,22 @@ def bake_group(scene, objects, settings: TransportTextureSettings, out_dir: str,
             b.store.close()
         b.store = None
     return TextureBakeOutput(reports, [b.model for b in result.objects])
+
+
+def _camera_comparison(scene, objects, settings, out_dir: str, reports: list, truth: int,
+                       truth_samples: int):
+    """Generator: ``<first object>_compare.png`` -- the previews of ``objects`` next to a
+    Cycles Sun render from the scene camera at the lowest held-out light -- and its figures in
+    every report (``comparison``, ``timings.compare_seconds``)."""
+    from ..preview.compare_render import report_comparison
+
+    yield Progress(1, 1, "rendering the comparison from the scene camera")
+    png = os.path.join(out_dir, f"{atomic.safe_name(objects[0].name)}_compare.png")
+    cmp = report_comparison(scene, objects, truth_lights(truth), settings.sun_angle, png,
+                            truth_samples)
+    for rep in reports:
+        rep["comparison"] = cmp
+        rep["timings"]["compare_seconds"] = cmp.get("seconds", 0.0)
 
 
 def _truth_figures(scene, objects, settings, result, truth, truth_samples, target_error,

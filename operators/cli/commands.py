@@ -521,24 +521,21 @@ def _cmd_bake_texture_transport(args) -> int:
     path = check_input_blend(args.file)
     overrides = {k: getattr(args, k) for k in TRANSPORT_OPTIONS + SHARED_OPTIONS
                  if getattr(args, k) is not None}
+    from ...lt_addon.transport import object_resolution as orr
+
     try:
         settings = tx.settings_from_preset(args.preset, **overrides)
         settings.validate()
         if args.truth:
             tx.truth_lights(args.truth)
+        sides = dict(orr.parse(spec) for spec in args.object_resolution or ())
+        orr.groups(args.object, settings.resolution, sides)   # a name not baked: refused
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
     if args.truth_samples < 1:
         raise CliError(f"--truth-samples must be >= 1, got {args.truth_samples}")
     if args.target_error is not None and not 0.0 < args.target_error < 1.0:
         raise CliError(f"--target-error must be in (0, 1), got {args.target_error}")
-    from ...lt_addon.transport import object_resolution as orr
-
-    try:
-        sides = dict(orr.parse(spec) for spec in args.object_resolution or ())
-        orr.groups(args.object, settings.resolution, sides)   # a name not baked: refused
-    except orr.ResolutionError as exc:
-        raise CliError(str(exc)) from None
     out_dir = check_output_dir(args.out, path)
     if not can_create_in(os.path.dirname(path)):
         raise CliError(f"cannot update {path}: its folder is not writable")

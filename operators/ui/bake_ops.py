@@ -41,7 +41,7 @@ def transport_objects(context):
 def object_resolutions(objects) -> dict:
     """{name: side} of the objects with their own texture side (Object Resolution > 0)."""
     return {o.name: int(o.relight_resolution) for o in objects
-            if getattr(o, "relight_resolution", 0) > 0}
+            if o.relight_resolution > 0}
 
 
 #: Scene property holding the last texture bake's summary lines, shown in the panel.
