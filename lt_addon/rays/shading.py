@@ -217,6 +217,7 @@ def cosine(points: ShadingPoints, L) -> np.ndarray:
 def shadow_origins(points: ShadingPoints, L, idx=None) -> np.ndarray:
     """Origins (M, 3) float32 of the shadow rays towards unit ``L`` from ``points`` (or its
     ``idx``): Cycles' ``shadow_ray_offset`` plus the self-intersection push (module docstring).
+    ``L`` is one direction (3,) for all, or one per asked point (M, 3).
     Computed in float32, the precision the rays are cast in, and only for the asked points;
     the terminator rules only where they apply (smooth faces of objects with a terminator
     offset: ``compact()["lifting"]``) -- elsewhere the origin is the pushed point on the side
@@ -224,7 +225,10 @@ def shadow_origins(points: ShadingPoints, L, idx=None) -> np.ndarray:
     c = points.compact()
     L = np.asarray(L, np.float32)
     sel = np.arange(points.size) if idx is None else np.asarray(idx)
-    NgL = c["Ng"][sel] @ L
+    per_ray = L.ndim == 2                   # one direction per asked point (M, 3)
+    if per_ray and len(L) != len(sel):
+        raise ValueError(f"{len(L)} directions for {len(sel)} points")
+    NgL = np.einsum("pj,pj->p", c["Ng"][sel], L) if per_ray else c["Ng"][sel] @ L
     origin = c["P_up"][sel]
     down = NgL < 0
     if down.any():
@@ -234,7 +238,7 @@ def shadow_origins(points: ShadingPoints, L, idx=None) -> np.ndarray:
         return origin
     k = np.nonzero(lifting)[0]
     j = sel[k]
-    NL = c["N"][j] @ L
+    NL = np.einsum("pj,pj->p", c["N"][j], L[k]) if per_ray else c["N"][j] @ L
     NgLk = NgL[k]
     transmit = NL < 0
     NL = np.abs(NL)

@@ -43,7 +43,7 @@ MODELS = ("pca", "blocks", "steerable", "none")
 
 #: What the viewport shows (``auto``: T itself when its atlas fits, else the PCA; see
 #: :func:`..lt_addon.transport.sparse_tables.choose_viewport`).
-VIEWPORTS = ("auto", "transport", "blocks", "pca")
+VIEWPORTS = ("auto", "horizon", "transport", "blocks", "pca")
 
 
 INDIRECT = ("steerable", "none")
@@ -154,9 +154,13 @@ class TransportTextureSettings:
              "follows low suns more closely than 32; 4x the tabulation time)")
     seed: int = setting(0, lo=0, help="Cycles seed")
     viewport: str = setting("auto", label="Viewport", choices=(
-        ("auto", "Auto", "T itself when its atlas fits the GPU budget (400 directions at "
-         "256^2: 37 MiB; 1600 directions 140 MiB), else a PCA per texel block, or the global PCA "
-         "when it is measured closer to T"),
+        ("auto", "Auto", "The horizon map where rays baked it and it agrees with T's rays; "
+         "else T itself when its atlas fits the GPU budget (400 directions at 256^2: 37 MiB; "
+         "1600 directions 140 MiB), else a PCA per texel block, or the global PCA when it is "
+         "measured closer to T"),
+        ("horizon", "Horizons", "Per-texel horizons found by rays: a shadow edge moves with "
+         "the sun instead of blending the baked directions' shadows (no ghosting at low suns); "
+         "4 lookups per pixel and about 1.3 bytes per texel and azimuth; needs the ray engine"),
         ("transport", "Transport (T)", "Relight from T itself: a few baked directions per "
          "pixel through sparse kernel tables; keeps cast shadows on large receivers; an atlas "
          "of every direction in memory"),
@@ -165,6 +169,10 @@ class TransportTextureSettings:
          "with few lookups per pixel"),
         ("pca", "PCA", "The fitted PCA's eigen-textures: small, smooths cast shadows on large "
          "receivers")), help="What the live preview shows")
+    horizon_azimuths: int = setting(
+        128, lo=0, hi=1024, label="Horizon Azimuths",
+        help="Azimuths of the horizon map rays bake for the viewport (0: none); 128 are 2.8 "
+             "degrees apart")
     gpu_budget: int = setting(
         512, lo=8, hi=65536, label="GPU Budget", metavar="MIB",
         help="MiB of GPU memory each object's viewport may take: auto shows T itself when its "
@@ -212,6 +220,9 @@ class TransportTextureSettings:
             raise InputError(f"direct must be one of {DIRECT}, got {self.direct!r}")
         if self.viewport not in VIEWPORTS:
             raise InputError(f"viewport must be one of {VIEWPORTS}, got {self.viewport!r}")
+        if self.horizon_azimuths in (1, 2):
+            raise InputError(f"horizon azimuths must be 0 (none) or 3 or more, got "
+                             f"{self.horizon_azimuths}")
         check_ranges(self)
         return dset
 
@@ -238,6 +249,7 @@ class ObjectBake:
     store: object = None                    # the TransportStore (temporary until written)
     view: object = None                     # the BlockViewport when the viewport shows blocks
     viewport: dict = None                   # what the viewport shows and why (the report's)
+    horizon: object = None                  # the HorizonMap when the viewport shows horizons
 
 
 @dataclass
@@ -255,6 +267,13 @@ class TransportTextureResult:
     direct: dict = None              # which engine baked the direct term, why, and its figures
 
 
+#: Texture lookups per pixel of the horizon viewport: two horizon tiles, the normal, the albedo.
+HORIZON_LOOKUPS = 4
+#: Under ``--viewport auto`` the horizon map is shown when its point-sun relight is within this
+#: relative RMSE of T's own rays at T's directions (:func:`.horizon_map.agreement`).
+HORIZON_AGREEMENT = 0.05
+
+
 def fit_model(store, settings: TransportTextureSettings, albedo):
     """The chosen model of one object's store (None for ``model="none"``)."""
     if settings.model == "pca":
@@ -267,7 +286,8 @@ def fit_model(store, settings: TransportTextureSettings, albedo):
     return None
 
 
-def fit_viewport(store, settings: TransportTextureSettings, model, lights=TRUTH_LIGHTS):
+def fit_viewport(store, settings: TransportTextureSettings, model, lights=TRUTH_LIGHTS,
+                 horizon=None):
     """What the live preview shows for one object's store: ``(BlockViewport or None, info)``.
 
     The block viewport is fitted when the settings resolve to it
@@ -282,9 +302,34 @@ def fit_viewport(store, settings: TransportTextureSettings, model, lights=TRUTH_
     if settings.model != "pca":
         return None, {"shows": "none", "why": f"model {settings.model!r} has no live preview"}
     budget = int(settings.gpu_budget) << 20
+    if horizon is not None and settings.viewport in ("auto", "horizon"):
+        from . import horizon_map as hmap
+
+        t0 = time.perf_counter()
+        ag = hmap.agreement(horizon, store, seed=settings.seed)
+        mib = horizon.gpu_bytes() / 2**20
+        info = {"azimuths": horizon.azimuths, "gpu_mib": round(mib, 1),
+                "lookups_per_pixel": HORIZON_LOOKUPS, "horizon_vs_T_rays": round(
+                    ag["rel_rmse"], 4), "horizon_vs_T_worst_direction": round(
+                    ag["worst_direction_rel_rmse"], 4), "agreement_directions": ag["directions"],
+                "gpu_budget_mib": settings.gpu_budget,
+                "agreement_seconds": round(time.perf_counter() - t0, 3)}
+        if settings.viewport == "horizon":
+            return None, {"shows": "horizon", "why": "asked for", **info}
+        if ag["rel_rmse"] <= HORIZON_AGREEMENT and mib <= settings.gpu_budget:
+            return None, {"shows": "horizon", "why": (
+                f"auto: the horizon map agrees with T's rays within {ag['rel_rmse']:.3f} "
+                f"(at most {HORIZON_AGREEMENT}) in {mib:.0f} MiB"), **info}
+        horizon_note = {"horizon_rejected": (
+            f"the horizon map is {ag['rel_rmse']:.3f} from T's rays (over {HORIZON_AGREEMENT}:"
+            " the sky shows under overhangs)" if ag["rel_rmse"] > HORIZON_AGREEMENT else
+            f"the horizon map takes {mib:.0f} MiB (over {settings.gpu_budget})"), **{
+            "horizon_" + k: v for k, v in info.items() if k != "gpu_budget_mib"}}
+    else:
+        horizon_note = {}
     shows, why = sp.choose_viewport(settings.viewport, store.directions.size, store.resolution,
                                     budget_mib=settings.gpu_budget, table_size=settings.table_size)
-    info = {"shows": shows, "why": why, "gpu_budget_mib": settings.gpu_budget}
+    info = {"shows": shows, "why": why, "gpu_budget_mib": settings.gpu_budget, **horizon_note}
     if shows != "blocks":
         return None, info
     t0 = time.perf_counter()
@@ -449,15 +494,18 @@ def model_fidelity(bake: ObjectBake, store, settings, lights=TRUTH_LIGHTS) -> di
     if model is None or not (hasattr(model, "V") or hasattr(model, "n_blocks")):
         return None                     # none, or the steerable basis (no sparse relight)
     view = getattr(bake, "view", None)
-    tables = None if view is not None else viewport_tables(settings, store)
-    viewport = "blocks" if view is not None else settings.model if tables is None else "transport"
+    hm = getattr(bake, "horizon", None)
+    tables = None if view is not None or hm is not None else viewport_tables(settings, store)
+    viewport = ("horizon" if hm is not None else "blocks" if view is not None else
+                settings.model if tables is None else "transport")
     rows = []
     for az, el in lights:
         d = direction_from_az_el(az, el)
         idx, w = tt.sun_weights(store.directions, d, settings.sun_angle, settings.kernel)
         full = store.relight(idx, w)
         row = {"azimuth": az, "elevation": el, "model": rel_rmse(model.relight(idx, w), full)}
-        row["rel"] = (rel_rmse(view.relight_weights(idx, w), full) if view is not None else
+        row["rel"] = (rel_rmse(hm.direct(d, settings.sun_angle), full) if hm is not None else
+                      rel_rmse(view.relight_weights(idx, w), full) if view is not None else
                       row["model"] if tables is None else
                       rel_rmse(viewport_direct(store, tables, d), full))
         rows.append(row)
@@ -489,7 +537,7 @@ def model_summary(model, S: int) -> dict:
     return {"kind": "steerable", "order": model.order}
 
 
-def preview_cost(model, settings, store=None, view=None) -> dict:
+def preview_cost(model, settings, store=None, view=None, horizon=None) -> dict:
     """Per-pixel cost of the live preview of ``model`` as ``settings.viewport`` shows it (the
     transport viewport: 4 table texels x (2 K / 3 table lookups + K atlas lookups) + the
     albedo, K the taps its tables need for the preview's sun size: 21 lookups for a point sun,
@@ -497,6 +545,11 @@ def preview_cost(model, settings, store=None, view=None) -> dict:
     if not hasattr(model, "preview_cost"):
         return {}
     extra = settings.indirect_order ** 2 if settings.bounces else 0
+    if horizon is not None:
+        return {"viewport": "horizon", "azimuths": horizon.azimuths,
+                "texture_lookups_per_pixel": HORIZON_LOOKUPS + extra,
+                "python_per_light_change": False,
+                "gpu_mib": round(horizon.gpu_bytes() / 2**20, 1)}
     if view is not None:
         from . import block_viewport as bv
 
@@ -554,8 +607,13 @@ def load_bake(report_path: str) -> tuple:
         from . import block_viewport as bv
 
         view = bv.load(where(files["viewport_blocks"]), store)
+    horizon = None
+    if "horizons" in files:
+        from . import horizon_map as hmap
+
+        horizon = hmap.load(where(files["horizons"]))
     return ObjectBake(report["object"], store.path, albedo, indirect, model, view=view,
-                      viewport=report.get("viewport")), store, report
+                      viewport=report.get("viewport"), horizon=horizon), store, report
 
 
 def write_bundle(result: TransportTextureResult, names: list, out_dir: str,
@@ -593,6 +651,11 @@ def write_bundle(result: TransportTextureResult, names: list, out_dir: str,
 
             files["viewport_blocks"] = base + "_viewport_blocks.npz"
             bv.save(files["viewport_blocks"], b.view)
+        if b.horizon is not None:
+            from . import horizon_map as hmap
+
+            files["horizons"] = base + "_horizons.npz"
+            hmap.save(files["horizons"], b.horizon)
         nbytes = {k: os.path.getsize(v) for k, v in files.items()}
         s = result.settings
         store = b.store or tt.TransportStore.open(b.store_path)
@@ -611,7 +674,7 @@ def write_bundle(result: TransportTextureResult, names: list, out_dir: str,
             "bake_calls": result.bake_calls,
             "peak_rss_above_start_mb": round(result.peak_rss_mb, 1),
             "rss_growth_while_streaming_mb": round(result.growth_after_first_mb, 1),
-            "preview_cost": preview_cost(b.model, s, store, b.view),
+            "preview_cost": preview_cost(b.model, s, store, b.view, b.horizon),
             "viewport": b.viewport or {},
             "model_vs_T": model_fidelity(b, store, s),
             **result.chunks,

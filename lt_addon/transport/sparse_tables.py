@@ -80,6 +80,10 @@ def choose_viewport(setting: str, n_directions: int, resolution: int,
     budget = int(budget_mib * 2**20)
     if setting == "pca":
         return "pca", "asked for"
+    if setting == "horizon":   # (shown when the bake made the map: bundle.fit_viewport)
+        shows, why = choose_viewport("auto", n_directions, resolution, max_side, budget_mib,
+                                     table_size)
+        return shows, "no horizon map (its direct light was not baked by rays); " + why
     if setting == "transport":
         if side > max_side:
             raise ValueError(f"the T preview atlas would be {side} texels across (over "

@@ -16,6 +16,8 @@ import numpy as np
 
 from ...lt_addon.errors import InputError
 from ...lt_addon.rays import engine as ray_engine
+from ...lt_addon.rays import horizon
+from ...lt_addon.transport import horizon_map as hmap
 from ...lt_addon.rays.direct import direct_rows
 from ...lt_addon.rays.texels import extend_margin
 from ..base import cycles_device, ray_scene
@@ -79,6 +81,14 @@ def _blas_idle():
     return blas_threads.limited(1) if cycles_device.blas_policy() else contextlib.nullcontext()
 
 
+def horizon_count(settings) -> int:
+    """Azimuths of the horizon maps this bake makes (0: none): only where the viewport may show
+    them (``auto`` or ``horizon``, a PCA model) and the settings ask for some."""
+    if settings.model != "pca" or settings.viewport not in ("auto", "horizon"):
+        return 0
+    return int(settings.horizon_azimuths)
+
+
 def bake(scene, objects, settings, dset, stores, normals, step: int, total: int, margin: int = 4):
     """Generator: fill ``stores`` (one per object, (S, R*R)) with the ray-traced direct
     transport; ``normals``: per object world closure normals (R, R, 3) or None; ``margin``: the
@@ -112,9 +122,29 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
         eta = rate * (S - done)
         yield Progress(step + done - 1, total,
                        f"direction {done}/{S} (rays, about {eta:.0f} s left)")
+    maps, horizon_info = None, {}
+    A = horizon_count(settings)
+    if A:
+        t2, r2 = time.perf_counter(), occluder.rays
+        maps = []
+        for i, ((smp, pts), mg) in enumerate(zip(receivers, margins)):
+            gen = horizon.iter_horizons(occluder, pts, A)
+            while True:
+                try:
+                    done = next(gen)
+                except StopIteration as stop:
+                    H = stop.value
+                    break
+                if done % max(1, A // 16) == 0:    # (a yield lets the bake be cancelled)
+                    who = f", object {i + 1}/{len(receivers)}" if len(receivers) > 1 else ""
+                    yield Progress(step + S - 1, total, f"horizons {done}/{A} azimuths{who}")
+            maps.append(hmap.from_points(H, smp.texel, R, pts.Ns, mg))
+        horizon_info = {"horizon_azimuths": A,
+                        "horizon_seconds": round(time.perf_counter() - t2, 3),
+                        "horizon_rays": int(occluder.rays - r2)}
     seconds = time.perf_counter() - t0
     rays = occluder.rays
-    return {"engine": "rays", "seconds": round(seconds, 3), "scene_seconds": round(t_scene, 3),
+    return {"engine": "rays", "horizon_maps": maps, **horizon_info, "seconds": round(seconds, 3), "scene_seconds": round(t_scene, 3),
             "rays": int(rays), "rays_per_second": round(rays / max(seconds - t_scene, 1e-9)),
             "casters": int(n_casters), "caster_triangles": int(len(T)),
             "texels": [int(smp.size) for smp, _ in receivers],

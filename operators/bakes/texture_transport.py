@@ -185,10 +185,12 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
     finished = False
     first = peak
     seconds["direct_cycles"] = 0.0
+    horizon_maps = None
     try:
         if rays:
             engine.update((yield from ray_direct.bake(scene, objects, settings, dset, stores,
                                                       normals, 2, total)))
+            horizon_maps = engine.pop("horizon_maps", None)
             seconds["direct_rays"] = engine["seconds"]
             faults.checkpoint("directions")
             peak = first = max(peak, _rss_mb())
@@ -241,7 +243,7 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
         result = yield from _indirect_and_models(scene, objects, settings, dset, albedos,
                                                  readers, seconds, calls, t_start, rss0, peak,
                                                  first, 2 + S, total, lights, client,
-                                                 blend_path)
+                                                 blend_path, horizon_maps)
     except BaseException:   # cancelled or failed after the directions: drop the stores too
         for r in readers:
             r.abort()
@@ -375,7 +377,7 @@ def direct_chunk_cache(scene, objects, settings: TransportTextureSettings, out_d
 
 def _indirect_and_models(scene, objects, settings, dset, albedos, readers, seconds, calls,
                          t_start, rss0, peak, first, step, total, cache=None, client=None,
-                         blend_path=None):
+                         blend_path=None, horizon_maps=None):
     """Steps 3 and 4 of :func:`bake_transport_textures` (the stores are not committed yet).
     The indirect stage's basis lights are chunks (:mod:`.light_chunks`): from ``cache``, from
     ``client``'s workers, or baked here."""
@@ -423,9 +425,11 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
         t0 = time.perf_counter()
         with blas_threads.limited(n_fit) if n_fit else contextlib.nullcontext():
             model = fit_model(readers[i], settings, albedos[i])
-            view, viewport = fit_viewport(readers[i], settings, model)
+            hm = horizon_maps[i] if horizon_maps else None
+            view, viewport = fit_viewport(readers[i], settings, model, horizon=hm)
         results.append(ObjectBake(o.name, readers[i].path, albedos[i], indirects[i], model,
-                                  time.perf_counter() - t0, readers[i], view, viewport))
+                                  time.perf_counter() - t0, readers[i], view, viewport,
+                                  horizon=hm if viewport.get("shows") == "horizon" else None))
         peak = max(peak, _rss_mb())
     seconds["fit"] = sum(r.fit_seconds for r in results)
     seconds["bake_total"] = time.perf_counter() - t_start
@@ -467,8 +471,8 @@ def truth_errors(result: TransportTextureResult, truths: dict, sun_angle: float,
     rows = []
     for oi, b in enumerate(result.objects):
         store = b.store or tt.TransportStore.open(b.store_path)
-        tables = None if b.view is not None else viewport_tables(result.settings, store,
-                                                                  sun_angle)
+        tables = (None if b.view is not None or b.horizon is not None else
+                  viewport_tables(result.settings, store, sun_angle))
         for az, el in lights:
             truth = truths[(az, el)][oi]
             d = direction_from_az_el(az, el)
@@ -481,7 +485,9 @@ def truth_errors(result: TransportTextureResult, truths: dict, sun_angle: float,
             ind = (None if b.indirect is None else
                    _upsample(b.indirect.relight(d), store.resolution))
             view = None
-            if b.view is not None:   # the block viewport
+            if b.horizon is not None:   # the horizon viewport
+                view = b.horizon.direct(d, sun_angle)[..., None] * b.albedo
+            elif b.view is not None:   # the block viewport
                 idx, w = tt.sun_weights(store.directions, d, sun_angle, result.settings.kernel)
                 view = b.view.relight_weights(idx, w)[..., None] * b.albedo
             elif tables is not None:   # the viewport relights from T through sparse tables
@@ -692,6 +698,18 @@ def bake_group(scene, objects, settings: TransportTextureSettings, out_dir: str,
                                budget_mib=settings.gpu_budget, table_size=settings.table_size)
         except ValueError as exc:
             raise BakeInputError(str(exc)) from None
+        if settings.viewport == "horizon":
+            from ...lt_addon.transport import horizon_map as hmap
+
+            if settings.direct == "cycles" or settings.horizon_azimuths < 3:
+                raise BakeInputError("--viewport horizon needs horizons found by rays: "
+                                     "--direct auto or rays, and --horizon-azimuths 3 or more")
+            mib = hmap.gpu_bytes(settings.horizon_azimuths, settings.resolution) / 2**20
+            if mib > settings.gpu_budget:
+                raise BakeInputError(
+                    f"the horizon viewport would take {mib:.0f} MiB of GPU memory at "
+                    f"{settings.resolution}^2 with {settings.horizon_azimuths} azimuths (over "
+                    f"--gpu-budget {settings.gpu_budget}); use fewer azimuths or raise the budget")
     if target_error is not None:
         if not 0.0 < target_error < 1.0:
             raise BakeInputError(f"--target-error must be in (0, 1), got {target_error}")

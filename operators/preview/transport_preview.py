@@ -428,6 +428,147 @@ def build_sparse_group(n_directions: int, resolution: int, table_size: int, taps
     return group
 
 
+# ---------------------------------------------------------------------------------------------
+# the horizon viewport: per-texel horizons and normals (lt_addon/transport/horizon_map.py)
+
+
+def horizon_preview_arrays(hm, albedo):
+    """(8-bit horizon tiles (ceil(A/3), R, R, 3) uint8, three azimuths per RGB tile; normal and
+    albedo tiles (2, R, R, 3) float32) -- what :func:`build_horizon_group` reads."""
+    A, R = hm.azimuths, hm.resolution
+    n = -(-A // 3)
+    q = np.zeros((n * 3, R, R), np.uint8)
+    q[:A] = hm.q
+    tiles = q.reshape(n, 3, R, R).transpose(0, 2, 3, 1)
+    na = np.stack([hm.normals.astype(np.float32), np.asarray(albedo, np.float32)])
+    return tiles, na
+
+
+def write_horizon_files(base: str, tiles, na, azimuths: int) -> dict:
+    """``<base>_preview_horizons.png`` (8-bit, edge-padded atlas) and
+    ``<base>_preview_normals.exr`` (half floats: the normal tile, then the albedo)."""
+    from ...lt_addon.io import versions
+    from ...lt_addon.io.contact_sheet import write_png
+
+    out = {"horizon_atlas": f"{base}_preview_horizons.png",
+           "horizon_normals": f"{base}_preview_normals.exr"}
+    out["horizon_atlas_bytes"] = write_png(out["horizon_atlas"], pack_atlas(tiles, "edge")[::-1])
+    atlas = pack_atlas(na, "edge")
+    out["horizon_normals_bytes"] = exrio.write_exr(
+        out["horizon_normals"], {c: atlas[..., i] for i, c in enumerate("RGB")},
+        {**versions.stamp("relightable_textures.horizon_preview"), "tiles": 2,
+         "azimuths": int(azimuths), "resolution": int(na.shape[1])}, pixel_type="half")
+    return out
+
+
+def viewport_relight_horizon(tiles, na, azimuths: int, direction, sun_angle: float):
+    """NumPy twin of :func:`build_horizon_group` (direct light, intensity 1): (R, R, 3) from
+    the 8-bit horizon tiles and the half-float normal and albedo tiles."""
+    from ...lt_addon.transport.horizon_map import HorizonMap
+
+    A = int(azimuths)
+    q = np.asarray(tiles).transpose(0, 3, 1, 2).reshape(-1, *tiles.shape[1:3])[:A]
+    hm = HorizonMap(q, np.asarray(na[0], np.float16))
+    e = hm.direct(direction, sun_angle)
+    return (e[..., None] * np.asarray(na[1], np.float64)).astype(np.float32)
+
+
+def _atlas_channel(b, index, uv, lay, image, resolution: int, acc, x, y, interpolation="Linear"):
+    """The value of channel ``index % 3`` of tile ``index // 3`` of an atlas (``lay``:
+    :func:`atlas_layout`) at the texel's ``uv``; ``index`` a socket holding an integer."""
+    cols, stride, W, H = lay["cols"], lay["stride"], lay["width"], lay["height"]
+    tile = b.math("FLOOR", b.math("MULTIPLY_ADD", index, 1.0 / 3.0, 0.5 / 3.0, x=x, y=y),
+                  x=x + 100, y=y)
+    ch = b.math("MULTIPLY_ADD", tile, -3.0, index, x=x + 200, y=y)
+    row = b.math("FLOOR", b.math("MULTIPLY_ADD", tile, 1.0 / cols, 0.5 / cols, x=x + 300, y=y),
+                 x=x + 400, y=y)
+    col = b.math("MULTIPLY_ADD", row, -float(cols), tile, x=x + 500, y=y)
+    off = b.node("ShaderNodeCombineXYZ", x + 600, y)
+    b.links.new(b.math("MULTIPLY_ADD", col, stride / W, 1.0 / W, x=x + 550, y=y), off.inputs[0])
+    b.links.new(b.math("MULTIPLY_ADD", row, stride / H, 1.0 / H, x=x + 550, y=y - 40),
+                off.inputs[1])
+    m = b.node("ShaderNodeVectorMath", x + 700, y, operation="MULTIPLY_ADD")
+    b.links.new(pn.after_sum(b, uv, acc, x + 650, y), m.inputs[0])
+    m.inputs[1].default_value = (resolution / W, resolution / H, 0.0)
+    b.links.new(off.outputs[0], m.inputs[2])
+    tex = b.node("ShaderNodeTexImage", x + 800, y, image=image, interpolation=interpolation,
+                 extension="EXTEND")
+    b.links.new(m.outputs["Vector"], tex.inputs["Vector"])
+    onehot = b.node("ShaderNodeCombineXYZ", x + 900, y - 40)
+    for c in range(3):
+        b.links.new(b.math("COMPARE", ch, float(c), 0.5, x=x + 850, y=y - 40 * c),
+                    onehot.inputs[c])
+    return b.vmath("DOT_PRODUCT", tex.outputs["Color"], onehot.outputs[0], x=x + 1000, y=y)
+
+
+#: Node name of the horizon group's sun radius (radians), rewritten by the Sun Size slider.
+SUN_RADIUS_NODE = "Sun Radius"
+
+
+def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image, uv_map: str,
+                        name: str, sun_angle: float):
+    """The sun group relighting from horizons (the sockets of :func:`build_group`): the sun's
+    azimuth picks the two azimuth channels around it (linear between them), the sun's disc is
+    cut by the horizon line, ``0.5 + (t sqrt(1 - t^2) + asin t) / pi`` for the centre ``t``
+    sun radii above it, times ``max(0, N . d) / pi`` with the baked normal; 4 lookups."""
+    from ...lt_addon.transport.horizon_map import SUN_RADIUS_MIN
+
+    group, b, gin, gout, (dx, dy, dz), _ = _sun_group_head(name, -2600, 2400)
+    A = int(azimuths)
+    az = b.math("ARCTAN2", dy, dx, x=-2000, y=400)                       # atan2(y, x)
+    xa = b.math("MULTIPLY", az, A / (2 * np.pi), x=-1900, y=400)
+    xa = b.math("ADD", xa, b.math("MULTIPLY", b.math("LESS_THAN", xa, 0.0, x=-1900, y=300),
+                                  float(A), x=-1800, y=300), x=-1700, y=400)
+    k0 = b.math("FLOOR", xa, x=-1600, y=400)
+    f = b.math("SUBTRACT", xa, k0, x=-1500, y=300)
+    k0 = b.math("SUBTRACT", k0, b.math("MULTIPLY", b.math("FLOOR", b.math(
+        "MULTIPLY_ADD", k0, 1.0 / A, 0.5 / A, x=-1500, y=500), x=-1400, y=500), float(A),
+        x=-1300, y=500), x=-1200, y=400)                                  # k0 mod A
+    k1 = b.math("ADD", k0, 1.0, x=-1100, y=500)
+    k1 = b.math("SUBTRACT", k1, b.math("MULTIPLY", b.math("FLOOR", b.math(
+        "MULTIPLY_ADD", k1, 1.0 / A, 0.5 / A, x=-1100, y=600), x=-1000, y=600), float(A),
+        x=-900, y=600), x=-800, y=500)                                    # (k0 + 1) mod A
+    uv = b.node("ShaderNodeUVMap", -1400, -600, uv_map=uv_map).outputs["UV"]
+    lay = atlas_layout(-(-A // 3), resolution)
+    q0 = _atlas_channel(b, k0, uv, lay, horizon_image, resolution, None, -700, 800)
+    q1 = _atlas_channel(b, k1, uv, lay, horizon_image, resolution, q0, -700, 400)
+    q = b.math("MULTIPLY_ADD", b.math("SUBTRACT", q1, q0, x=400, y=600), f, q0, x=500, y=600)
+    h = b.math("MULTIPLY", q, np.pi / 2, x=600, y=600)
+    el = b.math("ARCSINE", b.math("MINIMUM", dz, 1.0, x=500, y=200), x=600, y=200)
+    radius = b.node("ShaderNodeValue", 500, 0)
+    radius.name = radius.label = SUN_RADIUS_NODE
+    radius.outputs[0].default_value = max(np.radians(sun_angle) / 2, SUN_RADIUS_MIN)
+    t = b.math("DIVIDE", b.math("SUBTRACT", el, h, x=700, y=400), radius.outputs[0], x=800,
+               y=400)
+    t = b.math("MINIMUM", b.math("MAXIMUM", t, -1.0, x=900, y=400), 1.0, x=1000, y=400)
+    root = b.math("SQRT", b.math("MULTIPLY_ADD", t, b.math("MULTIPLY", t, -1.0, x=1000, y=300),
+                                 1.0, x=1100, y=300), x=1200, y=300)
+    seg = b.math("MULTIPLY_ADD", t, root, b.math("ARCSINE", t, x=1200, y=200), x=1300, y=300)
+    vis = b.math("MULTIPLY_ADD", seg, 1.0 / np.pi, 0.5, x=1400, y=300)
+    ntile = atlas_layout(2, resolution)["tiles"]
+    nrm = b.vmath("NORMALIZE", _lookup(b, na_image, uv, ntile[0], 500, -300), x=900, y=-300)
+    d = b.vmath("NORMALIZE", gin.outputs["Light Direction"], x=900, y=-450)
+    cos = b.math("MAXIMUM", b.vmath("DOT_PRODUCT", nrm, d, x=1000, y=-300), 0.0, x=1100,
+                 y=-300)
+    irr = b.math("MULTIPLY", b.math("MULTIPLY", cos, vis, x=1500, y=0), 1.0 / np.pi, x=1600,
+                 y=0)
+    albedo = _lookup(b, na_image, uv, ntile[1], 1400, -600)
+    _sun_group_tail(b, gin, gout, irr, albedo, dz, 1800)
+    group["relight_azimuths"] = A
+    return group
+
+
+def set_horizon_sun(group, sun_angle: float) -> bool:
+    """Set a horizon group's sun size in place (True if ``group`` is one)."""
+    from ...lt_addon.transport.horizon_map import SUN_RADIUS_MIN
+
+    node = group.nodes.get(SUN_RADIUS_NODE) if group is not None else None
+    if node is None:
+        return False
+    node.outputs[0].default_value = max(np.radians(sun_angle) / 2, SUN_RADIUS_MIN)
+    return True
+
+
 def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: float | None = None,
                               sun=None) -> dict:
     """Write the atlases, build the group(s) and wire them into ``obj``'s materials (replacing
@@ -462,7 +603,17 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
                                            table_size=s["table_size"])
         viewport = "pca" if viewport == "blocks" else viewport
     sparse = {}
-    if viewport == "blocks":
+    if bake.horizon is not None:
+        viewport, why = "horizon", info.get("why", "")
+    if viewport == "horizon":
+        htiles, na = horizon_preview_arrays(bake.horizon, bake.albedo)
+        sparse = {**write_horizon_files(base, htiles, na, bake.horizon.azimuths),
+                  "azimuths": bake.horizon.azimuths}
+        h_img = pn.load_atlas_image(sparse["horizon_atlas"], f"{obj.name} transport horizons")
+        n_img = pn.load_atlas_image(sparse["horizon_normals"], f"{obj.name} transport normals")
+        group = build_horizon_group(bake.horizon.azimuths, model.resolution, h_img, n_img,
+                                    uv_map, gname + " new", angle)
+    elif viewport == "blocks":
         view = bake.view
         beig, btab = block_preview_arrays(view, bake.albedo, store.directions, angle,
                                           s["table_size"], s.get("kernel", "linear"))
@@ -568,6 +719,8 @@ def rewrite_tables(obj, report: dict, bake, store, sun_angle: float) -> None:
                          "resolution": btab.shape[1], "sun_angle": sun_angle},
                         pixel_type="half")
         pn.load_atlas_image(path, f"{obj.name} transport block tables")
+    if group is not None and group.get("relight_viewport") == "horizon":
+        set_horizon_sun(group, sun_angle)
     if group is not None and group.get("relight_viewport") == "transport":
         D = max(sp.TABLE_SIZE, int(s["table_size"]))
         idx, wts, _ = sp.cached_tables(store.directions, D, sun_angle, s.get("kernel", "linear"))

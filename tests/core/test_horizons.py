@@ -1,0 +1,131 @@
+"""Per-texel horizons (lt_addon/rays/horizon.py) and the horizon map
+(lt_addon/transport/horizon_map.py) against independent computations: the analytic horizon of a
+wall, the area of a disc's segment by counting, T's own rays at its directions, and a file round
+trip."""
+
+import numpy as np
+import pytest
+
+from relightable_textures.lt_addon.errors import InputError
+from relightable_textures.lt_addon.rays import engine, horizon
+from relightable_textures.lt_addon.rays.direct import direct_rows
+from relightable_textures.lt_addon.rays.shading import shading_points
+from relightable_textures.lt_addon.transport import horizon_map as hmap
+
+needs_engine = pytest.mark.skipif(not engine.available()[0], reason="embreex not installed")
+
+
+def _floor_and_wall(n=300, seed=3):
+    """Points on a 4 m floor (z = 0) in front of a wall 1.5 m high along x = 1 (|y| < 10 m):
+    (occluder, shading points, positions)."""
+    floor = np.array([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]], float)
+    wall = np.array([[1, -10, 0], [1, 10, 0], [1, 10, 1.5], [1, -10, 1.5]], float)
+    V = np.concatenate([floor, wall])
+    T = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    occ = engine.Occluder(V, T)
+    rng = np.random.default_rng(seed)
+    P = np.column_stack([rng.uniform(-1.9, 0.9, n), rng.uniform(-1.9, 1.9, n), np.zeros(n)])
+    tri = np.where(P[:, 0] >= P[:, 1], 0, 1)
+    bary = np.zeros((n, 3))
+    for i, (p, t) in enumerate(zip(P, tri)):
+        a, b, c = floor[T[t]]
+        u, v = np.linalg.solve(np.column_stack([b - a, c - a])[:2], (p - a)[:2])
+        bary[i] = [1 - u - v, u, v]
+    up = np.tile([0.0, 0.0, 1.0], (2, 3, 1))
+    return occ, shading_points(V, T[:2], up, [False, False], tri, bary), P
+
+
+@needs_engine
+def test_the_horizon_of_a_wall_is_its_analytic_elevation():
+    """Along azimuth phi (|phi| < 90 degrees) a floor point at x sees the wall's top at
+    elevation atan(1.5 cos(phi) / (1 - x)); the bisection places it within 90 / 8 / 2^7
+    degrees (half of it either way); away from the wall the sky is open down to 0."""
+    occ, pts, P = _floor_and_wall()
+    A = 16
+    H = horizon.horizons(occ, pts, azimuths=A)
+    assert H.shape == (A, len(P)) and H.dtype == np.float32
+    step = np.radians(90 / horizon.COARSE / 2 ** horizon.REFINE)
+    for a in range(A):
+        phi = 2 * np.pi * a / A
+        if np.cos(phi) > 0.05:
+            want = np.arctan(1.5 * np.cos(phi) / (1 - P[:, 0]))
+            # (+ 1e-4: the origin's self-intersection push, EPSILON * 2 m up, seen from the
+            # wall's top 0.1-2.9 m away, and float32 rays)
+            assert np.abs(H[a] - want).max() <= step / 2 + 1e-4, a
+        elif np.cos(phi) < -0.05:
+            assert np.all(H[a] == 0)
+    # every ray counted: the coarse scan for all, the bisection only where a transition lies
+    assert occ.rays <= horizon.cost(len(P), A, horizon.COARSE, horizon.REFINE)
+
+
+def test_disc_fraction_is_the_area_of_the_segment():
+    rng = np.random.default_rng(0)
+    r = np.sqrt(rng.uniform(0, 1, 400_000))
+    a = rng.uniform(0, 2 * np.pi, 400_000)
+    y = r * np.sin(a)                      # points uniform in the unit disc
+    for t in (-1.0, -0.7, -0.2, 0.0, 0.35, 0.9, 1.0):
+        # the sun's centre t radii above the line: the part above is y > -t
+        assert abs(horizon.disc_fraction(t) - np.mean(y > -t)) < 3e-3
+    assert horizon.disc_fraction(-3.0) == 0.0 and horizon.disc_fraction(2.0) == 1.0
+
+
+@needs_engine
+def test_the_map_relights_the_rays_of_its_directions():
+    """At any hard-sun direction, the map's relight is T's ray-traced row, up to the texels
+    where the 8-bit horizon (0.35 degree steps) or the azimuth interpolation crosses the sun."""
+    occ, pts, P = _floor_and_wall(n=400)
+    A = 64
+    H = horizon.horizons(occ, pts, azimuths=A)
+    R = 20
+    hm = hmap.from_points(H, np.arange(len(P)), R, pts.Ns)
+    assert hm.q.shape == (A, R, R) and hm.normals.dtype == np.float16
+    rng = np.random.default_rng(1)
+    D = horizon._dirs(rng.uniform(-1.2, 1.2, 40), rng.uniform(0.05, 1.4, 40))
+    T = direct_rows(occ, pts, D)
+    flips = 0
+    for s, d in enumerate(D):
+        got = hm.direct(d).reshape(-1)[:len(P)]
+        differ = np.abs(got - T[s]) > 1e-3
+        flips += int(differ.sum())
+        # where they agree, they agree to the half-float normal's precision
+        assert np.allclose(got[~differ], T[s][~differ], atol=1e-3)
+    assert flips <= 0.01 * D.shape[0] * len(P), flips
+    # a disc of 10 degrees: between the two hard suns at its edges
+    d = horizon._dirs(0.0, np.radians(45))
+    soft = hm.direct(d, 10.0).reshape(-1)[:len(P)]
+    lo = hm.direct(horizon._dirs(0.0, np.radians(40))).reshape(-1)[:len(P)]
+    hi = hm.direct(horizon._dirs(0.0, np.radians(50))).reshape(-1)[:len(P)]
+    lit_lo, lit_hi = lo > 0, hi > 0
+    assert np.all(soft[lit_lo] > 0) and np.all(soft[~lit_hi] == 0)
+    partial = lit_hi & ~lit_lo
+    assert partial.sum() > 5 and np.all((soft[partial] > 0) & (soft[partial] < hi[partial]))
+
+
+def test_quantize_and_margin_fill():
+    H = np.array([[0.0, np.pi / 4, np.pi / 2, 3.0]])
+    assert hmap.quantize(H).tolist() == [[0, 128, 255, 255]]
+    import scipy.sparse as sps
+
+    op = sps.csr_matrix(np.array([[0.5, 0.5, 0.0, 0.0]]))
+    N = np.array([[0, 0, 1.0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    hm = hmap.from_points(np.array([[0.2, 0.4, 0.6, 0.8]]), np.array([0, 1, 2, 3]), 3, N,
+                          (np.array([4]), op))
+    assert abs(hm.horizons()[0].reshape(-1)[4] - 0.3) < np.pi / 2 / 255
+    assert np.allclose(hm.normals.reshape(-1, 3)[4], [0.7071, 0, 0.7071], atol=1e-3)
+    assert np.all(hm.normals.reshape(-1, 3)[5:] == 0)
+
+
+def test_save_load_round_trip_and_a_newer_format_is_refused(tmp_path):
+    rng = np.random.default_rng(2)
+    hm = hmap.HorizonMap(rng.integers(0, 256, (6, 8, 8), dtype=np.uint8),
+                         rng.normal(size=(8, 8, 3)).astype(np.float16))
+    path = str(tmp_path / "o_horizons.npz")
+    hmap.save(path, hm)
+    back = hmap.load(path)
+    assert np.array_equal(back.q, hm.q) and np.array_equal(back.normals, hm.normals)
+    np.savez(path, q=hm.q, normals=hm.normals, format=np.array(hmap.FORMAT),
+             format_version=np.array(99))
+    with pytest.raises(InputError, match="newer"):
+        hmap.load(path)
+    # the GPU figure: 6 azimuths in two 8-bit RGBA tiles, normals and albedo in half floats
+    assert hmap.gpu_bytes(6, 8) == 2 * 1 * 10 * 10 * 4 // 1 + 2 * 1 * 10 * 10 * 8
