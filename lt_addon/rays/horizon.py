@@ -1,34 +1,43 @@
-"""Per-texel horizons by rays: where along each azimuth the sky opens for good.
+"""Per-texel horizons by rays: the elevations between which the sky is blocked along each azimuth.
 
-For a shading point and an azimuth ``phi``, the *horizon* ``h(phi)`` is the elevation above which
-every direction of that azimuth reaches the sky: the top end of the occluded elevations. A sun
-at elevation ``e`` is then visible where ``e > h(phi)``, exactly for a point whose occluded
-elevations along ``phi`` form one interval from below (heightfields, a ground under an object),
-and the sun's disc is partly visible across the line -- a soft shadow whose edge *moves* with the
-sun, where interpolating visibility between two baked directions draws two faint copies of
-the shadow (the ghosting of a low sun).
+For a shading point and an azimuth ``phi`` the occluded elevations are summed up as one interval
+``[lo(phi), hi(phi)]``: ``hi`` is where the sky opens for good above, ``lo`` where it is blocked
+from (``-pi/2`` when it is blocked from the horizon up: heightfields, an object standing on the
+ground; above ``0`` under an object that floats or overhangs, where a low sun shines under it).
+A sun at elevation ``e`` is visible outside the interval, and a sun's disc by the part of it
+outside (:func:`visible_fraction`) -- a soft shadow whose edges *move* with the sun, where
+interpolating visibility between two baked directions draws two faint copies of the shadow
+(the ghosting of a low sun). Two blocked intervals along one azimuth (sky between them) are
+taken as their hull; :func:`iter_horizons` counts them. Directions behind the surface (a zero
+cosine) do not count: whatever blocks them, the interval is the simplest one that agrees with
+the rays in front.
 
-Found by the ray engine, not fitted from sampled directions: a coarse scan of ``coarse + 1``
-elevations 0..90 degrees per azimuth finds the highest blocked one, then ``refine`` bisection
-steps place the transition within ``90 / coarse / 2**refine`` degrees. Every ray leaves its
-point by Cycles' rules (:func:`.shading.shadow_origins`).
+Found by the ray engine, not fitted from sampled directions: a scan of :data:`ELEVATIONS`
+(denser near the horizon, where a far object subtends a few degrees) finds the lowest and the
+highest blocked ones, then ``refine`` bisection steps place each edge within its bracket
+(0.1 degrees at the horizon, 0.1 degrees higher up with 7 steps). Every ray leaves its point by
+Cycles' rules (:func:`.shading.shadow_origins`).
 
-Shapes: ``H`` is (A, P) radians in [0, pi/2] for ``A`` azimuths ``2 pi a / A`` (from +x toward
-+y, as :func:`...sphere.hemisphere.direction_from_az_el`) and ``P`` shading points.
+Shapes: ``H`` is (2, A, P) radians -- ``H[0]`` the lower edges, ``H[1]`` the upper ones -- for
+``A`` azimuths ``2 pi a / A`` (from +x toward +y, as
+:func:`...sphere.hemisphere.direction_from_az_el`) and ``P`` shading points. An open sky is an
+empty interval (:func:`place_open`).
 """
 
 from __future__ import annotations
-
-import time
 
 import numpy as np
 
 from .shading import ShadingPoints, cosine, shadow_origins
 
-
-#: Coarse elevations per azimuth (0..90 degrees, 90 / COARSE apart) and bisection steps after
-#: them: the transition is placed within 90 / COARSE / 2**REFINE degrees (0.09 for 8 and 7).
-COARSE, REFINE = 8, 7
+#: The scanned elevations (degrees): 1-2.5 degrees apart below 10, wider above (an object
+#: subtending less than its gap can be missed: 1 m seen from 25 m at the horizon is 2.3 degrees).
+ELEVATIONS = (0.0, 1.0, 2.0, 3.5, 5.0, 7.0, 9.5, 12.5, 16.0, 20.0, 25.0, 31.0, 38.0, 46.0,
+              55.0, 65.0, 77.0, 90.0)
+#: Bisection steps for each edge: the widest bracket (13 degrees) / 2^7 = 0.1 degrees.
+REFINE = 7
+#: The lower edge of an interval blocked from the horizon up.
+FROM_BELOW = -np.pi / 2
 
 
 def _dirs(az, el):
@@ -37,68 +46,110 @@ def _dirs(az, el):
     return np.stack(np.broadcast_arrays(ce * np.cos(az), ce * np.sin(az), np.sin(el)), -1)
 
 
-def horizons(occluder, points: ShadingPoints, azimuths: int = 128, coarse: int = COARSE,
-             refine: int = REFINE, progress=None) -> np.ndarray:
-    """Horizon elevations (A, P) float32 radians (module docstring).
-
-    ``progress(done, total)`` is called after each azimuth. A point open at every coarse
-    elevation gets 0; one blocked at the zenith gets pi/2 (never lit).
-    """
-    gen = iter_horizons(occluder, points, azimuths, coarse, refine)
+def horizons(occluder, points: ShadingPoints, azimuths: int = 128, refine: int = REFINE,
+             progress=None) -> np.ndarray:
+    """Horizon intervals (2, A, P) float32 radians (module docstring); ``progress(done,
+    total)`` after each azimuth."""
+    gen = iter_horizons(occluder, points, azimuths, refine)
     while True:
         try:
             done = next(gen)
         except StopIteration as stop:
-            return stop.value
+            return stop.value[0]
         if progress is not None:
             progress(done, azimuths)
 
 
-def iter_horizons(occluder, points: ShadingPoints, azimuths: int = 128, coarse: int = COARSE,
-                  refine: int = REFINE):
+def _bisect(occluder, points, phi, idx, lo, hi, blocked_at_lo: bool, refine: int):
+    """Move ``lo``/``hi`` (elevations, radians, (M,)) of points ``idx`` together: the ray at
+    ``lo`` is blocked and at ``hi`` open (``blocked_at_lo``) or the reverse. Returns the
+    midpoints."""
+    for _ in range(refine):
+        mid = 0.5 * (lo + hi)
+        L = _dirs(phi, mid)
+        b = occluder.occluded(shadow_origins(points, L, idx), L.astype(np.float32))
+        move_lo = b if blocked_at_lo else ~b
+        lo = np.where(move_lo, mid, lo)
+        hi = np.where(move_lo, hi, mid)
+    return 0.5 * (lo + hi)
+
+
+def iter_horizons(occluder, points: ShadingPoints, azimuths: int = 128, refine: int = REFINE):
     """Generator form of :func:`horizons`: yields the azimuths done after each one (a caller
-    may stop between them) and returns H (A, P)."""
-    if azimuths < 3 or coarse < 2 or refine < 0:
-        raise ValueError(f"need azimuths >= 3, coarse >= 2, refine >= 0; got "
-                         f"{azimuths}, {coarse}, {refine}")
+    may stop between them) and returns ``(H, figures)``; figures: ``gaps``, the share of
+    (azimuth, point) pairs whose scan saw the sky between two blocked elevations."""
+    if azimuths < 3 or refine < 0:
+        raise ValueError(f"need azimuths >= 3 and refine >= 0; got {azimuths}, {refine}")
     P = points.size
-    H = np.zeros((azimuths, P), np.float32)
-    els = np.linspace(0.0, np.pi / 2, coarse + 1)
-    step = els[1] - els[0]
+    H = np.empty((2, azimuths, P), np.float32)
+    els = np.radians(np.asarray(ELEVATIONS))
+    J = len(els)
+    gaps = 0
+    open_ = np.zeros((azimuths, P), bool)
     for a in range(azimuths):
         phi = 2 * np.pi * a / azimuths
         L = _dirs(phi, els)                                           # (J, 3)
-        origins = np.concatenate([shadow_origins(points, L[j]) for j in range(len(els))])
+        origins = np.concatenate([shadow_origins(points, L[j]) for j in range(J)])
         blocked = occluder.occluded(origins, np.repeat(L.astype(np.float32), P, 0))
-        blocked = blocked.reshape(len(els), P)
-        any_ = blocked.any(0)
-        top = np.where(any_, len(els) - 1 - np.argmax(blocked[::-1], 0), -1)   # highest blocked
-        h = np.where(top < 0, 0.0, np.pi / 2)
-        todo = np.nonzero((top >= 0) & (top < len(els) - 1))[0]
-        lo = els[top[todo]]
-        hi = lo + step
-        for _ in range(refine):
-            mid = 0.5 * (lo + hi)
-            Lm = _dirs(phi, mid)
-            b = occluder.occluded(shadow_origins(points, Lm, todo), Lm.astype(np.float32))
-            lo = np.where(b, mid, lo)
-            hi = np.where(b, hi, mid)
-        h[todo] = 0.5 * (lo + hi)
-        H[a] = h
+        blocked = blocked.reshape(J, P)
+        # only directions in front of the closure count: behind it the cosine is 0 whatever
+        # the ray meets (often the object itself), and along one azimuth the directions in
+        # front form one range of elevations
+        care = np.stack([cosine(points, L[j]) > 0 for j in range(J)])
+        cb = blocked & care
+        any_ = cb.any(0)
+        top = np.where(any_, J - 1 - np.argmax(cb[::-1], 0), -1)           # highest blocked
+        bottom = np.where(any_, np.argmax(cb, 0), J)                        # lowest blocked
+        care_top = J - 1 - np.argmax(care[::-1], 0)
+        care_bottom = np.argmax(care, 0)
+        gaps += int(np.sum(any_ & (cb.sum(0) < top - bottom + 1)))
+        # blocked up to (or from) the end of the range in front: the edge is the terminator
+        # itself, the elevation where the closure normal's cosine crosses 0 along phi --
+        # continuous from one azimuth to the next, unlike "blocked to the zenith"
+        e0 = np.arctan2(points.Ns[:, 2], points.Ns[:, 0] * np.cos(phi)
+                        + points.Ns[:, 1] * np.sin(phi))       # cos(N, L(e)) ~ cos(e - e0)
+        hi = np.where(any_, np.clip(e0 + np.pi / 2, 0.0, np.pi / 2), 0.0)
+        todo = np.nonzero(any_ & (top < care_top))[0]
+        hi[todo] = _bisect(occluder, points, phi, todo, els[top[todo]], els[top[todo] + 1],
+                           True, refine)
+        start = e0 - np.pi / 2
+        lo = np.where(any_, np.where(start > 0, start, FROM_BELOW), 0.0)   # (open: [0, 0])
+        todo = np.nonzero(any_ & (bottom > care_bottom))[0]
+        lo[todo] = _bisect(occluder, points, phi, todo, els[bottom[todo] - 1],
+                           els[bottom[todo]], False, refine)
+        H[0, a], H[1, a] = lo, hi
+        open_[a] = ~any_
         yield a + 1
-    return H
+    place_open(H, open_)
+    return H, {"gaps": gaps / max(azimuths * P, 1)}
 
 
-def horizon_at(H: np.ndarray, azimuth) -> np.ndarray:
-    """Horizons (P,) (or (n, P) for n azimuths) at ``azimuth`` radians, linear between the
-    table's azimuths (periodic)."""
-    A = H.shape[0]
-    x = (np.asarray(azimuth, np.float64) % (2 * np.pi)) / (2 * np.pi) * A
-    k0 = np.floor(x).astype(int) % A
-    f = x - np.floor(x)
-    k1 = (k0 + 1) % A
-    f = np.asarray(f)[..., None]
-    return (1 - f) * H[k0] + f * H[k1]
+def place_open(H, open_) -> None:
+    """An open sky (no blocked direction along its azimuth) is an empty interval ``[m, m]``:
+    ``m`` the middle of a neighbouring azimuth's floating interval (both neighbours': the
+    mean), else 0. Between two azimuths the edges are interpolated, so the interval then
+    shrinks to nothing where it is, instead of spreading towards the horizon (an open
+    ``[-pi/2, 0]`` against ``[a, b]`` blends to an interval over low elevations: a shadow where
+    the sun shines under the object). In place."""
+    mids, weight = np.zeros(H.shape[1:]), np.zeros(H.shape[1:])
+    floating = ~open_ & (H[0] > FROM_BELOW)
+    mid = 0.5 * (H[0] + H[1])
+    for shift in (1, -1):
+        f = np.roll(floating, shift, axis=0)
+        mids += np.where(f, np.roll(mid, shift, axis=0), 0.0)
+        weight += f
+    take = open_ & (weight > 0)
+    m = mids[take] / weight[take]
+    H[0][take] = m
+    H[1][take] = m
+
+
+def visible_fraction(el, lo, hi, radius: float) -> np.ndarray:
+    """The part of a sun's disc (angular ``radius`` > 0, centre at elevation ``el``) outside
+    the blocked elevations ``[lo, hi]``, each edge taken as a straight line across the disc
+    (an empty interval, ``lo >= hi``, blocks nothing)."""
+    return 1.0 - np.maximum(disc_fraction((el - lo) / radius)
+                            - disc_fraction((el - hi) / radius), 0.0)
 
 
 def disc_fraction(t) -> np.ndarray:
@@ -109,41 +160,7 @@ def disc_fraction(t) -> np.ndarray:
     return 0.5 + (t * np.sqrt(1.0 - t * t) + np.arcsin(t)) / np.pi
 
 
-def direct(points: ShadingPoints, H: np.ndarray, d, sun_angle_deg: float = 0.0,
-           disc: int = 0) -> np.ndarray:
-    """Direct transport (P,) float64 for a sun towards unit ``d`` of angular diameter
-    ``sun_angle_deg``: ``cos * V / pi`` as :func:`.direct.direct_rows` gives it for a hard sun.
-
-    ``disc = 0``: the cosine at the centre times the part of the disc above the horizon line
-    (:func:`disc_fraction`, the line taken straight across the disc). ``disc = n``: the mean of
-    ``n`` hard suns spread over the disc, each lit where it is above the horizon.
-    """
-    d = np.asarray(d, np.float64)
-    r = np.radians(sun_angle_deg) / 2
-    if disc and r > 0:
-        from ..transport.texture import _disc_points
-
-        acc = np.zeros(points.size)
-        pts = _disc_points(d / np.linalg.norm(d), r, disc)
-        for p in pts:
-            acc += direct(points, H, p, 0.0)
-        return acc / len(pts)
-    az = np.arctan2(d[1], d[0])
-    el = np.arcsin(np.clip(d[2], -1.0, 1.0))
-    h = horizon_at(H, az)
-    vis = disc_fraction((el - h) / r) if r > 0 else (el > h).astype(np.float64)
-    return cosine(points, d) * vis / np.pi
-
-
-def cost(P: int, azimuths: int, coarse: int, refine: int) -> int:
-    """Rays at most for :func:`horizons` on ``P`` points (the refinement only runs where a
-    transition lies between two coarse elevations)."""
-    return int(P) * int(azimuths) * (int(coarse) + 1 + int(refine))
-
-
-def timed_horizons(occluder, points, **kw):
-    """(H, figures): :func:`horizons` with its seconds and rays."""
-    t0 = time.perf_counter()
-    r0 = occluder.rays
-    H = horizons(occluder, points, **kw)
-    return H, {"seconds": time.perf_counter() - t0, "rays": occluder.rays - r0}
+def cost(P: int, azimuths: int, refine: int = REFINE) -> int:
+    """Rays at most for :func:`horizons` on ``P`` points (the bisections only run where an
+    edge lies between two scanned elevations)."""
+    return int(P) * int(azimuths) * (len(ELEVATIONS) + 2 * int(refine))

@@ -160,7 +160,7 @@ class TransportTextureSettings:
          "measured closer to T"),
         ("horizon", "Horizons", "Per-texel horizons found by rays: a shadow edge moves with "
          "the sun instead of blending the baked directions' shadows (no ghosting at low suns); "
-         "4 lookups per pixel and about 1.3 bytes per texel and azimuth; needs the ray engine"),
+         "6 lookups per pixel and 2.7 bytes per texel and azimuth; needs the ray engine"),
         ("transport", "Transport (T)", "Relight from T itself: a few baked directions per "
          "pixel through sparse kernel tables; keeps cast shadows on large receivers; an atlas "
          "of every direction in memory"),
@@ -267,11 +267,9 @@ class TransportTextureResult:
     direct: dict = None              # which engine baked the direct term, why, and its figures
 
 
-#: Texture lookups per pixel of the horizon viewport: two horizon tiles, the normal, the albedo.
-HORIZON_LOOKUPS = 4
-#: Under ``--viewport auto`` the horizon map is shown when its point-sun relight is within this
-#: relative RMSE of T's own rays at T's directions (:func:`.horizon_map.agreement`).
-HORIZON_AGREEMENT = 0.05
+#: Texture lookups per pixel of the horizon viewport: both edges at the two azimuths around the
+#: sun's, the normal, the albedo.
+HORIZON_LOOKUPS = 6
 
 
 def fit_model(store, settings: TransportTextureSettings, albedo):
@@ -287,7 +285,7 @@ def fit_model(store, settings: TransportTextureSettings, albedo):
 
 
 def fit_viewport(store, settings: TransportTextureSettings, model, lights=TRUTH_LIGHTS,
-                 horizon=None):
+                 horizon=None, horizon_check=None):
     """What the live preview shows for one object's store: ``(BlockViewport or None, info)``.
 
     The block viewport is fitted when the settings resolve to it
@@ -302,31 +300,36 @@ def fit_viewport(store, settings: TransportTextureSettings, model, lights=TRUTH_
     if settings.model != "pca":
         return None, {"shows": "none", "why": f"model {settings.model!r} has no live preview"}
     budget = int(settings.gpu_budget) << 20
+    horizon_note = {}
     if horizon is not None and settings.viewport in ("auto", "horizon"):
         from . import horizon_map as hmap
 
         t0 = time.perf_counter()
-        ag = hmap.agreement(horizon, store, seed=settings.seed)
         mib = horizon.gpu_bytes() / 2**20
         info = {"azimuths": horizon.azimuths, "gpu_mib": round(mib, 1),
-                "lookups_per_pixel": HORIZON_LOOKUPS, "horizon_vs_T_rays": round(
-                    ag["rel_rmse"], 4), "horizon_vs_T_worst_direction": round(
-                    ag["worst_direction_rel_rmse"], 4), "agreement_directions": ag["directions"],
-                "gpu_budget_mib": settings.gpu_budget,
-                "agreement_seconds": round(time.perf_counter() - t0, 3)}
+                "lookups_per_pixel": HORIZON_LOOKUPS, "gpu_budget_mib": settings.gpu_budget}
+        if horizon_check is not None:
+            e = hmap.heldout_errors(horizon, store, *horizon_check, settings.sun_angle,
+                                    settings.kernel)
+            info.update(heldout={"horizon": round(e["horizon"], 4),
+                                 "transport": round(e["transport"], 4),
+                                 "sun_angle": e["sun_angle"], "directions": e["directions"],
+                                 "meaning": "relative RMSE of the direct light against hard "
+                                            "suns by rays over the sun's disc at held-out "
+                                            "directions (3-85 degrees elevation)"},
+                        check_seconds=round(time.perf_counter() - t0, 3))
         if settings.viewport == "horizon":
             return None, {"shows": "horizon", "why": "asked for", **info}
-        if ag["rel_rmse"] <= HORIZON_AGREEMENT and mib <= settings.gpu_budget:
+        h = info.get("heldout")
+        if h is not None and h["horizon"] <= h["transport"] and mib <= settings.gpu_budget:
             return None, {"shows": "horizon", "why": (
-                f"auto: the horizon map agrees with T's rays within {ag['rel_rmse']:.3f} "
-                f"(at most {HORIZON_AGREEMENT}) in {mib:.0f} MiB"), **info}
+                f"auto: closer to rays at held-out suns than T ({h['horizon']:.3f} against "
+                f"{h['transport']:.3f}) in {mib:.0f} MiB"), **info}
         horizon_note = {"horizon_rejected": (
-            f"the horizon map is {ag['rel_rmse']:.3f} from T's rays (over {HORIZON_AGREEMENT}:"
-            " the sky shows under overhangs)" if ag["rel_rmse"] > HORIZON_AGREEMENT else
-            f"the horizon map takes {mib:.0f} MiB (over {settings.gpu_budget})"), **{
-            "horizon_" + k: v for k, v in info.items() if k != "gpu_budget_mib"}}
-    else:
-        horizon_note = {}
+            f"the horizon map takes {mib:.0f} MiB (over {settings.gpu_budget})"
+            if mib > settings.gpu_budget else "no held-out check" if h is None else
+            f"T is closer to rays at held-out suns ({h['transport']:.3f} against the horizon "
+            f"map's {h['horizon']:.3f})"), "horizon": info}
     shows, why = sp.choose_viewport(settings.viewport, store.directions.size, store.resolution,
                                     budget_mib=settings.gpu_budget, table_size=settings.table_size)
     info = {"shows": shows, "why": why, "gpu_budget_mib": settings.gpu_budget, **horizon_note}
@@ -393,10 +396,17 @@ def upsample(img, R):
 def relight(bake: ObjectBake, store, direction, sun_angle: float = 0.0, intensity: float = 1.0,
             source: str = "transport", kernel: str = "linear") -> np.ndarray:
     """Radiance (R, R, 3) under a sun: ``source="transport"`` relights from T itself (the
-    full-accuracy reference), ``"model"`` from the fitted model."""
+    full-accuracy reference at T's directions), ``"model"`` from the fitted model,
+    ``"horizon"`` from the horizon map (what its viewport shows)."""
     idx, w = tt.sun_weights(store.directions, direction, sun_angle, kernel)
     R = store.resolution
-    if source == "transport" or bake.model is None:
+    if source == "horizon":
+        if bake.horizon is None:
+            raise InputError(f"{bake.name}: this bake keeps no horizon map (its viewport shows "
+                             f"{(bake.viewport or {}).get('shows', 'no horizons')}); use "
+                             "--source model or transport")
+        direct = bake.horizon.direct(direction, sun_angle)[..., None] * bake.albedo
+    elif source == "transport" or bake.model is None:
         e = store.relight(idx, w)
         direct = e[..., None] * bake.albedo
     elif hasattr(bake.model, "relight") and hasattr(bake.model, "V"):
@@ -416,6 +426,9 @@ def relight_environment(bake: ObjectBake, store, env_image, rotation_deg: float 
     light from T (``source="transport"``) or from the PCA model (``"model"``, what the
     viewport shows), plus the indirect term steered by the same environment
     (:func:`..lt_addon.transport.texture.steer_environment`)."""
+    if source == "horizon":
+        raise InputError("an environment relights from T or the model (--source transport or "
+                         "model): the horizon map holds one sun's shadows")
     w = tt.environment_weights(store.directions, env_image, row_order=row_order,
                                rotation_deg=rotation_deg)
     model = bake.model

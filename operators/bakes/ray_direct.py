@@ -81,6 +81,17 @@ def _blas_idle():
     return blas_threads.limited(1) if cycles_device.blas_policy() else contextlib.nullcontext()
 
 
+#: Held-out directions of the viewport check, and hard suns over each one's disc.
+HELDOUT, HELDOUT_DISC = 16, 8
+
+
+def tt_disc(d, radius, count):
+    """Hard-sun directions spread over a sun's disc (the transport relight's own)."""
+    from ...lt_addon.transport.texture import _disc_points
+
+    return _disc_points(np.asarray(d, np.float64), radius, count)
+
+
 def horizon_count(settings) -> int:
     """Azimuths of the horizon maps this bake makes (0: none): only where the viewport may show
     them (``auto`` or ``horizon``, a PCA model) and the settings ask for some."""
@@ -126,25 +137,41 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
     A = horizon_count(settings)
     if A:
         t2, r2 = time.perf_counter(), occluder.rays
-        maps = []
+        maps, gaps = [], []
         for i, ((smp, pts), mg) in enumerate(zip(receivers, margins)):
             gen = horizon.iter_horizons(occluder, pts, A)
             while True:
                 try:
                     done = next(gen)
                 except StopIteration as stop:
-                    H = stop.value
+                    H, figs = stop.value
                     break
                 if done % max(1, A // 16) == 0:    # (a yield lets the bake be cancelled)
                     who = f", object {i + 1}/{len(receivers)}" if len(receivers) > 1 else ""
                     yield Progress(step + S - 1, total, f"horizons {done}/{A} azimuths{who}")
             maps.append(hmap.from_points(H, smp.texel, R, pts.Ns, mg))
-        horizon_info = {"horizon_azimuths": A,
+            gaps.append(round(figs["gaps"], 5))
+        # the check auto chooses the viewport by: hard suns by rays over the preview sun's
+        # disc at held-out directions (neither set has them), per object, margins filled
+        Dh = hmap.heldout_directions(HELDOUT, settings.seed)
+        checks = []
+        for (smp, pts), (dst, op) in zip(receivers, margins):
+            rows = np.zeros((len(Dh), R * R), np.float32)
+            for j, d in enumerate(Dh):
+                disc = tt_disc(d, np.radians(settings.sun_angle) / 2, HELDOUT_DISC)
+                inside = direct_rows(occluder, pts, disc).mean(0)
+                rows[j, smp.texel] = inside
+                if dst.size:
+                    rows[j, dst] = op @ inside
+            checks.append(rows)
+        horizon_info = {"horizon_azimuths": A, "horizon_gaps": gaps,
+                        "horizon_checks": {"directions": Dh, "rows": checks},
                         "horizon_seconds": round(time.perf_counter() - t2, 3),
                         "horizon_rays": int(occluder.rays - r2)}
     seconds = time.perf_counter() - t0
     rays = occluder.rays
-    return {"engine": "rays", "horizon_maps": maps, **horizon_info, "seconds": round(seconds, 3), "scene_seconds": round(t_scene, 3),
+    return {"engine": "rays", "horizon_maps": maps, **horizon_info,
+            "seconds": round(seconds, 3), "scene_seconds": round(t_scene, 3),
             "rays": int(rays), "rays_per_second": round(rays / max(seconds - t_scene, 1e-9)),
             "casters": int(n_casters), "caster_triangles": int(len(T)),
             "texels": [int(smp.size) for smp, _ in receivers],

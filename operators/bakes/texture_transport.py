@@ -191,6 +191,10 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
             engine.update((yield from ray_direct.bake(scene, objects, settings, dset, stores,
                                                       normals, 2, total)))
             horizon_maps = engine.pop("horizon_maps", None)
+            checks = engine.pop("horizon_checks", None)
+            if horizon_maps:
+                horizon_maps = [(m, checks["directions"], rows)
+                                for m, rows in zip(horizon_maps, checks["rows"])]
             seconds["direct_rays"] = engine["seconds"]
             faults.checkpoint("directions")
             peak = first = max(peak, _rss_mb())
@@ -425,8 +429,10 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
         t0 = time.perf_counter()
         with blas_threads.limited(n_fit) if n_fit else contextlib.nullcontext():
             model = fit_model(readers[i], settings, albedos[i])
-            hm = horizon_maps[i] if horizon_maps else None
-            view, viewport = fit_viewport(readers[i], settings, model, horizon=hm)
+            hm, check = (horizon_maps[i][0], horizon_maps[i][1:]) if horizon_maps else (None,
+                                                                                       None)
+            view, viewport = fit_viewport(readers[i], settings, model, horizon=hm,
+                                          horizon_check=check)
         results.append(ObjectBake(o.name, readers[i].path, albedos[i], indirects[i], model,
                                   time.perf_counter() - t0, readers[i], view, viewport,
                                   horizon=hm if viewport.get("shows") == "horizon" else None))

@@ -177,8 +177,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rotate", type=float, default=0.0, metavar="DEG",
                    help="with --env: rotate the environment about +z like a world Mapping "
                         "node's Z rotation (Point type)")
-    p.add_argument("--source", choices=("model", "transport"), default="model",
-                   help="transport bakes: relight from the fitted model or from T itself")
+    p.add_argument("--source", choices=("model", "transport", "horizon"), default="model",
+                   help="transport bakes: relight from the fitted model, from T itself, or "
+                        "from the horizon map (what the horizon viewport shows)")
     p.add_argument("--out", metavar="IMG.exr", help="write the relit texture (float RGB EXR)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
     p.set_defaults(func=_cmd_relight)
@@ -583,9 +584,11 @@ def _cmd_bake_texture_transport(args) -> int:
         fid = rep.get("model_vs_T") or {}
         if "headline" in fid:
             via = {"transport": "T through sparse tables",
-                   "blocks": "a PCA per texel block", "pca": "the PCA"}.get(fid.get("viewport"), fid.get("viewport", "the model"))
+                   "blocks": "a PCA per texel block", "pca": "the PCA",
+                   "horizon": "per-texel horizons"}.get(fid.get("viewport"),
+                                                        fid.get("viewport", "the model"))
             extra = (f"; the PCA alone {fid['model_headline']:.3f}"
-                     if fid.get("viewport") in ("transport", "blocks") else "")
+                     if fid.get("viewport") in ("transport", "blocks", "horizon") else "")
             print(f"  the viewport ({via}) vs T itself at the held-out lights: "
                   f"{fid['headline']:.3f} (worst {fid['worst']['rel']:.3f} at elevation "
                   f"{fid['worst']['elevation']:g} deg{extra}; relight --source transport "

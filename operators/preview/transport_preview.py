@@ -433,13 +433,14 @@ def build_sparse_group(n_directions: int, resolution: int, table_size: int, taps
 
 
 def horizon_preview_arrays(hm, albedo):
-    """(8-bit horizon tiles (ceil(A/3), R, R, 3) uint8, three azimuths per RGB tile; normal and
-    albedo tiles (2, R, R, 3) float32) -- what :func:`build_horizon_group` reads."""
-    A, R = hm.azimuths, hm.resolution
+    """(8-bit horizon tiles (2 ceil(A/3), R, R, 3) uint8 -- the lower edges' tiles, then the
+    upper edges', three azimuths per RGB tile; normal and albedo tiles (2, R, R, 3) float32)
+    -- what :func:`build_horizon_group` reads."""
+    _, A, R, _ = hm.q.shape
     n = -(-A // 3)
-    q = np.zeros((n * 3, R, R), np.uint8)
-    q[:A] = hm.q
-    tiles = q.reshape(n, 3, R, R).transpose(0, 2, 3, 1)
+    q = np.zeros((2, n * 3, R, R), np.uint8)
+    q[:, :A] = hm.q
+    tiles = q.reshape(2 * n, 3, R, R).transpose(0, 2, 3, 1)
     na = np.stack([hm.normals.astype(np.float32), np.asarray(albedo, np.float32)])
     return tiles, na
 
@@ -467,7 +468,8 @@ def viewport_relight_horizon(tiles, na, azimuths: int, direction, sun_angle: flo
     from ...lt_addon.transport.horizon_map import HorizonMap
 
     A = int(azimuths)
-    q = np.asarray(tiles).transpose(0, 3, 1, 2).reshape(-1, *tiles.shape[1:3])[:A]
+    n, R = len(tiles) // 2, tiles.shape[1]
+    q = np.asarray(tiles).transpose(0, 3, 1, 2).reshape(2, 3 * n, R, R)[:, :A]
     hm = HorizonMap(q, np.asarray(na[0], np.float16))
     e = hm.direct(direction, sun_angle)
     return (e[..., None] * np.asarray(na[1], np.float64)).astype(np.float32)
@@ -505,55 +507,83 @@ def _atlas_channel(b, index, uv, lay, image, resolution: int, acc, x, y, interpo
 SUN_RADIUS_NODE = "Sun Radius"
 
 
+def _disc_part(b, offset, radius, x, y):
+    """``disc_fraction(offset / radius)`` in nodes: the part of a disc of ``radius`` beyond a
+    line ``offset`` below its centre (:func:`...lt_addon.rays.horizon.disc_fraction`)."""
+    t = b.math("DIVIDE", offset, radius, x=x, y=y)
+    t = b.math("MINIMUM", b.math("MAXIMUM", t, -1.0, x=x + 100, y=y), 1.0, x=x + 200, y=y)
+    root = b.math("SQRT", b.math("MULTIPLY_ADD", t, b.math("MULTIPLY", t, -1.0, x=x + 200,
+                                                           y=y - 100),
+                                 1.0, x=x + 300, y=y - 100), x=x + 400, y=y - 100)
+    seg = b.math("MULTIPLY_ADD", t, root, b.math("ARCSINE", t, x=x + 400, y=y - 200),
+                 x=x + 500, y=y)
+    return b.math("MULTIPLY_ADD", seg, 1.0 / np.pi, 0.5, x=x + 600, y=y)
+
+
 def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image, uv_map: str,
                         name: str, sun_angle: float):
     """The sun group relighting from horizons (the sockets of :func:`build_group`): the sun's
-    azimuth picks the two azimuth channels around it (linear between them), the sun's disc is
-    cut by the horizon line, ``0.5 + (t sqrt(1 - t^2) + asin t) / pi`` for the centre ``t``
-    sun radii above it, times ``max(0, N . d) / pi`` with the baked normal; 4 lookups."""
-    from ...lt_addon.transport.horizon_map import SUN_RADIUS_MIN
+    azimuth picks the two azimuth channels around it, the blocked interval's edges are linear
+    between them, the sun's disc is cut by both (``1 - max(0, F((e - lo) / r) - F((e - hi) /
+    r))``
+    with ``F(t) = 0.5 + (t sqrt(1 - t^2) + asin t) / pi``), times ``max(0, N . d) / pi`` with
+    the baked normal: 6 lookups (4 horizon channels, the normal, the albedo)."""
+    from ...lt_addon.transport.horizon_map import SUN_RADIUS_MIN, STEP
 
-    group, b, gin, gout, (dx, dy, dz), _ = _sun_group_head(name, -2600, 2400)
+    group, b, gin, gout, (dx, dy, dz), _ = _sun_group_head(name, -2600, 3000)
     A = int(azimuths)
+    n = -(-A // 3)
     az = b.math("ARCTAN2", dy, dx, x=-2000, y=400)                       # atan2(y, x)
     xa = b.math("MULTIPLY", az, A / (2 * np.pi), x=-1900, y=400)
     xa = b.math("ADD", xa, b.math("MULTIPLY", b.math("LESS_THAN", xa, 0.0, x=-1900, y=300),
                                   float(A), x=-1800, y=300), x=-1700, y=400)
     k0 = b.math("FLOOR", xa, x=-1600, y=400)
     f = b.math("SUBTRACT", xa, k0, x=-1500, y=300)
-    k0 = b.math("SUBTRACT", k0, b.math("MULTIPLY", b.math("FLOOR", b.math(
-        "MULTIPLY_ADD", k0, 1.0 / A, 0.5 / A, x=-1500, y=500), x=-1400, y=500), float(A),
-        x=-1300, y=500), x=-1200, y=400)                                  # k0 mod A
-    k1 = b.math("ADD", k0, 1.0, x=-1100, y=500)
-    k1 = b.math("SUBTRACT", k1, b.math("MULTIPLY", b.math("FLOOR", b.math(
-        "MULTIPLY_ADD", k1, 1.0 / A, 0.5 / A, x=-1100, y=600), x=-1000, y=600), float(A),
-        x=-900, y=600), x=-800, y=500)                                    # (k0 + 1) mod A
+
+    def mod_a(k, x, y):
+        wrap = b.math("FLOOR", b.math("MULTIPLY_ADD", k, 1.0 / A, 0.5 / A, x=x, y=y),
+                      x=x + 100, y=y)
+        return b.math("SUBTRACT", k, b.math("MULTIPLY", wrap, float(A), x=x + 200, y=y),
+                      x=x + 300, y=y)
+    k0 = mod_a(k0, -1500, 500)
+    k1 = mod_a(b.math("ADD", k0, 1.0, x=-1200, y=600), -1100, 600)
     uv = b.node("ShaderNodeUVMap", -1400, -600, uv_map=uv_map).outputs["UV"]
-    lay = atlas_layout(-(-A // 3), resolution)
-    q0 = _atlas_channel(b, k0, uv, lay, horizon_image, resolution, None, -700, 800)
-    q1 = _atlas_channel(b, k1, uv, lay, horizon_image, resolution, q0, -700, 400)
-    q = b.math("MULTIPLY_ADD", b.math("SUBTRACT", q1, q0, x=400, y=600), f, q0, x=500, y=600)
-    h = b.math("MULTIPLY", q, np.pi / 2, x=600, y=600)
-    el = b.math("ARCSINE", b.math("MINIMUM", dz, 1.0, x=500, y=200), x=600, y=200)
-    radius = b.node("ShaderNodeValue", 500, 0)
+    lay = atlas_layout(2 * n, resolution)
+    edges, acc = [], None
+    for e, upper in enumerate((False, True)):
+        vals = []
+        for j, k in enumerate((k0, k1)):
+            y = 1600 - 400 * (2 * e + j)
+            idx = b.math("ADD", k, float(3 * n), x=-800, y=y) if upper else k
+            q = _atlas_channel(b, idx, uv, lay, horizon_image, resolution, acc, -700, y)
+            acc = q
+            h = b.math("MULTIPLY", q, 255.0 * STEP, x=400, y=y)
+            if not upper:    # code 0: blocked from below
+                below = b.math("LESS_THAN", q, 0.5 / 255.0, x=400, y=y - 60)
+                h = b.math("MULTIPLY_ADD", below, -np.pi / 2, h, x=500, y=y)
+            vals.append(h)
+        edges.append(b.math("MULTIPLY_ADD", b.math("SUBTRACT", vals[1], vals[0], x=600,
+                                                   y=1600 - 800 * e),
+                            f, vals[0], x=700, y=1600 - 800 * e))
+    el = b.math("ARCSINE", b.math("MINIMUM", dz, 1.0, x=600, y=200), x=700, y=200)
+    radius = b.node("ShaderNodeValue", 600, 0)
     radius.name = radius.label = SUN_RADIUS_NODE
     radius.outputs[0].default_value = max(np.radians(sun_angle) / 2, SUN_RADIUS_MIN)
-    t = b.math("DIVIDE", b.math("SUBTRACT", el, h, x=700, y=400), radius.outputs[0], x=800,
-               y=400)
-    t = b.math("MINIMUM", b.math("MAXIMUM", t, -1.0, x=900, y=400), 1.0, x=1000, y=400)
-    root = b.math("SQRT", b.math("MULTIPLY_ADD", t, b.math("MULTIPLY", t, -1.0, x=1000, y=300),
-                                 1.0, x=1100, y=300), x=1200, y=300)
-    seg = b.math("MULTIPLY_ADD", t, root, b.math("ARCSINE", t, x=1200, y=200), x=1300, y=300)
-    vis = b.math("MULTIPLY_ADD", seg, 1.0 / np.pi, 0.5, x=1400, y=300)
+    r = radius.outputs[0]
+    above_lo = _disc_part(b, b.math("SUBTRACT", el, edges[0], x=800, y=800), r, 900, 800)
+    above_hi = _disc_part(b, b.math("SUBTRACT", el, edges[1], x=800, y=400), r, 900, 400)
+    vis = b.math("SUBTRACT", 1.0, b.math("MAXIMUM", b.math("SUBTRACT", above_lo, above_hi,
+                                                           x=1600, y=600), 0.0, x=1650, y=600),
+                 x=1700, y=600)
     ntile = atlas_layout(2, resolution)["tiles"]
-    nrm = b.vmath("NORMALIZE", _lookup(b, na_image, uv, ntile[0], 500, -300), x=900, y=-300)
-    d = b.vmath("NORMALIZE", gin.outputs["Light Direction"], x=900, y=-450)
-    cos = b.math("MAXIMUM", b.vmath("DOT_PRODUCT", nrm, d, x=1000, y=-300), 0.0, x=1100,
+    nrm = b.vmath("NORMALIZE", _lookup(b, na_image, uv, ntile[0], 1200, -300), x=1600, y=-300)
+    d = b.vmath("NORMALIZE", gin.outputs["Light Direction"], x=1600, y=-450)
+    cos = b.math("MAXIMUM", b.vmath("DOT_PRODUCT", nrm, d, x=1700, y=-300), 0.0, x=1800,
                  y=-300)
-    irr = b.math("MULTIPLY", b.math("MULTIPLY", cos, vis, x=1500, y=0), 1.0 / np.pi, x=1600,
+    irr = b.math("MULTIPLY", b.math("MULTIPLY", cos, vis, x=1900, y=0), 1.0 / np.pi, x=2000,
                  y=0)
-    albedo = _lookup(b, na_image, uv, ntile[1], 1400, -600)
-    _sun_group_tail(b, gin, gout, irr, albedo, dz, 1800)
+    albedo = _lookup(b, na_image, uv, ntile[1], 1800, -600)
+    _sun_group_tail(b, gin, gout, irr, albedo, dz, 2200)
     group["relight_azimuths"] = A
     return group
 

@@ -68,7 +68,8 @@ def _finish(operator, scene, result):
             lines.append(direct_summary(direct, rep["directions"]))
         fid = rep.get("model_vs_T") or {}
         if "headline" in fid:
-            via = {"transport": "T", "blocks": "blocks"}.get(fid.get("viewport"), "PCA")
+            via = {"transport": "T", "blocks": "blocks", "horizon": "horizons"}.get(
+                fid.get("viewport"), "PCA")
             lines.append(f"{rep['object']}: the preview ({via}) is {fid['headline']:.3f} from "
                          f"the bake itself (worst {fid['worst']['rel']:.3f} at "
                          f"{fid['worst']['elevation']:g} deg)")

@@ -15,16 +15,17 @@ from relightable_textures.lt_addon.transport import horizon_map as hmap
 needs_engine = pytest.mark.skipif(not engine.available()[0], reason="embreex not installed")
 
 
-def _floor_and_wall(n=300, seed=3):
-    """Points on a 4 m floor (z = 0) in front of a wall 1.5 m high along x = 1 (|y| < 10 m):
+def _floor_points(n, seed, extra, x=(-1.9, 0.9)):
+    """Points on a 4 m floor (z = 0) under the triangles ``extra`` (vertices (4k, 3), quads):
     (occluder, shading points, positions)."""
     floor = np.array([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]], float)
-    wall = np.array([[1, -10, 0], [1, 10, 0], [1, 10, 1.5], [1, -10, 1.5]], float)
-    V = np.concatenate([floor, wall])
-    T = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    V = np.concatenate([floor, extra])
+    T = np.array([[0, 1, 2], [0, 2, 3]] + [[4 * q, 4 * q + 1, 4 * q + 2] for q in
+                                            range(1, len(V) // 4)]
+                 + [[4 * q, 4 * q + 2, 4 * q + 3] for q in range(1, len(V) // 4)])
     occ = engine.Occluder(V, T)
     rng = np.random.default_rng(seed)
-    P = np.column_stack([rng.uniform(-1.9, 0.9, n), rng.uniform(-1.9, 1.9, n), np.zeros(n)])
+    P = np.column_stack([rng.uniform(*x, n), rng.uniform(-1.9, 1.9, n), np.zeros(n)])
     tri = np.where(P[:, 0] >= P[:, 1], 0, 1)
     bary = np.zeros((n, 3))
     for i, (p, t) in enumerate(zip(P, tri)):
@@ -35,27 +36,56 @@ def _floor_and_wall(n=300, seed=3):
     return occ, shading_points(V, T[:2], up, [False, False], tri, bary), P
 
 
+def _floor_and_wall(n=300, seed=3):
+    """Floor points in front of a wall 1.5 m high along x = 1 (|y| < 10 m)."""
+    wall = np.array([[1, -10, 0], [1, 10, 0], [1, 10, 1.5], [1, -10, 1.5]], float)
+    return _floor_points(n, seed, wall)
+
+
+#: Half the widest bisection bracket (13 degrees / 2^7), plus the origin's self-intersection
+#: push (EPSILON * 2 m up, seen from 0.1-3 m away) and float32 rays.
+TOL = np.radians(13.0 / 2 ** horizon.REFINE) / 2 + 1e-4
+
+
 @needs_engine
 def test_the_horizon_of_a_wall_is_its_analytic_elevation():
     """Along azimuth phi (|phi| < 90 degrees) a floor point at x sees the wall's top at
-    elevation atan(1.5 cos(phi) / (1 - x)); the bisection places it within 90 / 8 / 2^7
-    degrees (half of it either way); away from the wall the sky is open down to 0."""
+    elevation atan(1.5 cos(phi) / (1 - x)), blocked from the horizon up; away from the wall
+    the sky is open: an empty interval."""
     occ, pts, P = _floor_and_wall()
     A = 16
     H = horizon.horizons(occ, pts, azimuths=A)
-    assert H.shape == (A, len(P)) and H.dtype == np.float32
-    step = np.radians(90 / horizon.COARSE / 2 ** horizon.REFINE)
+    assert H.shape == (2, A, len(P)) and H.dtype == np.float32
     for a in range(A):
         phi = 2 * np.pi * a / A
         if np.cos(phi) > 0.05:
+            assert np.all(H[0, a] == np.float32(horizon.FROM_BELOW))
             want = np.arctan(1.5 * np.cos(phi) / (1 - P[:, 0]))
-            # (+ 1e-4: the origin's self-intersection push, EPSILON * 2 m up, seen from the
-            # wall's top 0.1-2.9 m away, and float32 rays)
-            assert np.abs(H[a] - want).max() <= step / 2 + 1e-4, a
-        elif np.cos(phi) < -0.05:
-            assert np.all(H[a] == 0)
-    # every ray counted: the coarse scan for all, the bisection only where a transition lies
-    assert occ.rays <= horizon.cost(len(P), A, horizon.COARSE, horizon.REFINE)
+            assert np.abs(H[1, a] - want).max() <= TOL, a
+        elif np.cos(phi) < -0.05:      # open: the empty interval [0, 0]
+            assert np.all(H[:, a] == 0)
+    # every ray counted: the scan for all, the bisections only where an edge lies
+    assert occ.rays <= horizon.cost(len(P), A)
+
+
+@needs_engine
+def test_a_floating_roof_blocks_an_interval_a_low_sun_shines_under():
+    """A 1 m roof at z = 1 over 0 < x < 1 (|y| < 10 m): along +x a floor point at x < 0 is
+    blocked between atan(1 / (1 - x)) and atan(1 / -x) and sees the sky below and above."""
+    roof = np.array([[0, -10, 1], [1, -10, 1], [1, 10, 1], [0, 10, 1]], float)
+    occ, pts, P = _floor_points(200, 4, roof, x=(-1.9, -0.2))
+    H = horizon.horizons(occ, pts, azimuths=8)
+    lo = np.arctan(1 / (1 - P[:, 0]))
+    hi = np.arctan(1 / -P[:, 0])
+    assert np.abs(H[0, 0] - lo).max() <= TOL and np.abs(H[1, 0] - hi).max() <= TOL
+    hm = hmap.from_points(H, np.arange(len(P)), 15, pts.Ns)
+    for el_deg in (5.0, 60.0):        # a low sun under the roof lights every point; ...
+        d = horizon._dirs(0.0, np.radians(el_deg))
+        want = direct_rows(occ, pts, d[None])[0]
+        got = hm.direct(d).reshape(-1)[:len(P)]
+        assert np.abs(got - want).max() < 1e-3
+    mid = horizon._dirs(0.0, 0.5 * (lo + hi))        # ... between the edges, none of them
+    assert all(hm.direct(m).reshape(-1)[i] == 0 for i, m in enumerate(mid))
 
 
 def test_disc_fraction_is_the_area_of_the_segment():
@@ -78,7 +108,7 @@ def test_the_map_relights_the_rays_of_its_directions():
     H = horizon.horizons(occ, pts, azimuths=A)
     R = 20
     hm = hmap.from_points(H, np.arange(len(P)), R, pts.Ns)
-    assert hm.q.shape == (A, R, R) and hm.normals.dtype == np.float16
+    assert hm.q.shape == (2, A, R, R) and hm.normals.dtype == np.float16
     rng = np.random.default_rng(1)
     D = horizon._dirs(rng.uniform(-1.2, 1.2, 40), rng.uniform(0.05, 1.4, 40))
     T = direct_rows(occ, pts, D)
@@ -102,22 +132,29 @@ def test_the_map_relights_the_rays_of_its_directions():
 
 
 def test_quantize_and_margin_fill():
-    H = np.array([[0.0, np.pi / 4, np.pi / 2, 3.0]])
-    assert hmap.quantize(H).tolist() == [[0, 128, 255, 255]]
+    H = np.array([[[-np.pi / 2, 0.001, np.pi / 4, 3.0]], [[0.0, np.pi / 4, np.pi / 2, 3.0]]])
+    q = hmap.quantize(H)
+    assert q.tolist() == [[[0, 1, 128, 255]], [[0, 128, 255, 255]]]
+    assert np.allclose(hmap.decode(q)[0, 0], [-np.pi / 2, hmap.STEP, 128 * hmap.STEP,
+                                              np.pi / 2])
     import scipy.sparse as sps
 
-    op = sps.csr_matrix(np.array([[0.5, 0.5, 0.0, 0.0]]))
+    # margin texel 4 = mean of points 0 and 1; texel 5 = mean of points 2 and 3
+    op = sps.csr_matrix(np.array([[0.5, 0.5, 0.0, 0.0], [0.0, 0.0, 0.5, 0.5]]))
     N = np.array([[0, 0, 1.0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
-    hm = hmap.from_points(np.array([[0.2, 0.4, 0.6, 0.8]]), np.array([0, 1, 2, 3]), 3, N,
-                          (np.array([4]), op))
-    assert abs(hm.horizons()[0].reshape(-1)[4] - 0.3) < np.pi / 2 / 255
+    H = np.array([[[-np.pi / 2, -np.pi / 2, 0.2, 0.4]], [[0.2, 0.4, 0.6, 0.8]]])
+    hm = hmap.from_points(H, np.array([0, 1, 2, 3]), 3, N, (np.array([4, 5]), op))
+    h = hmap.decode(hm.q).reshape(2, -1)
+    assert h[0, 4] == -np.pi / 2 and abs(h[0, 5] - 0.3) < hmap.STEP
+    assert abs(h[1, 4] - 0.3) < hmap.STEP and abs(h[1, 5] - 0.7) < hmap.STEP
     assert np.allclose(hm.normals.reshape(-1, 3)[4], [0.7071, 0, 0.7071], atol=1e-3)
-    assert np.all(hm.normals.reshape(-1, 3)[5:] == 0)
+    assert np.all(hm.normals.reshape(-1, 3)[6:] == 0) and np.all(h[0, 6:] == -np.pi / 2)
+    assert np.all(h[1, 6:] == 0)
 
 
 def test_save_load_round_trip_and_a_newer_format_is_refused(tmp_path):
     rng = np.random.default_rng(2)
-    hm = hmap.HorizonMap(rng.integers(0, 256, (6, 8, 8), dtype=np.uint8),
+    hm = hmap.HorizonMap(rng.integers(0, 256, (2, 6, 8, 8), dtype=np.uint8),
                          rng.normal(size=(8, 8, 3)).astype(np.float16))
     path = str(tmp_path / "o_horizons.npz")
     hmap.save(path, hm)
@@ -127,5 +164,6 @@ def test_save_load_round_trip_and_a_newer_format_is_refused(tmp_path):
              format_version=np.array(99))
     with pytest.raises(InputError, match="newer"):
         hmap.load(path)
-    # the GPU figure: 6 azimuths in two 8-bit RGBA tiles, normals and albedo in half floats
-    assert hmap.gpu_bytes(6, 8) == 2 * 1 * 10 * 10 * 4 // 1 + 2 * 1 * 10 * 10 * 8
+    # the GPU figure: 2 x 6 azimuths in four 8-bit RGBA tiles (2 x 2 grid of 8 + 2 texel
+    # strides), normals and albedo in two half-float RGBA tiles (2 x 1)
+    assert hmap.gpu_bytes(6, 8) == 20 * 20 * 4 + 20 * 10 * 8
