@@ -5,10 +5,13 @@ On a demo scene at ``--resolution``, against direct-only Cycles Sun truths (2 an
 ``--spp``) at the four held-out lights, relative RMSE over the covered texels (albedo applied):
 
 * *T*: the ray-traced transport at ``--counts`` directions relit by the product's linear kernel;
-* *horizon A*: horizons at ``A`` azimuths (:mod:`lt_addon.rays.horizon`), the sun's disc cut by
-  the horizon line (``disc 0``) or 32 hard suns over the disc;
+* *horizon A*: the horizon map at ``A`` azimuths (:mod:`lt_addon.transport.horizon_map`: the
+  blocked interval per azimuth by rays, 8-bit, the sun's disc cut by its edges), as the
+  horizon viewport shows it;
 * *disc 64*: 64 hard suns over the disc by rays, averaged -- no table at all, the floor of any
   representation of hard-sun rays.
+
+Per object too, where the scene has several (the statue and its ground).
 
 Usage: python benchmarks/bench_ray_horizons.py [--scene bumps] [--resolution 256] [--spp 256]
            [--counts 1600] [--azimuths 32,64,128]
@@ -32,12 +35,11 @@ def main(argv=None):
     ap.add_argument("--spp", type=int, default=256)
     ap.add_argument("--counts", default="1600")
     ap.add_argument("--azimuths", default="32,64,128")
-    ap.add_argument("--coarse", type=int, default=16)
-    ap.add_argument("--refine", type=int, default=7)
     args = ap.parse_args(argv)
 
     from bench_transport_textures import build, truths as truth_bakes
     from relightable_textures.lt_addon.rays import engine as ray_engine, horizon
+    from relightable_textures.lt_addon.transport import horizon_map as hmap
     from relightable_textures.lt_addon.rays.direct import direct_rows
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
     from relightable_textures.lt_addon.transport import texture as tt
@@ -68,10 +70,13 @@ def main(argv=None):
     P = sum(p.size for _, p in recv)
     print(f"{len(objs)} objects, {P} shading points, {len(Tri)} caster triangles", flush=True)
 
-    def err(rows_of, ang, i):
-        """Relative RMSE over all objects' covered texels for light i; rows_of(oi) -> (P,)."""
+    def err(rows_of, ang, i, only=None):
+        """Relative RMSE over all objects' (or object ``only``'s) covered texels for light i;
+        rows_of(oi) -> (P,)."""
         num = den = 0.0
         for oi, (smp, _) in enumerate(recv):
+            if only is not None and oi != only:
+                continue
             truth = truths[ang][i][oi].reshape(R * R, -1)[smp.texel]
             alb = albedos[oi].reshape(R * R, -1)[smp.texel]
             got_ = rows_of(oi)[:, None] * alb
@@ -96,15 +101,13 @@ def main(argv=None):
     for A in map(int, args.azimuths.split(",")):
         t0 = time.perf_counter()
         r0 = occ.rays
-        Hs = [horizon.horizons(occ, p, azimuths=A, coarse=args.coarse, refine=args.refine)
-              for _, p in recv]
+        Hs = [hmap.from_points(horizon.horizons(occ, p, azimuths=A), smp.texel, R, p.Ns)
+              for smp, p in recv]
         print(f"horizons, {A} azimuths: {time.perf_counter() - t0:.1f} s, "
               f"{(occ.rays - r0) / 1e6:.1f} M rays ({(occ.rays - r0) / P:.0f} per point)",
               flush=True)
-        methods[f"horizon {A}, disc cut"] = (
-            lambda oi, d, ang, Hs=Hs: horizon.direct(recv[oi][1], Hs[oi], d, ang))
-        methods[f"horizon {A}, 32 suns"] = (
-            lambda oi, d, ang, Hs=Hs: horizon.direct(recv[oi][1], Hs[oi], d, ang, disc=32))
+        methods[f"horizon map, {A} azimuths"] = (
+            lambda oi, d, ang, Hs=Hs: Hs[oi].direct(d, ang).reshape(-1)[recv[oi][0].texel])
 
     def disc_rays(oi, d, ang):
         pts = tt._disc_points(d, np.radians(ang) / 2, 64)
@@ -115,10 +118,12 @@ def main(argv=None):
           "10 / 30 / 55 / 80 deg")
     for ang in (2.0, 10.0):
         for name, fn in methods.items():
-            errs = [err(lambda oi: fn(oi, direction_from_az_el(az, el), ang), ang, i)
-                    for i, (az, el) in enumerate(LIGHTS)]
-            print(f"{ang:4g} deg  {name:36s} " + " / ".join(f"{e:.4f}" for e in errs),
-                  flush=True)
+            for only in [None] + (list(range(len(objs))) if len(objs) > 1 else []):
+                errs = [err(lambda oi: fn(oi, direction_from_az_el(az, el), ang), ang, i, only)
+                        for i, (az, el) in enumerate(LIGHTS)]
+                who = "" if only is None else f" [{objs[only].name}]"
+                print(f"{ang:4g} deg  {name + who:44s} " + " / ".join(f"{e:.4f}" for e in errs),
+                      flush=True)
 
 
 if __name__ == "__main__":

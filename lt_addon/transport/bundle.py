@@ -230,9 +230,12 @@ class TransportTextureSettings:
 def direct_summary(direct: dict, directions: int) -> str:
     """One line on how a transport bake's direct light was baked (its report's ``direct``)."""
     if direct.get("engine") == "rays":
+        horizons = (f"; horizons at {direct['horizon_azimuths']} azimuths "
+                    f"{direct['horizon_seconds']:.1f} s of it" if direct.get("horizon_azimuths")
+                    else "")
         return (f"Direct light: {directions} directions by rays ({direct.get('library', '')}, "
                 f"{direct.get('seconds', 0):.1f} s, "
-                f"{direct.get('rays_per_second', 0) / 1e6:.1f} M rays/s)")
+                f"{direct.get('rays_per_second', 0) / 1e6:.1f} M rays/s{horizons})")
     return f"Direct light: {directions} Cycles calls ({direct.get('why', 'asked for')})"
 
 

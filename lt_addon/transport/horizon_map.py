@@ -72,9 +72,13 @@ class HorizonMap:
 
     def direct(self, d, sun_angle_deg: float = 0.0) -> np.ndarray:
         """Direct ``E / pi`` (R, R) float32 under a unit sun towards ``d``: the closure
-        normal's cosine times the part of the sun's disc outside the blocked interval, whose
-        edges are linear between the two azimuths around the sun's -- the viewport's
-        computation (:func:`...operators.preview.transport_preview.build_horizon_group`)."""
+        normal's cosine times the part of the sun's disc outside the blocked interval, at the
+        two azimuths around the sun's and linear between them -- the viewport's computation
+        (:func:`...operators.preview.transport_preview.build_horizon_group`). Interpolating the
+        visibility rather than the edges between azimuths was measured better at a 2-degree
+        Sun (statue demo's ground at 10 degrees elevation: 0.042 against 0.074; bumps 0.033
+        against 0.031, and 0.016 against 0.019 at 30 degrees;
+        benchmarks/bench_ray_horizons.py)."""
         d = np.asarray(d, np.float64)
         d = d / np.linalg.norm(d)
         if d[2] <= 0:
@@ -83,10 +87,10 @@ class HorizonMap:
         x = (np.arctan2(d[1], d[0]) % (2 * np.pi)) / (2 * np.pi) * A
         k0 = int(np.floor(x)) % A
         f = x - np.floor(x)
-        h = (1 - f) * decode(self.q[:, k0]) + f * decode(self.q[:, (k0 + 1) % A])
         el = np.arcsin(np.clip(d[2], -1.0, 1.0))
         r = max(np.radians(sun_angle_deg) / 2, SUN_RADIUS_MIN)
-        vis = visible_fraction(el, h[0], h[1], r)
+        h0, h1 = decode(self.q[:, k0]), decode(self.q[:, (k0 + 1) % A])
+        vis = (1 - f) * visible_fraction(el, *h0, r) + f * visible_fraction(el, *h1, r)
         n = self.normals.astype(np.float64)
         length = np.linalg.norm(n, axis=-1)
         cos = np.maximum(n @ d, 0.0) / np.maximum(length, 1e-12)

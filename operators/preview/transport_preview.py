@@ -523,11 +523,11 @@ def _disc_part(b, offset, radius, x, y):
 def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image, uv_map: str,
                         name: str, sun_angle: float):
     """The sun group relighting from horizons (the sockets of :func:`build_group`): the sun's
-    azimuth picks the two azimuth channels around it, the blocked interval's edges are linear
-    between them, the sun's disc is cut by both (``1 - max(0, F((e - lo) / r) - F((e - hi) /
-    r))``
-    with ``F(t) = 0.5 + (t sqrt(1 - t^2) + asin t) / pi``), times ``max(0, N . d) / pi`` with
-    the baked normal: 6 lookups (4 horizon channels, the normal, the albedo)."""
+    azimuth picks the two azimuth channels around it; at each, the sun's disc is cut by the
+    blocked interval's edges (``1 - max(0, F((e - lo) / r) - F((e - hi) / r))`` with
+    ``F(t) = 0.5 + (t sqrt(1 - t^2) + asin t) / pi``), the two visibilities linear between the
+    azimuths, times ``max(0, N . d) / pi`` with the baked normal: 6 lookups (4 horizon
+    channels, the normal, the albedo)."""
     from ...lt_addon.transport.horizon_map import SUN_RADIUS_MIN, STEP
 
     group, b, gin, gout, (dx, dy, dz), _ = _sun_group_head(name, -2600, 3000)
@@ -549,11 +549,16 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     k1 = mod_a(b.math("ADD", k0, 1.0, x=-1200, y=600), -1100, 600)
     uv = b.node("ShaderNodeUVMap", -1400, -600, uv_map=uv_map).outputs["UV"]
     lay = atlas_layout(2 * n, resolution)
-    edges, acc = [], None
-    for e, upper in enumerate((False, True)):
-        vals = []
-        for j, k in enumerate((k0, k1)):
-            y = 1600 - 400 * (2 * e + j)
+    el = b.math("ARCSINE", b.math("MINIMUM", dz, 1.0, x=600, y=200), x=700, y=200)
+    radius = b.node("ShaderNodeValue", 600, 0)
+    radius.name = radius.label = SUN_RADIUS_NODE
+    radius.outputs[0].default_value = max(np.radians(sun_angle) / 2, SUN_RADIUS_MIN)
+    r = radius.outputs[0]
+    vis, acc = [], None
+    for j, k in enumerate((k0, k1)):
+        edge = []
+        for e, upper in enumerate((False, True)):
+            y = 1600 - 400 * (2 * j + e)
             idx = b.math("ADD", k, float(3 * n), x=-800, y=y) if upper else k
             q = _atlas_channel(b, idx, uv, lay, horizon_image, resolution, acc, -700, y)
             acc = q
@@ -561,20 +566,12 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
             if not upper:    # code 0: blocked from below
                 below = b.math("LESS_THAN", q, 0.5 / 255.0, x=400, y=y - 60)
                 h = b.math("MULTIPLY_ADD", below, -np.pi / 2, h, x=500, y=y)
-            vals.append(h)
-        edges.append(b.math("MULTIPLY_ADD", b.math("SUBTRACT", vals[1], vals[0], x=600,
-                                                   y=1600 - 800 * e),
-                            f, vals[0], x=700, y=1600 - 800 * e))
-    el = b.math("ARCSINE", b.math("MINIMUM", dz, 1.0, x=600, y=200), x=700, y=200)
-    radius = b.node("ShaderNodeValue", 600, 0)
-    radius.name = radius.label = SUN_RADIUS_NODE
-    radius.outputs[0].default_value = max(np.radians(sun_angle) / 2, SUN_RADIUS_MIN)
-    r = radius.outputs[0]
-    above_lo = _disc_part(b, b.math("SUBTRACT", el, edges[0], x=800, y=800), r, 900, 800)
-    above_hi = _disc_part(b, b.math("SUBTRACT", el, edges[1], x=800, y=400), r, 900, 400)
-    vis = b.math("SUBTRACT", 1.0, b.math("MAXIMUM", b.math("SUBTRACT", above_lo, above_hi,
-                                                           x=1600, y=600), 0.0, x=1650, y=600),
-                 x=1700, y=600)
+            edge.append(_disc_part(b, b.math("SUBTRACT", el, h, x=800, y=y), r, 900, y))
+        blocked = b.math("MAXIMUM", b.math("SUBTRACT", edge[0], edge[1], x=1600,
+                                           y=1400 - 800 * j), 0.0, x=1650, y=1400 - 800 * j)
+        vis.append(b.math("SUBTRACT", 1.0, blocked, x=1700, y=1400 - 800 * j))
+    vis = b.math("MULTIPLY_ADD", b.math("SUBTRACT", vis[1], vis[0], x=1750, y=600), f, vis[0],
+                 x=1800, y=600)
     ntile = atlas_layout(2, resolution)["tiles"]
     nrm = b.vmath("NORMALIZE", _lookup(b, na_image, uv, ntile[0], 1200, -300), x=1600, y=-300)
     d = b.vmath("NORMALIZE", gin.outputs["Light Direction"], x=1600, y=-450)
