@@ -154,8 +154,8 @@ class TransportTextureSettings:
              "follows low suns more closely than 32; 4x the tabulation time)")
     seed: int = setting(0, lo=0, help="Cycles seed")
     viewport: str = setting("auto", label="Viewport", choices=(
-        ("auto", "Auto", "The horizon map where rays baked it and it agrees with T's rays; "
-         "else T itself when its atlas fits the GPU budget (400 directions at 256^2: 37 MiB; "
+        ("auto", "Auto", "Per object: the horizon map where rays baked it and it is measured "
+         "closer to rays at held-out suns; else T itself when its atlas fits the GPU budget (400 directions at 256^2: 37 MiB; "
          "1600 directions 140 MiB), else a PCA per texel block, or the global PCA when it is "
          "measured closer to T"),
         ("horizon", "Horizons", "Per-texel horizons found by rays: a shadow edge moves with "

@@ -120,27 +120,30 @@ def from_points(H, texel, resolution: int, normals, margin=None) -> HorizonMap:
     at the covered texels ``texel`` (P,) flat indices; ``margin``: ``(dst, op)`` of
     :func:`..rays.texels.extend_margin`, which fills the bake margin as Cycles' Extend does
     (edges linearly -- a lower edge blocked from below counts as 0 there --, normals then
-    renormalised)."""
-    H = np.asarray(H, np.float64)
+    renormalised). One azimuth at a time: memory holds the codes and one row."""
     _, A, P = H.shape
     R = int(resolution)
     texel = np.asarray(texel)
-    img = np.zeros((2, A, R * R))
-    img[0] = FROM_BELOW
-    img[:, :, texel] = H
+    q = np.zeros((2, A, R * R), np.uint8)           # uncovered: open, [-pi/2, 0]
+    has_margin = margin is not None and len(margin[0])
+    for a in range(A):
+        img = np.zeros((2, R * R))
+        img[0] = FROM_BELOW
+        img[:, texel] = H[:, a]
+        if has_margin:
+            dst, op = margin
+            lo = np.asarray(H[0, a], np.float64)
+            below = lo < 0
+            share = op @ below.astype(np.float64)          # weight of "from below"
+            img[0, dst] = np.where(share >= 0.5, FROM_BELOW, op @ np.where(below, 0.0, lo))
+            img[1, dst] = op @ np.asarray(H[1, a], np.float64)
+        q[:, a] = quantize(img)
     nrm = np.zeros((R * R, 3))
     nrm[texel] = np.asarray(normals, np.float64)
-    if margin is not None and len(margin[0]):
-        dst, op = margin
-        below = H[0] < 0
-        lo = (op @ np.where(below, 0.0, H[0]).T).T
-        share = (op @ below.T.astype(np.float64)).T          # weight of "from below"
-        img[0][:, dst] = np.where(share >= 0.5, FROM_BELOW, lo)
-        img[1][:, dst] = (op @ H[1].T).T
-        n = op @ np.asarray(normals, np.float64)
-        nrm[dst] = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-    return HorizonMap(quantize(img).reshape(2, A, R, R),
-                      nrm.reshape(R, R, 3).astype(np.float16))
+    if has_margin:
+        n = margin[1] @ np.asarray(normals, np.float64)
+        nrm[margin[0]] = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    return HorizonMap(q.reshape(2, A, R, R), nrm.reshape(R, R, 3).astype(np.float16))
 
 
 def heldout_directions(count: int = 16, seed: int = 0) -> np.ndarray:

@@ -97,7 +97,11 @@ def horizon_count(settings) -> int:
     them (``auto`` or ``horizon``, a PCA model) and the settings ask for some."""
     if settings.model != "pca" or settings.viewport not in ("auto", "horizon"):
         return 0
-    return int(settings.horizon_azimuths)
+    A = int(settings.horizon_azimuths)
+    if settings.viewport == "auto" and A and \
+            hmap.gpu_bytes(A, settings.resolution) > int(settings.gpu_budget) << 20:
+        return 0       # auto could not show it (explicit horizon is refused before the bake)
+    return A
 
 
 def bake(scene, objects, settings, dset, stores, normals, step: int, total: int, margin: int = 4):

@@ -43,8 +43,9 @@ def _floor_and_wall(n=300, seed=3):
 
 
 #: Half the widest bisection bracket (13 degrees / 2^7), plus the origin's self-intersection
-#: push (EPSILON * 2 m up, seen from 0.1-3 m away) and float32 rays.
-TOL = np.radians(13.0 / 2 ** horizon.REFINE) / 2 + 1e-4
+#: push (EPSILON * 2 m up, seen from 0.1-3 m away) and float32 rays, plus the float16 the
+#: edges are kept in (half of 2^-10 rad in [1, 2) rad).
+TOL = np.radians(13.0 / 2 ** horizon.REFINE) / 2 + 1e-4 + 2.0 ** -11
 
 
 @needs_engine
@@ -55,11 +56,11 @@ def test_the_horizon_of_a_wall_is_its_analytic_elevation():
     occ, pts, P = _floor_and_wall()
     A = 16
     H = horizon.horizons(occ, pts, azimuths=A)
-    assert H.shape == (2, A, len(P)) and H.dtype == np.float32
+    assert H.shape == (2, A, len(P)) and H.dtype == np.float16
     for a in range(A):
         phi = 2 * np.pi * a / A
         if np.cos(phi) > 0.05:
-            assert np.all(H[0, a] == np.float32(horizon.FROM_BELOW))
+            assert np.all(H[0, a] == np.float16(horizon.FROM_BELOW))
             want = np.arctan(1.5 * np.cos(phi) / (1 - P[:, 0]))
             assert np.abs(H[1, a] - want).max() <= TOL, a
         elif np.cos(phi) < -0.05:      # open: the empty interval [0, 0]
@@ -169,3 +170,16 @@ def test_save_load_round_trip_and_a_newer_format_is_refused(tmp_path):
     # the GPU figure: 2 x 6 azimuths in four 8-bit RGBA tiles (2 x 2 grid of 8 + 2 texel
     # strides), normals and albedo in two half-float RGBA tiles (2 x 1)
     assert hmap.gpu_bytes(6, 8) == 20 * 20 * 4 + 20 * 10 * 8
+
+
+@needs_engine
+def test_a_ray_budget_splits_the_points_and_changes_no_bit(monkeypatch):
+    """The scan takes its points in chunks of RAY_BUDGET / 18 elevations (4 M rays a call at
+    any texture size); the intervals do not depend on the chunking."""
+    roof = np.array([[0, -10, 1], [1, -10, 1], [1, 10, 1], [0, 10, 1]], float)
+    occ, pts, P = _floor_points(150, 5, roof, x=(-1.9, 0.9))
+    whole = horizon.horizons(occ, pts, azimuths=12)
+    monkeypatch.setattr(horizon, "RAY_BUDGET", 18 * 7)       # 7 points a call
+    calls = occ.rays
+    parts = horizon.horizons(occ, pts, azimuths=12)
+    assert np.array_equal(whole, parts) and occ.rays - calls == calls
