@@ -148,3 +148,29 @@ def test_horizons_relight_a_low_sun_as_well_as_hard_suns_over_its_disc(bumps, tm
         assert e_h <= 1.2 * e_f + 0.01, (el, e_h, e_f)
         assert e_h < 0.85 * e_t, (el, e_h, e_t)
     b.store.abort()
+
+
+def test_the_horizon_viewport_is_refused_before_any_bake_where_it_cannot_be_made(bumps,
+                                                                                  tmp_path):
+    """--viewport horizon without the ray engine's direct light, or over the GPU budget, is one
+    line before any bake call: nothing is made, not even the folder. A bake that shows T keeps
+    no map, and the relight from horizons says so."""
+    from relightable_textures.lt_addon.errors import InputError
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.base.jobs import run
+
+    scene, obj = bumps
+    for kw, msg in ((dict(direct="cycles"), "needs horizons found by rays"),
+                    (dict(horizon_azimuths=0), "needs horizons found by rays"),
+                    (dict(resolution=2048, gpu_budget=64), "would take 321 MiB of GPU memory at 2048")):
+        out = tmp_path / "no"
+        with pytest.raises(tx.BakeInputError, match=msg):
+            run(tx.bake_job(scene, [obj], settings(viewport="horizon", **kw), str(out),
+                            truth=0))
+        assert not out.exists()
+    rep = run(tx.bake_job(scene, [obj], settings(viewport="transport"), str(tmp_path / "t"),
+                          truth=0)).reports[0]
+    assert "horizons" not in rep["files"] and rep["viewport"]["shows"] == "transport"
+    bake_, store_, _ = tx.load_bake(rep["report"])
+    with pytest.raises(InputError, match="keeps no horizon map"):
+        tx.relight(bake_, store_, direction_from_az_el(30, 20), 2.0, source="horizon")
