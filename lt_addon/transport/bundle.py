@@ -155,9 +155,9 @@ class TransportTextureSettings:
     seed: int = setting(0, lo=0, help="Cycles seed")
     viewport: str = setting("auto", label="Viewport", choices=(
         ("auto", "Auto", "Per object: the horizon map where rays baked it and it is measured "
-         "closer to rays at held-out suns; else T itself when its atlas fits the GPU budget (400 directions at 256^2: 37 MiB; "
-         "1600 directions 140 MiB), else a PCA per texel block, or the global PCA when it is "
-         "measured closer to T"),
+         "closer to rays at held-out suns; else T itself when its atlas fits the GPU budget "
+         "(400 directions at 256^2: 37 MiB; 1600 directions 140 MiB), else a PCA per texel "
+         "block, or the global PCA when it is measured closer to T"),
         ("horizon", "Horizons", "Per-texel horizons found by rays: a shadow edge moves with "
          "the sun instead of blending the baked directions' shadows (no ghosting at low suns); "
          "6 lookups per pixel and 2.7 bytes per texel and azimuth; needs the ray engine"),

@@ -85,7 +85,7 @@ def _blas_idle():
 HELDOUT, HELDOUT_DISC = 16, 8
 
 
-def tt_disc(d, radius, count):
+def _disc(d, radius, count):
     """Hard-sun directions spread over a sun's disc (the transport relight's own)."""
     from ...lt_addon.transport.texture import _disc_points
 
@@ -162,7 +162,7 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
         for (smp, pts), (dst, op) in zip(receivers, margins):
             rows = np.zeros((len(Dh), R * R), np.float32)
             for j, d in enumerate(Dh):
-                disc = tt_disc(d, np.radians(settings.sun_angle) / 2, HELDOUT_DISC)
+                disc = _disc(d, np.radians(settings.sun_angle) / 2, HELDOUT_DISC)
                 inside = direct_rows(occluder, pts, disc).mean(0)
                 rows[j, smp.texel] = inside
                 if dst.size:

@@ -371,7 +371,6 @@ def build_sparse_group(n_directions: int, resolution: int, table_size: int, taps
         frac.append(b.math("SUBTRACT", f, c0, x=-1100, y=y))
     uv = b.node("ShaderNodeUVMap", -1400, -600, uv_map=uv_map).outputs["UV"]
     lay = atlas_layout(-(-n_directions // 3), resolution)
-    cols, stride, W, H = lay["cols"], lay["stride"], lay["width"], lay["height"]
     acc = None
     y = 1200
     for cy in (0, 1):
@@ -394,31 +393,8 @@ def build_sparse_group(n_directions: int, resolution: int, table_size: int, taps
                 wts += list(_closest(b, weight_image, at, -700, yp - 200))[:3]
             for k in range(len(idx)):
                 yk = y - 120 * k
-                i = idx[k]
-                tile = b.math("FLOOR", b.math("MULTIPLY_ADD", i, 1.0 / 3.0, 0.5 / 3.0, x=-300,
-                                              y=yk), x=-200, y=yk)
-                ch = b.math("MULTIPLY_ADD", tile, -3.0, i, x=-100, y=yk)
-                row = b.math("FLOOR", b.math("MULTIPLY_ADD", tile, 1.0 / cols, 0.5 / cols,
-                                             x=0, y=yk), x=100, y=yk)
-                col = b.math("MULTIPLY_ADD", row, -float(cols), tile, x=200, y=yk)
-                off = b.node("ShaderNodeCombineXYZ", 300, yk)
-                b.links.new(b.math("MULTIPLY_ADD", col, stride / W, 1.0 / W, x=250, y=yk),
-                            off.inputs[0])
-                b.links.new(b.math("MULTIPLY_ADD", row, stride / H, 1.0 / H, x=250, y=yk - 40),
-                            off.inputs[1])
-                m = b.node("ShaderNodeVectorMath", 400, yk, operation="MULTIPLY_ADD")
-                b.links.new(pn.after_sum(b, uv, acc, 350, yk), m.inputs[0])
-                m.inputs[1].default_value = (resolution / W, resolution / H, 0.0)
-                b.links.new(off.outputs[0], m.inputs[2])
-                tex = b.node("ShaderNodeTexImage", 500, yk, image=atlas_image,
-                             interpolation="Linear", extension="EXTEND")
-                b.links.new(m.outputs["Vector"], tex.inputs["Vector"])
-                onehot = b.node("ShaderNodeCombineXYZ", 600, yk - 40)
-                for c in range(3):
-                    b.links.new(b.math("COMPARE", ch, float(c), 0.5, x=550, y=yk - 40 * c),
-                                onehot.inputs[c])
-                value = b.vmath("DOT_PRODUCT", tex.outputs["Color"], onehot.outputs[0], x=700,
-                                y=yk)
+                value = _atlas_channel(b, idx[k], uv, lay, atlas_image, resolution, acc,
+                                       -300, yk)
                 term = b.math("MULTIPLY", value, b.math("MULTIPLY", wts[k], factor, x=700,
                                                         y=yk - 60), x=800, y=yk)
                 acc = term if acc is None else b.math("ADD", acc, term, x=900, y=yk)

@@ -162,7 +162,8 @@ def test_the_horizon_viewport_is_refused_before_any_bake_where_it_cannot_be_made
     scene, obj = bumps
     for kw, msg in ((dict(direct="cycles"), "needs horizons found by rays"),
                     (dict(horizon_azimuths=0), "needs horizons found by rays"),
-                    (dict(resolution=2048, gpu_budget=64), "would take 321 MiB of GPU memory at 2048")):
+                    (dict(resolution=2048, gpu_budget=64),
+                     "would take 321 MiB of GPU memory at 2048")):
         out = tmp_path / "no"
         with pytest.raises(tx.BakeInputError, match=msg):
             run(tx.bake_job(scene, [obj], settings(viewport="horizon", **kw), str(out),
