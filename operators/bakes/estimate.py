@@ -99,12 +99,10 @@ def estimate(scene, objects, settings, truth: int = 4, truth_samples: int = 256)
     from ...lt_addon.transport import horizon_map as hmap
     from .ray_direct import horizon_count
 
-    hgpu = hmap.gpu_bytes(horizon_count(settings), settings.resolution) \
-        if horizon_count(settings) >= 3 else 0
-    if hgpu and settings.direct != "cycles" and (settings.viewport == "horizon" or
-                                                 hgpu <= settings.gpu_budget << 20):
-        # (where rays bake the direct light; auto shows it when it agrees with T's rays)
-        viewport, gpu = "horizon", len(objects) * hgpu
+    A = horizon_count(settings)     # (0 under auto when the map would not fit the budget)
+    if A and settings.direct != "cycles":
+        # rays bake the map; auto shows it where the held-out check finds it closer than T
+        viewport, gpu = "horizon", len(objects) * hmap.gpu_bytes(A, settings.resolution)
     elif viewport == "transport":
         gpu = len(objects) * sp.atlas_layout_bytes(dset.size, settings.resolution)[1]
     elif viewport == "blocks":   # the block size is chosen after the bake: at most this
