@@ -125,17 +125,24 @@ try:
         rep["bake_files"] = files
         rep["bake"] = (rep["bake_result"] == ["FINISHED"] and props.method == "transport"
                        and {"Bumps_texture_report.json", "Bumps_transport_texture.npy",
-                            "Bumps_preview_tables.exr", "Bumps_preview_transport.png",
-                            "Bumps_preview_sparse_index.exr"} <= set(files))
+                            "Bumps_preview_tables.exr"} <= set(files))
         if rep["bake"]:
             with open(os.path.join(props.output_dir, "Bumps_texture_report.json")) as fh:
                 bake_rep = json.load(fh)
-            # the viewport from T: its group is built with this Blender's nodes
+            # auto shows T's sparse tables or the horizon map, whichever its held-out check
+            # found closer to the rays (24 directions: the horizons); each has its own images,
+            # and its group is built with this Blender's nodes
+            shown = bake_rep["preview"]["viewport"]
+            rep["viewport"] = shown
+            images = {"transport": {"Bumps_preview_transport.png",
+                                    "Bumps_preview_sparse_index.exr"},
+                      "horizon": {"Bumps_horizons.npz", "Bumps_preview_horizons.png",
+                                  "Bumps_preview_normals.exr"}}.get(shown)
             group = bpy.data.node_groups.get("Relight Transport (Bumps)")
             rep["bake"] = (bake_rep["directions"] == 24
                            and bake_rep["direct"]["engine"] == "rays"
-                           and bake_rep["preview"]["viewport"] == "transport"
-                           and group is not None and group.get("relight_viewport") == "transport")
+                           and images is not None and images <= set(files)
+                           and group is not None and group.get("relight_viewport") == shown)
 except Exception:
     rep["error"] = traceback.format_exc()[-1500:]
 out()
@@ -344,9 +351,14 @@ def main() -> int:
             ok = all(rep.get(k) for k in ("installs", "enables", "wheels", "bake"))
             if not ok:
                 failures.append(f"{version}: " + ", ".join(
-                    f"{k}={rep.get(k)}" for k in ("install", "enables", "wheels", "bake")))
+                    f"{k}={rep.get(k)}" for k in ("install", "enables", "wheels", "bake"))
+                    + (f" (viewport {rep.get('viewport')}, files {rep.get('bake_files')})"
+                       if not rep.get("bake") else ""))
+            bake_cell = yes(rep.get("bake"))
+            if rep.get("bake") and rep.get("viewport"):
+                bake_cell += f" ({rep['viewport']} viewport)"
             row = [yes(rep.get("installs")), yes(rep.get("enables")), yes(rep.get("wheels")),
-                   yes(rep.get("bake"))]
+                   bake_cell]
         else:
             refused = not rep.get("installs") and not rep.get("enables")
             if not refused:
