@@ -26,8 +26,11 @@ def direct_rows(occluder, points: ShadingPoints, directions) -> np.ndarray:
         cos = cosine(points, L)
         lit = np.nonzero(cos > 0)[0]
         out[s, lit] = cos[lit] / np.pi
-        if lit.size:
+        if lit.size > points.size // 4:   # every point's origin, then the lit ones': faster
+            origins.append(np.take(shadow_origins(points, L), lit, axis=0))
+        elif lit.size:                    # (the same bits: shadow_origins is per point)
             origins.append(shadow_origins(points, L, lit))
+        if lit.size:
             counts.append(lit.size)
             where.append(s * points.size + lit)
         else:

@@ -104,12 +104,17 @@ def iter_horizons(occluder, points: ShadingPoints, azimuths: int = 128, refine: 
         e0_all = np.arctan2(points.Ns[:, 2], points.Ns[:, 0] * np.cos(phi)
                             + points.Ns[:, 1] * np.sin(phi))
         for c0 in range(0, P, chunk):
-            idx = np.arange(c0, min(c0 + chunk, P))
+            part = slice(c0, min(c0 + chunk, P))
+            idx = np.arange(part.start, part.stop)
             n = len(idx)
-            origins = np.concatenate([shadow_origins(points, L[j], idx) for j in range(J)])
-            blocked = occluder.occluded(origins, np.repeat(L.astype(np.float32), n, 0))
+            care = care_all[:, part]
+            # rays only where the direction is in front (behind it a blocked ray is not used)
+            flat = np.flatnonzero(care)
+            origins = np.concatenate([shadow_origins(points, L[j], part) for j in range(J)])
+            blocked = np.zeros(J * n, bool)
+            blocked[flat] = occluder.occluded(np.take(origins, flat, axis=0),
+                                              np.repeat(L.astype(np.float32), n, 0)[flat])
             blocked = blocked.reshape(J, n)
-            care = care_all[:, idx]
             e0 = e0_all[idx]
             cb = blocked & care
             any_ = cb.any(0)

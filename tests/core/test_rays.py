@@ -164,6 +164,34 @@ def test_shadow_origins_follow_cycles_rules():
     assert (shadow_origins(flat, grazing)[:, 2] < 1e-4).all()   # flat faces: never lifted
 
 
+def test_a_points_origin_does_not_depend_on_the_points_asked_with_it():
+    """Chunking points (horizons, ray budgets) and asking only the lit ones must not move any
+    origin by a bit: a BLAS matrix-vector product rounds a row by its vector lane, and with it
+    2 of 3 random subsets of the statue's points differed in the last bit."""
+    rng = np.random.default_rng(5)
+    V = rng.normal(size=(300, 3))
+    tris = rng.integers(0, 300, (400, 3))
+    tris = tris[(tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2])
+                & (tris[:, 0] != tris[:, 2])]
+    corner = rng.normal(size=(len(tris), 3, 3))
+    corner /= np.linalg.norm(corner, axis=2, keepdims=True)
+    P = 4000
+    tri, bary = rng.integers(0, len(tris), P), rng.dirichlet(np.ones(3), P)
+    smooth = rng.random(len(tris)) < 0.7                 # smooth and flat faces mixed
+    pts = shading_points(V, tris, corner, smooth, tri, bary, cutoff=0.1)
+    for t in range(20):
+        L = rng.normal(size=3)
+        L[2] *= 0.05 if t % 2 else 1.0                   # half of them near the terminators
+        L /= np.linalg.norm(L)
+        full = shadow_origins(pts, L)
+        idx = np.sort(rng.choice(P, int(rng.integers(1, P)), replace=False))
+        a = int(rng.integers(0, P - 1))
+        b = int(rng.integers(a + 1, P + 1))
+        assert np.array_equal(shadow_origins(pts, L, idx), full[idx])
+        assert np.array_equal(shadow_origins(pts, L, slice(a, b)), full[a:b])
+        assert np.array_equal(shadow_origins(pts, np.tile(L, (len(idx), 1)), idx), full[idx])
+
+
 def test_backfacing_points_flip_both_normals():
     V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)   # winding: Ng = +z
     down = np.tile([0.0, 0.0, -1.0], (3, 1))                 # smooth normals point down
