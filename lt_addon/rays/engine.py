@@ -72,6 +72,7 @@ class Occluder:
         if not np.all(np.isfinite(v)):
             raise ValueError("vertices contain NaN or inf")
         self.n_triangles = int(len(t))
+        self.vertices, self.triangles = v, t        # as the BVH holds them (float32, int32)
         self.threads = int(threads) or default_threads()
         self._scene = rtcore_scene.EmbreeScene()
         if len(t):
@@ -99,10 +100,13 @@ class Occluder:
         if not len(o) or not self.n_triangles:
             return out
         self.rays += len(o)
-        starts = range(0, len(o), BATCH)
+        # a call smaller than a batch per thread is shared out evenly (the bisections of the
+        # horizon scan cast a few thousand rays a call, on one core before)
+        size = max(1024, min(BATCH, -(-len(o) // self.threads)))
+        starts = range(0, len(o), size)
 
         def run(a):
-            b = min(a + BATCH, len(o))
+            b = min(a + size, len(o))
             dd = d if len(d) == 1 else d[a:b]
             out[a:b] = self._scene.run(o[a:b], dd, query="OCCLUDED") == 0
         if self.threads == 1 or len(starts) == 1:

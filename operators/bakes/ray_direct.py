@@ -141,7 +141,7 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
     A = horizon_count(settings)
     if A:
         t2, r2 = time.perf_counter(), occluder.rays
-        maps, gaps = [], []
+        maps, gaps, skipped = [], [], 0
         for i, ((smp, pts), mg) in enumerate(zip(receivers, margins)):
             gen = horizon.iter_horizons(occluder, pts, A)
             while True:
@@ -155,6 +155,7 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                     yield Progress(step + S - 1, total, f"horizons {done}/{A} azimuths{who}")
             maps.append(hmap.from_points(H, smp.texel, R, pts.Ns, mg))
             gaps.append(round(figs["gaps"], 5))
+            skipped += figs["skipped"]
         # the check auto chooses the viewport by: hard suns by rays over the preview sun's
         # disc at held-out directions (neither set has them), per object, margins filled
         Dh = hmap.heldout_directions(HELDOUT, settings.seed)
@@ -171,7 +172,9 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
         horizon_info = {"horizon_azimuths": A, "horizon_gaps": gaps,
                         "horizon_checks": {"directions": Dh, "rows": checks},
                         "horizon_seconds": round(time.perf_counter() - t2, 3),
-                        "horizon_rays": int(occluder.rays - r2)}
+                        "horizon_rays": int(occluder.rays - r2),
+                        # scan rays no caster could meet (lt_addon/rays/reach.py): not cast
+                        "horizon_rays_skipped": int(skipped)}
     seconds = time.perf_counter() - t0
     rays = occluder.rays
     return {"engine": "rays", "horizon_maps": maps, **horizon_info,
