@@ -173,6 +173,11 @@ class TransportTextureSettings:
         128, lo=0, hi=1024, label="Horizon Azimuths",
         help="Azimuths of the horizon map rays bake for the viewport (0: none); 128 are 2.8 "
              "degrees apart")
+    horizon_resolution: int = setting(
+        0, lo=0, hi=8192, label="Horizon Resolution", metavar="SIDE",
+        help="Side of the horizon map (0: the texture's, at most 1024): a shadow edge is as "
+             "wide as the sun's penumbra, many texels on a large receiver, so a 2048^2 "
+             "texture's horizons at 1024^2 cost a quarter of the rays and GPU memory")
     gpu_budget: int = setting(
         512, lo=8, hi=65536, label="GPU Budget", metavar="MIB",
         help="MiB of GPU memory each object's viewport may take: auto shows T itself when its "
@@ -223,6 +228,9 @@ class TransportTextureSettings:
         if self.horizon_azimuths in (1, 2):
             raise InputError(f"horizon azimuths must be 0 (none) or 3 or more, got "
                              f"{self.horizon_azimuths}")
+        if self.horizon_resolution and not 4 <= self.horizon_resolution <= 8192:
+            raise InputError(f"horizon resolution must be 0 (the texture's, at most 1024) or "
+                             f"in 4..8192, got {self.horizon_resolution}")
         check_ranges(self)
         return dset
 
@@ -230,7 +238,9 @@ class TransportTextureSettings:
 def direct_summary(direct: dict, directions: int) -> str:
     """One line on how a transport bake's direct light was baked (its report's ``direct``)."""
     if direct.get("engine") == "rays":
-        horizons = (f"; horizons at {direct['horizon_azimuths']} azimuths "
+        side = (f" at {direct['horizon_resolution']}^2" if direct.get("horizon_resolution")
+                else "")
+        horizons = (f"; horizons at {direct['horizon_azimuths']} azimuths{side} "
                     f"{direct['horizon_seconds']:.1f} s of it" if direct.get("horizon_azimuths")
                     else "")
         return (f"Direct light: {directions} directions by rays ({direct.get('library', '')}, "

@@ -6,7 +6,9 @@ A bake's stages scale with what they work on:
 stage              scales with                                 measured as
 =================  ==========================================  ===============================
 ``direct``         texels x objects (albedo, then T's rays     ``seconds["direct_total"]``
-                   or Cycles calls)
+                   or Cycles calls)                            minus the horizons'
+``horizons``       horizon texels x objects (the horizon map's ``seconds["horizons"]``
+                   scan by rays, at its own side)
 ``indirect``       indirect texels (``indirect_resolution``)   ``seconds["indirect_total"]``
 ``fit``            texels x objects (the PCA over T)           ``seconds["fit"]``
 ``other``          texels x objects (store, stacking, ...)     ``bake_total`` minus the above
@@ -27,7 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-STAGES = ("direct", "indirect", "fit", "other", "truth")
+STAGES = ("direct", "horizons", "indirect", "fit", "other", "truth")
 
 
 @dataclass
@@ -45,19 +47,24 @@ def stage_seconds(seconds: dict) -> dict:
     """The stage split of a bake's ``seconds`` (its report's timings):
     {direct, indirect, fit, other} in seconds, non-negative."""
     direct = float(seconds.get("direct_total", 0.0))
+    horizons = min(float(seconds.get("horizons", 0.0)), direct)
     indirect = float(seconds.get("indirect_total", 0.0))
     fit = float(seconds.get("fit", 0.0))
     total = float(seconds.get("bake_total", direct + indirect + fit))
-    return {"direct": direct, "indirect": indirect, "fit": fit,
-            "other": max(0.0, total - direct - indirect - fit)}
+    return {"direct": direct - horizons, "horizons": horizons, "indirect": indirect,
+            "fit": fit, "other": max(0.0, total - direct - indirect - fit)}
 
 
 def units(stage: str, resolution: int, indirect_resolution: int, n_objects: int,
-          truth_lights: int) -> float:
-    """What ``stage`` scales with at these settings (texels; see the module table)."""
+          truth_lights: int, horizon_resolution: int | None = None) -> float:
+    """What ``stage`` scales with at these settings (texels; see the module table;
+    ``horizon_resolution`` the horizon map's side, the texture's when None)."""
     P = float(resolution) ** 2 * n_objects
     if stage == "indirect":
         return float(indirect_resolution) ** 2 * n_objects
+    if stage == "horizons":
+        side = resolution if horizon_resolution is None else horizon_resolution
+        return float(side) ** 2 * n_objects
     if stage == "truth":
         return P * truth_lights
     return P
@@ -89,9 +96,9 @@ def fit_costs(samples: list) -> dict:
 
 
 def predict(costs: dict, resolution: int, indirect_resolution: int, n_objects: int,
-            truth_lights: int) -> dict:
-    """{stage: seconds, "bake": the bake's seconds (direct + indirect + fit + other), "total":
-    with the truths} at the asked settings."""
+            truth_lights: int, horizon_resolution: int | None = None) -> dict:
+    """{stage: seconds, "bake": the bake's seconds (direct + horizons + indirect + fit +
+    other), "total": with the truths} at the asked settings."""
     out = {}
     for stage, cost in costs.items():
         if stage == "truth" and not truth_lights:
@@ -99,8 +106,9 @@ def predict(costs: dict, resolution: int, indirect_resolution: int, n_objects: i
         if stage == "indirect" and not indirect_resolution:
             continue
         out[stage] = cost.at(units(stage, resolution, indirect_resolution, n_objects,
-                                   truth_lights))
-    out["bake"] = sum(out.get(s, 0.0) for s in ("direct", "indirect", "fit", "other"))
+                                   truth_lights, horizon_resolution))
+    out["bake"] = sum(out.get(s, 0.0) for s in ("direct", "horizons", "indirect", "fit",
+                                                 "other"))
     out["total"] = out["bake"] + out.get("truth", 0.0)
     return out
 

@@ -13,10 +13,16 @@ It is exact where a texel's occluded elevations along an azimuth form one interv
 form two (the sky between), their hull darkens the gap. Before the viewport is chosen,
 :func:`heldout_errors` measures the map and T against rays at directions neither holds.
 
-Arrays: ``q`` (2, A, R, R) uint8 codes -- ``q[1]`` the upper edges ``hi = q / 255 * pi / 2``,
+Arrays: ``q`` (2, A, Rh, Rh) uint8 codes -- ``q[1]`` the upper edges ``hi = q / 255 * pi / 2``,
 ``q[0]`` the lower edges, the same but code 0 for "blocked from below" (``-pi / 2``); rows from
 v = 0 -- and ``normals`` (R, R, 3) float16 world unit vectors (zeros on texels no triangle
 covers). Azimuth ``a`` is ``2 pi a / A`` from +x toward +y.
+
+The horizons may be kept at a coarser side ``Rh`` than the texture's ``R`` (:func:`side`): a
+shadow's edge is as sharp as the sun's penumbra, which on a large receiver spans many texels
+(a 2-degree sun over an object 1 m high: 35 mm; a 5 m ground at 2048^2: 2.4 mm texels), while
+the horizons' memory and rays grow with the texels. The texture's texels then read the codes
+bilinearly at their centres, as the viewport's linear image lookup does.
 """
 
 from __future__ import annotations
@@ -38,6 +44,18 @@ DEFAULT_AZIMUTHS = 128
 SUN_RADIUS_MIN = 1e-4
 #: Radians per code step (0.35 degrees).
 STEP = np.pi / 2 / 255.0
+#: The horizons' side at most when the settings leave it to the bake (0). With 128 azimuths a
+#: 2048^2 texture's horizon viewport then takes 426 MiB of GPU memory (its normals and albedo
+#: at 2048^2 included; 1507 MiB with the horizons at 2048^2), within the default 512 MiB
+#: budget; a 4096^2 texture's 618 MiB.
+AUTO_SIDE = 1024
+
+
+def side(resolution: int, horizon_resolution: int = 0) -> int:
+    """The horizons' side for a texture of side ``resolution``: ``horizon_resolution`` when
+    given (> 0), else :data:`AUTO_SIDE`; never more than the texture's."""
+    want = int(horizon_resolution) if horizon_resolution else AUTO_SIDE
+    return max(1, min(int(resolution), want))
 
 
 def quantize(H) -> np.ndarray:
@@ -51,15 +69,34 @@ def quantize(H) -> np.ndarray:
 
 
 def decode(q) -> np.ndarray:
-    """uint8 codes (2, ...) -> radians float64 (lower code 0 -> ``-pi/2``)."""
-    h = np.asarray(q, np.float64) * STEP
-    h[0] = np.where(np.asarray(q[0]) == 0, FROM_BELOW, h[0])
+    """Codes (2, ...) -> radians float64: uint8 codes, or codes interpolated between texels
+    as floats -- the viewport's rule: ``q * STEP``, and a lower code under 0.5 is "from
+    below", ``q * STEP - pi/2`` (exactly ``-pi/2`` for code 0)."""
+    qf = np.asarray(q, np.float64)
+    h = qf * STEP
+    h[0] = np.where(qf[0] < 0.5, h[0] + FROM_BELOW, h[0])
     return h
+
+
+def upsample(img, R: int) -> np.ndarray:
+    """``img`` (..., Rh, Rh) read bilinearly at the centres of an (R, R) grid's texels over the
+    same square, edges clamped (the atlas' edge padding): the viewport's linear lookup.
+    float64; ``img`` itself when Rh == R."""
+    img = np.asarray(img, np.float64)
+    Rh = img.shape[-1]
+    if Rh == R:
+        return img
+    x = (np.arange(R) + 0.5) * (Rh / R) - 0.5
+    i0 = np.floor(x).astype(np.int64)
+    w = x - i0
+    a, b = np.clip(i0, 0, Rh - 1), np.clip(i0 + 1, 0, Rh - 1)
+    rows = img[..., a, :] * (1 - w)[:, None] + img[..., b, :] * w[:, None]
+    return rows[..., a] * (1 - w) + rows[..., b] * w
 
 
 @dataclass
 class HorizonMap:
-    q: np.ndarray          # (2, A, R, R) uint8
+    q: np.ndarray          # (2, A, Rh, Rh) uint8
     normals: np.ndarray    # (R, R, 3) float16
 
     @property
@@ -68,6 +105,12 @@ class HorizonMap:
 
     @property
     def resolution(self) -> int:
+        """The texture's side (the normals')."""
+        return int(self.normals.shape[0])
+
+    @property
+    def horizon_resolution(self) -> int:
+        """The horizons' side (<= the texture's)."""
         return int(self.q.shape[2])
 
     def direct(self, d, sun_angle_deg: float = 0.0) -> np.ndarray:
@@ -89,7 +132,9 @@ class HorizonMap:
         f = x - np.floor(x)
         el = np.arcsin(np.clip(d[2], -1.0, 1.0))
         r = max(np.radians(sun_angle_deg) / 2, SUN_RADIUS_MIN)
-        h0, h1 = decode(self.q[:, k0]), decode(self.q[:, (k0 + 1) % A])
+        R = self.resolution
+        h0 = decode(upsample(self.q[:, k0], R))
+        h1 = decode(upsample(self.q[:, (k0 + 1) % A], R))
         vis = (1 - f) * visible_fraction(el, *h0, r) + f * visible_fraction(el, *h1, r)
         n = self.normals.astype(np.float64)
         length = np.linalg.norm(n, axis=-1)
@@ -98,31 +143,50 @@ class HorizonMap:
 
     def gpu_bytes(self) -> int:
         """GPU memory of the viewport's images (:func:`gpu_bytes`)."""
-        return gpu_bytes(self.azimuths, self.resolution)
+        return gpu_bytes(self.azimuths, self.resolution, self.horizon_resolution)
 
     def storage_bytes(self) -> int:
         return int(self.q.nbytes + self.normals.nbytes)
 
 
-def gpu_bytes(azimuths: int, resolution: int) -> int:
+def gpu_bytes(azimuths: int, resolution: int, horizon_resolution: int = 0) -> int:
     """GPU memory of a horizon viewport: the lower and upper edges as one 8-bit RGBA atlas
-    (three azimuths per tile) and the normals with the albedo in a half-float RGBA atlas (two
-    tiles)."""
+    (three azimuths per tile) at the horizons' side (:func:`side`, of ``horizon_resolution``:
+    0 lets the bake choose) and the normals with the albedo in a half-float RGBA atlas (two
+    tiles) at the texture's."""
     from ..io.atlas import atlas_layout
 
-    h = atlas_layout(2 * -(-int(azimuths) // 3), int(resolution))
+    h = atlas_layout(2 * -(-int(azimuths) // 3), side(resolution, horizon_resolution))
     n = atlas_layout(2, int(resolution))
     return int(h["width"] * h["height"] * 4 + n["width"] * n["height"] * 8)
 
 
-def from_points(H, texel, resolution: int, normals, margin=None) -> HorizonMap:
+def from_points(H, texel, resolution: int, normals, margin=None, coarse=None) -> HorizonMap:
     """A map from one object's shading points: ``H`` (2, A, P) radians and ``normals`` (P, 3)
     at the covered texels ``texel`` (P,) flat indices; ``margin``: ``(dst, op)`` of
     :func:`..rays.texels.extend_margin`, which fills the bake margin as Cycles' Extend does
     (edges linearly -- a lower edge blocked from below counts as 0 there --, normals then
-    renormalised). One azimuth at a time: memory holds the codes and one row."""
-    _, A, P = H.shape
+    renormalised). One azimuth at a time: memory holds the codes and one row.
+    ``coarse``: ``(texel, side, margin)`` when ``H`` was found at the points of a coarser
+    side (``normals`` stay at ``texel``, ``resolution``)."""
+    if coarse is not None:
+        h_texel, Rh, h_margin = coarse
+        q = _codes(H, np.asarray(h_texel), int(Rh), h_margin)
+    else:
+        q = _codes(H, np.asarray(texel), int(resolution), margin)
     R = int(resolution)
+    texel = np.asarray(texel)
+    nrm = np.zeros((R * R, 3))
+    nrm[texel] = np.asarray(normals, np.float64)
+    if margin is not None and len(margin[0]):
+        n = margin[1] @ np.asarray(normals, np.float64)
+        nrm[margin[0]] = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    return HorizonMap(q, nrm.reshape(R, R, 3).astype(np.float16))
+
+
+def _codes(H, texel, R: int, margin) -> np.ndarray:
+    """The codes (2, A, R, R) of intervals ``H`` (2, A, P) at ``texel``, margin filled."""
+    _, A, P = H.shape
     texel = np.asarray(texel)
     q = np.zeros((2, A, R * R), np.uint8)           # uncovered: open, [-pi/2, 0]
     has_margin = margin is not None and len(margin[0])
@@ -138,12 +202,7 @@ def from_points(H, texel, resolution: int, normals, margin=None) -> HorizonMap:
             img[0, dst] = np.where(share >= 0.5, FROM_BELOW, op @ np.where(below, 0.0, lo))
             img[1, dst] = op @ np.asarray(H[1, a], np.float64)
         q[:, a] = quantize(img)
-    nrm = np.zeros((R * R, 3))
-    nrm[texel] = np.asarray(normals, np.float64)
-    if has_margin:
-        n = margin[1] @ np.asarray(normals, np.float64)
-        nrm[margin[0]] = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-    return HorizonMap(q.reshape(2, A, R, R), nrm.reshape(R, R, 3).astype(np.float16))
+    return q.reshape(2, A, R, R)
 
 
 def heldout_directions(count: int = 16, seed: int = 0) -> np.ndarray:

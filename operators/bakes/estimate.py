@@ -15,6 +15,7 @@ import time
 from dataclasses import replace
 
 from ...lt_addon.transport import estimate as est
+from ...lt_addon.transport import horizon_map as hmap
 from ...lt_addon.transport import texture as tt
 from ..base.cycles_bake import _size, available_memory_bytes
 from ..base.jobs import Progress
@@ -62,7 +63,8 @@ def calibrate(scene, objects, settings, truth: int, truth_samples: int):
                     b.store.abort()
         seconds = est.stage_seconds(res.seconds)
         u = {st: est.units(st, R, R if settings.bounces > 0 and
-                           settings.indirect == "steerable" else 0, len(objects), 1)
+                           settings.indirect == "steerable" else 0, len(objects), 1,
+                           hmap.side(R, s.horizon_resolution))
              for st in est.STAGES}
         if lights:
             tr = yield from truth_bakes(scene, objects, lights, settings.sun_angle,
@@ -85,7 +87,8 @@ def estimate(scene, objects, settings, truth: int = 4, truth_samples: int = 256)
     costs, cal = yield from calibrate(scene, objects, settings, truth, truth_samples)
     ri = settings.indirect_resolution if (settings.bounces > 0 and
                                           settings.indirect == "steerable") else 0
-    seconds = est.predict(costs, settings.resolution, ri, len(objects), truth)
+    seconds = est.predict(costs, settings.resolution, ri, len(objects), truth,
+                          hmap.side(settings.resolution, settings.horizon_resolution))
     P = settings.resolution ** 2
     disk = len(objects) * tt.transport_bytes(dset.size, P)
     k = settings.components or 48
@@ -96,13 +99,13 @@ def estimate(scene, objects, settings, truth: int = 4, truth_samples: int = 256)
                                          table_size=settings.table_size)
     except ValueError:
         viewport = "pca"
-    from ...lt_addon.transport import horizon_map as hmap
     from .ray_direct import horizon_count
 
     A = horizon_count(settings)     # (0 under auto when the map would not fit the budget)
     if A and settings.direct != "cycles":
         # rays bake the map; auto shows it where the held-out check finds it closer than T
-        viewport, gpu = "horizon", len(objects) * hmap.gpu_bytes(A, settings.resolution)
+        viewport, gpu = "horizon", len(objects) * hmap.gpu_bytes(
+            A, settings.resolution, settings.horizon_resolution)
     elif viewport == "transport":
         gpu = len(objects) * sp.atlas_layout_bytes(dset.size, settings.resolution)[1]
     elif viewport == "blocks":   # the block size is chosen after the bake: at most this
@@ -152,7 +155,8 @@ def describe(e: dict, settings, n_objects: int) -> list:
     """The estimate in a few lines."""
     s = e["seconds"]
     parts = [f"{name} {est.readable_seconds(s[name])}" for name in
-             ("direct", "indirect", "fit", "other", "truth") if name in s]
+             ("direct", "horizons", "indirect", "fit", "other", "truth")
+             if name in s and (name != "horizons" or s[name] >= 0.5)]
     return [f"estimate for {n_objects} object(s) at {settings.resolution}^2: about "
             f"{est.readable_seconds(e['total'])} ({', '.join(parts)})",
             f"  disk {_size(e['disk_bytes'])} for T, memory {_size(e['ram_bytes'])} of "

@@ -92,14 +92,24 @@ def _disc(d, radius, count):
     return _disc_points(np.asarray(d, np.float64), radius, count)
 
 
+def _nearest(image, side: int):
+    """An (R, R, 3) image (or None) read at the texel centres of a coarser ``side``: the
+    nearest texel (the closure normals of normal-mapped objects, for the horizons' points)."""
+    if image is None:
+        return None
+    R = image.shape[0]
+    i = np.minimum(((np.arange(side) + 0.5) * R / side).astype(np.int64), R - 1)
+    return np.asarray(image)[i][:, i]
+
+
 def horizon_count(settings) -> int:
     """Azimuths of the horizon maps this bake makes (0: none): only where the viewport may show
     them (``auto`` or ``horizon``, a PCA model) and the settings ask for some."""
     if settings.model != "pca" or settings.viewport not in ("auto", "horizon"):
         return 0
     A = int(settings.horizon_azimuths)
-    if settings.viewport == "auto" and A and \
-            hmap.gpu_bytes(A, settings.resolution) > int(settings.gpu_budget) << 20:
+    if settings.viewport == "auto" and A and hmap.gpu_bytes(
+            A, settings.resolution, settings.horizon_resolution) > int(settings.gpu_budget) << 20:
         return 0       # auto could not show it (explicit horizon is refused before the bake)
     return A
 
@@ -110,12 +120,17 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
     bake sessions' margin (EnvironmentBake's, Extend type), filled alike. Yields Progress
     from ``step``; returns figures (seconds, rays, rays per second, casters, triangles)."""
     R = settings.resolution
+    A = horizon_count(settings)
+    Rh = hmap.side(R, settings.horizon_resolution)
     t0 = time.perf_counter()
     with ray_scene.RenderGeometry(scene) as depsgraph:
         V, T, n_casters = ray_scene.casters(depsgraph)
         occluder = ray_engine.Occluder(V, T, threads=cycles_device.current().threads)
         receivers = [ray_scene.receiver_points(o, depsgraph, R, nrm)
                      for o, nrm in zip(objects, normals)]
+        # the horizons at their own (coarser) side: their own texel centres
+        coarse = ([ray_scene.receiver_points(o, depsgraph, Rh, _nearest(nrm, Rh))
+                   for o, nrm in zip(objects, normals)] if A and Rh < R else None)
     t_scene = time.perf_counter() - t0
     margins = [extend_margin(smp.covered(), margin) for smp, _ in receivers]
     S = dset.size
@@ -138,12 +153,17 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
         yield Progress(step + done - 1, total,
                        f"direction {done}/{S} (rays, about {eta:.0f} s left)")
     maps, horizon_info = None, {}
-    A = horizon_count(settings)
     if A:
         t2, r2 = time.perf_counter(), occluder.rays
         maps, gaps, skipped = [], [], 0
         for i, ((smp, pts), mg) in enumerate(zip(receivers, margins)):
-            gen = horizon.iter_horizons(occluder, pts, A)
+            if coarse is None:
+                h_pts, low = pts, None
+            else:        # the margin in the horizons' texels, at least one
+                h_smp, h_pts = coarse[i]
+                low = (h_smp.texel, Rh,
+                       extend_margin(h_smp.covered(), max(1, -(-margin * Rh // R))))
+            gen = horizon.iter_horizons(occluder, h_pts, A)
             while True:
                 try:
                     done = next(gen)
@@ -153,7 +173,7 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                 if done % max(1, A // 16) == 0:    # (a yield lets the bake be cancelled)
                     who = f", object {i + 1}/{len(receivers)}" if len(receivers) > 1 else ""
                     yield Progress(step + S - 1, total, f"horizons {done}/{A} azimuths{who}")
-            maps.append(hmap.from_points(H, smp.texel, R, pts.Ns, mg))
+            maps.append(hmap.from_points(H, smp.texel, R, pts.Ns, mg, coarse=low))
             gaps.append(round(figs["gaps"], 5))
             skipped += figs["skipped"]
         # the check auto chooses the viewport by: hard suns by rays over the preview sun's
@@ -169,7 +189,7 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                 if dst.size:
                     rows[j, dst] = op @ inside
             checks.append(rows)
-        horizon_info = {"horizon_azimuths": A, "horizon_gaps": gaps,
+        horizon_info = {"horizon_azimuths": A, "horizon_resolution": Rh, "horizon_gaps": gaps,
                         "horizon_checks": {"directions": Dh, "rows": checks},
                         "horizon_seconds": round(time.perf_counter() - t2, 3),
                         "horizon_rays": int(occluder.rays - r2),

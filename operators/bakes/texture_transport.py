@@ -196,6 +196,7 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
                 horizon_maps = [(m, checks["directions"], rows)
                                 for m, rows in zip(horizon_maps, checks["rows"])]
             seconds["direct_rays"] = engine["seconds"]
+            seconds["horizons"] = engine.get("horizon_seconds", 0.0)
             faults.checkpoint("directions")
             peak = first = max(peak, _rss_mb())
         missing = any(c is None for c in cached)
@@ -710,12 +711,15 @@ def bake_group(scene, objects, settings: TransportTextureSettings, out_dir: str,
             if settings.direct == "cycles" or settings.horizon_azimuths < 3:
                 raise BakeInputError("--viewport horizon needs horizons found by rays: "
                                      "--direct auto or rays, and --horizon-azimuths 3 or more")
-            mib = hmap.gpu_bytes(settings.horizon_azimuths, settings.resolution) / 2**20
+            mib = hmap.gpu_bytes(settings.horizon_azimuths, settings.resolution,
+                                 settings.horizon_resolution) / 2**20
             if mib > settings.gpu_budget:
+                side = hmap.side(settings.resolution, settings.horizon_resolution)
                 raise BakeInputError(
                     f"the horizon viewport would take {mib:.0f} MiB of GPU memory at "
-                    f"{settings.resolution}^2 with {settings.horizon_azimuths} azimuths (over "
-                    f"--gpu-budget {settings.gpu_budget}); use fewer azimuths or raise the budget")
+                    f"{settings.resolution}^2 with {settings.horizon_azimuths} azimuths at "
+                    f"{side}^2 (over --gpu-budget {settings.gpu_budget}); use fewer azimuths, "
+                    f"a smaller --horizon-resolution or raise the budget")
     if target_error is not None:
         if not 0.0 < target_error < 1.0:
             raise BakeInputError(f"--target-error must be in (0, 1), got {target_error}")

@@ -49,7 +49,8 @@ class _Parser(argparse.ArgumentParser):
 #: transport method's own, the three both methods take, the lobes method's own.
 TRANSPORT_OPTIONS = ("directions", "direct", "sun_path", "sun_path_step", "sun_angle", "model",
                      "components", "tol", "indirect_samples", "indirect_resolution",
-                     "table_size", "viewport", "horizon_azimuths", "gpu_budget")
+                     "table_size", "viewport", "horizon_azimuths", "horizon_resolution",
+                     "gpu_budget")
 SHARED_OPTIONS = ("resolution", "bounces", "seed")
 LOBES_OPTIONS = ("frame", "order", "samples", "storage", "mode", "world_sampling")
 

@@ -409,14 +409,14 @@ def build_sparse_group(n_directions: int, resolution: int, table_size: int, taps
 
 
 def horizon_preview_arrays(hm, albedo):
-    """(8-bit horizon tiles (2 ceil(A/3), R, R, 3) uint8 -- the lower edges' tiles, then the
-    upper edges', three azimuths per RGB tile; normal and albedo tiles (2, R, R, 3) float32)
-    -- what :func:`build_horizon_group` reads."""
-    _, A, R, _ = hm.q.shape
+    """(8-bit horizon tiles (2 ceil(A/3), Rh, Rh, 3) uint8 -- the lower edges' tiles, then the
+    upper edges', three azimuths per RGB tile, at the horizons' side; normal and albedo tiles
+    (2, R, R, 3) float32 at the texture's) -- what :func:`build_horizon_group` reads."""
+    _, A, Rh, _ = hm.q.shape
     n = -(-A // 3)
-    q = np.zeros((2, n * 3, R, R), np.uint8)
+    q = np.zeros((2, n * 3, Rh, Rh), np.uint8)
     q[:, :A] = hm.q
-    tiles = q.reshape(2 * n, 3, R, R).transpose(0, 2, 3, 1)
+    tiles = q.reshape(2 * n, 3, Rh, Rh).transpose(0, 2, 3, 1)
     na = np.stack([hm.normals.astype(np.float32), np.asarray(albedo, np.float32)])
     return tiles, na
 
@@ -434,7 +434,8 @@ def write_horizon_files(base: str, tiles, na, azimuths: int) -> dict:
     out["horizon_normals_bytes"] = exrio.write_exr(
         out["horizon_normals"], {c: atlas[..., i] for i, c in enumerate("RGB")},
         {**versions.stamp("relightable_textures.horizon_preview"), "tiles": 2,
-         "azimuths": int(azimuths), "resolution": int(na.shape[1])}, pixel_type="half")
+         "azimuths": int(azimuths), "resolution": int(na.shape[1]),
+         "horizon_resolution": int(tiles.shape[1])}, pixel_type="half")
     return out
 
 
@@ -444,8 +445,8 @@ def viewport_relight_horizon(tiles, na, azimuths: int, direction, sun_angle: flo
     from ...lt_addon.transport.horizon_map import HorizonMap
 
     A = int(azimuths)
-    n, R = len(tiles) // 2, tiles.shape[1]
-    q = np.asarray(tiles).transpose(0, 3, 1, 2).reshape(2, 3 * n, R, R)[:, :A]
+    n, Rh = len(tiles) // 2, tiles.shape[1]
+    q = np.asarray(tiles).transpose(0, 3, 1, 2).reshape(2, 3 * n, Rh, Rh)[:, :A]
     hm = HorizonMap(q, np.asarray(na[0], np.float16))
     e = hm.direct(direction, sun_angle)
     return (e[..., None] * np.asarray(na[1], np.float64)).astype(np.float32)
@@ -497,14 +498,18 @@ def _disc_part(b, offset, radius, x, y):
 
 
 def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image, uv_map: str,
-                        name: str, sun_angle: float):
+                        name: str, sun_angle: float, horizon_resolution: int | None = None):
     """The sun group relighting from horizons (the sockets of :func:`build_group`): the sun's
     azimuth picks the two azimuth channels around it; at each, the sun's disc is cut by the
     blocked interval's edges (``1 - max(0, F((e - lo) / r) - F((e - hi) / r))`` with
     ``F(t) = 0.5 + (t sqrt(1 - t^2) + asin t) / pi``), the two visibilities linear between the
     azimuths, times ``max(0, N . d) / pi`` with the baked normal: 6 lookups (4 horizon
-    channels, the normal, the albedo)."""
+    channels, the normal, the albedo). The horizon atlas may be coarser
+    (``horizon_resolution``) than the normals' (``resolution``): its linear lookup reads the
+    codes between its texels, as :func:`...lt_addon.transport.horizon_map.upsample`."""
     from ...lt_addon.transport.horizon_map import SUN_RADIUS_MIN, STEP
+
+    Rh = int(horizon_resolution or resolution)
 
     group, b, gin, gout, (dx, dy, dz), _ = _sun_group_head(name, -2600, 3000)
     A = int(azimuths)
@@ -524,7 +529,7 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     k0 = mod_a(k0, -1500, 500)
     k1 = mod_a(b.math("ADD", k0, 1.0, x=-1200, y=600), -1100, 600)
     uv = b.node("ShaderNodeUVMap", -1400, -600, uv_map=uv_map).outputs["UV"]
-    lay = atlas_layout(2 * n, resolution)
+    lay = atlas_layout(2 * n, Rh)
     el = b.math("ARCSINE", b.math("MINIMUM", dz, 1.0, x=600, y=200), x=700, y=200)
     radius = b.node("ShaderNodeValue", 600, 0)
     radius.name = radius.label = SUN_RADIUS_NODE
@@ -536,7 +541,7 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
         for e, upper in enumerate((False, True)):
             y = 1600 - 400 * (2 * j + e)
             idx = b.math("ADD", k, float(3 * n), x=-800, y=y) if upper else k
-            q = _atlas_channel(b, idx, uv, lay, horizon_image, resolution, acc, -700, y)
+            q = _atlas_channel(b, idx, uv, lay, horizon_image, Rh, acc, -700, y)
             acc = q
             h = b.math("MULTIPLY", q, 255.0 * STEP, x=400, y=y)
             if not upper:    # code 0: blocked from below
@@ -611,11 +616,13 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
     if viewport == "horizon":
         htiles, na = horizon_preview_arrays(bake.horizon, bake.albedo)
         sparse = {**write_horizon_files(base, htiles, na, bake.horizon.azimuths),
-                  "azimuths": bake.horizon.azimuths}
+                  "azimuths": bake.horizon.azimuths,
+                  "horizon_resolution": bake.horizon.horizon_resolution}
         h_img = pn.load_atlas_image(sparse["horizon_atlas"], f"{obj.name} transport horizons")
         n_img = pn.load_atlas_image(sparse["horizon_normals"], f"{obj.name} transport normals")
         group = build_horizon_group(bake.horizon.azimuths, model.resolution, h_img, n_img,
-                                    uv_map, gname + " new", angle)
+                                    uv_map, gname + " new", angle,
+                                    bake.horizon.horizon_resolution)
     elif viewport == "blocks":
         view = bake.view
         beig, btab = block_preview_arrays(view, bake.albedo, store.directions, angle,

@@ -87,7 +87,8 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
             for name in ("directions", "horizon_power", "sun_path", "sun_path_step",
                          "resolution", "transport_direct", "bounces", "indirect_samples", "indirect_resolution", "transport_model",
                          "transport_components", "transport_tol", "transport_viewport",
-                         "horizon_azimuths", "gpu_budget", "sun_angle", "table_size",
+                         "horizon_azimuths", "horizon_resolution", "gpu_budget", "sun_angle",
+                         "table_size",
                          "truth_lights", "output_dir"):
                 col.prop(props, name)
             obj = context.active_object

@@ -248,7 +248,7 @@ MATERIAL_FIELDS = ("bounces", "bounce_bake", "rays", "samples", "anchor_samples"
 MATERIAL_PROPS = {f: "material_" + f for f in MATERIAL_FIELDS}
 LOBES_FIELDS = ("frame", "order", "samples", "storage", "mode", "world_sampling")
 TRANSPORT_FIELDS = ("direct", "sun_path", "sun_path_step", "model", "viewport",
-                    "horizon_azimuths", "gpu_budget",
+                    "horizon_azimuths", "horizon_resolution", "gpu_budget",
                     "tol",
                     "components", "indirect_samples",
                     "indirect_resolution", "table_size")

@@ -34,25 +34,27 @@ def settings(**kw):
     return TransportTextureSettings(**base)
 
 
-def _horizon_preview(prev, azimuths, resolution=R):
+def _horizon_preview(prev, azimuths, side=R, resolution=R):
     """(8-bit horizon tiles, normal and albedo tiles) as the group reads them from its files."""
     from relightable_textures.lt_addon.io import exrio
     from relightable_textures.lt_addon.io.atlas import unpack_atlas
     from relightable_textures.lt_addon.io.contact_sheet import read_png
 
-    tiles = unpack_atlas(read_png(prev["horizon_atlas"])[::-1], 2 * -(-azimuths // 3),
-                         resolution)
+    tiles = unpack_atlas(read_png(prev["horizon_atlas"])[::-1], 2 * -(-azimuths // 3), side)
     ch = exrio.read_exr(prev["horizon_normals"])[0]
     na = unpack_atlas(np.stack([ch[c] for c in "RGB"], -1), 2, resolution)
     return tiles, na
 
 
 @pytest.mark.version_sensitive
-def test_horizon_viewport_rendered_by_cycles_equals_its_twin(bumps, tmp_path):
+@pytest.mark.parametrize("side", [R, R // 2])
+def test_horizon_viewport_rendered_by_cycles_equals_its_twin(bumps, tmp_path, side):
     """Cycles renders the horizon group (azimuth channels picked in the tree, the disc cut by
     the horizon line, the baked normal's cosine) equal to its NumPy twin to half precision,
     at lights between the azimuths, across the wrap of the azimuth at 180 degrees, and after
-    the Sun Size slider rewrote the group's radius in place. Six texture lookups."""
+    the Sun Size slider rewrote the group's radius in place. Six texture lookups. With the
+    horizons at half the texture's side, the image's linear lookup reads the codes between
+    their texels as the twin does (horizon_map.upsample)."""
     import bpy
 
     from relightable_textures.operators.bakes import texture_transport as tx
@@ -60,8 +62,10 @@ def test_horizon_viewport_rendered_by_cycles_equals_its_twin(bumps, tmp_path):
     from relightable_textures.operators.preview import transport_preview as tp
 
     scene, obj = bumps
-    rep = run(tx.bake_job(scene, [obj], settings(sun_angle=4.0, viewport="horizon"),
+    rep = run(tx.bake_job(scene, [obj], settings(sun_angle=4.0, viewport="horizon",
+                                                 horizon_resolution=side),
                           str(tmp_path), truth=0)).reports[0]
+    assert rep["direct"]["horizon_resolution"] == side
     prev, info = rep["preview"], rep["viewport"]
     assert prev["viewport"] == "horizon" and info["shows"] == "horizon"
     assert rep["preview_cost"]["viewport"] == "horizon" and rep["model_vs_T"]["viewport"] == \
@@ -69,8 +73,8 @@ def test_horizon_viewport_rendered_by_cycles_equals_its_twin(bumps, tmp_path):
     assert rep["direct"]["horizon_azimuths"] == 24 and rep["direct"]["horizon_rays"] > 0
     group = bpy.data.node_groups[prev["group"]]
     assert len([n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]) == 6
-    tiles, na = _horizon_preview(prev, 24)
-    assert tiles.dtype == np.uint8 and tiles.shape == (16, R, R, 3)
+    tiles, na = _horizon_preview(prev, 24, side)
+    assert tiles.dtype == np.uint8 and tiles.shape == (16, side, side, 3)
     for az, el, inten, angle in ((40.0, 35.0, 2.0, 4.0), (250.0, 12.0, 1.0, 4.0),
                                  (179.9, 20.0, 1.0, 4.0), (-179.9, 8.0, 1.0, 4.0)):
         scene["relight_azimuth"], scene["relight_elevation"] = az, el
@@ -170,7 +174,9 @@ def test_the_horizon_viewport_is_refused_before_any_bake_where_it_cannot_be_made
     for kw, msg in ((dict(direct="cycles"), "needs horizons found by rays"),
                     (dict(horizon_azimuths=0), "needs horizons found by rays"),
                     (dict(resolution=2048, gpu_budget=64),
-                     "would take 321 MiB of GPU memory at 2048")):
+                     # the horizons at 1024^2 (64 MiB), the normals and albedo at 2048^2
+                     r"would take 128 MiB of GPU memory at 2048\^2 with 24 azimuths at "
+                     r"1024\^2")):
         out = tmp_path / "no"
         with pytest.raises(tx.BakeInputError, match=msg):
             run(tx.bake_job(scene, [obj], settings(viewport="horizon", **kw), str(out),
