@@ -138,15 +138,23 @@ def estimated_elapsed(seconds: dict, message: str) -> float | None:
     prints ``message`` (its direction, indirect-bake and fit steps), None for other steps.
     "other" (albedo, writing) is counted before the directions."""
     other, direct = seconds.get("other", 0.0), seconds.get("direct", 0.0)
+    horizons = seconds.get("horizons", 0.0)
     indirect, fit = seconds.get("indirect", 0.0), seconds.get("fit", 0.0)
     f = _fraction(message, "direction ")
     if f is not None:
         return other + direct * f
+    f = _fraction(message, "horizons ")
+    if f is not None:                  # "horizons k/A azimuths, object i/n": objects in turn
+        obj = _fraction(message.split("object ")[-1], "") if "object " in message else None
+        if obj is not None:
+            n = int(message.split("object ")[-1].split("/")[1].split()[0])
+            f = (obj * n - 1 + f) / n
+        return other + direct + horizons * f
     f = _fraction(message, "indirect bake ")
     if f is not None:
-        return other + direct + indirect * f
+        return other + direct + horizons + indirect * f
     if message.startswith("models fitted"):
-        return other + direct + indirect + fit
+        return other + direct + horizons + indirect + fit
     return None
 
 
@@ -156,7 +164,8 @@ def time_left(seconds: dict, message: str, elapsed: float, last: float | None = 
     (measured / estimated elapsed, once a tenth of the estimate is behind), so a machine
     slower or faster than the calibration moves the figure at once. ``last``: the previous
     figure, kept for steps the estimate does not place."""
-    total = sum(seconds.get(s, 0.0) for s in ("direct", "indirect", "fit", "other"))
+    total = sum(seconds.get(s, 0.0) for s in ("direct", "horizons", "indirect", "fit",
+                                               "other"))
     at = estimated_elapsed(seconds, message)
     if at is None:
         return max(0.0, total - elapsed) if last is None else last

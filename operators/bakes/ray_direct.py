@@ -10,6 +10,7 @@ true displacement) is baked by Cycles calls under ``--direct auto`` and refused 
 
 from __future__ import annotations
 
+import contextlib
 import time
 
 import numpy as np
@@ -102,9 +103,29 @@ def _nearest(image, side: int):
     return np.asarray(image)[i][:, i]
 
 
+#: Azimuths the estimate's calibration bakes find horizons at whatever their viewport (they
+#: force the block viewport to time its fit, which alone would make no map): see
+#: :func:`calibration_horizons`.
+_CALIBRATION_AZIMUTHS = None
+
+
+@contextlib.contextmanager
+def calibration_horizons(azimuths: int):
+    """Within it, :func:`horizon_count` is ``azimuths`` for every bake (the estimate's
+    calibration bakes, so that the horizons are timed with the block fit)."""
+    global _CALIBRATION_AZIMUTHS
+    before, _CALIBRATION_AZIMUTHS = _CALIBRATION_AZIMUTHS, int(azimuths)
+    try:
+        yield
+    finally:
+        _CALIBRATION_AZIMUTHS = before
+
+
 def horizon_count(settings) -> int:
     """Azimuths of the horizon maps this bake makes (0: none): only where the viewport may show
     them (``auto`` or ``horizon``, a PCA model) and the settings ask for some."""
+    if _CALIBRATION_AZIMUTHS is not None:
+        return _CALIBRATION_AZIMUTHS
     if settings.model != "pca" or settings.viewport not in ("auto", "horizon"):
         return 0
     A = int(settings.horizon_azimuths)
