@@ -1,7 +1,7 @@
 """How close the up-front estimate of a transport bake is to the bake (issue 33).
 
 For each resolution: a bake of the bumps scene with the balanced preset and ``--estimate``
-implied (the calibration bakes at 48^2 and 96^2 run first, in the same process, so the two
+implied (the calibration bakes at 64^2 and 128^2 run first, in the same process, so the two
 share the machine's state), then the report's estimate per stage against the measured stage
 seconds. Prints Markdown.
 

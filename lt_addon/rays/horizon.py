@@ -182,21 +182,36 @@ def _bounds(occluder, points: ShadingPoints, azimuths: int, chunk: int):
     if V is None or T is None or not len(T):
         return None
     boxes = reach_mod.clusters(V, T)
-    c = points.compact()
     out = []
     for c0 in range(0, points.size, chunk):
-        part = slice(c0, min(c0 + chunk, points.size))
-        up = c["P_up"][part].astype(np.float64)
-        tip = up + c["lift"][part] * c["lifting"][part, None]      # the most lifted origin
-        lo, hi = np.minimum(up, tip), np.maximum(up, tip)
-        scale = np.maximum(1.0, np.abs(hi).max(1, keepdims=True))
-        apex, spread = 0.5 * (lo + hi), 0.5 * (hi - lo) + 1e-6 * scale
-        Ng, P = points.Ng[part], points.P[part]
-        push = np.einsum("pj,pj->p", Ng, up - P)                   # the push, float32 P's
-        lift_ng = np.einsum("pj,pj->p", Ng, tip - up)
-        above = 0.5 * (push + np.minimum(lift_ng, 0.0))
-        out.append(reach_mod.reach(boxes, apex, spread, Ng, P, above, azimuths))
+        # in pieces of REACH_POINTS: the arcs' counts take (A + 1) x 8 bytes per point
+        parts = [_reach(boxes, points, slice(s0, min(s0 + REACH_POINTS, c0 + chunk,
+                                                      points.size)), azimuths)
+                 for s0 in range(c0, min(c0 + chunk, points.size), REACH_POINTS)]
+        out.append((np.concatenate([p[0] for p in parts], axis=1),
+                    np.concatenate([p[1] for p in parts]),
+                    np.concatenate([p[2] for p in parts])))
     return out
+
+
+#: Points per :func:`.reach.reach` call (its transient memory: ~2 KB per point at 128 azimuths).
+REACH_POINTS = 1 << 15
+
+
+def _reach(boxes, points: ShadingPoints, part: slice, azimuths: int):
+    """:func:`.reach.reach` for the points ``part``: their upward rays' origins (the pushed
+    point, lifted by up to Cycles' terminator offset) and how far above the plane they start."""
+    c = points.compact()
+    up = c["P_up"][part].astype(np.float64)
+    tip = up + c["lift"][part] * c["lifting"][part, None]      # the most lifted origin
+    lo, hi = np.minimum(up, tip), np.maximum(up, tip)
+    scale = np.maximum(1.0, np.abs(hi).max(1, keepdims=True))
+    apex, spread = 0.5 * (lo + hi), 0.5 * (hi - lo) + 1e-6 * scale
+    Ng, P = points.Ng[part], points.P[part]
+    push = np.einsum("pj,pj->p", Ng, up - P)                   # the push, float32 P's
+    lift_ng = np.einsum("pj,pj->p", Ng, tip - up)
+    above = 0.5 * (push + np.minimum(lift_ng, 0.0))
+    return reach_mod.reach(boxes, apex, spread, Ng, P, above, azimuths)
 
 
 def place_open(H, open_) -> None:

@@ -1,6 +1,6 @@
 """A transport-texture bake's time, disk, RAM and GPU memory, predicted before it starts (bpy).
 
-Two calibration bakes of the same objects and settings at 48^2 and 96^2 (the indirect term at
+Two calibration bakes of the same objects and settings at 64^2 and 128^2 (the indirect term at
 the same sizes), and one held-out truth light at each, give each stage's fixed and per-texel
 cost on this machine and scene (:mod:`...lt_addon.transport.estimate`). These costs are then
 applied to the asked sizes. The calibration takes a few seconds. It writes nothing that stays:
@@ -21,7 +21,7 @@ from ..base.cycles_bake import _size, available_memory_bytes
 from ..base.jobs import Progress
 
 #: calibration sizes (texels across)
-CALIBRATION = (48, 96)
+CALIBRATION = (64, 128)
 #: a bake at or above this resolution is estimated (and the estimate printed) before it starts
 ESTIMATE_FROM = 512
 

@@ -126,3 +126,16 @@ def test_the_scan_makes_the_same_intervals_with_fewer_rays():
         full = occ.rays - r0
         assert np.array_equal(H, H0)
         assert pruned <= fewer * full and pruned + figs["skipped"] == full, (pruned, full)
+
+
+@needs_engine
+def test_the_bound_in_pieces_is_the_bound_in_one(monkeypatch):
+    """The bound is computed in pieces of REACH_POINTS points (its transient memory); the
+    pieces change no bit."""
+    V, T, on_floor, _ = _scene(n=300)
+    occ = engine.Occluder(V, T)
+    (whole,) = horizon._bounds(occ, on_floor, 24, chunk=10 ** 6)
+    monkeypatch.setattr(horizon, "REACH_POINTS", 7)
+    (parts,) = horizon._bounds(occ, on_floor, 24, chunk=10 ** 6)
+    assert all(np.array_equal(a, b) for a, b in zip(whole, parts))
+    assert whole[0].shape == (24, on_floor.size) and 0 < whole[0].mean() < 0.9
