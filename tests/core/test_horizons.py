@@ -9,31 +9,28 @@ import pytest
 from relightable_textures.lt_addon.errors import InputError
 from relightable_textures.lt_addon.rays import engine, horizon
 from relightable_textures.lt_addon.rays.direct import direct_rows
-from relightable_textures.lt_addon.rays.shading import shading_points
 from relightable_textures.lt_addon.transport import horizon_map as hmap
+from floor_points import floor_points
 
 needs_engine = pytest.mark.skipif(not engine.available()[0], reason="embreex not installed")
+
+
+def _floor_mesh(extra):
+    """A 4 m floor (two triangles) and the quads ``extra`` (vertices (4k, 3)): (V, T)."""
+    floor = np.array([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]], float)
+    V = np.concatenate([floor, extra])
+    q = np.arange(1, len(V) // 4)[:, None] * 4
+    return V, np.concatenate([[[0, 1, 2], [0, 2, 3]], q + [0, 1, 2], q + [0, 2, 3]])
 
 
 def _floor_points(n, seed, extra, x=(-1.9, 0.9)):
     """Points on a 4 m floor (z = 0) under the triangles ``extra`` (vertices (4k, 3), quads):
     (occluder, shading points, positions)."""
-    floor = np.array([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]], float)
-    V = np.concatenate([floor, extra])
-    T = np.array([[0, 1, 2], [0, 2, 3]] + [[4 * q, 4 * q + 1, 4 * q + 2] for q in
-                                            range(1, len(V) // 4)]
-                 + [[4 * q, 4 * q + 2, 4 * q + 3] for q in range(1, len(V) // 4)])
+    V, T = _floor_mesh(extra)
     occ = engine.Occluder(V, T)
     rng = np.random.default_rng(seed)
     P = np.column_stack([rng.uniform(*x, n), rng.uniform(-1.9, 1.9, n), np.zeros(n)])
-    tri = np.where(P[:, 0] >= P[:, 1], 0, 1)
-    bary = np.zeros((n, 3))
-    for i, (p, t) in enumerate(zip(P, tri)):
-        a, b, c = floor[T[t]]
-        u, v = np.linalg.solve(np.column_stack([b - a, c - a])[:2], (p - a)[:2])
-        bary[i] = [1 - u - v, u, v]
-    up = np.tile([0.0, 0.0, 1.0], (2, 3, 1))
-    return occ, shading_points(V, T[:2], up, [False, False], tri, bary), P
+    return occ, floor_points(V, T, P), P
 
 
 def _floor_and_wall(n=300, seed=3):
@@ -188,24 +185,11 @@ def test_a_ray_budget_splits_the_points_and_changes_no_bit(monkeypatch):
 def _floor_grid(R, extra):
     """The texel centres of an R^2 texture on the 4 m floor of :func:`_floor_points` (UV = the
     floor's xy square): (occluder, shading points, flat texel indices)."""
-    floor = np.array([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]], float)
-    V = np.concatenate([floor, extra])
-    T = np.array([[0, 1, 2], [0, 2, 3]] + [[4 * q, 4 * q + 1, 4 * q + 2] for q in
-                                            range(1, len(V) // 4)]
-                 + [[4 * q, 4 * q + 2, 4 * q + 3] for q in range(1, len(V) // 4)])
+    V, T = _floor_mesh(extra)
     c = (np.arange(R) + 0.5) / R * 4 - 2
     X, Y = np.meshgrid(c, c)                       # rows from v = 0: y grows with the row
     P = np.column_stack([X.ravel(), Y.ravel(), np.zeros(R * R)])
-    tri = np.where(P[:, 0] >= P[:, 1], 0, 1)
-    bary = np.zeros((R * R, 3))
-    for t in (0, 1):
-        a, b, cc = floor[T[t]]
-        m = np.linalg.inv(np.column_stack([b - a, cc - a])[:2])
-        uv = (P[tri == t, :2] - a[:2]) @ m.T
-        bary[tri == t] = np.column_stack([1 - uv.sum(1), uv])
-    up = np.tile([0.0, 0.0, 1.0], (2, 3, 1))
-    return (engine.Occluder(V, T), shading_points(V, T[:2], up, [False, False], tri, bary),
-            np.arange(R * R))
+    return engine.Occluder(V, T), floor_points(V, T, P), np.arange(R * R)
 
 
 @needs_engine

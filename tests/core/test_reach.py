@@ -8,6 +8,7 @@ import pytest
 
 from relightable_textures.lt_addon.rays import engine, horizon, reach
 from relightable_textures.lt_addon.rays.shading import shading_points, shadow_origins
+from floor_points import floor_points
 
 needs_engine = pytest.mark.skipif(not engine.available()[0], reason="embreex not installed")
 
@@ -32,16 +33,9 @@ def _scene(n=400, seed=2):
     o_s, o_r = 4, 4 + len(sphere)
     T = np.concatenate([[[0, 1, 2], [0, 2, 3]], st + o_s,
                         [[o_r, o_r + 1, o_r + 2], [o_r, o_r + 2, o_r + 3]]])
-    # floor points: random, away from the sphere's footprint
+    # floor points: random, some under the sphere and the roof
     P = np.column_stack([rng.uniform(-2.9, 2.9, n), rng.uniform(-2.9, 2.9, n), np.zeros(n)])
-    tri = np.where(P[:, 0] >= P[:, 1], 0, 1)
-    bary = np.zeros((n, 3))
-    for i, (p, t) in enumerate(zip(P, tri)):
-        a, b, cc = floor[T[t]]
-        u, v = np.linalg.solve(np.column_stack([b - a, cc - a])[:2], (p - a)[:2])
-        bary[i] = [1 - u - v, u, v]
-    up = np.tile([0.0, 0.0, 1.0], (2, 3, 1))
-    on_floor = shading_points(V, T[:2], up, [False, False], tri, bary)
+    on_floor = floor_points(V, T, P)
     # sphere points: smooth shaded, with Cycles' terminator lift
     corner = (V[st + o_s] - c) / r
     ts = rng.integers(0, len(st), n)
