@@ -27,9 +27,12 @@ Units: seconds, bytes. Sizes are texel counts.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 STAGES = ("direct", "horizons", "indirect", "fit", "other", "truth")
+#: The stages of the bake itself (the truths come after it).
+BAKE_STAGES = STAGES[:-1]
 
 
 @dataclass
@@ -107,8 +110,7 @@ def predict(costs: dict, resolution: int, indirect_resolution: int, n_objects: i
             continue
         out[stage] = cost.at(units(stage, resolution, indirect_resolution, n_objects,
                                    truth_lights, horizon_resolution))
-    out["bake"] = sum(out.get(s, 0.0) for s in ("direct", "horizons", "indirect", "fit",
-                                                 "other"))
+    out["bake"] = sum(out.get(s, 0.0) for s in BAKE_STAGES)
     out["total"] = out["bake"] + out.get("truth", 0.0)
     return out
 
@@ -145,10 +147,10 @@ def estimated_elapsed(seconds: dict, message: str) -> float | None:
         return other + direct * f
     f = _fraction(message, "horizons ")
     if f is not None:                  # "horizons k/A azimuths, object i/n": objects in turn
-        obj = _fraction(message.split("object ")[-1], "") if "object " in message else None
+        obj = re.search(r"object (\d+)/(\d+)", message)
         if obj is not None:
-            n = int(message.split("object ")[-1].split("/")[1].split()[0])
-            f = (obj * n - 1 + f) / n
+            i, n = int(obj[1]), max(int(obj[2]), 1)
+            f = (i - 1 + f) / n
         return other + direct + horizons * f
     f = _fraction(message, "indirect bake ")
     if f is not None:
@@ -164,8 +166,7 @@ def time_left(seconds: dict, message: str, elapsed: float, last: float | None = 
     (measured / estimated elapsed, once a tenth of the estimate is behind), so a machine
     slower or faster than the calibration moves the figure at once. ``last``: the previous
     figure, kept for steps the estimate does not place."""
-    total = sum(seconds.get(s, 0.0) for s in ("direct", "horizons", "indirect", "fit",
-                                               "other"))
+    total = sum(seconds.get(s, 0.0) for s in BAKE_STAGES)
     at = estimated_elapsed(seconds, message)
     if at is None:
         return max(0.0, total - elapsed) if last is None else last

@@ -164,8 +164,7 @@ def describe(e: dict, settings, n_objects: int) -> list:
     """The estimate in a few lines."""
     s = e["seconds"]
     parts = [f"{name} {est.readable_seconds(s[name])}" for name in
-             ("direct", "horizons", "indirect", "fit", "other", "truth")
-             if name in s and (name != "horizons" or s[name] >= 0.5)]
+             est.STAGES if name in s and (name != "horizons" or s[name] >= 0.5)]
     lines = [f"estimate for {n_objects} object(s) at {settings.resolution}^2: about "
              f"{est.readable_seconds(e['total'])} ({', '.join(parts)})",
              f"  disk {_size(e['disk_bytes'])} for T, memory {_size(e['ram_bytes'])} of "
