@@ -44,7 +44,8 @@ def default_threads() -> int:
 
 
 class Occluder:
-    """A BVH over world-space triangles that answers "is this ray blocked?".
+    """A BVH over world-space triangles that answers "is this ray blocked?" (:meth:`occluded`)
+    and "what does it meet first?" (:meth:`nearest`).
 
     Parameters
     ----------
@@ -99,25 +100,66 @@ class Occluder:
         out = np.zeros(len(o), bool)
         if not len(o) or not self.n_triangles:
             return out
+
+        def run(a, b, dd):
+            out[a:b] = self._scene.run(o[a:b], dd, query="OCCLUDED") == 0
+        self._batched(o, d, run)
+        return out
+
+    def nearest(self, origins, directions) -> tuple[np.ndarray, np.ndarray]:
+        """The first triangle each ray ``origins[i] + t directions[i]`` (t > 0) meets.
+
+        Parameters
+        ----------
+        origins : array_like, shape (M, 3)
+        directions : array_like, shape (M, 3) or (3,)
+            Unit directions (one for all rays when given once).
+
+        Returns
+        -------
+        triangle : ndarray, shape (M,), int64
+            Row of ``triangles`` hit, -1 where the ray meets nothing.
+        distance : ndarray, shape (M,), float64
+            Distance along the ray to the hit (metres for unit directions); 0 on a miss.
+        """
+        o = np.ascontiguousarray(origins, dtype=np.float32).reshape(-1, 3)
+        d = np.ascontiguousarray(directions, dtype=np.float32).reshape(-1, 3)
+        if len(d) not in (1, len(o)):
+            raise ValueError(f"{len(d)} directions for {len(o)} origins")
+        tri = np.full(len(o), -1, np.int64)
+        dist = np.zeros(len(o))
+        if not len(o) or not self.n_triangles:
+            return tri, dist
+
+        def run(a, b, dd):
+            if len(dd) == 1:   # the intersect query needs a direction per ray
+                dd = np.broadcast_to(dd, (b - a, 3)).copy()
+            got = self._scene.run(o[a:b], dd, query="INTERSECT", output=1)
+            hit = got["primID"] >= 0
+            tri[a:b] = np.where(hit, got["primID"], -1)
+            dist[a:b] = np.where(hit, got["tfar"], 0.0)
+        self._batched(o, d, run)
+        return tri, dist
+
+    def _batched(self, o, d, run) -> None:
+        """``run(a, b, directions)`` over slices of the rays, on the worker threads."""
         self.rays += len(o)
         # a call smaller than a batch per thread is shared out evenly (the bisections of the
         # horizon scan cast a few thousand rays a call, on one core before)
         size = max(1024, min(BATCH, -(-len(o) // self.threads)))
         starts = range(0, len(o), size)
 
-        def run(a):
+        def one(a):
             b = min(a + size, len(o))
-            dd = d if len(d) == 1 else d[a:b]
-            out[a:b] = self._scene.run(o[a:b], dd, query="OCCLUDED") == 0
+            run(a, b, d if len(d) == 1 else d[a:b])
         if self.threads == 1 or len(starts) == 1:
             for a in starts:
-                run(a)
+                one(a)
         else:
             if getattr(self, "_pool", None) is None or self._pool_size != self.threads:
                 self.close()
                 self._pool, self._pool_size = ThreadPoolExecutor(self.threads), self.threads
-            list(self._pool.map(run, starts))
-        return out
+            list(self._pool.map(one, starts))
 
     def close(self) -> None:
         """Stop the worker threads (a later call starts them again)."""

@@ -7,7 +7,7 @@ gated Cycles bake sees it -- each face corner with its region (editable material
 rest) and the diffuse colour it reflects with (white on editable regions, the material's own
 base colour elsewhere, :func:`..base.materials.material_colour`) -- casts the cosine-weighted
 rays of a block of origins through the :class:`.direct_rays.ReceiverRays` BVH
-(``mathutils.bvhtree``), and gives the exact direct light at every corner (a shadow ray per
+(the ray engine, :func:`..base.direct_rays.ray_engine`), and gives the exact direct light at every corner (a shadow ray per
 corner origin, the same rays that equal Cycles' bounce-free bake in the tests).
 
 What it models as Cycles' gated bake does: Diffuse BSDFs of each material's base colour, both
@@ -125,17 +125,12 @@ class GatherScene:
         """Transfer entries (:data:`..lt_addon.transport.gathered_transfer.ENTRY`) of origins
         ``start:stop``, ``rays`` cosine-weighted rays each; the same entries for the same
         arguments in any process (the lattice's shifts come from ``(seed, start)``)."""
-        from mathutils import Vector
-
         ids = np.arange(start, stop)
         rng = np.random.default_rng([int(seed), int(start)])
         d = gt.cosine_directions(self.front.origin_normals[ids], rays,
                                  rng.random((len(ids), 2))).reshape(-1, 3)
         org = np.repeat(self.front.origins[ids], rays, axis=0)
-        cast = self.front.tree.ray_cast
-        hits = list(map(cast, map(Vector, org.tolist()), map(Vector, d.tolist())))
-        tri = np.fromiter((-1 if h[2] is None else h[2] for h in hits), np.int64, len(hits))
-        dist = np.fromiter((0.0 if h[3] is None else h[3] for h in hits), np.float64, len(hits))
+        tri, dist = self.front.engine.nearest(org, d)
         ok = tri >= 0
         ti = tri[ok]
         a, b, c, n = (x[ti] for x in self._tri)

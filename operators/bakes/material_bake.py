@@ -616,6 +616,11 @@ def material_chunk_cache(scene, objects, settings: MaterialBakeSettings, out_dir
     baked["directions"] = list(settings.specs())
     baked["anchor_directions"] = settings.anchor_spec() if settings.roughness else None
     baked.pop("samples" if settings.gathers else "rays")
+    if settings.gathers:   # the gather's hits from Embree and from mathutils differ in last bits
+        from ...lt_addon.rays import engine
+
+        ok, name = engine.available()
+        baked["gather_engine"] = name if ok else "mathutils"
     key = {"stage": "materials", "scene": scene_key(scene, list(objects)),
            "device": current().id, "settings": baked, "chunk_directions": CHUNK_DIRECTIONS,
            "seeds": "per direction"}   # chunks of the one-seed bakes are not these

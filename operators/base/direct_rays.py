@@ -5,12 +5,12 @@ them a hard shadow is blended from its neighbours (measured on the demo room, 40
 0.15 of the error of E at suns that are not baked directions, where the two truth seeds differ
 by 0.02). Under a sun the direct term is visibility x cosine, which a ray per receiver gives
 exactly at any direction: :class:`ReceiverRays` keeps a BVH of the scene's rendered shadow
-casters (``mathutils.bvhtree``; not instances) and the receivers' points and normals, and casts
-one ray per lit receiver towards the sun (``rays`` over the disc of a sun wider than
-:data:`HARD_SUN_DEG`), or only where the baked directions around the sun disagree
-(:meth:`ReceiverRays.known_from`). Measured here (idle): 13K receivers in 9.1 ms, or 2.2 ms
-casting only where the baked directions disagree (544 rays); with the ties below 10.5 ms and
-3.4 ms (1,072 and 932 corners cast again; ``benchmarks/bench_materials.py --no-bake``).
+casters (not instances) and the receivers' points and normals, and casts one ray per lit
+receiver towards the sun (``rays`` over the disc of a sun wider than :data:`HARD_SUN_DEG`), or
+only where the baked directions around the sun disagree (:meth:`ReceiverRays.known_from`).
+The rays go through the texture bake's engine (:class:`...lt_addon.rays.engine.Occluder`,
+Embree, batched on every core); where ``embreex`` cannot be imported, through
+``mathutils.bvhtree`` one Python call per ray (:class:`MathutilsOccluder`, the same answers).
 
 What Cycles bakes and this reproduces (checked against ``D`` at baked directions in the tests):
 a value per face corner at the vertex position with the corner's normal; per vertex
@@ -43,6 +43,49 @@ RAY_OFFSET = 1e-4
 
 #: Object types whose evaluated geometry casts shadows (those ``to_mesh`` can triangulate).
 CASTER_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
+
+
+class MathutilsOccluder:
+    """:class:`...lt_addon.rays.engine.Occluder`'s two queries through ``mathutils.bvhtree``,
+    one Python call per ray: the fallback where ``embreex`` cannot be imported."""
+
+    def __init__(self, vertices, triangles):
+        from mathutils.bvhtree import BVHTree
+
+        self.tree = BVHTree.FromPolygons(np.asarray(vertices, np.float64).tolist(),
+                                         np.asarray(triangles, np.int64).tolist(),
+                                         all_triangles=True)
+        self.rays = 0
+
+    def _hits(self, origins, directions) -> list:
+        from mathutils import Vector
+
+        o = np.asarray(origins, np.float64).reshape(-1, 3)
+        d = np.broadcast_to(np.asarray(directions, np.float64).reshape(-1, 3), o.shape)
+        self.rays += len(o)
+        return list(map(self.tree.ray_cast, map(Vector, o.tolist()), map(Vector, d.tolist())))
+
+    def occluded(self, origins, directions) -> np.ndarray:
+        hits = self._hits(origins, directions)
+        return np.fromiter((h[0] is not None for h in hits), bool, len(hits))
+
+    def nearest(self, origins, directions) -> tuple:
+        hits = self._hits(origins, directions)
+        tri = np.fromiter((-1 if h[2] is None else h[2] for h in hits), np.int64, len(hits))
+        dist = np.fromiter((0.0 if h[3] is None else h[3] for h in hits), np.float64, len(hits))
+        return tri, dist
+
+
+def ray_engine(vertices, triangles):
+    """(occluder, name): Embree's :class:`...lt_addon.rays.engine.Occluder` over the
+    world-space ``triangles`` (T, 3) of ``vertices`` (N, 3), or :class:`MathutilsOccluder`
+    where ``embreex`` cannot be imported (name "mathutils")."""
+    from ...lt_addon.rays import engine
+
+    ok, why = engine.available()
+    if ok:
+        return engine.Occluder(vertices, triangles), why
+    return MathutilsOccluder(vertices, triangles), "mathutils"
 
 
 def shadow_casters(scene):
@@ -116,7 +159,6 @@ class ReceiverRays:
 
     def __init__(self, scene, objects, domain: str = "POINT", side: int = 1):
         import bpy
-        from mathutils.bvhtree import BVHTree
 
         depsgraph = bpy.context.evaluated_depsgraph_get()
         verts, tris, offset = [], [], 0
@@ -127,8 +169,8 @@ class ReceiverRays:
             offset += len(co)
         if not verts:
             raise ValueError("nothing in the scene casts shadows")
-        self.tree = BVHTree.FromPolygons(np.concatenate(verts).tolist(),
-                                         np.concatenate(tris).tolist(), all_triangles=True)
+        # the triangles in this order: a hit's triangle is a row of them (bounce_rays)
+        self.engine, self.engine_name = ray_engine(np.concatenate(verts), np.concatenate(tris))
         self.domain = domain
         self.cast = 0   # origins the last direct() cast rays from
         points, normals, inward, groups, nexts, faces, starts, corners = [], [], [], [], [], [], 0, 0
@@ -231,8 +273,6 @@ class ReceiverRays:
         facing neighbour round a face sees the sun differently) cast again from inside their
         own faces towards ``w``: a shadow edge through the vertex itself splits them as Cycles
         does (see the module docstring)."""
-        from mathutils import Vector
-
         a, b = self._edge_from, self._edge_to
         edge = facing[a] & facing[b] & (vis[a] != vis[b])
         near = np.zeros(len(self._origins), bool)
@@ -247,11 +287,8 @@ class ReceiverRays:
         self.ties = len(idx)
         if not len(idx):
             return vis
-        ray_cast, dv = self.tree.ray_cast, Vector(tuple(float(x) for x in w))
         out = vis.copy()
-        out[idx] = np.fromiter((ray_cast(p, dv)[0] is None for p in
-                                self._vectors("_corner_vectors", self._corner_origins, idx)),
-                               dtype=np.float64, count=len(idx))
+        out[idx] = ~self.engine.occluded(self._corner_origins[idx], w)
         return out
 
     def mean_cos(self, directions) -> np.ndarray:
@@ -297,8 +334,6 @@ class ReceiverRays:
 
     def _visible_where(self, lit, directions) -> np.ndarray:
         """Mean visibility (origins,) over ``directions`` of the origins with a lit corner."""
-        from mathutils import Vector
-
         need = np.zeros(len(self._origins), bool)
         need[self._origin_of[lit]] = True
         idx = np.nonzero(need)[0]
@@ -306,30 +341,11 @@ class ReceiverRays:
         self.cast = len(idx)
         if not len(idx):
             return vis
-        cast = self.tree.ray_cast
-        pts = self._vectors("_origin_vectors", self._origins, idx)
-        for d in directions:
-            dv = Vector(tuple(float(x) for x in d))
-            vis[idx] += np.fromiter((cast(p, dv)[0] is None for p in pts), dtype=np.float64,
-                                    count=len(pts))
-        return vis / len(directions)
-
-    def _vectors(self, name: str, points: np.ndarray, idx: np.ndarray) -> list:
-        """``mathutils.Vector`` of ``points[idx]``, made once per point (a ray's origin is
-        the same at every sun: making it again was a fifth of a ray's cost)."""
-        from mathutils import Vector
-
-        cache = getattr(self, name, None)
-        if cache is None:
-            cache = [None] * len(points)
-            setattr(self, name, cache)
-        out = []
-        for i in idx.tolist():
-            v = cache[i]
-            if v is None:
-                v = cache[i] = Vector(points[i].tolist())
-            out.append(v)
-        return out
+        d = np.asarray(directions, np.float64).reshape(-1, 3)
+        o = self._origins[idx]
+        blocked = self.engine.occluded(np.tile(o, (len(d), 1)), np.repeat(d, len(o), axis=0))
+        vis[idx] = len(d) - blocked.reshape(len(d), len(o)).sum(axis=0)
+        return vis / len(d)
 
 
 def disc_directions(w, angle_deg: float, n: int) -> np.ndarray:

@@ -112,6 +112,38 @@ def test_occluder_casts_the_analytic_shadow_of_a_square():
     assert occ.rays == len(O)
 
 
+@needs_engine
+def test_nearest_finds_the_first_of_two_stacked_squares():
+    """Rays up from z = 0 through two unit squares (z = 1, triangles 0-1; z = 2.5, triangles
+    2-3) meet the lower one first at distance 1/cos; rays aimed past both meet nothing. Analytic
+    triangle and distance, on a batch large enough to be split over threads, and with one
+    direction for all rays."""
+    V = np.array([[0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1],
+                  [0, 0, 2.5], [1, 0, 2.5], [1, 1, 2.5], [0, 1, 2.5]], float)
+    T = [[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]]
+    occ = engine.Occluder(V, T, threads=2)
+    rng = np.random.default_rng(3)
+    P = rng.uniform(-0.5, 1.5, (5000, 2))
+    O = np.column_stack([P, np.zeros(len(P))])
+    L = np.array([0.3, 0.0, 1.0]) / np.linalg.norm([0.3, 0.0, 1.0])
+    tri, dist = occ.nearest(O, np.broadcast_to(L, O.shape))
+    at1 = P + L[:2] / L[2] * 1.0          # where each ray crosses z = 1 and z = 2.5
+    at2 = P + L[:2] / L[2] * 2.5
+    inside = lambda q: (q[:, 0] > 0) & (q[:, 0] < 1) & (q[:, 1] > 0) & (q[:, 1] < 1)
+    lower, upper = inside(at1), inside(at2) & ~inside(at1)
+    lower_tri = np.where(at1[:, 0] > at1[:, 1], 0, 1)     # the diagonal splits the square
+    upper_tri = np.where(at2[:, 0] > at2[:, 1], 2, 3)
+    away = np.abs(at1[:, 0] - at1[:, 1]) > 1e-4   # not on a diagonal (either triangle)
+    assert np.array_equal(tri[lower & away], lower_tri[lower & away])
+    assert np.array_equal(tri[upper & away], upper_tri[upper & away])
+    assert np.all(tri[~lower & ~upper] == -1) and np.all(dist[tri < 0] == 0)
+    np.testing.assert_allclose(dist[lower], 1.0 / L[2], rtol=1e-6)
+    np.testing.assert_allclose(dist[upper], 2.5 / L[2], rtol=1e-6)
+    one = occ.nearest(O, L)                # one direction for all: the same answer
+    assert np.array_equal(one[0], tri) and np.array_equal(one[1], dist)
+    assert lower.sum() > 1000 and upper.sum() > 200   # both cases are exercised
+
+
 def test_available_says_why_without_embree(monkeypatch):
     import sys
 
