@@ -289,6 +289,12 @@ def receivers(objects, regions: list, domain: str = "POINT"
 #: How the diffuse bounce terms are made: gathered by rays once for every light direction
 #: (:mod:`.bounce_rays`, the default) or a Cycles bake per direction, region and gate.
 BOUNCE_BAKES = ("rays", "cycles")
+#: How the direct term is made: "auto" (rays where they reproduce the scene, else Cycles),
+#: "rays" (refuse a scene they cannot), "cycles" (a 1-spp Cycles bake per direction).
+DIRECT_BAKES = ("auto", "rays", "cycles")
+#: Directions of the direct set Cycles also bakes when rays make it: the report's check of the
+#: rays against Cycles (``direct.vs_cycles``), spread evenly over the set.
+DIRECT_CHECKS = 8
 #: The one-bounce directions when none are given. Cycles bakes: measured with the smoothing,
 #: 128 at 16 spp erred 9% less than 64 at 32 spp for less bake time. Gathered by rays: the
 #: blend between directions is made exact at a sun by the receiver transfer
@@ -318,8 +324,9 @@ class MaterialBakeSettings:
     (``hemi:N[:P]``; the one-bounce one None: :data:`ONE_BOUNCE`);
     bounce_bake : "rays" (the diffuse bounce terms gathered by ``rays`` cosine-weighted rays
     per receiver, :mod:`.bounce_rays`) or "cycles" (a Cycles bake per direction, region and
-    gate at ``samples`` per vertex); the direct term is always Cycles' (1 sample: exact under
-    a hard Sun); seed : base of the Cycles seed of each direction (:func:`direction_seed`)
+    gate at ``samples`` per vertex); direct : how the direct term is made (:data:`DIRECT_BAKES`:
+    by rays through the ray engine, :class:`..base.direct_rays.ReceiverRays`, or a 1-sample
+    Cycles bake per direction, exact under a hard Sun); seed : base of the Cycles seed of each direction (:func:`direction_seed`)
     and of the rays' lattice shifts; domain : "POINT" (a
     value per vertex) or "CORNER" (per face corner: hard edges stay hard, about 4x the data
     on quad meshes); smoothing : radius, in median receiver spacings, over which the
@@ -368,6 +375,13 @@ class MaterialBakeSettings:
         ("cycles", "Cycles", "a Cycles bake per sun direction, region and gate at the bounce "
                              "samples (1.9x the noise floor in 168 s)")),
         help="How the diffuse bounce terms are made")
+    direct: str = setting("auto", label="Direct By", choices=(
+        ("auto", "Auto", "rays where they reproduce the scene (no instanced, see-through or "
+                         "displaced shadow casters), else Cycles; the report says which and why"),
+        ("rays", "Rays", "a shadow ray per receiver and direction (Embree); refuse a scene "
+                         "rays cannot reproduce"),
+        ("cycles", "Cycles", "a 1-sample Cycles bake per direction: the reference path")),
+        help="How the direct light is baked")
     rays: int = setting(
         gathered_transfer.DEFAULT_RAYS, lo=16, hi=65536,
         help="Rays per receiver of the gathered bounce terms (512; 256 / 1024 measured 1.16x / "
@@ -416,6 +430,9 @@ class MaterialBakeSettings:
         if self.bounce_bake not in BOUNCE_BAKES:
             raise BakeInputError(f"bounce bake must be one of {', '.join(BOUNCE_BAKES)}, got "
                                  f"{self.bounce_bake!r}")
+        if self.direct not in DIRECT_BAKES:
+            raise BakeInputError(f"direct must be one of {', '.join(DIRECT_BAKES)}, got "
+                                 f"{self.direct!r}")
         if not 16 <= int(self.rays) <= 65536:
             raise BakeInputError(f"rays must be 16..65536 per receiver, got {self.rays}")
         check_ranges(self)
@@ -447,7 +464,8 @@ class MaterialChunk:
     subtracted when the tensors are assembled, so every chunk is a plain Cycles bake) or
     "gloss" (one bounce off region ``last`` as a white metal of the ``before``-th roughness
     anchor; the anchors' set) or "gather" (no Cycles call: the rays of the gather origins
-    ``start:stop``, :mod:`.bounce_rays`; one step of progress).
+    ``start:stop``, :mod:`.bounce_rays`; one step of progress) or "check" (as "direct", at
+    the :func:`check_indices` of the direct set: Cycles' check of a direct term made by rays).
     """
 
     kind: str
@@ -481,7 +499,7 @@ class MaterialChunk:
         as many as the rays hit distinct corners)."""
         if self.kind == "gather":
             return None
-        return (self.stop - self.start, V) if self.kind == "direct" else (
+        return (self.stop - self.start, V) if self.kind in ("direct", "check") else (
             self.stop - self.start, V, 3)
 
     def fits(self, arr, V: int) -> bool:
@@ -497,12 +515,20 @@ def direction_seed(seed: int, s: int) -> int:
     return int((int(seed) * 1_000_003 + int(s)) % 2_147_483_647)
 
 
-def material_chunks(settings: MaterialBakeSettings, sizes: tuple, origins: int = 0) -> list:
+def check_indices(S0: int) -> np.ndarray:
+    """The directions of a direct set of ``S0`` that Cycles checks when rays bake the direct
+    term: :data:`DIRECT_CHECKS` of them, spread evenly over the set (all of a smaller one)."""
+    return np.unique(np.linspace(0, S0 - 1, min(DIRECT_CHECKS, S0)).round().astype(np.int64))
+
+
+def material_chunks(settings: MaterialBakeSettings, sizes: tuple, origins: int = 0,
+                    direct_rays: bool = False) -> list:
     """The chunks of a material bake in the order one process bakes them (a gate change makes
     Cycles sync the shaders again, about 0.25 s a call here, a new direction does not: gates
     outside, directions inside). ``sizes``: (S0, S1, S2, Sg) directions per path order and of
     the glossy anchors (0: none); ``origins``: the gather's ray origins (bounces by rays:
-    :func:`.bounce_rays.gather_chunks` replace the one- and two-bounce Cycles chunks)."""
+    :func:`.bounce_rays.gather_chunks` replace the one- and two-bounce Cycles chunks);
+    ``direct_rays``: rays make the direct term, Cycles bakes only its "check" directions."""
     S0, S1, S2, Sg = sizes
     R1 = len(settings.regions) + 1
 
@@ -510,7 +536,7 @@ def material_chunks(settings: MaterialBakeSettings, sizes: tuple, origins: int =
         return [MaterialChunk(kind, last, before, a, min(a + CHUNK_DIRECTIONS, S))
                 for a in range(0, S, CHUNK_DIRECTIONS)]
 
-    out = runs("direct", S0)
+    out = runs("check", len(check_indices(S0))) if direct_rays else runs("direct", S0)
     gathers = settings.gathers
     for r in range(R1 if S1 and not gathers else 0):
         out += runs("one", S1, r)
@@ -534,8 +560,10 @@ def bake_material_chunks(scene, objects, settings: MaterialBakeSettings, chunks,
     with gated materials, handing each finished one to ``put(name, array)``; yields
     ``(chunk, direction index)`` after every Cycles call and returns Cycles' seconds.
     ``threads``: Cycles threads (0: all cores). Used by the bake, the Dask task and farms."""
-    sets = dict(zip(("direct", "one", "ref"), settings.validate()))
-    sets["pair"], sets["gloss"] = sets["ref"], parse_directions(settings.anchor_spec())
+    sets = {k: d.directions for k, d in zip(("direct", "one", "ref"), settings.validate())}
+    sets["pair"] = sets["ref"]
+    sets["gloss"] = parse_directions(settings.anchor_spec()).directions
+    sets["check"] = sets["direct"][check_indices(len(sets["direct"]))]
     roughness = settings.roughness
     if threads:   # workers sharing a machine: no more Cycles threads than their share of cores
         scene.render.threads_mode, scene.render.threads = "FIXED", int(threads)
@@ -552,7 +580,7 @@ def bake_material_chunks(scene, objects, settings: MaterialBakeSettings, chunks,
     if not chunks:
         return cycles
     with GatedMaterials(scene, settings.regions, gloss=bool(roughness)) as gates:
-        group = {"direct": 0, "gloss": 2}
+        group = {"direct": 0, "check": 0, "gloss": 2}
         for g, spp in enumerate((1, settings.samples, settings.anchor_samples)):
             mine = [c for c in chunks if group.get(c.kind, 1) == g]
             if not mine:
@@ -573,12 +601,48 @@ def bake_material_chunks(scene, objects, settings: MaterialBakeSettings, chunks,
                         # the session put the scene's own seed aside and restores it
                         session.scene.cycles.seed = direction_seed(settings.seed, s)
                         e = np.pi * np.concatenate(
-                            session.bake_sun_all(sets[c.kind].directions[s], 1.0, 0.0), axis=0)
+                            session.bake_sun_all(sets[c.kind][s], 1.0, 0.0), axis=0)
                         rows.append(e[:, 0] if direct else e)   # E per unit irradiance
                         yield c, s
                     put(c.name, np.stack(rows).astype(np.float32, copy=False))
                 cycles += session.bake_seconds
     return cycles
+
+
+def direct_rays(scene, objects, settings: MaterialBakeSettings):
+    """``(choice, rays)``: how the direct term is made, ``{"engine": "rays" | "cycles", "why":
+    ...}`` (with "library" for rays), and the :class:`..base.direct_rays.ReceiverRays` of the
+    receivers read with the render's geometry (None with Cycles). ``direct="rays"`` on a scene
+    rays cannot reproduce raises BakeInputError with the reasons."""
+    if settings.direct == "cycles":
+        return {"engine": "cycles", "why": "asked for (--direct cycles)"}, None
+    from ...lt_addon.rays import engine
+    from ..base import ray_scene
+    from ..base.direct_rays import ReceiverRays
+
+    ok, lib = engine.available()
+    why, rays = ([] if ok else [f"no ray engine: {lib}"]), None
+    if ok:
+        with ray_scene.RenderGeometry(scene) as depsgraph:
+            why = ray_scene.unsupported(scene, depsgraph, objects)
+            inst = sorted({i.object.original.name for i in depsgraph.object_instances
+                           if i.is_instance and i.object.type in ray_scene.CASTER_TYPES
+                           and getattr(i.object.original, "visible_shadow", True)})
+            if inst:   # the receivers' rays read each caster object once, not its instances
+                why.append(f"instanced shadow casters ({', '.join(inst[:3])}"
+                           f"{', ...' if len(inst) > 3 else ''})")
+            if not why:
+                try:
+                    rays = ReceiverRays(scene, [(o.name, element_count(o, settings.domain))
+                                                for o in objects], settings.domain)
+                except ValueError as exc:   # a modifier changes the receivers' vertices
+                    why.append(str(exc))
+    if why:
+        if settings.direct == "rays":
+            raise BakeInputError("--direct rays cannot reproduce this scene's direct light: "
+                                 + "; ".join(why) + " (use --direct cycles or auto)")
+        return {"engine": "cycles", "why": "rays cannot reproduce: " + "; ".join(why)}, None
+    return {"engine": "rays", "why": "the scene is supported", "library": lib}, rays
 
 
 def material_stage(scene, objects, settings: dict, start: int, stop: int, cache,
@@ -656,6 +720,9 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
     S2 = d2.size if settings.bounces >= 2 else 0
     dg = parse_directions(settings.anchor_spec())
     Sg = dg.size if K and S1 else 0
+    direct_by, receiver_rays = direct_rays(scene, objects, settings)
+    by_rays = receiver_rays is not None
+    checks = check_indices(d0.size) if by_rays else None
     gs = None
     if settings.gathers:
         from .bounce_rays import GatherScene
@@ -671,10 +738,10 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
         floats += 12 * gs.origins * settings.rays
     check_memory(floats * 4 * 2, f"{V} vertices x {floats // max(V, 1)} term values",
                  "use fewer regions or coarser direction sets")
-    plan = material_chunks(settings, (d0.size, S1, S2, Sg), gs.origins if gs else 0)
-    total = sum(len(c) for c in plan)
+    plan = material_chunks(settings, (d0.size, S1, S2, Sg), gs.origins if gs else 0, by_rays)
+    total = sum(len(c) for c in plan) + (d0.size if by_rays else 0)
     calls = ptt.bake_count(d0.size, S1, S2, R1 - 1, settings.bounces, K, Sg,
-                           rays=settings.gathers)
+                           rays=settings.gathers) - (d0.size - len(checks) if by_rays else 0)
     assert calls == sum(len(c) for c in plan if c.kind != "gather")
     have = {}
     for c in plan if cache is not None else ():
@@ -707,11 +774,13 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
 
     cycles = 0.0
     if todo:
-        what = {"direct": "direct", "one": "one bounce off region {last}",
+        what = {"direct": "direct", "check": "direct: Cycles' check of the rays",
+                "one": "one bounce off region {last}",
                 "gloss": "one bounce off region {last} as metal, anchor {before}",
                 "ref": "two bounces: reference {last}", "pair": "two bounces {before}->{last}",
                 "gather": "bounce rays"}
-        stage = {"direct": "direct", "one": "one_bounce", "gloss": "glossy_anchors",
+        stage = {"direct": "direct", "check": "direct_check", "one": "one_bounce",
+                 "gloss": "glossy_anchors",
                  "ref": "two_bounce", "pair": "two_bounce", "gather": "bounce_rays"}
         gen = bake_material_chunks(scene, objects, settings, todo, put)
         t = time.perf_counter()
@@ -729,6 +798,18 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
         except StopIteration as stop:
             cycles = stop.value
     direct = np.empty((d0.size, V), dtype=np.float32)
+    if by_rays:   # every direction, a shadow ray per receiver corner (no cache: seconds)
+        t = time.perf_counter()
+        for a in range(0, d0.size, CHUNK_DIRECTIONS):
+            b = min(a + CHUNK_DIRECTIONS, d0.size)
+            for s in range(a, b):
+                direct[s] = receiver_rays.direct(d0.directions[s])
+            done += b - a
+            yield Progress(done, total, f"direct by rays, directions {a + 1}-{b}/{d0.size}")
+        seconds["direct"] = time.perf_counter() - t
+        cycles_rows = np.concatenate([have[c.name] for c in plan if c.kind == "check"])
+        direct_by.update(checked_directions=len(checks), vs_cycles=direct_agreement(
+            cycles_rows, direct[checks]), rays=int(receiver_rays.engine.rays))
     one = np.zeros((S1, 3, R1 if S1 else 0, V), dtype=np.float32)
     two = np.zeros((S2, 3, R1 if S2 else 0, R1 if S2 else 0, V), dtype=np.float32)
     gloss = np.zeros((Sg, R1 - 1, K, V), dtype=np.float32) if Sg else None
@@ -762,7 +843,7 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
             "bounce_bake": settings.bounce_bake,
             "samples": settings.samples if not settings.gathers else None,
             "rays": settings.rays if settings.gathers else None,
-            "seed": settings.seed, "bake_calls": calls,
+            "seed": settings.seed, "bake_calls": calls, "direct": direct_by,
             "anchor_samples": settings.anchor_samples if K else None,
             "seconds": {k: round(v, 3) for k, v in seconds.items()},
             "cycles_seconds": round(cycles, 3),
@@ -782,7 +863,7 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
                           "sky_fraction": round(transfer.sky_fraction(), 4),
                           "back_sides_lit": int(transfer.back_sides().sum()),
                           "fit_two_directions": terms["fit_spec"]}
-        if d1.spec == d0.spec:   # the rays' direct light against Cycles' own bake of it
+        if d1.spec == d0.spec and not by_rays:   # the rays' direct light against Cycles' own
             meta["gather"]["direct_vs_cycles"] = direct_agreement(direct, direct_one)
         meta["notes"] += [n for n in gs.notes if n not in meta["notes"]]
     tensors = ptt.TransferTensors(direct, one, two, tuple(d.spec for d in (d0, d1, d2)),
@@ -1080,6 +1161,7 @@ def materials_job(scene, objects, settings: MaterialBakeSettings, out_dir: str,
               "anchor_directions": settings.anchor_spec() if settings.roughness else None,
               "directions": {"direct": d0.spec, "one_bounce": d1.spec, "two_bounce": d2.spec},
               "bake_calls": tensors.metadata["bake_calls"],
+              "direct": tensors.metadata.get("direct"),
               "bounce_bake": settings.bounce_bake,
               "device": cycles_device.current().report(),
               "bytes": {"tensors": tensors.nbytes},

@@ -48,7 +48,8 @@ def add_parsers(sub) -> None:
         description="Bakes, per vertex of the objects, the direct light and the light that "
                     "reflected once off each editable material (region) and twice off each "
                     "ordered pair, under hard suns over direction sets (finer for lower "
-                    "orders): the direct light with Cycles, the bounces gathered by rays once "
+                    "orders): the direct light by shadow rays (Cycles checks 8 directions; "
+                    "--direct cycles bakes them all), the bounces gathered by rays once "
                     "for every direction (or Cycles bakes per direction, --bounce-bake "
                     "cycles). Every rendered mesh of the scene reflects light; materials not "
                     "named with --region keep their colour. Diffuse, or with --anchors "
@@ -62,7 +63,7 @@ def add_parsers(sub) -> None:
     p.add_argument("--region", required=True, action="append", metavar="MATERIAL",
                    help="an editable material (repeat for several)")
     add_setting_options(p, MaterialBakeSettings, ("anchors", "anchor_samples", "anchor_directions",
-                                                  "bounce_bake", "rays", "bounces"),
+                                                  "direct", "bounce_bake", "rays", "bounces"),
                         defaults=True)
     p.add_argument("--directions", default="hemi:400:1.5", metavar="SPEC",
                    help="direct-light directions (default hemi:400:1.5; 1 sample each)")
@@ -140,7 +141,8 @@ def _cmd_bake_materials(args) -> int:
         anchor_samples=args.anchor_samples, anchor_directions=args.anchor_directions,
         directions=(args.directions, args.one_bounce_directions, args.two_bounce_directions),
         samples=args.samples, seed=args.seed, domain="CORNER" if args.per_corner else "POINT",
-        bounce_bake=args.bounce_bake, rays=args.rays, smoothing=args.smoothing)
+        bounce_bake=args.bounce_bake, rays=args.rays, smoothing=args.smoothing,
+        direct=args.direct)
     path, out_dir = check_bake_inputs(args, settings)
     started = time.perf_counter()
     objects = open_objects(path, args.object)
@@ -173,6 +175,15 @@ def _cmd_bake_materials(args) -> int:
           f"more to open and save the .blend); {rep['bytes']['tensors'] / 2**20:.2f} MiB; "
           f"light shares direct {shares['direct']:.3f}, one bounce {shares['one_bounce']:.3f}"
           f", two bounces {shares['two_bounce']:.3f} -> {rep['tensors']}")
+    direct = rep.get("direct") or {}
+    if direct.get("engine") == "rays":
+        check = direct["vs_cycles"]
+        print(f"  direct light by rays ({direct['library']}); Cycles' bake of "
+              f"{direct['checked_directions']} of its directions: relative difference "
+              f"{check['rel_difference']:.2g}, {100 * check['values_apart']:.2g}% of values "
+              f"more than 1e-4 apart")
+    elif direct:
+        print(f"  direct light by Cycles: {direct['why']}")
     truth = rep.get("ground_truth")
     if truth:
         print(f"  vs Cycles ({truth['samples']} spp, {truth['light']}): rel. error "

@@ -262,6 +262,7 @@ class VIEW3D_PT_relight_materials(_RelightSubPanel, bpy.types.Panel):
                         row.prop(sock, "default_value", text=k.title())
         col = layout.column(align=True)
         col.prop(props, "material_bounces")
+        col.prop(props, "material_direct")
         col.prop(props, "material_bounce_bake")
         col.prop(props, "material_rays" if props.material_bounce_bake == "rays"
                  else "material_samples")

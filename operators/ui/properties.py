@@ -244,7 +244,8 @@ TRANSPORT_PROPS = {"model": "transport_model", "viewport": "transport_viewport",
 VERTEX_FIELDS = ("directions", "bounces", "energy")
 VERTEX_PROPS = {f: "vertex_" + f for f in VERTEX_FIELDS}
 #: Panel property of each declared material-bake setting (the panel's Material Edits box).
-MATERIAL_FIELDS = ("bounces", "bounce_bake", "rays", "samples", "anchor_samples", "smoothing")
+MATERIAL_FIELDS = ("bounces", "direct", "bounce_bake", "rays", "samples", "anchor_samples",
+                   "smoothing")
 MATERIAL_PROPS = {f: "material_" + f for f in MATERIAL_FIELDS}
 LOBES_FIELDS = ("frame", "order", "samples", "storage", "mode", "world_sampling")
 TRANSPORT_FIELDS = ("direct", "sun_path", "sun_path_step", "model", "viewport",

@@ -221,7 +221,9 @@ def test_material_bakes_distribute_and_resume_bit_for_bit(tmp_path, bounce_bake)
     args = ["bake-materials", blend, "--object", "Floor", "--object", "Box", "--region",
             "RedMaterial", "--region", "GreenMaterial", "--directions", "hemi:40",
             "--one-bounce-directions", "hemi:20", "--two-bounce-directions", "hemi:4",
-            "--samples", "8", "--bounce-bake", bounce_bake]
+            "--samples", "8", "--bounce-bake", bounce_bake,
+            # rays make the direct term with rays, Cycles its 40 directions with Cycles
+            "--direct", "auto" if bounce_bake == "rays" else "cycles"]
     r = relight(*args, "--no-resume", "--out", tmp_path / "ref")
     assert r.returncode == 0, r.stderr[-2000:]
     ref = ptt.TransferTensors.load(str(tmp_path / "ref" / "Floor_materials.npz"))
@@ -239,9 +241,10 @@ def test_material_bakes_distribute_and_resume_bit_for_bit(tmp_path, bounce_bake)
     r = relight(*args, "--workers", "2", "--out", tmp_path / "dist")
     assert r.returncode == 0, r.stderr[-2000:]
     rep = json.loads((tmp_path / "dist" / "Floor_materials.json").read_text())
-    # 40/16 -> 3 direct chunks; with rays, 378 ray origins / 256 -> 2 gather chunks; with
-    # Cycles 3 regions x 2 one-bounce chunks, 3 references + 9 ordered pairs
-    chunks = 3 + (2 if bounce_bake == "rays" else 6 + 3 + 9)
+    # with rays, Cycles' check of the direct term (8 of the 40 directions, 1 chunk) and 378
+    # ray origins / 256 -> 2 gather chunks; with Cycles 40/16 -> 3 direct chunks, 3 regions x
+    # 2 one-bounce chunks, 3 references + 9 ordered pairs
+    chunks = 1 + 2 if bounce_bake == "rays" else 3 + 6 + 3 + 9
     assert rep["chunks_total"] == rep["distributed"]["chunks"] == chunks
     assert rep["chunks_reused"] == 0 and len(rep["distributed"]["workers"]) == 2
     assert f"distributed: {chunks} chunks on 2 worker processes" in r.stdout
@@ -251,23 +254,30 @@ def test_material_bakes_distribute_and_resume_bit_for_bit(tmp_path, bounce_bake)
     bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False)
     scene, objs = bpy.context.scene, [bpy.data.objects[n] for n in objects]
     s = mb.MaterialBakeSettings(regions=regions, directions=("hemi:40", "hemi:20", "hemi:4"),
-                                samples=8, bounce_bake=bounce_bake)
+                                samples=8, bounce_bake=bounce_bake,
+                                direct="auto" if bounce_bake == "rays" else "cycles")
     out = tmp_path / "resume"
     gen = mb.materials_job(scene, objs, s, str(out))
-    # rays: the 2 gather chunks (rays first, before the gates) and 2 of the 3 direct chunks;
+    # rays: the 2 gather chunks (rays first, before the gates) and the direct light's check
+    # (8 Cycles calls), stopped in the direct light by rays (not kept: seconds);
     # Cycles: the 3 direct chunks (40 directions) and the first one-bounce chunk (16)
-    for _ in range(2 + 32 + 1 if bounce_bake == "rays" else 60):
-        next(gen)
+    if bounce_bake == "rays":
+        while "direct by rays" not in next(gen).message:
+            pass
+    else:
+        for _ in range(60):
+            next(gen)
     gen.close()
+    kept = 3 if bounce_bake == "rays" else 4
     assert os.listdir(out) == [".relight_cache"]
     (folder,) = (out / ".relight_cache").iterdir()
-    assert folder.name == "Floor_materials" and len(list(folder.glob("*/*_0*.npy"))) == 4
+    assert folder.name == "Floor_materials" and len(list(folder.glob("*/*_0*.npy"))) == kept
     again = run(mb.materials_job(scene, objs, s, str(out)))
-    assert again.report["chunks_reused"] == 4 and again.report["chunks_total"] == chunks
+    assert again.report["chunks_reused"] == kept and again.report["chunks_total"] == chunks
     assert same(again.tensors) and ".relight_cache" not in os.listdir(out)
 
     gen = mb.materials_job(scene, objs, s, str(out))
-    for _ in range(20):
+    for _ in range(5):   # a chunk or more is kept (with rays the whole bake yields 18 times)
         next(gen)
     gen.close()
     old = mb.material_chunk_cache(scene, objs, s, str(out)).folder

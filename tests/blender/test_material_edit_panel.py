@@ -126,8 +126,10 @@ def test_panel_bake_with_roughness_anchors_follows_a_metallic_edit(fresh_scene, 
         assert bpy.ops.relight.bake_materials() == {"FINISHED"}
         ((_, tensors),) = me.scene_bakes(scene)
         assert tensors.roughness == (0.3, 0.7)
-        # Cycles: 16 direct directions and 2 anchors x 4 directions; the bounces by rays
-        assert tensors.metadata["bake_calls"] == 16 + 4 * 2
+        # Cycles: the direct light's check (8 of its 16 directions) and 2 anchors x 4
+        # directions; the direct light and the bounces by rays
+        assert tensors.metadata["bake_calls"] == 8 + 4 * 2
+        assert tensors.metadata["direct"]["engine"] == "rays"
         assert tensors.metadata["gather"]["rays_per_origin"] == props.material_rays == 512
 
         def shown():

@@ -46,7 +46,10 @@ def room(request):
     objs = [bpy.data.objects[n] for n in OBJECTS]
     settings = mb.MaterialBakeSettings(regions=["RedMaterial", "GreenMaterial"],
                                        directions=(SPEC, SPEC, SPEC), samples=SAMPLES,
-                                       bounce_bake=request.param)
+                                       bounce_bake=request.param,
+                                       # rays make the direct term by default; the Cycles
+                                       # bounces keep Cycles' own, the reference D
+                                       direct="auto" if request.param == "rays" else "cycles")
     tensors = run(mb.bake_materials(scene, objs, settings))
     d = parse_directions(SPEC).directions
     light = d[int(np.argmax(d[:, 2]))]   # a baked direction, 60 degrees up
@@ -67,14 +70,17 @@ def test_bake_shapes_and_counts(room):
     assert t.vertices == sum(len(o.data.vertices) for o in objs) == 350
     assert t.direct.shape == (4, 350) and t.one.shape == (4, 3, 3, 350)
     assert t.two.shape == (4, 3, 3, 3, 350)
-    if t.metadata["bounce_bake"] == "rays":   # Cycles bakes only the direct term
+    if t.metadata["bounce_bake"] == "rays":   # Cycles bakes only its check of the direct term
         assert t.metadata["bake_calls"] == 4
         g = t.metadata["gather"]
         assert g["rays_per_origin"] == 512 and g["origins"] >= 350
-        # the rays' direct light is Cycles' own at the 4 directions (a corner where two walls'
-        # edges meet may differ: their intersection tie-break)
-        assert g["direct_vs_cycles"]["values_apart"] <= 1 / 350
+        # the rays' direct light is Cycles' own at the 4 directions it checks (a corner where
+        # two walls' edges meet may differ: their intersection tie-break)
+        d = t.metadata["direct"]
+        assert d["engine"] == "rays" and d["checked_directions"] == 4
+        assert d["vs_cycles"]["values_apart"] <= 1 / 350
     else:
+        assert t.metadata["direct"]["engine"] == "cycles"
         assert t.metadata["bake_calls"] == 4 + 4 * 3 + 4 * (3 + 9)
     assert [n for n, _ in t.objects] == list(OBJECTS)
     # each wall's vertices belong to its region; the floor and box to the fixed one
@@ -139,7 +145,10 @@ def test_the_suns_direct_light_by_rays_is_cycles_own_at_any_sun(room):
     scene, objs, tensors, _ = room
     rays = ReceiverRays(scene, tensors.objects, "POINT")
     for s, w in enumerate(tensors.direction_sets()[0].directions):
-        off = np.abs(rays.direct(w) - tensors.direct[s]) > 1e-5
+        # D as Cycles baked it (Cycles bounces), else Cycles' bake of that direction now
+        cycles = (tensors.direct[s] if tensors.metadata["direct"]["engine"] == "cycles"
+                  else mb.truth_irradiance(scene, objs, {}, w, 0, 1)[:, 0])
+        off = np.abs(rays.direct(w) - cycles) > 1e-5
         assert off.sum() <= 1, (s, np.nonzero(off))
     zero = {"RedMaterial": (0, 0, 0), "GreenMaterial": (0, 0, 0)}
     for az, el in ((200.0, 30.0), (300.0, 20.0), (100.0, 60.0), (30.0, 45.0)):
@@ -365,8 +374,8 @@ def test_glossy_gates_restore_the_scene(glossy_room):
 
 
 def test_gathered_bounces_follow_held_out_suns():
-    """The default bake (bounces gathered by rays, 16 direct directions here, 128 one-bounce
-    directions, the second bounce composed) at suns that are no baked direction: every edit
+    """The default bake (direct light and bounces by rays, 16 direct directions here, 128
+    one-bounce directions, the second bounce composed) at suns that are no baked direction: every edit
     within 1.5x the noise floor of two 128-spp Cycles truths; without the receiver transfer
     the 30-degree sun's edits are not (a shadow edge between the one-bounce directions), and
     without the two-bounce term the white room is not. Measured (bpy 5.0.1, the receiver
@@ -389,7 +398,7 @@ def test_gathered_bounces_follow_held_out_suns():
     objs = [bpy.data.objects[n] for n in OBJECTS]
     t = run(mb.bake_materials(scene, objs, mb.MaterialBakeSettings(
         regions=["RedMaterial", "GreenMaterial"], directions=("hemi:16", None, "hemi:8"))))
-    assert t.metadata["bake_calls"] == 16 and t.one.shape[0] == 128
+    assert t.metadata["bake_calls"] == mb.DIRECT_CHECKS and t.one.shape[0] == 128   # the check
     assert t.bounce is not None and t.receiver_transfer is not None
     edits = {"file colours": {}, "red wall blue": EDITS["red wall blue"], "white": WHITE}
     for az, el in ((200.0, 30.0), (120.0, 65.0), (300.0, 20.0)):
@@ -450,3 +459,42 @@ def test_gathered_terms_are_cycles_gated_bakes_of_each_region_and_pair():
                 continue
             floor = rel(b.two[:, :, r1, r2], a.two[:, :, r1, r2])
             assert rel(rays.two[:, :, r1, r2], a.two[:, :, r1, r2]) <= 1.5 * floor, (r1, r2)
+
+
+def test_an_instanced_caster_keeps_the_direct_light_on_cycles():
+    """The receivers' rays read each shadow-casting object once, not its instances: with a
+    collection instance of the box in the room, ``direct="auto"`` bakes the direct term by
+    Cycles and says why, ``direct="rays"`` refuses in one line before any Cycles call; without
+    the instance, auto takes the rays."""
+    import bpy
+
+    from relightable_textures import samples
+    from relightable_textures.operators.bakes import material_bake as mb
+    from relightable_textures.operators.base.cycles_bake import BakeInputError
+    from relightable_textures.operators.base.jobs import run
+
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = bpy.context.scene
+    samples.build("room", scene, "test")
+    objs = [bpy.data.objects["Floor"]]
+
+    def settings(direct):
+        return mb.MaterialBakeSettings(regions=["RedMaterial"], bounces=1, rays=16,
+                                       directions=("hemi:4", "hemi:4", "hemi:4"), direct=direct)
+
+    choice, rays = mb.direct_rays(scene, objs, settings("auto"))
+    assert choice["engine"] == "rays" and rays is not None
+    coll = bpy.data.collections.new("Boxes")
+    coll.objects.link(bpy.data.objects["Box"])
+    inst = bpy.data.objects.new("BoxInstance", None)
+    inst.instance_type, inst.instance_collection = "COLLECTION", coll
+    inst.location = (0.3, -0.4, 0.0)
+    scene.collection.objects.link(inst)
+    bpy.context.view_layer.update()
+    t = run(mb.bake_materials(scene, objs, settings("auto")))
+    d = t.metadata["direct"]
+    assert d["engine"] == "cycles" and "instanced shadow casters (Box)" in d["why"], d
+    assert t.metadata["bake_calls"] == 4   # every direct direction by Cycles
+    with pytest.raises(BakeInputError, match=r"^--direct rays cannot reproduce this scene's "
+                                             r"direct light: instanced shadow casters \(Box\)"):
+        run(mb.bake_materials(scene, objs, settings("rays")))
