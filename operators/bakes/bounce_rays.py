@@ -6,9 +6,10 @@ module is its Blender side: :class:`GatherScene` reads every rendered mesh of th
 gated Cycles bake sees it -- each face corner with its region (editable material, or the fixed
 rest) and the diffuse colour it reflects with (white on editable regions, the material's own
 base colour elsewhere, :func:`..base.materials.material_colour`) -- casts the cosine-weighted
-rays of a block of origins through the :class:`.direct_rays.ReceiverRays` BVH
-(the ray engine, :func:`..base.direct_rays.ray_engine`), and gives the exact direct light at every corner (a shadow ray per
-corner origin, the same rays that equal Cycles' bounce-free bake in the tests).
+rays of a block of origins through the :class:`.direct_rays.ReceiverRays` BVH (the ray
+engine, :func:`..base.direct_rays.ray_engine`), and gives the exact direct light at every
+corner (a shadow ray per corner origin, the same rays that equal Cycles' bounce-free bake in
+the tests).
 
 What it models as Cycles' gated bake does: Diffuse BSDFs of each material's base colour, both
 sides of a face lit (a ray meeting a face from behind sees that side's direct light), light

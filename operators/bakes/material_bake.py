@@ -55,6 +55,8 @@ from ...lt_addon.transport.texture import parse_directions
 from ..base import cycles_device
 from ..base.compat import ensure_node_tree
 from ..base.cycles_bake import BakeInputError, EnvironmentBake, SceneChanges, check_memory
+from ..base.direct_rays import (DIRECT_BAKES, DIRECT_CHECKS,  # noqa: F401 (tests read it)
+                                check_indices, direct_agreement)
 from ..base.jobs import Progress, run
 from ..base.materials import (finish_sockets, material_bsdf, material_colour,  # noqa: F401
                               material_colour_socket, material_finish, scene_materials)
@@ -289,12 +291,7 @@ def receivers(objects, regions: list, domain: str = "POINT"
 #: How the diffuse bounce terms are made: gathered by rays once for every light direction
 #: (:mod:`.bounce_rays`, the default) or a Cycles bake per direction, region and gate.
 BOUNCE_BAKES = ("rays", "cycles")
-#: How the direct term is made: "auto" (rays where they reproduce the scene, else Cycles),
-#: "rays" (refuse a scene they cannot), "cycles" (a 1-spp Cycles bake per direction).
-DIRECT_BAKES = ("auto", "rays", "cycles")
-#: Directions of the direct set Cycles also bakes when rays make it: the report's check of the
-#: rays against Cycles (``direct.vs_cycles``), spread evenly over the set.
-DIRECT_CHECKS = 8
+
 #: The one-bounce directions when none are given. Cycles bakes: measured with the smoothing,
 #: 128 at 16 spp erred 9% less than 64 at 32 spp for less bake time. Gathered by rays: the
 #: blend between directions is made exact at a sun by the receiver transfer
@@ -326,8 +323,8 @@ class MaterialBakeSettings:
     per receiver, :mod:`.bounce_rays`) or "cycles" (a Cycles bake per direction, region and
     gate at ``samples`` per vertex); direct : how the direct term is made (:data:`DIRECT_BAKES`:
     by rays through the ray engine, :class:`..base.direct_rays.ReceiverRays`, or a 1-sample
-    Cycles bake per direction, exact under a hard Sun); seed : base of the Cycles seed of each direction (:func:`direction_seed`)
-    and of the rays' lattice shifts; domain : "POINT" (a
+    Cycles bake per direction, exact under a hard Sun); seed : base of the Cycles seed of
+    each direction (:func:`direction_seed`) and of the rays' lattice shifts; domain : "POINT" (a
     value per vertex) or "CORNER" (per face corner: hard edges stay hard, about 4x the data
     on quad meshes); smoothing : radius, in median receiver spacings, over which the
     Cycles-baked bounce terms (and glossy anchors) are averaged after the bake (0: off;
@@ -515,12 +512,6 @@ def direction_seed(seed: int, s: int) -> int:
     return int((int(seed) * 1_000_003 + int(s)) % 2_147_483_647)
 
 
-def check_indices(S0: int) -> np.ndarray:
-    """The directions of a direct set of ``S0`` that Cycles checks when rays bake the direct
-    term: :data:`DIRECT_CHECKS` of them, spread evenly over the set (all of a smaller one)."""
-    return np.unique(np.linspace(0, S0 - 1, min(DIRECT_CHECKS, S0)).round().astype(np.int64))
-
-
 def material_chunks(settings: MaterialBakeSettings, sizes: tuple, origins: int = 0,
                     direct_rays: bool = False) -> list:
     """The chunks of a material bake in the order one process bakes them (a gate change makes
@@ -610,39 +601,12 @@ def bake_material_chunks(scene, objects, settings: MaterialBakeSettings, chunks,
 
 
 def direct_rays(scene, objects, settings: MaterialBakeSettings):
-    """``(choice, rays)``: how the direct term is made, ``{"engine": "rays" | "cycles", "why":
-    ...}`` (with "library" for rays), and the :class:`..base.direct_rays.ReceiverRays` of the
-    receivers read with the render's geometry (None with Cycles). ``direct="rays"`` on a scene
-    rays cannot reproduce raises BakeInputError with the reasons."""
-    if settings.direct == "cycles":
-        return {"engine": "cycles", "why": "asked for (--direct cycles)"}, None
-    from ...lt_addon.rays import engine
-    from ..base import ray_scene
-    from ..base.direct_rays import ReceiverRays
+    """``(choice, rays)`` of the direct term for ``objects``' receivers
+    (:func:`..base.direct_rays.bake_rays`)."""
+    from ..base.direct_rays import bake_rays
 
-    ok, lib = engine.available()
-    why, rays = ([] if ok else [f"no ray engine: {lib}"]), None
-    if ok:
-        with ray_scene.RenderGeometry(scene) as depsgraph:
-            why = ray_scene.unsupported(scene, depsgraph, objects)
-            inst = sorted({i.object.original.name for i in depsgraph.object_instances
-                           if i.is_instance and i.object.type in ray_scene.CASTER_TYPES
-                           and getattr(i.object.original, "visible_shadow", True)})
-            if inst:   # the receivers' rays read each caster object once, not its instances
-                why.append(f"instanced shadow casters ({', '.join(inst[:3])}"
-                           f"{', ...' if len(inst) > 3 else ''})")
-            if not why:
-                try:
-                    rays = ReceiverRays(scene, [(o.name, element_count(o, settings.domain))
-                                                for o in objects], settings.domain)
-                except ValueError as exc:   # a modifier changes the receivers' vertices
-                    why.append(str(exc))
-    if why:
-        if settings.direct == "rays":
-            raise BakeInputError("--direct rays cannot reproduce this scene's direct light: "
-                                 + "; ".join(why) + " (use --direct cycles or auto)")
-        return {"engine": "cycles", "why": "rays cannot reproduce: " + "; ".join(why)}, None
-    return {"engine": "rays", "why": "the scene is supported", "library": lib}, rays
+    return bake_rays(scene, [(o.name, element_count(o, settings.domain)) for o in objects],
+                     settings.domain, settings.direct)
 
 
 def material_stage(scene, objects, settings: dict, start: int, stop: int, cache,
@@ -892,17 +856,6 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
         tensors.metadata["bounce_transfer"]["seconds"] = round(time.perf_counter() - t, 3)
     tensors.metadata["bake_seconds"] = round(time.perf_counter() - started, 3)
     return tensors
-
-
-def direct_agreement(cycles: np.ndarray, rays: np.ndarray) -> dict:
-    """How far the rays' direct light ``rays`` (S, V) is from Cycles' bake of it ``cycles``
-    (S, V) at the same directions: the relative difference over all values and the share of
-    values more than 1e-4 apart (the tests: a corner where two edges meet exactly may differ)."""
-    a, b = np.asarray(cycles, np.float64), np.asarray(rays, np.float64)
-    off = np.abs(a - b) > 1e-4
-    return {"rel_difference": round(float(np.linalg.norm(a - b)
-                                          / max(np.linalg.norm(a), 1e-30)), 6),
-            "values_apart": round(float(off.mean()) if off.size else 0.0, 6)}
 
 
 #: Two-bounce directions the second-bounce composition is fitted to when the bounce terms are

@@ -35,6 +35,8 @@ from ..base.jobs import Progress
 
 #: Directions per chunk: the unit a cancelled bake resumes from and a Dask worker bakes.
 CHUNK_DIRECTIONS = 16
+#: Progress steps of Cycles' check when rays bake T (its directions: at most this many).
+DIRECT_CHECKS_STEPS = 8
 
 
 @dataclass
@@ -45,6 +47,7 @@ class TransportBakeResult:
     total_seconds: float
     bake_calls: int
     chunks: dict = None     # chunks_total, chunks_reused (, distributed) with a chunk cache
+    direct: dict = None     # how T was made: engine, why (, library, vs_cycles) -- rays or Cycles
 
 
 def _default_samples(samples, bounces: int) -> int:
@@ -103,8 +106,15 @@ def vertex_chunk_cache(scene, obj, directions, bounces: int, samples, seed: int,
 
 
 def bake_transport(scene, obj, directions, bounces: int = 0, samples: int | None = None,
-                   seed: int = 0, cache=None, client=None, blend_path: str | None = None):
+                   seed: int = 0, cache=None, client=None, blend_path: str | None = None,
+                   direct: str = "cycles"):
     """Generator: bake ``T`` of ``obj`` for every direction; returns a TransportBakeResult.
+
+    Without bounces ``T`` is visibility x cosine, which shadow rays give exactly: ``direct``
+    "auto" or "rays" (:func:`..base.direct_rays.bake_rays`) casts a ray per vertex corner and
+    direction through the ray engine and Cycles bakes only :data:`..base.direct_rays.
+    DIRECT_CHECKS` of the directions, the report's check (``direct.vs_cycles``); "cycles", or
+    bounces, bakes every direction with Cycles.
 
     With a chunk ``cache`` (:func:`vertex_chunk_cache`) every finished chunk of
     :data:`CHUNK_DIRECTIONS` directions is kept and a rerun reuses it (bit for bit); with a Dask
@@ -141,6 +151,15 @@ def bake_transport(scene, obj, directions, bounces: int = 0, samples: int | None
     start = time.perf_counter()
     S = len(dirs)
     T = np.empty((n_vertices, S), dtype=np.float32)
+    if bounces == 0 and direct != "cycles":
+        from ..base.direct_rays import bake_rays
+
+        choice, rays = bake_rays(scene, [(obj.name, n_vertices)], "POINT", direct)
+        if rays is not None:
+            return (yield from _bake_by_rays(scene, obj, dirs, rays, choice, T, seed, start))
+    elif direct == "rays":
+        raise BakeInputError("--direct rays bakes visibility x cosine only: with --bounces the "
+                             "indirect light needs Cycles (use --direct auto or cycles)")
     chunks = [range(a, min(a + CHUNK_DIRECTIONS, S)) for a in range(0, S, CHUNK_DIRECTIONS)]
     kept = [cache.get(f"vertex_{c.start:05d}") if cache else None for c in chunks]
     kept = [k if k is None or k.shape == (n_vertices, len(c)) else None
@@ -184,7 +203,37 @@ def bake_transport(scene, obj, directions, bounces: int = 0, samples: int | None
                       else {})}
         if distributed is not None:
             figures["distributed"] = distributed
-    return TransportBakeResult(T, dirs, cycles, time.perf_counter() - start, calls, figures)
+    return TransportBakeResult(T, dirs, cycles, time.perf_counter() - start, calls, figures,
+                               {"engine": "cycles", "why": "asked for (--direct cycles)"
+                                if direct == "cycles" else
+                                "the bounces need Cycles" if bounces else choice["why"]})
+
+
+def _bake_by_rays(scene, obj, dirs, rays, choice: dict, T, seed: int, start: float):
+    """Generator: ``T`` (V, S) by ``rays`` (:class:`..base.direct_rays.ReceiverRays`), then
+    Cycles' bake of the checked directions; returns the TransportBakeResult."""
+    from ..base.direct_rays import check_indices, direct_agreement
+
+    S = len(dirs)
+    for a in range(0, S, CHUNK_DIRECTIONS):
+        b = min(a + CHUNK_DIRECTIONS, S)
+        for s in range(a, b):
+            T[:, s] = rays.direct(dirs[s])
+        yield Progress(b, S + DIRECT_CHECKS_STEPS, f"direct by rays, directions {a + 1}-{b}/{S}")
+    ray_seconds = time.perf_counter() - start
+    checks = check_indices(S)
+    with EnvironmentBake(scene, obj, None, 1, 0, (8, 16), mode="irradiance", seed=seed,
+                         world_sampling="none") as session:
+        cycles_rows = []
+        for i, s in enumerate(checks):
+            cycles_rows.append(np.pi * session.bake_sun(dirs[s], 1.0, 0.0)[:, 0])
+            yield Progress(S + i + 1, S + DIRECT_CHECKS_STEPS,
+                           f"Cycles' check of the rays, direction {s + 1}")
+        cycles, calls = session.bake_seconds, session.bake_calls
+    choice.update(checked_directions=len(checks), rays=int(rays.engine.rays),
+                  ray_seconds=round(ray_seconds, 3),
+                  vs_cycles=direct_agreement(np.stack(cycles_rows), T[:, checks].T))
+    return TransportBakeResult(T, dirs, cycles, time.perf_counter() - start, calls, None, choice)
 
 
 def bake_environment_truth(scene, obj, environment, bounces: int, samples: int,
@@ -220,6 +269,14 @@ class TransportSettings:
     bounces: int = setting(0, lo=0, hi=64,
                            help="Diffuse bounces of the per-vertex bake (0 = visibility x cosine, "
                                 "exact at 1 sample)")
+    direct: str = setting("auto", label="Direct By", choices=(
+        ("auto", "Auto", "without bounces, shadow rays where they reproduce the scene (no "
+                         "instanced, see-through or displaced shadow casters), else Cycles; "
+                         "the report says which and why"),
+        ("rays", "Rays", "shadow rays per vertex and direction (Embree); refuse a scene rays "
+                         "cannot reproduce, or bounces"),
+        ("cycles", "Cycles", "a Cycles vertex bake per direction: the reference path")),
+        help="How the per-vertex transport is baked")
     samples: int | None = setting(None, lo=1, panel=False,
                                   help="Cycles samples per vertex (default 1 without bounces: "
                                        "exact for a hard Sun; 64 with bounces)")
@@ -238,6 +295,8 @@ class TransportSettings:
             ds = parse_direction_spec(self.directions)
         except ValueError as exc:
             raise BakeInputError(str(exc)) from None
+        if self.direct not in ("auto", "rays", "cycles"):
+            raise BakeInputError(f"direct must be auto, rays or cycles, got {self.direct!r}")
         if self.bounces < 0 or self.bounces > 64:
             raise BakeInputError(f"bounces must be in 0..64, got {self.bounces}")
         if (self.energy is None) == (self.coeffs is None):
@@ -348,6 +407,7 @@ def write_transport(result: TransportBakeResult, model, fit_seconds: float, obj,
             "relative_rms_error": model.info["relative_rms_error"]} if clustered else
            {"captured_energy": model.captured_energy, "selection": model.selection}),
         "device": cycles_device.current().report(),
+        "direct": result.direct, "bake_calls": result.bake_calls,
         "timings": {"cycles_bake_seconds": round(result.cycles_seconds, 4),
                     "total_bake_seconds": round(result.total_seconds, 4),
                     "fit_seconds": round(fit_seconds, 4),
@@ -429,7 +489,7 @@ def transport_job(scene, obj, settings: TransportSettings, out_dir: str, *,
                                 settings.samples, settings.seed, out_dir) if resume else None)
     result = yield from bake_transport(scene, obj, direction_set.directions, settings.bounces,
                                        settings.samples, settings.seed, cache, client,
-                                       blend_path)
+                                       blend_path, settings.direct)
     yield Progress(0, 1, "fitting")
     model, fit_seconds = fit(result, obj, direction_set, settings)
     figures = {}

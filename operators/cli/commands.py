@@ -215,14 +215,17 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("bake-transport", help="bake per-vertex light transport and fit "
                        "eigentransport (Nowrouzezahrai 2008)",
-                       description="One Cycles vertex bake per sample direction under a hard "
-                                   "Sun (T = visibility x cosine, plus interreflection with "
-                                   "--bounces), then PCA to d eigentransports. Writes an .npz "
+                       description="T = visibility x cosine per vertex and sample direction "
+                                   "of a hard Sun: by shadow rays (Cycles checks 8 directions), "
+                                   "or with --bounces (interreflection) or --direct cycles one "
+                                   "Cycles vertex bake per direction; then PCA to d "
+                                   "eigentransports. Writes an .npz "
                                    "sidecar and a JSON report; the .blend gets the bake record "
                                    "and a per-vertex preview.")
     _add_transport_source_args(p)
     from ..bakes.transport_bake import TransportSettings
 
+    add_setting_options(p, TransportSettings, ("direct",), defaults=True)
     add_setting_options(p, TransportSettings, ("samples",))
     add_setting_options(p.add_mutually_exclusive_group(), TransportSettings,
                         ("energy", "coeffs"))     # default None: the verb's 0.99 when neither
@@ -674,7 +677,7 @@ def _cmd_bake_transport(args) -> int:
     settings = transport_bake.TransportSettings(
         directions=args.directions, bounces=args.bounces, samples=args.samples,
         energy=args.energy if args.coeffs is None else None, coeffs=args.coeffs,
-        clusters=args.clusters)
+        clusters=args.clusters, direct=args.direct)
     if settings.energy is None and settings.coeffs is None:
         settings.energy = 0.99
     path, out_dir = check_bake_inputs(args, settings)

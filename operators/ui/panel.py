@@ -215,6 +215,8 @@ class VIEW3D_PT_relight_vertex(_RelightSubPanel, bpy.types.Panel):
         col = self.layout.column(align=True)
         col.prop(props, "vertex_directions")
         col.prop(props, "vertex_bounces")
+        if props.vertex_bounces == 0:
+            col.prop(props, "vertex_direct")
         col.prop(props, "vertex_energy")
         _run_on(self.layout, props)
         self.layout.operator("relight.bake_transport", icon="RENDER_STILL")

@@ -241,7 +241,7 @@ TRANSPORT_PROPS = {"model": "transport_model", "viewport": "transport_viewport",
                    "direct": "transport_direct",
                    "tol": "transport_tol", "components": "transport_components"}
 #: Panel property of each declared per-vertex bake setting (the Vertex Transport box).
-VERTEX_FIELDS = ("directions", "bounces", "energy")
+VERTEX_FIELDS = ("directions", "bounces", "direct", "energy")
 VERTEX_PROPS = {f: "vertex_" + f for f in VERTEX_FIELDS}
 #: Panel property of each declared material-bake setting (the panel's Material Edits box).
 MATERIAL_FIELDS = ("bounces", "direct", "bounce_bake", "rays", "samples", "anchor_samples",
