@@ -55,6 +55,7 @@ class ShadingPoints:
     cutoff: np.ndarray
     bump: str = "conty"            # Cycles' bump terminator term: "conty" (4.5+) or "chiang"
     correction: np.ndarray = None  # (P,) bool: the material's bump map correction (conty)
+    epsilon: float = EPSILON       # the origin's push off the plane (see EPSILON)
 
     @property
     def size(self) -> int:
@@ -71,7 +72,7 @@ class ShadingPoints:
         """float32 copies for the per-direction ray set-up (made once, then cached)."""
         c = getattr(self, "_compact", None)
         if c is None:
-            eps = EPSILON * np.maximum(1.0, np.abs(self.P).max(axis=1))
+            eps = self.epsilon * np.maximum(1.0, np.abs(self.P).max(axis=1))
             P = self.P.astype(np.float32)
             push = (eps[:, None] * self.Ng).astype(np.float32)
             lift = self.lift.astype(np.float32)

@@ -84,12 +84,14 @@ def analysis_job(scene, obj, direction_set, out_dir: str, bounces: int = 0,
         if T.shape != (len(obj.data.vertices), direction_set.directions.shape[0]):
             T, path, why = None, None, f"the samples file holds {T.shape}, not this mesh's"
     if T is None:
+        # as the vertex bake makes it (rays where they reproduce the scene): a reused bake
+        # and a fresh one are the same transport
         result = yield from bake_transport(scene, obj, direction_set.directions, bounces,
-                                           samples, seed)
+                                           samples, seed, direct="auto")
         T = result.transport
         bake = {"bake_seconds": round(result.total_seconds, 3),
                 "cycles_seconds": round(result.cycles_seconds, 3)}
-        source = {"kind": "baked", "why": why}
+        source = {"kind": "baked", "why": why, "direct": result.direct["engine"]}
     else:
         bake = {"bake_seconds": 0.0, "cycles_seconds": 0.0}
         source = {"kind": "reused", "file": path, "why": why}

@@ -766,8 +766,7 @@ def bake_materials(scene, objects, settings: MaterialBakeSettings, cache=None, c
         t = time.perf_counter()
         for a in range(0, d0.size, CHUNK_DIRECTIONS):
             b = min(a + CHUNK_DIRECTIONS, d0.size)
-            for s in range(a, b):
-                direct[s] = receiver_rays.direct(d0.directions[s])
+            direct[a:b] = receiver_rays.bake_rows(d0.directions[a:b])
             done += b - a
             yield Progress(done, total, f"direct by rays, directions {a + 1}-{b}/{d0.size}")
         seconds["direct"] = time.perf_counter() - t

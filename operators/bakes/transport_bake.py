@@ -217,8 +217,7 @@ def _bake_by_rays(scene, obj, dirs, rays, choice: dict, T, seed: int, start: flo
     S = len(dirs)
     for a in range(0, S, CHUNK_DIRECTIONS):
         b = min(a + CHUNK_DIRECTIONS, S)
-        for s in range(a, b):
-            T[:, s] = rays.direct(dirs[s])
+        T[:, a:b] = rays.bake_rows(dirs[a:b]).T
         yield Progress(b, S + DIRECT_CHECKS_STEPS, f"direct by rays, directions {a + 1}-{b}/{S}")
     ray_seconds = time.perf_counter() - start
     checks = check_indices(S)

@@ -135,6 +135,43 @@ def _mesh_arrays(obj, depsgraph, receiver: bool = True):
         ev.to_mesh_clear()
 
 
+def _vertex_bake_points(obj, depsgraph):
+    """Cycles' vertex-bake shading points of ``obj``'s evaluated mesh
+    (:func:`...lt_addon.rays.vertex_points.vertex_bake_points`): (ShadingPoints, their corners
+    (P,), the vertex of every corner (C,))."""
+    from ...lt_addon.rays.vertex_points import vertex_bake_points
+
+    ev = obj.evaluated_get(depsgraph)
+    mesh = ev.to_mesh()
+    try:
+        M = np.array(obj.matrix_world, np.float64)
+        co = np.empty(len(mesh.vertices) * 3)
+        mesh.vertices.foreach_get("co", co)
+        co = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
+        mesh.calc_loop_triangles()
+        T = len(mesh.loop_triangles)
+        tri, loops = np.empty(T * 3, np.int64), np.empty(T * 3, np.int64)
+        poly = np.empty(T, np.int64)
+        mesh.loop_triangles.foreach_get("vertices", tri)
+        mesh.loop_triangles.foreach_get("loops", loops)
+        mesh.loop_triangles.foreach_get("polygon_index", poly)
+        smooth = np.empty(len(mesh.polygons), bool)
+        mesh.polygons.foreach_get("use_smooth", smooth)
+        cn = np.empty(len(mesh.loops) * 3)
+        mesh.corner_normals.foreach_get("vector", cn)
+        cn = cn.reshape(-1, 3) @ np.linalg.pinv(M[:3, :3])   # (M^-T n), as row vectors
+        cn /= np.maximum(np.linalg.norm(cn, axis=1, keepdims=True), 1e-30)
+        corner_v = np.empty(len(mesh.loops), np.int64)
+        mesh.loops.foreach_get("vertex_index", corner_v)
+    finally:
+        ev.to_mesh_clear()
+    points, corner = vertex_bake_points(
+        co, tri.reshape(-1, 3), loops.reshape(-1, 3), cn, smooth[poly],
+        cutoff=float(getattr(obj, "shadow_terminator_geometry_offset", 0.1)),
+        mirrored=np.linalg.det(M[:3, :3]) < 0)
+    return points, corner, corner_v
+
+
 def _ranks(total):
     """0, 1, .., n-1 for each run length n of ``total`` (a face's corner offsets)."""
     ends = np.cumsum(total)
@@ -172,6 +209,8 @@ class ReceiverRays:
         # the triangles in this order: a hit's triangle is a row of them (bounce_rays)
         self.engine, self.engine_name = ray_engine(np.concatenate(verts), np.concatenate(tris))
         self.domain = domain
+        self.objects = [(name, int(count)) for name, count in objects]
+        self._bake = None   # Cycles' vertex-bake points (prepare_bake)
         self.cast = 0   # origins the last direct() cast rays from
         points, normals, inward, groups, nexts, faces, starts, corners = [], [], [], [], [], [], 0, 0
         n_faces = 0
@@ -203,15 +242,21 @@ class ReceiverRays:
         _, origin_of = np.unique(key, axis=0, return_inverse=True)
         self._origin_of = origin_of.reshape(-1)
         n_orig = int(self._origin_of.max()) + 1 if len(self._origin_of) else 0
+        # towards the faces' centres along the surface: in the tangent plane of the corner's
+        # normal (a curved mesh's face centres lie below its vertices; that part pointed the
+        # origin back into the surface: a 12 x 8 smooth ball's pole and equator shadowed
+        # themselves at 33 of 1,290 values, where Cycles lights them)
         towards = np.concatenate(inward)
+        towards -= np.sum(towards * self.normals, axis=1, keepdims=True) * self.normals
         towards /= np.maximum(np.linalg.norm(towards, axis=1, keepdims=True), 1e-30)
-        mean_t = np.zeros((n_orig, 3))
-        np.add.at(mean_t, self._origin_of, towards)
-        norm_t = np.linalg.norm(mean_t, axis=1, keepdims=True)
-        mean_t = np.where(norm_t > 1e-6, mean_t / np.maximum(norm_t, 1e-30), 0.0)
         base, normal = np.zeros((n_orig, 3)), np.zeros((n_orig, 3))
         base[self._origin_of] = self.points
         normal[self._origin_of] = self.normals
+        mean_t = np.zeros((n_orig, 3))
+        np.add.at(mean_t, self._origin_of, towards)
+        mean_t -= np.sum(mean_t * normal, axis=1, keepdims=True) * normal
+        norm_t = np.linalg.norm(mean_t, axis=1, keepdims=True)
+        mean_t = np.where(norm_t > 1e-6, mean_t / np.maximum(norm_t, 1e-30), 0.0)
         self._origins = base + RAY_OFFSET * (normal + mean_t)
         self.origin_normals = normal   # (origins, 3) unit: the normal each origin stands on
         # each corner's own origin, inside its face (for ties, see the module docstring), and
@@ -222,6 +267,38 @@ class ReceiverRays:
         self._face = np.concatenate(faces) if faces else np.zeros(0, np.int64)
         self._faces = n_faces
         self.ties = 0   # corners the last direct() cast again at a shadow edge
+
+    def prepare_bake(self) -> None:
+        """Read Cycles' vertex-bake shading points of the receivers (each face corner inside
+        its first triangle, :mod:`...lt_addon.rays.vertex_points`) for :meth:`bake_rows`: call
+        it with the depsgraph evaluated as the bake evaluates it (the render's geometry)."""
+        import bpy
+
+        from ...lt_addon.rays.shading import ShadingPoints
+
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        parts, groups, start = [], [], 0
+        for name, count in self.objects:
+            points, corner, corner_v = _vertex_bake_points(bpy.data.objects[name], depsgraph)
+            parts.append(points)
+            groups.append((corner_v[corner] if self.domain == "POINT" else corner) + start)
+            start += count
+        fields = ("P", "Ng", "N", "Ns", "lift", "cutoff", "correction")
+        points = ShadingPoints(*(np.concatenate([getattr(p, f) for p in parts])
+                                 for f in fields[:6]), parts[0].bump,
+                               np.concatenate([p.correction for p in parts]), parts[0].epsilon)
+        self._bake = (points, np.concatenate(groups))
+
+    def bake_rows(self, directions) -> np.ndarray:
+        """What Cycles' 1-spp vertex bake of a hard sun gives per receiver (S, count) float32,
+        visibility x cosine per unit normal irradiance, for unit ``directions`` (S, 3): from
+        the points :meth:`prepare_bake` read, all directions in batched engine calls."""
+        from ...lt_addon.rays.vertex_points import vertex_rows
+
+        if self._bake is None:
+            self.prepare_bake()
+        points, group = self._bake
+        return vertex_rows(self.engine, points, group, self.count, directions)
 
     @property
     def origin_of(self) -> np.ndarray:
@@ -374,23 +451,13 @@ def direct_agreement(cycles: np.ndarray, rays: np.ndarray) -> dict:
             "values_apart": round(float(off.mean()) if off.size else 0.0, 6)}
 
 
-def _has_smooth_faces(obj) -> bool:
-    mesh = getattr(obj, "data", None)
-    if mesh is None or not hasattr(mesh, "polygons") or not len(mesh.polygons):
-        return False
-    flags = np.empty(len(mesh.polygons), bool)
-    mesh.polygons.foreach_get("use_smooth", flags)
-    return bool(flags.any())
-
-
 def bake_rays(scene, receivers, domain: str, mode: str):
     """``(choice, rays)`` for a per-vertex bake's direct term: how it is made, ``{"engine":
     "rays" | "cycles", "why": ...}`` (with "library" for rays), and the :class:`ReceiverRays`
     of ``receivers`` ((name, count) in stacking order) read with the render's geometry (None
     with Cycles). ``mode`` (:data:`DIRECT_BAKES`) "rays" on a scene rays cannot reproduce --
     instanced, see-through or displaced shadow casters, hair, volumes, modifiers that change a
-    receiver's vertices in the render, smooth-shaded receivers -- raises BakeInputError with
-    the reasons."""
+    receiver's vertices in the render -- raises BakeInputError with the reasons."""
     from ...lt_addon.rays import engine
     from . import ray_scene
     from .cycles_bake import BakeInputError
@@ -411,15 +478,10 @@ def bake_rays(scene, receivers, domain: str, mode: str):
             if inst:   # the receivers' rays read each caster object once, not its instances
                 why.append(f"instanced shadow casters ({', '.join(inst[:3])}"
                            f"{', ...' if len(inst) > 3 else ''})")
-            smooth = [n for n, _ in receivers if _has_smooth_faces(bpy.data.objects[n])]
-            if smooth:   # measured: a 12 x 8 smooth ball on a floor, 15 suns at 5-80 degrees
-                why.append(f"smooth-shaded receivers ({', '.join(smooth[:3])}"
-                           f"{', ...' if len(smooth) > 3 else ''}: Cycles shades a vertex of "
-                           "a smooth low-poly mesh by terminator rules these rays do not "
-                           "follow; 2.6% of a ball's values differ, 0.5% flat-shaded)")
             if not why:
                 try:
                     rays = ReceiverRays(scene, receivers, domain)
+                    rays.prepare_bake()      # the render's geometry, as the bake reads it
                 except ValueError as exc:   # a modifier changes the receivers' vertices
                     why.append(str(exc))
     if why:

@@ -163,13 +163,15 @@ def test_the_flamenco_job_type_emits_chunk_commands_that_bake_the_same_bits(tmp_
 
 
 def test_vertex_transport_bakes_distribute_and_resume_bit_for_bit(tmp_path):
-    """`bake-transport --workers 2` gives the one-process samples bit for bit; an in-process
-    bake cancelled after its first chunk keeps it, and the rerun reuses it (same T)."""
+    """`bake-transport --direct cycles --workers 2` gives the one-process samples bit for bit;
+    an in-process bake cancelled after its first chunk keeps it, and the rerun reuses it (same
+    T). (By rays, the default, the bake takes no Cycles call per direction to distribute.)"""
     import json
 
     blend = tmp_path / "s.blend"
     make_scene("statue", blend)
-    args = ["bake-transport", blend, "--object", "Statue", "--directions", "cube:6"]
+    args = ["bake-transport", blend, "--object", "Statue", "--directions", "cube:6",
+            "--direct", "cycles"]
     assert relight(*args, "--no-resume", "--out", tmp_path / "ref").returncode == 0
     r = relight(*args, "--workers", "2", "--out", tmp_path / "dist")
     assert r.returncode == 0, r.stderr[-2000:]
@@ -187,7 +189,7 @@ def test_vertex_transport_bakes_distribute_and_resume_bit_for_bit(tmp_path):
 
     bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False)
     obj, scene = bpy.data.objects["Statue"], bpy.context.scene
-    s = tb.TransportSettings(directions="cube:6")
+    s = tb.TransportSettings(directions="cube:6", direct="cycles")
     out = tmp_path / "resume"
     gen = tb.transport_job(scene, obj, s, str(out), preview=False)
     for _ in range(20):                       # directions 1..20: chunk 0 finished

@@ -528,12 +528,14 @@ def test_vertex_preview_follows_the_world_mapping_rotation_like_cycles(fresh_sce
 @pytest.mark.parametrize("smooth", [False, True])
 def test_rays_bake_the_transport_cycles_bakes_direction_by_direction(fresh_scene, smooth):
     """Without bounces T is visibility x cosine, and the default (``direct="auto"``) casts it
-    by rays: a flat-shaded low-poly ball on a floor under a plate, whose shadows cross
-    vertices at elevations 5-80 degrees, equals Cycles' own 1-spp vertex bake of every
-    direction (``direct="cycles"``) on >= 99 % of the values to 1e-4 (measured: 6 of the
-    1,290 off, vertices a shadow edge passes exactly); the report's check is Cycles' bake of 8
-    of them. The same ball smooth-shaded differs at 2.6 % of its values (Cycles' terminator
-    rules at a vertex), so auto leaves it to Cycles and says why."""
+    by rays: a low-poly ball (flat, then smooth: Cycles' terminator rules at each vertex) on a
+    floor under a plate, whose shadows cross vertices at elevations 5-80 degrees, equals
+    Cycles' own 1-spp vertex bake of every direction (``direct="cycles"``) to 1e-4 but for at
+    most 2 of the 1,290 values (measured: 0, smooth and flat); the report's check is Cycles'
+    bake of 8 of them. The rays start where Cycles shades a vertex bake, 1e-4 inside each
+    corner's first triangle (lt_addon/rays/vertex_points.py): from the vertices themselves,
+    with the preview's origins, 33 (smooth) and 6 (flat) values differed, and 10 % of the
+    statue's."""
     import bmesh
 
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
@@ -554,16 +556,11 @@ def test_rays_bake_the_transport_cycles_bakes_direction_by_direction(fresh_scene
     mesh_object("Plate", plate.reshape(-1, 3), grid_faces(2, 2), fresh_scene.collection)
     dirs = np.array([direction_from_az_el(az, el) for el in (5, 10, 20, 45, 80)
                      for az in (20, 140, 260)])
-    auto = run(tb.bake_transport(fresh_scene, obj, dirs, direct="auto"))
+    rays = run(tb.bake_transport(fresh_scene, obj, dirs, direct="auto"))
     cycles = run(tb.bake_transport(fresh_scene, obj, dirs, direct="cycles"))
     assert cycles.direct["engine"] == "cycles" and cycles.bake_calls == len(dirs)
     assert (cycles.transport > 0).mean() > 0.3 and (cycles.transport == 0).mean() > 0.3
-    if smooth:
-        assert auto.direct["engine"] == "cycles" and "smooth-shaded receivers (Ball" in \
-            auto.direct["why"]
-        np.testing.assert_array_equal(auto.transport, cycles.transport)
-        return
-    assert auto.direct["engine"] == "rays" and auto.bake_calls == 8
-    off = np.abs(auto.transport - cycles.transport) > 1e-4
-    assert off.mean() <= 0.01, (off.sum(), np.argwhere(off))
-    assert auto.direct["vs_cycles"]["values_apart"] <= 0.01
+    assert rays.direct["engine"] == "rays" and rays.bake_calls == 8
+    off = np.abs(rays.transport - cycles.transport) > 1e-4
+    assert off.sum() <= 2, (off.sum(), np.argwhere(off))
+    assert rays.direct["vs_cycles"]["values_apart"] <= 2 / 86 / 8
