@@ -154,7 +154,8 @@ def bake_transport(scene, obj, directions, bounces: int = 0, samples: int | None
     if bounces == 0 and direct != "cycles":
         from ..base.direct_rays import bake_rays
 
-        choice, rays = bake_rays(scene, [(obj.name, n_vertices)], "POINT", direct)
+        choice, rays = bake_rays(scene, [(obj.name, n_vertices)], "POINT", direct,
+                                 instances=True)
         if rays is not None:
             return (yield from _bake_by_rays(scene, obj, dirs, rays, choice, T, seed, start))
     elif direct == "rays":
@@ -229,7 +230,8 @@ def _bake_by_rays(scene, obj, dirs, rays, choice: dict, T, seed: int, start: flo
             yield Progress(S + i + 1, S + DIRECT_CHECKS_STEPS,
                            f"Cycles' check of the rays, direction {s + 1}")
         cycles, calls = session.bake_seconds, session.bake_calls
-    choice.update(checked_directions=len(checks), rays=int(rays.engine.rays),
+    cast = (rays.bake_engine or rays.engine).rays
+    choice.update(checked_directions=len(checks), rays=int(cast),
                   ray_seconds=round(ray_seconds, 3),
                   vs_cycles=direct_agreement(np.stack(cycles_rows), T[:, checks].T))
     return TransportBakeResult(T, dirs, cycles, time.perf_counter() - start, calls, None, choice)

@@ -211,6 +211,7 @@ class ReceiverRays:
         self.domain = domain
         self.objects = [(name, int(count)) for name, count in objects]
         self._bake = None   # Cycles' vertex-bake points (prepare_bake)
+        self.bake_engine = None   # what bake_rows casts against (None: self.engine)
         self.cast = 0   # origins the last direct() cast rays from
         points, normals, inward, groups, nexts, faces, starts, corners = [], [], [], [], [], [], 0, 0
         n_faces = 0
@@ -298,7 +299,8 @@ class ReceiverRays:
         if self._bake is None:
             self.prepare_bake()
         points, group = self._bake
-        return vertex_rows(self.engine, points, group, self.count, directions)
+        return vertex_rows(self.bake_engine or self.engine, points, group, self.count,
+                           directions)
 
     @property
     def origin_of(self) -> np.ndarray:
@@ -451,13 +453,17 @@ def direct_agreement(cycles: np.ndarray, rays: np.ndarray) -> dict:
             "values_apart": round(float(off.mean()) if off.size else 0.0, 6)}
 
 
-def bake_rays(scene, receivers, domain: str, mode: str):
+def bake_rays(scene, receivers, domain: str, mode: str, instances: bool = False):
     """``(choice, rays)`` for a per-vertex bake's direct term: how it is made, ``{"engine":
     "rays" | "cycles", "why": ...}`` (with "library" for rays), and the :class:`ReceiverRays`
     of ``receivers`` ((name, count) in stacking order) read with the render's geometry (None
-    with Cycles). ``mode`` (:data:`DIRECT_BAKES`) "rays" on a scene rays cannot reproduce --
-    instanced, see-through or displaced shadow casters, hair, volumes, modifiers that change a
-    receiver's vertices in the render -- raises BakeInputError with the reasons."""
+    with Cycles). With ``instances`` its :meth:`ReceiverRays.bake_rows` cast against every
+    shadow caster of the render, instances included (the texture bake's
+    :func:`.ray_scene.casters`); without, an instanced caster is left to Cycles (the material
+    bake: its gathered bounces read each object once). ``mode`` (:data:`DIRECT_BAKES`) "rays"
+    on a scene rays cannot reproduce -- see-through or displaced shadow casters, hair,
+    volumes, modifiers that change a receiver's vertices in the render -- raises
+    BakeInputError with the reasons."""
     from ...lt_addon.rays import engine
     from . import ray_scene
     from .cycles_bake import BakeInputError
@@ -475,13 +481,16 @@ def bake_rays(scene, receivers, domain: str, mode: str):
             inst = sorted({i.object.original.name for i in depsgraph.object_instances
                            if i.is_instance and i.object.type in ray_scene.CASTER_TYPES
                            and getattr(i.object.original, "visible_shadow", True)})
-            if inst:   # the receivers' rays read each caster object once, not its instances
+            if inst and not instances:   # ReceiverRays reads each caster object once
                 why.append(f"instanced shadow casters ({', '.join(inst[:3])}"
                            f"{', ...' if len(inst) > 3 else ''})")
             if not why:
                 try:
                     rays = ReceiverRays(scene, receivers, domain)
                     rays.prepare_bake()      # the render's geometry, as the bake reads it
+                    if instances:
+                        V, T, _ = ray_scene.casters(depsgraph)
+                        rays.bake_engine = engine.Occluder(V, T)
                 except ValueError as exc:   # a modifier changes the receivers' vertices
                     why.append(str(exc))
     if why:

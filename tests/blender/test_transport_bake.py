@@ -525,14 +525,16 @@ def test_vertex_preview_follows_the_world_mapping_rotation_like_cycles(fresh_sce
         relightable_textures.unregister()
 
 
-@pytest.mark.parametrize("smooth", [False, True])
-def test_rays_bake_the_transport_cycles_bakes_direction_by_direction(fresh_scene, smooth):
+@pytest.mark.parametrize("smooth, instanced", [(False, False), (True, False), (True, True)])
+def test_rays_bake_the_transport_cycles_bakes_direction_by_direction(fresh_scene, smooth,
+                                                                     instanced):
     """Without bounces T is visibility x cosine, and the default (``direct="auto"``) casts it
     by rays: a low-poly ball (flat, then smooth: Cycles' terminator rules at each vertex) on a
     floor under a plate, whose shadows cross vertices at elevations 5-80 degrees, equals
     Cycles' own 1-spp vertex bake of every direction (``direct="cycles"``) to 1e-4 but for at
     most 2 of the 1,290 values (measured: 0, smooth and flat); the report's check is Cycles'
-    bake of 8 of them. The rays start where Cycles shades a vertex bake, 1e-4 inside each
+    bake of 8 of them; with the plate a collection instance, as without. The rays start where
+    Cycles shades a vertex bake, 1e-4 inside each
     corner's first triangle (lt_addon/rays/vertex_points.py): from the vertices themselves,
     with the preview's origins, 33 (smooth) and 6 (flat) values differed, and 10 % of the
     statue's."""
@@ -553,7 +555,17 @@ def test_rays_bake_the_transport_cycles_bakes_direction_by_direction(fresh_scene
     mesh_object("Floor", floor.reshape(-1, 3), grid_faces(13, 13), fresh_scene.collection)
     p = np.linspace(-0.4, 0.4, 2) + 0.9
     plate = np.stack([*np.meshgrid(p, p, indexing="ij"), np.full((2, 2), 1.2)], -1)
-    mesh_object("Plate", plate.reshape(-1, 3), grid_faces(2, 2), fresh_scene.collection)
+    if instanced:   # the plate only as an instance of a collection the scene does not hold
+        import bpy
+
+        plates = bpy.data.collections.new("Plates")
+        mesh_object("Plate", plate.reshape(-1, 3), grid_faces(2, 2), plates)
+        inst = bpy.data.objects.new("PlateInstance", None)
+        inst.instance_type, inst.instance_collection = "COLLECTION", plates
+        fresh_scene.collection.objects.link(inst)
+        bpy.context.view_layer.update()
+    else:
+        mesh_object("Plate", plate.reshape(-1, 3), grid_faces(2, 2), fresh_scene.collection)
     dirs = np.array([direction_from_az_el(az, el) for el in (5, 10, 20, 45, 80)
                      for az in (20, 140, 260)])
     rays = run(tb.bake_transport(fresh_scene, obj, dirs, direct="auto"))
