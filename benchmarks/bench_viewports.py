@@ -41,6 +41,7 @@ def main(argv=None) -> int:
     from bench_transport_textures import ANGLES, build, combined, single_bake_seconds, truths
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
     from relightable_textures.lt_addon.transport import block_viewport as bv
+    from relightable_textures.lt_addon.transport.bundle import HORIZON_LOOKUPS
     from relightable_textures.lt_addon.transport import sparse_tables as sp
     from relightable_textures.lt_addon.transport import texture as tt
     from relightable_textures.operators.bakes import texture_transport as tx
@@ -135,6 +136,26 @@ def main(argv=None) -> int:
             add(f"blocks {v0.block}^2 x {v0.k} comps ({v0.method})", relight_blocks,
                 v0.gpu_bytes(s.table_size)["total_bytes"] / 2**20, bv.lookups_per_pixel(v0.k))
 
+            maps = [b.found_horizon for b in result.objects]
+            if all(m is not None for m in maps):
+                def relight_horizon(oi, d, a):
+                    return maps[oi].direct(d, a)[..., None] * result.objects[oi].albedo
+
+                hmib = maps[0].gpu_bytes() / 2**20
+                add(f"horizons, {maps[0].azimuths} azimuths at {maps[0].horizon_resolution}^2"
+                    + (" (over the budget)" if hmib > args.gpu_budget else ""),
+                    relight_horizon, hmib, HORIZON_LOOKUPS)
+
+            def relight_shown(oi, d, a):   # what --viewport auto shows, per object
+                b = result.objects[oi]
+                if b.horizon is not None:
+                    return relight_horizon(oi, d, a)
+                if b.view is not None:
+                    return relight_blocks(oi, d, a)
+                if b.viewport.get("shows") in ("transport", "T"):
+                    return relight_sparse(oi, d, a)
+                return relight_pca(oi, d, a)
+
             def relight_pca(oi, d, a):
                 idx, w = tt.table_weights(stores[oi].directions, d, s.table_size, a)
                 return result.objects[oi].model.relight(idx, w)[..., None] * \
@@ -145,6 +166,8 @@ def main(argv=None) -> int:
             add(f"global PCA {k} comps" + (" (over the budget)"
                                            if pca_mib > args.gpu_budget else ""),
                 relight_pca, pca_mib, 2 * -(-k // 3) + 1)
+            shown = ", ".join(f"{b.name} {b.viewport.get('shows')}" for b in result.objects)
+            add(f"**what auto shows** ({shown})", relight_shown, float("nan"), "-")
             for st in stores:
                 st.abort()
     return 0

@@ -263,6 +263,7 @@ class ObjectBake:
     view: object = None                     # the BlockViewport when the viewport shows blocks
     viewport: dict = None                   # what the viewport shows and why (the report's)
     horizon: object = None                  # the HorizonMap when the viewport shows horizons
+    found_horizon: object = None            # the HorizonMap the bake found, shown or not
 
 
 @dataclass

@@ -291,7 +291,6 @@ def receivers(objects, regions: list, domain: str = "POINT"
 #: How the diffuse bounce terms are made: gathered by rays once for every light direction
 #: (:mod:`.bounce_rays`, the default) or a Cycles bake per direction, region and gate.
 BOUNCE_BAKES = ("rays", "cycles")
-
 #: The one-bounce directions when none are given. Cycles bakes: measured with the smoothing,
 #: 128 at 16 spp erred 9% less than 64 at 32 spp for less bake time. Gathered by rays: the
 #: blend between directions is made exact at a sun by the receiver transfer

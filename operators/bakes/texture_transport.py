@@ -436,7 +436,8 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
                                           horizon_check=check)
         results.append(ObjectBake(o.name, readers[i].path, albedos[i], indirects[i], model,
                                   time.perf_counter() - t0, readers[i], view, viewport,
-                                  horizon=hm if viewport.get("shows") == "horizon" else None))
+                                  horizon=hm if viewport.get("shows") == "horizon" else None,
+                                  found_horizon=hm))
         peak = max(peak, _rss_mb())
     seconds["fit"] = sum(r.fit_seconds for r in results)
     seconds["bake_total"] = time.perf_counter() - t_start

@@ -35,8 +35,6 @@ from ..base.jobs import Progress
 
 #: Directions per chunk: the unit a cancelled bake resumes from and a Dask worker bakes.
 CHUNK_DIRECTIONS = 16
-#: Progress steps of Cycles' check when rays bake T (its directions: at most this many).
-DIRECT_CHECKS_STEPS = 8
 
 
 @dataclass
@@ -216,19 +214,19 @@ def _bake_by_rays(scene, obj, dirs, rays, choice: dict, T, seed: int, start: flo
     from ..base.direct_rays import check_indices, direct_agreement
 
     S = len(dirs)
+    checks = check_indices(S)
+    total = S + len(checks)
     for a in range(0, S, CHUNK_DIRECTIONS):
         b = min(a + CHUNK_DIRECTIONS, S)
         T[:, a:b] = rays.bake_rows(dirs[a:b]).T
-        yield Progress(b, S + DIRECT_CHECKS_STEPS, f"direct by rays, directions {a + 1}-{b}/{S}")
+        yield Progress(b, total, f"direct by rays, directions {a + 1}-{b}/{S}")
     ray_seconds = time.perf_counter() - start
-    checks = check_indices(S)
     with EnvironmentBake(scene, obj, None, 1, 0, (8, 16), mode="irradiance", seed=seed,
                          world_sampling="none") as session:
         cycles_rows = []
         for i, s in enumerate(checks):
             cycles_rows.append(np.pi * session.bake_sun(dirs[s], 1.0, 0.0)[:, 0])
-            yield Progress(S + i + 1, S + DIRECT_CHECKS_STEPS,
-                           f"Cycles' check of the rays, direction {s + 1}")
+            yield Progress(S + i + 1, total, f"Cycles' check of the rays, direction {s + 1}")
         cycles, calls = session.bake_seconds, session.bake_calls
     cast = (rays.bake_engine or rays.engine).rays
     choice.update(checked_directions=len(checks), rays=int(cast),
@@ -272,8 +270,8 @@ class TransportSettings:
                                 "exact at 1 sample)")
     direct: str = setting("auto", label="Direct By", choices=(
         ("auto", "Auto", "without bounces, shadow rays where they reproduce the scene (no "
-                         "instanced, see-through or displaced shadow casters), else Cycles; "
-                         "the report says which and why"),
+                         "see-through or displaced shadow casters, hair or volumes), else "
+                         "Cycles; the report says which and why"),
         ("rays", "Rays", "shadow rays per vertex and direction (Embree); refuse a scene rays "
                          "cannot reproduce, or bounces"),
         ("cycles", "Cycles", "a Cycles vertex bake per direction: the reference path")),
