@@ -85,7 +85,8 @@ def test_analysis_cost_agrees_with_a_one_cluster_cpca_bake(analyzed, tmp_path):
                 "--rebake", "--out", tmp_path / "rebaked")
     assert r.returncode == 0, r.stderr[-2000:]
     rebaked = json.loads((tmp_path / "rebaked" / "Statue_analysis.json").read_text())
-    assert rebaked["transport_source"] == {"kind": "baked", "why": "--rebake"}
+    # ... by rays, as the vertex bake does
+    assert rebaked["transport_source"] == {"kind": "baked", "why": "--rebake", "direct": "rays"}
 
 
 @pytest.mark.parametrize("args, message", [
