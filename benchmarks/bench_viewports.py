@@ -122,11 +122,10 @@ def main(argv=None) -> int:
                 add(f"T through sparse tables ({side}^2 8-bit atlas"
                     + (", over the budget)" if nbytes > args.gpu_budget << 20 else ")"),
                     relight_sparse, nbytes / 2**20, 4 * (2 * taps // 3 + taps) + 1)
-            views = [b.view for b in result.objects]
-            if views[0] is None:
-                views = [bv.fit(st, **{k: v for k, v in bv.choose(
-                    st, s.table_size, args.gpu_budget << 20).items()
-                    if k in ("block", "k")}) for st in stores]
+            # the block viewport of every object, fitted here where auto showed another
+            views = [b.view if b.view is not None else bv.fit(st, **{k: v for k, v in bv.choose(
+                st, s.table_size, args.gpu_budget << 20).items() if k in ("block", "k")})
+                for b, st in zip(result.objects, stores)]
 
             def relight_blocks(oi, d, a):   # through the viewport's tables (bilinear)
                 idx, w = tt.table_weights(stores[oi].directions, d, s.table_size, a)
