@@ -43,6 +43,15 @@ def default_threads() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+def _rays(origins, directions):
+    """float32 (M, 3) origins and (M, 3) or (1, 3) directions, contiguous, as Embree takes them."""
+    o = np.ascontiguousarray(origins, dtype=np.float32).reshape(-1, 3)
+    d = np.ascontiguousarray(directions, dtype=np.float32).reshape(-1, 3)
+    if len(d) not in (1, len(o)):
+        raise ValueError(f"{len(d)} directions for {len(o)} origins")
+    return o, d
+
+
 class Occluder:
     """A BVH over world-space triangles that answers "is this ray blocked?" (:meth:`occluded`)
     and "what does it meet first?" (:meth:`nearest`).
@@ -93,10 +102,7 @@ class Occluder:
         -------
         ndarray, shape (M,), bool
         """
-        o = np.ascontiguousarray(origins, dtype=np.float32).reshape(-1, 3)
-        d = np.ascontiguousarray(directions, dtype=np.float32).reshape(-1, 3)
-        if len(d) not in (1, len(o)):
-            raise ValueError(f"{len(d)} directions for {len(o)} origins")
+        o, d = _rays(origins, directions)
         out = np.zeros(len(o), bool)
         if not len(o) or not self.n_triangles:
             return out
@@ -122,10 +128,7 @@ class Occluder:
         distance : ndarray, shape (M,), float64
             Distance along the ray to the hit (metres for unit directions); 0 on a miss.
         """
-        o = np.ascontiguousarray(origins, dtype=np.float32).reshape(-1, 3)
-        d = np.ascontiguousarray(directions, dtype=np.float32).reshape(-1, 3)
-        if len(d) not in (1, len(o)):
-            raise ValueError(f"{len(d)} directions for {len(o)} origins")
+        o, d = _rays(origins, directions)
         tri = np.full(len(o), -1, np.int64)
         dist = np.zeros(len(o))
         if not len(o) or not self.n_triangles:

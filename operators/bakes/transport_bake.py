@@ -294,8 +294,11 @@ class TransportSettings:
             ds = parse_direction_spec(self.directions)
         except ValueError as exc:
             raise BakeInputError(str(exc)) from None
-        if self.direct not in ("auto", "rays", "cycles"):
-            raise BakeInputError(f"direct must be auto, rays or cycles, got {self.direct!r}")
+        from ..base.direct_rays import DIRECT_BAKES
+
+        if self.direct not in DIRECT_BAKES:
+            raise BakeInputError(f"direct must be one of {', '.join(DIRECT_BAKES)}, got "
+                                 f"{self.direct!r}")
         if self.bounces < 0 or self.bounces > 64:
             raise BakeInputError(f"bounces must be in 0..64, got {self.bounces}")
         if (self.energy is None) == (self.coeffs is None):
