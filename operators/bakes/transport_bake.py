@@ -155,6 +155,10 @@ def bake_transport(scene, obj, directions, bounces: int = 0, samples: int | None
         choice, rays = bake_rays(scene, [(obj.name, n_vertices)], "POINT", direct,
                                  instances=True)
         if rays is not None:
+            if client is not None:   # nothing is left to share out: say so, do not ignore it
+                choice["workers_unused"] = (
+                    "the Dask workers were not used: shadow rays baked every direction in this "
+                    "process (use --direct cycles to bake the directions on the workers)")
             return (yield from _bake_by_rays(scene, obj, dirs, rays, choice, T, seed, start))
     elif direct == "rays":
         raise BakeInputError("--direct rays bakes visibility x cosine only: with --bounces the "

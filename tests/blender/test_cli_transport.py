@@ -32,6 +32,13 @@ def test_bake_transport_writes_sidecar_report_and_record(baked):
     assert t["wall_total"] >= t["total_bake_seconds"] + t["fit_seconds"]
     assert f"{t['wall_total']:.2f} s in all" in r.stdout
     assert rep["timings"]["directions_per_second"] > 0
+    # by rays (the default), and the line says how close Cycles' check came
+    d = rep["direct"]
+    assert d["engine"] == "rays" and d["checked_directions"] == 8
+    assert (f"direct light by rays ({d['library']}, {d['ray_seconds']:.2f} s); Cycles' bake of "
+            f"8 of its directions: relative difference {d['vs_cycles']['rel_difference']:.2g}"
+            in r.stdout)
+    assert "workers_unused" not in d and "warning" not in r.stderr
     assert rep["bytes"]["paper_runtime"] == 4 * 12 * (507 + 1)
     per_d = rep["ground_truth"]["per_d"]
     assert per_d[-1]["d"] == 12 and per_d[-1]["rel_rms_error"] < per_d[0]["rel_rms_error"]

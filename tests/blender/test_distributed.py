@@ -202,6 +202,25 @@ def test_vertex_transport_bakes_distribute_and_resume_bit_for_bit(tmp_path):
     assert ".relight_cache" not in os.listdir(out)
 
 
+def test_a_vertex_bake_by_rays_says_it_left_the_workers_idle(tmp_path):
+    """By rays the whole per-vertex bake runs in this process: `--workers` is not silently
+    ignored -- one warning line, the report says so, and T is the one-process rays' T."""
+    import json
+
+    blend = tmp_path / "s.blend"
+    make_scene("statue", blend)
+    args = ["bake-transport", blend, "--object", "Statue", "--directions", "cube:2"]
+    assert relight(*args, "--out", tmp_path / "ref").returncode == 0
+    r = relight(*args, "--workers", "1", "--out", tmp_path / "dist")
+    assert r.returncode == 0, r.stderr[-2000:]
+    rep = json.loads((tmp_path / "dist" / "Statue_transport.json").read_text())
+    assert rep["direct"]["engine"] == "rays"
+    assert "Dask workers were not used" in rep["direct"]["workers_unused"]
+    assert r.stderr.count("relight: warning: the Dask workers were not used") == 1
+    ref = np.load(tmp_path / "ref" / "Statue_transport_samples.npy")
+    assert _same_bits(np.load(tmp_path / "dist" / "Statue_transport_samples.npy"), ref)
+
+
 @pytest.mark.parametrize("bounce_bake", ["rays", "cycles"])
 def test_material_bakes_distribute_and_resume_bit_for_bit(tmp_path, bounce_bake):
     """`bake-materials --workers 2` gives the one-process tensors bit for bit (every term is a
