@@ -86,7 +86,8 @@ test-core: $(STAMP)
 
 ## bench: the sweeps that print figures (not part of `make test`; ~1 h on 2 cores): the
 ##   transport bake vs the lobes presets on bumps, noise and statue+ground at demo size
-##   (out/bench/transport_textures.*), relight bench --quick on all four scenes (JSON, CSV,
+##   (out/bench/transport_textures.*), the indirect term gathered by rays against the steerable
+##   one (~10 min), relight bench --quick on all four scenes (JSON, CSV,
 ##   Pareto charts in out/bench), the CPCA comparison on statue and room (out/bench/cpca.*),
 ##   distributed and resumed bakes (1, 2, 4 local workers), the horizon-model experiment and
 ##   the material edits' transfer tensors on the demo room (~25 min of it, ~20 more for the
@@ -99,6 +100,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_transport_textures.py --out $(OUT)/bench
 	$(PY) benchmarks/bench_ray_direct.py --out $(OUT)/bench
 	$(PY) benchmarks/bench_sun_path.py --out $(OUT)/bench
+	$(PY) benchmarks/bench_indirect_gather.py --path --out $(OUT)/bench
 	$(VENV)/bin/relight bench --quick --out $(OUT)/bench
 	$(PY) benchmarks/bench_cpca.py --scenes statue,room --out $(OUT)/bench
 	$(PY) benchmarks/bench_distributed.py

@@ -1,0 +1,276 @@
+"""Benchmark: the transport bake's indirect light gathered by rays over T's directions, against
+today's order-3 steerable indirect bake (issue 32: "measure whether a ray-gathered bounce over
+the same directions beats the steerable indirect bake in error and in time").
+
+One transport bake (the balanced preset, ``--model none``: T, the albedo and the steerable
+indirect term) of a demo scene; then, from the same T, the gathered indirect
+(:mod:`relightable_textures.lt_addon.transport.gathered_indirect`): ``--rays`` cosine-weighted
+rays from each texel centre of the ``--indirect-resolution`` grid, one and ``--bounces`` bounces,
+and its PCA over directions (``--components``). Every variant adds the same direct light from T
+(offline, no viewport) and is compared with Cycles' radiance bakes of Sun lamps with the scene's
+2 bounces (``--truth-samples``) at the bench's four held-out lights (2 and 10 degree Suns) and,
+with ``--path``, at six points of an animated Sun's path at 5-10 degrees of elevation (2 degree
+Sun; the bake then adds directions along the path, as ``bench_sun_path.py``). Prints relative
+RMSE (lights combined as ``sqrt(mean(rel^2))``), the indirect term's own error (against the
+truths minus Cycles' 0-bounce bakes of the same Suns) and the seconds of each stage.
+
+Usage: python benchmarks/bench_indirect_gather.py [--scene bumps] [--resolution 256]
+       [--rays 64] [--path] [--out out/bench]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+
+def receiver_geometry(objects, depsgraph):
+    """World triangles of the receivers (each with its UVs) and of every other shadow caster:
+    (V (N, 3), T (M, 3), receiver (M,) index or -1, uv (M, 3, 2))."""
+    from relightable_textures.operators.base import ray_scene
+    from relightable_textures.operators.base.meshes import uv_corners
+
+    names = [o.name for o in objects]
+    V, T, recv, UV, offset = [], [], [], [], 0
+    for i, o in enumerate(objects):
+        ev = o.evaluated_get(depsgraph)
+        mesh = ev.to_mesh()
+        try:
+            M = np.array(o.matrix_world, np.float64)
+            co = np.empty(len(mesh.vertices) * 3)
+            mesh.vertices.foreach_get("co", co)
+            co = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
+            mesh.calc_loop_triangles()
+            n = len(mesh.loop_triangles)
+            tri = np.empty(n * 3, np.int64)
+            mesh.loop_triangles.foreach_get("vertices", tri)
+            loops = np.empty(n * 3, np.int64)
+            mesh.loop_triangles.foreach_get("loops", loops)
+            uv = uv_corners(mesh)[loops].reshape(-1, 3, 2)
+        finally:
+            ev.to_mesh_clear()
+        V.append(co)
+        T.append(tri.reshape(-1, 3) + offset)
+        recv.append(np.full(n, i))
+        UV.append(uv)
+        offset += len(co)
+    for inst in depsgraph.object_instances:
+        ob = inst.object
+        if ob.type not in ray_scene.CASTER_TYPES or ob.original.name in names:
+            continue
+        if not getattr(ob.original, "visible_shadow", True):
+            continue
+        got = ray_scene._to_world_mesh(ob, inst.matrix_world)
+        if got is None:
+            continue
+        co, tri = got
+        V.append(co)
+        T.append(tri + offset)
+        recv.append(np.full(len(tri), -1))
+        UV.append(np.zeros((len(tri), 3, 2)))
+        offset += len(co)
+    return np.concatenate(V), np.concatenate(T), np.concatenate(recv), np.concatenate(UV)
+
+
+def gathered_indirect(scene, result, RI: int, rays: int, bounces: int, seed: int = 1):
+    """The gathered indirect term of a transport bake's objects: ({object index: (3, S, P_o)
+    I}, {object index: (TexelSamples, albedo at its gather points (P_o, 3))}, figures)."""
+    import bpy
+
+    from relightable_textures.lt_addon.rays import engine
+    from relightable_textures.lt_addon.transport import gathered_indirect as gi
+    from relightable_textures.operators.base import ray_scene
+
+    objs = [bpy.data.objects[b.name] for b in result.objects]
+    R = result.objects[0].store.resolution
+    t0 = time.perf_counter()
+    with ray_scene.RenderGeometry(scene) as dg:
+        V, T, recv, UV = receiver_geometry(objs, dg)
+        grids = [ray_scene.receiver_points(o, dg, RI, None) for o in objs]
+    occ = engine.Occluder(V, T)
+    gmaps, origins, normals, geo, offs = [], [], [], [], [0]
+    for smp, pts in grids:
+        m = np.full(RI * RI, -1, np.int64)
+        m[smp.texel] = offs[-1] + np.arange(smp.size)
+        gmaps.append(m)
+        c = pts.compact()
+        origins.append(c["P_up"])            # the point pushed off its plane (shading.EPSILON)
+        normals.append(pts.Ns)
+        geo.append(pts.Ng)
+        offs.append(offs[-1] + smp.size)
+    t_scene = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    g = gi.gather(occ.nearest, np.concatenate(origins), np.concatenate(normals),
+                  np.concatenate(geo), rays, seed, V, T, recv, UV, R,
+                  [i * R * R for i in range(len(objs))], RI, gmaps)
+    t_rays = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    Tall = np.concatenate([np.asarray(b.store.array, np.float32) for b in result.objects], axis=1)
+    alb = np.concatenate([b.albedo.reshape(-1, 3) for b in result.objects])
+    t_read = time.perf_counter() - t0
+    out, seconds = {}, {}
+    for nb in sorted({1, bounces}):
+        t0 = time.perf_counter()
+        out[nb] = gi.indirect(g, Tall, alb, bounces=nb)
+        seconds[f"bounces_{nb}"] = round(time.perf_counter() - t0, 2)
+    del Tall
+    centre = ((np.arange(RI) + 0.5) * R / RI).astype(np.int64)
+    per = {}
+    for i, (smp, _) in enumerate(grids):
+        a = result.objects[i].albedo[centre][:, centre].reshape(-1, 3)[smp.texel]
+        per[i] = (smp, a, offs[i], offs[i + 1])
+    figures = {"scene_seconds": round(t_scene, 2), "ray_seconds": round(t_rays, 2),
+               "read_T_seconds": round(t_read, 2), **seconds, **g.figures(),
+               "rays": int(occ.rays)}
+    return out, per, figures
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scene", default="bumps")
+    ap.add_argument("--resolution", type=int, default=256)
+    ap.add_argument("--indirect-resolution", type=int, default=128)
+    ap.add_argument("--rays", type=int, default=64)
+    ap.add_argument("--bounces", type=int, default=2)
+    ap.add_argument("--components", type=int, default=16)
+    ap.add_argument("--truth-samples", type=int, default=256)
+    ap.add_argument("--path", action="store_true",
+                    help="also a Sun animated over a day: six lights on its path at 5-10 deg")
+    ap.add_argument("--out", default="out/bench")
+    args = ap.parse_args(argv)
+
+    import bench_transport_textures as btt
+
+    from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
+    from relightable_textures.lt_addon.transport import texture as tt
+    from relightable_textures.lt_addon.transport.bundle import rel_rmse, upsample
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.base.jobs import run
+
+    R, RI = args.resolution, args.indirect_resolution
+    report = {"date": time.strftime("%Y-%m-%d %H:%M"), "scene": args.scene, "resolution": R,
+              "indirect_resolution": RI, "rays": args.rays, "bounces": args.bounces,
+              "truth_samples": args.truth_samples, "cases": []}
+    cases = [("held-out", None)] + ([("sun path", "path")] if args.path else [])
+    for label, kind in cases:
+        scene, objects = btt.build(args.scene, "demo")
+        if kind == "path":
+            sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(
+                os.path.abspath(__file__))), "tests", "blender"))
+            from test_sun_path import _animate_sun
+
+            _animate_sun(scene)
+            lights = []
+            for el in (5.0, 7.5, 10.0):
+                t = math.asin((el + 3) / 53) / math.pi
+                lights += [((80 + 200 * t, el), 2.0), ((80 + 200 * (1 - t), el), 2.0)]
+        else:
+            lights = [(l, a) for a in btt.ANGLES for l in tx.TRUTH_LIGHTS]
+        t0 = time.perf_counter()
+        truth2, truth0 = {}, {}
+        for angle in sorted({a for _, a in lights}):
+            ls = [l for l, a in lights if a == angle]
+            got2 = run(tx.truth_bakes(scene, objects, ls, angle, 2, args.truth_samples, R))
+            got0 = run(tx.truth_bakes(scene, objects, ls, angle, 0, args.truth_samples, R))
+            for l in ls:
+                truth2[(l, angle)], truth0[(l, angle)] = got2[l], got0[l]
+        truth_s = time.perf_counter() - t0
+        single = btt.single_bake_seconds(scene, objects, R)
+        print(f"{label}: truths {truth_s:.1f} s; one 64-spp bake {single:.2f} s", flush=True)
+        folder = tempfile.mkdtemp()
+        s = tx.settings_from_preset("balanced", resolution=R, model="none",
+                                    **({"sun_path": "auto"} if kind == "path" else
+                                       {"sun_path": "off"}))
+        t0 = time.perf_counter()
+        res = run(tx.bake_transport_textures(scene, objects, s, folder, resume=False))
+        bake_s = time.perf_counter() - t0
+        steer = {k: round(v, 2) for k, v in res.seconds.items()
+                 if k in ("indirect_cycles", "indirect_total", "direct_total")}
+        I, per, figs = gathered_indirect(scene, res, RI, args.rays, args.bounces)
+        # PCA over directions of the gathered term (all objects and colours): Gram, eigh
+        t0 = time.perf_counter()
+        full = I[args.bounces]
+        S = full.shape[1]
+        Y = full.transpose(1, 0, 2).reshape(S, -1).astype(np.float64)
+        ev, Vec = np.linalg.eigh(Y @ Y.T)
+        Vk = Vec[:, ::-1][:, :args.components]
+        Uk = Vk.T @ Y
+        figs["pca_seconds"] = round(time.perf_counter() - t0, 2)
+        figs["pca_energy"] = round(float(ev[::-1][:args.components].sum() / ev.sum()), 5)
+        del Y
+        dset = res.objects[0].store.directions
+
+        def gathered_image(oi, d, angle, which):
+            idx, w = tt.sun_weights(dset, d, angle, "linear")
+            smp, a, lo, hi = per[oi]
+            if which == "pca":
+                v = ((w @ Vk[idx]) @ Uk).reshape(3, -1)[:, lo:hi].T
+            else:
+                v = np.einsum("s,csp->pc", w, I[which][:, idx, lo:hi])
+            img = np.zeros((RI * RI, 3), np.float32)
+            img[smp.texel] = v * a
+            return upsample(img.reshape(RI, RI, 3), R)
+
+        variants = ("steerable", "gathered, 1 bounce", f"gathered, {args.bounces} bounces",
+                    f"gathered, {args.bounces} bounces, PCA {args.components}")
+        errs = {v: {} for v in variants}
+        ind_errs = {v: {} for v in variants}
+        for (l, angle) in lights:
+            d = direction_from_az_el(*l)
+            for oi, b in enumerate(res.objects):
+                idx, w = tt.sun_weights(b.store.directions, d, angle, res.settings.kernel)
+                direct = b.store.relight(idx, w)[..., None] * b.albedo
+                t2, t0_ = truth2[(l, angle)][oi], truth0[(l, angle)][oi]
+                imgs = {variants[0]: upsample(b.indirect.relight(np.asarray(d, np.float64)), R),
+                        variants[1]: gathered_image(oi, d, angle, 1),
+                        variants[2]: gathered_image(oi, d, angle, args.bounces),
+                        variants[3]: gathered_image(oi, d, angle, "pca")}
+                for v, img in imgs.items():
+                    errs[v].setdefault(angle, []).append(rel_rmse(direct + img, t2))
+                    ind_errs[v].setdefault(angle, []).append(
+                        float(np.linalg.norm(img - (t2 - t0_)) / np.linalg.norm(t2)))
+        for b in res.objects:
+            b.store.abort()
+        rows = [{"indirect": v, **{f"err_{a:g}deg": round(btt.combined(e), 4)
+                                   for a, e in errs[v].items()},
+                 **{f"indirect_err_{a:g}deg": round(btt.combined(e), 4)
+                    for a, e in ind_errs[v].items()}} for v in variants]
+        case = {"case": label, "lights": [list(l) + [a] for l, a in lights],
+                "directions": int(dset.size), "bake_seconds": round(bake_s, 1),
+                "single_bake_seconds": round(single, 2), "steerable_seconds": steer,
+                "gather": figs, "rows": rows}
+        report["cases"].append(case)
+        print(json.dumps(case), flush=True)
+        del I
+    for case in report["cases"]:
+        angles = sorted({a for *_, a in case["lights"]})
+        print(f"\n{case['case']} ({case['directions']} directions; one 64-spp bake "
+              f"{case['single_bake_seconds']} s; steerable indirect "
+              f"{case['steerable_seconds'].get('indirect_total')} s; gathered: rays "
+              f"{case['gather']['ray_seconds']} s, bounces "
+              f"{case['gather'].get('bounces_1')} / "
+              f"{case['gather'].get(f'bounces_{args.bounces}')} s, PCA "
+              f"{case['gather']['pca_seconds']} s)")
+        print("| indirect | " + " | ".join(f"err {a:g}° | its indirect {a:g}°" for a in angles)
+              + " |")
+        print("|---|" + "---|---|" * len(angles))
+        for r in case["rows"]:
+            print(f"| {r['indirect']} | " + " | ".join(
+                f"{r[f'err_{a:g}deg']:.4f} | {r[f'indirect_err_{a:g}deg']:.4f}" for a in angles)
+                + " |")
+    os.makedirs(args.out, exist_ok=True)
+    with open(os.path.join(args.out, f"indirect_gather_{args.scene}.json"), "w") as fh:
+        json.dump(report, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()

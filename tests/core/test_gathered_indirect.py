@@ -1,0 +1,140 @@
+"""The texture bake's gathered indirect light (lt_addon/transport/gathered_indirect.py) against
+exact answers: a closed box's furnace (every ray meets a lit inner wall, so one bounce is
+albedo x T and two are albedo^2 x T, with no noise), the view factor of a square seen from
+below (analytic), and the hit-to-texel mapping."""
+
+import numpy as np
+import pytest
+
+from relightable_textures.lt_addon.rays import engine
+from relightable_textures.lt_addon.rays.shading import shading_points
+from relightable_textures.lt_addon.rays.texels import texel_samples
+from relightable_textures.lt_addon.transport import gathered_indirect as gi
+
+needs_engine = pytest.mark.skipif(not engine.available()[0], reason="embreex not installed")
+
+
+def _quad(corners, tile):
+    """Two triangles of a quad (4 corners, counter-clockwise seen from its front) with the UV
+    rectangle ``tile`` = (u0, v0, u1, v1)."""
+    u0, v0, u1, v1 = tile
+    uv = np.array([[u0, v0], [u1, v0], [u1, v1], [u0, v1]])
+    return np.asarray(corners, np.float64), [(0, 1, 2), (0, 2, 3)], uv
+
+
+def _mesh(quads):
+    V, T, UV = [], [], []
+    for corners, tris, uv in quads:
+        base = len(V)
+        V.extend(corners)
+        for t in tris:
+            T.append([base + i for i in t])
+            UV.append(uv[list(t)])
+    return np.array(V), np.array(T), np.array(UV)
+
+
+def _box():
+    """The inside of the unit cube: six faces whose fronts look inwards, each on its own tile
+    of a 3 x 2 UV atlas (every texel of every side divisible by 6 covered)."""
+    c = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], float)
+    faces = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    quads = []
+    for i, f in enumerate(faces):
+        u, v = i % 3, i // 3
+        quads.append(_quad(c[list(f[::-1])], (u / 3, v / 2, (u + 1) / 3, (v + 1) / 2)))
+    return _mesh(quads)
+
+
+def _points(V, T, UV, side):
+    smp = texel_samples(UV, side)
+    n = np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    pts = shading_points(V, T, np.repeat(n[:, None], 3, axis=1), np.zeros(len(T), bool),
+                         smp.triangle, smp.bary, cutoff=0.0)
+    return smp, pts
+
+
+def _gather(V, T, UV, receiver, pts, smp, t_side, g_side, rays, seed=1):
+    occ = engine.Occluder(V, T)
+    gmap = np.full(g_side * g_side, -1, np.int64)
+    gmap[smp.texel] = np.arange(smp.size)
+    return gi.gather(occ.nearest, pts.P + 1e-6 * pts.Ng, pts.N, pts.Ng, rays, seed, V, T,
+                     receiver, UV, t_side, [0], g_side, [gmap])
+
+
+@needs_engine
+def test_a_closed_box_is_a_furnace_one_and_two_bounces_exactly():
+    V, T, UV = _box()
+    G_SIDE, T_SIDE = 6, 12
+    smp, pts = _points(V, T, UV, G_SIDE)
+    assert smp.size == G_SIDE * G_SIDE            # every gather texel covered
+    g = _gather(V, T, UV, np.zeros(len(T), np.int64), pts, smp, T_SIDE, G_SIDE, rays=64)
+    # every ray met an inner wall's front side, on a covered texel of both grids
+    assert g.missed == g.other == g.back == 0 and len(g.point) == 64 * smp.size
+    assert (g.target >= 0).all()
+    t = np.array([0.3, 1.0, 0.05])                # three directions' (uniform) direct light
+    Trows = np.repeat(t[:, None], T_SIDE * T_SIDE, axis=1).astype(np.float32)
+    rho = np.array([0.2, 0.5, 0.8])
+    alb = np.tile(rho, (T_SIDE * T_SIDE, 1))
+    one = gi.indirect(g, Trows, alb, bounces=1)
+    two = gi.indirect(g, Trows, alb, bounces=2)
+    assert one.shape == (3, 3, smp.size)
+    want1 = rho[:, None, None] * t[None, :, None]
+    np.testing.assert_allclose(one, np.broadcast_to(want1, one.shape), rtol=1e-5)
+    np.testing.assert_allclose(two, np.broadcast_to(want1 * (1 + rho[:, None, None]),
+                                                    two.shape), rtol=1e-5)
+
+
+def _corner_factor(a, b, c):
+    """View factor from a point to an a x b rectangle parallel to its plane at height c, the
+    point below one corner (the differential-area-to-rectangle formula)."""
+    A, B = a / c, b / c
+    return (A / np.sqrt(1 + A * A) * np.arctan(B / np.sqrt(1 + A * A))
+            + B / np.sqrt(1 + B * B) * np.arctan(A / np.sqrt(1 + B * B))) / (2 * np.pi)
+
+
+@needs_engine
+@pytest.mark.parametrize("ceiling_receives", [True, False])
+def test_a_lit_square_overhead_gives_its_view_factor(ceiling_receives):
+    """A floor point under the centre of a 2 x 2 ceiling 1 above: one bounce is albedo x T x F,
+    F the analytic view factor (0.5541); a ceiling that is not a receiver adds nothing and is
+    counted as another object."""
+    floor = _quad([[-5, -5, 0], [5, -5, 0], [5, 5, 0], [-5, 5, 0]], (0, 0, 0.5, 1))
+    ceiling = _quad([[-1, -1, 1], [-1, 1, 1], [1, 1, 1], [1, -1, 1]], (0.5, 0, 1, 1))
+    V, T, UV = _mesh([floor, ceiling])
+    F = 4 * _corner_factor(1.0, 1.0, 1.0)
+    assert abs(F - 0.5541) < 1e-4
+    K = 4096
+    point = np.array([[0.0, 0.0, 0.0]])
+    up = np.array([[0.0, 0.0, 1.0]])
+    receiver = np.array([0, 0, 0, 0]) if ceiling_receives else np.array([0, 0, -1, -1])
+    occ = engine.Occluder(V, T)
+    g = gi.gather(occ.nearest, point + 1e-6 * up, up, up, K, 3, V, T, receiver, UV, 8, [0], 8,
+                  [np.full(64, -1, np.int64)])
+    rows = np.zeros((1, 64), np.float32)
+    rows[0, np.arange(64) % 8 >= 4] = 0.7          # the ceiling's half of the atlas is lit
+    alb = np.full((64, 3), 0.5)
+    got = gi.indirect(g, rows, alb, bounces=2)[:, 0, 0]
+    # binomial noise of K rays bounds the error; the Fibonacci lattice does better
+    tol = 3 * np.sqrt(F * (1 - F) / K)
+    if ceiling_receives:
+        np.testing.assert_allclose(got, 0.5 * 0.7 * F, atol=0.5 * 0.7 * tol)
+        assert g.other == 0 and abs(len(g.point) / K - F) < tol
+    else:
+        assert np.all(got == 0) and abs(g.other / K - F) < tol and len(g.point) == 0
+    assert g.missed + g.other + g.back + len(g.point) == K
+
+
+def test_hits_read_the_texel_under_their_uv():
+    V = np.array([[0, 0, 0], [2, 0, 0], [0, 2, 0]], float)
+    T = np.array([[0, 1, 2]])
+    uv = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    # the point (0.5, 1.0) of the triangle: barycentrics (0.25, 0.25, 0.5), uv (0.25, 0.5)
+    o = np.array([[0.5, 1.0, 1.0]])
+    d = np.array([[0.0, 0.0, -1.0]])
+    bary = gi.hit_barycentrics(V, T, np.array([0]), o, d, np.array([1.0]))
+    np.testing.assert_allclose(bary, [[0.25, 0.25, 0.5]], atol=1e-12)
+    at = np.einsum("mc,mcj->mj", bary, uv[None])
+    # on a 4 x 4 grid: column 1 (u 0.25..0.5), row 2 (v 0.5..0.75): 2 * 4 + 1
+    assert gi.uv_texel(at, 4)[0] == 9
+    assert gi.uv_texel(np.array([[1.0, 1.0], [-0.1, 0.0]]), 4).tolist() == [15, 0]
