@@ -37,32 +37,16 @@ def receiver_geometry(objects, depsgraph):
     """World triangles of the receivers (each with its UVs) and of every other shadow caster:
     (V (N, 3), T (M, 3), receiver (M,) index or -1, uv (M, 3, 2))."""
     from relightable_textures.operators.base import ray_scene
-    from relightable_textures.operators.base.meshes import uv_corners
 
     names = [o.name for o in objects]
     V, T, recv, UV, offset = [], [], [], [], 0
     for i, o in enumerate(objects):
-        ev = o.evaluated_get(depsgraph)
-        mesh = ev.to_mesh()
-        try:
-            M = np.array(o.matrix_world, np.float64)
-            co = np.empty(len(mesh.vertices) * 3)
-            mesh.vertices.foreach_get("co", co)
-            co = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
-            mesh.calc_loop_triangles()
-            n = len(mesh.loop_triangles)
-            tri = np.empty(n * 3, np.int64)
-            mesh.loop_triangles.foreach_get("vertices", tri)
-            loops = np.empty(n * 3, np.int64)
-            mesh.loop_triangles.foreach_get("loops", loops)
-            uv = uv_corners(mesh)[loops].reshape(-1, 3, 2)
-        finally:
-            ev.to_mesh_clear()
-        V.append(co)
-        T.append(tri.reshape(-1, 3) + offset)
-        recv.append(np.full(n, i))
-        UV.append(uv)
-        offset += len(co)
+        m = ray_scene.mesh_arrays(o, depsgraph)
+        V.append(m.co)
+        T.append(m.tri + offset)
+        recv.append(np.full(len(m.tri), i))
+        UV.append(m.uv[m.loops.ravel()].reshape(-1, 3, 2))
+        offset += len(m.co)
     for inst in depsgraph.object_instances:
         ob = inst.object
         if ob.type not in ray_scene.CASTER_TYPES or ob.original.name in names:
@@ -83,10 +67,12 @@ def receiver_geometry(objects, depsgraph):
 
 def gathered_indirect(scene, result, RI: int, rays: int, bounces: int, seed: int = 1):
     """The gathered indirect term of a transport bake's objects: ({object index: (3, S, P_o)
-    I}, {object index: (TexelSamples, albedo at its gather points (P_o, 3))}, figures)."""
+    I}, {object index: (TexelSamples, albedo at its gather points (P_o, 3), its first and last
+    stacked gather point, its margin operator)}, figures)."""
     import bpy
 
     from relightable_textures.lt_addon.rays import engine
+    from relightable_textures.lt_addon.rays.texels import extend_margin
     from relightable_textures.lt_addon.transport import gathered_indirect as gi
     from relightable_textures.operators.base import ray_scene
 
@@ -127,7 +113,9 @@ def gathered_indirect(scene, result, RI: int, rays: int, bounces: int, seed: int
     per = {}
     for i, (smp, _) in enumerate(grids):
         a = result.objects[i].albedo[centre][:, centre].reshape(-1, 3)[smp.texel]
-        per[i] = (smp, a, offs[i], offs[i + 1])
+        # the bake's Extend margin (4 texels at T's side), as every baked image has it
+        margin = extend_margin(smp.covered(), max(1, -(-4 * RI // R)))
+        per[i] = (smp, a, offs[i], offs[i + 1], margin)
     figures = {"scene_seconds": round(t_scene, 2), "ray_seconds": round(t_rays, 2),
                "read_T_seconds": round(t_read, 2), **seconds, **g.figures(),
                "rays": int(occ.rays)}
@@ -211,13 +199,15 @@ def main(argv=None):
 
         def gathered_image(oi, d, angle, which):
             idx, w = tt.sun_weights(dset, d, angle, "linear")
-            smp, a, lo, hi = per[oi]
+            smp, a, lo, hi, (dst, op) = per[oi]
             if which == "pca":
                 v = ((w @ Vk[idx]) @ Uk).reshape(3, -1)[:, lo:hi].T
             else:
                 v = np.einsum("s,csp->pc", w, I[which][:, idx, lo:hi])
             img = np.zeros((RI * RI, 3), np.float32)
             img[smp.texel] = v * a
+            if dst.size:
+                img[dst] = op @ (v * a)
             return upsample(img.reshape(RI, RI, 3), R)
 
         variants = ("steerable", "gathered, 1 bounce", f"gathered, {args.bounces} bounces",

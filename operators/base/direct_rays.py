@@ -99,40 +99,20 @@ def _mesh_arrays(obj, depsgraph, receiver: bool = True):
     triangles (T, 3), the centre of each corner's face (C, 3) and the next corner round that
     face (C,) of the evaluated mesh of ``obj``; a caster (``receiver=False``) needs only the
     vertices and triangles (the rest None)."""
-    ev = obj.evaluated_get(depsgraph)
-    mesh = ev.to_mesh()
-    try:
-        co = np.empty(len(mesh.vertices) * 3)
-        mesh.vertices.foreach_get("co", co)
-        M = np.array(obj.matrix_world)
-        co = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
-        mesh.calc_loop_triangles()
-        tri = np.empty(len(mesh.loop_triangles) * 3, np.int64)
-        mesh.loop_triangles.foreach_get("vertices", tri)
-        if not receiver:
-            return co, None, None, tri.reshape(-1, 3), None, None, None
-        corner_v = np.empty(len(mesh.loops), np.int64)
-        mesh.loops.foreach_get("vertex_index", corner_v)
-        cn = np.empty(len(mesh.loops) * 3)
-        mesh.corner_normals.foreach_get("vector", cn)
-        normal_matrix = np.linalg.pinv(M[:3, :3]).T   # pinv: a zero scale is not an error
-        cn = cn.reshape(-1, 3) @ normal_matrix.T
-        cn /= np.maximum(np.linalg.norm(cn, axis=1, keepdims=True), 1e-30)
-        F = len(mesh.polygons)
-        centre = np.empty(F * 3)
-        mesh.polygons.foreach_get("center", centre)
-        centre = centre.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
-        start, total = np.empty(F, np.int64), np.empty(F, np.int64)
-        mesh.polygons.foreach_get("loop_start", start)
-        mesh.polygons.foreach_get("loop_total", total)
-        face_of = np.repeat(np.arange(F), total)[np.argsort(np.repeat(start, total)
-                                                             + _ranks(total), kind="stable")]
-        # the next corner round each corner's face: the face's edges as corner pairs
-        first = start[face_of]
-        following = first + (np.arange(len(face_of)) - first + 1) % total[face_of]
-        return co, corner_v, cn, tri.reshape(-1, 3), centre[face_of], following, face_of
-    finally:
-        ev.to_mesh_clear()
+    from .ray_scene import mesh_arrays
+
+    m = mesh_arrays(obj, depsgraph)
+    if not receiver:
+        return m.co, None, None, m.tri, None, None, None
+    start, total = m.loop_start, m.loop_total
+    F = len(start)
+    face_of = np.repeat(np.arange(F), total)[np.argsort(np.repeat(start, total)
+                                                         + _ranks(total), kind="stable")]
+    # the next corner round each corner's face: the face's edges as corner pairs
+    first = start[face_of]
+    following = first + (np.arange(len(face_of)) - first + 1) % total[face_of]
+    return (m.co, m.corner_vertex, m.corner_normals, m.tri, m.face_centre[face_of], following,
+            face_of)
 
 
 def _vertex_bake_points(obj, depsgraph):
@@ -140,36 +120,14 @@ def _vertex_bake_points(obj, depsgraph):
     (:func:`...lt_addon.rays.vertex_points.vertex_bake_points`): (ShadingPoints, their corners
     (P,), the vertex of every corner (C,))."""
     from ...lt_addon.rays.vertex_points import vertex_bake_points
+    from .ray_scene import mesh_arrays
 
-    ev = obj.evaluated_get(depsgraph)
-    mesh = ev.to_mesh()
-    try:
-        M = np.array(obj.matrix_world, np.float64)
-        co = np.empty(len(mesh.vertices) * 3)
-        mesh.vertices.foreach_get("co", co)
-        co = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
-        mesh.calc_loop_triangles()
-        T = len(mesh.loop_triangles)
-        tri, loops = np.empty(T * 3, np.int64), np.empty(T * 3, np.int64)
-        poly = np.empty(T, np.int64)
-        mesh.loop_triangles.foreach_get("vertices", tri)
-        mesh.loop_triangles.foreach_get("loops", loops)
-        mesh.loop_triangles.foreach_get("polygon_index", poly)
-        smooth = np.empty(len(mesh.polygons), bool)
-        mesh.polygons.foreach_get("use_smooth", smooth)
-        cn = np.empty(len(mesh.loops) * 3)
-        mesh.corner_normals.foreach_get("vector", cn)
-        cn = cn.reshape(-1, 3) @ np.linalg.pinv(M[:3, :3])   # (M^-T n), as row vectors
-        cn /= np.maximum(np.linalg.norm(cn, axis=1, keepdims=True), 1e-30)
-        corner_v = np.empty(len(mesh.loops), np.int64)
-        mesh.loops.foreach_get("vertex_index", corner_v)
-    finally:
-        ev.to_mesh_clear()
+    m = mesh_arrays(obj, depsgraph)
     points, corner = vertex_bake_points(
-        co, tri.reshape(-1, 3), loops.reshape(-1, 3), cn, smooth[poly],
+        m.co, m.tri, m.loops, m.corner_normals, m.smooth[m.poly],
         cutoff=float(getattr(obj, "shadow_terminator_geometry_offset", 0.1)),
-        mirrored=np.linalg.det(M[:3, :3]) < 0)
-    return points, corner, corner_v
+        mirrored=m.mirrored)
+    return points, corner, m.corner_vertex
 
 
 def _ranks(total):

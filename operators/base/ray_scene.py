@@ -10,6 +10,8 @@ The core of :mod:`...lt_addon.rays` does the rest.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import bpy
 import numpy as np
 
@@ -67,6 +69,78 @@ class RenderGeometry:
         self._restore.clear()
         bpy.context.evaluated_depsgraph_get().update()
         return False
+
+
+@dataclass
+class MeshArrays:
+    """An evaluated mesh in world space, as the ray bakes read it (:func:`mesh_arrays`).
+
+    co (V, 3) vertices;  tri, loops (T, 3) each loop triangle's vertices and face corners;
+    poly (T,) its face;  smooth, mat_index (F,) per face;  corner_vertex (C,);  corner_normals
+    (C, 3) unit, world ((M^-1)^T n: a zero scale is not an error);  face_centre (F, 3);
+    loop_start, loop_total (F,);  uv (C, 2) the active render UV map (None without one);
+    matrix (4, 4) the object's world matrix.
+    """
+
+    co: np.ndarray
+    tri: np.ndarray
+    loops: np.ndarray
+    poly: np.ndarray
+    smooth: np.ndarray
+    mat_index: np.ndarray
+    corner_vertex: np.ndarray
+    corner_normals: np.ndarray
+    face_centre: np.ndarray
+    loop_start: np.ndarray
+    loop_total: np.ndarray
+    uv: np.ndarray
+    matrix: np.ndarray
+
+    @property
+    def mirrored(self) -> bool:
+        """The transform flips orientation (Cycles flips the geometric normal)."""
+        return bool(np.linalg.det(self.matrix[:3, :3]) < 0)
+
+
+def mesh_arrays(obj, depsgraph) -> MeshArrays:
+    """The evaluated mesh of ``obj`` (its render geometry within :class:`RenderGeometry`) as
+    :class:`MeshArrays`: the one reader of the texture bake's texels, the vertex bake's points,
+    the live preview's rays and the gathered bounces."""
+    ev = obj.evaluated_get(depsgraph)
+    mesh = ev.to_mesh()
+    try:
+        M = np.array(obj.matrix_world, np.float64)
+        co = np.empty(len(mesh.vertices) * 3)
+        mesh.vertices.foreach_get("co", co)
+        co = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
+        mesh.calc_loop_triangles()
+        T = len(mesh.loop_triangles)
+        tri, loops = np.empty(T * 3, np.int64), np.empty(T * 3, np.int64)
+        poly = np.empty(T, np.int64)
+        mesh.loop_triangles.foreach_get("vertices", tri)
+        mesh.loop_triangles.foreach_get("loops", loops)
+        mesh.loop_triangles.foreach_get("polygon_index", poly)
+        F = len(mesh.polygons)
+        smooth, mat_index = np.empty(F, bool), np.empty(F, np.int64)
+        mesh.polygons.foreach_get("use_smooth", smooth)
+        mesh.polygons.foreach_get("material_index", mat_index)
+        centre = np.empty(F * 3)
+        mesh.polygons.foreach_get("center", centre)
+        start, total = np.empty(F, np.int64), np.empty(F, np.int64)
+        mesh.polygons.foreach_get("loop_start", start)
+        mesh.polygons.foreach_get("loop_total", total)
+        corner_v = np.empty(len(mesh.loops), np.int64)
+        mesh.loops.foreach_get("vertex_index", corner_v)
+        cn = np.empty(len(mesh.loops) * 3)
+        mesh.corner_normals.foreach_get("vector", cn)
+        cn = cn.reshape(-1, 3) @ np.linalg.pinv(M[:3, :3])     # (M^-T n), as row vectors
+        cn /= np.maximum(np.linalg.norm(cn, axis=1, keepdims=True), 1e-30)
+        uv = uv_corners(mesh) if len(mesh.uv_layers) else None
+    finally:
+        ev.to_mesh_clear()
+    return MeshArrays(co, tri.reshape(-1, 3), loops.reshape(-1, 3), poly, smooth, mat_index,
+                      corner_v, cn, centre.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3], start,
+                      total, uv, M)
 
 
 def _to_world_mesh(obj_eval, matrix):
@@ -201,33 +275,12 @@ def receiver_points(obj, depsgraph, resolution: int, Ns_image=None):
     mesh in world space, its active render UV map, corner normals, smooth flags and the object's
     shadow-terminator geometry offset. ``Ns_image``: (R, R, 3) world closure normals (a Cycles
     normal bake) for normal-mapped materials, or None."""
-    ev = obj.evaluated_get(depsgraph)
-    mesh = ev.to_mesh()
-    try:
-        M = np.array(obj.matrix_world, np.float64)
-        co = np.empty(len(mesh.vertices) * 3)
-        mesh.vertices.foreach_get("co", co)
-        co = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
-        mesh.calc_loop_triangles()
-        T = len(mesh.loop_triangles)
-        tri = np.empty(T * 3, np.int64)
-        mesh.loop_triangles.foreach_get("vertices", tri)
-        loops = np.empty(T * 3, np.int64)
-        mesh.loop_triangles.foreach_get("loops", loops)
-        poly = np.empty(T, np.int64)
-        mesh.loop_triangles.foreach_get("polygon_index", poly)
-        mat_index = np.empty(len(mesh.polygons), np.int64)
-        mesh.polygons.foreach_get("material_index", mat_index)
-        smooth_face = np.empty(len(mesh.polygons), bool)
-        mesh.polygons.foreach_get("use_smooth", smooth_face)
-        cn = np.empty(len(mesh.loops) * 3)
-        mesh.corner_normals.foreach_get("vector", cn)
-        normal_matrix = np.linalg.pinv(M[:3, :3]).T
-        cn = cn.reshape(-1, 3) @ normal_matrix.T
-        cn /= np.maximum(np.linalg.norm(cn, axis=1, keepdims=True), 1e-30)
-        uv = uv_corners(mesh)[loops].reshape(-1, 3, 2)
-    finally:
-        ev.to_mesh_clear()
+    m = mesh_arrays(obj, depsgraph)
+    if m.uv is None:
+        raise ValueError(f"{obj.name} has no UV map")
+    tri, loops, poly, mat_index = m.tri, m.loops.ravel(), m.poly, m.mat_index
+    cn = m.corner_normals
+    uv = m.uv[loops].reshape(-1, 3, 2)
     # Cycles' bump terminator term: Conty Estevez et al.'s, its smoothing gated per material by
     # the bump map correction, in 4.5.15 and 5.x; Chiang et al.'s in 4.2.13 (both measured
     # against Cycles' bake in tests/blender/test_ray_direct.py; 4.3 and 4.4 not checked)
@@ -240,10 +293,10 @@ def receiver_points(obj, depsgraph, resolution: int, Ns_image=None):
     Ns = None if Ns_image is None else np.asarray(Ns_image, np.float64).reshape(-1, 3)[samples.texel]
     if Ns is not None:   # texels the normal bake left empty keep the smooth normal
         Ns = np.where(np.linalg.norm(Ns, axis=1, keepdims=True) > 0.5, Ns, np.nan)
-    points = shading_points(co, tri.reshape(-1, 3), cn[loops].reshape(-1, 3, 3),
-                            smooth_face[poly], samples.triangle, samples.bary,
+    points = shading_points(m.co, tri, cn[loops].reshape(-1, 3, 3),
+                            m.smooth[poly], samples.triangle, samples.bary,
                             cutoff=float(getattr(obj, "shadow_terminator_geometry_offset", 0.1)),
-                            mirrored=np.linalg.det(M[:3, :3]) < 0, Ns=None, bump=bump,
+                            mirrored=m.mirrored, Ns=None, bump=bump,
                             correction=correction)
     if Ns is not None:
         bad = np.isnan(Ns).any(axis=1)

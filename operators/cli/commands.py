@@ -29,7 +29,7 @@ from .common import (CliError, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, add_device_opt
                      add_distribution_options, add_setting_options, bake_device, can_create_in, check_bake_inputs,
                     check_input_blend, check_output_dir, check_output_path, open_object,
                      open_objects, parse_az_el, parse_point_light, parse_rgb, print_chunks,
-                     refuse_existing, run_bake, run_job)
+                     print_direct, refuse_existing, run_bake, run_job)
 
 
 
@@ -714,17 +714,7 @@ def _cmd_bake_transport(args) -> int:
              f"{report['relative_rms_error']:.4f}; " if "cpca" in report else
              f"d = {report['d']} (captured energy {report['captured_energy']:.4f}); ")
           + f"{report['bytes']['sidecar_file']} bytes -> {report['sidecar']}")
-    direct = report.get("direct") or {}
-    if direct.get("engine") == "rays":
-        check = direct["vs_cycles"]
-        print(f"  direct light by rays ({direct['library']}, {direct['ray_seconds']:.2f} s); "
-              f"Cycles' bake of {direct['checked_directions']} of its directions: relative "
-              f"difference {check['rel_difference']:.2g}, {100 * check['values_apart']:.2g}% "
-              "of values more than 1e-4 apart")
-    elif direct:
-        print(f"  direct light by Cycles: {direct['why']}")
-    if direct.get("workers_unused"):
-        print(f"relight: warning: {direct['workers_unused']}", file=sys.stderr)
+    print_direct(report.get("direct"))
     for row in report.get("ground_truth", {}).get("per_d", []):
         what = "CPCA model" if "cpca" in report else f"d = {row['d']:4d}"
         print(f"  {what}: rel. RMS error vs Cycles {row['rel_rms_error']:.4f}")

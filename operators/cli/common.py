@@ -255,6 +255,24 @@ def refuse_existing(out_dir: str, obj_name: str, suffixes, force: bool, what: st
             raise CliError(f"{what} of {obj_name} exists in {out_dir} (use --force to replace it)")
 
 
+def print_direct(direct: dict) -> None:
+    """How a per-vertex bake made its direct light (the report's ``direct``): by rays, with how
+    close Cycles' bake of the checked directions came, or by Cycles and why; and a warning when
+    the Dask workers it was given sat idle."""
+    direct = direct or {}
+    if direct.get("engine") == "rays":
+        check = direct["vs_cycles"]
+        took = f", {direct['ray_seconds']:.2f} s" if "ray_seconds" in direct else ""
+        print(f"  direct light by rays ({direct['library']}{took}); Cycles' bake of "
+              f"{direct['checked_directions']} of its directions: relative difference "
+              f"{check['rel_difference']:.2g}, {100 * check['values_apart']:.2g}% of values "
+              "more than 1e-4 apart")
+    elif direct:
+        print(f"  direct light by Cycles: {direct['why']}")
+    if direct.get("workers_unused"):
+        print(f"relight: warning: {direct['workers_unused']}", file=sys.stderr)
+
+
 def print_chunks(rep: dict) -> None:
     """A chunked bake's resume and distribution figures, when there are any."""
     for dev, n in (rep.get("other_device_chunks") or {}).items():

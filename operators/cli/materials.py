@@ -133,7 +133,7 @@ def _cmd_bake_materials(args) -> int:
     import bpy
 
     from ..bakes import material_bake, material_edit
-    from .common import (CliError, check_bake_inputs, open_objects, print_chunks,
+    from .common import (CliError, check_bake_inputs, open_objects, print_chunks, print_direct,
                          refuse_existing, run_bake)
 
     settings = material_bake.MaterialBakeSettings(
@@ -175,15 +175,7 @@ def _cmd_bake_materials(args) -> int:
           f"more to open and save the .blend); {rep['bytes']['tensors'] / 2**20:.2f} MiB; "
           f"light shares direct {shares['direct']:.3f}, one bounce {shares['one_bounce']:.3f}"
           f", two bounces {shares['two_bounce']:.3f} -> {rep['tensors']}")
-    direct = rep.get("direct") or {}
-    if direct.get("engine") == "rays":
-        check = direct["vs_cycles"]
-        print(f"  direct light by rays ({direct['library']}); Cycles' bake of "
-              f"{direct['checked_directions']} of its directions: relative difference "
-              f"{check['rel_difference']:.2g}, {100 * check['values_apart']:.2g}% of values "
-              f"more than 1e-4 apart")
-    elif direct:
-        print(f"  direct light by Cycles: {direct['why']}")
+    print_direct(rep.get("direct"))
     truth = rep.get("ground_truth")
     if truth:
         print(f"  vs Cycles ({truth['samples']} spp, {truth['light']}): rel. error "
