@@ -119,7 +119,19 @@ def gathered_indirect(scene, result, RI: int, rays: int, bounces: int, seed: int
     figures = {"scene_seconds": round(t_scene, 2), "ray_seconds": round(t_rays, 2),
                "read_T_seconds": round(t_read, 2), **seconds, **g.figures(),
                "rays": int(occ.rays)}
-    return out, per, figures
+    return out, per, figures, (g, alb)
+
+
+class StackedRows:
+    """The objects' T stores side by side, read by chunks of directions (half floats on disk):
+    what :func:`~relightable_textures.lt_addon.transport.gathered_indirect.indirect_pca` reads."""
+
+    def __init__(self, stores):
+        self.stores = stores
+        self.shape = (stores[0].array.shape[0], sum(st.array.shape[1] for st in stores))
+
+    def __getitem__(self, rows):
+        return np.concatenate([np.asarray(st.array[rows]) for st in self.stores], axis=1)
 
 
 def main(argv=None):
@@ -183,7 +195,16 @@ def main(argv=None):
         bake_s = time.perf_counter() - t0
         steer = {k: round(v, 2) for k, v in res.seconds.items()
                  if k in ("indirect_cycles", "indirect_total", "direct_total")}
-        I, per, figs = gathered_indirect(scene, res, RI, args.rays, args.bounces)
+        I, per, figs, (g, alb) = gathered_indirect(scene, res, RI, args.rays, args.bounces)
+        # what a bake would do: the same PCA by a randomised SVD, I never formed, T read from
+        # the stores in chunks (the gather's rays are the same, timed above)
+        from relightable_textures.lt_addon.transport import gathered_indirect as gi
+
+        t0 = time.perf_counter()
+        Vr, Ur, _ = gi.indirect_pca(g, StackedRows([b.store for b in res.objects]), alb,
+                                    bounces=args.bounces, components=args.components)
+        figs["randomised_pca_seconds"] = round(time.perf_counter() - t0, 2)
+        Ur = Ur.reshape(len(Ur), -1)
         # PCA over directions of the gathered term (all objects and colours): Gram, eigh
         t0 = time.perf_counter()
         full = I[args.bounces]
@@ -202,6 +223,8 @@ def main(argv=None):
             smp, a, lo, hi, (dst, op) = per[oi]
             if which == "pca":
                 v = ((w @ Vk[idx]) @ Uk).reshape(3, -1)[:, lo:hi].T
+            elif which == "rpca":
+                v = ((w @ Vr[idx]) @ Ur).reshape(3, -1)[:, lo:hi].T
             else:
                 v = np.einsum("s,csp->pc", w, I[which][:, idx, lo:hi])
             img = np.zeros((RI * RI, 3), np.float32)
@@ -211,7 +234,8 @@ def main(argv=None):
             return upsample(img.reshape(RI, RI, 3), R)
 
         variants = ("steerable", "gathered, 1 bounce", f"gathered, {args.bounces} bounces",
-                    f"gathered, {args.bounces} bounces, PCA {args.components}")
+                    f"gathered, {args.bounces} bounces, PCA {args.components}",
+                    f"gathered, {args.bounces} bounces, randomised PCA {args.components}")
         errs = {v: {} for v in variants}
         ind_errs = {v: {} for v in variants}
         for (l, angle) in lights:
@@ -223,7 +247,8 @@ def main(argv=None):
                 imgs = {variants[0]: upsample(b.indirect.relight(np.asarray(d, np.float64)), R),
                         variants[1]: gathered_image(oi, d, angle, 1),
                         variants[2]: gathered_image(oi, d, angle, args.bounces),
-                        variants[3]: gathered_image(oi, d, angle, "pca")}
+                        variants[3]: gathered_image(oi, d, angle, "pca"),
+                        variants[4]: gathered_image(oi, d, angle, "rpca")}
                 for v, img in imgs.items():
                     errs[v].setdefault(angle, []).append(rel_rmse(direct + img, t2))
                     ind_errs[v].setdefault(angle, []).append(
@@ -249,7 +274,8 @@ def main(argv=None):
               f"{case['gather']['ray_seconds']} s, bounces "
               f"{case['gather'].get('bounces_1')} / "
               f"{case['gather'].get(f'bounces_{args.bounces}')} s, PCA "
-              f"{case['gather']['pca_seconds']} s)")
+              f"{case['gather']['pca_seconds']} s; randomised PCA, I not formed: "
+              f"{case['gather']['randomised_pca_seconds']} s)")
         print("| indirect | " + " | ".join(f"err {a:g}° | its indirect {a:g}°" for a in angles)
               + " |")
         print("|---|" + "---|---|" * len(angles))

@@ -183,3 +183,89 @@ def indirect(g: Gather, T, albedo_t, bounces: int = 2) -> np.ndarray:
                 total += level
         out[c] = total.T
     return out
+
+
+def _bounce_matrices(g: Gather, albedo_t, n_t: int, c: int):
+    """The sparse one-bounce gather (P, n_t) and grid-to-grid bounce (P, P) of colour ``c``."""
+    from scipy import sparse
+
+    a = np.asarray(albedo_t, np.float32)[:, c]
+    ok = g.target >= 0
+    G1 = sparse.csr_matrix((a[g.texel] / g.rays, (g.point, g.texel)), shape=(g.points, n_t))
+    G2 = sparse.csr_matrix((a[g.texel[ok]] / g.rays, (g.point[ok], g.target[ok])),
+                           shape=(g.points, g.points))
+    return G1, G2
+
+
+def indirect_pca(g: Gather, T, albedo_t, bounces: int = 2, components: int = 16,
+                 oversample: int = 8, power: int = 1, seed: int = 0, chunk: int = 256,
+                 measure: bool = False):
+    """The top ``components`` of ``I`` over directions (the rows of :func:`indirect`, colours
+    and gather points as columns) without forming ``I``: a randomised SVD (Halko et al. 2011,
+    ``power`` subspace iterations) whose products with ``I`` and its transpose are the bounce
+    operator ``B_c = sum_i G2^i G1`` and its adjoint applied to a few images, and T read once per
+    pass in chunks of ``chunk`` directions (float32 from a half-float store).
+
+    Returns ``(V, U, kept)``: coefficients V (S, k) float32 and images U (k, 3, P) float32 with
+    ``I[c, s] ~ sum_j V[s, j] U[j, c]``, and with ``measure`` the share of ``||I||^2`` they
+    keep (one more pass that bounces all of T: the cost of :func:`indirect`), else None."""
+    if bounces < 1 or components < 1:
+        raise ValueError(f"need bounces >= 1 and components >= 1; got {bounces}, {components}")
+    T = np.asarray(T) if not hasattr(T, "shape") else T
+    S, n_t = T.shape
+    m = min(S, int(components) + int(oversample))
+    mats = [_bounce_matrices(g, albedo_t, n_t, c) for c in range(3)]
+
+    def apply(X):                        # (n_t, m) -> (3, P, m): B_c X
+        out = []
+        for G1, G2 in mats:
+            level = np.asarray(G1 @ X, np.float64)
+            total = level.copy()
+            for _ in range(bounces - 1):
+                level = np.asarray(G2 @ level, np.float64)
+                total += level
+            out.append(total)
+        return np.stack(out)
+
+    def adjoint(Y):                      # (3, P, m) -> (n_t, m): sum_c B_c^T Y_c
+        acc = np.zeros((n_t, Y.shape[-1]))
+        for (G1, G2), y in zip(mats, Y):
+            z, s = y, y.copy()
+            for _ in range(bounces - 1):
+                z = np.asarray(G2.T @ z, np.float64)
+                s += z
+            acc += np.asarray(G1.T @ s, np.float64)
+        return acc
+
+    def t_times(W):                      # T (S, n_t) @ W (n_t, m) -> (S, m)
+        return np.concatenate([np.asarray(T[a:a + chunk], np.float32).astype(np.float64) @ W
+                               for a in range(0, S, chunk)])
+
+    def t_transposed(O):                 # T^T (n_t, S) @ O (S, m) -> (n_t, m)
+        acc = np.zeros((n_t, O.shape[1]))
+        for a in range(0, S, chunk):
+            acc += np.asarray(T[a:a + chunk], np.float32).astype(np.float64).T @ O[a:a + chunk]
+        return acc
+
+    def orth(Y):                         # (3, P, m) -> orthonormal columns, same shape
+        q, _ = np.linalg.qr(Y.reshape(-1, Y.shape[-1]))
+        return q.reshape(Y.shape)
+
+    omega = np.random.default_rng(seed).standard_normal((S, m))
+    Q = orth(apply(t_transposed(omega)))             # range of I^T (images)
+    for _ in range(int(power)):
+        C = t_times(adjoint(Q))                       # I Q: (S, m)
+        Q = orth(apply(t_transposed(C)))
+    C = t_times(adjoint(Q))                           # I ~ C Q^T
+    Uc, sv, Vt = np.linalg.svd(C, full_matrices=False)
+    k = min(int(components), m)
+    V = (Uc[:, :k] * sv[:k]).astype(np.float32)
+    U = np.einsum("cpm,km->kcp", Q, Vt[:k]).astype(np.float32)
+    if not measure:
+        return V, U, None
+    total = 0.0                          # ||I||^2: B applied to all of T
+    for a in range(0, S, chunk):
+        Tc = np.asarray(T[a:a + chunk], np.float32).astype(np.float64).T     # (n_t, s)
+        total += float(np.sum(apply(Tc) ** 2))
+    kept = float(np.sum(sv[:k] ** 2) / total) if total > 0 else 1.0
+    return V, U, kept

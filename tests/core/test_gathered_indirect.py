@@ -138,3 +138,33 @@ def test_hits_read_the_texel_under_their_uv():
     # on a 4 x 4 grid: column 1 (u 0.25..0.5), row 2 (v 0.5..0.75): 2 * 4 + 1
     assert gi.uv_texel(at, 4)[0] == 9
     assert gi.uv_texel(np.array([[1.0, 1.0], [-0.1, 0.0]]), 4).tolist() == [15, 0]
+
+
+@needs_engine
+def test_the_randomised_pca_is_the_exact_one_without_forming_the_term():
+    """On the furnace box with T varying over texels and directions: at full rank the
+    randomised factors rebuild ``indirect`` exactly; at rank k they keep what an exact SVD of
+    the formed term keeps (to 1e-6 of its energy), and say how much."""
+    V, T, UV = _box()
+    smp, pts = _points(V, T, UV, 6)
+    g = _gather(V, T, UV, np.zeros(len(T), np.int64), pts, smp, 12, 6, rays=16)
+    rng = np.random.default_rng(5)
+    S = 40
+    # a few smooth patterns over directions, so a low rank holds most of the term
+    basis = rng.random((4, 144))
+    Trows = (rng.random((S, 4)) @ basis + 0.01 * rng.random((S, 144))).astype(np.float16)
+    alb = rng.uniform(0.2, 0.9, (144, 3))
+    full = gi.indirect(g, Trows, alb, bounces=2).astype(np.float64)       # (3, S, P)
+    M = full.transpose(1, 0, 2).reshape(S, -1)
+    Vk, Uk, kept = gi.indirect_pca(g, Trows, alb, bounces=2, components=S, oversample=0,
+                                   chunk=7, measure=True)
+    rebuilt = Vk.astype(np.float64) @ Uk.reshape(len(Uk), -1).astype(np.float64)
+    assert np.abs(rebuilt - M).max() < 1e-5 * np.abs(M).max() and abs(kept - 1) < 1e-6
+    sv = np.linalg.svd(M, compute_uv=False)
+    exact = float(np.sum(sv[:4] ** 2) / np.sum(sv ** 2))
+    Vk, Uk, kept = gi.indirect_pca(g, Trows, alb, bounces=2, components=4, chunk=7,
+                                   measure=True)
+    rebuilt = Vk.astype(np.float64) @ Uk.reshape(4, -1).astype(np.float64)
+    got = 1 - np.sum((rebuilt - M) ** 2) / np.sum(M ** 2)
+    assert exact > 0.99 and abs(got - exact) < 1e-6 and abs(kept - exact) < 1e-6
+    assert gi.indirect_pca(g, Trows, alb, components=4)[2] is None
