@@ -47,21 +47,11 @@ def receiver_geometry(objects, depsgraph):
         recv.append(np.full(len(m.tri), i))
         UV.append(m.uv[m.loops.ravel()].reshape(-1, 3, 2))
         offset += len(m.co)
-    for inst in depsgraph.object_instances:
-        ob = inst.object
-        if ob.type not in ray_scene.CASTER_TYPES or ob.original.name in names:
-            continue
-        if not getattr(ob.original, "visible_shadow", True):
-            continue
-        got = ray_scene._to_world_mesh(ob, inst.matrix_world)
-        if got is None:
-            continue
-        co, tri = got
-        V.append(co)
-        T.append(tri + offset)
-        recv.append(np.full(len(tri), -1))
-        UV.append(np.zeros((len(tri), 3, 2)))
-        offset += len(co)
+    co, tri, _ = ray_scene.casters(depsgraph, exclude_names=names)   # every other caster
+    V.append(co)
+    T.append(tri + offset)
+    recv.append(np.full(len(tri), -1))
+    UV.append(np.zeros((len(tri), 3, 2)))
     return np.concatenate(V), np.concatenate(T), np.concatenate(recv), np.concatenate(UV)
 
 

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..geometry.barycentric import barycentric
 from .gathered_transfer import cosine_directions
 
 
@@ -44,20 +45,13 @@ def uv_texel(uv, resolution: int) -> np.ndarray:
 
 def hit_barycentrics(vertices, triangles, hit, origins, directions, distance) -> np.ndarray:
     """Barycentric weights (M, 3) of the hit points ``origins + distance * directions`` on
-    triangles ``hit`` (M,) of the mesh (vertices (N, 3), triangles (T, 3)): the least-squares
-    point of the plane, float64."""
+    triangles ``hit`` (M,) of the mesh (vertices (N, 3), triangles (T, 3)), float64
+    (:func:`..geometry.barycentric.barycentric`: projected, clipped to the triangle)."""
     V = np.asarray(vertices, np.float64)
     t = np.asarray(triangles, np.int64)[np.asarray(hit, np.int64)]
     X = (np.asarray(origins, np.float64)
          + np.asarray(directions, np.float64) * np.asarray(distance, np.float64)[:, None])
-    V0 = V[t[:, 0]]
-    e1, e2, vp = V[t[:, 1]] - V0, V[t[:, 2]] - V0, X - V0
-    d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
-    p1, p2 = (vp * e1).sum(1), (vp * e2).sum(1)
-    den = np.where(np.abs(d11 * d22 - d12 * d12) > 0, d11 * d22 - d12 * d12, 1.0)
-    v = (d22 * p1 - d12 * p2) / den
-    w = (d11 * p2 - d12 * p1) / den
-    return np.stack([1.0 - v - w, v, w], axis=1)
+    return barycentric(X, V[t[:, 0]], V[t[:, 1]], V[t[:, 2]])
 
 
 @dataclass
@@ -159,29 +153,14 @@ def indirect(g: Gather, T, albedo_t, bounces: int = 2) -> np.ndarray:
     """``I`` (3, S, P) float32 (module docstring) from T's rows ``T`` (S, n_t) -- float32 or
     float16, stacked receivers' texels -- with the albedo (n_t, 3) at T's texels (each hit
     reflects with the albedo at its texel), over ``bounces`` >= 1. One sparse product per
-    bounce and colour (float32; a row sums at most to 1)."""
-    from scipy import sparse
-
+    bounce and colour (a row sums at most to 1)."""
     if bounces < 1:
         raise ValueError(f"need bounces >= 1, got {bounces}")
     Tt = np.ascontiguousarray(np.asarray(T).T, dtype=np.float32)              # (n_t, S)
     n_t, S = Tt.shape
-    a_t = np.asarray(albedo_t, np.float32)
     out = np.zeros((3, S, g.points), np.float32)
-    ok = g.target >= 0
     for c in range(3):
-        w = a_t[g.texel, c] / g.rays
-        G1 = sparse.csr_matrix((w, (g.point, g.texel)), shape=(g.points, n_t))
-        level = np.asarray(G1 @ Tt, np.float32)                              # (P, S)
-        total = level.copy()
-        if bounces > 1:
-            w2 = a_t[g.texel[ok], c] / g.rays
-            G2 = sparse.csr_matrix((w2, (g.point[ok], g.target[ok])),
-                                   shape=(g.points, g.points))
-            for _ in range(bounces - 1):
-                level = np.asarray(G2 @ level, np.float32)
-                total += level
-        out[c] = total.T
+        out[c] = _bounced(*_bounce_matrices(g, albedo_t, n_t, c), Tt, bounces).T
     return out
 
 
@@ -195,6 +174,17 @@ def _bounce_matrices(g: Gather, albedo_t, n_t: int, c: int):
     G2 = sparse.csr_matrix((a[g.texel[ok]] / g.rays, (g.point[ok], g.target[ok])),
                            shape=(g.points, g.points))
     return G1, G2
+
+
+def _bounced(G1, G2, X, bounces: int):
+    """``sum_{i < bounces} G2^i G1 X``: ``bounces`` bounces of light gathered from the direct
+    light ``X`` (n_t, m) at T's texels; (P, m) in X's dtype."""
+    level = np.asarray(G1 @ X)
+    total = level.copy()
+    for _ in range(bounces - 1):
+        level = np.asarray(G2 @ level)
+        total += level
+    return total
 
 
 def indirect_pca(g: Gather, T, albedo_t, bounces: int = 2, components: int = 16,
@@ -216,16 +206,8 @@ def indirect_pca(g: Gather, T, albedo_t, bounces: int = 2, components: int = 16,
     m = min(S, int(components) + int(oversample))
     mats = [_bounce_matrices(g, albedo_t, n_t, c) for c in range(3)]
 
-    def apply(X):                        # (n_t, m) -> (3, P, m): B_c X
-        out = []
-        for G1, G2 in mats:
-            level = np.asarray(G1 @ X, np.float64)
-            total = level.copy()
-            for _ in range(bounces - 1):
-                level = np.asarray(G2 @ level, np.float64)
-                total += level
-            out.append(total)
-        return np.stack(out)
+    def apply(X):                        # (n_t, m) float64 -> (3, P, m): B_c X
+        return np.stack([_bounced(G1, G2, X, bounces) for G1, G2 in mats])
 
     def adjoint(Y):                      # (3, P, m) -> (n_t, m): sum_c B_c^T Y_c
         acc = np.zeros((n_t, Y.shape[-1]))

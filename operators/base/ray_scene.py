@@ -164,11 +164,12 @@ def _to_world_mesh(obj_eval, matrix):
 def casters(depsgraph, exclude_names=()):
     """World-space triangles of every shadow caster: (vertices (N, 3), triangles (T, 3),
     count of objects and instances). Objects whose ``visible_shadow`` is off are left out, as
-    Cycles leaves them out of shadow rays."""
+    Cycles leaves them out of shadow rays, and so are the objects named in ``exclude_names``
+    (a caller that reads them itself)."""
     verts, tris, n, offset = [], [], 0, 0
     for inst in depsgraph.object_instances:
         ob = inst.object
-        if ob.type not in CASTER_TYPES:
+        if ob.type not in CASTER_TYPES or ob.original.name in exclude_names:
             continue
         original = ob.original
         parent = inst.parent.original if inst.is_instance and inst.parent else None

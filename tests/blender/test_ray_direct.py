@@ -246,8 +246,10 @@ def test_render_settings_decide_the_geometry(fresh_scene):
     gone.hide_render = True                          # does not render: no shadow
     with ray_scene.RenderGeometry(fresh_scene) as depsgraph:
         V, T, n = ray_scene.casters(depsgraph)
+        _, T_rest, n_rest = ray_scene.casters(depsgraph, exclude_names=[shown.name])
     assert n == 2                                    # the floor and the subdivided cube
     assert len(T) == 2 * 8 * 8 + 12 * 16             # 8x8 grid, the cube at 2 render levels
+    assert n_rest == 1 and len(T_rest) == 2 * 8 * 8  # a named object left to its caller
     assert shown.hide_viewport and sub.levels == 0 and gone.hide_render   # restored
 
 
