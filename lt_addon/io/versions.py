@@ -25,6 +25,8 @@ FORMATS = {
     #                                                   horizons may be coarser than the normals)
     "relightable_textures.horizon_preview": 1,        # <object>_preview_horizons.png/.exr
     "relightable_textures.block_preview": 1,          # <object>_preview_block_eigen/tables.exr
+    "relightable_textures.gathered_indirect": 1,      # <object>_indirect.npz
+    "relightable_textures.gathered_indirect_preview": 1,  # <object>_preview_indirect_*.exr
     "relightable_textures.atlas": 1,                  # <object>_steerable_atlas.exr, indirect atlas
     "relightable_textures.commit_journal": 1,         # .relight-stage-*/.journal.json
 }
