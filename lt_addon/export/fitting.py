@@ -22,6 +22,7 @@ from ..sphere.directions import hemisphere_fibonacci, parse_direction_spec
 from ..sphere.hemisphere import direction_from_az_el
 from ..transport import texture as tt
 from ..transport.bundle import relight, upsample
+from ..transport.gathered_texture import indirect_images
 from . import godot, rti, rti_files
 from . import sh_lightmap as sh
 
@@ -205,8 +206,9 @@ def indirect_over_pi(bake, store, settings) -> np.ndarray | None:
     indirect term is tabulated per sun direction only)."""
     if bake.indirect is None or settings.sun is None:
         return None
-    rad = upsample(bake.indirect.relight(direction_from_az_el(*settings.sun)),
-                    store.resolution).reshape(-1, 3).astype(np.float64)
+    rad = upsample(indirect_images(bake.indirect, direction_from_az_el(*settings.sun),
+                                   settings.sun_angle),
+                   store.resolution).reshape(-1, 3).astype(np.float64)
     albedo = bake.albedo.reshape(-1, 3).astype(np.float64)
     tint = np.asarray(settings.color, np.float64) * settings.strength
     return np.where(albedo > 0.02, rad / np.maximum(albedo, 0.02), 0.0) * tint

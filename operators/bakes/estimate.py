@@ -69,7 +69,7 @@ def calibrate(scene, objects, settings, truth: int, truth_samples: int):
                     b.store.abort()
         seconds = est.stage_seconds(res.seconds)
         u = {st: est.units(st, R, R if settings.bounces > 0 and
-                           settings.indirect == "steerable" else 0, len(objects), 1,
+                           settings.indirect != "none" else 0, len(objects), 1,
                            hmap.side(R, s.horizon_resolution))
              for st in est.STAGES}
         if lights:
@@ -92,7 +92,7 @@ def estimate(scene, objects, settings, truth: int = 4, truth_samples: int = 256)
     dset = settings.validate()
     costs, cal = yield from calibrate(scene, objects, settings, truth, truth_samples)
     ri = settings.indirect_resolution if (settings.bounces > 0 and
-                                          settings.indirect == "steerable") else 0
+                                          settings.indirect != "none") else 0
     seconds = est.predict(costs, settings.resolution, ri, len(objects), truth,
                           hmap.side(settings.resolution, settings.horizon_resolution))
     P = settings.resolution ** 2

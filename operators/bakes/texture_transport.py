@@ -7,13 +7,15 @@ For every selected object, in the same Cycles calls:
    set under a hard Sun (angle 0, strength 1, 1 sample: noise-free apart from anti-aliasing),
    streamed to a float16 store on disk (:class:`..lt_addon.transport.texture.TransportStore`)
    one direction at a time, so memory holds one image, never ``T``;
-3. the **indirect** light as its own term, when the scene has bounces: a low-order steerable
-   bake of the indirect pass only (Ashikhmin & Shirley's lobes are accurate for light that is
-   smooth in the light direction, which interreflection is), in radiance units.
+3. the **indirect** light as its own term, when the scene has bounces: by default gathered by
+   rays over T's own directions and kept as a PCA over them (:mod:`.indirect_gather`,
+   ``indirect="gather"``); or a low-order steerable bake of Cycles' indirect pass
+   (``"steerable"``, the earlier default: Ashikhmin & Shirley's lobes), in radiance units.
 
 Relit radiance for a sun of angular size ``a`` from ``w0`` and normal irradiance ``I``::
 
-    I * (albedo * sum_s k_s(w0, a) T[s]  +  steer(indirect, w0))
+    I * (albedo * sum_s k_s(w0, a) T[s]  +  max(0, sum_s k_s(w0, a) V[s] @ U))   (gathered)
+    I * (albedo * sum_s k_s(w0, a) T[s]  +  steer(indirect, w0))               (steerable)
 
 The same geometry-of-the-generator as the other bakes: a generator yielding Progress and
 returning the result; stopping it restores the scene and deletes the partial store.
@@ -34,6 +36,7 @@ from ...lt_addon.io.transaction import after_commit
 from ...lt_addon import blas_threads, faults
 from ...lt_addon.io import atomic
 from ...lt_addon.transport import texture as tt
+from ...lt_addon.transport.gathered_texture import indirect_images
 from ...lt_addon.sphere.hemisphere import direction_from_az_el
 from ..base import cycles_device
 from ..base.cycles_bake import BakeInputError, EnvironmentBake, check_bakeable, check_memory
@@ -119,7 +122,8 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
     R = settings.resolution
     S = dset.size
     do_indirect = settings.bounces > 0 and settings.indirect == "steerable"
-    n_ind = settings.indirect_order ** 2 if do_indirect else 0
+    n_ind = (settings.indirect_order ** 2 if do_indirect else
+             1 if settings.bounces > 0 and settings.indirect == "gather" else 0)
     total = 1 + S + n_ind + 1
     calls = 0
     seconds = {}
@@ -421,6 +425,22 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
                           "smoothing_texels": settings.indirect_smoothing,
                           "object": o.name, "seed": settings.seed})
         seconds["indirect_total"] = time.perf_counter() - t0
+    elif settings.bounces > 0 and settings.indirect == "gather":
+        # 3. indirect light gathered by rays over T's own directions (.indirect_gather)
+        from . import indirect_gather
+
+        t0 = time.perf_counter()
+        indirects, gathered = yield from indirect_gather.bake(
+            scene, objects, [r.array for r in readers], albedos, dset,
+            resolution=settings.indirect_resolution, bounces=settings.bounces,
+            rays=settings.indirect_rays, components=settings.indirect_components,
+            seed=settings.seed, step=step, total=total)
+        yield Progress(step, total, "indirect light gathered")
+        faults.checkpoint("indirect")
+        seconds["indirect_rays"] = gathered["seconds"]["rays"]
+        seconds["indirect_total"] = time.perf_counter() - t0
+        peak = max(peak, _rss_mb())
+        indirect_chunks = None
 
     # 4. models (BLAS on --threads N when given, else as NumPy started it: every core)
     faults.checkpoint("fit")
@@ -445,6 +465,7 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
     out = TransportTextureResult(results, dset, settings, seconds, calls, peak - rss0,
                                  peak - first)
     out.indirect_chunks = indirect_chunks
+    out.indirect = gathered if settings.bounces > 0 and settings.indirect == "gather" else None
     return out
 
 
@@ -490,8 +511,8 @@ def truth_errors(result: TransportTextureResult, truths: dict, sun_angle: float,
             if b.model is not None:
                 row["model"] = rel_rmse(relight(b, store, d, sun_angle, source="model",
                                                 kernel=result.settings.kernel), truth)
-            ind = (None if b.indirect is None else
-                   _upsample(b.indirect.relight(d), store.resolution))
+            ind = (None if b.indirect is None else _upsample(indirect_images(
+                b.indirect, d, sun_angle, result.settings.kernel), store.resolution))
             view = None
             if b.horizon is not None:   # the horizon viewport
                 view = b.horizon.direct(d, sun_angle)[..., None] * b.albedo
@@ -526,7 +547,8 @@ def retire_globs(objects) -> tuple:
         out += [f"{safe}_preview_{part}" for part in (
                     "eigen.exr", "tables.exr", "sparse_index.exr", "sparse_weights.exr",
                     "transport.png", "transport.json", "block_eigen.exr", "block_tables.exr")]
-        out += [f"{safe}_indirect.exr", f"{safe}_indirect_atlas.exr",
+        out += [f"{safe}_indirect.exr", f"{safe}_indirect_atlas.exr", f"{safe}_indirect.npz",
+                f"{safe}_preview_indirect_eigen.exr", f"{safe}_preview_indirect_tables.exr",
                 f"{safe}_transport_model.npz", f"{safe}_transport_steerable.exr",
                 f"{safe}_viewport_blocks.npz"]
     return tuple(out) + (f"{atomic.safe_name(objects[0].name)}_compare.png",)

@@ -48,7 +48,8 @@ class _Parser(argparse.ArgumentParser):
 #: bake-textures' options, made from the settings dataclasses (lt_addon/settings.py): the
 #: transport method's own, the three both methods take, the lobes method's own.
 TRANSPORT_OPTIONS = ("directions", "direct", "sun_path", "sun_path_step", "sun_angle", "model",
-                     "components", "tol", "indirect_samples", "indirect_resolution",
+                     "components", "tol", "indirect", "indirect_rays",
+                     "indirect_components", "indirect_samples", "indirect_resolution",
                      "table_size", "viewport", "horizon_azimuths", "horizon_resolution",
                      "gpu_budget")
 SHARED_OPTIONS = ("resolution", "bounces", "seed")
@@ -89,7 +90,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bake-textures", help="bake relightable textures of one or more objects",
                        description="--method transport (default): bake each object's UV texture "
                                    "under S hard Sun lamps (1 sample each, streamed to disk), the "
-                                   "albedo, and the indirect light as a low-order steerable term; "
+                                   "albedo, and the indirect light (gathered by rays over the same "
+                                   "directions, or --indirect steerable); "
                                    "fit a model (PCA eigen-textures by default) and install a live "
                                    "preview. --method lobes: the paper's broad-lobe bake under the "
                                    "N = order^2 sampled steerable lights. Both write EXR/NPZ files "
@@ -583,7 +585,9 @@ def _cmd_bake_texture_transport(args) -> int:
                  if "distributed_wall" in t else
                  f"direct by rays {t['direct_rays']:.1f} s, " if "direct_rays" in t else
                  f"Cycles direct {t.get('direct_cycles', 0):.1f} s, ")
-              + f"indirect {t.get('indirect_cycles', 0):.1f} s; fit {t['fit']:.1f} s; camera "
+              + f"indirect ({(rep.get('indirect') or {}).get('method', 'steerable')}) "
+                f"{t.get('indirect_total', t.get('indirect_cycles', 0)):.1f} s; "
+                f"fit {t['fit']:.1f} s; camera "
               f"comparison {t.get('compare_seconds', 0.0):.1f} s); report {rep['report']}")
         fid = rep.get("model_vs_T") or {}
         if "headline" in fid:

@@ -85,7 +85,9 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
         if props.method == "transport":
             col = layout.column(align=True)
             for name in ("directions", "horizon_power", "sun_path", "sun_path_step",
-                         "resolution", "transport_direct", "bounces", "indirect_samples", "indirect_resolution", "transport_model",
+                         "resolution", "transport_direct", "bounces", "transport_indirect",
+                         "indirect_rays", "indirect_components", "indirect_samples",
+                         "indirect_resolution", "transport_model",
                          "transport_components", "transport_tol", "transport_viewport",
                          "horizon_azimuths", "horizon_resolution", "gpu_budget", "sun_angle",
                          "table_size",

@@ -238,7 +238,7 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
 # (a transport_ prefix where the word is ambiguous). New scenes hold the balanced presets.
 #: Panel property of each transport setting whose name alone would be ambiguous.
 TRANSPORT_PROPS = {"model": "transport_model", "viewport": "transport_viewport",
-                   "direct": "transport_direct",
+                   "direct": "transport_direct", "indirect": "transport_indirect",
                    "tol": "transport_tol", "components": "transport_components"}
 #: Panel property of each declared per-vertex bake setting (the Vertex Transport box).
 VERTEX_FIELDS = ("directions", "bounces", "direct", "energy")
@@ -251,8 +251,8 @@ LOBES_FIELDS = ("frame", "order", "samples", "storage", "mode", "world_sampling"
 TRANSPORT_FIELDS = ("direct", "sun_path", "sun_path_step", "model", "viewport",
                     "horizon_azimuths", "horizon_resolution", "gpu_budget",
                     "tol",
-                    "components", "indirect_samples",
-                    "indirect_resolution", "table_size")
+                    "components", "indirect", "indirect_rays", "indirect_components",
+                    "indirect_samples", "indirect_resolution", "table_size")
 
 
 def _declared_properties() -> dict:

@@ -152,8 +152,10 @@ def test_the_flamenco_job_type_emits_chunk_commands_that_bake_the_same_bits(tmp_
             again = relight(*p["args"][2:])
             assert again.returncode == 0 and "already in" in again.stdout
     rep = json.loads((tmp_path / "farm" / "Bumps_texture_report.json").read_text())
-    # the chunk tasks baked every direction; the final task bakes the 9 indirect lights
-    assert rep["direct_chunks"] == rep["chunks_reused"] == 3 and rep["indirect_chunks"] == 9
+    # the chunk tasks baked every direction; the final task gathers the indirect light by rays
+    # over them (no Cycles chunks: the steerable term's 9 lights were chunks)
+    assert rep["direct_chunks"] == rep["chunks_reused"] == 3 and rep["indirect_chunks"] == 0
+    assert rep["indirect"]["method"] == "gathered"
     ref = tmp_path / "ref"
     args = [a if a != str(tmp_path / "farm") else str(ref) for a in tasks[-1]["commands"][0]
             ["params"]["args"][2:]]
@@ -335,8 +337,9 @@ def test_basis_light_stages_distribute_and_resume_bit_for_bit(blend, tmp_path):
 
     path, _ = blend
     args = ["bake-textures", path, "--object", "Bumps", "--directions", "hemi:48",
-            "--resolution", "16", "--bounces", "1", "--indirect-samples", "4",
-            "--indirect-resolution", "8", "--model", "none", "--no-compare", "--direct", "cycles"]
+            "--resolution", "16", "--bounces", "1", "--indirect", "steerable",
+            "--indirect-samples", "4", "--indirect-resolution", "8", "--model", "none",
+            "--no-compare", "--direct", "cycles"]
     assert relight(*args, "--no-resume", "--out", tmp_path / "ref").returncode == 0
     r = relight(*args, "--workers", "2", "--out", tmp_path / "dist")
     assert r.returncode == 0, r.stderr[-2000:]
@@ -375,8 +378,8 @@ def test_basis_light_stages_distribute_and_resume_bit_for_bit(blend, tmp_path):
     assert ".relight_cache" not in os.listdir(out)
 
     ts = tx.TransportTextureSettings(directions="hemi:48", resolution=16, bounces=1,
-                                     indirect_samples=4, indirect_resolution=8, model="none",
-                                     direct="cycles")
+                                     indirect="steerable", indirect_samples=4,
+                                     indirect_resolution=8, model="none", direct="cycles")
     out = tmp_path / "tresume"
     gen = tx.bake_transport_textures(scene, [obj], ts, str(out))
     for step in gen:                   # the albedo, 48 directions, then indirect lights
