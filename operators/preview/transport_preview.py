@@ -19,7 +19,9 @@ coefficient_tables`), so the node group only needs texture lookups:
    and one in the *eigen atlas* at the texel's UV (eigen-textures in R, G, B); their dot
    product, summed -- both atlases padded tiles, one GPU sampler each;
 3. times the albedo tile of the eigen atlas, gated to 0 below the horizon;
-4. plus the indirect term through the steerable group of :mod:`.preview_nodes`;
+4. plus the indirect term: the gathered term's group (:func:`build_gathered_group`: its own
+   coefficient tables over the sun's disk and k RGB component images; twin
+   ``gathered_texture.viewport_relight``), or the steerable group of :mod:`.preview_nodes`;
 5. times intensity and colour.
 
 :func:`viewport_relight` is the same computation in NumPy (bilinear table lookup, half-float
@@ -28,8 +30,8 @@ into the tables; changing it rewrites them (:func:`install_transport_preview`, a
 
 **The world's environment** (the scene's *Texture Light* set to World): an environment is
 ``sum_s L(w_s) dw_s T[s]``, so each component gets one RGB coefficient ``C[:, k] = sum_s L_s
-dw_s V[s, k]`` and each steerable indirect basis image one ``G[:, j] = sum_s L_s dw_s gain(w_s)
-c_j(w_s)``. The *environment groups* (:func:`build_env_group`, :func:`build_env_indirect_group`)
+dw_s V[s, k]`` and each indirect image one ``G[:, j]``: ``sum_s L_s dw_s V_ind[s, j]`` for the
+gathered term's components, ``sum_s L_s dw_s gain(w_s) c_j(w_s)`` for a steerable basis image. The *environment groups* (:func:`build_env_group`, :func:`build_env_indirect_group`)
 have the sun groups' sockets, so switching swaps the groups' trees and keeps every link; they
 hold ``C`` and ``G`` as constants that Python rewrites when the world, its Mapping Z rotation or
 the Environment Rotation / Strength change (:func:`update_environment_previews`, one small
@@ -47,6 +49,7 @@ import time
 
 from ...lt_addon.io import exrio
 from ...lt_addon.transport import sparse_tables as sp
+from ...lt_addon.transport import gathered_texture as gt
 from ...lt_addon.transport import texture as tt
 from ...lt_addon.io.atlas import atlas_layout, pack_atlas
 from . import preview_nodes as pn
@@ -114,11 +117,16 @@ def _lookup(b, image, uv, tile, x, y):
     return tex.outputs["Color"]
 
 
-def _sun_group_head(name: str, x_in: float, x_out: float):
+def _sun_group_head(name: str, x_in: float, x_out: float, albedo_input: bool = False):
     """A new sun group (light inputs, Color output) and the light's unit direction: returns
     (group, builder, group input, group output, (dx, dy, dz) sockets, sqrt(1 + dz) socket --
-    the disk map's denominator)."""
+    the disk map's denominator). ``albedo_input``: an (unused) Albedo input before the output,
+    so the sockets' identifiers are the environment indirect group's and a group node keeps
+    its links when the light mode swaps the trees (Blender matches them by identifier)."""
     group = pn.new_light_group(name)
+    if albedo_input:
+        s = group.interface.new_socket("Albedo", in_out="INPUT", socket_type="NodeSocketColor")
+        s.default_value = (0.8, 0.8, 0.8, 1.0)
     group.interface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
     b = pn._Builder(group)
     gin = b.node("NodeGroupInput", x_in, 0)
@@ -166,6 +174,82 @@ def build_group(n_tiles: int, resolution: int, table_size: int, eig_image, table
     albedo = _lookup(b, eig_image, uv, lay_e["tiles"][n_tiles], -500, -600)
     _sun_group_tail(b, gin, gout, acc, albedo, dz, 150)
     return group
+
+
+def build_gathered_group(k: int, resolution: int, table_size: int, eig_image, table_image,
+                         uv_map: str, name: str):
+    """The gathered indirect term's group (:mod:`...lt_addon.transport.gathered_texture`):
+    inputs Light Direction, Intensity, Color; output Color = ``max(0, sum_j c_j(w0) U_j)`` x
+    Intensity x Color, 0 with the light below the horizon. ``c_j``: channel ``j % 3`` of table
+    tile ``j // 3`` at the sun's disk point; ``U_j``: RGB component image ``j`` (radiance).
+    Lookups per pixel: k + ceil(k / 3). Twin: ``gathered_texture.viewport_relight``."""
+    group, b, gin, gout, (dx, dy, dz), root = _sun_group_head(name, -1800, 1600, True)
+    tx = b.math("MULTIPLY_ADD", b.math("DIVIDE", dx, root, x=-900, y=100), 0.5, 0.5, x=-800, y=100)
+    ty = b.math("MULTIPLY_ADD", b.math("DIVIDE", dy, root, x=-900, y=0), 0.5, 0.5, x=-800, y=0)
+    table_uv = b.node("ShaderNodeCombineXYZ", -700, 50)
+    b.links.new(tx, table_uv.inputs[0])
+    b.links.new(ty, table_uv.inputs[1])
+    uv = b.node("ShaderNodeUVMap", -700, -400, uv_map=uv_map).outputs["UV"]
+    n_tiles = -(-k // 3)
+    lay_e = atlas_layout(k, resolution)
+    lay_t = atlas_layout(n_tiles, table_size)
+    acc = None
+
+    def scalar(v, y):        # the running RGB sum as one number (for after_sum's chaining)
+        return None if v is None else b.vmath("DOT_PRODUCT", v, (1.0, 0.0, 0.0), x=-900, y=y)
+
+    for t in range(n_tiles):
+        y = 600 - 600 * t
+        c = _lookup(b, table_image, pn.after_sum(b, table_uv.outputs[0], scalar(acc, y), -700, y),
+                    lay_t["tiles"][t], -500, y)
+        sep = b.node("ShaderNodeSeparateXYZ", -100, y)
+        b.links.new(c, sep.inputs[0])
+        for ch in range(min(3, k - 3 * t)):
+            j, yj = 3 * t + ch, y - 150 * (ch + 1)
+            e = _lookup(b, eig_image, pn.after_sum(b, uv, scalar(acc, yj), -700, yj),
+                        lay_e["tiles"][j], -500, yj)
+            term = b.vmath("SCALE", e, x=100, y=yj, scale=sep.outputs[ch])
+            acc = term if acc is None else b.vmath("ADD", acc, term, x=300, y=yj)
+    clamped = b.vmath("MAXIMUM", acc, (0.0, 0.0, 0.0), x=500, y=0)
+    lit = b.math("GREATER_THAN", dz, 0.0, x=500, y=-200)
+    scale = b.math("MULTIPLY", lit, gin.outputs["Intensity"], x=700, y=-200)
+    color = b.vmath("SCALE", clamped, x=900, y=0, scale=scale)
+    color = b.vmath("MULTIPLY", color, gin.outputs["Color"], x=1100, y=0)
+    b.links.new(color, gout.inputs["Color"])
+    return group
+
+
+def install_indirect_group(obj, report: dict, bake, base: str, sun_angle: float, uv_map: str):
+    """The indirect term's group of ``obj`` (None without one): the gathered term's
+    (:func:`build_gathered_group`, its component atlas and tables written beside the bake) or
+    the steerable term's (:func:`.preview_nodes.build_group`). Both leave the component /
+    basis atlas in the image ``"<obj> indirect atlas"`` the environment group samples."""
+    if bake.indirect is None:
+        return None, {}
+    iname = f"{GROUP_PREFIX} indirect ({obj.name})"
+    old = bpy.data.node_groups.get(iname)
+    files = {}
+    if isinstance(bake.indirect, gt.GatheredIndirect):
+        s = report["settings"]
+        eig, tables = gt.preview_arrays(bake.indirect, sun_angle, s["table_size"],
+                                        s.get("kernel", "linear"))
+        files = write_preview_files(base, eig, tables, ("indirect_eigen", "indirect_tables"),
+                                    "relightable_textures.gathered_indirect_preview")
+        iimg = pn.load_atlas_image(files["indirect_eigen"], f"{obj.name} indirect atlas")
+        timg = pn.load_atlas_image(files["indirect_tables"], f"{obj.name} indirect tables")
+        group = build_gathered_group(len(eig), bake.indirect.resolution, s["table_size"], iimg,
+                                     timg, uv_map, iname + " new")
+        group["relight_indirect"] = "gathered"
+    else:
+        atlas_path, _ = pn.write_atlas(bake.indirect, report["files"]["indirect"])
+        iimg = pn.load_atlas_image(atlas_path, f"{obj.name} indirect atlas")
+        group = pn.build_group(bake.indirect, iimg, uv_map, name=iname + " new")
+        group["relight_indirect"] = "steerable"
+    if old is not None:
+        bpy.data.node_groups.remove(old)
+    group.name = iname
+    group[pn.OWNER] = obj.name
+    return group, files
 
 
 # ---------------------------------------------------------------------------------------------
@@ -580,8 +664,8 @@ def set_horizon_sun(group, sun_angle: float) -> bool:
 def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: float | None = None,
                               sun=None) -> dict:
     """Write the atlases, build the group(s) and wire them into ``obj``'s materials (replacing
-    an earlier preview of ``obj``). The indirect term, when baked, goes through the steerable
-    group of :mod:`.preview_nodes`."""
+    an earlier preview of ``obj``). The indirect term, when baked, goes through its own group
+    (:func:`install_indirect_group`)."""
     s = report["settings"]
     angle = float(s["sun_angle"] if sun_angle is None else sun_angle)
     model = bake.model
@@ -658,18 +742,7 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
     group["relight_viewport"] = viewport
     group["relight_report"] = report["report"]
     group[pn.OWNER] = obj.name
-    indirect_group = None
-    if bake.indirect is not None:
-        iname = f"{GROUP_PREFIX} indirect ({obj.name})"
-        ipath = report["files"]["indirect"]
-        atlas_path, _ = pn.write_atlas(bake.indirect, ipath)
-        iimg = pn.load_atlas_image(atlas_path, f"{obj.name} indirect atlas")
-        old = bpy.data.node_groups.get(iname)
-        indirect_group = pn.build_group(bake.indirect, iimg, uv_map, name=iname + " new")
-        if old is not None:
-            bpy.data.node_groups.remove(old)
-        indirect_group.name = iname
-        indirect_group[pn.OWNER] = obj.name
+    indirect_group, ifiles = install_indirect_group(obj, report, bake, base, angle, uv_map)
     pn.ensure_sliders(scene)
     if sun is None:
         sun = scene.get("relight_sun")
@@ -682,7 +755,7 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
         out = g.outputs["Color"]
         if indirect_group is not None:
             gi = b.node("ShaderNodeGroup", 700, 600, node_tree=indirect_group,
-                        label="Indirect (steerable)")
+                        label=f"Indirect ({indirect_group['relight_indirect']})")
             for k, v in (("Light Direction", direction), ("Intensity", intensity),
                          ("Color", col)):
                 b.links.new(v, gi.inputs[k])
@@ -699,7 +772,7 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
     props = getattr(scene, "relight", None)
     if props is not None and props.texture_light == "WORLD":
         set_light_mode(scene, obj, "WORLD")
-    return {**files, **sparse, "group": gname, "group_nodes": len(group.nodes),
+    return {**files, **sparse, **ifiles, "group": gname, "group_nodes": len(group.nodes),
             "sun_angle": angle, "tiles": len(tables), "viewport": viewport,
             "viewport_why": why}
 
@@ -731,6 +804,16 @@ def rewrite_tables(obj, report: dict, bake, store, sun_angle: float) -> None:
         pn.load_atlas_image(path, f"{obj.name} transport block tables")
     if group is not None and group.get("relight_viewport") == "horizon":
         set_horizon_sun(group, sun_angle)
+    if isinstance(bake.indirect, gt.GatheredIndirect):   # its tables follow the sun's size
+        _, itab = gt.preview_arrays(bake.indirect, sun_angle, s["table_size"],
+                                    s.get("kernel", "linear"))
+        atlas = pack_atlas(itab, "edge")
+        path = f"{base}_preview_indirect_tables.exr"
+        exrio.write_exr(path, {c: atlas[..., i] for i, c in enumerate("RGB")},
+                        {"format": "relightable_textures.gathered_indirect_preview",
+                         "tiles": len(itab), "resolution": itab.shape[1],
+                         "sun_angle": sun_angle}, pixel_type="half")
+        pn.load_atlas_image(path, f"{obj.name} indirect tables")
     if group is not None and group.get("relight_viewport") == "transport":
         D = max(sp.TABLE_SIZE, int(s["table_size"]))
         idx, wts, _ = sp.cached_tables(store.directions, D, sun_angle, s.get("kernel", "linear"))
@@ -927,7 +1010,7 @@ def _env_data(obj):
     bake, store, _ = load_bake(path)
     if not getattr(bake.model, "live_preview", False):
         return None
-    B = None if bake.indirect is None else tt.steering_matrix(bake.indirect, store.directions)
+    B = None if bake.indirect is None else gt.direction_matrix(bake.indirect, store.directions)
     data = {"key": key, "V": np.asarray(bake.model.V, np.float64), "B": B,
             "directions": store.directions, "bake": bake}
     _ENV_CACHE[obj.name] = data

@@ -12,6 +12,7 @@ import pytest
 from render_check import render_rgb
 
 from relightable_textures import samples
+from relightable_textures.lt_addon.transport import gathered_texture as gt
 from relightable_textures.lt_addon.transport import texture as tt
 from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
 
@@ -873,7 +874,8 @@ def _smooth_sky(h=32):
 
 
 @pytest.mark.version_sensitive
-def test_world_lit_preview_rendered_by_cycles_equals_numpy_relight(bumps, tmp_path):
+@pytest.mark.parametrize("indirect", ["gather", "steerable"])
+def test_world_lit_preview_rendered_by_cycles_equals_numpy_relight(bumps, tmp_path, indirect):
     """Texture Light = World: the environment groups (constant coefficients written from
     Python, indirect steered by the environment) rendered by Cycles equal the NumPy twin of the
     half-float atlases, and that twin equals relight_environment of the model to half-float
@@ -891,7 +893,8 @@ def test_world_lit_preview_rendered_by_cycles_equals_numpy_relight(bumps, tmp_pa
     scene, obj = bumps
     relightable_textures.register()
     try:
-        s = settings(components=12, bounces=1, indirect_resolution=R, indirect_samples=4)
+        s = settings(components=12, bounces=1, indirect_resolution=R, indirect_samples=4,
+                     indirect=indirect, indirect_rays=16, indirect_components=7)
         reports = run(tx.bake_job(scene, [obj], s, str(tmp_path), truth=0)).reports
         prev = reports[0]["preview"]
         bake, store, _ = tx.load_bake(reports[0]["report"])
@@ -909,14 +912,15 @@ def test_world_lit_preview_rendered_by_cycles_equals_numpy_relight(bumps, tmp_pa
         assert {n.node_tree.name for n in tp._group_nodes(obj, list(bpy.data.node_groups))} == {
             f"Relight Transport env ({obj.name})", f"Relight Transport env indirect ({obj.name})"}
         # the NumPy twin from the half-float atlases against the model relit in NumPy
-        ind_atlas = exrio.read_exr(os.path.splitext(reports[0]["files"]["indirect"])[0]
+        ind_atlas = exrio.read_exr(prev["indirect_eigen"] if indirect == "gather" else
+                                   os.path.splitext(reports[0]["files"]["indirect"])[0]
                                    + "_atlas.exr")[0]
         ind = unpack_atlas(np.stack([ind_atlas[c] for c in "RGB"], -1),
                            len(bake.indirect.basis_images), R)
         for rot in (40.0, -75.0):
             mapping.inputs["Rotation"].default_value[2] = np.radians(rot)
             bpy.context.view_layer.update()       # the handler sees the world change
-            B = tt.steering_matrix(bake.indirect, store.directions)
+            B = gt.direction_matrix(bake.indirect, store.directions)
             C, G = tp.env_coefficients(bake.model.V, B, store.directions, env, -rot)
             twin = tp.viewport_relight_env(eig, C, ind, G)
             want = tx.relight_environment(bake, store, env, -rot, row_order="bottom_first",
