@@ -33,28 +33,6 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 
-def receiver_geometry(objects, depsgraph):
-    """World triangles of the receivers (each with its UVs) and of every other shadow caster:
-    (V (N, 3), T (M, 3), receiver (M,) index or -1, uv (M, 3, 2))."""
-    from relightable_textures.operators.base import ray_scene
-
-    names = [o.name for o in objects]
-    V, T, recv, UV, offset = [], [], [], [], 0
-    for i, o in enumerate(objects):
-        m = ray_scene.mesh_arrays(o, depsgraph)
-        V.append(m.co)
-        T.append(m.tri + offset)
-        recv.append(np.full(len(m.tri), i))
-        UV.append(m.uv[m.loops.ravel()].reshape(-1, 3, 2))
-        offset += len(m.co)
-    co, tri, _ = ray_scene.casters(depsgraph, exclude_names=names)   # every other caster
-    V.append(co)
-    T.append(tri + offset)
-    recv.append(np.full(len(tri), -1))
-    UV.append(np.zeros((len(tri), 3, 2)))
-    return np.concatenate(V), np.concatenate(T), np.concatenate(recv), np.concatenate(UV)
-
-
 def gathered_indirect(scene, result, RI: int, rays: int, bounces: int, seed: int = 1):
     """The gathered indirect term of a transport bake's objects: ({object index: (3, S, P_o)
     I}, {object index: (TexelSamples, albedo at its gather points (P_o, 3), its first and last
@@ -64,29 +42,17 @@ def gathered_indirect(scene, result, RI: int, rays: int, bounces: int, seed: int
     from relightable_textures.lt_addon.rays import engine
     from relightable_textures.lt_addon.rays.texels import extend_margin
     from relightable_textures.lt_addon.transport import gathered_indirect as gi
-    from relightable_textures.operators.base import ray_scene
+    from relightable_textures.operators.bakes import indirect_gather
 
     objs = [bpy.data.objects[b.name] for b in result.objects]
     R = result.objects[0].store.resolution
     t0 = time.perf_counter()
-    with ray_scene.RenderGeometry(scene) as dg:
-        V, T, recv, UV = receiver_geometry(objs, dg)
-        grids = [ray_scene.receiver_points(o, dg, RI, None) for o in objs]
+    V, T, recv, UV, grids = indirect_gather.gather_points(scene, objs, RI)
     occ = engine.Occluder(V, T)
-    gmaps, origins, normals, geo, offs = [], [], [], [], [0]
-    for smp, pts in grids:
-        m = np.full(RI * RI, -1, np.int64)
-        m[smp.texel] = offs[-1] + np.arange(smp.size)
-        gmaps.append(m)
-        c = pts.compact()
-        origins.append(c["P_up"])            # the point pushed off its plane (shading.EPSILON)
-        normals.append(pts.Ns)
-        geo.append(pts.Ng)
-        offs.append(offs[-1] + smp.size)
+    gmaps, origins, normals, geo, offs = indirect_gather.stack_points(grids, RI)
     t_scene = time.perf_counter() - t0
     t0 = time.perf_counter()
-    g = gi.gather(occ.nearest, np.concatenate(origins), np.concatenate(normals),
-                  np.concatenate(geo), rays, seed, V, T, recv, UV, R,
+    g = gi.gather(occ.nearest, origins, normals, geo, rays, seed, V, T, recv, UV, R,
                   [i * R * R for i in range(len(objs))], RI, gmaps)
     t_rays = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -112,18 +78,6 @@ def gathered_indirect(scene, result, RI: int, rays: int, bounces: int, seed: int
     return out, per, figures, (g, alb)
 
 
-class StackedRows:
-    """The objects' T stores side by side, read by chunks of directions (half floats on disk):
-    what :func:`~relightable_textures.lt_addon.transport.gathered_indirect.indirect_pca` reads."""
-
-    def __init__(self, stores):
-        self.stores = stores
-        self.shape = (stores[0].array.shape[0], sum(st.array.shape[1] for st in stores))
-
-    def __getitem__(self, rows):
-        return np.concatenate([np.asarray(st.array[rows]) for st in self.stores], axis=1)
-
-
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scene", default="bumps")
@@ -144,6 +98,7 @@ def main(argv=None):
     from relightable_textures.lt_addon.transport import texture as tt
     from relightable_textures.lt_addon.transport.bundle import rel_rmse, upsample
     from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.bakes.indirect_gather import StackedRows
     from relightable_textures.operators.base.jobs import run
 
     R, RI = args.resolution, args.indirect_resolution
@@ -177,7 +132,7 @@ def main(argv=None):
         single = btt.single_bake_seconds(scene, objects, R)
         print(f"{label}: truths {truth_s:.1f} s; one 64-spp bake {single:.2f} s", flush=True)
         folder = tempfile.mkdtemp()
-        s = tx.settings_from_preset("balanced", resolution=R, model="none",
+        s = tx.settings_from_preset("balanced", resolution=R, model="none", indirect="steerable",
                                     **({"sun_path": "auto"} if kind == "path" else
                                        {"sun_path": "off"}))
         t0 = time.perf_counter()
@@ -191,7 +146,7 @@ def main(argv=None):
         from relightable_textures.lt_addon.transport import gathered_indirect as gi
 
         t0 = time.perf_counter()
-        Vr, Ur, _ = gi.indirect_pca(g, StackedRows([b.store for b in res.objects]), alb,
+        Vr, Ur, _ = gi.indirect_pca(g, StackedRows([b.store.array for b in res.objects]), alb,
                                     bounces=args.bounces, components=args.components)
         figs["randomised_pca_seconds"] = round(time.perf_counter() - t0, 2)
         Ur = Ur.reshape(len(Ur), -1)

@@ -37,6 +37,7 @@ def main(argv=None):
     from relightable_textures import samples
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
     from relightable_textures.lt_addon.transport.bundle import relight, rel_rmse, viewport_direct
+    from relightable_textures.lt_addon.transport.gathered_texture import indirect_images
     from relightable_textures.lt_addon.transport import sparse_tables as sp
     from relightable_textures.operators.bakes import texture_transport as tx
     from relightable_textures.operators.base.jobs import run
@@ -79,7 +80,7 @@ def main(argv=None):
                 per.append(rel_rmse(relight(b, b.store, d, 2.0), truth))
                 view = viewport_direct(b.store, tables, d)[..., None] * b.albedo
                 if b.indirect is not None:
-                    view = view + tx._upsample(b.indirect.relight(d), R)
+                    view = view + tx._upsample(indirect_images(b.indirect, d, 2.0), R)
                 per_view.append(rel_rmse(view, truth))
             row = {"sun_path": mode, "directions": b.store.directions.size,
                    "path": (res.direct or {}).get("direction_set", {}).get("sun_path"),

@@ -114,6 +114,8 @@ def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder,
     model fitted from that store."""
     from relightable_textures.lt_addon.transport import sparse_tables as sp
     from relightable_textures.lt_addon.transport import texture as tt
+    from relightable_textures.lt_addon.transport.bundle import indirect_lookups
+    from relightable_textures.lt_addon.transport.gathered_texture import indirect_images
     from relightable_textures.operators.bakes import texture_transport as tx
     from relightable_textures.operators.base.jobs import run
 
@@ -131,6 +133,9 @@ def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder,
     stores = [b.store for b in result.objects]
     t_bytes = sum(os.path.getsize(s.path) for s in stores)
     ind_bytes = sum(b.indirect.basis_images.nbytes // 2 for b in result.objects if b.indirect)
+    # (the gathered term's coefficients: S x k float32 on top of its half-float images)
+    ind_bytes += sum(b.indirect.coefficients.nbytes for b in result.objects
+                     if getattr(b.indirect, "coefficients", None) is not None)
     alb_bytes = sum(b.albedo.size * 2 for b in result.objects)
     rows = []
     label = label or f"transport S {S}, {res}^2, indirect {ind_res}^2 {ind_spp} spp"
@@ -156,8 +161,7 @@ def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder,
             tables = sp.cached_tables(st_.directions, sp.TABLE_SIZE, a, "linear")
             out = tx.viewport_direct(st_, tables, d)[..., None] * b.albedo   # 8-bit atlas
             if b.indirect is not None:
-                out = out + tx._upsample(b.indirect.relight(np.asarray(d, np.float64)),
-                                         st_.resolution)
+                out = out + tx._upsample(indirect_images(b.indirect, d, a), st_.resolution)
             return out
 
         if kind == "viewport":
@@ -176,7 +180,7 @@ def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder,
             model_bytes = nbytes * len(stores)
             taps = max(sp.cached_tables(stores[0].directions, sp.TABLE_SIZE, a, "linear")[0]
                        .shape[-1] for a in (2.0, 10.0))     # the wider sun's
-            lookups = 4 * (2 * taps // 3 + taps) + 1 + (9 if ind_spp else 0)
+            lookups = 4 * (2 * taps // 3 + taps) + 1 + indirect_lookups(st)
             madds = 4 * taps + 27
             name = (f"viewport from T (sparse {sp.TABLE_SIZE}^2 tables, up to {taps} taps, "
                     f"8-bit atlas {side}^2)")
@@ -185,7 +189,7 @@ def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder,
         elif kind == "pca":
             k = fitted[0].k
             model_bytes = sum(m.U.size * 2 + m.V.size * 4 for m in fitted)
-            lookups = 2 * -(-k // 3) + 1 + (9 if ind_spp else 0)
+            lookups = 2 * -(-k // 3) + 1 + indirect_lookups(st)
             madds = 3 * k + 27
             name = f"PCA k {k}"
         else:

@@ -44,6 +44,7 @@ def main(argv=None) -> int:
     from relightable_textures.lt_addon.transport.bundle import HORIZON_LOOKUPS
     from relightable_textures.lt_addon.transport import sparse_tables as sp
     from relightable_textures.lt_addon.transport import texture as tt
+    from relightable_textures.lt_addon.transport.gathered_texture import indirect_images
     from relightable_textures.operators.bakes import texture_transport as tx
     from relightable_textures.operators.bakes.presets import TRANSPORT
     from relightable_textures.operators.base.jobs import run
@@ -90,7 +91,7 @@ def main(argv=None) -> int:
                         for oi, b in enumerate(result.objects):
                             img = fn(oi, d, a)
                             if b.indirect is not None:
-                                img = img + tx._upsample(b.indirect.relight(d), R)
+                                img = img + tx._upsample(indirect_images(b.indirect, d, a), R)
                             r = tx.rel_rmse(img, truth[a][(az, el)][oi])
                             e.append(r)
                             if a == 10.0 and el == 10.0 and b.name == "Ground":

@@ -123,6 +123,7 @@ def bake(scene, objects, arrays, albedos, dset, *, resolution: int, bounces: int
     t_pca = time.perf_counter() - t0
     centre = ((np.arange(RI) + 0.5) * R / RI).astype(np.int64)
     out = []
+    # (points, rays and where they went: over all objects gathered together)
     figures = {"method": "gathered", "rays_per_point": int(rays), "bounces": int(bounces),
                "components": int(Vc.shape[1]), "resolution": RI, **g.figures(),
                "seconds": {"scene": round(t_scene, 3), "rays": round(t_rays, 3),
@@ -139,5 +140,7 @@ def bake(scene, objects, arrays, albedos, dset, *, resolution: int, bounces: int
         out.append(GatheredIndirect(
             imgs.reshape(-1, RI, RI, 3), Vc, dset,
             settings={**{k: v for k, v in figures.items() if k != "seconds"},
-                      "object": objects[i].name, "seed": int(seed), "mode": "radiance"}))
+                      "object": objects[i].name, "object_points": int(smp.size),
+                      "objects_gathered_together": len(objects), "seed": int(seed),
+                      "mode": "radiance"}))
     return out, figures
