@@ -25,12 +25,6 @@ from ...lt_addon.transport import gathered_indirect as gi
 from ...lt_addon.transport.gathered_texture import GatheredIndirect
 from ..base import ray_scene
 
-#: Cosine-weighted rays per gather point, PCA components over directions (measured on the
-#: bumps and statue + ground: 64 rays, 16 components; 24 / 32 components cut the bumps' 2-degree
-#: error from 0.0592 to 0.0581 / 0.0577)
-RAYS = 64
-COMPONENTS = 16
-
 
 def receiver_geometry(objects, depsgraph):
     """World triangles of the receivers (each with its UVs) and of every other shadow caster:
@@ -94,7 +88,7 @@ def stack_points(grids, resolution: int):
 
 
 def bake(scene, objects, arrays, albedos, dset, *, resolution: int, bounces: int,
-         rays: int = RAYS, components: int = COMPONENTS, seed: int = 1, margin: int = 4,
+         rays: int, components: int, seed: int = 1, margin: int = 4,
          step: int = 0, total: int = 1):
     """Generator: the gathered indirect term of every object (yields Progress; returns
     ``([GatheredIndirect per object], figures)``).

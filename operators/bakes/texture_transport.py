@@ -430,14 +430,14 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
         from . import indirect_gather
 
         t0 = time.perf_counter()
-        indirects, gathered = yield from indirect_gather.bake(
+        indirects, figures = yield from indirect_gather.bake(
             scene, objects, [r.array for r in readers], albedos, dset,
             resolution=settings.indirect_resolution, bounces=settings.bounces,
             rays=settings.indirect_rays, components=settings.indirect_components,
             seed=settings.seed, step=step, total=total)
         yield Progress(step, total, "indirect light gathered")
         faults.checkpoint("indirect")
-        seconds["indirect_rays"] = gathered["seconds"]["rays"]
+        seconds["indirect_rays"] = figures["seconds"]["rays"]
         seconds["indirect_total"] = time.perf_counter() - t0
         peak = max(peak, _rss_mb())
         indirect_chunks = None
@@ -465,7 +465,6 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
     out = TransportTextureResult(results, dset, settings, seconds, calls, peak - rss0,
                                  peak - first)
     out.indirect_chunks = indirect_chunks
-    out.indirect = gathered if settings.bounces > 0 and settings.indirect == "gather" else None
     return out
 
 
