@@ -683,6 +683,15 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
     started = time.perf_counter()
     sides = {o.name: side for side, idx in parts for o in (objects[i] for i in idx)}
     reports, models = [], []
+    why = None
+    if settings.bounces > 0 and settings.indirect == "gather":
+        # the gathered light reads T of the objects baked together only: the bounce light
+        # between groups (the statue's on a ground of its own side, and back) would be lost
+        settings = replace(settings, indirect="steerable")
+        why = ("objects baked at different texture sides: the gathered indirect light reads "
+               "only T of the objects baked together, so each group takes Cycles' steerable "
+               "term, which keeps the bounce light between the groups")
+        yield Progress(0, 1, f"indirect light: steerable ({why})")
     for n, (side, idx) in enumerate(parts):
         group = [objects[i] for i in idx]
         yield Progress(0, 1, f"group {n + 1}/{len(parts)}: {', '.join(o.name for o in group)} "
@@ -698,6 +707,8 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
     for rep in reports:   # each report: the sides of all groups, and the whole job's wall time
         rep["object_resolutions"] = sides
         rep["timings"]["wall_total"] = wall
+        if why:
+            rep["indirect"]["why"] = why
         atomic.write_json(rep["report"], {k: v for k, v in rep.items() if k != "report"},
                           default=float)
     return TextureBakeOutput(reports, models)

@@ -127,6 +127,11 @@ def test_cli_bakes_two_sides_and_prints_each_groups_figures(tmp_path):
     errors = [ln for ln in out if "error vs Cycles Sun" in ln]
     assert len(errors) == 2 and all("at 1 held-out lights" in ln for ln in errors), errors
     assert len([ln for ln in out if ln.strip().startswith("Direct light:")]) == 2
+    # the gathered indirect light reads only T of the objects baked together: two groups take
+    # the steerable term, and say why
+    assert all("indirect (steerable)" in ln for ln in out if ln.startswith("baked "))
     for n, side in (("Statue", 16), ("Ground", 32)):
         rep = json.loads((tmp_path / "o" / f"{n}_texture_report.json").read_text())
         assert rep["settings"]["resolution"] == side
+        assert rep["indirect"]["method"] == "steerable"
+        assert "different texture sides" in rep["indirect"]["why"]
