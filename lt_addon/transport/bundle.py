@@ -690,7 +690,8 @@ def indirect_summary(term, settings) -> dict:
     if isinstance(term, GatheredIndirect):
         return {**term.settings, "bytes": term.storage_bytes()}
     return {"method": "steerable", "order": int(term.order), "resolution": term.resolution,
-            "samples": term.settings.get("samples")}
+            "samples": term.settings.get("samples"),
+            **{k: term.settings[k] for k in ("why", "gather_check") if k in term.settings}}
 
 
 def write_bundle(result: TransportTextureResult, names: list, out_dir: str,

@@ -391,9 +391,33 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
     The indirect stage's basis lights are chunks (:mod:`.light_chunks`): from ``cache``, from
     ``client``'s workers, or baked here."""
     do_indirect = settings.bounces > 0 and settings.indirect == "steerable"
-    # 3. indirect light: a low-order steerable bake of the indirect pass
     indirects = [None] * len(objects)
     indirect_chunks = None
+    fallback = None
+    steer_total = total
+    if settings.bounces > 0 and settings.indirect == "gather":
+        # 3. indirect light gathered by rays over T's own directions (.indirect_gather); when
+        # the objects not baked reflect much of it (a statue baked without its ground), Cycles'
+        # steerable term instead: the gather reads T, which those objects do not have
+        from . import indirect_gather
+
+        t0 = time.perf_counter()
+        got, figures = yield from indirect_gather.bake(
+            scene, objects, [r.array for r in readers], albedos, dset,
+            resolution=settings.indirect_resolution, bounces=settings.bounces,
+            rays=settings.indirect_rays, components=settings.indirect_components,
+            seed=settings.seed, step=step, total=total)
+        seconds["indirect_rays"] = figures["seconds"]["rays"]
+        if got is None:
+            do_indirect, fallback = True, figures
+            steer_total = max(total, step + settings.indirect_order ** 2 + 1)
+        else:
+            indirects = got
+            yield Progress(step, total, "indirect light gathered")
+            faults.checkpoint("indirect")
+            seconds["indirect_total"] = time.perf_counter() - t0
+        peak = max(peak, _rss_mb())
+    # 3. indirect light: a low-order steerable bake of the indirect pass
     if do_indirect:
         from ...lt_addon.steerable.sampled_basis import build_sampled_basis
         from ...lt_addon.steerable.basis import paper_basis
@@ -406,9 +430,10 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
         ri = settings.indirect_resolution
         stacks, indirect_chunks = yield from light_stacks(
             scene, objects, indirect_spec(settings), cache, client if cache else None,
-            blend_path, step - 1, total, "indirect bake")
+            blend_path, step - 1, steer_total, "indirect bake")
         seconds["indirect_cycles"] = indirect_chunks["cycles_seconds"]
         calls += indirect_chunks["calls"]
+        t0 -= seconds.get("indirect_rays", 0.0) if fallback else 0.0   # the gather's check too
         from ...lt_addon.geometry.uv_layout import uv_coverage
         from ..base.meshes import uv_triangles
 
@@ -423,24 +448,11 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
                 settings={"resolution": ri, "samples": settings.indirect_samples,
                           "bounces": settings.bounces, "mode": "radiance", "passes": "indirect",
                           "smoothing_texels": settings.indirect_smoothing,
-                          "object": o.name, "seed": settings.seed})
+                          "object": o.name, "seed": settings.seed,
+                          **({"why": fallback["why"], "gather_check": {
+                              k: v for k, v in fallback.items() if k != "why"}}
+                             if fallback else {})})
         seconds["indirect_total"] = time.perf_counter() - t0
-    elif settings.bounces > 0 and settings.indirect == "gather":
-        # 3. indirect light gathered by rays over T's own directions (.indirect_gather)
-        from . import indirect_gather
-
-        t0 = time.perf_counter()
-        indirects, figures = yield from indirect_gather.bake(
-            scene, objects, [r.array for r in readers], albedos, dset,
-            resolution=settings.indirect_resolution, bounces=settings.bounces,
-            rays=settings.indirect_rays, components=settings.indirect_components,
-            seed=settings.seed, step=step, total=total)
-        yield Progress(step, total, "indirect light gathered")
-        faults.checkpoint("indirect")
-        seconds["indirect_rays"] = figures["seconds"]["rays"]
-        seconds["indirect_total"] = time.perf_counter() - t0
-        peak = max(peak, _rss_mb())
-        indirect_chunks = None
 
     # 4. models (BLAS on --threads N when given, else as NumPy started it: every core)
     faults.checkpoint("fit")
