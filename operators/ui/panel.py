@@ -92,6 +92,12 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
                          "horizon_azimuths", "horizon_resolution", "gpu_budget", "sun_angle",
                          "table_size",
                          "truth_lights", "output_dir"):
+                # the gather's rays and components only when it gathers; the steerable term's
+                # samples also serve the gather's fallback (objects not baked, several sides)
+                if (name in ("indirect_rays", "indirect_components")
+                        and props.transport_indirect != "gather") or (
+                        name.startswith("indirect_") and props.transport_indirect == "none"):
+                    continue
                 col.prop(props, name)
             obj = context.active_object
             if obj is not None and obj.type == "MESH":   # e.g. the ground at its own size
