@@ -109,8 +109,9 @@ def errors_for(relight_fn, truth, R):
 
 
 def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder,
-                     ind_res=None, label=None, direct="auto"):
-    """Bake once at (S, ind_spp, res; indirect at ``ind_res``, default res / 2); one row per
+                     ind_res=None, label=None, direct="auto", indirect="gather"):
+    """Bake once at (S, ind_spp, res; indirect at ``ind_res``, default res / 2; ``indirect``
+    gathered by rays, the default, or the steerable term of ``ind_spp`` samples); one row per
     model fitted from that store."""
     from relightable_textures.lt_addon.transport import sparse_tables as sp
     from relightable_textures.lt_addon.transport import texture as tt
@@ -122,7 +123,8 @@ def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder,
     ind_res = ind_res or max(8, res // 2)
     st = tx.TransportTextureSettings(directions=f"hemi:{S}:1.5", resolution=res, bounces=2,
                                      indirect_resolution=ind_res,
-                                     indirect_samples=ind_spp, model="none", direct=direct)
+                                     indirect_samples=ind_spp, model="none", direct=direct,
+                                     indirect=indirect)
     t0 = time.perf_counter()
     # resume=False: a kept indirect stage of the previous point (same lights) is not reused
     result = run(tx.bake_transport_textures(scene, objects, st, folder, resume=False))
@@ -138,7 +140,8 @@ def transport_points(scene, objects, truth, R, S, ind_spp, res, models, folder,
                      if getattr(b.indirect, "coefficients", None) is not None)
     alb_bytes = sum(b.albedo.size * 2 for b in result.objects)
     rows = []
-    label = label or f"transport S {S}, {res}^2, indirect {ind_res}^2 {ind_spp} spp"
+    label = label or (f"transport S {S}, {res}^2, indirect {ind_res}^2 "
+                      + ("gathered" if indirect == "gather" else f"steerable {ind_spp} spp"))
     for kind, arg in models:
         t1 = time.perf_counter()
         if kind in ("T", "viewport"):
@@ -335,8 +338,7 @@ def measure_presets(out_dir, truth_spp=256):
                                                      ("viewport", None)],
                                    folder, ind_res=p["indirect_resolution"],
                                    label=f"{name}: {p['directions']}, {p['resolution']}^2, "
-                                         f"indirect {p['indirect_resolution']}^2 "
-                                         f"{p['indirect_samples']} spp")
+                                         f"indirect {p['indirect_resolution']}^2 gathered")
             rows += got
             t_row, pca_row, v_row = got
             viewport, _ = sp.choose_viewport("auto", S, p["resolution"])
@@ -406,9 +408,9 @@ def main(argv=None):
             for S in counts:
                 rows += transport_points(scene, objects, truth, R, S, 64, R, models, folder)
             mid = counts[-2]
-            for ind in (16, 256):
+            for ind in (16, 256):     # the steerable term's samples, for comparison
                 rows += transport_points(scene, objects, truth, R, mid, ind, R,
-                                         [("pca", ks[-2])], folder)
+                                         [("pca", ks[-2])], folder, indirect="steerable")
             rows += transport_points(scene, objects, truth, R, mid, 64, R // 2,
                                      [("pca", ks[-2])], folder)
         if not args.no_lobes:

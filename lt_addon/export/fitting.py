@@ -201,13 +201,13 @@ def light_weights(settings: ExportSettings, dset, kernel: str) -> np.ndarray:
     return w[:, None] * tint
 
 
-def indirect_over_pi(bake, store, settings) -> np.ndarray | None:
+def indirect_over_pi(bake, store, settings, kernel: str = "linear") -> np.ndarray | None:
     """Bounce light as ``E_ind / pi`` (P, 3) under the sun (None for an environment: the bake's
     indirect term is tabulated per sun direction only)."""
     if bake.indirect is None or settings.sun is None:
         return None
     rad = upsample(indirect_images(bake.indirect, direction_from_az_el(*settings.sun),
-                                   settings.sun_angle),
+                                   settings.sun_angle, kernel),
                    store.resolution).reshape(-1, 3).astype(np.float64)
     albedo = bake.albedo.reshape(-1, 3).astype(np.float64)
     tint = np.asarray(settings.color, np.float64) * settings.strength

@@ -587,10 +587,20 @@ def model_summary(model, S: int) -> dict:
     return {"kind": "steerable", "order": model.order}
 
 
-def indirect_lookups(settings) -> int:
+_BAKED = object()
+
+
+def indirect_lookups(settings, term=_BAKED) -> int:
     """Texture lookups per pixel of the indirect term's viewport group: the steerable term's
     order^2 basis images; the gathered term's k component images and its ceil(k / 3) tables of
-    coefficients over the sun's disk."""
+    coefficients over the sun's disk. ``term``: the baked term (GatheredIndirect,
+    SteerableTexture or None: what was made, a fallback included); else from the settings."""
+    if term is not _BAKED:
+        if term is None:
+            return 0
+        if isinstance(term, GatheredIndirect):
+            return term.components + -(-term.components // 3)
+        return int(term.order) ** 2
     if not settings.bounces or settings.indirect == "none":
         return 0
     if settings.indirect == "gather":
@@ -599,14 +609,14 @@ def indirect_lookups(settings) -> int:
     return settings.indirect_order ** 2
 
 
-def preview_cost(model, settings, store=None, view=None, horizon=None) -> dict:
+def preview_cost(model, settings, store=None, view=None, horizon=None, indirect=_BAKED) -> dict:
     """Per-pixel cost of the live preview of ``model`` as ``settings.viewport`` shows it (the
     transport viewport: 4 table texels x (2 K / 3 table lookups + K atlas lookups) + the
     albedo, K the taps its tables need for the preview's sun size: 21 lookups for a point sun,
     whatever the number of directions)."""
     if not hasattr(model, "preview_cost"):
         return {}
-    extra = indirect_lookups(settings)
+    extra = indirect_lookups(settings, indirect)
     if horizon is not None:
         return {"viewport": "horizon", "azimuths": horizon.azimuths,
                 "texture_lookups_per_pixel": HORIZON_LOOKUPS + extra,
@@ -754,7 +764,7 @@ def write_bundle(result: TransportTextureResult, names: list, out_dir: str,
             "bake_calls": result.bake_calls,
             "peak_rss_above_start_mb": round(result.peak_rss_mb, 1),
             "rss_growth_while_streaming_mb": round(result.growth_after_first_mb, 1),
-            "preview_cost": preview_cost(b.model, s, store, b.view, b.horizon),
+            "preview_cost": preview_cost(b.model, s, store, b.view, b.horizon, b.indirect),
             "viewport": b.viewport or {},
             "model_vs_T": model_fidelity(b, store, s),
             **result.chunks,

@@ -91,8 +91,14 @@ def estimate(scene, objects, settings, truth: int = 4, truth_samples: int = 256)
 
     dset = settings.validate()
     costs, cal = yield from calibrate(scene, objects, settings, truth, truth_samples)
-    ri = settings.indirect_resolution if (settings.bounces > 0 and
-                                          settings.indirect != "none") else 0
+    # the steerable term's Cycles bakes scale with the indirect grid's texels; the gathered
+    # term's PCA reads all of T (S x the texture's texels) four times and outweighs its rays
+    # from the grid (rays 0.36 of 4.26 s on the balanced bumps at 256^2), so it scales with the
+    # texture's texels (the calibration bakes have the grid at the texture's side: the same
+    # units there)
+    ri = (0 if settings.bounces == 0 or settings.indirect == "none" else
+          settings.resolution if settings.indirect == "gather" else
+          settings.indirect_resolution)
     seconds = est.predict(costs, settings.resolution, ri, len(objects), truth,
                           hmap.side(settings.resolution, settings.horizon_resolution))
     P = settings.resolution ** 2

@@ -125,7 +125,7 @@ def export_job(scene, obj, settings: ExportSettings, out_dir: str, force: bool =
         yield Progress(1, 3, f"{obj.name}: projecting onto L1 spherical harmonics")
         t0 = time.perf_counter()
         weights = light_weights(settings, store.directions, kernel)
-        indirect = indirect_over_pi(bake, store, settings)
+        indirect = indirect_over_pi(bake, store, settings, kernel)
         variants = {}
         if settings.format == "godot-lightmap":
             ver = settings.godot

@@ -22,6 +22,7 @@ from ...lt_addon.progress import Progress
 from ...lt_addon.rays import engine
 from ...lt_addon.rays.texels import extend_margin
 from ...lt_addon.transport import gathered_indirect as gi
+from ...lt_addon.transport import texture as tt
 from ...lt_addon.transport.gathered_texture import GatheredIndirect
 from ..base import ray_scene
 
@@ -131,8 +132,9 @@ def bake(scene, objects, arrays, albedos, dset, *, resolution: int, bounces: int
     yield Progress(step, total, f"indirect light: {bounces} bounce(s), PCA {components}")
     t0 = time.perf_counter()
     alb = np.concatenate([np.asarray(a, np.float32).reshape(-1, 3) for a in albedos])
-    Vc, U, _ = gi.indirect_pca(g, StackedRows(arrays), alb, bounces=bounces,
-                               components=components, seed=seed)
+    rows = StackedRows(arrays)          # read by chunks of directions of ~CHUNK_BYTES in float64
+    Vc, U, _ = gi.indirect_pca(g, rows, alb, bounces=bounces, components=components, seed=seed,
+                               chunk=max(1, tt.CHUNK_BYTES // (8 * rows.shape[1])))
     t_pca = time.perf_counter() - t0
     centre = ((np.arange(RI) + 0.5) * R / RI).astype(np.int64)
     out = []

@@ -239,7 +239,9 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
     seconds["direct_total"] = time.perf_counter() - t_start
 
     lights = None
-    if resume and settings.bounces > 0 and settings.indirect == "steerable":
+    # (the gathered term falls back to the steerable lights when objects not baked reflect much
+    # of the light: their chunks are kept as the steerable term's)
+    if resume and settings.bounces > 0 and settings.indirect in ("steerable", "gather"):
         from .light_chunks import light_cache
 
         lights = light_cache(scene, objects, indirect_spec(settings),
@@ -410,7 +412,7 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
         seconds["indirect_rays"] = figures["seconds"]["rays"]
         if got is None:
             do_indirect, fallback = True, figures
-            steer_total = max(total, step + settings.indirect_order ** 2 + 1)
+            steer_total = step + settings.indirect_order ** 2    # its lights, then the models
         else:
             indirects = got
             yield Progress(step, total, "indirect light gathered")
@@ -433,7 +435,7 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
             blend_path, step - 1, steer_total, "indirect bake")
         seconds["indirect_cycles"] = indirect_chunks["cycles_seconds"]
         calls += indirect_chunks["calls"]
-        t0 -= seconds.get("indirect_rays", 0.0) if fallback else 0.0   # the gather's check too
+        t0 -= sum(fallback["seconds"].values()) if fallback else 0.0   # the gather's check too
         from ...lt_addon.geometry.uv_layout import uv_coverage
         from ..base.meshes import uv_triangles
 
@@ -473,7 +475,7 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
         peak = max(peak, _rss_mb())
     seconds["fit"] = sum(r.fit_seconds for r in results)
     seconds["bake_total"] = time.perf_counter() - t_start
-    yield Progress(total, total, "models fitted")
+    yield Progress(steer_total, steer_total, "models fitted")
     out = TransportTextureResult(results, dset, settings, seconds, calls, peak - rss0,
                                  peak - first)
     out.indirect_chunks = indirect_chunks

@@ -229,26 +229,37 @@ def install_indirect_group(obj, report: dict, bake, base: str, sun_angle: float,
     iname = f"{GROUP_PREFIX} indirect ({obj.name})"
     old = bpy.data.node_groups.get(iname)
     files = {}
-    if isinstance(bake.indirect, gt.GatheredIndirect):
+    aname = f"{obj.name} indirect atlas"
+    stale = bpy.data.images.get(aname)
+    # an earlier bake's atlas of the other kind of term (another file): loading ours beside it
+    # would name ours "... .001" and leave the World group reading the stale one by name
+    gathered = isinstance(bake.indirect, gt.GatheredIndirect)
+    atlas = (f"{base}_preview_indirect_eigen.exr" if gathered else
+             os.path.splitext(report["files"]["indirect"])[0] + "_atlas.exr")
+    if stale is not None and stale.get(pn._TAG) and (
+            os.path.abspath(bpy.path.abspath(stale.filepath)) != os.path.abspath(atlas)):
+        bpy.data.images.remove(stale)
+    if gathered:
         s = report["settings"]
         eig, tables = gt.preview_arrays(bake.indirect, sun_angle, s["table_size"],
                                         s.get("kernel", "linear"))
         files = write_preview_files(base, eig, tables, ("indirect_eigen", "indirect_tables"),
                                     "relightable_textures.gathered_indirect_preview")
-        iimg = pn.load_atlas_image(files["indirect_eigen"], f"{obj.name} indirect atlas")
+        iimg = pn.load_atlas_image(files["indirect_eigen"], aname)
         timg = pn.load_atlas_image(files["indirect_tables"], f"{obj.name} indirect tables")
         group = build_gathered_group(len(eig), bake.indirect.resolution, s["table_size"], iimg,
                                      timg, uv_map, iname + " new")
         group["relight_indirect"] = "gathered"
     else:
         atlas_path, _ = pn.write_atlas(bake.indirect, report["files"]["indirect"])
-        iimg = pn.load_atlas_image(atlas_path, f"{obj.name} indirect atlas")
+        iimg = pn.load_atlas_image(atlas_path, aname)
         group = pn.build_group(bake.indirect, iimg, uv_map, name=iname + " new")
         group["relight_indirect"] = "steerable"
     if old is not None:
         bpy.data.node_groups.remove(old)
     group.name = iname
     group[pn.OWNER] = obj.name
+    group["relight_indirect_image"] = iimg.name     # what the World group samples
     return group, files
 
 
@@ -1052,7 +1063,8 @@ def set_light_mode(scene, obj, mode: str) -> bool:
             env_g = build_env_group(n_tiles, bake.model.resolution, eig_img, uv_map, env_name)
             env_g[pn.OWNER] = obj.name
             if sun_i is not None and bake.indirect is not None:
-                iimg = bpy.data.images.get(f"{obj.name} indirect atlas")
+                iimg = bpy.data.images.get(sun_i.get("relight_indirect_image",
+                                                     f"{obj.name} indirect atlas"))
                 env_i = build_env_indirect_group(bake.indirect, iimg, uv_map, envi_name)
                 env_i[pn.OWNER] = obj.name
         swaps = ((sun_g, env_g), (sun_i, env_i))

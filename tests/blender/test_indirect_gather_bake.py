@@ -148,3 +148,38 @@ def test_a_statue_baked_without_its_ground_takes_the_steerable_term_and_says_why
     assert "objects that are not baked" in term.settings["why"]
     reps = tx.write_bake(res, [bpy.data.objects["Statue"]], str(tmp_path / "alone"))
     assert reps[0]["indirect"]["method"] == "steerable" and "why" in reps[0]["indirect"]
+
+
+def test_re_baking_with_the_other_indirect_term_lights_the_world_with_the_new_atlas(
+        fresh_scene, tmp_path):
+    """A steerable bake, then a gathered one of the same object into the same folder: the World
+    light's indirect group samples the new component atlas (not the earlier basis atlas of the
+    same image name, which would be read with the wrong tile layout), and the report counts the
+    lookups of the term it made."""
+    import bpy
+
+    import relightable_textures
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.base.jobs import run
+    from relightable_textures.operators.preview import transport_preview as tp
+
+    scene = fresh_scene
+    samples.build("bumps", scene, "test")
+    obj = bpy.data.objects["Bumps"]
+    relightable_textures.register()
+    try:
+        first = run(tx.bake_job(scene, [obj], settings(indirect="steerable", indirect_samples=4),
+                                str(tmp_path), truth=0)).reports[0]
+        rep = run(tx.bake_job(scene, [obj], settings(), str(tmp_path), truth=0)).reports[0]
+        assert first["preview_cost"]["texture_lookups_per_pixel"] + (7 + 3) - 9 == \
+            rep["preview_cost"]["texture_lookups_per_pixel"]
+        scene.relight.texture_light = "WORLD"
+        assert tp.set_light_mode(scene, obj, "WORLD")
+        group = bpy.data.node_groups[f"Relight Transport env indirect ({obj.name})"]
+        images = {n.image for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"}
+        assert len(images) == 1
+        (image,) = images
+        assert bpy.path.abspath(image.filepath).endswith("Bumps_preview_indirect_eigen.exr")
+        assert len([n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]) == 7
+    finally:
+        relightable_textures.unregister()
