@@ -150,22 +150,27 @@ def _sun_group_tail(b, gin, gout, irradiance, albedo, dz, x: float) -> None:
     b.links.new(color, gout.inputs["Color"])
 
 
-def build_group(n_tiles: int, resolution: int, table_size: int, eig_image, table_image,
-                uv_map: str, name: str):
-    """The node group: inputs Light Direction, Intensity, Color; output Color (direct light)."""
-    group, b, gin, gout, (dx, dy, dz), root = _sun_group_head(name, -1800, 1600)
+def _disk_and_uv(b, dx, dy, root, uv_map: str):
+    """(the light's disk point as table coordinates in [0, 1]^2, the texel's UV) sockets."""
     tx = b.math("MULTIPLY_ADD", b.math("DIVIDE", dx, root, x=-900, y=100), 0.5, 0.5, x=-800, y=100)
     ty = b.math("MULTIPLY_ADD", b.math("DIVIDE", dy, root, x=-900, y=0), 0.5, 0.5, x=-800, y=0)
     table_uv = b.node("ShaderNodeCombineXYZ", -700, 50)
     b.links.new(tx, table_uv.inputs[0])
     b.links.new(ty, table_uv.inputs[1])
-    uv = b.node("ShaderNodeUVMap", -700, -400, uv_map=uv_map).outputs["UV"]
+    return table_uv.outputs[0], b.node("ShaderNodeUVMap", -700, -400, uv_map=uv_map).outputs["UV"]
+
+
+def build_group(n_tiles: int, resolution: int, table_size: int, eig_image, table_image,
+                uv_map: str, name: str):
+    """The node group: inputs Light Direction, Intensity, Color; output Color (direct light)."""
+    group, b, gin, gout, (dx, dy, dz), root = _sun_group_head(name, -1800, 1600)
+    table_uv, uv = _disk_and_uv(b, dx, dy, root, uv_map)
     lay_e = atlas_layout(n_tiles + 1, resolution)
     lay_t = atlas_layout(n_tiles, table_size)
     acc = None
     for t in range(n_tiles):
         y = 600 - 220 * t
-        c = _lookup(b, table_image, pn.after_sum(b, table_uv.outputs[0], acc, -700, y), lay_t["tiles"][t],
+        c = _lookup(b, table_image, pn.after_sum(b, table_uv, acc, -700, y), lay_t["tiles"][t],
                     -500, y)
         e = _lookup(b, eig_image, pn.after_sum(b, uv, acc, -700, y - 100), lay_e["tiles"][t], -500,
                     y - 100)
@@ -184,12 +189,7 @@ def build_gathered_group(k: int, resolution: int, table_size: int, eig_image, ta
     tile ``j // 3`` at the sun's disk point; ``U_j``: RGB component image ``j`` (radiance).
     Lookups per pixel: k + ceil(k / 3). Twin: ``gathered_texture.viewport_relight``."""
     group, b, gin, gout, (dx, dy, dz), root = _sun_group_head(name, -1800, 1600, True)
-    tx = b.math("MULTIPLY_ADD", b.math("DIVIDE", dx, root, x=-900, y=100), 0.5, 0.5, x=-800, y=100)
-    ty = b.math("MULTIPLY_ADD", b.math("DIVIDE", dy, root, x=-900, y=0), 0.5, 0.5, x=-800, y=0)
-    table_uv = b.node("ShaderNodeCombineXYZ", -700, 50)
-    b.links.new(tx, table_uv.inputs[0])
-    b.links.new(ty, table_uv.inputs[1])
-    uv = b.node("ShaderNodeUVMap", -700, -400, uv_map=uv_map).outputs["UV"]
+    table_uv, uv = _disk_and_uv(b, dx, dy, root, uv_map)
     n_tiles = -(-k // 3)
     lay_e = atlas_layout(k, resolution)
     lay_t = atlas_layout(n_tiles, table_size)
@@ -200,7 +200,7 @@ def build_gathered_group(k: int, resolution: int, table_size: int, eig_image, ta
 
     for t in range(n_tiles):
         y = 600 - 600 * t
-        c = _lookup(b, table_image, pn.after_sum(b, table_uv.outputs[0], scalar(acc, y), -700, y),
+        c = _lookup(b, table_image, pn.after_sum(b, table_uv, scalar(acc, y), -700, y),
                     lay_t["tiles"][t], -500, y)
         sep = b.node("ShaderNodeSeparateXYZ", -100, y)
         b.links.new(c, sep.inputs[0])
