@@ -31,7 +31,8 @@ into the tables; changing it rewrites them (:func:`install_transport_preview`, a
 **The world's environment** (the scene's *Texture Light* set to World): an environment is
 ``sum_s L(w_s) dw_s T[s]``, so each component gets one RGB coefficient ``C[:, k] = sum_s L_s
 dw_s V[s, k]`` and each indirect image one ``G[:, j]``: ``sum_s L_s dw_s V_ind[s, j]`` for the
-gathered term's components, ``sum_s L_s dw_s gain(w_s) c_j(w_s)`` for a steerable basis image. The *environment groups* (:func:`build_env_group`, :func:`build_env_indirect_group`)
+gathered term's components, ``sum_s L_s dw_s gain(w_s) c_j(w_s)`` for a steerable basis
+image. The *environment groups* (:func:`build_env_group`, :func:`build_env_indirect_group`)
 have the sun groups' sockets, so switching swaps the groups' trees and keeps every link; they
 hold ``C`` and ``G`` as constants that Python rewrites when the world, its Mapping Z rotation or
 the Environment Rotation / Strength change (:func:`update_environment_previews`, one small
