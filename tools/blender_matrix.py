@@ -116,7 +116,8 @@ try:
         bpy.ops.relight.add_sample_scene(name="bumps", size="test")
         props = bpy.context.scene.relight
         props.preset = "draft"
-        # the default method (transport): 24 hard suns at 16^2, a 4-spp indirect term
+        # the default method (transport): 24 hard suns at 16^2, the indirect light gathered by
+        # rays (the draft preset's 2 bounces) with its own node group
         props.directions, props.resolution, props.indirect_samples = 24, 16, 4
         props.output_dir = os.path.join(work, "bake") + os.sep
         bpy.context.view_layer.objects.active = bpy.data.objects["Bumps"]
@@ -139,10 +140,15 @@ try:
                       "horizon": {"Bumps_horizons.npz", "Bumps_preview_horizons.png",
                                   "Bumps_preview_normals.exr"}}.get(shown)
             group = bpy.data.node_groups.get("Relight Transport (Bumps)")
+            indirect = bpy.data.node_groups.get("Relight Transport indirect (Bumps)")
+            rep["indirect"] = bake_rep.get("indirect", {}).get("method")
             rep["bake"] = (bake_rep["directions"] == 24
                            and bake_rep["direct"]["engine"] == "rays"
                            and images is not None and images <= set(files)
-                           and group is not None and group.get("relight_viewport") == shown)
+                           and group is not None and group.get("relight_viewport") == shown
+                           and rep["indirect"] == "gathered" and indirect is not None
+                           and indirect.get("relight_indirect") == "gathered"
+                           and "Bumps_indirect.npz" in files)
 except Exception:
     rep["error"] = traceback.format_exc()[-1500:]
 out()
