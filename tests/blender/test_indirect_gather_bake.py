@@ -92,17 +92,22 @@ def test_gathered_indirect_light_equals_cycles_indirect_light_of_the_same_sun(fr
                                                                               tmp_path):
     """Statue on its ground at 32^2, the scene's 2 bounces, 200 directions: the gathered term
     under a 2-degree Sun at three held-out lights against Cycles' own indirect light of that
-    Sun (an indirect-pass radiance bake, 256 spp). Measured (2026-12-04): the mean over each
-    object's texels within 1.2 % (statue) / 3 % (ground) of Cycles'; per texel 0.09-0.17
-    (statue) / 0.22-0.27 (ground) relative RMSE, where two Cycles truths of different seeds
-    differ by 0.05-0.07 / 0.17-0.24 (the ground's bounce light is dim: a tenth of the statue's
-    mean). Bounds: means 3 % / 10 %, per texel 0.25 / 0.40. The order-3 steerable term, for
-    scale, is 0.19-0.41 / 0.34-0.54 off per texel and 22-40 % off the ground's mean."""
+    Sun (an indirect-pass radiance bake, 256 spp), over the texels the UV islands cover (the
+    margin around them is padding, and Cycles 5.3 pads differently: over all texels its
+    statue truth moved 0.14-0.18 from 5.0.1's, over the covered ones 0.06-0.08, as much as two
+    seeds of one release). Measured (2026-12-04, bpy 5.0.1 / 5.3.0, the term bit-identical on
+    both): the mean over each object's covered texels within 1.5 % / 1.4 % (statue) and 2.0 % /
+    1.4 % (ground) of Cycles'; per texel 0.10-0.18 / 0.12-0.21 (statue) and 0.22-0.27 /
+    0.23-0.28 (ground) relative RMSE, where two Cycles truths of different seeds differ by
+    0.05-0.08 / 0.14-0.25 (the ground's bounce light is dim: a tenth of the statue's mean).
+    Bounds: means 3 % / 10 %, per texel 0.25 / 0.40. The order-3 steerable term, for scale,
+    is 0.19-0.41 / 0.34-0.54 off per texel and 22-40 % off the ground's mean."""
     import bpy
 
     from relightable_textures.operators.bakes import texture_transport as tx
     from relightable_textures.operators.base.cycles_bake import EnvironmentBake
     from relightable_textures.operators.base.jobs import run
+    from relightable_textures.operators.base.ray_scene import receiver_points
     from relightable_textures.lt_addon.transport.bundle import upsample
 
     scene = fresh_scene
@@ -114,13 +119,17 @@ def test_gathered_indirect_light_equals_cycles_indirect_light_of_the_same_sun(fr
     res = run(tx.bake_transport_textures(scene, objs, s, str(tmp_path), resume=False))
     for b in res.objects:
         b.store.abort()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    covered = [receiver_points(o, depsgraph, r)[0].covered() for o in objs]
     for az, el in ((37.0, 30.0), (161.0, 12.0), (283.0, 55.0)):
         d = direction_from_az_el(az, el)
         with EnvironmentBake(scene, objs, r, 256, 2, (8, 16), mode="radiance", seed=1,
                              world_sampling="none", passes="indirect") as session:
             truth = session.bake_sun_all(d, 1.0, 2.0)
-        for b, t, (mean_tol, texel_tol) in zip(res.objects, truth, ((0.03, 0.25), (0.1, 0.4))):
-            got = upsample(b.indirect.relight(d, 2.0), r)
+        for b, t, m, (mean_tol, texel_tol) in zip(res.objects, truth, covered,
+                                                  ((0.03, 0.25), (0.1, 0.4))):
+            assert m.sum() > 0.6 * r * r
+            got, t = upsample(b.indirect.relight(d, 2.0), r)[m], t[m]
             assert abs(got.mean() / t.mean() - 1.0) < mean_tol, (b.name, az, el)
             assert rel(got, t) < texel_tol, (b.name, az, el)
 
