@@ -313,13 +313,60 @@ def write_presets(report, scene, out_dir):
     print(f"presets written to {path}; to adopt them: cp {path} {PACKAGE_PRESETS}")
 
 
-def measure_presets(out_dir, truth_spp=256):
-    """Bake each transport preset exactly as defined (operators/bakes/transport_presets.json) on the
-    bumps demo at 256^2, measure it as the sweep does (plus T itself and one 64-spp Cycles bake
-    in the same run) and write the figures into the presets file's ``figures`` blocks."""
+def user_bake_row(scene, objects, truth, settings, folder, one, label):
+    """Bake ``settings`` as a user's bake runs them (its model, ``--viewport`` as set: under
+    ``auto`` the horizons are found and the held-out checks choose per object) and score what
+    the viewport shows with the bake's own :func:`...texture_transport.truth_errors` (the
+    report's headline) at the held-out lights for the 2- and 10-degree Suns, beside the relight
+    from T itself and the fitted PCA. The bake time is the whole bake, horizons included."""
+    from relightable_textures.lt_addon.transport.bundle import preview_cost
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.base.jobs import run
+
+    t0 = time.perf_counter()
+    result = run(tx.bake_transport_textures(scene, objects, settings, folder, resume=False))
+    bake_s = time.perf_counter() - t0
+    errs = {a: tx.truth_errors(result, truth[a], a) for a in ANGLES}
+    pca = {a: float(np.sqrt(np.mean([r["model"] ** 2 for r in errs[a]["lights"]])))
+           if all("model" in r for r in errs[a]["lights"]) else None for a in ANGLES}
+    costs = [preview_cost(b.model, settings, b.store, b.view, b.horizon, b.indirect)
+             for b in result.objects]
+    stores = [b.store for b in result.objects]
+    row = {
+        "setting": label, "shows": [b.viewport.get("shows") for b in result.objects],
+        "bake_seconds": round(bake_s, 2), "single_bakes": round(bake_s / one, 2),
+        "stages": {k: round(v, 2) for k, v in result.seconds.items()
+                   if k in ("direct_rays", "horizons", "indirect_total", "fit")},
+        "peak_mem_mb": round(result.peak_rss_mb, 1),
+        "transport_bytes": int(sum(os.path.getsize(s.path) for s in stores)),
+        "preview_lookups": max(c.get("texture_lookups_per_pixel", 0) for c in costs),
+        "gpu_mib": round(sum(c.get("gpu_mib", c.get("atlas_mib_8bit", 0.0)) for c in costs), 1),
+        "err_2deg": round(errs[2.0]["headline_rel_rmse"], 4),
+        "err_10deg": round(errs[10.0]["headline_rel_rmse"], 4),
+        "err_from_T_2deg": round(errs[2.0]["transport_rel_rmse"], 4),
+        "err_from_T_10deg": round(errs[10.0]["transport_rel_rmse"], 4),
+        "err_pca_10deg": None if pca[10.0] is None else round(pca[10.0], 4)}
+    print(f"  {label}: {row['bake_seconds']} s = {row['single_bakes']} single bakes, shows "
+          f"{'/'.join(row['shows'])}, err 2/10 deg {row['err_2deg']}/{row['err_10deg']} "
+          f"(from T {row['err_from_T_2deg']}/{row['err_from_T_10deg']}), stages "
+          f"{row['stages']}", flush=True)
+    for s in stores:
+        s.abort()
+    return row
+
+
+def measure_presets(out_dir, truth_spp=256, candidates=()):
+    """Bake each transport preset exactly as defined (operators/bakes/transport_presets.json)
+    and as a user's bake runs it (:func:`user_bake_row`: PCA model, ``--viewport auto`` with
+    its horizons and held-out choice) on the bumps demo at 256^2, score what the viewport shows
+    against the 256-spp truths, time it against one 64-spp bake of the same texture in the same
+    run, and write the figures into the presets file's ``figures`` blocks (in ``out_dir``).
+    ``candidates``: further {field: value} overrides of the balanced preset, measured in the
+    same run for re-choosing the presets (printed, not written)."""
+    from dataclasses import replace
+
     from relightable_textures.lt_addon.io import atomic
-    from relightable_textures.lt_addon.transport import sparse_tables as sp
-    from relightable_textures.lt_addon.transport.texture import parse_directions
+    from relightable_textures.operators.bakes import texture_transport as tx
 
     with open(PACKAGE_PRESETS) as fh:
         data = json.load(fh)
@@ -332,31 +379,35 @@ def measure_presets(out_dir, truth_spp=256):
     with tempfile.TemporaryDirectory(dir=out_dir) as folder:
         for name, row in data["presets"].items():
             p = row["settings"]
-            S = parse_directions(p["directions"]).size
-            got = transport_points(scene, objects, truth, R, S, p["indirect_samples"],
-                                   p["resolution"], [("T", None), ("pca", p["components"]),
-                                                     ("viewport", None)],
-                                   folder, ind_res=p["indirect_resolution"],
-                                   label=f"{name}: {p['directions']}, {p['resolution']}^2, "
-                                         f"indirect {p['indirect_resolution']}^2 gathered")
-            rows += got
-            t_row, pca_row, v_row = got
-            viewport, _ = sp.choose_viewport("auto", S, p["resolution"])
-            m_row = v_row if viewport == "transport" else pca_row
+            r = user_bake_row(scene, objects, truth, tx.settings_from_preset(name), folder, one,
+                              f"{name}: " + ", ".join(f"{k} {v}" for k, v in p.items()))
+            rows.append(r)
             row["figures"] = {
-                "viewport": viewport, "bake_seconds": m_row["bake_seconds"],
-                "rel_rmse": m_row["err_10deg"], "rel_rmse_2deg": m_row["err_2deg"],
-                "rel_rmse_from_T": t_row["err_10deg"], "rel_rmse_pca": pca_row["err_10deg"],
-                "rel_rmse_transport_viewport": v_row["err_10deg"],
-                "single_bakes": round(m_row["bake_seconds"] / one, 2),
-                "single_bake_seconds": round(one, 2), "peak_mem_mb": m_row["peak_mem_mb"],
-                "stored_bytes": m_row["stored_bytes"], "transport_bytes": m_row["transport_bytes"],
-                "preview_lookups": m_row["preview_lookups"], "scene": "bumps demo",
+                "viewport": "/".join(r["shows"]), "bake_seconds": r["bake_seconds"],
+                "rel_rmse": r["err_10deg"], "rel_rmse_2deg": r["err_2deg"],
+                "rel_rmse_from_T": r["err_from_T_10deg"],
+                "rel_rmse_from_T_2deg": r["err_from_T_2deg"], "rel_rmse_pca": r["err_pca_10deg"],
+                "single_bakes": r["single_bakes"], "single_bake_seconds": round(one, 2),
+                "stages_seconds": r["stages"], "peak_mem_mb": r["peak_mem_mb"],
+                "transport_bytes": r["transport_bytes"], "preview_lookups": r["preview_lookups"],
+                "viewport_gpu_mib": r["gpu_mib"], "scene": "bumps demo",
                 "truth_samples": truth_spp, "date": time.strftime("%Y-%m-%d")}
+        for c in candidates:
+            rows.append(user_bake_row(scene, objects, truth,
+                                      replace(tx.settings_from_preset("balanced"), **c), folder,
+                                      one, "balanced with " + json.dumps(c)))
     path = os.path.join(out_dir, "transport_presets.json")   # never into the package
     atomic.write_json(path, data, indent=1)
-    print(table(rows, f"transport presets (bumps demo, {R}^2; one 64-spp bake {one:.2f} s; "
-                      f"truths {truth_spp} spp, 2 bounces)"))
+    print(f"\n#### transport presets as users bake them (bumps demo, {R}^2; one 64-spp bake "
+          f"{one:.2f} s; truths {truth_spp} spp, 2 bounces; {time.strftime('%Y-%m-%d %H:%M')})\n")
+    print("| setting | shows | bake | x one 64-spp bake | stages (s) | GPU MiB | lookups | "
+          "err 2° | err 10° | from T 2° / 10° |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['setting']} | {'/'.join(r['shows'])} | {r['bake_seconds']:.1f} s | "
+              f"{r['single_bakes']:.2f} | {r['stages']} | {r['gpu_mib']} | "
+              f"{r['preview_lookups']} | {r['err_2deg']:.4f} | {r['err_10deg']:.4f} | "
+              f"{r['err_from_T_2deg']:.4f} / {r['err_from_T_10deg']:.4f} |")
     print(f"measured figures written to {path}; to adopt them: cp {path} {PACKAGE_PRESETS}")
     return rows
 
@@ -376,12 +427,17 @@ def main(argv=None):
     ap.add_argument("--truth-samples", type=int, help="Cycles samples of the truths (default "
                     "256; 64 with --quick); one 256-spp truth's own noise is 0.011 here")
     ap.add_argument("--measure-presets", action="store_true",
-                    help="bake and measure the three transport presets as defined (bumps demo) "
-                         "and write the presets file with their figures into --out")
+                    help="bake and measure the three transport presets as defined and as a "
+                         "user's bake runs them (bumps demo) and write the presets file with "
+                         "their figures into --out")
+    ap.add_argument("--candidates", default="[]",
+                    help="with --measure-presets: a JSON list of overrides of the balanced "
+                         "preset to measure in the same run, e.g. "
+                         "'[{\"directions\": \"hemi:400:1.5\"}]'")
     args = ap.parse_args(argv)
     if args.measure_presets:
         os.makedirs(args.out, exist_ok=True)
-        measure_presets(args.out, args.truth_samples or 256)
+        measure_presets(args.out, args.truth_samples or 256, json.loads(args.candidates))
         return 0
     size = "test" if args.quick else args.size
     R = args.resolution or (64 if args.quick else 256)

@@ -27,7 +27,8 @@ def preset_values(method: str, preset: str) -> dict:
             "resolution": t.resolution, "transport_tol": t.tol,
             "transport_components": int(t.components or 0),
             "indirect_samples": t.indirect_samples,
-            "indirect_resolution": t.indirect_resolution, "table_size": t.table_size}
+            "indirect_resolution": t.indirect_resolution, "table_size": t.table_size,
+            "horizon_azimuths": t.horizon_azimuths, "horizon_resolution": t.horizon_resolution}
 
 
 def preset_differences(props) -> list:
