@@ -355,14 +355,16 @@ def user_bake_row(scene, objects, truth, settings, folder, one, label):
     return row
 
 
-def measure_presets(out_dir, truth_spp=256, candidates=()):
+def measure_presets(out_dir, truth_spp=256, candidates=(), scene_name="bumps"):
     """Bake each transport preset exactly as defined (operators/bakes/transport_presets.json)
     and as a user's bake runs it (:func:`user_bake_row`: PCA model, ``--viewport auto`` with
     its horizons and held-out choice) on the bumps demo at 256^2, score what the viewport shows
     against the 256-spp truths, time it against one 64-spp bake of the same texture in the same
     run, and write the figures into the presets file's ``figures`` blocks (in ``out_dir``).
-    ``candidates``: further {field: value} overrides of the balanced preset, measured in the
-    same run for re-choosing the presets (printed, not written)."""
+    ``candidates``: further {field: value} overrides of a preset (``"preset"``: which one,
+    balanced by default), measured in the same run for re-choosing the presets (printed, not
+    written). ``scene_name`` other than the bumps: the same rows on another demo scene, and no
+    presets file is written (the presets' figures are the bumps')."""
     from dataclasses import replace
 
     from relightable_textures.lt_addon.io import atomic
@@ -370,7 +372,7 @@ def measure_presets(out_dir, truth_spp=256, candidates=()):
 
     with open(PACKAGE_PRESETS) as fh:
         data = json.load(fh)
-    scene, objects = build("bumps", "demo")
+    scene, objects = build(scene_name, "demo")
     R = 256
     one = single_bake_seconds(scene, objects, R)
     print(f"one 64-spp Cycles bake at {R}^2: {one:.2f} s", flush=True)
@@ -393,13 +395,17 @@ def measure_presets(out_dir, truth_spp=256, candidates=()):
                 "viewport_gpu_mib": r["gpu_mib"], "scene": "bumps demo",
                 "truth_samples": truth_spp, "date": time.strftime("%Y-%m-%d")}
         for c in candidates:
+            c = dict(c)
+            base = c.pop("preset", "balanced")
             rows.append(user_bake_row(scene, objects, truth,
-                                      replace(tx.settings_from_preset("balanced"), **c), folder,
-                                      one, "balanced with " + json.dumps(c)))
+                                      replace(tx.settings_from_preset(base), **c), folder,
+                                      one, f"{base} with {json.dumps(c)}"))
     path = os.path.join(out_dir, "transport_presets.json")   # never into the package
-    atomic.write_json(path, data, indent=1)
-    print(f"\n#### transport presets as users bake them (bumps demo, {R}^2; one 64-spp bake "
-          f"{one:.2f} s; truths {truth_spp} spp, 2 bounces; {time.strftime('%Y-%m-%d %H:%M')})\n")
+    if scene_name == "bumps":
+        atomic.write_json(path, data, indent=1)
+    print(f"\n#### transport presets as users bake them ({scene_name} demo, {R}^2; one 64-spp "
+          f"bake {one:.2f} s; truths {truth_spp} spp, 2 bounces; "
+          f"{time.strftime('%Y-%m-%d %H:%M')})\n")
     print("| setting | shows | bake | x one 64-spp bake | stages (s) | GPU MiB | lookups | "
           "err 2° | err 10° | from T 2° / 10° |")
     print("|---|---|---|---|---|---|---|---|---|---|")
@@ -408,7 +414,8 @@ def measure_presets(out_dir, truth_spp=256, candidates=()):
               f"{r['single_bakes']:.2f} | {r['stages']} | {r['gpu_mib']} | "
               f"{r['preview_lookups']} | {r['err_2deg']:.4f} | {r['err_10deg']:.4f} | "
               f"{r['err_from_T_2deg']:.4f} / {r['err_from_T_10deg']:.4f} |")
-    print(f"measured figures written to {path}; to adopt them: cp {path} {PACKAGE_PRESETS}")
+    if scene_name == "bumps":
+        print(f"measured figures written to {path}; to adopt them: cp {path} {PACKAGE_PRESETS}")
     return rows
 
 
@@ -433,11 +440,14 @@ def main(argv=None):
     ap.add_argument("--candidates", default="[]",
                     help="with --measure-presets: a JSON list of overrides of the balanced "
                          "preset to measure in the same run, e.g. "
-                         "'[{\"directions\": \"hemi:400:1.5\"}]'")
+                         "'[{\"directions\": \"hemi:400:1.5\"}]' (\"preset\": another base)")
+    ap.add_argument("--presets-scene", default="bumps", choices=sorted(SCENES),
+                    help="with --measure-presets: the demo scene (not the bumps: printed only)")
     args = ap.parse_args(argv)
     if args.measure_presets:
         os.makedirs(args.out, exist_ok=True)
-        measure_presets(args.out, args.truth_samples or 256, json.loads(args.candidates))
+        measure_presets(args.out, args.truth_samples or 256, json.loads(args.candidates),
+                        args.presets_scene)
         return 0
     size = "test" if args.quick else args.size
     R = args.resolution or (64 if args.quick else 256)

@@ -698,7 +698,8 @@ def test_new_scene_holds_the_preset_it_names_and_edits_make_it_custom(fresh_scen
         want = tx.settings_from_preset("balanced")
         got = pr.transport_settings_from_scene(props)
         fields = ("directions", "resolution", "indirect_resolution", "indirect_samples",
-                  "components", "bounces", "table_size")
+                  "components", "bounces", "table_size", "horizon_azimuths",
+                  "horizon_resolution")
         for name in fields:
             assert getattr(got, name) == getattr(want, name), name
         props.preset = "production"          # its indirect resolution and table size too
@@ -712,6 +713,11 @@ def test_new_scene_holds_the_preset_it_names_and_edits_make_it_custom(fresh_scen
         props.preset = "draft"                       # choosing a preset applies it
         assert pr.preset_differences(props) == []
         assert pr.transport_settings_from_scene(props).components == 48
+        assert pr.transport_settings_from_scene(props).horizon_azimuths == \
+            tx.settings_from_preset("draft").horizon_azimuths == 64
+        props.preset = "production"                  # and back: the field default again
+        assert pr.transport_settings_from_scene(props).horizon_azimuths == 128
+        props.preset = "draft"
         props.method = "lobes"                       # the lobes preset of the same name
         assert pr.preset_differences(props) == []
         props.order = 9

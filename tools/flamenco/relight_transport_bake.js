@@ -38,7 +38,7 @@ const JOB_TYPE = {
 
 const CHUNK_DIRECTIONS = 16;
 // The presets' direction counts (operators/bakes/transport_presets.json).
-const PRESET_DIRECTIONS = { draft: 400, balanced: 1600, production: 2800 };
+const PRESET_DIRECTIONS = { draft: 400, balanced: 400, production: 2800 };
 
 // How many directions the bake has: N of `hemi:N[:P]`, or the preset's.
 function directionCount(settings) {
