@@ -340,7 +340,9 @@ def user_bake_row(scene, objects, truth, settings, folder, one, label):
         "peak_mem_mb": round(result.peak_rss_mb, 1),
         "transport_bytes": int(sum(os.path.getsize(s.path) for s in stores)),
         "preview_lookups": max(c.get("texture_lookups_per_pixel", 0) for c in costs),
-        "gpu_mib": round(sum(c.get("gpu_mib", c.get("atlas_mib_8bit", 0.0)) for c in costs), 1),
+        # (the global PCA's preview cost states no GPU figure: None, not 0)
+        "gpu_mib": (None if any("gpu_mib" not in c and "atlas_mib_8bit" not in c for c in costs)
+                    else round(sum(c.get("gpu_mib", c.get("atlas_mib_8bit")) for c in costs), 1)),
         "err_2deg": round(errs[2.0]["headline_rel_rmse"], 4),
         "err_10deg": round(errs[10.0]["headline_rel_rmse"], 4),
         "err_from_T_2deg": round(errs[2.0]["transport_rel_rmse"], 4),
