@@ -25,7 +25,7 @@ Shapes: ``H`` front hits on receivers; receivers stacked -- T's texels as column
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -202,8 +202,20 @@ def indirect_pca(g: Gather, T, albedo_t, bounces: int = 2, components: int = 16,
     if bounces < 1 or components < 1:
         raise ValueError(f"need bounces >= 1 and components >= 1; got {bounces}, {components}")
     T = np.asarray(T) if not hasattr(T, "shape") else T
-    S, n_t = T.shape
+    S, n_all = T.shape
     m = min(S, int(components) + int(oversample))
+    # B reads T only at the texels the gather rays met: the products run over those columns
+    # (the statue demo at 512^2: 51 % of T's texels; the bumps at 256^2: 66 %), the same sums
+    # without the zeros. T's products are float32 (T is stored in half floats; against
+    # float64 products the term moved by 5e-7 relative on the statue at 512^2, and the pass
+    # took 3.8 s instead of 5.2), accumulated over chunks and decomposed in float64
+    cols = np.unique(g.texel)
+    g = replace(g, texel=np.searchsorted(cols, g.texel))
+    albedo_t = np.asarray(albedo_t, np.float32)[cols]
+    n_t = len(cols)
+
+    def rows(a):                         # T's directions a:a + chunk at the met texels, float32
+        return np.asarray(T[a:a + chunk])[:, cols].astype(np.float32)
     mats = [_bounce_matrices(g, albedo_t, n_t, c) for c in range(3)]
 
     def apply(X):                        # (n_t, m) float64 -> (3, P, m): B_c X
@@ -220,13 +232,13 @@ def indirect_pca(g: Gather, T, albedo_t, bounces: int = 2, components: int = 16,
         return acc
 
     def t_times(W):                      # T (S, n_t) @ W (n_t, m) -> (S, m)
-        return np.concatenate([np.asarray(T[a:a + chunk], np.float32).astype(np.float64) @ W
-                               for a in range(0, S, chunk)])
+        W = W.astype(np.float32)
+        return np.concatenate([rows(a) @ W for a in range(0, S, chunk)]).astype(np.float64)
 
     def t_transposed(O):                 # T^T (n_t, S) @ O (S, m) -> (n_t, m)
         acc = np.zeros((n_t, O.shape[1]))
         for a in range(0, S, chunk):
-            acc += np.asarray(T[a:a + chunk], np.float32).astype(np.float64).T @ O[a:a + chunk]
+            acc += rows(a).T @ O[a:a + chunk].astype(np.float32)
         return acc
 
     def orth(Y):                         # (3, P, m) -> orthonormal columns, same shape
@@ -247,7 +259,7 @@ def indirect_pca(g: Gather, T, albedo_t, bounces: int = 2, components: int = 16,
         return V, U, None
     total = 0.0                          # ||I||^2: B applied to all of T
     for a in range(0, S, chunk):
-        Tc = np.asarray(T[a:a + chunk], np.float32).astype(np.float64).T     # (n_t, s)
+        Tc = rows(a).T                                                        # (n_t, s)
         total += float(np.sum(apply(Tc) ** 2))
     kept = float(np.sum(sv[:k] ** 2) / total) if total > 0 else 1.0
     return V, U, kept
