@@ -85,8 +85,9 @@ RAY_BUDGET = 4 << 20
 def iter_horizons(occluder, points: ShadingPoints, azimuths: int = 128, refine: int = REFINE):
     """Generator form of :func:`horizons`: yields the azimuths done after each one (a caller
     may stop between them) and returns ``(H, figures)``; H (2, A, P) float16 (0.03 degrees
-    at the zenith, against the map's 0.35-degree codes); figures: ``gaps``, the share of
-    (azimuth, point) pairs whose scan saw the sky between two blocked elevations. At most
+    at the zenith, against the map's 0.35-degree codes); figures: ``skipped``, the scan's
+    rays no caster could meet (not cast), ``castable``, the others, and ``searched``, those
+    of them :func:`_search` cast. At most
     :data:`RAY_BUDGET` rays per engine call, whatever the number of points."""
     if azimuths < 3 or refine < 0:
         raise ValueError(f"need azimuths >= 3 and refine >= 0; got {azimuths}, {refine}")
@@ -95,11 +96,10 @@ def iter_horizons(occluder, points: ShadingPoints, azimuths: int = 128, refine: 
     els = np.radians(np.asarray(ELEVATIONS))
     J = len(els)
     chunk = max(1, RAY_BUDGET // J)
-    gaps = 0
     open_ = np.zeros((azimuths, P), bool)
     bounds = _bounds(occluder, points, azimuths, chunk)
     JJ = np.arange(J, dtype=np.int16)[:, None]
-    skipped = 0
+    skipped = searched = castable = 0
     for a in range(azimuths):
         phi = 2 * np.pi * a / azimuths
         L = _dirs(phi, els)                                           # (J, 3)
@@ -128,31 +128,13 @@ def iter_horizons(occluder, points: ShadingPoints, azimuths: int = 128, refine: 
                 skipped += int(care.sum() - cast.sum())
             else:
                 cast = care
-            blocked = np.zeros((J, n), bool)
-            origins, dirs, rows = [], [], []
-            for j in range(J):
-                pick = np.flatnonzero(cast[j])
-                if not pick.size:
-                    continue
-                if pick.size > n // 4:          # (the same bits either way: per point)
-                    origins.append(np.take(shadow_origins(points, L[j], part), pick, axis=0))
-                else:
-                    origins.append(shadow_origins(points, L[j], idx[pick]))
-                dirs.append(np.broadcast_to(L32[j], (pick.size, 3)))
-                rows.append(j * n + pick)
-            if rows:
-                blocked.reshape(-1)[np.concatenate(rows)] = occluder.occluded(
-                    np.concatenate(origins), np.concatenate(dirs))
-            e0 = e0_all[idx]
-            cb = blocked & care
-            # the highest and the lowest blocked elevation and the ends of the range in front
-            # (reductions across rows: argmax along the first axis was 10 % of the run)
-            top = np.where(cb, JJ, -1).max(0)
+            top, bottom, rays = _search(occluder, points, L, L32, part, idx, cast)
+            searched += rays
+            castable += int(cast.sum())
             any_ = top >= 0
-            bottom = np.where(cb, JJ, J).min(0)
+            e0 = e0_all[idx]
             care_top = np.where(care, JJ, -1).max(0)
             care_bottom = np.where(care, JJ, J).min(0)
-            gaps += int(np.sum(any_ & (cb.sum(0) < top - bottom + 1)))
             # blocked up to (or from) the end of the range in front: the edge is the
             # terminator itself -- continuous from one azimuth to the next, unlike "blocked to
             # the zenith"
@@ -172,7 +154,42 @@ def iter_horizons(occluder, points: ShadingPoints, azimuths: int = 128, refine: 
             open_[a, idx] = ~any_
         yield a + 1
     place_open(H, open_)
-    return H, {"gaps": gaps / max(azimuths * P, 1), "skipped": skipped}
+    return H, {"skipped": skipped, "searched": searched, "castable": castable}
+
+
+def _search(occluder, points, L, L32, part: slice, idx, cast):
+    """The highest and the lowest blocked elevation (indices into ``L``, (J, 3)) of the points
+    ``part`` (``idx`` the same as indices), rays only where ``cast`` (J, n): down from the top
+    until a point's first blocked ray, then up from the bottom until its first one below that.
+    The scan it replaces cast every elevation; the elevations between the two are never
+    needed (only the hull is kept): 17 % fewer scan rays on the bumps demo, 22-23 % on the
+    statue demo's objects (balanced preset, 256^2, the same intervals bit for bit). Returns
+    ``(top, bottom, rays)``: top -1 and bottom J where nothing is blocked; rays cast. One
+    engine call per elevation and direction of search, the direction given once."""
+    J, n = cast.shape
+    rays = 0
+
+    def blocked(j, pick):
+        nonlocal rays
+        rays += pick.size
+        if pick.size > n // 4:          # (the same bits either way: per point)
+            origins = np.take(shadow_origins(points, L[j], part), pick, axis=0)
+        else:
+            origins = shadow_origins(points, L[j], idx[pick])
+        return occluder.occluded(origins, L32[j])
+
+    top = np.full(n, -1, np.int64)
+    for j in range(J - 1, -1, -1):
+        pick = np.flatnonzero(cast[j] & (top < 0))
+        if pick.size:
+            top[pick[blocked(j, pick)]] = j
+    bottom = np.where(top >= 0, top, -1)      # searched below the top only; -1: done
+    for j in range(J):
+        pick = np.flatnonzero(cast[j] & (bottom > j))
+        if pick.size:
+            bottom[pick[blocked(j, pick)]] = j
+    bottom[top < 0] = J
+    return top, bottom, rays
 
 
 def _bounds(occluder, points: ShadingPoints, azimuths: int, chunk: int):

@@ -85,6 +85,15 @@ class ShadingPoints:
             self._compact = c
         return c
 
+    def subset(self, rows) -> "ShadingPoints":
+        """The points ``rows`` (indices) alone: every ray from them leaves as from the whole
+        set (origins are computed per point)."""
+        rows = np.asarray(rows, np.int64)
+        return ShadingPoints(self.P[rows], self.Ng[rows], self.N[rows], self.Ns[rows],
+                             self.lift[rows], self.cutoff[rows], self.bump,
+                             None if self.correction is None else self.correction[rows],
+                             self.epsilon)
+
 
 def _unit(v):
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-30)

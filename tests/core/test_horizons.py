@@ -182,6 +182,36 @@ def test_a_ray_budget_splits_the_points_and_changes_no_bit(monkeypatch):
     assert np.array_equal(whole, parts) and occ.rays - calls == calls
 
 
+@needs_engine
+def test_the_search_finds_the_highest_and_lowest_blocked_elevations_of_a_full_scan():
+    """Down from the top to the first blocked ray, then up from the bottom: the same two
+    elevations as casting every one, on floor points under a floating roof with a wall
+    beyond it (sky between the two along +x: a gap the hull covers), in fewer rays."""
+    roof = np.array([[0, -10, 0.4], [0.6, -10, 0.4], [0.6, 10, 0.4], [0, 10, 0.4]], float)
+    wall = np.array([[1.5, -10, 0], [1.5, 10, 0], [1.5, 10, 1.2], [1.5, -10, 1.2]], float)
+    occ, pts, P = _floor_points(400, 6, np.concatenate([roof, wall]), x=(-1.9, -0.1))
+    els = np.radians(np.asarray(horizon.ELEVATIONS))
+    J, n = len(els), len(P)
+    gaps = 0
+    for phi in (0.0, 0.4, 2.0, np.pi):
+        L = horizon._dirs(phi, els)
+        cast = np.random.default_rng(1).random((J, n)) < 0.9    # some rays not needed
+        full = np.stack([occ.occluded(horizon.shadow_origins(pts, L[j]),
+                                      L[j].astype(np.float32)) for j in range(J)]) & cast
+        rays = occ.rays
+        top, bottom, cast_rays = horizon._search(occ, pts, L, L.astype(np.float32),
+                                                 slice(0, n), np.arange(n), cast)
+        JJ = np.arange(J)[:, None]
+        assert np.array_equal(top, np.where(full, JJ, -1).max(0))
+        assert np.array_equal(bottom, np.where(full, JJ, J).min(0))
+        assert occ.rays - rays == cast_rays <= cast.sum()
+        found = top >= 0
+        gaps += int(np.sum(found & (full.sum(0) < top - bottom + 1)))
+        if phi == 0.0:
+            assert found.all() and cast_rays < 0.8 * cast.sum()
+    assert gaps > 50          # the scene has the case the hull is for
+
+
 def _floor_grid(R, extra):
     """The texel centres of an R^2 texture on the 4 m floor of :func:`_floor_points` (UV = the
     floor's xy square): (occluder, shading points, flat texel indices)."""
