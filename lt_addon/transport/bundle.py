@@ -330,6 +330,9 @@ def fit_viewport(store, settings: TransportTextureSettings, model, lights=TRUTH_
     with the lowest residual on sampled regions of T within the GPU budget
     (:func:`.block_viewport.choose`). Under ``auto`` the global PCA (``model``) is kept instead
     when it is measured closer to T at the held-out lights (direct light, the preview's sun).
+    ``horizon_check``: ``(directions, rows)`` of rays against which ``horizon`` and T are
+    checked, or the errors of a trial on sampled tiles that decided
+    (:mod:`.horizon_trial`; ``horizon`` is then None where it rejected the map).
     ``info`` is the report's ``viewport`` entry: what is shown, why, and the figures."""
     from . import block_viewport as bv
     from . import sparse_tables as sp
@@ -338,6 +341,13 @@ def fit_viewport(store, settings: TransportTextureSettings, model, lights=TRUTH_
         return None, {"shows": "none", "why": f"model {settings.model!r} has no live preview"}
     budget = int(settings.gpu_budget) << 20
     horizon_note = {}
+    # a trial on sampled tiles (horizon_trial) that decided: its errors instead of a check's rays
+    trial = horizon_check if isinstance(horizon_check, dict) else None
+    if horizon is None and trial is not None and settings.viewport == "auto":
+        horizon_note = {"horizon_rejected": (
+            f"T is closer to rays at held-out suns on {trial['texels']} sampled texels "
+            f"({trial['transport']:.3f} against the horizon map's {trial['horizon']:.3f}); the "
+            f"map was not found whole"), "horizon": {"heldout": _heldout(trial)}}
     if horizon is not None and settings.viewport in ("auto", "horizon"):
         from . import horizon_map as hmap
 
@@ -346,15 +356,9 @@ def fit_viewport(store, settings: TransportTextureSettings, model, lights=TRUTH_
         info = {"azimuths": horizon.azimuths, "gpu_mib": round(mib, 1),
                 "lookups_per_pixel": HORIZON_LOOKUPS, "gpu_budget_mib": settings.gpu_budget}
         if horizon_check is not None:
-            e = hmap.heldout_errors(horizon, store, *horizon_check, settings.sun_angle,
-                                    settings.kernel)
-            info.update(heldout={"horizon": round(e["horizon"], 4),
-                                 "transport": round(e["transport"], 4),
-                                 "sun_angle": e["sun_angle"], "directions": e["directions"],
-                                 "meaning": "relative RMSE of the direct light against hard "
-                                            "suns by rays over the sun's disc at held-out "
-                                            "directions (3-85 degrees elevation)"},
-                        check_seconds=round(time.perf_counter() - t0, 3))
+            e = trial if trial is not None else hmap.heldout_errors(
+                horizon, store, *horizon_check, settings.sun_angle, settings.kernel)
+            info.update(heldout=_heldout(e), check_seconds=round(time.perf_counter() - t0, 3))
         if settings.viewport == "horizon":
             return None, {"shows": "horizon", "why": "asked for", **info}
         h = info.get("heldout")
@@ -374,6 +378,7 @@ def fit_viewport(store, settings: TransportTextureSettings, model, lights=TRUTH_
         return None, info
     t0 = time.perf_counter()
     choice = bv.choose(store, settings.table_size, budget, seed=settings.seed)
+    t_choose = time.perf_counter() - t0
     view = bv.fit(store, choice["block"], choice["k"], seed=settings.seed)
     rows = []
     for az, el in lights:
@@ -389,12 +394,34 @@ def fit_viewport(store, settings: TransportTextureSettings, model, lights=TRUTH_
                  "gpu_mib": round(g["total_bytes"] / 2**20, 1),
                  "lookups_per_pixel": bv.lookups_per_pixel(view.k),
                  "blocks_vs_T": round(blocks_err, 4), "pca_vs_T": round(pca_err, 4),
-                 "fit_seconds": round(time.perf_counter() - t0, 3)})
+                 "fit_seconds": round(time.perf_counter() - t0, 3),
+                 # the choice fits sampled regions of at most the largest block's side, the
+                 # same work at any texture side from 128^2 up (the estimate times it apart)
+                 "choose_seconds": round(t_choose, 3)})
     if settings.viewport == "auto" and pca_err < blocks_err:
         info.update(shows="pca", why=f"auto: the PCA is closer to T ({pca_err:.3f}) than the "
                                      f"block viewport ({blocks_err:.3f})")
         return None, info
     return view, info
+
+
+def _heldout(e: dict) -> dict:
+    """The report's held-out check of the horizon map against T (whole, or on the trial's
+    sampled texels)."""
+    out = {"horizon": round(e["horizon"], 4), "transport": round(e["transport"], 4),
+           "sun_angle": e["sun_angle"], "directions": e["directions"],
+           "meaning": "relative RMSE of the direct light against hard suns by rays over the "
+                      "sun's disc at held-out directions (3-85 degrees elevation)"}
+    if "texels" in e:
+        from .horizon_trial import DECISIVE
+
+        out["sampled"] = {"texels": e["texels"], "of_texels": e["of_texels"],
+                          "horizon_texels_found_first": e["tiles_texels"],
+                          "decided": e["decided"],
+                          "meaning": "the check ran on the texels of sampled tiles only "
+                                     "(lt_addon/transport/horizon_trial.py), and one viewport "
+                                     f"erred over {DECISIVE}x the other there"}
+    return out
 
 
 def steerable_from_store(store, albedo, order: int = 7):

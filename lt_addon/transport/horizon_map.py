@@ -94,6 +94,25 @@ def upsample(img, R: int) -> np.ndarray:
     return rows[..., a] * (1 - w) + rows[..., b] * w
 
 
+def upsample_at(img, R: int, texels) -> np.ndarray:
+    """:func:`upsample` read only at flat ``texels`` (n,) of the (R, R) grid: (..., n), the
+    same operations in the same order, so the same bits."""
+    img = np.asarray(img, np.float64)
+    texels = np.asarray(texels, np.int64)
+    row, col = texels // R, texels % R
+    Rh = img.shape[-1]
+    if Rh == R:
+        return img[..., row, col]
+    x = (np.arange(R) + 0.5) * (Rh / R) - 0.5
+    i0 = np.floor(x).astype(np.int64)
+    w = x - i0
+    a, b = np.clip(i0, 0, Rh - 1), np.clip(i0 + 1, 0, Rh - 1)
+    wr, wc = w[row], w[col]
+    r0 = img[..., a[row], a[col]] * (1 - wr) + img[..., b[row], a[col]] * wr
+    r1 = img[..., a[row], b[col]] * (1 - wr) + img[..., b[row], b[col]] * wr
+    return r0 * (1 - wc) + r1 * wc
+
+
 @dataclass
 class HorizonMap:
     q: np.ndarray          # (2, A, Rh, Rh) uint8
@@ -113,7 +132,7 @@ class HorizonMap:
         """The horizons' side (<= the texture's)."""
         return int(self.q.shape[2])
 
-    def direct(self, d, sun_angle_deg: float = 0.0) -> np.ndarray:
+    def direct(self, d, sun_angle_deg: float = 0.0, texels=None) -> np.ndarray:
         """Direct ``E / pi`` (R, R) float32 under a unit sun towards ``d``: the closure
         normal's cosine times the part of the sun's disc outside the blocked interval, at the
         two azimuths around the sun's and linear between them -- the viewport's computation
@@ -121,11 +140,13 @@ class HorizonMap:
         visibility rather than the edges between azimuths was measured better at a 2-degree
         Sun (statue demo's ground at 10 degrees elevation: 0.042 against 0.074; bumps 0.033
         against 0.031, and 0.016 against 0.019 at 30 degrees;
-        benchmarks/bench_ray_horizons.py)."""
+        benchmarks/bench_ray_horizons.py). ``texels``: flat indices (n,) at the texture's side
+        to compute only there (the same values, bit for bit): (n,) float32."""
         d = np.asarray(d, np.float64)
         d = d / np.linalg.norm(d)
+        shape = (self.resolution,) * 2 if texels is None else (len(texels),)
         if d[2] <= 0:
-            return np.zeros((self.resolution,) * 2, np.float32)
+            return np.zeros(shape, np.float32)
         A = self.azimuths
         x = (np.arctan2(d[1], d[0]) % (2 * np.pi)) / (2 * np.pi) * A
         k0 = int(np.floor(x)) % A
@@ -133,10 +154,15 @@ class HorizonMap:
         el = np.arcsin(np.clip(d[2], -1.0, 1.0))
         r = max(np.radians(sun_angle_deg) / 2, SUN_RADIUS_MIN)
         R = self.resolution
-        h0 = decode(upsample(self.q[:, k0], R))
-        h1 = decode(upsample(self.q[:, (k0 + 1) % A], R))
+        if texels is None:
+            h0 = decode(upsample(self.q[:, k0], R))
+            h1 = decode(upsample(self.q[:, (k0 + 1) % A], R))
+            n = self.normals.astype(np.float64)
+        else:
+            h0 = decode(upsample_at(self.q[:, k0], R, texels))
+            h1 = decode(upsample_at(self.q[:, (k0 + 1) % A], R, texels))
+            n = self.normals.reshape(-1, 3)[np.asarray(texels)].astype(np.float64)
         vis = (1 - f) * visible_fraction(el, *h0, r) + f * visible_fraction(el, *h1, r)
-        n = self.normals.astype(np.float64)
         length = np.linalg.norm(n, axis=-1)
         cos = np.maximum(n @ d, 0.0) / np.maximum(length, 1e-12)
         return (cos * vis / np.pi).astype(np.float32)
@@ -219,12 +245,14 @@ def heldout_directions(count: int = 16, seed: int = 0) -> np.ndarray:
 
 
 def heldout_errors(hm: HorizonMap, store, directions, rows, sun_angle: float,
-                   kernel: str = "linear") -> dict:
+                   kernel: str = "linear", texels=None) -> dict:
     """Both viewports' direct light against rays at held-out directions: ``rows`` (n, R*R) the
     mean of hard suns by rays over each sun's disc (``directions`` (n, 3), ``sun_angle``
     degrees), against which the horizon map's relight and T's kernel relight (what the T
     viewport shows, before its tables) are compared. Relative RMSE over texels, combined over
-    the directions as ``sqrt(sum err^2 / sum ref^2)``, and per direction."""
+    the directions as ``sqrt(sum err^2 / sum ref^2)``, and per direction. ``texels``: flat
+    indices (m,) to compare at only (``rows`` then (n, m)): the trial on sampled tiles
+    (:mod:`.horizon_trial`)."""
     from . import texture as tt
 
     num = {"horizon": 0.0, "transport": 0.0}
@@ -233,8 +261,8 @@ def heldout_errors(hm: HorizonMap, store, directions, rows, sun_angle: float,
     for d, ref in zip(np.asarray(directions, np.float64), rows):
         ref = np.asarray(ref, np.float64).reshape(-1)
         idx, w = tt.sun_weights(store.directions, d, sun_angle, kernel)
-        got = {"horizon": hm.direct(d, sun_angle).reshape(-1).astype(np.float64),
-               "transport": store.relight(idx, w).reshape(-1).astype(np.float64)}
+        got = {"horizon": hm.direct(d, sun_angle, texels).reshape(-1).astype(np.float64),
+               "transport": store.relight(idx, w, texels).reshape(-1).astype(np.float64)}
         n2 = float(ref @ ref)
         den += n2
         row = {"elevation": round(float(np.degrees(np.arcsin(d[2]))), 2)}

@@ -364,12 +364,18 @@ class TransportStore:
         return cls(path, dset, res, header)
 
     # -- relighting --------------------------------------------------------------------------
-    def relight(self, indices, weights) -> np.ndarray:
-        """``sum_k weights[k] T[indices[k]]``; shape (R, R), float32 (row 0 at v = 0)."""
-        out = np.zeros(self.n_texels, dtype=np.float64)
+    def relight(self, indices, weights, texels=None) -> np.ndarray:
+        """``sum_k weights[k] T[indices[k]]``; shape (R, R), float32 (row 0 at v = 0), or (m,)
+        at flat ``texels`` (m,) only (the same values)."""
+        if texels is not None:
+            texels = np.asarray(texels, np.int64)
+        out = np.zeros(self.n_texels if texels is None else len(texels), dtype=np.float64)
         arr = self.array
         for s, w in zip(np.asarray(indices), np.asarray(weights)):
-            out += float(w) * arr[int(s)].astype(np.float64)
+            row = arr[int(s)] if texels is None else arr[int(s)][texels]
+            out += float(w) * row.astype(np.float64)
+        if texels is not None:
+            return out.astype(np.float32)
         return out.reshape(self.resolution, self.resolution).astype(np.float32)
 
     def relight_dense(self, weights) -> np.ndarray:

@@ -19,6 +19,7 @@ from ...lt_addon.errors import InputError
 from ...lt_addon.rays import engine as ray_engine
 from ...lt_addon.rays import horizon
 from ...lt_addon.transport import horizon_map as hmap
+from ...lt_addon.transport import horizon_trial
 from ...lt_addon.rays.direct import direct_rows
 from ...lt_addon.rays.texels import extend_margin
 from ..base import cycles_device, ray_scene
@@ -176,46 +177,63 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
     maps, horizon_info = None, {}
     if A:
         t2, r2 = time.perf_counter(), occluder.rays
-        maps, gaps, skipped = [], [], 0
-        for i, ((smp, pts), mg) in enumerate(zip(receivers, margins)):
+        # the check auto chooses the viewport by: hard suns by rays over the preview sun's
+        # disc at held-out directions (neither set has them), per object, margins filled
+        Dh = hmap.heldout_directions(HELDOUT, settings.seed)
+        trial_ok = settings.viewport == "auto" and _CALIBRATION_AZIMUTHS is None
+        maps, skipped, searched, castable, checks, trials = [], 0, 0, 0, [], []
+        for i, ((smp, pts), mg, store) in enumerate(zip(receivers, margins, stores)):
             if coarse is None:
-                h_pts, low = pts, None
+                h_smp, h_pts, low = smp, pts, None
             else:        # the margin in the horizons' texels, at least one
                 h_smp, h_pts = coarse[i]
                 low = (h_smp.texel, Rh,
                        extend_margin(h_smp.covered(), max(1, -(-margin * Rh // R))))
-            gen = horizon.iter_horizons(occluder, h_pts, A)
-            while True:
-                try:
-                    done = next(gen)
-                except StopIteration as stop:
-                    H, figs = stop.value
-                    break
-                if done % max(1, A // 16) == 0:    # (a yield lets the bake be cancelled)
-                    who = f", object {i + 1}/{len(receivers)}" if len(receivers) > 1 else ""
-                    yield Progress(step + S - 1, total, f"horizons {done}/{A} azimuths{who}")
-            maps.append(hmap.from_points(H, smp.texel, R, pts.Ns, mg, coarse=low))
-            gaps.append(round(figs["gaps"], 5))
-            skipped += figs["skipped"]
-        # the check auto chooses the viewport by: hard suns by rays over the preview sun's
-        # disc at held-out directions (neither set has them), per object, margins filled
-        Dh = hmap.heldout_directions(HELDOUT, settings.seed)
-        checks = []
-        for (smp, pts), (dst, op) in zip(receivers, margins):
-            rows = np.zeros((len(Dh), R * R), np.float32)
-            for j, d in enumerate(Dh):
-                disc = _disc(d, np.radians(settings.sun_angle) / 2, HELDOUT_DISC)
-                inside = direct_rows(occluder, pts, disc).mean(0)
-                rows[j, smp.texel] = inside
-                if dst.size:
-                    rows[j, dst] = op @ inside
-            checks.append(rows)
-        horizon_info = {"horizon_azimuths": A, "horizon_resolution": Rh, "horizon_gaps": gaps,
-                        "horizon_checks": {"directions": Dh, "rows": checks},
+            who = f", object {i + 1}/{len(receivers)}" if len(receivers) > 1 else ""
+            H = np.zeros((2, A, h_pts.size), np.float16)       # (open: [0, 0])
+            rest = np.arange(h_pts.size)
+            picked = (horizon_trial.pick(h_smp.texel, h_smp.resolution, smp.texel, R,
+                                         seed=settings.seed) if trial_ok else None)
+            trial, decided, counts = None, None, []
+            if picked is not None:       # the map on sampled tiles first (horizon_trial)
+                h_rows, t_rows = picked
+                H_t, figs = yield from _find(occluder, h_pts.subset(h_rows), A,
+                                             "horizon trial", who, step + S - 1, total)
+                H[:, :, h_rows] = H_t
+                counts.append((len(h_rows), figs))
+                rest = np.setdiff1d(rest, h_rows, assume_unique=True)
+                sample = hmap.from_points(H, smp.texel, R, pts.Ns, mg, coarse=low)
+                trial = _trial(occluder, sample, store, pts.subset(t_rows),
+                               smp.texel[t_rows], Dh, settings)
+                trial.update(tiles_texels=int(len(h_rows)), texels=int(len(t_rows)),
+                             of_texels=int(smp.size))
+                decided = horizon_trial.decide(trial["horizon"], trial["transport"])
+                trial["decided"] = decided or "whole map and check"
+            if decided != "transport":
+                H_r, figs = yield from _find(occluder, h_pts if len(rest) == h_pts.size
+                                             else h_pts.subset(rest), A,
+                                             "horizons", who, step + S - 1, total)
+                H[:, :, rest] = H_r
+                counts.append((len(rest), figs))
+            skipped += sum(f["skipped"] for _, f in counts)
+            searched += sum(f["searched"] for _, f in counts)
+            castable += sum(f["castable"] for _, f in counts)
+            maps.append(None if decided == "transport" else
+                        hmap.from_points(H, smp.texel, R, pts.Ns, mg, coarse=low))
+            trials.append(trial)
+            checks.append(None if decided else _check_rows(occluder, smp, pts, mg, Dh,
+                                                           settings))
+        horizon_info = {"horizon_azimuths": A, "horizon_resolution": Rh,
+                        "horizon_checks": {"directions": Dh, "rows": checks,
+                                           "trials": trials},
                         "horizon_seconds": round(time.perf_counter() - t2, 3),
                         "horizon_rays": int(occluder.rays - r2),
                         # scan rays no caster could meet (lt_addon/rays/reach.py): not cast
-                        "horizon_rays_skipped": int(skipped)}
+                        "horizon_rays_skipped": int(skipped),
+                        # scan rays a caster could meet, and those the search cast of them
+                        # (lt_addon/rays/horizon.py _search)
+                        "horizon_scan_rays": {"castable": int(castable),
+                                              "cast": int(searched)}}
     seconds = time.perf_counter() - t0
     rays = occluder.rays
     return {"engine": "rays", "horizon_maps": maps, **horizon_info,
@@ -225,3 +243,48 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
             "texels": [int(smp.size) for smp, _ in receivers],
             "margin_texels": margin, "threads": occluder.threads,
             "directions_per_call": chunk}
+
+
+def _find(occluder, pts, A: int, label: str, who: str, step: int, total: int):
+    """Generator: the horizons (2, A, P) of ``pts`` (:func:`...rays.horizon.iter_horizons`),
+    yielding Progress every A / 16 azimuths (a yield lets the bake be cancelled) as
+    "<label> k/A azimuths<who>" (the ETA reads "horizons k/A azimuths, object i/n":
+    :func:`...lt_addon.transport.estimate.estimated_elapsed`); returns ``(H, figures)``."""
+    gen = horizon.iter_horizons(occluder, pts, A)
+    while True:
+        try:
+            done = next(gen)
+        except StopIteration as stop:
+            return stop.value
+        if done % max(1, A // 16) == 0:
+            yield Progress(step, total, f"{label} {done}/{A} azimuths{who}")
+
+
+def _disc_mean(occluder, pts, d, settings):
+    """(P,) the mean of hard suns by rays over the preview sun's disc around ``d``: the held-out
+    check's reference."""
+    disc = _disc(d, np.radians(settings.sun_angle) / 2, HELDOUT_DISC)
+    return direct_rows(occluder, pts, disc).mean(0)
+
+
+def _check_rows(occluder, smp, pts, margin, directions, settings):
+    """The held-out check's reference (n, R*R) (:func:`_disc_mean` per direction), margins
+    filled."""
+    R = smp.resolution
+    dst, op = margin
+    rows = np.zeros((len(directions), R * R), np.float32)
+    for j, d in enumerate(directions):
+        inside = _disc_mean(occluder, pts, d, settings)
+        rows[j, smp.texel] = inside
+        if dst.size:
+            rows[j, dst] = op @ inside
+    return rows
+
+
+def _trial(occluder, sample, store, pts, texels, directions, settings) -> dict:
+    """The held-out check on the trial's texels (:mod:`...lt_addon.transport.horizon_trial`):
+    the map ``sample`` (its sampled tiles found) and T (the rows just written to ``store``)
+    against :func:`_disc_mean` of points ``pts`` at ``texels`` (flat)."""
+    refs = [_disc_mean(occluder, pts, d, settings) for d in directions]
+    return hmap.heldout_errors(sample, store, directions, refs, settings.sun_angle,
+                               settings.kernel, texels=texels)

@@ -196,9 +196,10 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
                                                       normals, 2, total)))
             horizon_maps = engine.pop("horizon_maps", None)
             checks = engine.pop("horizon_checks", None)
-            if horizon_maps:
-                horizon_maps = [(m, checks["directions"], rows)
-                                for m, rows in zip(horizon_maps, checks["rows"])]
+            if horizon_maps:    # a check's rays, or the trial that decided on sampled tiles
+                horizon_maps = [(m, (checks["directions"], rows) if rows is not None else trial)
+                                for m, rows, trial in zip(horizon_maps, checks["rows"],
+                                                          checks["trials"])]
             seconds["direct_rays"] = engine["seconds"]
             seconds["horizons"] = engine.get("horizon_seconds", 0.0)
             faults.checkpoint("directions")
@@ -415,6 +416,7 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
             steer_total = step + settings.indirect_order ** 2    # its lights, then the models
         else:
             indirects = got
+            seconds["indirect_pca"] = figures["seconds"]["pca"]
             yield Progress(step, total, "indirect light gathered")
             faults.checkpoint("indirect")
             seconds["indirect_total"] = time.perf_counter() - t0
@@ -464,8 +466,7 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
         t0 = time.perf_counter()
         with blas_threads.limited(n_fit) if n_fit else contextlib.nullcontext():
             model = fit_model(readers[i], settings, albedos[i])
-            hm, check = (horizon_maps[i][0], horizon_maps[i][1:]) if horizon_maps else (None,
-                                                                                       None)
+            hm, check = horizon_maps[i] if horizon_maps else (None, None)
             view, viewport = fit_viewport(readers[i], settings, model, horizon=hm,
                                           horizon_check=check)
         results.append(ObjectBake(o.name, readers[i].path, albedos[i], indirects[i], model,
@@ -474,6 +475,7 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
                                   found_horizon=hm))
         peak = max(peak, _rss_mb())
     seconds["fit"] = sum(r.fit_seconds for r in results)
+    seconds["fit_choose"] = sum((r.viewport or {}).get("choose_seconds", 0.0) for r in results)
     seconds["bake_total"] = time.perf_counter() - t_start
     yield Progress(steer_total, steer_total, "models fitted")
     out = TransportTextureResult(results, dset, settings, seconds, calls, peak - rss0,
