@@ -10,7 +10,17 @@ stage              scales with                                 measured as
 ``horizons``       horizon texels x objects (the horizon map's ``seconds["horizons"]``
                    scan by rays, at its own side)
 ``indirect``       indirect texels (``indirect_resolution``)   ``seconds["indirect_total"]``
-``fit``            texels x objects (the PCA over T)           ``seconds["fit"]``
+                   (Cycles' steerable bakes, or the gather's   minus the gather's PCA
+                   points and rays; calibrated at the bake's
+                   own grid, up to 256^2)
+``indirect_pca``   texels x objects (the gathered term's PCA   ``seconds["indirect_pca"]``
+                   reads T's rows; its bounce operator, the
+                   rays' hits, is fixed by the grid)
+``fit``            texels x objects (the PCA over T, the       ``seconds["fit"]`` minus the
+                   block viewport's fit)                       block choice's
+``fit_choose``     objects (the block viewport's choice fits   ``seconds["fit_choose"]``
+                   sampled regions of at most 64^2 texels:
+                   units ``min(side, 128)^2``)
 ``other``          texels x objects (store, stacking, ...)     ``bake_total`` minus the above
 ``truth``          texels x objects x lights                   the truth bakes' seconds
 =================  ==========================================  ===============================
@@ -30,7 +40,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-STAGES = ("direct", "horizons", "indirect", "fit", "other", "truth")
+STAGES = ("direct", "horizons", "indirect", "indirect_pca", "fit", "fit_choose", "other",
+          "truth")
 #: The stages of the bake itself (the truths come after it).
 BAKE_STAGES = STAGES[:-1]
 
@@ -48,14 +59,17 @@ class StageCost:
 
 def stage_seconds(seconds: dict) -> dict:
     """The stage split of a bake's ``seconds`` (its report's timings):
-    {direct, indirect, fit, other} in seconds, non-negative."""
+    {direct, horizons, indirect, indirect_pca, fit, other} in seconds, non-negative."""
     direct = float(seconds.get("direct_total", 0.0))
     horizons = min(float(seconds.get("horizons", 0.0)), direct)
     indirect = float(seconds.get("indirect_total", 0.0))
+    pca = min(float(seconds.get("indirect_pca", 0.0)), indirect)
     fit = float(seconds.get("fit", 0.0))
+    choose = min(float(seconds.get("fit_choose", 0.0)), fit)
     total = float(seconds.get("bake_total", direct + indirect + fit))
-    return {"direct": direct - horizons, "horizons": horizons, "indirect": indirect,
-            "fit": fit, "other": max(0.0, total - direct - indirect - fit)}
+    return {"direct": direct - horizons, "horizons": horizons, "indirect": indirect - pca,
+            "indirect_pca": pca, "fit": fit - choose, "fit_choose": choose,
+            "other": max(0.0, total - direct - indirect - fit)}
 
 
 def units(stage: str, resolution: int, indirect_resolution: int, n_objects: int,
@@ -70,6 +84,8 @@ def units(stage: str, resolution: int, indirect_resolution: int, n_objects: int,
         return float(side) ** 2 * n_objects
     if stage == "truth":
         return P * truth_lights
+    if stage == "fit_choose":
+        return float(min(int(resolution), 128)) ** 2 * n_objects
     return P
 
 
@@ -77,14 +93,19 @@ def fit_costs(samples: list) -> dict:
     """Per stage, the line through the calibration points ``samples``: a list of
     ``(units_by_stage, seconds_by_stage)``, one per calibration bake, at two or more sizes.
     A per-unit cost the noise made negative is 0 (the stage is then its measured fixed cost,
-    the larger calibration's seconds)."""
+    the larger calibration's seconds); a negative fixed cost makes the stage proportional to
+    its size through the larger calibration. Points all at one size (the indirect term, calibrated
+    at the bake's own grid) give a stage proportional to its size through their mean: exact at
+    that size, scaled with the size beyond it."""
     out = {}
     for stage in STAGES:
         pts = [(u[stage], s[stage]) for u, s in samples if stage in u and stage in s]
         if not pts:
             continue
         if len(pts) == 1 or max(p[0] for p in pts) == min(p[0] for p in pts):
-            out[stage] = StageCost(max(p[1] for p in pts), 0.0)
+            mean = sum(p[1] for p in pts) / len(pts)
+            out[stage] = (StageCost(0.0, mean / pts[0][0]) if pts[0][0] > 0 else
+                          StageCost(mean, 0.0))
             continue
         n = len(pts)
         mx = sum(p[0] for p in pts) / n
@@ -93,8 +114,11 @@ def fit_costs(samples: list) -> dict:
         b = sum((p[0] - mx) * (p[1] - my) for p in pts) / sxx
         if b <= 0:
             out[stage] = StageCost(max(p[1] for p in pts), 0.0)
+        elif my - b * mx < 0:      # through 0 and the largest calibration, the nearest one
+            x, y = max(pts)
+            out[stage] = StageCost(0.0, y / x)
         else:
-            out[stage] = StageCost(max(0.0, my - b * mx), b)
+            out[stage] = StageCost(my - b * mx, b)
     return out
 
 
@@ -106,7 +130,7 @@ def predict(costs: dict, resolution: int, indirect_resolution: int, n_objects: i
     for stage, cost in costs.items():
         if stage == "truth" and not truth_lights:
             continue
-        if stage == "indirect" and not indirect_resolution:
+        if stage in ("indirect", "indirect_pca") and not indirect_resolution:
             continue
         out[stage] = cost.at(units(stage, resolution, indirect_resolution, n_objects,
                                    truth_lights, horizon_resolution))
@@ -141,7 +165,8 @@ def estimated_elapsed(seconds: dict, message: str) -> float | None:
     "other" (albedo, writing) is counted before the directions."""
     other, direct = seconds.get("other", 0.0), seconds.get("direct", 0.0)
     horizons = seconds.get("horizons", 0.0)
-    indirect, fit = seconds.get("indirect", 0.0), seconds.get("fit", 0.0)
+    indirect = seconds.get("indirect", 0.0) + seconds.get("indirect_pca", 0.0)
+    fit = seconds.get("fit", 0.0) + seconds.get("fit_choose", 0.0)
     f = _fraction(message, "direction ")
     if f is not None:
         return other + direct * f

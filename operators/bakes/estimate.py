@@ -22,6 +22,10 @@ from ..base.jobs import Progress
 
 #: calibration sizes (texels across)
 CALIBRATION = (64, 128)
+#: the calibration bakes' indirect grid: the bake's own, at most this side (texels across).
+#: The gathered term's cost depends on the grid (its points and rays) and on the texture (its
+#: PCA reads T's rows) apart; with the grid fixed, the calibration measures the texture's share
+CALIBRATION_GRID = 256
 #: a bake at or above this resolution is estimated (and the estimate printed) before it starts
 ESTIMATE_FROM = 512
 
@@ -58,8 +62,9 @@ def calibrate(scene, objects, settings, truth: int, truth_samples: int):
     # the bake times a block fit where T's atlas will not fit, and finds horizons where it
     # will make them: which of the two auto then shows is decided after both
     A = horizon_count(settings)
+    grid = min(settings.indirect_resolution, CALIBRATION_GRID)
     for R in CALIBRATION:
-        s = replace(settings, resolution=R, indirect_resolution=R,
+        s = replace(settings, resolution=R, indirect_resolution=grid,
                     viewport="blocks" if shown == "blocks" else settings.viewport)
         with tempfile.TemporaryDirectory(prefix="relight-estimate-") as tmp, \
                 calibration_horizons(A):
@@ -68,7 +73,7 @@ def calibrate(scene, objects, settings, truth: int, truth_samples: int):
                 if b.store is not None:
                     b.store.abort()
         seconds = est.stage_seconds(res.seconds)
-        u = {st: est.units(st, R, R if settings.bounces > 0 and
+        u = {st: est.units(st, R, grid if settings.bounces > 0 and
                            settings.indirect != "none" else 0, len(objects), 1,
                            hmap.side(R, s.horizon_resolution))
              for st in est.STAGES}
@@ -91,13 +96,10 @@ def estimate(scene, objects, settings, truth: int = 4, truth_samples: int = 256)
 
     dset = settings.validate()
     costs, cal = yield from calibrate(scene, objects, settings, truth, truth_samples)
-    # the steerable term's Cycles bakes scale with the indirect grid's texels; the gathered
-    # term's PCA reads all of T (S x the texture's texels) four times and outweighs its rays
-    # from the grid (rays 0.36 of 4.26 s on the balanced bumps at 256^2), so it scales with the
-    # texture's texels (the calibration bakes have the grid at the texture's side: the same
-    # units there)
+    # the indirect term's Cycles bakes (steerable) or points and rays (gathered) scale with the
+    # indirect grid's texels (calibrated at this grid up to CALIBRATION_GRID); the gathered
+    # term's PCA is a stage of its own, scaling with the texture's texels
     ri = (0 if settings.bounces == 0 or settings.indirect == "none" else
-          settings.resolution if settings.indirect == "gather" else
           settings.indirect_resolution)
     seconds = est.predict(costs, settings.resolution, ri, len(objects), truth,
                           hmap.side(settings.resolution, settings.horizon_resolution))
@@ -138,6 +140,10 @@ def estimate(scene, objects, settings, truth: int = 4, truth_samples: int = 256)
            "viewport": viewport, "viewport_gpu_bytes": int(gpu),
            "calibration_seconds": round(cal, 2),
            "fit_includes_blocks": blocks_if_not_horizons,
+           # auto first finds the horizons on sampled tiles (horizon_trial): where T is then
+           # clearly closer, the rest is not found; the calibration bakes find them whole
+           "horizons_whole": (bool(A) and settings.viewport == "auto"
+                              and settings.direct != "cycles"),
            "costs": {s: {"fixed_seconds": round(c.fixed, 4),
                          "seconds_per_million_units": round(c.per_unit * 1e6, 4)}
                      for s, c in costs.items()},
@@ -168,7 +174,9 @@ def estimate_groups(scene, objects, settings, resolutions: dict | None = None, t
 
 def describe(e: dict, settings, n_objects: int) -> list:
     """The estimate in a few lines."""
-    s = e["seconds"]
+    s = dict(e["seconds"])
+    s["indirect"] = s.get("indirect", 0.0) + s.pop("indirect_pca", 0.0)   # one figure for users
+    s["fit"] = s.get("fit", 0.0) + s.pop("fit_choose", 0.0)
     parts = [f"{name} {est.readable_seconds(s[name])}" for name in
              est.STAGES if name in s and (name != "horizons" or s[name] >= 0.5)]
     lines = [f"estimate for {n_objects} object(s) at {settings.resolution}^2: about "
@@ -177,6 +185,9 @@ def describe(e: dict, settings, n_objects: int) -> list:
              f"{_size(e['ram_available_bytes'])} available, viewport ({e['viewport']}) "
              f"{_size(e['viewport_gpu_bytes'])} of GPU memory; calibrated in "
              f"{e['calibration_seconds']:.1f} s"]
+    if e.get("horizons_whole") and s.get("horizons", 0.0) >= 0.5:
+        lines.append("  the horizons are timed whole; for an object whose sampled tiles show T "
+                     "clearly closer, only about an eighth is found (then the bake is shorter)")
     if e.get("fit_includes_blocks"):
         lines.append("  the fit includes the block viewport's, made only for an object whose "
                      "horizons auto does not show (then the bake is shorter)")

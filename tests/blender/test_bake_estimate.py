@@ -52,13 +52,15 @@ def test_cli_estimate_prints_the_cost_and_bakes_nothing(tmp_path):
     r = relight("bake-textures", blend, "--object", "Bumps", "--preset", "draft",
                 "--resolution", "2048", "--estimate", "--out", tmp_path / "o")
     assert r.returncode == 0, r.stderr[-2000:]
-    first, second, third = r.stdout.strip().splitlines()
+    first, second, *notes = r.stdout.strip().splitlines()
     assert first.startswith("estimate for 1 object(s) at 2048^2: about ")
     # the horizons at 1024^2 are a stage of their own; the block fit (T's atlas is over the
     # budget) is timed too, and made only if auto then does not show the horizons
     for what in ("direct", "horizons", "indirect", "fit"):
         assert f"{what} " in first
-    assert "block viewport" in third
+    # both what auto may skip: the block fit (the horizons shown) or most of the horizons (T
+    # clearly closer on the sampled tiles)
+    assert len(notes) == 2 and "timed whole" in notes[0] and "block viewport" in notes[1]
     # the disk figure is T's own formula: 400 directions x 2048^2 texels x 2 bytes
     assert "disk 3.1 GiB for T" in second and "of GPU memory" in second
     assert not (tmp_path / "o").exists() and "relight: error" not in r.stderr
