@@ -13,6 +13,7 @@ ratio to one 64-spp Cycles bake of the same textures measured in the same run.
 
 Usage: python benchmarks/bench_viewports.py [--scenes statue,bumps] [--resolutions 512,1024]
            [--preset balanced] [--truth-samples 64] [--gpu-budget 512] [--size demo|test]
+           [--indirect-resolution SIDE]
 """
 
 from __future__ import annotations
@@ -36,6 +37,9 @@ def main(argv=None) -> int:
     ap.add_argument("--truth-samples", type=int, default=64)
     ap.add_argument("--gpu-budget", type=int, default=512)
     ap.add_argument("--size", default="demo", choices=("demo", "test"))
+    ap.add_argument("--indirect-resolution", type=int, default=0,
+                    help="the indirect grid's side (default: the preset's at that resolution, as "
+                         "a user's bake of it gets; until 2026-12-04 it was R / 2)")
     args = ap.parse_args(argv)
 
     from bench_transport_textures import ANGLES, build, combined, single_bake_seconds, truths
@@ -60,8 +64,10 @@ def main(argv=None) -> int:
             truth = truths(scene, objects, R, args.truth_samples)
             from dataclasses import replace
 
-            s = replace(preset, resolution=R, bounces=2, model="pca",
-                        indirect_resolution=max(preset.indirect_resolution, R // 2),
+            at_r = TRANSPORT.settings(args.preset, resolution=R)   # its grids scaled with R
+            s = replace(at_r, bounces=2, model="pca",
+                        indirect_resolution=(args.indirect_resolution
+                                             or at_r.indirect_resolution),
                         viewport="auto", gpu_budget=args.gpu_budget)
             folder = tempfile.mkdtemp(prefix=f"bench-viewports-{name}-{R}-")
             t0 = time.perf_counter()
@@ -74,7 +80,8 @@ def main(argv=None) -> int:
                   f"stages: " + ", ".join(f"{k} {v:.1f} s" for k, v in result.seconds.items()
                                           if k in ("direct_total", "indirect_total", "fit"))
                   + f"; peak RSS above start {result.peak_rss_mb:.0f} MB; T on disk "
-                  f"{disk / 2**30:.2f} GiB")
+                  f"{disk / 2**30:.2f} GiB; indirect grid {s.indirect_resolution}^2, horizons "
+                  f"at {result.direct.get('horizon_resolution')}^2")
             for b in result.objects:
                 print(f"  {b.name}: viewport {b.viewport.get('shows')} ({b.viewport.get('why')})"
                       + (f", block {b.viewport['block']} x {b.viewport['components']} comps, "
@@ -136,11 +143,13 @@ def main(argv=None) -> int:
             add(f"blocks {v0.block}^2 x {v0.k} comps ({v0.method})", relight_blocks,
                 v0.gpu_bytes(s.table_size)["total_bytes"] / 2**20, bv.lookups_per_pixel(v0.k))
 
+            # (an object whose map auto's trial on sampled tiles rejected has none: no row)
             maps = [b.found_horizon for b in result.objects]
-            if all(m is not None for m in maps):
-                def relight_horizon(oi, d, a):
-                    return maps[oi].direct(d, a)[..., None] * result.objects[oi].albedo
 
+            def relight_horizon(oi, d, a):
+                return maps[oi].direct(d, a)[..., None] * result.objects[oi].albedo
+
+            if all(m is not None for m in maps):
                 hmib = maps[0].gpu_bytes() / 2**20
                 add(f"horizons, {maps[0].azimuths} azimuths at {maps[0].horizon_resolution}^2"
                     + (" (over the budget)" if hmib > args.gpu_budget else ""),

@@ -48,6 +48,24 @@ def _apply_preset(self, context):
         setattr(self, name, value)
 
 
+def _scale_with_resolution(self, context):
+    """A new texture side moves the transport fields a preset scales with it (the indirect
+    grid: ``presets.scaled``) to the chosen preset's values at that side,
+    where they still hold one of the preset's values at some side (a value of one's own
+    stays)."""
+    from ..bakes.presets import scaled
+
+    if self.method != "transport":
+        return
+    base = TRANSPORT.values(self.preset)
+    sides = [base["resolution"] << i for i in range(8)]
+    family = {k: {scaled(base, r, TRANSPORT.scales)[k] for r in sides}
+              for k in TRANSPORT.scales if k in base}
+    for k, v in scaled(base, self.resolution, TRANSPORT.scales).items():
+        if getattr(self, k) in family[k] and getattr(self, k) != v:
+            setattr(self, k, v)
+
+
 #: New scenes start on the balanced presets (transport, the default method, for the shared
 #: resolution), so the preset shown is the one the fields hold.
 _LOBES = preset_values("lobes", "balanced")
@@ -269,7 +287,8 @@ def _declared_properties() -> dict:
             **properties(ExportSettings, ("format", "godot"),
                          rename={"format": "export_format", "godot": "export_godot"},
                          defaults={"export_format": "rti-hsh"}),
-            **properties(TransportTextureSettings, ("resolution",), defaults=_TRANSPORT),
+            **properties(TransportTextureSettings, ("resolution",), defaults=_TRANSPORT,
+                         update=_scale_with_resolution),
             **properties(TransportTextureSettings, ("bounces",), defaults=_LOBES),
             **properties(TransportTextureSettings, TRANSPORT_FIELDS, rename=TRANSPORT_PROPS,
                          defaults=_TRANSPORT)}

@@ -117,3 +117,21 @@ def test_a_preset_keeps_the_values_its_file_leaves_out():
     # a --tol of one's own drops the preset's fixed component count (PCA by tolerance)
     assert TRANSPORT.settings("balanced").components == 96
     assert TRANSPORT.settings("balanced", tol=0.05).components is None
+
+
+def test_a_larger_texture_scales_the_presets_indirect_grid_with_it_up_to_512():
+    """The presets' indirect grid was chosen at 256^2 (draft at 128^2): a larger texture
+    multiplies it by how many times larger it is, up to 512; a smaller one keeps it; the
+    horizon side and an explicit value stay."""
+    from relightable_textures.operators.bakes.presets import TRANSPORT
+
+    def sides(name, **kw):
+        t = TRANSPORT.settings(name, **kw)
+        return t.indirect_resolution, t.horizon_resolution
+
+    assert sides("balanced") == sides("balanced", resolution=128) == (128, 128)
+    assert sides("balanced", resolution=512) == (256, 128)
+    assert sides("balanced", resolution=1024) == sides("balanced", resolution=4096) == (512, 128)
+    assert sides("draft", resolution=256) == (128, 0) and sides("draft", resolution=2048)[0] == 512
+    assert sides("production", resolution=1024) == (512, 0)
+    assert sides("balanced", resolution=2048, indirect_resolution=64) == (64, 128)

@@ -710,6 +710,20 @@ def test_new_scene_holds_the_preset_it_names_and_edits_make_it_custom(fresh_scen
         props.preset = "balanced"
         props.resolution = 128
         assert pr.preset_differences(props) == ["resolution"]
+        # a larger texture scales the preset's indirect grid with it, as the CLI's --preset
+        # balanced --resolution 2048 does; a value of one's own stays
+        props.resolution = 2048
+        got = pr.transport_settings_from_scene(props)
+        want = tx.settings_from_preset("balanced", resolution=2048)
+        assert (got.indirect_resolution, got.horizon_resolution) == \
+            (want.indirect_resolution, want.horizon_resolution) == (512, 128)
+        props.resolution = 512
+        assert props.indirect_resolution == 256
+        props.indirect_resolution = 96
+        props.resolution = 1024
+        assert props.indirect_resolution == 96
+        props.resolution = 128
+        assert pr.preset_differences(props) == ["resolution", "indirect_resolution"]
         props.preset = "draft"                       # choosing a preset applies it
         assert pr.preset_differences(props) == []
         assert pr.transport_settings_from_scene(props).components == 48
