@@ -40,6 +40,9 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
+# the share of an object's horizons the trial on sampled tiles finds first (one tile in 8)
+from .horizon_trial import FRACTION as TRIAL_SHARE
+
 STAGES = ("direct", "horizons", "indirect", "indirect_pca", "fit", "fit_choose", "other",
           "truth")
 #: The stages of the bake itself (the truths come after it).
@@ -161,7 +164,8 @@ def _fraction(message: str, prefix: str) -> float | None:
 
 def estimated_elapsed(seconds: dict, message: str) -> float | None:
     """Seconds the estimate ``seconds`` ({stage: s}) expects a bake to have taken when it
-    prints ``message`` (its direction, indirect-bake and fit steps), None for other steps.
+    prints ``message`` (its direction, horizon, horizon-trial, indirect and fit steps), None
+    for other steps.
     "other" (albedo, writing) is counted before the directions."""
     other, direct = seconds.get("other", 0.0), seconds.get("direct", 0.0)
     horizons = seconds.get("horizons", 0.0)
@@ -170,8 +174,13 @@ def estimated_elapsed(seconds: dict, message: str) -> float | None:
     f = _fraction(message, "direction ")
     if f is not None:
         return other + direct * f
-    f = _fraction(message, "horizons ")
-    if f is not None:                  # "horizons k/A azimuths, object i/n": objects in turn
+    for prefix, share in (("horizons ", 1.0), ("horizon trial ", TRIAL_SHARE)):
+        f = _fraction(message, prefix)
+        if f is None:
+            continue
+        # "horizons k/A azimuths, object i/n": objects in turn; the trial on sampled tiles
+        # (horizon_trial) finds about an eighth of an object's horizons first
+        f *= share
         obj = re.search(r"object (\d+)/(\d+)", message)
         if obj is not None:
             i, n = int(obj[1]), max(int(obj[2]), 1)
@@ -180,6 +189,12 @@ def estimated_elapsed(seconds: dict, message: str) -> float | None:
     f = _fraction(message, "indirect bake ")
     if f is not None:
         return other + direct + horizons + indirect * f
+    if message.startswith("indirect light: "):   # the gathered term: points and rays, its PCA
+        pca = seconds.get("indirect_pca", 0.0)
+        done = indirect - pca if "PCA" in message else 0.0
+        return other + direct + horizons + done
+    if message.startswith("indirect light gathered"):
+        return other + direct + horizons + indirect
     if message.startswith("models fitted"):
         return other + direct + horizons + indirect + fit
     return None

@@ -86,3 +86,25 @@ def test_the_block_choice_is_a_stage_that_stops_growing_at_128():
     costs = est.fit_costs(samples)
     assert est.predict(costs, 2048, 0, 2, 0)["fit_choose"] == pytest.approx(2.45)
     assert est.predict(costs, 128, 0, 2, 0)["fit_choose"] == pytest.approx(2.45)
+
+
+def test_the_time_left_places_the_horizon_trial_and_the_gathered_terms_steps():
+    """Steps the ETA once did not place (it then froze on the last figure): the trial on
+    sampled tiles ("horizon trial k/A azimuths, object i/n", an eighth of an object's
+    horizons), and the gathered indirect term's steps (points and rays, then its PCA)."""
+    from relightable_textures.lt_addon.transport.horizon_trial import FRACTION
+
+    sec = {"other": 0.0, "direct": 10.0, "horizons": 16.0, "indirect": 1.0,
+           "indirect_pca": 3.0, "fit": 2.0}
+    at = est.estimated_elapsed
+    assert at(sec, "horizon trial 64/128 azimuths, object 1/2") == pytest.approx(
+        10.0 + 16.0 * 0.5 * FRACTION / 2)
+    assert at(sec, "horizon trial 128/128 azimuths") == pytest.approx(10.0 + 16.0 * FRACTION)
+    assert at(sec, "horizons 128/128 azimuths, object 2/2") == pytest.approx(26.0)
+    assert at(sec, "indirect light: gather points") == pytest.approx(26.0)
+    assert at(sec, "indirect light: 64 rays from 16,384 points") == pytest.approx(26.0)
+    assert at(sec, "indirect light: 2 bounce(s), PCA 16") == pytest.approx(27.0)
+    assert at(sec, "indirect light gathered") == pytest.approx(30.0)
+    # the figure moves on those steps instead of staying at the last one
+    assert est.time_left(sec, "indirect light: 2 bounce(s), PCA 16", 27.0, last=99.0) == \
+        pytest.approx(5.0)
