@@ -93,8 +93,9 @@ test-core: $(STAMP)
 ##   the material edits' transfer tensors on the demo room (~25 min of it, ~20 more for the
 ##   metal edits of glossy anchors), and the exports
 ##   of a balanced bumps bake (lightmaps, RTI, equal-coefficient comparison; ~5 min), the
-##   thread settings of a bake, the up-front estimate against the bake at 256^2 and 512^2, and
-##   Mahajan's figures on a 65k-texel transport texture
+##   thread settings of a bake, the up-front estimate against the bake at 256^2 and 512^2,
+##   Mahajan's figures on a 65k-texel transport texture, and the real texture sizes: statue +
+##   ground and the bumps at 1024^2 and 2048^2, each viewport against Cycles (~2 h more)
 bench: $(STAMP)
 	mkdir -p $(OUT)/bench $(BLENDER_USER_RESOURCES)
 	$(PY) benchmarks/bench_transport_textures.py --out $(OUT)/bench
@@ -114,6 +115,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_threads.py --out $(OUT)/bench
 	$(PY) benchmarks/bench_estimate.py
 	$(PY) benchmarks/bench_texel_cpca.py --out $(OUT)/bench
+	$(PY) benchmarks/bench_viewports.py --scenes statue,bumps --resolutions 1024,2048
 
 ## bench-full: the standard (demo-size) sweeps behind the tables in docs/ (results.md and the
 ##   method pages) and the presets (~2 h): writes docs/bench (presets.json among it: copy it over
