@@ -105,7 +105,8 @@ def main(argv=None) -> int:
                                 ground = r
                     errs[a] = combined(e)
                 rows[label] = (errs, ground, mib, lookups)
-                print(f"| {label} | {mib:.1f} | {lookups} | {errs[2.0]:.4f} | {errs[10.0]:.4f} | "
+                cell = f"{mib:.1f}" if isinstance(mib, (int, float)) else mib
+                print(f"| {label} | {cell} | {lookups} | {errs[2.0]:.4f} | {errs[10.0]:.4f} | "
                       + (f"{ground:.4f}" if ground is not None else "-") + " |", flush=True)
 
             print("\n| viewport | GPU MiB per object | lookups per pixel | 2-deg Sun | "
@@ -176,7 +177,18 @@ def main(argv=None) -> int:
                                            if pca_mib > args.gpu_budget else ""),
                 relight_pca, pca_mib, 2 * -(-k // 3) + 1)
             shown = ", ".join(f"{b.name} {b.viewport.get('shows')}" for b in result.objects)
-            add(f"**what auto shows** ({shown})", relight_shown, float("nan"), "-")
+            # per object, the figures of the viewport it shows (the report's for the horizons
+            # and blocks; T's atlas and the global PCA as in their rows above)
+            own = {"transport": (nbytes / 2**20, 4 * (2 * taps // 3 + taps) + 1)
+                   if side <= 16384 else None, "T": None,
+                   "pca": (pca_mib, 2 * -(-k // 3) + 1)}
+            own["T"] = own["transport"]
+            figs = [(b.viewport["gpu_mib"], b.viewport.get("lookups_per_pixel", "-"))
+                    if b.viewport.get("gpu_mib") is not None else
+                    own.get(b.viewport.get("shows")) or ("-", "-") for b in result.objects]
+            add(f"**what auto shows** ({shown})", relight_shown,
+                " / ".join(f"{m:.1f}" if isinstance(m, float) else str(m) for m, _ in figs),
+                " / ".join(str(n) for _, n in figs))
             for st in stores:
                 st.abort()
     return 0
