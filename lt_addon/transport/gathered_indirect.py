@@ -187,79 +187,157 @@ def _bounced(G1, G2, X, bounces: int):
     return total
 
 
+#: Bytes of T (half floats) one window of texel columns reads: the PCA's working set per step.
+WINDOW_BYTES = 64 << 20
+#: Met texels whose products with T are gathered into the images at once (one sparse product per
+#: colour; fewer, larger products are faster, each holds FLUSH_TEXELS x m float32).
+FLUSH_TEXELS = 1 << 20
+
+
 def indirect_pca(g: Gather, T, albedo_t, bounces: int = 2, components: int = 16,
                  oversample: int = 8, power: int = 1, seed: int = 0, chunk: int = 256,
-                 measure: bool = False):
+                 measure: bool = False, window: int | None = None):
     """The top ``components`` of ``I`` over directions (the rows of :func:`indirect`, colours
     and gather points as columns) without forming ``I``: a randomised SVD (Halko et al. 2011,
     ``power`` subspace iterations) whose products with ``I`` and its transpose are the bounce
-    operator ``B_c = sum_i G2^i G1`` and its adjoint applied to a few images, and T read once per
-    pass in chunks of ``chunk`` directions (float32 from a half-float store).
+    operator ``B_c = sum_i G2_c^i G1_c`` and its adjoint applied to a few images.
+
+    ``T`` (S, n) is read once per pass by windows of ``window`` texel columns (default:
+    :data:`WINDOW_BYTES` of half floats; an object with ``columns(lo, hi)`` is asked for them,
+    else ``T[:, lo:hi]``), only at the texels the gather rays met. Per pass the working set is
+    one window (S x window), at most :data:`FLUSH_TEXELS` x m products and the images (3, P, m)
+    in float64; what grows with the texture's side is a few numbers per met texel (at most one
+    per hit). Until 2026-12-04 T was read by chunks of directions whose products (met texels x
+    m, float64) were accumulated in full: on the statue demo's gather at 1024^2 (12.3 M hits,
+    1.5 M met texels, 443 k points) 71.9 s and 2,170 MiB above the start, now 43.2 s and
+    1,639 MiB, the term equal to 1.4e-6 relative.
+
+    ``G1_c = G A_c``: the hits' counts per (point, texel) over K (one sparse matrix shared by the
+    colours) times the albedo at the texel; ``G2_c`` (P, P) per colour.
 
     Returns ``(V, U, kept)``: coefficients V (S, k) float32 and images U (k, 3, P) float32 with
     ``I[c, s] ~ sum_j V[s, j] U[j, c]``, and with ``measure`` the share of ``||I||^2`` they
-    keep (one more pass that bounces all of T: the cost of :func:`indirect`), else None."""
+    keep (one more pass that bounces all of T by ``chunk`` directions: the cost of
+    :func:`indirect`), else None."""
     if bounces < 1 or components < 1:
         raise ValueError(f"need bounces >= 1 and components >= 1; got {bounces}, {components}")
     T = np.asarray(T) if not hasattr(T, "shape") else T
     S, n_all = T.shape
     m = min(S, int(components) + int(oversample))
-    # B reads T only at the texels the gather rays met: the products run over those columns
-    # (the statue demo at 512^2: 51 % of T's texels; the bumps at 256^2: 66 %), the same sums
-    # without the zeros. T's products are float32 (T is stored in half floats; against
-    # float64 products the term moved by 5e-7 relative on the statue at 512^2, and the pass
-    # took 3.8 s instead of 5.2), accumulated over chunks and decomposed in float64
-    cols = np.unique(g.texel)
-    g = replace(g, texel=np.searchsorted(cols, g.texel))
-    albedo_t = np.asarray(albedo_t, np.float32)[cols]
+    P = int(g.points)
+    cols = np.unique(g.texel)                         # the met texels, sorted (n_t,)
     n_t = len(cols)
+    alb = np.asarray(albedo_t, np.float32)[cols]      # (n_t, 3)
+    G = _gather_matrix(g, cols)                       # (P, n_t) CSC, float32
+    G2 = _grid_matrices(g, np.asarray(albedo_t, np.float32))   # per colour (P, P) CSR
+    W = int(window) if window else max(1, WINDOW_BYTES // (2 * S))
+    # windows of T's columns [lo, hi) holding met texels, and their met texels cols[a:b]
+    edges = np.arange(0, n_all + W, W)
+    cuts = np.searchsorted(cols, edges)
+    spans = [(int(edges[i]), int(min(edges[i + 1], n_all)), int(cuts[i]), int(cuts[i + 1]))
+             for i in range(len(edges) - 1) if cuts[i + 1] > cuts[i]]
 
-    def rows(a):                         # T's directions a:a + chunk at the met texels, float32
-        return np.asarray(T[a:a + chunk])[:, cols].astype(np.float32)
-    mats = [_bounce_matrices(g, albedo_t, n_t, c) for c in range(3)]
+    def window_rows(lo, hi, a, b):                    # T[:, cols[a:b]] float32 (S, b - a)
+        block = T.columns(lo, hi) if hasattr(T, "columns") else T[:, lo:hi]
+        return np.asarray(block)[:, cols[a:b] - lo].astype(np.float32)
 
-    def apply(X):                        # (n_t, m) float64 -> (3, P, m): B_c X
-        return np.stack([_bounced(G1, G2, X, bounces) for G1, G2 in mats])
-
-    def adjoint(Y):                      # (3, P, m) -> (n_t, m): sum_c B_c^T Y_c
-        acc = np.zeros((n_t, Y.shape[-1]))
-        for (G1, G2), y in zip(mats, Y):
-            z, s = y, y.copy()
+    def bounce(Y):                                    # Y_c <- sum_i G2_c^i Y_c, in place
+        for c in range(3):
+            level = Y[c]
             for _ in range(bounces - 1):
-                z = np.asarray(G2.T @ z, np.float64)
-                s += z
-            acc += np.asarray(G1.T @ s, np.float64)
-        return acc
+                level = np.asarray(G2[c] @ level)
+                Y[c] += level
+        return Y
 
-    def t_times(W):                      # T (S, n_t) @ W (n_t, m) -> (S, m)
-        W = W.astype(np.float32)
-        return np.concatenate([rows(a) @ W for a in range(0, S, chunk)]).astype(np.float64)
+    def apply_t(O):                                   # B T^T O: (S, m) -> (3, P, m)
+        O = np.asarray(O, np.float32)
+        k = O.shape[1]
+        Y = np.zeros((3, P, k))
+        X = np.empty((min(n_t, FLUSH_TEXELS + W), k), np.float32)   # T^T O at met texels
+        first = 0                                     # X[0] is met texel `first`
 
-    def t_transposed(O):                 # T^T (n_t, S) @ O (S, m) -> (n_t, m)
-        acc = np.zeros((n_t, O.shape[1]))
-        for a in range(0, S, chunk):
-            acc += rows(a).T @ O[a:a + chunk].astype(np.float32)
-        return acc
+        def flush(upto):                              # Y_c += G1_c X over [first, upto)
+            for c in range(3):
+                Y[c] += G[:, first:upto] @ (alb[first:upto, c, None] * X[:upto - first])
+
+        for lo, hi, a, b in spans:
+            if b - first > len(X):
+                flush(a)
+                first = a
+            X[a - first:b - first] = window_rows(lo, hi, a, b).T @ O
+        flush(n_t)
+        return bounce(Y)
+
+    def t_adjoint(Q):                                 # T B^T Q: (3, P, m) -> (S, m)
+        k = Q.shape[-1]
+        S3 = np.empty((P, 3, k))                      # sum_i (G2_c^T)^i Q_c, points first
+        for c in range(3):
+            S3[:, c] = level = Q[c]
+            for _ in range(bounces - 1):
+                level = np.asarray(G2[c].T @ level)
+                S3[:, c] += level
+        S3 = S3.reshape(P, -1)
+        C = np.zeros((S, k))
+        for lo, hi, a, b in spans:
+            Z = np.asarray(G[:, a:b].T @ S3).reshape(b - a, 3, k)             # (b - a, 3, m)
+            Z = np.einsum("tc,tcm->tm", alb[a:b], Z).astype(np.float32)
+            C += window_rows(lo, hi, a, b) @ Z
+        return C
 
     def orth(Y):                         # (3, P, m) -> orthonormal columns, same shape
         q, _ = np.linalg.qr(Y.reshape(-1, Y.shape[-1]))
         return q.reshape(Y.shape)
 
     omega = np.random.default_rng(seed).standard_normal((S, m))
-    Q = orth(apply(t_transposed(omega)))             # range of I^T (images)
+    Q = orth(apply_t(omega))                          # range of I^T (images)
     for _ in range(int(power)):
-        C = t_times(adjoint(Q))                       # I Q: (S, m)
-        Q = orth(apply(t_transposed(C)))
-    C = t_times(adjoint(Q))                           # I ~ C Q^T
+        C = t_adjoint(Q)
+        del Q                                         # (not held while the next is made)
+        Q = orth(apply_t(C))
+    C = t_adjoint(Q)                                  # I ~ C Q^T
     Uc, sv, Vt = np.linalg.svd(C, full_matrices=False)
     k = min(int(components), m)
     V = (Uc[:, :k] * sv[:k]).astype(np.float32)
     U = np.einsum("cpm,km->kcp", Q, Vt[:k]).astype(np.float32)
     if not measure:
         return V, U, None
-    total = 0.0                          # ||I||^2: B applied to all of T
+    total = 0.0                          # ||I||^2: B applied to all of T, by directions
+    g_t = replace(g, texel=np.searchsorted(cols, g.texel))
+    mats = [_bounce_matrices(g_t, alb, n_t, c) for c in range(3)]
     for a in range(0, S, chunk):
-        Tc = rows(a).T                                                        # (n_t, s)
-        total += float(np.sum(apply(Tc) ** 2))
+        Tc = np.asarray(T[a:a + chunk])[:, cols].astype(np.float32).T          # (n_t, s)
+        total += float(sum(np.sum(_bounced(G1, G2c, Tc, bounces) ** 2) for G1, G2c in mats))
     kept = float(np.sum(sv[:k] ** 2) / total) if total > 0 else 1.0
     return V, U, kept
+
+
+def _gather_matrix(g: Gather, cols) -> "sparse.csc_matrix":
+    """(P, n_t) CSC float32: the share of each point's K rays that met each met texel
+    (``cols``, sorted): ``G1_c = G diag(albedo_c at cols)``."""
+    from scipy import sparse
+
+    t = np.searchsorted(cols, g.texel)
+    G = sparse.csc_matrix((np.full(len(t), 1.0 / g.rays, np.float32), (g.point, t)),
+                          shape=(g.points, len(cols)))
+    G.sum_duplicates()
+    return G
+
+
+def _grid_matrices(g: Gather, albedo_t) -> list:
+    """The grid-to-grid bounce (P, P) CSR float32 of each colour (a hit reflects with the
+    albedo at its texel), sharing one index structure."""
+    from scipy import sparse
+
+    ok = g.target >= 0
+    P = int(g.points)
+    key = g.point[ok].astype(np.int64) * P + g.target[ok]
+    uniq, inv = np.unique(key, return_inverse=True)
+    rows, idx = np.divmod(uniq, P)
+    indices = idx.astype(np.int32 if P < 2**31 else np.int64)
+    indptr = np.searchsorted(rows, np.arange(P + 1)).astype(indices.dtype)
+    a = np.asarray(albedo_t, np.float32)[g.texel[ok]] / g.rays                 # (H', 3)
+    out = []
+    for c in range(3):
+        data = np.bincount(inv.ravel(), weights=a[:, c], minlength=len(uniq)).astype(np.float32)
+        out.append(sparse.csr_matrix((data, indices, indptr), shape=(P, P), copy=False))
+    return out

@@ -22,7 +22,6 @@ from ...lt_addon.progress import Progress
 from ...lt_addon.rays import engine
 from ...lt_addon.rays.texels import extend_margin
 from ...lt_addon.transport import gathered_indirect as gi
-from ...lt_addon.transport import texture as tt
 from ...lt_addon.transport.gathered_texture import GatheredIndirect
 from ..base import ray_scene
 
@@ -65,6 +64,16 @@ class StackedRows:
 
     def __getitem__(self, rows):
         return np.concatenate([np.asarray(a[rows]) for a in self.arrays], axis=1)
+
+    def columns(self, lo: int, hi: int) -> np.ndarray:
+        """All rows at the stacked columns ``[lo, hi)`` (S, hi - lo), in the stores' dtype."""
+        parts, start = [], 0
+        for a in self.arrays:
+            n = a.shape[1]
+            if lo < start + n and hi > start:
+                parts.append(np.asarray(a[:, max(lo - start, 0):min(hi - start, n)]))
+            start += n
+        return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
 
 
 def gather_points(scene, objects, resolution: int):
@@ -132,9 +141,8 @@ def bake(scene, objects, arrays, albedos, dset, *, resolution: int, bounces: int
     yield Progress(step, total, f"indirect light: {bounces} bounce(s), PCA {components}")
     t0 = time.perf_counter()
     alb = np.concatenate([np.asarray(a, np.float32).reshape(-1, 3) for a in albedos])
-    rows = StackedRows(arrays)          # read by chunks of directions of ~CHUNK_BYTES in float64
-    Vc, U, _ = gi.indirect_pca(g, rows, alb, bounces=bounces, components=components, seed=seed,
-                               chunk=max(1, tt.CHUNK_BYTES // (8 * rows.shape[1])))
+    rows = StackedRows(arrays)          # read by windows of texel columns (gi.WINDOW_BYTES)
+    Vc, U, _ = gi.indirect_pca(g, rows, alb, bounces=bounces, components=components, seed=seed)
     t_pca = time.perf_counter() - t0
     centre = ((np.arange(RI) + 0.5) * R / RI).astype(np.int64)
     out = []

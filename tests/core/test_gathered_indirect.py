@@ -140,8 +140,21 @@ def test_hits_read_the_texel_under_their_uv():
     assert gi.uv_texel(np.array([[1.0, 1.0], [-0.1, 0.0]]), 4).tolist() == [15, 0]
 
 
+class _Columns:
+    """T behind ``columns(lo, hi)`` only (as the bake's stacked stores are read)."""
+
+    def __init__(self, a):
+        self.a, self.shape = a, a.shape
+
+    def columns(self, lo, hi):
+        return self.a[:, lo:hi]
+
+    def __getitem__(self, key):
+        raise AssertionError("the PCA reads T by windows of columns")
+
+
 @needs_engine
-def test_the_randomised_pca_is_the_exact_one_without_forming_the_term():
+def test_the_randomised_pca_is_the_exact_one_without_forming_the_term(monkeypatch):
     """On the furnace box with T varying over texels and directions: at full rank the
     randomised factors rebuild ``indirect`` exactly; at rank k they keep what an exact SVD of
     the formed term keeps (to 1e-6 of its energy), and say how much."""
@@ -157,13 +170,19 @@ def test_the_randomised_pca_is_the_exact_one_without_forming_the_term():
     full = gi.indirect(g, Trows, alb, bounces=2).astype(np.float64)       # (3, S, P)
     M = full.transpose(1, 0, 2).reshape(S, -1)
     Vk, Uk, kept = gi.indirect_pca(g, Trows, alb, bounces=2, components=S, oversample=0,
-                                   chunk=7, measure=True)
+                                   chunk=7, measure=True, window=7)    # T read by 21 windows
     rebuilt = Vk.astype(np.float64) @ Uk.reshape(len(Uk), -1).astype(np.float64)
     assert np.abs(rebuilt - M).max() < 1e-5 * np.abs(M).max() and abs(kept - 1) < 1e-6
     sv = np.linalg.svd(M, compute_uv=False)
     exact = float(np.sum(sv[:4] ** 2) / np.sum(sv ** 2))
     Vk, Uk, kept = gi.indirect_pca(g, Trows, alb, bounces=2, components=4, chunk=7,
                                    measure=True)
+    # read by windows of texel columns (a stacked reader's columns()), their products gathered
+    # a few texels at a time, or whole: the same
+    monkeypatch.setattr(gi, "FLUSH_TEXELS", 5)
+    Vw, Uw, _ = gi.indirect_pca(g, _Columns(Trows), alb, bounces=2, components=4, window=10)
+    np.testing.assert_allclose(Vw @ Uw.reshape(4, -1), Vk @ Uk.reshape(4, -1),
+                               atol=1e-5 * np.abs(M).max())
     rebuilt = Vk.astype(np.float64) @ Uk.reshape(4, -1).astype(np.float64)
     got = 1 - np.sum((rebuilt - M) ** 2) / np.sum(M ** 2)
     assert exact > 0.99 and abs(got - exact) < 1e-6 and abs(kept - exact) < 1e-6
