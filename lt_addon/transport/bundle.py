@@ -298,6 +298,7 @@ class TransportTextureResult:
     bake_calls: int = 0
     peak_rss_mb: float = 0.0         # anonymous memory above the level before the bake
     growth_after_first_mb: float = 0.0   # ... above the level after the first direction
+    peak_by_stage_mb: dict = field(default_factory=dict)   # {albedo, direct, indirect, fit}
     cache: object = None             # the stages' ChunkCaches, inner first (None: resume off)
     chunks: dict = field(default_factory=dict)   # chunks_total, chunks_reused, chunk_directions
     indirect_chunks: dict = None     # the indirect stage's light chunks (light_stacks figures)
@@ -791,6 +792,7 @@ def write_bundle(result: TransportTextureResult, names: list, out_dir: str,
             "bake_calls": result.bake_calls,
             "peak_rss_above_start_mb": round(result.peak_rss_mb, 1),
             "rss_growth_while_streaming_mb": round(result.growth_after_first_mb, 1),
+            "peak_rss_by_stage_mb": result.peak_by_stage_mb,
             "preview_cost": preview_cost(b.model, s, store, b.view, b.horizon, b.indirect),
             "viewport": b.viewport or {},
             "model_vs_T": model_fidelity(b, store, s),

@@ -34,6 +34,7 @@ import numpy as np
 from ... import __version__
 from ...lt_addon.io.transaction import after_commit
 from ...lt_addon import blas_threads, faults
+from ...lt_addon.peak_memory import PeakMemory
 from ...lt_addon.io import atomic
 from ...lt_addon.transport import texture as tt
 from ...lt_addon.transport.gathered_texture import indirect_images
@@ -56,19 +57,6 @@ from ...lt_addon.transport.bundle import (INDIRECT, KIND, MODELS, TRUTH_LIGHTS, 
 #: Directions per chunk of the direct stage: the unit a cancelled bake resumes from (16 hard-sun
 #: bakes at 256^2 are about 2 s here; a chunk of 16 x 256^2 half floats is 2 MiB per object).
 CHUNK_DIRECTIONS = 16
-
-
-def _rss_mb() -> float:
-    """Anonymous resident memory (MiB): what the process holds. File-backed pages of the store's
-    memmap are page cache the kernel can drop, so they are not counted (VmRSS would)."""
-    try:
-        with open("/proc/self/status") as fh:
-            for line in fh:
-                if line.startswith("RssAnon:"):
-                    return int(line.split()[1]) / 1024.0
-    except OSError:
-        pass
-    return 0.0
 
 
 def check_space(n_objects: int, dset, settings: TransportTextureSettings, out_dir: str,
@@ -106,8 +94,19 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
     reused by a rerun of the same bake of the same scene (:func:`direct_chunk_cache`);
     :func:`write_bake` removes them. With a Dask ``client`` the missing chunks are baked on
     its workers from the saved ``blend_path`` first (:mod:`.distributed`); the result is the
-    same bit for bit. Returns a TransportTextureResult.
+    same bit for bit. Returns a TransportTextureResult, whose peak memory a thread sampled
+    (:class:`...lt_addon.peak_memory.PeakMemory`; the report says it per stage).
     """
+    mem = PeakMemory()
+    try:
+        return (yield from _bake_transport_textures(scene, objects, settings, out_dir, resume,
+                                                    client, blend_path, mem))
+    finally:
+        mem.stop()
+
+
+def _bake_transport_textures(scene, objects, settings, out_dir, resume, client, blend_path, mem):
+    """:func:`bake_transport_textures`, with ``mem`` started once the inputs are checked."""
     dset, path_info = resolve_directions(scene, settings)
     if client is not None and (not resume or not blend_path):
         raise BakeInputError("a distributed bake needs the chunk cache (no --no-resume) and a "
@@ -117,8 +116,9 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
         check_bakeable(o)
     check_space(len(objects), dset, settings, out_dir, resume)
     t_start = time.perf_counter()
-    rss0 = _rss_mb()
-    peak = rss0
+    mem.start()
+    mem.stage("albedo")
+    peak = mem.base
     R = settings.resolution
     S = dset.size
     do_indirect = settings.bounces > 0 and settings.indirect == "steerable"
@@ -149,6 +149,7 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
         seconds["albedo_cycles"] = session.bake_seconds
         calls += session.bake_calls
     yield Progress(1, total, "albedo baked")
+    mem.stage("direct")
 
     # 2. direct transport, streamed to disk in chunks of directions; each finished chunk is
     # also kept in the chunk cache, so a cancelled or killed bake run again redoes only the
@@ -203,7 +204,7 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
             seconds["direct_rays"] = engine["seconds"]
             seconds["horizons"] = engine.get("horizon_seconds", 0.0)
             faults.checkpoint("directions")
-            peak = first = max(peak, _rss_mb())
+            peak = first = max(peak, mem.peak_mb)
         missing = any(c is None for c in cached)
         with (EnvironmentBake(scene, objects, R, 1, 0, (8, 16), mode="irradiance",
                               seed=settings.seed, world_sampling="none", passes="direct")
@@ -219,7 +220,7 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
                     images = session.bake_sun_all(dset.directions[s], 1.0, 0.0)
                     for store, img in zip(stores, images):
                         store.write(s, img[..., 0])
-                    peak = max(peak, _rss_mb())
+                    peak = max(peak, mem.peak_mb)
                     if s == 0:
                         first = peak   # Cycles' own session memory is allocated by now
                     yield Progress(2 + s, total, f"direction {s + 1}/{S}")
@@ -253,7 +254,7 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
         shutil.rmtree(os.path.join(cache.root, "indirect"), ignore_errors=True)
     try:
         result = yield from _indirect_and_models(scene, objects, settings, dset, albedos,
-                                                 readers, seconds, calls, t_start, rss0, peak,
+                                                 readers, seconds, calls, t_start, mem, peak,
                                                  first, 2 + S, total, lights, client,
                                                  blend_path, horizon_maps)
     except BaseException:   # cancelled or failed after the directions: drop the stores too
@@ -388,7 +389,7 @@ def direct_chunk_cache(scene, objects, settings: TransportTextureSettings, out_d
 
 
 def _indirect_and_models(scene, objects, settings, dset, albedos, readers, seconds, calls,
-                         t_start, rss0, peak, first, step, total, cache=None, client=None,
+                         t_start, mem, peak, first, step, total, cache=None, client=None,
                          blend_path=None, horizon_maps=None):
     """Steps 3 and 4 of :func:`bake_transport_textures` (the stores are not committed yet).
     The indirect stage's basis lights are chunks (:mod:`.light_chunks`): from ``cache``, from
@@ -398,6 +399,7 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
     indirect_chunks = None
     fallback = None
     steer_total = total
+    mem.stage("indirect")
     if settings.bounces > 0 and settings.indirect == "gather":
         # 3. indirect light gathered by rays over T's own directions (.indirect_gather); when
         # the objects not baked reflect much of it (a statue baked without its ground), Cycles'
@@ -420,7 +422,7 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
             yield Progress(step, total, "indirect light gathered")
             faults.checkpoint("indirect")
             seconds["indirect_total"] = time.perf_counter() - t0
-        peak = max(peak, _rss_mb())
+        peak = max(peak, mem.peak_mb)
     # 3. indirect light: a low-order steerable bake of the indirect pass
     if do_indirect:
         from ...lt_addon.steerable.sampled_basis import build_sampled_basis
@@ -460,6 +462,7 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
 
     # 4. models (BLAS on --threads N when given, else as NumPy started it: every core)
     faults.checkpoint("fit")
+    mem.stage("fit")
     results = []
     n_fit = cycles_device.current().threads if cycles_device.blas_policy() else 0
     for i, o in enumerate(objects):
@@ -473,13 +476,16 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
                                   time.perf_counter() - t0, readers[i], view, viewport,
                                   horizon=hm if viewport.get("shows") == "horizon" else None,
                                   found_horizon=hm))
-        peak = max(peak, _rss_mb())
+        peak = max(peak, mem.peak_mb)
     seconds["fit"] = sum(r.fit_seconds for r in results)
     seconds["fit_choose"] = sum((r.viewport or {}).get("choose_seconds", 0.0) for r in results)
     seconds["bake_total"] = time.perf_counter() - t_start
     yield Progress(steer_total, steer_total, "models fitted")
-    out = TransportTextureResult(results, dset, settings, seconds, calls, peak - rss0,
+    mem.read()
+    peak = max(peak, mem.peak_mb)
+    out = TransportTextureResult(results, dset, settings, seconds, calls, peak - mem.base,
                                  peak - first)
+    out.peak_by_stage_mb = mem.above_base()
     out.indirect_chunks = indirect_chunks
     return out
 
