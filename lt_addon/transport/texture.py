@@ -448,16 +448,24 @@ class TexturePCA:
 
     def relight(self, indices, weights) -> np.ndarray:
         c = self.coefficients(indices, weights)
-        return (c @ self.U.astype(np.float64)).reshape(self.resolution, self.resolution).astype(
-            np.float32)
+        return self._combine(c).reshape(self.resolution, self.resolution)
 
     def relight_dense(self, weights) -> np.ndarray:
         w = np.asarray(weights, np.float64)                  # (S,) or (S, C)
         c = w.T @ self.V.astype(np.float64)                   # (K,) or (C, K)
-        out = c @ self.U.astype(np.float64)                   # (P,) or (C, P)
+        out = self._combine(c)                                # (P,) or (C, P)
         out = out if c.ndim == 1 else out.T
-        return out.reshape((self.resolution, self.resolution) + np.shape(weights)[1:]).astype(
-            np.float32)
+        return out.reshape((self.resolution, self.resolution) + np.shape(weights)[1:])
+
+    def _combine(self, c) -> np.ndarray:
+        """``c @ U`` (float32 out, float64 sums) by chunks of texels: U (K, P) is never
+        converted whole (at 4096^2 and 96 components that would be 12.9 GB of float64)."""
+        n = self.U.shape[1]
+        out = np.empty(np.shape(c)[:-1] + (n,), np.float32)
+        step = chunk_texels(self.U.shape[0])
+        for a in range(0, n, step):
+            out[..., a:a + step] = c @ self.U[:, a:a + step].astype(np.float64)
+        return out
 
     def storage_bytes(self) -> dict:
         return {"eigen_textures_half": int(self.U.size * 2), "loadings_float32": int(self.V.size * 4)}
