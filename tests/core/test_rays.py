@@ -224,6 +224,32 @@ def test_a_points_origin_does_not_depend_on_the_points_asked_with_it():
         assert np.array_equal(shadow_origins(pts, np.tile(L, (len(idx), 1)), idx), full[idx])
 
 
+def test_shading_points_by_steps_are_the_whole_set_bit_for_bit(monkeypatch):
+    """shading_points works by steps of POINTS_STEP points (its float64 temporaries were the
+    peak of a 4096^2 bake); every point is computed alone, so the steps change no bit."""
+    from relightable_textures.lt_addon.rays import shading
+
+    rng = np.random.default_rng(9)
+    V = rng.normal(size=(200, 3))
+    tris = np.array([t for t in rng.integers(0, 200, (300, 3)) if len(set(t)) == 3])
+    corner = rng.normal(size=(len(tris), 3, 3))
+    corner /= np.linalg.norm(corner, axis=2, keepdims=True)
+    tri, bary = rng.integers(0, len(tris), 1000), rng.dirichlet(np.ones(3), 1000)
+    smooth = rng.random(len(tris)) < 0.6
+    Ns = rng.normal(size=(1000, 3))
+    corr = rng.random(len(tris)) < 0.5
+    whole = shading_points(V, tris, corner, smooth, tri, bary, cutoff=0.1, Ns=Ns,
+                           correction=corr)
+    monkeypatch.setattr(shading, "POINTS_STEP", 77)
+    steps = shading_points(V, tris, corner, smooth, tri, bary, cutoff=0.1, Ns=Ns,
+                           correction=corr)
+    for f in ("P", "Ng", "N", "Ns", "lift", "cutoff", "correction"):
+        assert np.array_equal(getattr(steps, f), getattr(whole, f)), f
+    assert steps.size == 1000 and steps.bump == whole.bump and np.any(whole.lift != 0)
+    plain = shading_points(V, tris, corner, smooth, tri, bary, cutoff=0.1)
+    assert plain.Ns is plain.N and np.array_equal(plain.N, whole.N)
+
+
 def test_backfacing_points_flip_both_normals():
     V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)   # winding: Ng = +z
     down = np.tile([0.0, 0.0, -1.0], (3, 1))                 # smooth normals point down
