@@ -673,6 +673,36 @@ def set_horizon_sun(group, sun_angle: float) -> bool:
     return True
 
 
+def pca_atlas_gpu_bytes(model) -> int:
+    """GPU memory of the PCA's eigen atlas: a tile per three components and the albedo's, RGBA
+    half floats (what Blender uploads for a half-float EXR)."""
+    return (-(-model.k // 3) + 1) * model.resolution ** 2 * 8
+
+
+def _write_pca_atlas(obj, model, albedo, store, angle, s, base):
+    """Write and load the PCA's eigen and table atlases: (files, eigen image, eigen tiles)."""
+    eig, tables = preview_arrays(model, albedo, store.directions, angle, s["table_size"],
+                                 s.get("kernel", "linear"))
+    files = write_preview_files(base, eig, tables)
+    n = len(eig)
+    del eig
+    eig_img = pn.load_atlas_image(files["eigen"], f"{obj.name} transport eigen atlas")
+    pn.load_atlas_image(files["tables"], f"{obj.name} transport tables")
+    return files, eig_img, n
+
+
+def pca_atlas_image(obj, bake, store, report: dict):
+    """``obj``'s PCA eigen atlas image, written and loaded first when the preview left it out
+    (over the GPU budget; environment lighting reads it)."""
+    img = bpy.data.images.get(f"{obj.name} transport eigen atlas")
+    if img is not None:
+        return img
+    s = report["settings"]
+    base = os.path.splitext(report["report"])[0].removesuffix("_texture_report")
+    return _write_pca_atlas(obj, bake.model, bake.albedo, store, float(s["sun_angle"]), s,
+                            base)[1]
+
+
 def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: float | None = None,
                               sun=None) -> dict:
     """Write the atlases, build the group(s) and wire them into ``obj``'s materials (replacing
@@ -684,12 +714,7 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
     if not getattr(model, "live_preview", False):
         raise ValueError("the live preview shows PCA models (model 'pca'); this bake has "
                          f"{report['model']['kind']!r}")
-    eig, tables = preview_arrays(model, bake.albedo, store.directions, angle, s["table_size"],
-                                 s.get("kernel", "linear"))
     base = os.path.splitext(report["report"])[0].removesuffix("_texture_report")
-    files = write_preview_files(base, eig, tables)
-    eig_img = pn.load_atlas_image(files["eigen"], f"{obj.name} transport eigen atlas")
-    tab_img = pn.load_atlas_image(files["tables"], f"{obj.name} transport tables")
     uv_map = next((uv.name for uv in obj.data.uv_layers if uv.active_render),
                   obj.data.uv_layers[0].name)
     gname = f"{GROUP_PREFIX} ({obj.name})"
@@ -709,6 +734,20 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
     sparse = {}
     if bake.horizon is not None:
         viewport, why = "horizon", info.get("why", "")
+    # the PCA's eigen-texture atlas: what the PCA and T viewports read (T its albedo tile), and
+    # environment lighting; over the GPU budget and not shown it is made when environment
+    # lighting asks for it (pca_atlas_image): at 4096^2 with 96 components it is 33 tiles,
+    # 4.4 GB of GPU memory, and its float32 arrays alone held 13 GB while it was written
+    budget = int(s.get("gpu_budget", sp.DEFAULT_BUDGET_MIB)) << 20
+    files, eig_img = {}, None
+    if viewport in ("pca", "transport") or pca_atlas_gpu_bytes(model) <= budget:
+        files, eig_img, eig_tiles = _write_pca_atlas(obj, model, bake.albedo, store, angle, s,
+                                                     base)
+    else:
+        files = {"eigen_skipped": f"the PCA's eigen atlas ({pca_atlas_gpu_bytes(model) / 2**20:.0f}"
+                                  f" MiB of GPU memory) is over the {budget >> 20} MiB budget "
+                                  f"and the {viewport} viewport does not read it; environment "
+                                  "lighting makes it when asked"}
     if viewport == "horizon":
         htiles, na = horizon_preview_arrays(bake.horizon, bake.albedo)
         sparse = {**write_horizon_files(base, htiles, na, bake.horizon.azimuths),
@@ -742,12 +781,13 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
         w_img = pn.load_atlas_image(sparse["sparse_weights"], f"{obj.name} transport T weights")
         group = build_sparse_group(store.directions.size, model.resolution, D, idx.shape[-1],
                                    t_img, i_img, w_img, eig_img,
-                                   atlas_layout(len(eig), model.resolution)["tiles"][-1],
+                                   atlas_layout(eig_tiles, model.resolution)["tiles"][-1],
                                    uv_map, gname + " new")
         group["relight_taps"] = int(idx.shape[-1])
     else:
-        group = build_group(len(tables), model.resolution, s["table_size"], eig_img, tab_img,
-                            uv_map, gname + " new")
+        tab_img = bpy.data.images.get(f"{obj.name} transport tables")
+        group = build_group(-(-model.k // 3), model.resolution, s["table_size"], eig_img,
+                            tab_img, uv_map, gname + " new")
     if old is not None:
         bpy.data.node_groups.remove(old)
     group.name = gname
@@ -785,7 +825,7 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
     if props is not None and props.texture_light == "WORLD":
         set_light_mode(scene, obj, "WORLD")
     return {**files, **sparse, **ifiles, "group": gname, "group_nodes": len(group.nodes),
-            "sun_angle": angle, "tiles": len(tables), "viewport": viewport,
+            "sun_angle": angle, "tiles": -(-model.k // 3), "viewport": viewport,
             "viewport_why": why}
 
 
@@ -1019,12 +1059,12 @@ def _env_data(obj):
     hit = _ENV_CACHE.get(obj.name)
     if hit is not None and hit["key"] == key:
         return hit
-    bake, store, _ = load_bake(path)
+    bake, store, report = load_bake(path)
     if not getattr(bake.model, "live_preview", False):
         return None
     B = None if bake.indirect is None else gt.direction_matrix(bake.indirect, store.directions)
     data = {"key": key, "V": np.asarray(bake.model.V, np.float64), "B": B,
-            "directions": store.directions, "bake": bake}
+            "directions": store.directions, "bake": bake, "store": store, "report": report}
     _ENV_CACHE[obj.name] = data
     return data
 
@@ -1059,6 +1099,8 @@ def set_light_mode(scene, obj, mode: str) -> bool:
             bake = data["bake"]
             n_tiles = -(-bake.model.k // 3)
             eig_img = bpy.data.images.get(f"{obj.name} transport eigen atlas")
+            if eig_img is None:   # left out of the preview (over the GPU budget): made now
+                eig_img = pca_atlas_image(obj, bake, data["store"], data["report"])
             uv_map = next((uv.name for uv in obj.data.uv_layers if uv.active_render),
                           obj.data.uv_layers[0].name)
             env_g = build_env_group(n_tiles, bake.model.resolution, eig_img, uv_map, env_name)

@@ -241,3 +241,52 @@ def test_the_trial_on_sampled_tiles_decides_as_the_whole_check_and_finds_the_sam
                                                                    g_whole.normals)
     assert trial.direct["horizon_rays"] < 0.8 * whole.direct["horizon_rays"], (
         trial.direct["horizon_rays"], whole.direct["horizon_rays"])
+
+
+def test_an_over_budget_pca_atlas_is_left_out_and_made_for_environment_light(bumps, tmp_path,
+                                                                              monkeypatch):
+    """A horizon preview does not read the PCA's eigen atlas; when that atlas is over the GPU
+    budget (4.4 GB at 4096^2 and 96 components, its arrays 13 GB while written) it is neither
+    written nor loaded. Environment lighting reads it: switching to World makes it then, equal
+    to the model's eigen-textures to half precision."""
+    import os
+
+    import bpy
+
+    from relightable_textures.lt_addon.io import exrio
+    from relightable_textures.lt_addon.io.atlas import unpack_atlas
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.base.jobs import run
+    from relightable_textures.operators.preview import transport_preview as tp
+
+    import relightable_textures
+
+    scene, obj = bumps
+    monkeypatch.setattr(tp, "pca_atlas_gpu_bytes", lambda model: 1 << 40)
+    relightable_textures.register()
+    try:
+        rep = run(tx.bake_job(scene, [obj], settings(viewport="horizon", components=12),
+                              str(tmp_path), truth=0)).reports[0]
+        prev = rep["preview"]
+        base = os.path.splitext(rep["report"])[0].removesuffix("_texture_report")
+        assert prev["viewport"] == "horizon" and "eigen" not in prev
+        assert "over the 512 MiB budget" in prev["eigen_skipped"]
+        assert not os.path.exists(base + "_preview_eigen.exr")
+        assert bpy.data.images.get(f"{obj.name} transport eigen atlas") is None
+        world = bpy.data.worlds.new("sky")
+        scene.world = world
+        scene.relight.texture_light = "WORLD"
+        tp.update_environment_previews(scene)
+        img = bpy.data.images.get(f"{obj.name} transport eigen atlas")
+        assert img is not None and os.path.exists(base + "_preview_eigen.exr")
+        env = bpy.data.node_groups[f"Relight Transport env ({obj.name})"]
+        assert img in {n.image for n in env.nodes if n.bl_idname == "ShaderNodeTexImage"}
+        bake, _, _ = tx.load_bake(rep["report"])
+        ch = exrio.read_exr(base + "_preview_eigen.exr")[0]
+        eig = unpack_atlas(np.stack([ch[c] for c in "RGB"], -1), 4 + 1, R)   # 12 comps + albedo
+        U = bake.model.U.reshape(12, R, R).astype(np.float64)
+        got = eig[:4].transpose(0, 3, 1, 2).reshape(12, R, R)
+        assert np.abs(got - U).max() <= 2.0 ** -10 * np.abs(U).max()
+    finally:
+        scene.relight.texture_light = "SUN"
+        relightable_textures.unregister()
