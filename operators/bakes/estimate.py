@@ -15,6 +15,7 @@ import time
 from dataclasses import replace
 
 from ...lt_addon.transport import estimate as est
+from .bake_cost import memory_bytes, viewport_gpu
 from ...lt_addon.transport import horizon_map as hmap
 from ...lt_addon.transport import texture as tt
 from ..base.cycles_bake import _size, available_memory_bytes
@@ -89,10 +90,11 @@ def calibrate(scene, objects, settings, truth: int, truth_samples: int):
 def estimate(scene, objects, settings, truth: int = 4, truth_samples: int = 256):
     """Generator: the estimate of a bake of ``objects`` with ``settings`` (its truths:
     ``truth`` lights at ``truth_samples``). Returns a dict: ``seconds`` per stage, ``bake``
-    and ``total``; ``disk_bytes``, ``ram_bytes``, ``ram_available_bytes``,
+    and ``total``; ``disk_bytes``, ``ram_bytes`` (the peak, in stage ``ram_stage``),
+    ``ram_available_bytes``,
     ``viewport_gpu_bytes`` and the viewport it would use; ``calibration_seconds``; ``lines``
     (what the CLI prints and the panel shows)."""
-    from ...lt_addon.transport import sparse_tables as sp
+    from .ray_direct import horizon_count
 
     dset = settings.validate()
     costs, cal = yield from calibrate(scene, objects, settings, truth, truth_samples)
@@ -105,44 +107,18 @@ def estimate(scene, objects, settings, truth: int = 4, truth_samples: int = 256)
                           hmap.side(settings.resolution, settings.horizon_resolution))
     P = settings.resolution ** 2
     disk = len(objects) * tt.transport_bytes(dset.size, P)
-    k = settings.components or 48
-    ram = tt.CHUNK_BYTES + k * P * 4 + 8 * P * 3 * 4
-    try:
-        viewport, _ = sp.choose_viewport(settings.viewport, dset.size, settings.resolution,
-                                         budget_mib=settings.gpu_budget,
-                                         table_size=settings.table_size)
-    except ValueError:
-        viewport = "pca"
-    from .ray_direct import horizon_count
-
-    A = horizon_count(settings)     # (0 under auto when the map would not fit the budget)
-    # both timed: the block fit runs only where auto then finds T closer than the horizons
-    blocks_if_not_horizons = bool(A) and viewport == "blocks" and settings.viewport == "auto"
-    if A and settings.direct != "cycles":
-        # rays bake the map; auto shows it where the held-out check finds it closer than T
-        viewport, gpu = "horizon", len(objects) * hmap.gpu_bytes(
-            A, settings.resolution, settings.horizon_resolution)
-    elif viewport == "transport":
-        gpu = len(objects) * sp.atlas_layout_bytes(dset.size, settings.resolution)[1]
-    elif viewport == "blocks":   # the block size is chosen after the bake: at most this
-        from ...lt_addon.transport import block_viewport as bv
-
-        gpu = len(objects) * max(bv.gpu_bytes(settings.resolution, B, kb, settings.table_size)
-                                 ["total_bytes"] for B, kb in bv.candidates(
-                                     settings.resolution, settings.table_size,
-                                     settings.gpu_budget << 20))
-    else:   # eigen-textures in half floats, three per image, uploaded as RGBA
-        gpu = len(objects) * (-(-k // 3)) * 4 * P * 2
+    viewport, gpu, blocks_if_not_horizons = viewport_gpu(settings, dset, len(objects))
+    ram, ram_stage = memory_bytes(settings, len(objects), gpu)
     out = {"seconds": {k2: round(v, 2) for k2, v in seconds.items()},
            "bake": round(seconds["bake"], 2), "total": round(seconds["total"], 2),
-           "disk_bytes": int(disk), "ram_bytes": int(ram),
+           "disk_bytes": int(disk), "ram_bytes": int(ram), "ram_stage": ram_stage,
            "ram_available_bytes": int(available_memory_bytes()),
            "viewport": viewport, "viewport_gpu_bytes": int(gpu),
            "calibration_seconds": round(cal, 2),
            "fit_includes_blocks": blocks_if_not_horizons,
            # auto first finds the horizons on sampled tiles (horizon_trial): where T is then
            # clearly closer, the rest is not found; the calibration bakes find them whole
-           "horizons_whole": (bool(A) and settings.viewport == "auto"
+           "horizons_whole": (bool(horizon_count(settings)) and settings.viewport == "auto"
                               and settings.direct != "cycles"),
            "costs": {s: {"fixed_seconds": round(c.fixed, 4),
                          "seconds_per_million_units": round(c.per_unit * 1e6, 4)}
@@ -181,7 +157,8 @@ def describe(e: dict, settings, n_objects: int) -> list:
              est.STAGES if name in s and (name != "horizons" or s[name] >= 0.5)]
     lines = [f"estimate for {n_objects} object(s) at {settings.resolution}^2: about "
              f"{est.readable_seconds(e['total'])} ({', '.join(parts)})",
-             f"  disk {_size(e['disk_bytes'])} for T, memory {_size(e['ram_bytes'])} of "
+             f"  disk {_size(e['disk_bytes'])} for T, memory {_size(e['ram_bytes'])} at most "
+             f"(its {e.get('ram_stage', 'fit')} stage) of "
              f"{_size(e['ram_available_bytes'])} available, viewport ({e['viewport']}) "
              f"{_size(e['viewport_gpu_bytes'])} of GPU memory; calibrated in "
              f"{e['calibration_seconds']:.1f} s"]

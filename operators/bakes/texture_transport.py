@@ -76,11 +76,14 @@ def check_space(n_objects: int, dset, settings: TransportTextureSettings, out_di
             f"{', and as much again for the resumable chunks' if resume else ''}) but "
             f"{free / 2**20:.0f} MiB are free in {folder}; use fewer directions or a lower "
             "resolution" + (" (or --no-resume)" if resume else ""))
-    # in memory: one chunk of T in float64, the eigen-textures and a few images
-    k = settings.components or 48
-    check_memory(tt.CHUNK_BYTES + k * P * 4 + 8 * P * 3 * 4,
-                 f"{settings.resolution}^2 texels x {dset.size} directions",
-                 "use fewer directions or a lower resolution")
+    # in memory: the largest stage's working set (lt_addon/transport/bake_memory.py), with
+    # the images of the viewport the estimate expects
+    from .bake_cost import memory_bytes, viewport_gpu
+
+    ram, stage = memory_bytes(settings, n_objects, viewport_gpu(settings, dset, n_objects)[1])
+    check_memory(ram, f"the bake of {n_objects} object(s) at {settings.resolution}^2 texels "
+                      f"({stage} stage)", "use a lower resolution, fewer objects per bake, or "
+                                          "fewer components")
     return need
 
 

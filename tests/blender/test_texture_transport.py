@@ -527,6 +527,33 @@ def test_streaming_keeps_peak_memory_below_the_transport_size(bumps, tmp_path):
     assert res.growth_after_first_mb < 0.5 * size_mb, (res.growth_after_first_mb, size_mb)
 
 
+def test_the_bake_is_refused_before_any_bake_call_when_its_stated_peak_memory_would_not_fit(
+        bumps, tmp_path, monkeypatch):
+    """The stated peak (lt_addon/transport/bake_memory.py: the largest stage, here the PCA's
+    96 eigen-textures at 1024^2 and their half-float copy) against 80 % of the memory available:
+    refused with that figure and the stage, before any bake call and any file; one byte more of
+    memory and the check passes."""
+    from relightable_textures.operators.bakes import bake_cost as be
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.base import cycles_bake as cb
+
+    scene, obj = bumps
+    s = settings(resolution=1024, components=None, tol=0.03, viewport="auto")
+    dset = s.validate()
+    need, stage = be.memory_bytes(s, 1, be.viewport_gpu(s, dset, 1)[1])
+    assert stage == "write" and need > 96 * 4 * 1024 ** 2
+    calls = []
+    monkeypatch.setattr(cb.EnvironmentBake, "__enter__", lambda self: calls.append(1))
+    monkeypatch.setattr(cb, "available_memory_bytes", lambda: need / 0.8 - 1)
+    with pytest.raises(tx.BakeInputError) as err:
+        next(tx.bake_transport_textures(scene, [obj], s, str(tmp_path)))
+    assert str(err.value).startswith(f"the bake of 1 object(s) at 1024^2 texels (write stage) "
+                                     f"needs {cb._size(need)} but only ")
+    assert not calls and not os.listdir(tmp_path)
+    monkeypatch.setattr(cb, "available_memory_bytes", lambda: need / 0.8 + 1)
+    tx.check_space(1, dset, s, str(tmp_path))
+
+
 def test_cli_bake_textures_default_method_relight_and_force(tmp_path):
     from relightable_textures.operators import cli
 
