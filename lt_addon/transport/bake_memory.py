@@ -15,9 +15,9 @@ direct      every object's shading points and texel samples (169 bytes a       D
 indirect    the gather's hits and sparse bounce matrices, the PCA's images     PER_RAY x P x K
             and their QR (gathered_indirect.indirect_pca; independent of the   + 12 N
             texture's side since its T windows)
-fit         the eigen-textures of every object in float32, one object's        (4 k + 16) N
-            stream of T
-write       the model file's half-float copy of one object's eigen-textures    (4 k + 16) N
+fit         the eigen-textures of every object in float32, one object's        (4 k + 96) N
+            stream of T, the block viewport's fit
+write       the model file's half-float copy of one object's eigen-textures    (4 k + 96) N
             on top of the fit's; the preview's images in Blender (float32:      + 2 k n
             twice the GPU memory of its half floats)                            + 2 gpu
 ==========  =================================================================  ==============
@@ -47,8 +47,10 @@ DIRECT = 450
 #: 512^2, where many hits share a texel, 31 on the statue at 1024^2, 44 on the bumps at 4096^2,
 #: where nearly every hit meets a texel of its own)
 PER_RAY = 48
-#: bytes per texel held besides the eigen-textures (the albedo, a stream's chunk)
-HELD = 16
+#: bytes per texel held in the fit besides the eigen-textures (the albedo, a stream's chunk, the
+#: block viewport's fit where auto makes one; the statue with its ground at 2048^2 held 475 bytes
+#: a texel with 96 components, 384 of them the eigen-textures)
+HELD = 96
 #: the PCA's components at most when a ``tol`` chooses them (texture.fit_texture_pca's max_k)
 MAX_COMPONENTS = 96
 

@@ -108,7 +108,7 @@ def estimate(scene, objects, settings, truth: int = 4, truth_samples: int = 256)
     P = settings.resolution ** 2
     disk = len(objects) * tt.transport_bytes(dset.size, P)
     viewport, gpu, blocks_if_not_horizons = viewport_gpu(settings, dset, len(objects))
-    ram, ram_stage = memory_bytes(settings, len(objects), gpu)
+    ram, ram_stage = memory_bytes(settings, dset, len(objects))
     out = {"seconds": {k2: round(v, 2) for k2, v in seconds.items()},
            "bake": round(seconds["bake"], 2), "total": round(seconds["total"], 2),
            "disk_bytes": int(disk), "ram_bytes": int(ram), "ram_stage": ram_stage,

@@ -76,11 +76,10 @@ def check_space(n_objects: int, dset, settings: TransportTextureSettings, out_di
             f"{', and as much again for the resumable chunks' if resume else ''}) but "
             f"{free / 2**20:.0f} MiB are free in {folder}; use fewer directions or a lower "
             "resolution" + (" (or --no-resume)" if resume else ""))
-    # in memory: the largest stage's working set (lt_addon/transport/bake_memory.py), with
-    # the images of the viewport the estimate expects
-    from .bake_cost import memory_bytes, viewport_gpu
+    # in memory: the largest stage's working set (lt_addon/transport/bake_memory.py)
+    from .bake_cost import memory_bytes
 
-    ram, stage = memory_bytes(settings, n_objects, viewport_gpu(settings, dset, n_objects)[1])
+    ram, stage = memory_bytes(settings, dset, n_objects)
     check_memory(ram, f"the bake of {n_objects} object(s) at {settings.resolution}^2 texels "
                       f"({stage} stage)", "use a lower resolution, fewer objects per bake, or "
                                           "fewer components")

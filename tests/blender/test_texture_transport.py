@@ -540,7 +540,7 @@ def test_the_bake_is_refused_before_any_bake_call_when_its_stated_peak_memory_wo
     scene, obj = bumps
     s = settings(resolution=1024, components=None, tol=0.03, viewport="auto")
     dset = s.validate()
-    need, stage = be.memory_bytes(s, 1, be.viewport_gpu(s, dset, 1)[1])
+    need, stage = be.memory_bytes(s, dset, 1)
     assert stage == "write" and need > 96 * 4 * 1024 ** 2
     calls = []
     monkeypatch.setattr(cb.EnvironmentBake, "__enter__", lambda self: calls.append(1))
