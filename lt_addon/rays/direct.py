@@ -14,27 +14,45 @@ import numpy as np
 from .shading import ShadingPoints, cosine, shadow_origins
 
 
-def direct_rows(occluder, points: ShadingPoints, directions) -> np.ndarray:
+#: Points per block of :func:`direct_rows`. A direction's arrays over all points (cosines, lit
+#: indices, origins, hits: ~40 bytes a point) were fresh pages every direction: at 4096^2 about
+#: 690 MB a direction, and the kernel's page faults took a third of the direct stage's time.
+#: Blocks of this many reuse the allocator's memory. A multiple of every vector width, so the
+#: cosines' matrix-vector products round each point as over all points.
+POINT_BLOCK = 1 << 18
+
+
+def direct_rows(occluder, points: ShadingPoints, directions, out=None) -> np.ndarray:
     """Direct transport (S, P) float32 for unit ``directions`` (S, 3): cosine x visibility / pi
     (Cycles' diffuse pass without its colour: a white Lambertian surface's ``E / pi`` under a
     sun of unit normal irradiance; checked against Cycles to float precision on the bumps).
-    One engine call per direction (its threads share the rays)."""
+    One engine call per direction and block of :data:`POINT_BLOCK` points (its threads share
+    the rays). ``out``: an (at least S, P) float32 array to fill (its first S rows; reused
+    by the caller across chunks of directions)."""
     D = np.asarray(directions, np.float64).reshape(-1, 3)
-    out = np.zeros((len(D), points.size), np.float32)
+    n = points.size
+    if out is None:
+        out = np.zeros((len(D), n), np.float32)
+    else:
+        out = out[:len(D)]
+        out[...] = 0.0
     for s, L in enumerate(D):
-        cos = cosine(points, L)
-        lit = np.nonzero(cos > 0)[0]
-        if not lit.size:
-            continue
-        out[s, lit] = cos[lit] / np.pi
-        if lit.size > points.size // 4:   # every point's origin, then the lit ones': faster
-            origins = np.take(shadow_origins(points, L), lit, axis=0)
-        else:                             # (the same bits: shadow_origins is per point)
-            origins = shadow_origins(points, L, lit)
-        # one engine call per direction, its direction given once: no per-ray copy of it (the
-        # rays of 64 directions in one call held ~400 MB at 512^2, faulted in afresh each call)
-        blocked = occluder.occluded(origins, L.astype(np.float32))
-        out[s, lit[blocked]] = 0.0
+        Lf = L.astype(np.float32)
+        for a in range(0, n, POINT_BLOCK):
+            b = min(a + POINT_BLOCK, n)
+            cos = cosine(points, L, slice(a, b))
+            lit = np.nonzero(cos > 0)[0]
+            if not lit.size:
+                continue
+            out[s, a + lit] = cos[lit] / np.pi
+            if lit.size > (b - a) // 4:   # every point's origin, then the lit ones': faster
+                origins = np.take(shadow_origins(points, L, slice(a, b)), lit, axis=0)
+            else:                         # (the same bits: shadow_origins is per point)
+                origins = shadow_origins(points, L, lit + a)
+            # one engine call per direction and block, its direction given once: no per-ray
+            # copy of it (the rays of 64 directions in one call held ~400 MB at 512^2)
+            blocked = occluder.occluded(origins, Lf)
+            out[s, a + lit[blocked]] = 0.0
     return out
 
 

@@ -246,16 +246,20 @@ def bump_correction(N, Ns, L, smoothing):
     return out * np.where(smoothing, g1, 1.0)
 
 
-def cosine(points: ShadingPoints, L) -> np.ndarray:
-    """The diffuse closure's cosine factor (P,) for unit ``L`` (3,), before visibility."""
-    cos = np.maximum(points.Ns @ L, 0.0)
+def cosine(points: ShadingPoints, L, sl: slice | None = None) -> np.ndarray:
+    """The diffuse closure's cosine factor (P,) for unit ``L`` (3,), before visibility; of the
+    points ``sl`` (a slice) only when given."""
+    a, b = (0, points.size) if sl is None else sl.indices(points.size)[:2]
+    cos = np.maximum(points.Ns[a:b] @ L, 0.0)
     mapped = points.mapped()
     if mapped is not None:
+        if sl is not None:
+            mapped = mapped[(mapped >= a) & (mapped < b)]
         N, Ns = points.N[mapped], points.Ns[mapped]
         if points.bump == "chiang":
-            cos[mapped] *= bump_shadowing(N, Ns, L)
+            cos[mapped - a] *= bump_shadowing(N, Ns, L)
         else:
-            cos[mapped] *= bump_correction(N, Ns, L, points.correction[mapped])
+            cos[mapped - a] *= bump_correction(N, Ns, L, points.correction[mapped])
     return cos
 
 

@@ -305,14 +305,15 @@ class TransportStore:
         self._array.flush()
 
     def write_rows(self, start: int, rows) -> None:
-        """Store directions ``start:start + n`` at once, rows (n, R*R); flushed once."""
+        """Store directions ``start:start + n`` at once, rows (n, R*R). Not flushed here (the
+        page cache writes it; :meth:`finish` flushes): a flush per chunk of one direction at
+        4096^2 made the bake wait for 33 MB of writing 400 times. No full-size temporaries."""
         rows = np.asarray(rows, dtype=np.float32)
         if rows.ndim != 2 or rows.shape[1] != self.n_texels:
             raise ValueError(f"rows must have shape (n, {self.n_texels}), got {rows.shape}")
-        if np.any(np.abs(rows) > 65504.0):
+        if rows.size and max(float(rows.max()), -float(rows.min())) > 65504.0:
             raise OverflowError("a transport value exceeds the float16 range")
-        self._array[start:start + len(rows)] = rows.astype(np.float16)
-        self._array.flush()
+        self._array[start:start + len(rows)] = rows
 
     def finish(self) -> "TransportStore":
         """Flush and close for writing; returns a reader of the still-temporary store (its

@@ -159,16 +159,21 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
     chunk = ray_chunk(max(smp.size for smp, _ in receivers))
     t1 = time.perf_counter()
     eta = None
+    # the rows and the covered texels' values, made once and reused by every chunk (fresh
+    # arrays per chunk were page faults: see direct.POINT_BLOCK)
+    rows = np.zeros((chunk, R * R), np.float32)
+    inside_buf = np.empty((chunk, max(smp.size for smp, _ in receivers)), np.float32)
     for a in range(0, S, chunk):
         D = dset.directions[a:a + chunk]
         with _blas_idle():   # the ray engine's threads have the cores
             for store, (smp, pts), (dst, op) in zip(stores, receivers, margins):
-                rows = np.zeros((len(D), R * R), np.float32)
-                inside = direct_rows(occluder, pts, D)
-                rows[:, smp.texel] = inside
+                out = rows[:len(D)]
+                out[...] = 0.0
+                inside = direct_rows(occluder, pts, D, inside_buf[:, :smp.size])
+                out[:, smp.texel] = inside
                 if dst.size:
-                    rows[:, dst] = (op @ inside.T).T
-                store.write_rows(a, rows)
+                    out[:, dst] = (op @ inside.T).T
+                store.write_rows(a, out)
         done = min(a + chunk, S)
         rate = (time.perf_counter() - t1) / done
         eta = rate * (S - done)

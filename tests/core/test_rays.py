@@ -300,6 +300,30 @@ def test_direct_rows_are_cos_over_pi_with_the_square_shadow():
         want = np.where(shadow, 0.0, cos[s])
         assert np.abs(rows[s] - want).max() < 1e-6
         assert shadow.sum() > 5
+    # by blocks of points, into a reused buffer holding other values: the same bits
+    from relightable_textures.lt_addon.rays import direct as direct_mod
+
+    old_block = direct_mod.POINT_BLOCK
+    try:
+        direct_mod.POINT_BLOCK = 64
+        buf = np.full((3, 400), 7.0, np.float32)
+        blocked = direct_rows(occ, pts, D, buf)
+    finally:
+        direct_mod.POINT_BLOCK = old_block
+    assert blocked.base is buf and np.array_equal(blocked, rows) and np.all(buf[2] == 7.0)
+    # with closure normals (a normal map) on some points: their bump terms, block by block
+    Ns = np.tile([0.0, 0.0, 1.0], (400, 1))
+    Ns[::3] = [0.3, -0.2, 0.93]
+    mapped = shading_points(V, T[:2], np.repeat(up[None, :3], 2, 0), [False, False], tri,
+                            bary, Ns=Ns)
+    assert mapped.mapped() is not None and len(mapped.mapped()) > 100
+    whole = direct_rows(occ, mapped, D)
+    try:
+        direct_mod.POINT_BLOCK = 64
+        assert np.array_equal(direct_rows(occ, mapped, D), whole)
+    finally:
+        direct_mod.POINT_BLOCK = old_block
+    assert not np.array_equal(whole, rows)
 
 
 def test_extend_margin_stays_sparse_at_1024():
