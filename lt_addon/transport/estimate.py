@@ -17,10 +17,12 @@ stage              scales with                                 measured as
                    reads T's rows; its bounce operator, the
                    rays' hits, is fixed by the grid)
 ``fit``            texels x objects (the PCA over T, the       ``seconds["fit"]`` minus the
-                   block viewport's fit)                       block choice's
+                   viewport's checks)                          block viewport's
 ``fit_choose``     objects (the block viewport's choice fits   ``seconds["fit_choose"]``
                    sampled regions of at most 64^2 texels:
                    units ``min(side, 128)^2``)
+``fit_blocks``     texels x objects (the block viewport's fit  ``seconds["fit_blocks"]``
+                   and its check, once chosen)
 ``other``          texels x objects (store, stacking, ...)     ``bake_total`` minus the above
 ``truth``          texels x objects x lights                   the truth bakes' seconds
 =================  ==========================================  ===============================
@@ -43,7 +45,8 @@ from dataclasses import dataclass
 # the share of an object's horizons the trial on sampled tiles finds first (one tile in 8)
 from .horizon_trial import FRACTION as TRIAL_SHARE
 
-STAGES = ("direct", "horizons", "indirect", "indirect_pca", "fit", "fit_choose", "other",
+STAGES = ("direct", "horizons", "indirect", "indirect_pca", "fit", "fit_choose", "fit_blocks",
+          "other",
           "truth")
 #: The stages of the bake itself (the truths come after it).
 BAKE_STAGES = STAGES[:-1]
@@ -69,9 +72,11 @@ def stage_seconds(seconds: dict) -> dict:
     pca = min(float(seconds.get("indirect_pca", 0.0)), indirect)
     fit = float(seconds.get("fit", 0.0))
     choose = min(float(seconds.get("fit_choose", 0.0)), fit)
+    blocks = min(float(seconds.get("fit_blocks", 0.0)), fit - choose)
     total = float(seconds.get("bake_total", direct + indirect + fit))
     return {"direct": direct - horizons, "horizons": horizons, "indirect": indirect - pca,
-            "indirect_pca": pca, "fit": fit - choose, "fit_choose": choose,
+            "indirect_pca": pca, "fit": fit - choose - blocks, "fit_choose": choose,
+            "fit_blocks": blocks,
             "other": max(0.0, total - direct - indirect - fit)}
 
 
@@ -170,7 +175,7 @@ def estimated_elapsed(seconds: dict, message: str) -> float | None:
     other, direct = seconds.get("other", 0.0), seconds.get("direct", 0.0)
     horizons = seconds.get("horizons", 0.0)
     indirect = seconds.get("indirect", 0.0) + seconds.get("indirect_pca", 0.0)
-    fit = seconds.get("fit", 0.0) + seconds.get("fit_choose", 0.0)
+    fit = sum(seconds.get(s, 0.0) for s in ("fit", "fit_choose", "fit_blocks"))
     f = _fraction(message, "direction ")
     if f is not None:
         return other + direct * f

@@ -481,6 +481,11 @@ def _indirect_and_models(scene, objects, settings, dset, albedos, readers, secon
         peak = max(peak, mem.peak_mb)
     seconds["fit"] = sum(r.fit_seconds for r in results)
     seconds["fit_choose"] = sum((r.viewport or {}).get("choose_seconds", 0.0) for r in results)
+    # the block viewport's fit and check, once chosen (made only where auto does not show the
+    # horizons: the estimate counts it apart)
+    seconds["fit_blocks"] = sum(max(0.0, (r.viewport or {}).get("fit_seconds", 0.0)
+                                    - (r.viewport or {}).get("choose_seconds", 0.0))
+                                for r in results)
     seconds["bake_total"] = time.perf_counter() - t_start
     yield Progress(steer_total, steer_total, "models fitted")
     mem.read()

@@ -34,7 +34,7 @@ def test_the_horizons_are_a_stage_of_their_own_at_their_own_side():
     split = est.stage_seconds({"direct_total": 50.0, "horizons": 30.0, "indirect_total": 10.0,
                                "fit": 8.0, "bake_total": 70.0})
     assert split == {"direct": 20.0, "horizons": 30.0, "indirect": 10.0, "indirect_pca": 0.0,
-                     "fit": 8.0, "fit_choose": 0.0, "other": 2.0}
+                     "fit": 8.0, "fit_choose": 0.0, "fit_blocks": 0.0, "other": 2.0}
     costs = {"direct": est.StageCost(1.0, 1e-5), "horizons": est.StageCost(0.5, 2e-5)}
     at = est.predict(costs, 2048, 0, 1, 0, horizon_resolution=1024)
     assert at["horizons"] == pytest.approx(0.5 + 2e-5 * 1024 ** 2)
@@ -108,3 +108,17 @@ def test_the_time_left_places_the_horizon_trial_and_the_gathered_terms_steps():
     # the figure moves on those steps instead of staying at the last one
     assert est.time_left(sec, "indirect light: 2 bounce(s), PCA 16", 27.0, last=99.0) == \
         pytest.approx(5.0)
+
+
+def test_the_block_viewports_fit_is_a_stage_of_its_own():
+    """The block viewport's choice and fit come out of the fit stage (the estimate says them
+    apart where auto may show the horizons instead: made only for an object whose horizons it
+    does not show), and the time left counts them in the fit."""
+    split = est.stage_seconds({"direct_total": 10.0, "indirect_total": 2.0, "fit": 9.0,
+                               "fit_choose": 2.0, "fit_blocks": 5.0, "bake_total": 21.0})
+    assert (split["fit"], split["fit_choose"], split["fit_blocks"]) == (2.0, 2.0, 5.0)
+    # a bake's figures that overlap are clipped to the fit they came from
+    assert est.stage_seconds({"fit": 3.0, "fit_choose": 2.0, "fit_blocks": 5.0})["fit_blocks"] \
+        == 1.0
+    sec = {"other": 0.0, "direct": 10.0, "fit": 2.0, "fit_choose": 2.0, "fit_blocks": 5.0}
+    assert est.estimated_elapsed(sec, "models fitted") == pytest.approx(19.0)
