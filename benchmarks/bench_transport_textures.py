@@ -36,9 +36,9 @@ ANGLES = (2.0, 10.0)
 
 
 def _rss():
-    from relightable_textures.operators.bakes.texture_transport import _rss_mb
+    from relightable_textures.lt_addon.peak_memory import rss_anon_mb
 
-    return _rss_mb()
+    return rss_anon_mb()
 
 
 def combined(errors):
