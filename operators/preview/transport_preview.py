@@ -743,7 +743,12 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
     if viewport in ("pca", "transport") or pca_atlas_gpu_bytes(model) <= budget:
         files, eig_img, eig_tiles = _write_pca_atlas(obj, model, bake.albedo, store, angle, s,
                                                      base)
-    else:
+    else:   # an earlier bake's atlas of this object would be read for this one: gone
+        stale = bpy.data.images.get(f"{obj.name} transport eigen atlas")
+        if stale is not None:
+            bpy.data.images.remove(stale)
+        if os.path.exists(f"{base}_preview_eigen.exr"):
+            os.remove(f"{base}_preview_eigen.exr")
         files = {"eigen_skipped": f"the PCA's eigen atlas ({pca_atlas_gpu_bytes(model) / 2**20:.0f}"
                                   f" MiB of GPU memory) is over the {budget >> 20} MiB budget "
                                   f"and the {viewport} viewport does not read it; environment "

@@ -247,8 +247,9 @@ def test_an_over_budget_pca_atlas_is_left_out_and_made_for_environment_light(bum
                                                                               monkeypatch):
     """A horizon preview does not read the PCA's eigen atlas; when that atlas is over the GPU
     budget (4.4 GB at 4096^2 and 96 components, its arrays 13 GB while written) it is neither
-    written nor loaded. Environment lighting reads it: switching to World makes it then, equal
-    to the model's eigen-textures to half precision."""
+    written nor loaded, and an earlier bake's atlas of the object is dropped (environment
+    lighting would read it for this bake). Environment lighting reads it: switching to World
+    makes it then, equal to the model's eigen-textures to half precision."""
     import os
 
     import bpy
@@ -262,9 +263,14 @@ def test_an_over_budget_pca_atlas_is_left_out_and_made_for_environment_light(bum
     import relightable_textures
 
     scene, obj = bumps
-    monkeypatch.setattr(tp, "pca_atlas_gpu_bytes", lambda model: 1 << 40)
     relightable_textures.register()
     try:
+        # an earlier bake of the object, whose atlas fits: written and loaded
+        first = run(tx.bake_job(scene, [obj], settings(viewport="horizon", components=6),
+                                str(tmp_path), truth=0)).reports[0]
+        assert "eigen" in first["preview"]
+        assert bpy.data.images.get(f"{obj.name} transport eigen atlas") is not None
+        monkeypatch.setattr(tp, "pca_atlas_gpu_bytes", lambda model: 1 << 40)
         rep = run(tx.bake_job(scene, [obj], settings(viewport="horizon", components=12),
                               str(tmp_path), truth=0)).reports[0]
         prev = rep["preview"]
