@@ -737,7 +737,8 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
     # the PCA's eigen-texture atlas: what the PCA and T viewports read (T its albedo tile), and
     # environment lighting; over the GPU budget and not shown it is made when environment
     # lighting asks for it (pca_atlas_image): at 4096^2 with 96 components it is 33 tiles,
-    # 4.4 GB of GPU memory, and its float32 arrays alone held 13 GB while it was written
+    # 4.4 GB of GPU memory, and its float32 arrays would hold ~13 GB while it is written
+    # (from their shapes, not measured)
     budget = int(s.get("gpu_budget", sp.DEFAULT_BUDGET_MIB)) << 20
     files, eig_img = {}, None
     if viewport in ("pca", "transport") or pca_atlas_gpu_bytes(model) <= budget:

@@ -246,7 +246,7 @@ def test_the_trial_on_sampled_tiles_decides_as_the_whole_check_and_finds_the_sam
 def test_an_over_budget_pca_atlas_is_left_out_and_made_for_environment_light(bumps, tmp_path,
                                                                               monkeypatch):
     """A horizon preview does not read the PCA's eigen atlas; when that atlas is over the GPU
-    budget (4.4 GB at 4096^2 and 96 components, its arrays 13 GB while written) it is neither
+    budget (4.4 GB at 4096^2 and 96 components, its arrays ~13 GB by their shapes) it is neither
     written nor loaded, and an earlier bake's atlas of the object is dropped (environment
     lighting would read it for this bake). Environment lighting reads it: switching to World
     makes it then, equal to the model's eigen-textures to half precision."""
