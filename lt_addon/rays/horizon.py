@@ -14,8 +14,9 @@ the rays in front.
 
 Found by the ray engine, not fitted from sampled directions: a scan of :data:`ELEVATIONS`
 (denser near the horizon, where a far object subtends a few degrees) finds the lowest and the
-highest blocked ones, then ``refine`` bisection steps place each edge within its bracket
-(0.1 degrees at the horizon, 0.1 degrees higher up with 7 steps). Every ray leaves its point by
+highest blocked ones, then bisection steps place each edge within its bracket to 0.1 degrees
+(up to ``refine`` = 7 steps for the widest gap, 13 degrees; 4 for the 1-degree gaps:
+:func:`steps`). Every ray leaves its point by
 Cycles' rules (:func:`.shading.shadow_origins`).
 
 Shapes: ``H`` is (2, A, P) radians -- ``H[0]`` the lower edges, ``H[1]`` the upper ones -- for
@@ -61,18 +62,36 @@ def horizons(occluder, points: ShadingPoints, azimuths: int = 128, refine: int =
             progress(done, azimuths)
 
 
-def _bisect(occluder, points, phi, idx, lo, hi, blocked_at_lo, refine: int):
-    """Move ``lo``/``hi`` (elevations, radians, (M,)) of points ``idx`` together: the ray at
-    ``lo`` is blocked and at ``hi`` open (``blocked_at_lo``, a bool or (M,) bools) or the
-    reverse. Returns the midpoints."""
-    for _ in range(refine):
-        mid = 0.5 * (lo + hi)
-        L = _dirs(phi, mid)
-        b = occluder.occluded(shadow_origins(points, L, idx), L.astype(np.float32))
-        move_lo = b == blocked_at_lo
-        lo = np.where(move_lo, mid, lo)
-        hi = np.where(move_lo, hi, mid)
+def _bisect(occluder, points, ca, sa, idx, lo, hi, blocked_at_lo, refine: int):
+    """Move ``lo``/``hi`` (elevations, radians, (M,)) of points ``idx`` together along the
+    azimuths whose cosines and sines are ``ca``/``sa`` ((M,)): the ray at ``lo`` is blocked
+    and at ``hi`` open (``blocked_at_lo``, a bool or (M,) bools) or the reverse. Each bracket
+    is halved until it is as narrow as the widest scan gap after ``refine`` steps
+    (:func:`steps`). Returns the midpoints."""
+    lo, hi = np.array(lo, np.float64), np.array(hi, np.float64)
+    at_lo = np.broadcast_to(blocked_at_lo, lo.shape)
+    n = steps(np.abs(hi - lo), refine)
+    for k in range(int(n.max(initial=0))):
+        act = np.flatnonzero(n > k)
+        mid = 0.5 * (lo[act] + hi[act])
+        ce = np.cos(mid)
+        L = np.stack([ce * ca[act], ce * sa[act], np.sin(mid)], -1)
+        b = occluder.occluded(shadow_origins(points, L, idx[act]), L.astype(np.float32))
+        move_lo = b == at_lo[act]
+        lo[act] = np.where(move_lo, mid, lo[act])
+        hi[act] = np.where(move_lo, hi[act], mid)
     return 0.5 * (lo + hi)
+
+
+def steps(width, refine: int = REFINE) -> np.ndarray:
+    """Bisection steps (int, like ``width``) that narrow brackets ``width`` (radians) to the
+    widest scan gap's after ``refine`` steps (13 / 2^7 = 0.10 degrees): 4 for the 1-degree
+    gaps near the horizon, where all 7 made them 0.008 degrees wide -- finer than the map's
+    0.35-degree codes by 40x, for 3 more rays each (the bisections' rays are the scan's
+    costliest: they graze the casters' edges)."""
+    tol = np.radians(np.max(np.diff(ELEVATIONS))) / 2.0 ** refine
+    w = np.maximum(np.asarray(width, np.float64), tol)
+    return np.clip(np.ceil(np.log2(w / tol) - 1e-9), 0, refine).astype(np.int64)
 
 
 #: A scan ray is "upward" of its point's plane (and may be skipped where no caster can be met,
@@ -83,83 +102,138 @@ RAY_BUDGET = 4 << 20
 
 
 def iter_horizons(occluder, points: ShadingPoints, azimuths: int = 128, refine: int = REFINE):
-    """Generator form of :func:`horizons`: yields the azimuths done after each one (a caller
-    may stop between them) and returns ``(H, figures)``; H (2, A, P) float16 (0.03 degrees
-    at the zenith, against the map's 0.35-degree codes); figures: ``skipped``, the scan's
-    rays no caster could meet (not cast), ``castable``, the others, and ``searched``, those
-    of them :func:`_search` cast. At most
-    :data:`RAY_BUDGET` rays per engine call, whatever the number of points."""
+    """Generator form of :func:`horizons`: yields the azimuths done (whole-map equivalents:
+    the (azimuth, point) pairs done / P) after each block of pairs (a caller may stop between
+    them) and returns ``(H, figures)``; H (2, A, P) float16 (0.03 degrees at the zenith,
+    against the map's 0.35-degree codes); figures: ``skipped``, the scan's rays no caster
+    could meet (not cast), ``castable``, the others, and ``searched``, those of them
+    :func:`_search` cast.
+
+    The pairs are taken in blocks of azimuths over a chunk of points (:func:`_blocks`), and
+    every engine call casts one elevation (or one bisection step) for a whole block: ~600
+    calls of up to 233k rays on the bumps demo at 256^2 (128 azimuths, 16k points), where one
+    azimuth at a time made 10,560 calls of ~2,600 rays (and the calls' set-up cost more than
+    their rays). Each ray is the one a scan of one azimuth at a time casts, bit for bit
+    (tests)."""
     if azimuths < 3 or refine < 0:
         raise ValueError(f"need azimuths >= 3 and refine >= 0; got {azimuths}, {refine}")
-    P = points.size
-    H = np.empty((2, azimuths, P), np.float16)
-    els = np.radians(np.asarray(ELEVATIONS))
-    J = len(els)
-    chunk = max(1, RAY_BUDGET // J)
-    open_ = np.zeros((azimuths, P), bool)
-    bounds = _bounds(occluder, points, azimuths, chunk)
-    JJ = np.arange(J, dtype=np.int16)[:, None]
-    skipped = searched = castable = 0
-    for a in range(azimuths):
-        phi = 2 * np.pi * a / azimuths
-        L = _dirs(phi, els)                                           # (J, 3)
-        L32 = L.astype(np.float32)
+    A, P = int(azimuths), points.size
+    H = np.empty((2, A, P), np.float16)
+    open_ = np.zeros((A, P), bool)
+    scan = _Scan(occluder, points, A, refine)
+    figures = {"skipped": 0, "searched": 0, "castable": 0}
+    done, bounds = 0, (None, None)        # (the chunk's first point, its bounds)
+    for part, az in _blocks(P, A, len(ELEVATIONS)):
+        if bounds[0] != part.start:              # once per chunk of points, before its blocks
+            bounds = (part.start, _bounds(occluder, points, A, part))
+        ai, pi, lo, hi, any_, figs = scan.block(part, az, bounds[1])
+        H[0, ai, pi], H[1, ai, pi] = lo, hi
+        open_[ai, pi] = ~any_
+        for k in figures:
+            figures[k] += figs[k]
+        done += len(ai)
+        yield done // P
+    place_open(H, open_)
+    return H, figures
+
+
+#: A chunk of points is split into at least this many blocks of azimuths (the bake's progress
+#: and cancel come between blocks), where there are enough azimuths.
+MIN_BLOCKS = 8
+
+
+def _blocks(P: int, A: int, J: int) -> list:
+    """The scan's blocks ``(points slice, azimuth indices)``: chunks of points of at most
+    :data:`RAY_BUDGET` / J, and in each groups of azimuths of at most that many pairs (and
+    at least :data:`MIN_BLOCKS` groups when there are enough azimuths)."""
+    pairs = max(1, RAY_BUDGET // J)
+    chunk = max(1, min(P, pairs))
+    group = max(1, min(pairs // chunk, -(-A // MIN_BLOCKS)))
+    return [(slice(c0, min(c0 + chunk, P)), np.arange(a0, min(a0 + group, A)))
+            for c0 in range(0, P, chunk) for a0 in range(0, A, group)]
+
+
+class _Scan:
+    """The scan's per-call constants, and :meth:`block`: one block's intervals."""
+
+    def __init__(self, occluder, points, A: int, refine: int):
+        self.occluder, self.points, self.A, self.refine = occluder, points, A, refine
+        self.els = np.radians(np.asarray(ELEVATIONS))
+        J = len(self.els)
+        phis = 2 * np.pi * np.arange(A) / A
+        # cos / sin of each azimuth as a scan of one azimuth at a time takes them (a
+        # scalar's; the same bits for every pair of the azimuth)
+        self.ca = np.array([np.cos(p) for p in phis])
+        self.sa = np.array([np.sin(p) for p in phis])
+        ce, se = np.cos(self.els), np.sin(self.els)
+        self.L = np.stack([np.stack(np.broadcast_arrays(ce * c, ce * s, se), -1)
+                           for c, s in zip(self.ca, self.sa)])           # (A, J, 3)
+        self.L32 = self.L.astype(np.float32)
+        self.JJ = np.arange(J, dtype=np.int16)[:, None]
+
+    def block(self, part: slice, az, bounds):
+        """The pairs of the points ``part`` and azimuths ``az`` ((g,) indices), azimuth-major:
+        ``(ai, pi, lo, hi, any_, figures)``, their azimuths and points (m,), the interval's
+        edges (m,) and whether anything is blocked (m,)."""
+        points, els, JJ = self.points, self.els, self.JJ
+        J, n, g = len(els), part.stop - part.start, len(az)
+        m = g * n
+        ai = np.repeat(az, n)                                    # (m,) pair -> azimuth
+        pi = np.tile(np.arange(part.start, part.stop), g)        # (m,) pair -> point
         # only directions in front of the closure count: behind it the cosine is 0 whatever
         # the ray meets (often the object itself), and along one azimuth the directions in
         # front form one range of elevations
-        care_all = np.stack([cosine(points, L[j]) > 0 for j in range(J)])
+        care = np.concatenate([np.stack([cosine(points, self.L[a, j], part) > 0
+                                         for j in range(J)]) for a in az], 1)   # (J, m)
         # the terminator along phi: cos(N, L(e)) ~ cos(e - e0)
-        e0_all = np.arctan2(points.Ns[:, 2], points.Ns[:, 0] * np.cos(phi)
-                            + points.Ns[:, 1] * np.sin(phi))
-        for c0 in range(0, P, chunk):
-            part = slice(c0, min(c0 + chunk, P))
-            idx = np.arange(part.start, part.stop)
-            n = len(idx)
-            care = care_all[:, part]
-            # rays only where the direction is in front (behind it a blocked ray is not used)
-            # and, leaving the point upwards of its plane, where some caster can be met
-            if bounds is not None:
-                covered, e_lo, e_hi = bounds[c0 // chunk]
-                Ng = points.Ng[part]
-                upward = (L[:, 0, None] * Ng[:, 0] + L[:, 1, None] * Ng[:, 1]
-                          + L[:, 2, None] * Ng[:, 2]) > UPWARD             # (J, n)
-                reachable = covered[a][None] & (els[:, None] >= e_lo) & (els[:, None] <= e_hi)
-                cast = care & ~(upward & ~reachable)
-                skipped += int(care.sum() - cast.sum())
-            else:
-                cast = care
-            top, bottom, rays = _search(occluder, points, L, L32, part, idx, cast)
-            searched += rays
-            castable += int(cast.sum())
-            any_ = top >= 0
-            e0 = e0_all[idx]
-            care_top = np.where(care, JJ, -1).max(0)
-            care_bottom = np.where(care, JJ, J).min(0)
-            # blocked up to (or from) the end of the range in front: the edge is the
-            # terminator itself -- continuous from one azimuth to the next, unlike "blocked to
-            # the zenith"
-            hi = np.where(any_, np.clip(e0 + np.pi / 2, 0.0, np.pi / 2), 0.0)
-            start = e0 - np.pi / 2
-            lo = np.where(any_, np.where(start > 0, start, FROM_BELOW), 0.0)   # open: [0, 0]
-            # both edges bisected together: one engine call per step
-            up = np.nonzero(any_ & (top < care_top))[0]
-            down = np.nonzero(any_ & (bottom > care_bottom))[0]
-            if up.size or down.size:
-                edge = _bisect(occluder, points, phi, idx[np.concatenate([up, down])],
-                               np.concatenate([els[top[up]], els[bottom[down] - 1]]),
-                               np.concatenate([els[top[up] + 1], els[bottom[down]]]),
-                               np.arange(up.size + down.size) < up.size, refine)
-                hi[up], lo[down] = edge[:up.size], edge[up.size:]
-            H[0, a, idx], H[1, a, idx] = lo, hi
-            open_[a, idx] = ~any_
-        yield a + 1
-    place_open(H, open_)
-    return H, {"skipped": skipped, "searched": searched, "castable": castable}
+        Ns = points.Ns[part]
+        e0 = np.concatenate([np.arctan2(Ns[:, 2], Ns[:, 0] * self.ca[a] + Ns[:, 1] * self.sa[a])
+                             for a in az])
+        # rays only where the direction is in front (behind it a blocked ray is not used) and,
+        # leaving the point upwards of its plane, where some caster can be met
+        skipped = 0
+        if bounds is not None:
+            covered, e_lo, e_hi = bounds
+            Ng = points.Ng[part]
+            upward = np.concatenate(
+                [(self.L[a, :, 0, None] * Ng[:, 0] + self.L[a, :, 1, None] * Ng[:, 1]
+                  + self.L[a, :, 2, None] * Ng[:, 2]) > UPWARD for a in az], 1)     # (J, m)
+            reachable = (covered[az].reshape(1, m)
+                         & np.tile((els[:, None] >= e_lo) & (els[:, None] <= e_hi), g))
+            cast = care & ~(upward & ~reachable)
+            skipped = int(care.sum() - cast.sum())
+        else:
+            cast = care
+        top, bottom, rays = _search(self.occluder, points, self.L[az].transpose(1, 0, 2),
+                                    self.L32[az].transpose(1, 0, 2), None, pi, cast,
+                                    which=ai - az[0])
+        any_ = top >= 0
+        care_top = np.where(care, JJ, -1).max(0)
+        care_bottom = np.where(care, JJ, J).min(0)
+        # blocked up to (or from) the end of the range in front: the edge is the terminator
+        # itself -- continuous from one azimuth to the next, unlike "blocked to the zenith"
+        hi = np.where(any_, np.clip(e0 + np.pi / 2, 0.0, np.pi / 2), 0.0)
+        start = e0 - np.pi / 2
+        lo = np.where(any_, np.where(start > 0, start, FROM_BELOW), 0.0)   # open: [0, 0]
+        # both edges bisected together: one engine call per step
+        up = np.nonzero(any_ & (top < care_top))[0]
+        down = np.nonzero(any_ & (bottom > care_bottom))[0]
+        if up.size or down.size:
+            both = np.concatenate([up, down])
+            edge = _bisect(self.occluder, points, self.ca[ai[both]], self.sa[ai[both]],
+                           pi[both], np.concatenate([els[top[up]], els[bottom[down] - 1]]),
+                           np.concatenate([els[top[up] + 1], els[bottom[down]]]),
+                           np.arange(up.size + down.size) < up.size, self.refine)
+            hi[up], lo[down] = edge[:up.size], edge[up.size:]
+        return ai, pi, lo, hi, any_, {"skipped": skipped, "searched": rays,
+                                      "castable": int(cast.sum())}
 
 
-def _search(occluder, points, L, L32, part: slice, idx, cast):
+def _search(occluder, points, L, L32, part: slice, idx, cast, which=None):
     """The highest and the lowest blocked elevation (indices into ``L``, (J, 3)) of the points
-    ``part`` (``idx`` the same as indices), rays only where ``cast`` (J, n): down from the top
+    ``part`` (``idx`` the same as indices), rays only where ``cast`` (J, n); or, ``which``
+    given, of n (point, azimuth) pairs: ``idx`` (n,) their points, ``which`` (n,) their
+    azimuths' columns in ``L`` (J, g, 3), ``part`` unused. Down from the top
     until a point's first blocked ray, then up from the bottom until its first one below that.
     The scan it replaces cast every elevation; the elevations between the two are never
     needed (only the hull is kept): 17 % fewer scan rays on the bumps demo, 22-23 % on the
@@ -172,6 +246,9 @@ def _search(occluder, points, L, L32, part: slice, idx, cast):
     def blocked(j, pick):
         nonlocal rays
         rays += pick.size
+        if which is not None:           # a direction per pair (float32 as the origins take it)
+            d = np.take(L32[j], which[pick], axis=0)
+            return occluder.occluded(shadow_origins(points, d, np.take(idx, pick)), d)
         if pick.size > n // 4:          # (the same bits either way: per point)
             origins = np.take(shadow_origins(points, L[j], part), pick, axis=0)
         else:
@@ -192,23 +269,28 @@ def _search(occluder, points, L, L32, part: slice, idx, cast):
     return top, bottom, rays
 
 
-def _bounds(occluder, points: ShadingPoints, azimuths: int, chunk: int):
-    """Per chunk of points, where their upward rays can meet a caster (:func:`.reach.reach`),
-    or None when the engine does not expose its triangles."""
+def _bounds(occluder, points: ShadingPoints, azimuths: int, part: slice | None = None):
+    """Where the upward rays of the points ``part`` (all by default) can meet a caster
+    (:func:`.reach.reach`): ``(covered (A, n), e_lo (n,), e_hi (n,))``, or None when the
+    engine does not expose its triangles."""
     V, T = getattr(occluder, "vertices", None), getattr(occluder, "triangles", None)
     if V is None or T is None or not len(T):
         return None
-    boxes = reach_mod.clusters(V, T)
-    out = []
-    for c0 in range(0, points.size, chunk):
-        # in pieces of REACH_POINTS: the arcs' counts take (A + 1) x 8 bytes per point
-        parts = [_reach(boxes, points, slice(s0, min(s0 + REACH_POINTS, c0 + chunk,
-                                                      points.size)), azimuths)
-                 for s0 in range(c0, min(c0 + chunk, points.size), REACH_POINTS)]
-        out.append((np.concatenate([p[0] for p in parts], axis=1),
-                    np.concatenate([p[1] for p in parts]),
-                    np.concatenate([p[2] for p in parts])))
-    return out
+    a, b = (0, points.size) if part is None else part.indices(points.size)[:2]
+    # the boxes once per engine (every call of the scan on the same casters asks for them)
+    cached = getattr(occluder, "_reach_boxes", None)
+    if cached is None or cached[0] is not T:
+        cached = (T, reach_mod.clusters(V, T))
+        try:
+            occluder._reach_boxes = cached
+        except AttributeError:     # an engine that takes no attributes: computed each time
+            pass
+    boxes = cached[1]
+    # in pieces of REACH_POINTS: the arcs' counts take (A + 1) x 8 bytes per point
+    parts = [_reach(boxes, points, slice(s0, min(s0 + REACH_POINTS, b)), azimuths)
+             for s0 in range(a, b, REACH_POINTS)]
+    return (np.concatenate([p[0] for p in parts], axis=1),
+            np.concatenate([p[1] for p in parts]), np.concatenate([p[2] for p in parts]))
 
 
 #: Points per :func:`.reach.reach` call (its transient memory: ~2 KB per point at 128 azimuths).

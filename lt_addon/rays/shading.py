@@ -334,8 +334,9 @@ def shadow_origins(points: ShadingPoints, L, idx=None) -> np.ndarray:
     if own.any():
         w = np.nonzero(own)[0]
         part[w] = take(c["P"], w if k is None else k[w])
-    if lifted.any():
-        part += sub(c["lift"]) * amount[:, None]
+    if lifted.any():     # (only where lifted: adding 0 x lift elsewhere changed nothing)
+        w = np.nonzero(lifted)[0]
+        part[w] += take(c["lift"], w if k is None else k[w]) * amount[w, None]
     if k is not None:
         origin[k] = part
     return origin

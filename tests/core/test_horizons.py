@@ -193,7 +193,10 @@ def test_the_search_finds_the_highest_and_lowest_blocked_elevations_of_a_full_sc
     els = np.radians(np.asarray(horizon.ELEVATIONS))
     J, n = len(els), len(P)
     gaps = 0
-    for phi in (0.0, 0.4, 2.0, np.pi):
+    phis = (0.0, 0.4, 2.0, np.pi)
+    JJ = np.arange(J)[:, None]
+    tops, bottoms, casts = [], [], []
+    for phi in phis:
         L = horizon._dirs(phi, els)
         cast = np.random.default_rng(1).random((J, n)) < 0.9    # some rays not needed
         full = np.stack([occ.occluded(horizon.shadow_origins(pts, L[j]),
@@ -201,7 +204,6 @@ def test_the_search_finds_the_highest_and_lowest_blocked_elevations_of_a_full_sc
         rays = occ.rays
         top, bottom, cast_rays = horizon._search(occ, pts, L, L.astype(np.float32),
                                                  slice(0, n), np.arange(n), cast)
-        JJ = np.arange(J)[:, None]
         assert np.array_equal(top, np.where(full, JJ, -1).max(0))
         assert np.array_equal(bottom, np.where(full, JJ, J).min(0))
         assert occ.rays - rays == cast_rays <= cast.sum()
@@ -209,7 +211,32 @@ def test_the_search_finds_the_highest_and_lowest_blocked_elevations_of_a_full_sc
         gaps += int(np.sum(found & (full.sum(0) < top - bottom + 1)))
         if phi == 0.0:
             assert found.all() and cast_rays < 0.8 * cast.sum()
+        tops.append(top), bottoms.append(bottom), casts.append(cast)
     assert gaps > 50          # the scene has the case the hull is for
+    # the same search over (point, azimuth) pairs, the four azimuths in one call per
+    # elevation (as the scan's blocks cast): the same answers, pair by pair
+    L = np.stack([horizon._dirs(phi, els) for phi in phis], 1)           # (J, 4, 3)
+    which = np.repeat(np.arange(len(phis)), n)
+    rays = occ.rays
+    top, bottom, cast_rays = horizon._search(occ, pts, L, L.astype(np.float32), None,
+                                             np.tile(np.arange(n), len(phis)),
+                                             np.concatenate(casts, 1), which=which)
+    assert np.array_equal(top, np.concatenate(tops))
+    assert np.array_equal(bottom, np.concatenate(bottoms))
+    assert occ.rays - rays == cast_rays
+
+
+def test_each_bisection_narrows_its_bracket_to_the_widest_gaps_precision():
+    """Brackets as wide as the scan's gaps take the steps that bring them within 13 degrees /
+    2^7 (the widest gap's after REFINE steps), no more: 4 for the 1-degree gaps at the
+    horizon, 7 for the 13-degree one; none for an empty bracket."""
+    gaps = np.radians(np.diff(horizon.ELEVATIONS))
+    n = horizon.steps(gaps)
+    tol = np.radians(13.0) / 2 ** horizon.REFINE
+    assert np.all(gaps / 2.0 ** n <= tol * (1 + 1e-12))
+    assert np.all(gaps / 2.0 ** (n - 1) > tol)                  # one step fewer would not do
+    assert n[0] == 4 and n.max() == horizon.REFINE and horizon.steps(0.0) == 0
+    assert horizon.steps(gaps, 0).max() == 0
 
 
 def _floor_grid(R, extra):

@@ -65,7 +65,7 @@ def test_no_blocked_ray_lies_outside_the_bound(where):
     pts = on_floor if where == "floor" else on_sphere
     occ = engine.Occluder(V, T)
     A = 48
-    (covered, e_lo, e_hi), = horizon._bounds(occ, pts, A, chunk=10 ** 6)
+    covered, e_lo, e_hi = horizon._bounds(occ, pts, A)
     rng = np.random.default_rng(7)
     els = np.concatenate([np.radians(horizon.ELEVATIONS), rng.uniform(-1.5, 1.5, 30)])
     blocked_up = unreachable_up = outside = 0
@@ -128,8 +128,8 @@ def test_the_bound_in_pieces_is_the_bound_in_one(monkeypatch):
     pieces change no bit."""
     V, T, on_floor, _ = _scene(n=300)
     occ = engine.Occluder(V, T)
-    (whole,) = horizon._bounds(occ, on_floor, 24, chunk=10 ** 6)
+    whole = horizon._bounds(occ, on_floor, 24)
     monkeypatch.setattr(horizon, "REACH_POINTS", 7)
-    (parts,) = horizon._bounds(occ, on_floor, 24, chunk=10 ** 6)
+    parts = horizon._bounds(occ, on_floor, 24)
     assert all(np.array_equal(a, b) for a, b in zip(whole, parts))
     assert whole[0].shape == (24, on_floor.size) and 0 < whole[0].mean() < 0.9
