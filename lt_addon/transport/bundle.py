@@ -180,7 +180,7 @@ class TransportTextureSettings:
          "block, or the global PCA when it is measured closer to T"),
         ("horizon", "Horizons", "Per-texel horizons found by rays: a shadow edge moves with "
          "the sun instead of blending the baked directions' shadows (no ghosting at low suns); "
-         "6 lookups per pixel and 2.7 bytes per texel and azimuth; needs the ray engine"),
+         "14 lookups per pixel and 2.7 bytes per texel and azimuth; needs the ray engine"),
         ("transport", "Transport (T)", "Relight from T itself: a few baked directions per "
          "pixel through sparse kernel tables; keeps cast shadows on large receivers; an atlas "
          "of every direction in memory"),
@@ -305,9 +305,9 @@ class TransportTextureResult:
     direct: dict = None              # which engine baked the direct term, why, and its figures
 
 
-#: Texture lookups per pixel of the horizon viewport: both edges at the two azimuths around the
-#: sun's, the normal, the albedo.
-HORIZON_LOOKUPS = 6
+#: Texture lookups per pixel of the horizon viewport: both edges at the two azimuths around each
+#: of the sun disc's three strips (horizon_map.STRIPS), the normal, the albedo.
+HORIZON_LOOKUPS = 14
 
 
 def fit_model(store, settings: TransportTextureSettings, albedo):

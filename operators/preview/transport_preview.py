@@ -595,15 +595,16 @@ def _disc_part(b, offset, radius, x, y):
 
 def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image, uv_map: str,
                         name: str, sun_angle: float, horizon_resolution: int | None = None):
-    """The sun group relighting from horizons (the sockets of :func:`build_group`): the sun's
-    azimuth picks the two azimuth channels around it; at each, the sun's disc is cut by the
-    blocked interval's edges (``1 - max(0, F((e - lo) / r) - F((e - hi) / r))`` with
+    """The sun group relighting from horizons (the sockets of :func:`build_group`): at three
+    azimuths across the sun's disc (the sun's and either side, ``horizon_map.STRIPS``) the two
+    azimuth channels around each are picked; at each, the sun's disc is cut by the blocked
+    interval's edges (``1 - max(0, F((e - lo) / r) - F((e - hi) / r))`` with
     ``F(t) = 0.5 + (t sqrt(1 - t^2) + asin t) / pi``), the two visibilities linear between the
-    azimuths, times ``max(0, N . d) / pi`` with the baked normal: 6 lookups (4 horizon
-    channels, the normal, the albedo). The horizon atlas may be coarser
+    azimuths, the three weighted by the disc's chord there; times ``max(0, N . d) / pi`` with
+    the baked normal: 14 lookups (12 horizon channels, the normal, the albedo). The horizon atlas may be coarser
     (``horizon_resolution``) than the normals' (``resolution``): its linear lookup reads the
     codes between its texels, as :func:`...lt_addon.transport.horizon_map.upsample`."""
-    from ...lt_addon.transport.horizon_map import SUN_RADIUS_MIN, STEP
+    from ...lt_addon.transport.horizon_map import COS_MIN, STEP, STRIPS, SUN_RADIUS_MIN
 
     Rh = int(horizon_resolution or resolution)
 
@@ -614,16 +615,12 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     xa = b.math("MULTIPLY", az, A / (2 * np.pi), x=-1900, y=400)
     xa = b.math("ADD", xa, b.math("MULTIPLY", b.math("LESS_THAN", xa, 0.0, x=-1900, y=300),
                                   float(A), x=-1800, y=300), x=-1700, y=400)
-    k0 = b.math("FLOOR", xa, x=-1600, y=400)
-    f = b.math("SUBTRACT", xa, k0, x=-1500, y=300)
 
     def mod_a(k, x, y):
         wrap = b.math("FLOOR", b.math("MULTIPLY_ADD", k, 1.0 / A, 0.5 / A, x=x, y=y),
                       x=x + 100, y=y)
         return b.math("SUBTRACT", k, b.math("MULTIPLY", wrap, float(A), x=x + 200, y=y),
                       x=x + 300, y=y)
-    k0 = mod_a(k0, -1500, 500)
-    k1 = mod_a(b.math("ADD", k0, 1.0, x=-1200, y=600), -1100, 600)
     uv = b.node("ShaderNodeUVMap", -1400, -600, uv_map=uv_map).outputs["UV"]
     lay = atlas_layout(2 * n, Rh)
     el = b.math("ARCSINE", b.math("MINIMUM", dz, 1.0, x=600, y=200), x=700, y=200)
@@ -631,24 +628,38 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     radius.name = radius.label = SUN_RADIUS_NODE
     radius.outputs[0].default_value = max(np.radians(sun_angle) / 2, SUN_RADIUS_MIN)
     r = radius.outputs[0]
-    vis, acc = [], None
-    for j, k in enumerate((k0, k1)):
-        edge = []
-        for e, upper in enumerate((False, True)):
-            y = 1600 - 400 * (2 * j + e)
-            idx = b.math("ADD", k, float(3 * n), x=-800, y=y) if upper else k
-            q = _atlas_channel(b, idx, uv, lay, horizon_image, Rh, acc, -700, y)
-            acc = q
-            h = b.math("MULTIPLY", q, 255.0 * STEP, x=400, y=y)
-            if not upper:    # code 0: blocked from below
-                below = b.math("LESS_THAN", q, 0.5 / 255.0, x=400, y=y - 60)
-                h = b.math("MULTIPLY_ADD", below, -np.pi / 2, h, x=500, y=y)
-            edge.append(_disc_part(b, b.math("SUBTRACT", el, h, x=800, y=y), r, 900, y))
-        blocked = b.math("MAXIMUM", b.math("SUBTRACT", edge[0], edge[1], x=1600,
-                                           y=1400 - 800 * j), 0.0, x=1650, y=1400 - 800 * j)
-        vis.append(b.math("SUBTRACT", 1.0, blocked, x=1700, y=1400 - 800 * j))
-    vis = b.math("MULTIPLY_ADD", b.math("SUBTRACT", vis[1], vis[0], x=1750, y=600), f, vis[0],
-                 x=1800, y=600)
+    # azimuth steps per radian of the disc's width: A / (2 pi) / cos(el)
+    across = b.math("DIVIDE", b.math("MULTIPLY", r, A / (2 * np.pi), x=-1500, y=800),
+                    b.math("MAXIMUM", b.math("COSINE", el, x=-1500, y=700), COS_MIN,
+                           x=-1400, y=700), x=-1300, y=800)
+    vis, acc = None, None
+    for s_i, (x_s, w_s) in enumerate(STRIPS):
+        y0 = 3200 - 1800 * s_i
+        xs = b.math("MULTIPLY_ADD", across, x_s, xa, x=-1200, y=y0)
+        k = b.math("FLOOR", xs, x=-1100, y=y0)
+        f = b.math("SUBTRACT", xs, k, x=-1000, y=y0 - 100)
+        k0 = mod_a(k, -1000, y0)
+        k1 = mod_a(b.math("ADD", k0, 1.0, x=-700, y=y0 + 100), -600, y0 + 100)
+        part = []
+        for j, kk in enumerate((k0, k1)):
+            edge = []
+            for e, upper in enumerate((False, True)):
+                y = y0 - 400 * (2 * j + e)
+                idx = b.math("ADD", kk, float(3 * n), x=-800, y=y) if upper else kk
+                q = _atlas_channel(b, idx, uv, lay, horizon_image, Rh, acc, -700, y)
+                acc = q
+                h = b.math("MULTIPLY", q, 255.0 * STEP, x=400, y=y)
+                if not upper:    # code 0: blocked from below
+                    below = b.math("LESS_THAN", q, 0.5 / 255.0, x=400, y=y - 60)
+                    h = b.math("MULTIPLY_ADD", below, -np.pi / 2, h, x=500, y=y)
+                edge.append(_disc_part(b, b.math("SUBTRACT", el, h, x=800, y=y), r, 900, y))
+            blocked = b.math("MAXIMUM", b.math("SUBTRACT", edge[0], edge[1], x=1600,
+                                               y=y0 - 800 * j), 0.0, x=1650, y=y0 - 800 * j)
+            part.append(b.math("SUBTRACT", 1.0, blocked, x=1700, y=y0 - 800 * j))
+        strip = b.math("MULTIPLY_ADD", b.math("SUBTRACT", part[1], part[0], x=1750, y=y0),
+                       f, part[0], x=1800, y=y0)
+        vis = (b.math("MULTIPLY", strip, w_s, x=1900, y=y0) if vis is None else
+               b.math("MULTIPLY_ADD", strip, w_s, vis, x=1900, y=y0))
     ntile = atlas_layout(2, resolution)["tiles"]
     nrm = b.vmath("NORMALIZE", _lookup(b, na_image, uv, ntile[0], 1200, -300), x=1600, y=-300)
     d = b.vmath("NORMALIZE", gin.outputs["Light Direction"], x=1600, y=-450)

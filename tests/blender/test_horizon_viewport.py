@@ -49,10 +49,11 @@ def _horizon_preview(prev, azimuths, side=R, resolution=R):
 @pytest.mark.version_sensitive
 @pytest.mark.parametrize("side", [R, R // 2])
 def test_horizon_viewport_rendered_by_cycles_equals_its_twin(bumps, tmp_path, side):
-    """Cycles renders the horizon group (azimuth channels picked in the tree, the disc cut by
-    the horizon line, the baked normal's cosine) equal to its NumPy twin to half precision,
-    at lights between the azimuths, across the wrap of the azimuth at 180 degrees, and after
-    the Sun Size slider rewrote the group's radius in place. Six texture lookups. With the
+    """Cycles renders the horizon group (azimuth channels picked in the tree at three azimuths
+    across the disc, the disc cut by each one's horizon line, the baked normal's cosine) equal
+    to its NumPy twin to half precision, at lights between the azimuths, across the wrap of the
+    azimuth at 180 degrees, and after the Sun Size slider rewrote the group's radius in place
+    (a 12-degree disc spans several azimuths). Fourteen texture lookups. With the
     horizons at half the texture's side, the image's linear lookup reads the codes between
     their texels as the twin does (horizon_map.upsample)."""
     import bpy
@@ -72,7 +73,7 @@ def test_horizon_viewport_rendered_by_cycles_equals_its_twin(bumps, tmp_path, si
         "horizon"
     assert rep["direct"]["horizon_azimuths"] == 24 and rep["direct"]["horizon_rays"] > 0
     group = bpy.data.node_groups[prev["group"]]
-    assert len([n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]) == 6
+    assert len([n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]) == 14
     tiles, na = _horizon_preview(prev, 24, side)
     assert tiles.dtype == np.uint8 and tiles.shape == (16, side, side, 3)
     for az, el, inten, angle in ((40.0, 35.0, 2.0, 4.0), (250.0, 12.0, 1.0, 4.0),

@@ -10,6 +10,7 @@ from relightable_textures.lt_addon.errors import InputError
 from relightable_textures.lt_addon.rays import engine, horizon
 from relightable_textures.lt_addon.rays.direct import direct_rows
 from relightable_textures.lt_addon.transport import horizon_map as hmap
+from relightable_textures.lt_addon.transport import texture as tt
 from floor_points import floor_points
 
 needs_engine = pytest.mark.skipif(not engine.available()[0], reason="embreex not installed")
@@ -83,7 +84,9 @@ def test_a_floating_roof_blocks_an_interval_a_low_sun_shines_under():
         got = hm.direct(d).reshape(-1)[:len(P)]
         assert np.abs(got - want).max() < 1e-3
     mid = horizon._dirs(0.0, 0.5 * (lo + hi))        # ... between the edges, none of them
-    assert all(hm.direct(m).reshape(-1)[i] == 0 for i, m in enumerate(mid))
+    # (a point sun is a disc of 1e-4 rad: its side strips read the next azimuth with a
+    # weight ~1e-4, 1e-5 of light where the lit points get ~0.3)
+    assert all(hm.direct(m).reshape(-1)[i] < 3e-5 for i, m in enumerate(mid))
 
 
 def test_disc_fraction_is_the_area_of_the_segment():
@@ -125,10 +128,20 @@ def test_the_map_relights_the_rays_of_its_directions():
     soft = hm.direct(d, 10.0).reshape(-1)[:len(P)]
     lo = hm.direct(horizon._dirs(0.0, np.radians(40))).reshape(-1)[:len(P)]
     hi = hm.direct(horizon._dirs(0.0, np.radians(50))).reshape(-1)[:len(P)]
-    lit_lo, lit_hi = lo > 0, hi > 0
-    assert np.all(soft[lit_lo] > 0) and np.all(soft[~lit_hi] == 0)
+    # (lit: beyond the 1e-4 a hard sun's strips read from the next azimuth, as above; the
+    # side strips cut the whole disc by their azimuth's edge, which the wall lowers away from
+    # its normal: a little light where the disc's top is blocked at the sun's azimuth)
+    lit_lo, lit_hi = lo > 1e-3, hi > 1e-3
+    assert np.all(soft[lit_lo] > 0) and np.all(soft[~lit_hi] <= 0.01 * soft.max())
     partial = lit_hi & ~lit_lo
     assert partial.sum() > 5 and np.all((soft[partial] > 0) & (soft[partial] < hi[partial]))
+    # against 256 hard suns by rays over the disc (at three azimuths to the wall): within 2 %
+    # (measured 0.7 / 1.0 / 1.2 %)
+    for az in (0.0, 0.6, 1.2):
+        d = horizon._dirs(az, np.radians(45))
+        ref = direct_rows(occ, pts, tt._disc_points(d, np.radians(5), 256)).mean(0)
+        got = hm.direct(d, 10.0).reshape(-1)[:len(P)]
+        assert np.sqrt(np.mean((got - ref) ** 2) / np.mean(ref ** 2)) < 0.02, az
 
 
 def test_quantize_and_margin_fill():
