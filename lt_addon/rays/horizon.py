@@ -113,8 +113,8 @@ def iter_horizons(occluder, points: ShadingPoints, azimuths: int = 128, refine: 
     every engine call casts one elevation (or one bisection step) for a whole block: ~600
     calls of up to 233k rays on the bumps demo at 256^2 (128 azimuths, 16k points), where one
     azimuth at a time made 10,560 calls of ~2,600 rays (and the calls' set-up cost more than
-    their rays). Each ray is the one a scan of one azimuth at a time casts, bit for bit
-    (tests)."""
+    their rays). Each scan ray is the one a scan of one azimuth at a time casts, bit for bit
+    (tests), and so is each bisection step's."""
     if azimuths < 3 or refine < 0:
         raise ValueError(f"need azimuths >= 3 and refine >= 0; got {azimuths}, {refine}")
     A, P = int(azimuths), points.size
@@ -239,7 +239,8 @@ def _search(occluder, points, L, L32, part: slice, idx, cast, which=None):
     needed (only the hull is kept): 17 % fewer scan rays on the bumps demo, 22-23 % on the
     statue demo's objects (balanced preset, 256^2, the same intervals bit for bit). Returns
     ``(top, bottom, rays)``: top -1 and bottom J where nothing is blocked; rays cast. One
-    engine call per elevation and direction of search, the direction given once."""
+    engine call per elevation and direction of search (the direction given once, unless per
+    pair)."""
     J, n = cast.shape
     rays = 0
 

@@ -6,8 +6,9 @@ directions, and a light between them blends its neighbours' shadows: a low sun's
 as faint offset copies (ghosting). The horizon map holds instead, per texel and for each of ``A``
 azimuths, the elevations ``[lo, hi]`` between which the sky is blocked (:mod:`..rays.horizon`,
 found by rays), and the texel's closure normal. A sun is visible outside the interval -- for a
-disc, the part of it outside (:func:`..rays.horizon.visible_fraction`) -- so a shadow edge moves
-continuously with the sun, at any sun size, from ``2 A`` bytes per texel.
+disc, the part of it outside (:func:`..rays.horizon.visible_fraction`), read at three azimuths
+across the disc (:data:`STRIPS`) -- so a shadow edge moves continuously with the sun, at any sun
+size, from ``2 A`` bytes per texel.
 
 It is exact where a texel's occluded elevations along an azimuth form one interval; where they
 form two (the sky between), their hull darkens the gap. Before the viewport is chosen,
