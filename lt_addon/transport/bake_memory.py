@@ -14,7 +14,9 @@ direct      every object's shading points and texel samples (169 bytes a       D
             texel, kept for the horizons), one direction's rays and rows
 indirect    the gather's hits and sparse bounce matrices, the PCA's images     PER_RAY x P x K
             and their QR (gathered_indirect.indirect_pca; independent of the   + 12 N
-            texture's side since its T windows)
+            texture's side since its T windows); and T's met columns in        [+ 4 S n]
+            float32 (S directions), kept between the PCA's passes when one
+            window holds them all (2 S n <= WINDOW_BYTES: at most 128 MiB)
 fit         the eigen-textures of every object in float32, one object's        (4 k + 96) N
             stream of T, the block viewport's fit
 write       the model file's half-float copy of one object's eigen-textures    (4 k + 96) N
@@ -56,20 +58,26 @@ MAX_COMPONENTS = 96
 
 
 def stage_bytes(resolution: int, n_objects: int, components: int | None,
-                indirect_points: int, indirect_rays: int, preview_gpu_bytes: int = 0) -> dict:
+                indirect_points: int, indirect_rays: int, preview_gpu_bytes: int = 0,
+                directions: int = 0) -> dict:
     """{stage: bytes} of a bake of ``n_objects`` objects at ``resolution`` (texels across, the
     same for all). ``components``: the PCA's (None: a tol chooses, at most
     :data:`MAX_COMPONENTS`); ``indirect_points``: the gather's points of all objects (0: no
     gathered term); ``indirect_rays``: rays per point; ``preview_gpu_bytes``: the GPU memory of
-    the images the preview loads, all objects (0: no preview)."""
+    the images the preview loads, all objects (0: no preview); ``directions``: T's (S; 0: not
+    counted)."""
+    from .gathered_indirect import WINDOW_BYTES
+
     n = int(resolution) ** 2
     N = n * int(n_objects)
     k = int(components) if components else MAX_COMPONENTS
     fit = (4 * k + HELD) * N
+    S = int(directions)
+    window = 4 * S * n if indirect_points and S and 2 * S * n <= WINDOW_BYTES else 0
     stages = {
         "albedo": ALBEDO * N,
         "direct": DIRECT * N,
-        "indirect": PER_RAY * int(indirect_points) * int(indirect_rays) + 12 * N,
+        "indirect": PER_RAY * int(indirect_points) * int(indirect_rays) + 12 * N + window,
         "fit": fit,
         "write": fit + 2 * k * n + 2 * int(preview_gpu_bytes),
     }

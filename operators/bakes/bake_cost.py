@@ -64,4 +64,4 @@ def memory_bytes(settings, dset, n_objects: int) -> tuple:
     if pca_atlas <= settings.gpu_budget << 20:
         preview_gpu_bytes += n_objects * pca_atlas
     return bm.peak_bytes(settings.resolution, n_objects, settings.components, pts,
-                         settings.indirect_rays, preview_gpu_bytes)
+                         settings.indirect_rays, preview_gpu_bytes, dset.size)
