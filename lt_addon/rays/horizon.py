@@ -157,7 +157,7 @@ class _Scan:
     """The scan's per-call constants, and :meth:`block`: one block's intervals."""
 
     def __init__(self, occluder, points, A: int, refine: int):
-        self.occluder, self.points, self.A, self.refine = occluder, points, A, refine
+        self.occluder, self.points, self.refine = occluder, points, refine
         self.els = np.radians(np.asarray(ELEVATIONS))
         J = len(self.els)
         phis = 2 * np.pi * np.arange(A) / A
