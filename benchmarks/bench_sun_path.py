@@ -8,6 +8,7 @@ Cycles' radiance bakes of those Suns (the scene's 2 bounces, ``--truth-samples``
 relative RMSE per light and combined (``sqrt(mean(rel^2))``), bake time and direction counts.
 
 Usage: python benchmarks/bench_sun_path.py [--resolution 256] [--step 0.5] [--out out/bench]
+           [--preset balanced] [--set '{"horizon_resolution": 256}']
 """
 
 from __future__ import annotations
@@ -30,7 +31,10 @@ def main(argv=None):
     ap.add_argument("--step", type=float, default=0.5)
     ap.add_argument("--truth-samples", type=int, default=256)
     ap.add_argument("--out", default="out/bench")
+    ap.add_argument("--preset", default="balanced")
+    ap.add_argument("--set", default="{}", help="settings over the preset's, as JSON")
     args = ap.parse_args(argv)
+    overrides = json.loads(args.set)
 
     import bpy
 
@@ -67,8 +71,8 @@ def main(argv=None):
         for mode in ("off", "auto"):
             # the preset as a user bakes it: PCA model, viewport auto (so the bake also finds
             # the per-texel horizons its horizon viewport shows)
-            s = tx.settings_from_preset("balanced", resolution=R, sun_path=mode,
-                                        sun_path_step=args.step)
+            s = tx.settings_from_preset(args.preset, resolution=R, sun_path=mode,
+                                        sun_path_step=args.step, **overrides)
             t0 = time.perf_counter()
             res = run(tx.bake_transport_textures(scene, [obj], s, os.path.join(folder, mode),
                                                  resume=False))
@@ -114,8 +118,8 @@ def main(argv=None):
               f"{r['viewport_chosen']} |")
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "sun_path.json"), "w") as fh:
-        json.dump({"date": time.strftime("%Y-%m-%d"), "lights": lights, "rows": rows}, fh,
-                  indent=1)
+        json.dump({"date": time.strftime("%Y-%m-%d"), "preset": args.preset,
+                   "settings": overrides, "lights": lights, "rows": rows}, fh, indent=1)
 
 
 if __name__ == "__main__":
