@@ -46,10 +46,9 @@ SUN_RADIUS_MIN = 1e-4
 #: Where the sun's disc is read (:meth:`HorizonMap.direct`): (azimuth offset across the disc in
 #: radii, weight), the 3-point Gauss-Legendre rule weighted by the chord sqrt(1 - x^2) there,
 #: normalised.
-STRIPS = tuple((float(x), float(w)) for x, w in zip(
-    (-np.sqrt(0.6), 0.0, np.sqrt(0.6)),
-    np.array([5 / 9, 8 / 9, 5 / 9]) * np.sqrt(1 - np.array([0.6, 0.0, 0.6]))
-    / np.sum(np.array([5 / 9, 8 / 9, 5 / 9]) * np.sqrt(1 - np.array([0.6, 0.0, 0.6])))))
+_X = np.array([-np.sqrt(0.6), 0.0, np.sqrt(0.6)])
+_W = np.array([5 / 9, 8 / 9, 5 / 9]) * np.sqrt(1 - _X * _X)
+STRIPS = tuple(zip(_X.tolist(), (_W / _W.sum()).tolist()))
 #: The smallest cos(elevation) the strips' azimuth offsets divide by (a sun near the zenith
 #: spans every azimuth; its disc is then read over 1/COS_MIN radii of azimuth at most).
 COS_MIN = 1e-3
@@ -175,21 +174,21 @@ class HorizonMap:
         # azimuth steps per radian across the disc at this elevation
         across = A / (2 * np.pi) / max(np.cos(el), COS_MIN)
         R = self.resolution
-        edges = {}
+        seen = {}
 
-        def at(k):                                  # the edges (2, ...) at azimuth k
-            if k not in edges:
-                edges[k] = decode(upsample(self.q[:, k], R) if texels is None else
-                                  upsample_at(self.q[:, k], R, texels))
-            return edges[k]
+        def vis_at(k):        # the disc's visible part at azimuth k (strips often share one)
+            if k not in seen:
+                h = decode(upsample(self.q[:, k], R) if texels is None else
+                           upsample_at(self.q[:, k], R, texels))
+                seen[k] = visible_fraction(el, *h, r)
+            return seen[k]
         vis = 0.0
         for x, w in STRIPS:
             xs = xa + x * r * across
             k = np.floor(xs)
             f = xs - k
             k0 = int(k) % A
-            vis = vis + w * ((1 - f) * visible_fraction(el, *at(k0), r)
-                             + f * visible_fraction(el, *at((k0 + 1) % A), r))
+            vis = vis + w * ((1 - f) * vis_at(k0) + f * vis_at((k0 + 1) % A))
         if texels is None:
             n = self.normals.astype(np.float64)
         else:

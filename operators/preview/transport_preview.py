@@ -601,9 +601,10 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     interval's edges (``1 - max(0, F((e - lo) / r) - F((e - hi) / r))`` with
     ``F(t) = 0.5 + (t sqrt(1 - t^2) + asin t) / pi``), the two visibilities linear between the
     azimuths, the three weighted by the disc's chord there; times ``max(0, N . d) / pi`` with
-    the baked normal: 14 lookups (12 horizon channels, the normal, the albedo). The horizon atlas may be coarser
-    (``horizon_resolution``) than the normals' (``resolution``): its linear lookup reads the
-    codes between its texels, as :func:`...lt_addon.transport.horizon_map.upsample`."""
+    the baked normal: 14 lookups (12 horizon channels, the normal, the albedo). The horizon
+    atlas may be coarser (``horizon_resolution``) than the normals' (``resolution``): its linear
+    lookup reads the codes between its texels, as
+    :func:`...lt_addon.transport.horizon_map.upsample`."""
     from ...lt_addon.transport.horizon_map import COS_MIN, STEP, STRIPS, SUN_RADIUS_MIN
 
     Rh = int(horizon_resolution or resolution)
