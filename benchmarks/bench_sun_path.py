@@ -8,7 +8,7 @@ Cycles' radiance bakes of those Suns (the scene's 2 bounces, ``--truth-samples``
 relative RMSE per light and combined (``sqrt(mean(rel^2))``), bake time and direction counts.
 
 Usage: python benchmarks/bench_sun_path.py [--resolution 256] [--step 0.5] [--out out/bench]
-           [--preset balanced] [--set '{"horizon_resolution": 256}']
+           [--preset balanced] [--set '{"horizon_resolution": 256}'] [--modes off,auto]
 """
 
 from __future__ import annotations
@@ -33,6 +33,8 @@ def main(argv=None):
     ap.add_argument("--out", default="out/bench")
     ap.add_argument("--preset", default="balanced")
     ap.add_argument("--set", default="{}", help="settings over the preset's, as JSON")
+    ap.add_argument("--modes", default="off,auto",
+                    help="which bakes: off (the preset's set alone), auto (with the path)")
     args = ap.parse_args(argv)
     overrides = json.loads(args.set)
 
@@ -68,7 +70,7 @@ def main(argv=None):
     rows = []
     import tempfile
     with tempfile.TemporaryDirectory() as folder:
-        for mode in ("off", "auto"):
+        for mode in args.modes.split(","):
             # the preset as a user bakes it: PCA model, viewport auto (so the bake also finds
             # the per-texel horizons its horizon viewport shows)
             s = tx.settings_from_preset(args.preset, resolution=R, sun_path=mode,

@@ -32,6 +32,7 @@ from ..io import atomic, exrio, versions
 from ..settings import check_ranges, setting
 from ..sphere.hemisphere import direction_from_az_el
 from . import texture as tt
+from .horizon_map import PATH_AZIMUTHS
 from .gathered_texture import GatheredIndirect, direction_matrix, indirect_images
 
 KIND = "transport_texture"
@@ -106,7 +107,8 @@ class TransportTextureSettings:
              "degrees apart along the scene Sun's animated path; 0.5 by default)")
     sun_path: str = setting("auto", label="Sun Path", choices=(
         ("auto", "Auto", "When the scene's Sun is animated (keyframes, drivers, the Sun Position "
-         "add-on), add directions along its path, --sun-path-step apart"),
+         "add-on), add directions along its path, --sun-path-step apart, and find the "
+         "horizons at the texture's side"),
         ("off", "Off", "The direction set only")),
         help="Directions along the animated Sun's path")
     sun_path_step: float = setting(
@@ -197,7 +199,9 @@ class TransportTextureSettings:
         0, lo=0, hi=8192, label="Horizon Resolution", metavar="SIDE",
         help="Side of the horizon map (0: the texture's, at most 1024): a shadow edge is as "
              "wide as the sun's penumbra, many texels on a large receiver, so a 2048^2 "
-             "texture's horizons at 1024^2 cost a quarter of the rays and GPU memory")
+             "texture's horizons at 1024^2 cost a quarter of the rays and GPU memory. When "
+             f"the Sun is animated (Sun Path), the texture's side and at least {PATH_AZIMUTHS} "
+             "azimuths")
     gpu_budget: int = setting(
         512, lo=8, hi=65536, label="GPU Budget", metavar="MIB",
         help="MiB of GPU memory each object's viewport may take: auto shows T itself when its "
@@ -263,7 +267,10 @@ def direct_summary(direct: dict, directions: int) -> str:
     if direct.get("engine") == "rays":
         side = (f" at {direct['horizon_resolution']}^2" if direct.get("horizon_resolution")
                 else "")
-        horizons = (f"; horizons at {direct['horizon_azimuths']} azimuths{side} "
+        raised = direct.get("horizons_raised")
+        why = (f", raised from {raised['from']['azimuths']} at {raised['from']['side']}^2 for "
+               f"the animated Sun" if raised else "")
+        horizons = (f"; horizons at {direct['horizon_azimuths']} azimuths{side}{why}, "
                     f"{direct['horizon_seconds']:.1f} s of it" if direct.get("horizon_azimuths")
                     else "")
         return (f"Direct light: {directions} directions by rays ({direct.get('library', '')}, "

@@ -68,6 +68,29 @@ def side(resolution: int, horizon_resolution: int = 0) -> int:
     return max(1, min(int(resolution), want))
 
 
+#: The fewest azimuths of the horizons when the scene's Sun is animated (its path is in the
+#: direction set): a low Sun on its path needs the horizons at the texture's side and this many
+#: azimuths (:func:`for_sun_path`; measured in docs/transport-textures.md).
+PATH_AZIMUTHS = 128
+
+
+def for_sun_path(resolution: int, azimuths: int, horizon_resolution: int,
+                 budget_bytes: int) -> tuple[int, int]:
+    """``(azimuths, horizon_resolution)`` of the horizons a bake whose Sun is animated makes,
+    for a texture of side ``resolution``: at the texture's side (at most :data:`AUTO_SIDE`) and
+    at least :data:`PATH_AZIMUTHS` azimuths, as far as the viewport's GPU memory stays within
+    ``budget_bytes`` (:func:`gpu_bytes`): more azimuths are dropped first, then the finer side.
+    Never fewer azimuths or a coarser side than asked; ``azimuths`` 0 (none asked) stays 0."""
+    A, given = int(azimuths), side(resolution, horizon_resolution)
+    if A == 0:
+        return 0, int(horizon_resolution)
+    full = side(resolution, 0)
+    for a, h in ((max(A, PATH_AZIMUTHS), full), (A, full), (A, given)):
+        if h >= given and gpu_bytes(a, resolution, h) <= budget_bytes:
+            return a, h
+    return A, int(horizon_resolution)
+
+
 def quantize(H) -> np.ndarray:
     """Intervals (2, ...) in radians -> uint8 codes (module docstring): upper edges in
     [0, pi/2] round to 0..255; lower edges below 0 (blocked from below) are code 0, others

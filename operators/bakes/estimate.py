@@ -95,8 +95,11 @@ def estimate(scene, objects, settings, truth: int = 4, truth_samples: int = 256)
     ``viewport_gpu_bytes`` and the viewport it would use; ``calibration_seconds``; ``lines``
     (what the CLI prints and the panel shows)."""
     from .ray_direct import horizon_count
+    from .texture_transport import path_horizons, resolve_directions
 
-    dset = settings.validate()
+    # the bake's own direction set (with an animated Sun's path) and the horizons it then makes
+    dset, path = resolve_directions(scene, settings)
+    settings, _ = path_horizons(settings, path)
     costs, cal = yield from calibrate(scene, objects, settings, truth, truth_samples)
     # the indirect term's Cycles bakes (steerable) or points and rays (gathered) scale with the
     # indirect grid's texels (calibrated at this grid up to CALIBRATION_GRID); the gathered

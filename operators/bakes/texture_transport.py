@@ -110,6 +110,7 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
 def _bake_transport_textures(scene, objects, settings, out_dir, resume, client, blend_path, mem):
     """:func:`bake_transport_textures`, with ``mem`` started once the inputs are checked."""
     dset, path_info = resolve_directions(scene, settings)
+    settings, raised = path_horizons(settings, path_info)
     if client is not None and (not resume or not blend_path):
         raise BakeInputError("a distributed bake needs the chunk cache (no --no-resume) and a "
                              "saved .blend the workers can open")
@@ -137,6 +138,8 @@ def _bake_transport_textures(scene, objects, settings, out_dir, resume, client, 
     engine["direction_set"] = {"size": dset.size, "spec": settings.directions,
                                **({"sun_path": path_info} if path_info else {})}
     rays = engine["engine"] == "rays"
+    if raised and rays and ray_direct.horizon_count(settings):
+        engine["horizons_raised"] = raised
     mapped = ray_direct.needs_normals(objects) if rays else [False] * len(objects)
 
     # 1. albedo (colour pass only), and the shading normals rays need for normal maps
@@ -324,6 +327,31 @@ def resolve_directions(scene, settings):
             "step_deg": step, "elevation_deg": dset.params["sun_path_elevation_deg"],
             "why": "asked for (+sun-path)" if forced is not None else "the scene's Sun is animated"}
     return dset, info
+
+
+def path_horizons(settings, path_info):
+    """``(settings, note or None)``: with the scene Sun's path in the direction set
+    (``path_info`` of :func:`resolve_directions`), the horizons at the texture's side and at
+    least :data:`...lt_addon.transport.horizon_map.PATH_AZIMUTHS` azimuths, within the GPU
+    budget (:func:`...lt_addon.transport.horizon_map.for_sun_path`): a low Sun on its path
+    needs them finer than the presets' (the note says from what, to what and why)."""
+    from dataclasses import replace
+
+    from ...lt_addon.transport import horizon_map as hmap
+
+    if not path_info:
+        return settings, None
+    R, A = settings.resolution, int(settings.horizon_azimuths)
+    a, h = hmap.for_sun_path(R, A, settings.horizon_resolution,
+                             int(settings.gpu_budget) << 20)
+    before = (A, hmap.side(R, settings.horizon_resolution))
+    if (a, hmap.side(R, h)) == before:
+        return settings, None
+    note = {"from": {"azimuths": before[0], "side": before[1]},
+            "to": {"azimuths": a, "side": hmap.side(R, h)},
+            "why": "the scene's Sun is animated: a low Sun on its path needs horizons at the "
+                   "texture's side (--sun-path off keeps the settings' horizons)"}
+    return replace(settings, horizon_azimuths=a, horizon_resolution=h), note
 
 
 def bake_directions(scene, objects, settings, start: int, stop: int, cache,

@@ -95,3 +95,41 @@ def test_a_low_sun_on_the_path_relights_closer_to_cycles(fresh_scene, tmp_path):
     # on the path a baked direction lies within 0.07 degrees: nearly Cycles' own bake; off it,
     # the nearest of 100 directions are degrees away and their shadows blend
     assert errs["auto"] < 0.05 and errs["off"] > 4 * errs["auto"], errs
+
+
+def test_an_animated_sun_raises_the_horizons_to_the_texture_side(fresh_scene, tmp_path):
+    """With the Sun's path in the set, the bake makes its horizons at the texture's side and at
+    least PATH_AZIMUTHS azimuths, whatever coarser ones the settings (a preset's) ask, and says
+    so; those horizons relight a hard Sun at 8 degrees on the path closer to Cycles' bake of it
+    than the coarse ones. benchmarks/bench_sun_path.py measures the 2-degree Sun with bounces at
+    256^2 (docs/transport-textures.md)."""
+    from relightable_textures.lt_addon.transport import horizon_map as hmap
+    from relightable_textures.lt_addon.transport.bundle import direct_summary
+    from relightable_textures.operators.bakes.texture_transport import bake_transport_textures
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.base.jobs import run
+
+    samples.build("bumps", fresh_scene, "test")
+    obj = fresh_scene.objects["Bumps"]
+    _animate_sun(fresh_scene)
+    t = math.asin(11 / 53) / math.pi                      # elevation 8 on the rising side
+    d = direction_from_az_el(80 + 200 * t, 8.0)
+    with EnvironmentBake(fresh_scene, [obj], 32, 1, 0, (8, 16), mode="irradiance", seed=0,
+                         world_sampling="none", passes="direct") as s:
+        truth = s.bake_sun(d, 1.0, 0.0)[..., 0]
+    coarse = dict(model="pca", viewport="horizon", horizon_azimuths=32, horizon_resolution=16)
+    errs, maps = {}, {}
+    for mode in ("auto", "off"):
+        res = run(bake_transport_textures(fresh_scene, [obj], _settings(sun_path=mode, **coarse),
+                                          str(tmp_path / mode), resume=False))
+        b = res.objects[0]
+        maps[mode] = (b.found_horizon.azimuths, b.found_horizon.horizon_resolution,
+                      res.direct.get("horizons_raised"), direct_summary(res.direct, 100))
+        errs[mode] = float(np.linalg.norm(b.found_horizon.direct(d, 0.0) - truth)
+                           / np.linalg.norm(truth))
+        b.store.abort()
+    assert maps["off"][:3] == (32, 16, None)
+    assert maps["auto"][:2] == (hmap.PATH_AZIMUTHS, 32)
+    assert maps["auto"][2]["from"] == {"azimuths": 32, "side": 16}
+    assert "raised from 32 at 16^2 for the animated Sun" in maps["auto"][3]
+    assert errs["auto"] < 0.7 * errs["off"], errs

@@ -299,3 +299,21 @@ def test_horizons_at_half_the_side_relight_the_texture_at_its_own():
                                                                      q[..., -1, -1])
     assert hmap.side(2048) == hmap.AUTO_SIDE and hmap.side(256) == 256
     assert hmap.side(2048, 512) == 512 and hmap.side(256, 512) == 256
+
+
+def test_an_animated_sun_asks_for_horizons_at_the_texture_side():
+    """for_sun_path: the texture's side (at most AUTO_SIDE) and PATH_AZIMUTHS azimuths, never
+    less than asked, within the GPU budget (more azimuths dropped first, then the side)."""
+    big = 1 << 40
+    A = hmap.PATH_AZIMUTHS
+    assert hmap.for_sun_path(256, 96, 96, big) == (A, 256)
+    assert hmap.for_sun_path(256, 2 * A, 0, big) == (2 * A, 256)       # more asked: kept
+    assert hmap.for_sun_path(4096, 96, 256, big) == (A, hmap.AUTO_SIDE)
+    assert hmap.for_sun_path(256, 0, 96, big) == (0, 96)                # none asked: none
+    # a budget that holds 96 azimuths at 256^2 but not PATH_AZIMUTHS: the side only
+    budget = hmap.gpu_bytes(96, 256, 256)
+    assert hmap.gpu_bytes(A, 256, 256) > budget
+    assert hmap.for_sun_path(256, 96, 96, budget) == (96, 256)
+    # a budget that holds only what was asked: as asked
+    tight = hmap.gpu_bytes(96, 256, 96)
+    assert hmap.for_sun_path(256, 96, 96, tight) == (96, 96)
