@@ -263,10 +263,10 @@ def table(rows, title):
              "| | setting | bake | peak mem | stored (preview) | T on disk | preview | err 2° | err 10° |",
              "|---|---|---|---|---|---|---|---|---|"]
     for r, m in sorted(zip(rows, mask), key=lambda t: t[0]["bake_seconds"]):
-        prev = (f"{r['preview_lookups']} lookups, {r['preview_madds_per_texel']} madds"
+        madds = r.get("preview_madds_per_texel")
+        prev = (f"{r['preview_lookups']} lookups" + (f", {madds} madds" if madds else "")
                 if r["preview_lookups"] else
-                (f"NumPy, {r['preview_madds_per_texel']} madds" if r["preview_madds_per_texel"]
-                 else "offline"))
+                (f"NumPy, {madds} madds" if madds else "offline"))
         lines.append(
             f"| {'**front**' if m else ''} | {r['setting']} | {r['bake_seconds']:.1f} s "
             f"({r['cycles_seconds']:.1f} s Cycles) | {r['peak_mem_mb']:.0f} MB | "
@@ -332,8 +332,11 @@ def user_bake_row(scene, objects, truth, settings, folder, one, label):
     costs = [preview_cost(b.model, settings, b.store, b.view, b.horizon, b.indirect)
              for b in result.objects]
     stores = [b.store for b in result.objects]
+    cycles = sum(result.seconds.get(k, 0.0) for k in
+                 ("albedo_cycles", "direct_cycles", "indirect_cycles"))
     row = {
         "setting": label, "shows": [b.viewport.get("shows") for b in result.objects],
+        "cycles_seconds": round(cycles, 2),
         "bake_seconds": round(bake_s, 2), "single_bakes": round(bake_s / one, 2),
         "stages": {k: round(v, 2) for k, v in result.seconds.items()
                    if k in ("direct_rays", "horizons", "indirect_total", "fit")},
@@ -355,6 +358,32 @@ def user_bake_row(scene, objects, truth, settings, folder, one, label):
     for s in stores:
         s.abort()
     return row
+
+
+def preset_points(scene, objects, truth, folder, one):
+    """The transport presets baked as users bake them (:func:`user_bake_row`), as rows of the
+    sweep: what the panel's presets cost and show, on the same front as the sweep's points
+    (whose bakes find no horizons: their model is fitted after the bake)."""
+    from relightable_textures.operators.bakes import texture_transport as tx
+
+    with open(PACKAGE_PRESETS) as fh:
+        names = list(json.load(fh)["presets"])
+    rows = []
+    for name in names:
+        s = tx.settings_from_preset(name)
+        r = user_bake_row(scene, objects, truth, s, folder, one,
+                          f"transport preset {name} as users bake it (shows horizons where "
+                          f"auto chose them)")
+        rows.append({"method": "transport", "setting": r["setting"] + f" [{'/'.join(r['shows'])}]",
+                     "S": s.validate().size, "resolution": s.resolution, "indirect_samples": None,
+                     "model": "pca", "model_arg": None,
+                     "bake_seconds": r["bake_seconds"], "cycles_seconds": r["cycles_seconds"],
+                     "peak_mem_mb": r["peak_mem_mb"],
+                     "stored_bytes": int((r["gpu_mib"] or 0) * 2**20),
+                     "transport_bytes": r["transport_bytes"],
+                     "preview_lookups": r["preview_lookups"], "preview_madds_per_texel": None,
+                     "err_2deg": r["err_2deg"], "err_10deg": r["err_10deg"]})
+    return rows
 
 
 def measure_presets(out_dir, truth_spp=256, candidates=(), scene_name="bumps"):
@@ -481,6 +510,8 @@ def main(argv=None):
                                          [("pca", ks[-2])], folder, indirect="steerable")
             rows += transport_points(scene, objects, truth, R, mid, 64, R // 2,
                                      [("pca", ks[-2])], folder)
+            if R == 256:   # the presets as users bake them (horizons, viewport auto)
+                rows += preset_points(scene, objects, truth, folder, one)
         if not args.no_lobes:
             rows += lobes_points(scene, objects, truth, R)
         for r, m in zip(rows, front(rows)):
