@@ -614,8 +614,10 @@ def _cmd_bake_texture_transport(args) -> int:
             _print_comparison(rep.get("comparison"))
         te = rep.get("target_error")
         if te:
-            print(f"  target {te['target_error']}: chose {te['chosen_directions']}, tol "
-                  f"{te['tol']}; achieved {te.get('achieved', float('nan')):.3f}"
+            print(f"  target {te['target_error']}: chose {te['chosen_directions']} "
+                  f"({te.get('why', 'the pilot')}; {te.get('scored', 'T')} scored at "
+                  f"{te['pilot_resolution']}^2), tol {te['tol']}; achieved "
+                  f"{te.get('achieved', float('nan')):.3f}"
                   f"{'' if te.get('met') else ' (NOT met)'}")
         if rep["glossy"]["materials"]:
             print(f"  note: {rep['glossy']['note']}: "

@@ -788,6 +788,26 @@ def test_target_error_pilot_chooses_directions_and_reports_what_it_achieved(bump
     assert te["tol"] == pytest.approx(0.35 / 3, abs=1e-4)
     assert te["met"] == (te["achieved"] <= 0.35)
     assert len(reports[0]["ground_truth"]["lights"]) == 4       # forced on by the target
+    assert te["scored"] == "the viewport"                       # a PCA model: its preview
+
+
+def test_target_error_pilot_out_of_reach_takes_the_fewest_directions_near_the_best(bumps,
+                                                                                   tmp_path):
+    """A target no count meets on the pilot's bake: every count is tried, and the choice is the
+    fewest directions whose error is within PILOT_PLATEAU of the best tried (more directions
+    bought nothing), said in ``why``; never a count above the best one."""
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.base.jobs import run
+
+    scene, obj = bumps
+    te = run(tx.pilot(scene, [obj], settings(components=None, tol=0.02), 1e-4, str(tmp_path),
+                      resolution=16, truth_samples=16))
+    errs = [t["rel_rmse"] for t in te["tried"]]
+    assert len(errs) == len(tx.PILOT_COUNTS) and not te["met_in_pilot"]
+    pick = [t["directions"] for t in te["tried"]].index(te["chosen_directions"])
+    assert errs[pick] <= tx.PILOT_PLATEAU * min(errs)
+    assert all(e > tx.PILOT_PLATEAU * min(errs) for e in errs[:pick])
+    assert pick <= errs.index(min(errs)) and "bought nothing" in te["why"]
 
 
 def test_cli_bakes_an_object_of_a_scene_that_is_not_the_active_one(tmp_path):
