@@ -30,6 +30,22 @@ def _animate_sun(scene, frames=(1, 49)):
     return sun
 
 
+def _low_sun_on_path(scene):
+    """The bumps test patch under the animated Sun: (object, a hard Sun's direction at 8
+    degrees of elevation on the path, Cycles' 1-spp direct bake of that Sun at 32^2)."""
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
+
+    samples.build("bumps", scene, "test")
+    obj = scene.objects["Bumps"]
+    _animate_sun(scene)
+    t = math.asin(11 / 53) / math.pi                      # elevation 8 on the rising side
+    d = direction_from_az_el(80 + 200 * t, 8.0)
+    with EnvironmentBake(scene, [obj], 32, 1, 0, (8, 16), mode="irradiance", seed=0,
+                         world_sampling="none", passes="direct") as s:
+        truth = s.bake_sun(d, 1.0, 0.0)[..., 0]
+    return obj, d, truth
+
+
 def _settings(**kw):
     from relightable_textures.operators.bakes.texture_transport import TransportTextureSettings
 
@@ -72,17 +88,9 @@ def test_a_low_sun_on_the_path_relights_closer_to_cycles(fresh_scene, tmp_path):
     0.28 on 5.3.0, whose bakes filter differently; benchmarks/bench_sun_path.py measures the
     2-degree Sun with bounces."""
     from relightable_textures.operators.bakes.texture_transport import bake_transport_textures
-    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
     from relightable_textures.operators.base.jobs import run
 
-    samples.build("bumps", fresh_scene, "test")
-    obj = fresh_scene.objects["Bumps"]
-    _animate_sun(fresh_scene)
-    t = math.asin(11 / 53) / math.pi                      # elevation 8 on the rising side
-    d = direction_from_az_el(80 + 200 * t, 8.0)
-    with EnvironmentBake(fresh_scene, [obj], 32, 1, 0, (8, 16), mode="irradiance", seed=0,
-                         world_sampling="none", passes="direct") as s:
-        truth = s.bake_sun(d, 1.0, 0.0)[..., 0]
+    obj, d, truth = _low_sun_on_path(fresh_scene)
     assert (truth == 0).mean() > 0.05                      # long shadows at 8 degrees
     errs = {}
     for mode in ("auto", "off"):
@@ -106,17 +114,9 @@ def test_an_animated_sun_raises_the_horizons_to_the_texture_side(fresh_scene, tm
     from relightable_textures.lt_addon.transport import horizon_map as hmap
     from relightable_textures.lt_addon.transport.bundle import direct_summary
     from relightable_textures.operators.bakes.texture_transport import bake_transport_textures
-    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
     from relightable_textures.operators.base.jobs import run
 
-    samples.build("bumps", fresh_scene, "test")
-    obj = fresh_scene.objects["Bumps"]
-    _animate_sun(fresh_scene)
-    t = math.asin(11 / 53) / math.pi                      # elevation 8 on the rising side
-    d = direction_from_az_el(80 + 200 * t, 8.0)
-    with EnvironmentBake(fresh_scene, [obj], 32, 1, 0, (8, 16), mode="irradiance", seed=0,
-                         world_sampling="none", passes="direct") as s:
-        truth = s.bake_sun(d, 1.0, 0.0)[..., 0]
+    obj, d, truth = _low_sun_on_path(fresh_scene)
     coarse = dict(model="pca", viewport="horizon", horizon_azimuths=32, horizon_resolution=16)
     errs, maps = {}, {}
     for mode in ("auto", "off"):
