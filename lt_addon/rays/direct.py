@@ -36,23 +36,42 @@ def direct_rows(occluder, points: ShadingPoints, directions, out=None) -> np.nda
     else:
         out = out[:len(D)]
         out[...] = 0.0
-    for s, L in enumerate(D):
-        Lf = L.astype(np.float32)
-        for a in range(0, n, POINT_BLOCK):
-            b = min(a + POINT_BLOCK, n)
-            cos = cosine(points, L, slice(a, b))
-            lit = np.nonzero(cos > 0)[0]
-            if not lit.size:
-                continue
-            out[s, a + lit] = cos[lit] / np.pi
-            if lit.size > (b - a) // 4:   # every point's origin, then the lit ones': faster
-                origins = np.take(shadow_origins(points, L, slice(a, b)), lit, axis=0)
-            else:                         # (the same bits: shadow_origins is per point)
-                origins = shadow_origins(points, L, lit + a)
-            # one engine call per direction and block, its direction given once: no per-ray
-            # copy of it (the rays of 64 directions in one call held ~400 MB at 512^2)
-            blocked = occluder.occluded(origins, Lf)
-            out[s, a + lit[blocked]] = 0.0
+    cast = getattr(occluder, "occluded_async", None)
+    pending = None        # the rays in flight: (row, their points, Future of what is blocked)
+
+    def land(row, lit, future):
+        out[row, lit[future.result()]] = 0.0
+    try:
+        for s, L in enumerate(D):
+            Lf = L.astype(np.float32)
+            for a in range(0, n, POINT_BLOCK):
+                b = min(a + POINT_BLOCK, n)
+                cos = cosine(points, L, slice(a, b))
+                lit = np.nonzero(cos > 0)[0]
+                if not lit.size:
+                    continue
+                out[s, a + lit] = cos[lit] / np.pi
+                if lit.size > (b - a) // 4:   # every point's origin, then the lit ones': faster
+                    origins = np.take(shadow_origins(points, L, slice(a, b)), lit, axis=0)
+                else:                         # (the same bits: shadow_origins is per point)
+                    origins = shadow_origins(points, L, lit + a)
+                # one engine call per direction and block, its direction given once: no per-ray
+                # copy of it (the rays of 64 directions in one call held ~400 MB at 512^2).
+                # Cast while the next direction's origins are made (they took as long as the
+                # rays on the bumps, the engine's threads idle meanwhile)
+                if cast is None:
+                    out[s, a + lit[occluder.occluded(origins, Lf)]] = 0.0
+                    continue
+                future = cast(origins, Lf)
+                if pending is not None:
+                    land(*pending)
+                pending = (s, a + lit, future)
+        if pending is not None:
+            land(*pending)
+            pending = None
+    finally:
+        if pending is not None:     # (an error or a cancel: no rays left in flight)
+            pending[2].cancel() or pending[2].exception()
     return out
 
 

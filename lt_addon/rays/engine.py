@@ -112,6 +112,14 @@ class Occluder:
         self._batched(o, d, run)
         return out
 
+    def occluded_async(self, origins, directions):
+        """:meth:`occluded` cast from a dispatcher thread: returns a ``Future`` of its (M,) bool
+        array at once, so the caller sets up its next rays while the workers cast these (the
+        same rays and answers). ``origins`` must not change until the future is done."""
+        if getattr(self, "_dispatch", None) is None:
+            self._dispatch = ThreadPoolExecutor(1)
+        return self._dispatch.submit(self.occluded, origins, directions)
+
     def nearest(self, origins, directions) -> tuple[np.ndarray, np.ndarray]:
         """The first triangle each ray ``origins[i] + t directions[i]`` (t > 0) meets.
 
@@ -166,10 +174,11 @@ class Occluder:
 
     def close(self) -> None:
         """Stop the worker threads (a later call starts them again)."""
-        pool = getattr(self, "_pool", None)
-        if pool is not None:
-            pool.shutdown(wait=True)
-        self._pool = None
+        for name in ("_dispatch", "_pool"):    # (the dispatcher waits on the pool)
+            pool = getattr(self, name, None)
+            if pool is not None:
+                pool.shutdown(wait=True)
+            setattr(self, name, None)
 
     def __del__(self):
         try:

@@ -324,6 +324,16 @@ def test_direct_rows_are_cos_over_pi_with_the_square_shadow():
     finally:
         direct_mod.POINT_BLOCK = old_block
     assert not np.array_equal(whole, rows)
+    # cast while the next rays are set up (occluded_async) or each call waited for: the same
+    # rows, also by blocks (several calls in flight one after the other)
+    class Waiting:
+        occluded = occ.occluded
+    assert np.array_equal(direct_rows(Waiting(), mapped, D), whole)
+    try:
+        direct_mod.POINT_BLOCK = 64
+        assert np.array_equal(direct_rows(Waiting(), pts, D), rows)
+    finally:
+        direct_mod.POINT_BLOCK = old_block
 
 
 def test_extend_margin_stays_sparse_at_1024():
