@@ -168,17 +168,20 @@ class Occluder:
                 one(a)
         else:
             if getattr(self, "_pool", None) is None or self._pool_size != self.threads:
-                self.close()
+                self._stop("_pool")    # (not the dispatcher: this may run on its thread)
                 self._pool, self._pool_size = ThreadPoolExecutor(self.threads), self.threads
             list(self._pool.map(one, starts))
 
     def close(self) -> None:
         """Stop the worker threads (a later call starts them again)."""
-        for name in ("_dispatch", "_pool"):    # (the dispatcher waits on the pool)
-            pool = getattr(self, name, None)
-            if pool is not None:
-                pool.shutdown(wait=True)
-            setattr(self, name, None)
+        self._stop("_dispatch")                # (its calls wait on the pool)
+        self._stop("_pool")
+
+    def _stop(self, name: str) -> None:
+        pool = getattr(self, name, None)
+        if pool is not None:
+            pool.shutdown(wait=True)
+        setattr(self, name, None)
 
     def __del__(self):
         try:

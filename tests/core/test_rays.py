@@ -336,6 +336,37 @@ def test_direct_rows_are_cos_over_pi_with_the_square_shadow():
         direct_mod.POINT_BLOCK = old_block
 
 
+def test_rays_cast_from_the_dispatcher_use_the_worker_threads_from_the_first_call():
+    """A fresh engine whose first rays come through occluded_async (the direct rows' pipeline)
+    starts its worker pool on the dispatcher's thread and keeps both for the next calls
+    (stopping the dispatcher there broke the second direction); the rows are the waited
+    calls' bit for bit, with calls big enough to be shared among the workers."""
+    floor = np.array([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]], float)
+    roof = np.array([[0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
+    T = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    V = np.concatenate([floor, roof])
+    n = 5000
+    rng = np.random.default_rng(9)
+    u, v = rng.uniform(0, 1, (2, n))
+    flip = u + v > 1
+    u, v = np.where(flip, 1 - u, u), np.where(flip, 1 - v, v)
+    bary = np.column_stack([1 - u - v, u, v])
+    up = np.tile([0.0, 0.0, 1.0], (2, 3, 1))
+    pts = shading_points(V, T[:2], up, [False, False], np.zeros(n, int), bary)
+    D = np.array([[np.cos(np.radians(a)), 0.3, np.sin(np.radians(a))] for a in (20, 35, 50)])
+    D /= np.linalg.norm(D, axis=1, keepdims=True)
+    fresh = engine.Occluder(V, T, threads=2)
+    first = direct_rows(fresh, pts, D)
+    again = direct_rows(fresh, pts, D)
+
+    class Waiting:
+        occluded = engine.Occluder(V, T, threads=2).occluded
+    assert np.array_equal(first, again) and np.array_equal(first, direct_rows(Waiting(), pts, D))
+    assert (first == 0).sum() > 50 and fresh.rays >= 2 * 3 * n * 0.9
+    fresh.close()
+    assert np.array_equal(direct_rows(fresh, pts, D), first)     # started again after close
+
+
 def test_extend_margin_stays_sparse_at_1024():
     """The margin operator of a 1024^2 texture is built sparse (a row assignment that
     densified it asked for 38.6 GiB on the statue at 1024^2 and ended the bake): each margin
