@@ -183,8 +183,12 @@ class _Scan:
         # only directions in front of the closure count: behind it the cosine is 0 whatever
         # the ray meets (often the object itself), and along one azimuth the directions in
         # front form one range of elevations
-        care = np.concatenate([np.stack([cosine(points, self.L[a, j], part) > 0
-                                         for j in range(J)]) for a in az], 1)   # (J, m)
+        if points.mapped() is None:     # one product for all (azimuth, elevation) pairs
+            care = (points.Ns[part] @ self.L[az].reshape(-1, 3).T > 0).reshape(n, g, J)
+            care = care.transpose(2, 1, 0).reshape(J, m)                        # (J, m)
+        else:                           # closure normals: their bump terms, direction by one
+            care = np.concatenate([np.stack([cosine(points, self.L[a, j], part) > 0
+                                             for j in range(J)]) for a in az], 1)
         # the terminator along phi: cos(N, L(e)) ~ cos(e - e0)
         Ns = points.Ns[part]
         e0 = np.concatenate([np.arctan2(Ns[:, 2], Ns[:, 0] * self.ca[a] + Ns[:, 1] * self.sa[a])
