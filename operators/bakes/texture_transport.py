@@ -685,12 +685,17 @@ def pilot(scene, objects, settings: TransportTextureSettings, target: float, out
     truths = yield from truth_bakes(scene, objects, TRUTH_LIGHTS, settings.sun_angle,
                                     settings.bounces, truth_samples, resolution)
     tried = []
-    power = settings.directions.split(":")[2] if settings.directions.count(":") == 2 else "1.5"
+    from ...lt_addon.transport.bundle import SUN_PATH_SUFFIX, split_sun_path
+
+    # the counts over the settings' hemisphere power, keeping an asked +sun-path[:STEP]
+    base, step = split_sun_path(settings.directions)
+    power = base.split(":")[2] if base.count(":") == 2 else "1.5"
+    path = "" if step is None else f"{SUN_PATH_SUFFIX}:{step:g}"
     viewport = settings.model == "pca"     # (the live preview: what the user will look at)
     chosen = None
     with tempfile.TemporaryDirectory(dir=out_dir if os.path.isdir(out_dir) else None) as tmp:
         for n in PILOT_COUNTS:
-            s = replace(settings, directions=f"hemi:{n}:{power}", resolution=resolution,
+            s = replace(settings, directions=f"hemi:{n}:{power}{path}", resolution=resolution,
                         indirect_resolution=min(settings.indirect_resolution, resolution),
                         model="pca" if viewport else "none")
             res = yield from bake_transport_textures(scene, objects, s, tmp, resume=False)

@@ -133,3 +133,17 @@ def test_an_animated_sun_raises_the_horizons_to_the_texture_side(fresh_scene, tm
     assert maps["auto"][2]["from"] == {"azimuths": 32, "side": 16}
     assert "raised from 32 at 16^2 for the animated Sun" in maps["auto"][3]
     assert errs["auto"] < 0.7 * errs["off"], errs
+
+
+def test_the_target_error_pilot_keeps_an_asked_sun_path(fresh_scene, tmp_path):
+    """--directions hemi:N:P+sun-path:STEP with --target-error: the pilot's counts keep the
+    power and the path (split as the spec is parsed, not by counting colons)."""
+    from relightable_textures.operators.bakes.texture_transport import pilot
+    from relightable_textures.operators.base.jobs import run
+
+    samples.build("bumps", fresh_scene, "test")
+    obj = fresh_scene.objects["Bumps"]
+    _animate_sun(fresh_scene)
+    te = run(pilot(fresh_scene, [obj], _settings(directions="hemi:100:1.3+sun-path:2"), 0.99,
+                   str(tmp_path), resolution=16, truth_samples=8))
+    assert te["tried"][0]["directions"] == "hemi:64:1.3+sun-path:2" and te["met_in_pilot"]
