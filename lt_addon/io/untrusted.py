@@ -1,0 +1,322 @@
+"""Files from elsewhere: one place decides what a name read from a file may touch, and what a
+file's bytes may make this process allocate.
+
+A bake folder, a report, a ``.blend``'s records and the chunk cache may come from someone else
+(an asset pack, a colleague, a render farm): they are *untrusted input* (``docs/security.md``).
+PEP 706's ``tarfile`` filters are the model -- every name becomes a path here or nowhere:
+
+- :func:`confined` joins a *basename* read from such a file under the real path of the folder it
+  belongs to, refusing ``..``, absolute paths, separators, NUL, and (checked with ``lstat``,
+  never following) symlinks, FIFOs, sockets and devices.
+- :func:`regular_file` / :func:`real_folder` check a path the tool itself built the same way.
+- :func:`read_json`, :func:`npy_header`, :func:`load_npy` and :func:`open_npz` read with caps:
+  bytes before parsing, the header before the data, the decompressed size of every NPZ member
+  (and its ratio to the compressed size) before it is inflated.
+- :func:`check_values` refuses NaN/inf and values out of a stated range.
+
+Every refusal is an :class:`UntrustedFileError` (an :class:`~lt_addon.errors.InputError`)
+whose message reads ``<file>: <cause>``: the CLI prints it as ``relight: error: ...`` with exit
+status 2, the panel as one report line.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import stat
+import zipfile
+
+import numpy as np
+
+from ..errors import InputError
+
+__all__ = ["UntrustedFileError", "confined", "regular_file", "real_folder", "read_json",
+           "npy_header", "load_npy", "open_npz", "check_values", "check_shape",
+           "MAX_JSON_BYTES", "MAX_ARRAY_BYTES", "MAX_RESOLUTION", "MAX_DIRECTIONS",
+           "MAX_ZIP_RATIO"]
+
+#: caps on what a file may make this process read or allocate (generous for real bakes: a
+#: 16384^2 texture, 65536 directions; far below what exhausts a workstation's memory by accident)
+MAX_JSON_BYTES = 64 * 2**20          # a report or header: real ones are < 1 MiB
+MAX_ARRAY_BYTES = 64 * 2**30         # one array on disk (T of production at 2048^2 is ~5.6 GB)
+MAX_RESOLUTION = 16384               # a texture's side
+MAX_DIRECTIONS = 65536               # directions of one direction set
+MAX_ZIP_RATIO = 1100                 # deflate's own ceiling is ~1032:1; more is a crafted file
+
+
+class UntrustedFileError(InputError):
+    """A file from a bake folder, report, cache or record that cannot be used as it is."""
+
+    def __init__(self, path, cause: str):
+        self.path = os.fspath(path) if path is not None else ""
+        self.cause = cause
+        super().__init__(f"{self.path}: {cause}" if self.path else cause)
+
+
+# ------------------------------------------------------------------------------------------
+# names and paths
+
+def _kind(mode: int) -> str | None:
+    """What a non-regular, non-folder file is, by its ``lstat`` mode (None: file or folder)."""
+    if stat.S_ISLNK(mode):
+        return "a symbolic link"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    return None
+
+
+def check_name(name) -> str:
+    """``name`` when it is a plain basename (no separator, not ``.``/``..``, no NUL, not
+    empty, not absolute, no drive); UntrustedFileError otherwise."""
+    if not isinstance(name, str) or not name:
+        raise UntrustedFileError(None, f"{name!r} is not a file name")
+    bad = ("/" in name or "\\" in name or "\x00" in name or name in (".", "..")
+           or os.path.isabs(name) or os.path.splitdrive(name)[0] or ":" in name)
+    if bad:
+        raise UntrustedFileError(None, f"{name!r} is not a plain file name (only names inside "
+                                       "the bake's folder are followed)")
+    return name
+
+
+def confined(root: str, name, *, must_exist: bool = False, folder: bool | None = None) -> str:
+    """The path of basename ``name`` under the real path of ``root``, refusing anything that
+    could lead elsewhere: a name with a separator, ``..``, an absolute path, and an existing
+    entry that is a symlink, FIFO, socket or device (``lstat``: links are never followed).
+    ``must_exist``: refuse a missing entry; ``folder``: True/False to require a folder/file."""
+    check_name(name)
+    base = os.path.realpath(root)
+    path = os.path.join(base, name)
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        if must_exist:
+            raise UntrustedFileError(path, "is missing") from None
+        return path
+    except OSError as exc:
+        raise UntrustedFileError(path, f"cannot be read ({exc.strerror})") from None
+    kind = _kind(st.st_mode)
+    if kind:
+        raise UntrustedFileError(path, f"is {kind}; refused (a bake folder holds plain files)")
+    is_dir = stat.S_ISDIR(st.st_mode)
+    if folder is True and not is_dir:
+        raise UntrustedFileError(path, "is not a folder")
+    if folder is False and is_dir:
+        raise UntrustedFileError(path, "is a folder where a file was expected")
+    return path
+
+
+def regular_file(path: str, max_bytes: int | None = None) -> int:
+    """Size of ``path`` when it is a regular file (``lstat``: a symlink, FIFO or device is
+    refused, so a read never blocks or leaves the folder) of at most ``max_bytes``."""
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        raise UntrustedFileError(path, "is missing") from None
+    except OSError as exc:
+        raise UntrustedFileError(path, f"cannot be read ({exc.strerror})") from None
+    kind = _kind(st.st_mode)
+    if kind:
+        raise UntrustedFileError(path, f"is {kind}; refused")
+    if not stat.S_ISREG(st.st_mode):
+        raise UntrustedFileError(path, "is not a regular file")
+    if max_bytes is not None and st.st_size > max_bytes:
+        raise UntrustedFileError(path, f"is {st.st_size} bytes, more than the {max_bytes} "
+                                       "this kind of file may have")
+    return st.st_size
+
+
+def real_folder(path: str) -> bool:
+    """True when ``path`` is a real folder (not a symlink to one); False when absent;
+    UntrustedFileError when something else stands there."""
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        return False
+    if stat.S_ISDIR(st.st_mode):
+        return True
+    kind = _kind(st.st_mode) or "a file"
+    raise UntrustedFileError(path, f"is {kind} where this tool keeps a folder; refused (remove "
+                                   "it to go on)")
+
+
+# ------------------------------------------------------------------------------------------
+# reading with caps
+
+def read_json(path: str, max_bytes: int = MAX_JSON_BYTES, kind: type | None = dict):
+    """The parsed JSON of regular file ``path`` (at most ``max_bytes``), of type ``kind``."""
+    regular_file(path, max_bytes)
+    try:
+        with open(path, "rb") as fh:
+            data = json.loads(fh.read(max_bytes + 1).decode("utf-8"))
+    except UnicodeDecodeError:
+        raise UntrustedFileError(path, "is not UTF-8 text") from None
+    except ValueError as exc:
+        raise UntrustedFileError(path, f"is not valid JSON ({exc})") from None
+    except RecursionError:
+        raise UntrustedFileError(path, "is JSON nested too deeply") from None
+    if kind is not None and not isinstance(data, kind):
+        raise UntrustedFileError(path, f"holds a JSON {type(data).__name__}, not a "
+                                       f"{kind.__name__}")
+    return data
+
+
+def _header_from(fh, path: str):
+    try:
+        version = np.lib.format.read_magic(fh)
+        read = {(1, 0): np.lib.format.read_array_header_1_0,
+                (2, 0): np.lib.format.read_array_header_2_0}.get(version)
+        if read is None:
+            raise ValueError(f"NPY format {version} is not read by this tool")
+        shape, fortran, dtype = read(fh, max_header_size=10000)
+    except (ValueError, EOFError, SyntaxError, TypeError) as exc:
+        raise UntrustedFileError(path, f"is not a whole NPY file (its header: {exc})") from None
+    if dtype.hasobject or dtype.kind not in "biuf":
+        raise UntrustedFileError(path, f"holds {dtype}, not numbers")
+    if any(int(n) < 0 for n in shape):
+        raise UntrustedFileError(path, f"has a negative dimension {shape}")
+    return tuple(int(n) for n in shape), bool(fortran), dtype, fh.tell()
+
+
+def npy_header(path: str, max_bytes: int = MAX_ARRAY_BYTES):
+    """(shape, fortran_order, dtype, data offset) of NPY file ``path``, read from its header
+    alone, after checking the file is regular, capped, and as long as the header says."""
+    size = regular_file(path, max_bytes)
+    with open(path, "rb") as fh:
+        shape, fortran, dtype, offset = _header_from(fh, path)
+    need = offset + int(np.prod(shape, dtype=object)) * dtype.itemsize
+    if need > size:
+        raise UntrustedFileError(path, f"is truncated ({size} of the {need} bytes its header "
+                                       "says)")
+    return shape, fortran, dtype, offset
+
+
+def check_shape(path: str, shape, expect, dtype=None, expect_dtype=None) -> None:
+    """UntrustedFileError unless ``shape`` matches ``expect`` (None entries: any length) and
+    ``dtype`` is ``expect_dtype`` (a dtype, or a kind string such as ``"f"``)."""
+    shape = tuple(shape)
+    if expect is not None:
+        expect = tuple(expect)
+        if len(shape) != len(expect) or any(e is not None and int(e) != s
+                                            for s, e in zip(shape, expect)):
+            want = "(" + ", ".join("*" if e is None else str(e) for e in expect) + ")"
+            raise UntrustedFileError(path, f"has shape {shape}, expected {want}")
+    if expect_dtype is not None and dtype is not None:
+        ok = (np.dtype(dtype).kind in expect_dtype if isinstance(expect_dtype, str)
+              else np.dtype(dtype) == np.dtype(expect_dtype))
+        if not ok:
+            raise UntrustedFileError(path, f"holds {np.dtype(dtype)}, expected {expect_dtype}")
+
+
+def load_npy(path: str, *, shape=None, dtype=None, mmap: bool = False,
+             max_bytes: int = MAX_ARRAY_BYTES) -> np.ndarray:
+    """NPY file ``path`` checked against its header *before* its data is read: regular file,
+    at most ``max_bytes``, numeric dtype (``dtype``: an exact dtype or kind letters), shape
+    ``shape`` (None entries: any), whole. ``mmap``: a read-only memory map."""
+    hshape, _, hdtype, _ = npy_header(path, max_bytes)
+    check_shape(path, hshape, shape, hdtype, dtype)
+    try:
+        return np.load(path, mmap_mode="r" if mmap else None, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise UntrustedFileError(path, f"cannot be read ({exc})") from None
+
+
+class _Npz:
+    """A checked NPZ: members are inflated only after their stated sizes passed the caps."""
+
+    def __init__(self, path: str, max_bytes: int, max_ratio: float):
+        self.path = path
+        regular_file(path, max_bytes)
+        try:
+            self.zf = zipfile.ZipFile(path)
+        except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
+            raise UntrustedFileError(path, f"is not a whole NPZ file ({exc})") from None
+        total = 0
+        self.members = {}
+        for info in self.zf.infolist():
+            name = info.filename
+            if not name.endswith(".npy"):
+                continue
+            if info.file_size > max_bytes:
+                self.close()
+                raise UntrustedFileError(path, f"member {name} inflates to {info.file_size} "
+                                               f"bytes, more than {max_bytes}")
+            if info.compress_size and info.file_size / info.compress_size > max_ratio:
+                self.close()
+                raise UntrustedFileError(path, f"member {name} inflates {info.file_size} "
+                                               f"bytes from {info.compress_size}: refused "
+                                               "(a compression bomb?)")
+            total += info.file_size
+            self.members[name[:-4]] = info
+        if total > max_bytes:
+            self.close()
+            raise UntrustedFileError(path, f"inflates to {total} bytes, more than {max_bytes}")
+
+    def __contains__(self, key) -> bool:
+        return key in self.members
+
+    def keys(self):
+        return list(self.members)
+
+    files = property(keys)
+
+    def header(self, key):
+        """(shape, dtype) of member ``key`` from its NPY header alone."""
+        with self.zf.open(self.members[key]) as fh:
+            shape, _, dtype, _ = _header_from(fh, f"{self.path}[{key}]")
+        return shape, dtype
+
+    def get(self, key, shape=None, dtype=None) -> np.ndarray:
+        """Member ``key``, its header checked against ``shape`` / ``dtype`` first."""
+        if key not in self.members:
+            raise UntrustedFileError(self.path, f"has no array {key!r}")
+        hshape, hdtype = self.header(key)
+        check_shape(f"{self.path}[{key}]", hshape, shape, hdtype, dtype)
+        need = int(np.prod(hshape, dtype=object)) * hdtype.itemsize
+        if need > self.members[key].file_size:
+            raise UntrustedFileError(self.path, f"member {key} is truncated")
+        try:
+            with self.zf.open(self.members[key]) as fh:
+                return np.lib.format.read_array(fh, allow_pickle=False)
+        except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
+            raise UntrustedFileError(self.path, f"member {key} cannot be read ({exc})") from None
+
+    def __getitem__(self, key) -> np.ndarray:
+        return self.get(key)
+
+    def close(self) -> None:
+        self.zf.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+
+def open_npz(path: str, *, max_bytes: int = MAX_ARRAY_BYTES,
+             max_ratio: float = MAX_ZIP_RATIO) -> _Npz:
+    """NPZ file ``path`` opened for checked reads (a context manager with ``z[key]``,
+    ``key in z``, ``z.get(key, shape=, dtype=)``): a regular file at most ``max_bytes`` whose
+    members together inflate to at most ``max_bytes``, none by more than ``max_ratio`` : 1."""
+    return _Npz(path, max_bytes, max_ratio)
+
+
+def check_values(path: str, arr, *, lo: float | None = None, hi: float | None = None,
+                 what: str = "values", block: int = 1 << 24) -> None:
+    """UntrustedFileError when float ``arr`` holds NaN or inf, or values outside
+    ``[lo, hi]``; read in blocks of ``block`` values (a memory map is never loaded whole)."""
+    a = np.asarray(arr) if not isinstance(arr, np.ndarray) else arr
+    flat = a.reshape(-1) if a.flags.c_contiguous or a.flags.f_contiguous else np.ravel(a)
+    for s in range(0, flat.size, block):
+        part = np.asarray(flat[s:s + block])
+        if part.dtype.kind == "f" and not np.isfinite(part).all():
+            raise UntrustedFileError(path, f"holds NaN or infinite {what}")
+        if lo is not None and part.size and part.min() < lo:
+            raise UntrustedFileError(path, f"holds {what} below {lo} ({float(part.min()):.4g})")
+        if hi is not None and part.size and part.max() > hi:
+            raise UntrustedFileError(path, f"holds {what} above {hi} ({float(part.max()):.4g})")
