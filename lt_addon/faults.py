@@ -4,7 +4,9 @@ A bake calls :func:`checkpoint` at each stage (``directions``, ``indirect``, ``f
 ``preview``, ``commit``, ``blend``); with the variable unset it returns at once. ``kill`` ends
 the process as ``kill -9`` would (SIGKILL: no ``finally``, no atexit), ``raise`` raises
 :class:`InjectedFault` there, ``eacces`` / ``enospc`` raise the OSError a denied permission or a
-full disk gives (for machines where the tests run as root, whom permissions do not stop). The tests run real bakes in subprocesses with it set and check
+full disk gives (for machines where the tests run as root, whom permissions do not stop), ``sigint``
+sends this process the SIGINT a Ctrl-C sends (the bake goes on to its next cancellation point). The
+tests run real bakes in subprocesses with it set and check
 that the previous bake is intact byte for byte (tests/blender/test_bake_faults.py).
 """
 
@@ -29,6 +31,11 @@ def checkpoint(stage: str, path: str | None = None) -> None:
     for item in spec.split(","):
         name, _, action = item.strip().partition(":")
         if name != stage:
+            continue
+        if action == "sigint":
+            import signal
+
+            os.kill(os.getpid(), signal.SIGINT)
             continue
         if action == "kill":
             import signal

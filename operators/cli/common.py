@@ -99,7 +99,7 @@ def run_job(job, verb: str, device=None):
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
-    if asked and result is None:
+    if asked:   # cancel wins over commit, also when it came after the last step
         raise KeyboardInterrupt
     return result
 
@@ -434,7 +434,7 @@ def _bake_transaction(args, verb, path, make_job, client, device, out_dir, kept,
         except Exception as exc:
             txn.rollback()
             raise BakeFailed(exc, out_dir, path, txn.stage) from exc
-        with _ctrl_c_deferred(verb):   # a commit (or its undo) is not interrupted half-way
+        with _ctrl_c_deferred(verb) as ctrl_c:   # a commit is not interrupted half-way
             try:   # check; the new .blend under a temporary name; then only renames
                 txn.prepare()
                 blend_files.move_staged_paths(txn.stage, txn.target)
@@ -442,7 +442,15 @@ def _bake_transaction(args, verb, path, make_job, client, device, out_dir, kept,
                 with atomic.atomic_path(path) as tmp:
                     blend_files.save_copy(tmp)
                     faults.checkpoint("blend")
+                    if ctrl_c:   # Ctrl-C before the first rename: cancel wins over commit
+                        raise KeyboardInterrupt
                     txn.swap(blend_tmp=tmp)
+            except KeyboardInterrupt:
+                txn.rollback()
+                ctrl_c.clear()
+                note = "" if args.no_resume else kept
+                print(f"{verb}: cancelled before the commit; {cancelled}{note}", file=sys.stderr)
+                return None
             except ChangedMeanwhile as exc:
                 raise CliError(f"{exc}{'' if args.no_resume else kept}") from None
             except Exception as exc:   # a fault: undone here, told in one line
@@ -464,10 +472,10 @@ def _ctrl_c_deferred(verb: str):
     try:
         previous = signal.signal(signal.SIGINT, lambda signum, frame: asked.append(True))
     except ValueError:   # not the main thread
-        yield
+        yield asked
         return
     try:
-        yield
+        yield asked   # (the block reads it: before the swap starts, a Ctrl-C still cancels)
     finally:
         signal.signal(signal.SIGINT, previous)
         if asked:

@@ -162,6 +162,19 @@ def test_a_failure_at_any_stage_is_one_line_and_changes_nothing(scene, stage):
     assert _debris(bk) == []
 
 
+@pytest.mark.parametrize("stage", ["preview", "blend"])
+def test_ctrl_c_after_the_last_step_cancels_instead_of_committing(scene, stage):
+    """A Ctrl-C (a real SIGINT) that lands after the bake's last progress step (``preview``)
+    or while the new .blend is being saved aside (``blend``, before the first rename) cancels:
+    exit 130, nothing replaced. (Before issue 56 both committed with exit 0.)"""
+    blend, bk, (files, blend_bytes) = scene
+    r = _run(blend, bk, f"{stage}:sigint")
+    assert r.returncode == 130, (r.returncode, r.stderr[-3000:])
+    assert "cancelled" in r.stderr and "Traceback" not in r.stderr
+    assert _files(bk) == files and blend.read_bytes() == blend_bytes
+    assert _debris(bk) == []
+
+
 def test_a_full_disk_is_one_line_and_changes_nothing(scene):
     """RLIMIT_FSIZE below the size of T (64 x 256 half floats, 32 KiB): writing the store fails
     with EFBIG, as on a full disk (SIGXFSZ ignored, as a shell's ulimit -f leaves it)."""
