@@ -125,6 +125,36 @@ def check_bakeable(obj, need_uv: bool = True) -> None:
         raise BakeInputError(f"{obj.name} has no UV map; add one (UV > Unwrap) before baking")
     if not obj.data.polygons:
         raise BakeInputError(f"{obj.name} has no faces to bake")
+    _check_area(obj, need_uv)
+
+
+def _check_area(obj, need_uv: bool) -> None:
+    """Refuse a mesh whose faces have no area, or whose render UV map has none (every UV on
+    one point or one line): either bakes nothing, and used to give an all-zero texture with
+    exit 0 or a raw ``ValueError`` from deep in the bake (issue 56). The mesh as stored: a
+    modifier that makes area from none is rare enough to be told to apply it."""
+    from .meshes import uv_corners
+
+    mesh = obj.data
+    area = np.empty(len(mesh.polygons))
+    mesh.polygons.foreach_get("area", area)
+    if not np.isfinite(area).all() or float(area.sum()) <= 0.0:
+        raise BakeInputError(f"{obj.name}: its faces have no area (every face is degenerate: "
+                             "a point or a line); nothing to bake")
+    if need_uv and mesh.uv_layers:
+        uv = uv_corners(mesh)
+        start = np.empty(len(mesh.polygons), np.int64)
+        mesh.polygons.foreach_get("loop_start", start)
+        total = np.empty(len(mesh.polygons), np.int64)
+        mesh.polygons.foreach_get("loop_total", total)
+        nxt = np.arange(len(uv)) + 1   # each corner's next corner around its face
+        last = start + total - 1
+        nxt[last] = start
+        cross = uv[:, 0] * uv[nxt, 1] - uv[nxt, 0] * uv[:, 1]   # shoelace terms
+        uv_area = np.abs(np.add.reduceat(cross, start)) / 2 if len(start) else np.zeros(0)
+        if not np.isfinite(uv).all() or float(uv_area.sum()) <= 1e-12:
+            raise BakeInputError(f"{obj.name}: its UV map covers no area (every UV on one "
+                                 "point or line); unwrap it (UV > Unwrap) before baking")
 
 
 def _face_of_corner(mesh) -> np.ndarray:

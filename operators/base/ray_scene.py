@@ -291,6 +291,12 @@ def receiver_points(obj, depsgraph, resolution: int, Ns_image=None):
     correction = corr_of_slot[np.clip(mat_index[poly], 0, len(corr_of_slot) - 1)]
     bump = "conty" if bpy.app.version >= BUMP_CONTY_FROM else "chiang"
     samples = texel_samples(uv, resolution)
+    if samples.size == 0:
+        from .cycles_bake import BakeInputError
+
+        raise BakeInputError(f"{obj.name}: its UV map covers no texel centre at {resolution}^2 "
+                             "(UV islands smaller than a texel, or outside 0..1); unwrap it "
+                             "(UV > Unwrap) or raise the resolution")
     Ns = None if Ns_image is None else np.asarray(Ns_image, np.float64).reshape(-1, 3)[samples.texel]
     if Ns is not None:   # texels the normal bake left empty keep the smooth normal
         Ns = np.where(np.linalg.norm(Ns, axis=1, keepdims=True) > 0.5, Ns, np.nan)
