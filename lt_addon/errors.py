@@ -73,18 +73,31 @@ def log_folder() -> str:
 
 def write_log(exc: BaseException, context: str = "") -> str | None:
     """Write ``exc``'s traceback (and ``context``: the command line, say) to a new log file;
-    returns its path, or None when no folder could take it (the temporary folder is the
-    fallback)."""
+    returns its path, or None when no folder could take it. The fallback, when the log folder
+    cannot take it, is a fresh private temporary folder (``mkdtemp``: mode 0700, a new name
+    each time): a fixed name under the shared temporary folder could be another user's folder
+    or link. The file is created new (``x``: an existing file or link there is not written
+    through)."""
     stamp = time.strftime("%Y%m%d-%H%M%S")
     text = (f"{time.strftime('%Y-%m-%dT%H:%M:%S%z')} pid {os.getpid()}\n{context}\n\n"
             + "".join(traceback.format_exception(type(exc), exc, exc.__traceback__)))
-    for folder in (log_folder(), os.path.join(tempfile.gettempdir(), "relightable-textures")):
+
+    def fallback():
+        return tempfile.mkdtemp(prefix="relightable-textures-")
+
+    for folder in (log_folder, fallback):
         try:
+            folder = folder()
             os.makedirs(folder, exist_ok=True)
-            path = os.path.join(folder, f"relight-{stamp}-{os.getpid()}.log")
-            with open(path, "w", encoding="utf-8") as fh:
-                fh.write(text)
-            return path
+            for n in range(100):   # two failures in one second of one process: -1, -2, ...
+                path = os.path.join(folder, f"relight-{stamp}-{os.getpid()}"
+                                            + (f"-{n}" if n else "") + ".log")
+                try:
+                    with open(path, "x", encoding="utf-8") as fh:
+                        fh.write(text)
+                    return path
+                except FileExistsError:
+                    continue
         except OSError:
             continue
     return None

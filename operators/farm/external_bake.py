@@ -3,7 +3,9 @@ Python environment that has bpy and Dask (bpy).
 
 Blender's own Python has neither Dask nor a way to start bpy worker processes, so the panel's
 *Run On: Local Dask Workers / Dask Scheduler* hands the bake to ``relight`` (the console script
-of such an environment, e.g. this repository's ``.venv/bin/relight``): it opens the saved .blend,
+of such an environment, e.g. this repository's ``.venv/bin/relight``, set as the Relight
+Command of the add-on's preferences, as is the scheduler address: a .blend names neither, so a
+received file cannot choose a program to run or a cluster to trust): it opens the saved .blend,
 bakes the chunks on the workers, writes the files and saves the bake record and preview into the
 .blend. :func:`external_job` is an ordinary job (a generator of :class:`.jobs.Progress`), so
 the modal operator shows the command's progress lines and Esc interrupts it: the command gets
@@ -26,13 +28,50 @@ from dataclasses import dataclass
 from ..base.cycles_bake import BakeInputError
 from ..base.jobs import Progress
 
-#: ``Run On`` choices of the panel (scene property ``relight.run_on``).
+#: ``Run On`` choices of the panel (scene property ``relight.run_on``). The command and the
+#: scheduler address are the add-on's preferences, never the .blend's (:func:`farm_preferences`).
 RUN_ON = (("HERE", "This Blender", "Bake in this Blender process (modal, Esc cancels)"),
           ("WORKERS", "Local Dask Workers", "Bake the chunks on a local Dask cluster of "
-           "Workers processes, through the Relight Command (needs bpy and Dask there)"),
-          ("SCHEDULER", "Dask Scheduler", "Bake the chunks on the Dask cluster at Scheduler, "
+           "Workers processes, through the Relight Command of the add-on's Preferences (needs "
+           "bpy and Dask there)"),
+          ("SCHEDULER", "Dask Scheduler", "Bake the chunks on the Dask cluster at the Dask "
+           "Scheduler of the add-on's Preferences (a cluster trusted with running code here), "
            "through the Relight Command; the workers must read the .blend and the output "
            "folder at the same paths"))
+
+#: The add-on's module name, its preferences' ``bl_idname``: ``relightable_textures`` when
+#: registered from a path, ``bl_ext.<repository>.relightable_textures`` as an installed
+#: extension (this module is ``<package>.operators.farm.external_bake``).
+ADDON_ID = __name__.rsplit(".", 3)[0]
+#: Where the user sets them, for the lines that say so.
+WHERE = "Preferences > Add-ons > Relightable Textures"
+#: What connecting to a scheduler means, said wherever an address is set.
+SCHEDULER_TRUST = ("the Dask client runs code the scheduler sends (pickled tasks and results): "
+                   "connect only to a cluster you trust with this machine")
+
+
+@dataclass(frozen=True)
+class FarmPreferences:
+    """The user's settings of Run On Dask, from the add-on's preferences (stored in Blender's
+    user preferences, not in any .blend): the ``relight`` executable (empty: ``relight`` on
+    PATH) and the Dask scheduler address (empty: none)."""
+    relight_command: str = ""
+    scheduler: str = ""
+
+
+def farm_preferences() -> FarmPreferences:
+    """The add-on's preferences (:class:`FarmPreferences`); the defaults -- no command, no
+    scheduler -- when the add-on has no preferences entry (registered from a path, as in the
+    tests, rather than enabled as an installed extension). A .blend's scene properties are
+    never read here: a received file must not choose a program to run or a cluster to trust."""
+    import bpy
+
+    entry = bpy.context.preferences.addons.get(ADDON_ID)
+    prefs = getattr(entry, "preferences", None)
+    if prefs is None:
+        return FarmPreferences()
+    return FarmPreferences(prefs.relight_command.strip(), prefs.dask_scheduler.strip())
+
 
 _PROGRESS = re.compile(r"^\S+ \[(\d+)/(\d+)\] (.*)$")
 
@@ -51,29 +90,36 @@ class ExternalResult:
         return next((ln for ln in lines if ln.startswith("baked")), lines[0] if lines else "")
 
 
-def relight_command(props) -> str:
-    """The ``relight`` executable the panel runs: the Relight Command property, else
-    ``relight`` on PATH; BakeInputError with the fix when there is none."""
-    import bpy
-
-    text = bpy.path.abspath(props.dask_command.strip()) if props.dask_command.strip() else ""
+def relight_command() -> str:
+    """The ``relight`` executable the panel runs: the Relight Command of the add-on's
+    preferences (an absolute path: a blend-relative ``//`` one would name a file beside
+    whichever .blend is open), else ``relight`` on PATH; BakeInputError with the fix when there
+    is none. Run as an argument list, never through a shell."""
+    text = os.path.expanduser(farm_preferences().relight_command)
+    if text and not os.path.isabs(text):
+        raise BakeInputError(f"Relight Command {text!r} is not an absolute path: set it in "
+                             f"{WHERE}")
     found = text if text and os.path.isfile(text) and os.access(text, os.X_OK) else (
         None if text else shutil.which("relight"))
     if not found:
         raise BakeInputError(
             (f"Relight Command {text!r} is not an executable file" if text else
-             "no `relight` command on PATH") + ": set Relight Command to the `relight` of a "
-            "Python environment with bpy and Dask (e.g. <repository>/.venv/bin/relight)")
+             "no `relight` command on PATH") + f": set the Relight Command in {WHERE} to the "
+            "`relight` of a Python environment with bpy and Dask "
+            "(e.g. <repository>/.venv/bin/relight)")
     return found
 
 
 def distribution_args(props) -> list:
-    """``--workers N`` or ``--scheduler ADDRESS`` for the panel's Run On."""
+    """``--workers N`` or ``--scheduler ADDRESS`` for the panel's Run On; the address is the
+    add-on's preferences' (never the .blend's: the Dask client unpickles what a scheduler
+    sends)."""
     if props.run_on == "WORKERS":
         return ["--workers", str(int(props.dask_workers))]
-    address = props.dask_scheduler.strip()
+    address = farm_preferences().scheduler
     if not address:
-        raise BakeInputError("set the Dask Scheduler address (e.g. tcp://host:8786)")
+        raise BakeInputError(f"set the Dask Scheduler address (e.g. tcp://host:8786) in {WHERE}"
+                             f"; {SCHEDULER_TRUST}")
     return ["--scheduler", address]
 
 

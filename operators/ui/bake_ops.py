@@ -24,11 +24,37 @@ from .properties import VERTEX_FIELDS, VERTEX_PROPS, settings_from_scene
 from .settings_props import values
 
 
+def _inside(path: str, folder: str) -> bool:
+    """``path`` is ``folder`` or below it, after resolving '..' and links on both."""
+    path, folder = os.path.realpath(path), os.path.realpath(folder)
+    try:
+        return os.path.commonpath([path, folder]) == folder
+    except ValueError:    # another drive (Windows)
+        return False
+
+
 def _output_dir(props) -> str:
-    path = bpy.path.abspath(props.output_dir or "//relight/")
+    """The folder a panel bake writes into, from the Output field.
+
+    The field is saved in the .blend, and a bake sweeps, retires and removes files in its
+    folder, so a received .blend could aim that at any folder of the user's (``//../..``). The
+    rule: a folder the .blend names is used only when it lies inside the .blend's own folder
+    (after normalising '..' and resolving links); any other folder only when the user set the
+    Output field in this Blender session (``properties.CONFIRMED_OUTPUT_DIRS``). Otherwise
+    BakeInputError, one line asking to choose the Output folder again."""
+    from .properties import CONFIRMED_OUTPUT_DIRS
+
+    raw = props.output_dir or "//relight/"
+    path = bpy.path.abspath(raw)
     if path.startswith("//") or not os.path.isabs(path):  # unsaved file: no '//' base
         raise BakeInputError("save the .blend first or choose an absolute output folder")
-    return path
+    if os.path.normpath(path) in CONFIRMED_OUTPUT_DIRS:
+        return path
+    if bpy.data.filepath and _inside(path, os.path.dirname(bpy.data.filepath)):
+        return path
+    raise BakeInputError(f"the Output folder {raw!r} ({os.path.normpath(path)}) is outside "
+                         "this .blend's folder and was not chosen in this session: choose the "
+                         "Output folder again (a bake writes, replaces and removes files there)")
 
 
 def transport_objects(context):
@@ -193,19 +219,20 @@ class ModalBake:
 
     def _external(self, context, verb: str, args: list):
         """The job of Run On Dask: ``relight VERB FILE ARGS --out DIR --force`` with the
-        panel's ``--workers`` / ``--scheduler``, run by the Relight Command on the saved file
-        (:mod:`.external_bake`)."""
+        panel's ``--workers`` / the preferences' ``--scheduler``, run by the preferences' Relight
+        Command on the saved file (:mod:`.external_bake`), as an argument list (no shell)."""
         from ..farm import external_bake as eb
 
         props = context.scene.relight
-        command = eb.relight_command(props)
+        where = eb.distribution_args(props)   # the preferences' command and scheduler only
+        command = eb.relight_command()
         path = eb.saved_blend()
         self.out_dir = _output_dir(props)
         os.makedirs(self.out_dir, exist_ok=True)
         return eb.external_job([command, verb, path, *args, "--out", self.out_dir, "--force",
                                 "--device", props.device,
-                                *(["--mix-devices"] if props.mix_devices else []),
-                                *eb.distribution_args(props)], path)
+                                *(["--mix-devices"] if props.mix_devices else []), *where],
+                               path)
 
     def _done(self, context, result):
         """``_finish`` for a job of this process; for a Dask job, its summary, and the open file

@@ -11,8 +11,34 @@ from ..base.cycles_bake import BakeInputError
 
 #: Scene property holding the last export's summary lines, shown in the panel.
 LAST_EXPORT_KEY = "relight_last_export"
-#: Scene property holding the last RTI export's page, for Open Web Page.
-LAST_PAGE_KEY = "relight_last_export_page"
+#: The last RTI or sun-indirect export's page exported in this Blender session, for Open Web
+#: Page: kept here, not in the .blend -- a page path a file carries (older versions saved it
+#: as the scene property ``relight_last_export_page``) is never opened.
+_SESSION_PAGE: dict = {}
+
+
+def remember_page(path: str) -> None:
+    """Keep ``path`` as the page this session exported last."""
+    _SESSION_PAGE["page"] = os.path.abspath(path)
+
+
+def last_export_page() -> str | None:
+    """The page this session exported last, while it is still an ``.html`` regular file (not a
+    link: lstat) at that path; else None."""
+    import stat
+
+    page = _SESSION_PAGE.get("page")
+    if not page or not page.lower().endswith(".html"):
+        return None
+    try:
+        return page if stat.S_ISREG(os.lstat(page).st_mode) else None
+    except OSError:
+        return None
+
+
+def open_url(url: str) -> None:
+    """Open ``url`` (a file:// URL of an exported .html page) in the web browser."""
+    bpy.ops.wm.url_open(url=url)
 
 
 def settings_from_scene(scene):
@@ -64,12 +90,11 @@ class RELIGHT_OT_export(ModalBake, bpy.types.Operator):
         if rep["format"].startswith("rti"):
             what = (f"RMSE {err['rmse_mean']:.3f} ({err['psnr_mean_db']:.1f} dB) at "
                     f"{err['held_out_lights']} held-out lights")
-            page = os.path.join(result.files["folder"], "index.html")
-            context.scene[LAST_PAGE_KEY] = page
+            remember_page(os.path.join(result.files["folder"], "index.html"))
         elif rep["format"] == "sun-indirect":
             what = (f"{rep['components']} basis lightmaps, {err:.1%} relative RMS at "
                     f"{rep['held_out_suns']} held-out suns")
-            context.scene[LAST_PAGE_KEY] = result.files["page"]
+            remember_page(result.files["page"])
         else:
             what = "irradiance error " + ", ".join(
                 f"{v:.3f}" for v in err.values() if v is not None) + " at 0/15/30/45 deg tilts"
@@ -82,19 +107,24 @@ class RELIGHT_OT_export(ModalBake, bpy.types.Operator):
 
 
 class RELIGHT_OT_open_export_page(bpy.types.Operator):
-    """Open the last RTI or sun-indirect export's web page in the system browser"""
+    """Open the web page of the last RTI or sun-indirect export of this session in the web
+    browser"""
 
     bl_idname = "relight.open_export_page"
     bl_label = "Open Web Page"
 
     @classmethod
     def poll(cls, context):
-        page = context.scene.get(LAST_PAGE_KEY)
-        return bool(page) and os.path.isfile(page)
+        return last_export_page() is not None
 
     def execute(self, context):
-        page = context.scene[LAST_PAGE_KEY]
-        bpy.ops.wm.url_open(url="file://" + page)
+        import pathlib
+
+        page = last_export_page()
+        if page is None:
+            self.report({"ERROR"}, "no web page exported in this session: Export first")
+            return {"CANCELLED"}
+        open_url(pathlib.Path(page).as_uri())
         return {"FINISHED"}
 
 

@@ -138,8 +138,33 @@ def _last_bake(layout, scene):
         layout.label(text=line, icon="INFO")
 
 
+def run_on_lines(props) -> list:
+    """The lines under Run On Dask, as ``[(text, icon)]``: the add-on's preferences' Relight
+    Command and Dask Scheduler (read-only here: a .blend does not choose them), what trusting a
+    scheduler means, and a legacy value this .blend carries, said to be ignored."""
+    from ..farm import external_bake as eb
+
+    if props.run_on == "HERE":
+        return []
+    prefs = eb.farm_preferences()
+    lines = [(f"Relight Command: {prefs.relight_command or '`relight` on PATH'}", "CONSOLE")]
+    if props.run_on == "SCHEDULER":
+        lines.append((f"Dask Scheduler: {prefs.scheduler or 'not set'}", "NETWORK_DRIVE"))
+        lines.append(("Connecting trusts that cluster with running code here", "ERROR"))
+    lines.append((f"Set in {eb.WHERE}", "PREFERENCES"))
+    for name, what in (("dask_command", "Relight Command"), ("dask_scheduler", "Scheduler")):
+        legacy = getattr(props, name, "").strip()
+        if legacy:
+            lines.append((f"This .blend's {what} {legacy!r} is ignored (set in Preferences)",
+                          "ERROR"))
+    return lines
+
+
 def _run_on(layout, props):
-    """Where the bake below runs: here, or on Dask through the Relight Command."""
+    """Where the bake below runs: here, or on Dask through the Relight Command of the add-on's
+    preferences (drawn read-only, with the button that shows them)."""
+    from ..farm.external_bake import ADDON_ID
+
     col = layout.column(align=True)
     col.prop(props, "device")
     col.prop(props, "mix_devices")
@@ -148,10 +173,11 @@ def _run_on(layout, props):
     col.prop(props, "run_on")
     if props.run_on == "WORKERS":
         col.prop(props, "dask_workers")
-    elif props.run_on == "SCHEDULER":
-        col.prop(props, "dask_scheduler")
+    for text, icon in run_on_lines(props):
+        col.label(text=text, icon=icon)
     if props.run_on != "HERE":
-        col.prop(props, "dask_command")
+        col.operator("preferences.addon_show", text="Open Preferences",
+                     icon="PREFERENCES").module = ADDON_ID
 
 
 def _kept_chunks(layout, context, kind: str):

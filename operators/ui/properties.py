@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import os
+
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 from ...samples import DESCRIPTIONS, SIZES
 from ..base.compat import path_options
 from ..bakes.presets import PRESET_NAMES, TRANSPORT, settings_from_preset
-from ..farm.external_bake import RUN_ON as _RUN_ON
+from ..farm.external_bake import ADDON_ID, RUN_ON as _RUN_ON, SCHEDULER_TRUST, WHERE
 from .settings_props import properties, values
 
 _SETTING_NAMES = ("frame", "order", "resolution", "samples", "bounces", "storage", "mode",
@@ -105,6 +107,21 @@ def _on_texture_light(self, context):
             set_light_mode(context.scene, obj, self.texture_light)
 
 
+#: Output folders the user set in this Blender session (normalised absolute paths), filled by
+#: the Output field's update callback -- Blender calls it when the field is edited (in the UI or
+#: by a script), never when a file is loaded. A bake uses a folder a .blend names outside that
+#: .blend's own folder only when it is one of these (:func:`.bake_ops._output_dir`).
+CONFIRMED_OUTPUT_DIRS: set = set()
+
+
+def _confirm_output_dir(self, context):
+    """The user chose this Output folder in this session: remember it (resolved against the
+    open .blend now; a '//' path of an unsaved file has no folder yet and is not kept)."""
+    path = bpy.path.abspath(self.output_dir or "//relight/")
+    if not path.startswith("//") and os.path.isabs(path):
+        CONFIRMED_OUTPUT_DIRS.add(os.path.normpath(path))
+
+
 class RelightSceneSettings(bpy.types.PropertyGroup):
     """Settings shown in the Relight sidebar tab."""
 
@@ -121,7 +138,11 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         update=_apply_preset)
     output_dir: StringProperty(
         name="Output", subtype="DIR_PATH", default="//relight/", options=path_options(),
-        description="Folder for the EXR files and the JSON report ('//' = next to the .blend)")
+        update=_confirm_output_dir,
+        description="Folder for the EXR files and the JSON report ('//' = next to the .blend). "
+                    "A bake writes, replaces and removes its files there, so a folder saved in "
+                    "a .blend is used only inside that .blend's folder; any other must be "
+                    "chosen here in this session")
     sun: PointerProperty(name="Sun", type=bpy.types.Object, poll=_sun_poll,
                          description="Sun lamp whose direction the preview follows")
 
@@ -237,14 +258,16 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         name="Workers", default=2, min=1, max=256,
         description="Worker processes of the local Dask cluster (each gets its share of the "
                     "cores as Cycles threads)")
+    # legacy: a .blend of an older version may carry these; they are never used (a received
+    # file must not choose a program to run or a cluster to trust) -- the Relight Command and
+    # the Dask Scheduler are the add-on's preferences (RelightPreferences); the panel says a
+    # non-empty one is ignored
     dask_scheduler: StringProperty(
-        name="Scheduler", default="tcp://127.0.0.1:8786",
-        description="Address of a running Dask scheduler whose workers have this package and "
-                    "bpy, and read the .blend and the output folder at the same paths")
+        name="Scheduler (ignored)", default="",
+        description="Legacy, ignored: the Dask Scheduler is set in " + WHERE)
     dask_command: StringProperty(
-        name="Relight Command", subtype="FILE_PATH", default="", options=path_options(),
-        description="The `relight` console script of a Python environment with bpy and Dask "
-                    "(e.g. <repository>/.venv/bin/relight); empty: `relight` on PATH")
+        name="Relight Command (ignored)", default="",
+        description="Legacy, ignored: the Relight Command is set in " + WHERE)
 
     truth_lights: IntProperty(
         name="Check vs Cycles", default=0, min=0, max=12,
@@ -295,7 +318,35 @@ def _declared_properties() -> dict:
 
 
 RelightSceneSettings.__annotations__.update(_declared_properties())
-CLASSES = (RelightSceneSettings,)
+
+
+class RelightPreferences(bpy.types.AddonPreferences):
+    """The add-on's preferences: what Run On Dask runs and which cluster it trusts. They live in
+    Blender's user preferences, not in a .blend, so a received file cannot choose them
+    (read through :func:`..farm.external_bake.farm_preferences`)."""
+
+    bl_idname = ADDON_ID
+
+    relight_command: StringProperty(
+        name="Relight Command", subtype="FILE_PATH", default="",
+        description="The `relight` console script of a Python environment with bpy and Dask "
+                    "(e.g. <repository>/.venv/bin/relight), run by the panel's Run On Dask; "
+                    "empty: `relight` on PATH")
+    dask_scheduler: StringProperty(
+        name="Dask Scheduler", default="",
+        description="Address of a running Dask scheduler (e.g. tcp://host:8786) for Run On: "
+                    "Dask Scheduler; its workers need this package and bpy, and read the .blend "
+                    "and the output folder at the same paths. Trust: " + SCHEDULER_TRUST)
+
+    def draw(self, context):
+        col = self.layout.column()
+        col.prop(self, "relight_command")
+        col.prop(self, "dask_scheduler")
+        col.label(text="A Dask scheduler can run code on this machine: connect only to a "
+                       "cluster you trust", icon="ERROR")
+
+
+CLASSES = (RelightSceneSettings, RelightPreferences)
 
 
 def transport_settings_from_scene(props):
