@@ -10,25 +10,59 @@ a stale chunk is never read, and :meth:`ChunkCache.prune_others` drops the stale
 cache is a means to finish a bake, not a product: the bake removes it once its files are
 complete (:meth:`ChunkCache.clear`).
 
-A chunk is checked before it is reused: beside it, ``<chunk>.sha256`` holds the SHA-256 of its
-shape, dtype and bytes, written once the chunk is in place. A chunk whose checksum is missing or
-differs (a worker or a disk that wrote something else, a file edited by hand) or whose floating
-values are not all finite (NaN, inf: a faulty bake) is removed and baked again, and counted in
+A chunk is checked before it is reused: beside it, ``<chunk>.sha256`` holds
+``hmac-sha256:<hex>``, the HMAC-SHA256 under this user's chunk key (:func:`chunk_key`) of its
+file name, shape, dtype and bytes, written once the chunk is in place. A chunk whose checksum is
+missing or differs (a worker or a disk that wrote something else, a file edited by hand, a chunk
+planted by someone who can write the bake folder, an unkeyed SHA-256 of an earlier version),
+whose header is not what the bake asks for (read before its data: :func:`.untrusted.load_npy`),
+which is not a regular file (a symlink is never read through) or whose floating values are not
+all finite (NaN, inf: a faulty bake) is removed and baked again, and counted in
 :attr:`ChunkCache.rejected`.
+
+Untrusted folders (issue 56; ``docs/security.md``): the bake folder and its cache may come from
+someone else. The cache key is computable from the ``.blend`` and a plain SHA-256 needs no
+secret, so only the keyed checksum makes a planted chunk fail. And the cache's own folders --
+``.relight_cache`` down to this key's folder, and every key folder :meth:`ChunkCache.prune_others`
+would remove or adopt from -- must be real folders (``lstat``): a symbolic link there is refused
+with an :class:`~.untrusted.UntrustedFileError` naming it ("remove it to go on"), before anything
+is written, read or removed through it.
+
+**The chunk key.** 32 random bytes (hex) in ``$RELIGHT_CHUNK_KEY_FILE`` when set, else in the
+user's cache folder: ``$XDG_CACHE_HOME`` or ``~/.cache`` (``%LOCALAPPDATA%`` on Windows)
+``/relightable-textures/chunk-key``, made on first use with mode 0600 (its folder 0700). Dask
+workers on the same machine share the home folder, hence the key; workers on other machines
+writing into a shared cache need the same key: point ``RELIGHT_CHUNK_KEY_FILE`` at one file
+every worker can read (and nobody else), or their chunks are rejected and baked again by the
+coordinator. A new key (a deleted file, another user) only costs a rebake of kept chunks.
 """
 
 from __future__ import annotations
 
 import hashlib
+import hmac
 import json
 import os
+import secrets
 import shutil
+import stat
+import sys
 
 import numpy as np
 
-from . import atomic
+from . import atomic, untrusted
+from .untrusted import UntrustedFileError
 
-__all__ = ["digest", "checksum", "ChunkCache"]
+__all__ = ["digest", "checksum", "mac", "chunk_key", "key_file", "ChunkCache", "KEY_ENV",
+           "CACHE_FOLDER"]
+
+#: environment variable naming the chunk key's file (farms: one key all workers share)
+KEY_ENV = "RELIGHT_CHUNK_KEY_FILE"
+#: the chunk cache's folder in a bake folder (``operators/base/bake_inputs.CACHE_FOLDER``): the
+#: folders from it down to a key's folder are this tool's and must be real folders
+CACHE_FOLDER = ".relight_cache"
+#: what the checksum file of a chunk starts with (an earlier version's plain SHA-256 does not)
+MAC_PREFIX = "hmac-sha256:"
 
 
 def digest(key) -> str:
@@ -38,15 +72,124 @@ def digest(key) -> str:
 
 
 def checksum(array) -> str:
-    """SHA-256 (hex) of an array's shape, dtype and bytes (C order)."""
+    """SHA-256 (hex) of an array's shape, dtype and bytes (C order): the unkeyed checksum of
+    earlier versions (anyone can compute it; chunks carry :func:`mac` now)."""
     a = np.ascontiguousarray(array)
     h = hashlib.sha256(f"{a.shape}|{a.dtype.str}|".encode())
     h.update(a.tobytes())
     return h.hexdigest()
 
 
+def mac(array, key: bytes, name: str) -> str:
+    """HMAC-SHA256 (hex) under ``key`` of chunk file ``name``'s name, shape, dtype and bytes
+    (C order): only a process holding the key can make one (:func:`chunk_key`)."""
+    a = np.ascontiguousarray(array)
+    h = hmac.new(key, f"{name}|{a.shape}|{a.dtype.str}|".encode(), hashlib.sha256)
+    h.update(a.reshape(-1).view(np.uint8).data if a.size else b"")
+    return h.hexdigest()
+
+
+def key_file() -> str:
+    """Where the chunk key lives: ``$RELIGHT_CHUNK_KEY_FILE``, else the user's cache folder
+    (the base :func:`...errors.log_folder` uses) ``/relightable-textures/chunk-key``."""
+    if os.environ.get(KEY_ENV):
+        return os.path.abspath(os.path.expanduser(os.environ[KEY_ENV]))
+    if sys.platform == "win32" and os.environ.get("LOCALAPPDATA"):
+        base = os.environ["LOCALAPPDATA"]
+    else:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(base, "relightable-textures", "chunk-key")
+
+
+_KEYS: dict = {}
+
+
+def _read_key(path: str) -> bytes | None:
+    try:
+        size = untrusted.regular_file(path, 4096)
+    except UntrustedFileError as exc:
+        if exc.cause == "is missing":
+            return None
+        raise UntrustedFileError(path, f"{exc.cause} (the chunk key: remove it to make a new "
+                                       "one)") from None
+    with open(path, "rb") as fh:
+        data = fh.read(size).strip()
+    if len(data) < 32:
+        raise UntrustedFileError(path, "is not a chunk key (fewer than 32 bytes; remove it to "
+                                       "make a new one)")
+    return data
+
+
+def _make_key(path: str) -> None:
+    """Write a new random key to ``path`` (mode 0600), never replacing one another process
+    made meanwhile (a hard link of a whole file, or an exclusive create)."""
+    os.makedirs(os.path.dirname(path), mode=0o700, exist_ok=True)
+    data = secrets.token_hex(32).encode() + b"\n"
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
+
+    def write(p):
+        fd = os.open(p, flags, 0o600)
+        try:
+            os.write(fd, data)
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+    tmp = f"{path}.{atomic.token()}.tmp"
+    write(tmp)
+    try:
+        os.link(tmp, path)
+    except FileExistsError:
+        pass
+    except OSError:   # a file system without hard links
+        try:
+            write(path)
+        except FileExistsError:
+            pass
+    finally:
+        os.remove(tmp)
+
+
+def chunk_key() -> bytes:
+    """This user's secret for :func:`mac` (module docstring: made on first use, 0600)."""
+    path = key_file()
+    if path not in _KEYS:
+        key = _read_key(path)
+        if key is None:
+            try:
+                _make_key(path)
+            except OSError as exc:
+                why = exc.strerror or str(exc)
+                raise UntrustedFileError(path, f"the chunk key cannot be made ({why}); set "
+                                               f"{KEY_ENV} to a writable file, or bake with "
+                                               "--no-resume") from None
+            key = _read_key(path)
+        _KEYS[path] = key
+    return _KEYS[path]
+
+
+def _unlink(path: str) -> None:
+    """Remove the entry ``path`` itself (a link, never what it points to; a real folder whole)."""
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        return
+    if stat.S_ISDIR(st.st_mode):
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        os.remove(path)
+
+
+def _is_key_name(name: str) -> bool:
+    return len(name) == 20 and all(ch in "0123456789abcdef" for ch in name)
+
+
 class ChunkCache:
     """Finished chunks of one bake under ``root``, for one ``key`` (a JSON-able dict).
+
+    Raises :class:`~.untrusted.UntrustedFileError` when a folder of the cache (from
+    ``.relight_cache``, or ``root`` when the path has none, down to this key's folder) is a
+    symbolic link or not a folder: nothing is ever written, read or removed through a link.
 
     Attributes
     ----------
@@ -55,8 +198,8 @@ class ChunkCache:
     reused, written : int
         Chunks :meth:`get` found and :meth:`put` stored since this object was made.
     rejected : int
-        Chunks :meth:`get` found but refused (unreadable, checksum, non-finite values) and
-        removed, so the bake made them again.
+        Chunks :meth:`get` found but refused (unreadable, checksum, non-finite values, not a
+        regular file) and removed, so the bake made them again.
     """
 
     def __init__(self, root: str, key: dict):
@@ -75,74 +218,100 @@ class ChunkCache:
         #: ``prune_others(adopt_devices=True)`` (``--mix-devices``): reused, not baked again
         self.mixed_devices: dict = {}
         self.adopt_devices = False
+        # this tool's folders, top down: from .relight_cache (or root) to this key's folder
+        parts = self.folder.split(os.sep)
+        top = (max(i for i, p in enumerate(parts) if p == CACHE_FOLDER)
+               if CACHE_FOLDER in parts else len(self.root.split(os.sep)) - 1)
+        self._chain = [os.sep.join(parts[:i + 1]) or os.sep for i in range(top, len(parts))]
+        self._check()
+        self.secret = chunk_key()
+
+    def _check(self) -> None:
+        """UntrustedFileError unless every folder of the cache is a real folder or absent."""
+        for folder in self._chain:
+            if not untrusted.real_folder(folder):
+                break
 
     def path(self, chunk: str) -> str:
         safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in str(chunk))
         return os.path.join(self.folder, safe + ".npy")
 
+    def _signature(self, p: str, arr) -> str:
+        return MAC_PREFIX + mac(arr, self.secret, os.path.basename(p))
+
     def get(self, chunk: str, shape: tuple | None = None, dtype=None, lo: float | None = None,
             hi: float | None = None) -> np.ndarray | None:
-        """The stored array of ``chunk``, or None. A chunk that fails a check -- it does not
-        read (truncated), its checksum differs, it holds NaN or inf, or it has not the expected
-        ``shape`` / ``dtype`` or values outside ``[lo, hi]`` -- is removed, counted in
-        :attr:`rejected` and treated as missing (baked again)."""
+        """The stored array of ``chunk``, or None. A chunk that fails a check -- it is not a
+        regular file, its header is not the expected ``shape`` / ``dtype`` (read before the
+        data), it does not read (truncated), its keyed checksum differs, it holds NaN or inf,
+        or values outside ``[lo, hi]`` -- is removed (a link itself, never its target),
+        counted in :attr:`rejected` and treated as missing (baked again)."""
+        self._check()
         p = self.path(chunk)
-        if not os.path.isfile(p):
+        if not os.path.lexists(p):
             return None
         try:
-            arr = np.load(p, allow_pickle=False)
-            with open(p + ".sha256") as fh:
-                ok = fh.read().strip() == checksum(arr)
-        except (OSError, ValueError, EOFError):
+            arr = untrusted.load_npy(p, shape=shape, dtype=None if dtype is None
+                                     else np.dtype(dtype))
+            untrusted.regular_file(p + ".sha256", 4096)
+            with open(p + ".sha256", encoding="ascii") as fh:
+                ok = hmac.compare_digest(fh.read(4096).strip(), self._signature(p, arr))
+        except (UntrustedFileError, OSError, ValueError, EOFError):
             ok = False
         if ok and arr.dtype.kind == "f":
             ok = bool(np.isfinite(arr).all())
-        if ok and shape is not None:
-            ok = tuple(arr.shape) == tuple(shape)
-        if ok and dtype is not None:
-            ok = arr.dtype == np.dtype(dtype)
         if ok and lo is not None and arr.size:
             ok = float(arr.min()) >= lo
         if ok and hi is not None and arr.size:
             ok = float(arr.max()) <= hi
         if not ok:
             for q in (p, p + ".sha256", p + ".device"):
-                if os.path.exists(q):
-                    os.remove(q)
+                _unlink(q)
             self.rejected += 1
             return None
         dev_note = p + ".device"
-        if os.path.exists(dev_note):   # another device's chunk, adopted by --mix-devices
-            with open(dev_note) as fh:
-                dev = fh.read().strip()
+        if os.path.lexists(dev_note):   # another device's chunk, adopted by --mix-devices
+            try:
+                untrusted.regular_file(dev_note, 4096)
+                with open(dev_note, encoding="utf-8") as fh:
+                    dev = fh.read(4096).strip()
+            except (UntrustedFileError, OSError, ValueError):
+                dev = "unknown"
             if not self.adopt_devices:
                 for q in (p, p + ".sha256", dev_note):
-                    if os.path.exists(q):
-                        os.remove(q)
+                    _unlink(q)
                 self.other_devices[dev] = self.other_devices.get(dev, 0) + 1
                 return None
             self.mixed_devices[dev] = self.mixed_devices.get(dev, 0) + 1
         self.reused += 1
         return arr
 
-    def put(self, chunk: str, array) -> None:
-        """Store ``chunk``'s array (its dtype kept: store what the bake stores)."""
+    def _make_folder(self) -> None:
+        self._check()
         os.makedirs(self.folder, exist_ok=True)
+        self._check()
         key_file = os.path.join(self.folder, "key.json")
-        if not os.path.exists(key_file):   # what the chunks depend on, for a person to read
+        if not os.path.lexists(key_file):   # what the chunks depend on, for a person to read
             atomic.write_json(key_file, self.key, default=str)
+
+    def put(self, chunk: str, array) -> None:
+        """Store ``chunk``'s array (its dtype kept: store what the bake stores) with its keyed
+        checksum."""
+        self._make_folder()
         array = np.asarray(array)
-        if os.path.exists(self.path(chunk) + ".device"):   # baked here now, not adopted
-            os.remove(self.path(chunk) + ".device")
-        with atomic.atomic_path(self.path(chunk)) as tmp:
+        p = self.path(chunk)
+        _unlink(p + ".device")   # baked here now, not adopted
+        with atomic.atomic_path(p) as tmp:   # (a rename: replaces a link, never writes into it)
             np.save(tmp, array, allow_pickle=False)
-        atomic.write_text(self.path(chunk) + ".sha256", checksum(array) + "\n")
+        atomic.write_text(p + ".sha256", self._signature(p, array) + "\n")
         self.written += 1
 
     def prune_others(self, adopt_devices: bool = False) -> int:
         """Remove the folders of other keys under ``root`` (stale after a scene or settings
         change); returns how many were removed. Only key folders (20 hex digits) go: a
-        folder of another name is another stage's cache nested here, with its own key.
+        folder of another name is another stage's cache nested here, with its own key. A key
+        folder that is a symbolic link (or not a folder) is refused (UntrustedFileError): it
+        is never removed or adopted from through the link.
 
         A folder whose key differs only in its ``device`` holds the same chunks baked on
         another device (another sample set). By default it is removed and counted in
@@ -152,39 +321,43 @@ class ChunkCache:
         :attr:`mixed_devices`) only while adopting, and otherwise bakes them again (counted in
         :attr:`other_devices`), also in a later run."""
         self.adopt_devices = adopt_devices
-        if not os.path.isdir(self.root):
+        self._check()
+        if not untrusted.real_folder(self.root):
             return 0
+        others = [os.path.join(self.root, name) for name in sorted(os.listdir(self.root))
+                  if _is_key_name(name) and name != os.path.basename(self.folder)]
+        for p in others:   # all checked before any goes
+            untrusted.real_folder(p)
         gone = 0
-        for name in os.listdir(self.root):
-            p = os.path.join(self.root, name)
-            if (os.path.isdir(p) and p != self.folder and len(name) == 20
-                    and all(ch in "0123456789abcdef" for ch in name)):
-                device = self._other_device(p)
-                if device is not None and adopt_devices:
-                    self._adopt(p, device)   # (counted when reused: get())
-                elif device is not None:
-                    n = sum(1 for f in os.listdir(p) if f.endswith(".npy"))
-                    self.other_devices[device] = self.other_devices.get(device, 0) + n
-                shutil.rmtree(p, ignore_errors=True)
-                gone += 1
+        for p in others:
+            device = self._other_device(p)
+            if device is not None and adopt_devices:
+                self._adopt(p, device)   # (counted when reused: get())
+            elif device is not None:
+                n = sum(1 for f in os.listdir(p) if f.endswith(".npy"))
+                self.other_devices[device] = self.other_devices.get(device, 0) + n
+            shutil.rmtree(p, ignore_errors=True)
+            gone += 1
         return gone
 
     def _adopt(self, folder: str, device: str) -> int:
         """Move ``folder``'s chunks (with their checksums) that this key lacks into this key's
-        folder; returns how many."""
-        os.makedirs(self.folder, exist_ok=True)
-        key_file = os.path.join(self.folder, "key.json")
-        if not os.path.exists(key_file):
-            atomic.write_json(key_file, self.key, default=str)
+        folder; returns how many. Only regular files move (a link is left to the removal of
+        ``folder``, which removes the link itself)."""
+        self._make_folder()
         n = 0
         for f in sorted(os.listdir(folder)):
-            if not f.endswith(".npy") or os.path.exists(os.path.join(self.folder, f)):
+            src = os.path.join(folder, f)
+            if not f.endswith(".npy") or os.path.lexists(os.path.join(self.folder, f)):
                 continue
-            if not os.path.exists(os.path.join(folder, f + ".sha256")):
+            try:
+                untrusted.regular_file(src)
+                untrusted.regular_file(src + ".sha256", 4096)
+            except UntrustedFileError:
                 continue
             atomic.write_text(os.path.join(self.folder, f + ".device"), device + "\n")
-            atomic.move(os.path.join(folder, f + ".sha256"), os.path.join(self.folder, f + ".sha256"))
-            atomic.move(os.path.join(folder, f), os.path.join(self.folder, f))
+            atomic.move(src + ".sha256", os.path.join(self.folder, f + ".sha256"))
+            atomic.move(src, os.path.join(self.folder, f))
             n += 1
         return n
 
@@ -193,11 +366,10 @@ class ChunkCache:
         if "device" not in self.key:
             return None
         try:
-            with open(os.path.join(folder, "key.json"), encoding="utf-8") as fh:
-                other = json.load(fh)
-        except (OSError, ValueError):
+            other = untrusted.read_json(os.path.join(folder, "key.json"))
+        except UntrustedFileError:
             return None
-        if not isinstance(other, dict) or other.get("device", "CPU") == self.key["device"]:
+        if other.get("device", "CPU") == self.key["device"]:
             return None
         mine = json.loads(json.dumps(self.key, default=str))   # as key.json holds it
         rest = {k: v for k, v in other.items() if k != "device"}
@@ -205,10 +377,15 @@ class ChunkCache:
             k: v for k, v in mine.items() if k != "device"} else None
 
     def clear(self) -> None:
-        """Remove this key's chunks, and ``root`` (and its parent) when left empty."""
-        shutil.rmtree(self.folder, ignore_errors=True)
+        """Remove this key's chunks, and ``root`` (and its parent) when left empty (real
+        folders only: a link is never removed through)."""
+        self._check()
+        if untrusted.real_folder(self.folder):
+            shutil.rmtree(self.folder, ignore_errors=True)
         for folder in (self.root, os.path.dirname(self.root)):
             try:
+                if not untrusted.real_folder(folder):
+                    continue
                 os.rmdir(folder)
-            except OSError:
+            except (OSError, UntrustedFileError):
                 break

@@ -1,10 +1,21 @@
 """The chunk cache of resumable bakes: keys, atomic chunks, stale folders (no Blender)."""
 
 import os
+import stat
 
 import numpy as np
+import pytest
 
+from relightable_textures.lt_addon.io import chunk_cache
 from relightable_textures.lt_addon.io.chunk_cache import ChunkCache, digest
+from relightable_textures.lt_addon.io.untrusted import UntrustedFileError
+
+
+@pytest.fixture(autouse=True)
+def _own_key(tmp_path_factory, monkeypatch):
+    """Each test's chunk key in a folder of its own (never the user's ~/.cache)."""
+    monkeypatch.setenv("RELIGHT_CHUNK_KEY_FILE",
+                       str(tmp_path_factory.mktemp("key") / "chunk-key"))
 
 
 def test_digest_is_canonical_and_changes_with_any_value():
@@ -111,3 +122,143 @@ def test_an_adopted_chunk_of_another_device_is_reused_only_while_mixing(tmp_path
     assert later.get("direct_00000") is None and later.other_devices == {"GPU:OPTIX": 1}
     later.put("direct_00000", np.zeros((1, 2, 4), np.float16))   # baked here now: its own
     assert later.get("direct_00000") is not None and later.other_devices == {"GPU:OPTIX": 1}
+
+
+# ------------------------------------------------------------------------------------------
+# issue 56: the chunk cache is untrusted input -- never followed through a link, and a chunk
+# is reused only when it carries this user's keyed checksum
+
+
+def _tree(folder):
+    """Every entry under ``folder`` (links not followed) with its bytes (None: a folder)."""
+    out = {}
+    for root, dirs, files in os.walk(folder):
+        for d in dirs:
+            out[os.path.relpath(os.path.join(root, d), folder)] = None
+        for f in files:
+            p = os.path.join(root, f)
+            out[os.path.relpath(p, folder)] = open(p, "rb").read()
+    return out
+
+
+def _elsewhere(tmp_path):
+    """A folder outside the bake folder holding a key-like folder with a chunk, and an empty
+    folder: what a link in the cache would lead to."""
+    ext = tmp_path / "elsewhere"
+    (ext / "empty").mkdir(parents=True)
+    (ext / "0123456789abcdef0123").mkdir()
+    np.save(ext / "0123456789abcdef0123" / "direct_00000.npy", np.ones(4, np.float16))
+    (ext / "keep.txt").write_bytes(b"keep")
+    return ext, _tree(ext)
+
+
+def test_a_symlinked_cache_root_is_refused_in_one_line_and_nothing_outside_changes(tmp_path):
+    """``bk/.relight_cache`` a link to a folder elsewhere: the bake wrote through it and its
+    prune removed the 20-hex folder and the empty one there. Now making the cache refuses:
+    the message names the link and says to remove it."""
+    ext, before = _elsewhere(tmp_path)
+    (tmp_path / "bk").mkdir()
+    os.symlink(ext, tmp_path / "bk" / ".relight_cache")
+    with pytest.raises(UntrustedFileError) as err:
+        cache = ChunkCache(str(tmp_path / "bk" / ".relight_cache" / "A"), {"k": 1})
+        cache.prune_others()
+        cache.put("direct_00000", np.zeros(4, np.float16))
+        cache.clear()
+    msg = str(err.value)
+    assert msg.startswith(str(tmp_path / "bk" / ".relight_cache") + ": ")
+    assert "symbolic link" in msg and "remove it" in msg and "\n" not in msg
+    assert _tree(ext) == before
+
+
+def test_a_symlinked_key_folder_or_stale_folder_is_never_followed(tmp_path):
+    ext, before = _elsewhere(tmp_path)
+    root = tmp_path / "bk" / ".relight_cache" / "A"
+    root.mkdir(parents=True)
+    mine = ChunkCache(str(root), {"k": 1})
+    os.symlink(ext, mine.folder)                        # this key's folder is a link
+    with pytest.raises(UntrustedFileError, match="symbolic link"):
+        ChunkCache(str(root), {"k": 1}).put("direct_00000", np.zeros(4, np.float16))
+    os.remove(mine.folder)
+    os.symlink(ext / "0123456789abcdef0123", root / "fedcba9876543210fedc")   # a stale key's
+    other = ChunkCache(str(root), {"k": 2, "device": "CPU"})
+    with pytest.raises(UntrustedFileError, match="symbolic link"):
+        other.prune_others(adopt_devices=True)
+    assert _tree(ext) == before
+    other.clear()                                       # (removes only what is its own)
+    assert _tree(ext) == before and os.path.islink(root / "fedcba9876543210fedc")
+
+
+def test_a_symlinked_chunk_is_not_read_and_its_target_stays(tmp_path):
+    ext, before = _elsewhere(tmp_path)
+    cache = ChunkCache(str(tmp_path / "c"), {"k": 1})
+    cache.put("direct_00000", np.zeros(4, np.float16))
+    target = ext / "0123456789abcdef0123" / "direct_00000.npy"
+    os.remove(cache.path("direct_00000"))
+    os.symlink(target, cache.path("direct_00000"))      # a link with a valid keyed checksum
+    with open(cache.path("direct_00000") + ".sha256", "w") as fh:
+        fh.write(chunk_cache.mac(np.load(target), chunk_cache.chunk_key(),
+                                 "direct_00000") + "\n")
+    assert cache.get("direct_00000") is None and cache.rejected == 1
+    assert not os.path.lexists(cache.path("direct_00000"))   # the link went, not its target
+    assert _tree(ext) == before
+    cache.clear()
+    assert _tree(ext) == before
+
+
+def test_a_planted_chunk_with_a_valid_unkeyed_checksum_is_baked_again(tmp_path):
+    """The cache key can be computed from the .blend and SHA-256 needs no secret: anyone who
+    can write the folder could plant a chunk the bake reused as its output. Now the checksum is
+    an HMAC under this user's key: the planted chunk is refused and baked again."""
+    cache = ChunkCache(str(tmp_path / "c"), {"k": 1})
+    os.makedirs(cache.folder)
+    planted = np.full((2, 4), 0.5, np.float16)
+    np.save(cache.path("direct_00000"), planted)
+    with open(cache.path("direct_00000") + ".sha256", "w") as fh:
+        fh.write(chunk_cache.checksum(planted) + "\n")        # SHA-256 of shape, dtype, bytes
+    assert cache.get("direct_00000", (2, 4), np.float16) is None
+    assert cache.rejected == 1 and not os.path.exists(cache.path("direct_00000"))
+    cache.put("direct_00000", planted)                   # baked here: this user's key
+    assert cache.get("direct_00000", (2, 4), np.float16) is not None
+
+
+def test_the_key_is_made_once_private_and_another_users_key_rejects_the_chunks(
+        tmp_path, monkeypatch):
+    key_file = tmp_path / "keys" / "chunk-key"
+    monkeypatch.setenv("RELIGHT_CHUNK_KEY_FILE", str(key_file))
+    cache = ChunkCache(str(tmp_path / "c"), {"k": 1})
+    cache.put("x", np.arange(4, dtype=np.float32))
+    if os.name == "posix":
+        assert stat.S_IMODE(os.stat(key_file).st_mode) == 0o600
+    secret = key_file.read_bytes()
+    assert len(secret) >= 32
+    assert ChunkCache(str(tmp_path / "c"), {"k": 1}).get("x") is not None
+    assert key_file.read_bytes() == secret              # read, not made again
+    monkeypatch.setenv("RELIGHT_CHUNK_KEY_FILE", str(tmp_path / "other-user-key"))
+    again = ChunkCache(str(tmp_path / "c"), {"k": 1})
+    assert again.get("x") is None and again.rejected == 1
+
+
+def test_the_default_key_lives_in_the_users_cache_folder(tmp_path, monkeypatch):
+    monkeypatch.delenv("RELIGHT_CHUNK_KEY_FILE")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    monkeypatch.setenv("LOCALAPPDATA", str(tmp_path / "xdg"))
+    path = chunk_cache.key_file()
+    assert path.startswith(str(tmp_path / "xdg" / "relightable-textures"))
+    chunk_cache.chunk_key()
+    assert os.path.isfile(path)
+
+
+def test_a_chunk_is_checked_against_its_header_before_its_data_is_read(tmp_path):
+    """A chunk whose header claims more data than the file has, or another shape than the
+    bake asks for, is refused from its header (nothing of that size is allocated)."""
+    cache = ChunkCache(str(tmp_path / "c"), {"k": 1})
+    cache.put("big", np.zeros((2, 4), np.float16))
+    hdr = b"{'descr': '<f2', 'fortran_order': False, 'shape': (1099511627776,), }"
+    # a header that says 2**40 values, then 16 bytes
+    raw = b"\x93NUMPY\x01\x00" + len(hdr.ljust(118) + b"\n").to_bytes(2, "little") \
+        + hdr.ljust(118) + b"\n" + b"\x00" * 16
+    with open(cache.path("big"), "wb") as fh:
+        fh.write(raw)
+    assert cache.get("big") is None and cache.rejected == 1
+    cache.put("small", np.zeros((2, 4), np.float16))
+    assert cache.get("small", shape=(4, 2)) is None and cache.rejected == 2
