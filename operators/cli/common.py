@@ -171,7 +171,9 @@ def add_distribution_options(p, what: str) -> None:
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help=f"{what}bake the chunks on the Dask cluster at ADDRESS (e.g. "
                         "tcp://host:8786); its workers need this package and bpy, and must "
-                        "read the .blend and --out at the same paths")
+                        "read the .blend and --out at the same paths. Connecting trusts that "
+                        "cluster with code execution here (the Dask client unpickles what the "
+                        "scheduler sends): give only a cluster you trust")
     p.add_argument("--connect-timeout", type=float, default=10.0, metavar="SECONDS",
                    help="with --scheduler: how long to wait for the scheduler to answer before "
                         "giving up (default 10; a scheduler still starting may need more)")

@@ -42,7 +42,11 @@ class DistributedError(RuntimeError):
 def connect(workers: int | None = None, scheduler: str | None = None, timeout: float = 10.0):
     """A Dask client: a new local cluster of ``workers`` processes (one thread each), or the
     scheduler at ``scheduler``. Raises DistributedError with one clear line when Dask is
-    missing or the scheduler cannot be reached. The caller closes it (``close(client)``)."""
+    missing or the scheduler cannot be reached. The caller closes it (``close(client)``).
+
+    ``scheduler`` must be an address the user gave (the CLI's ``--scheduler``, or the Dask
+    Scheduler of the add-on's preferences), never one read from a .blend or a bake folder: the
+    client unpickles what the scheduler sends, so a scheduler can run code here."""
     try:
         from distributed import Client, LocalCluster
     except ImportError:

@@ -430,7 +430,10 @@ def _panel_export(bpy, tmp_path):
     props.export_terms = "4"
     assert bpy.ops.relight.export() == {"FINISHED"}
     page = tmp_path / "Plane_rti-hsh4" / "index.html"
-    assert page.is_file() and scene["relight_last_export_page"] == str(page)
+    from relightable_textures.operators.ui.export_ops import last_export_page
+
+    assert page.is_file() and last_export_page() == str(page)   # this session's, not the file's
+    assert "relight_last_export_page" not in scene
     assert "Exported Plane as rti-hsh" in scene["relight_last_export"]
     info = json.loads((tmp_path / "Plane_rti-hsh4" / "info.json").read_text())
     assert info["nplanes"] == 12
@@ -684,7 +687,9 @@ def test_panel_sun_indirect_reports_its_error_and_keeps_its_page(bumps, tmp_path
         scene.relight.export_format = "sun-indirect"
         assert bpy.ops.relight.export() == {"FINISHED"}
         page = tmp_path / "Bumps_sun-indirect" / "index.html"
-        assert scene["relight_last_export_page"] == str(page) and page.is_file()
+        from relightable_textures.operators.ui.export_ops import last_export_page
+
+        assert last_export_page() == str(page) and page.is_file()
         assert "held-out suns" in scene["relight_last_export"]
     finally:
         relightable_textures.unregister()

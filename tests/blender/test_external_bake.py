@@ -1,7 +1,9 @@
 """The panel's Run On: Dask (issue 15): Bake Materials run through the real ``relight`` console
 script on a real local cluster of 2 workers gives the in-process panel bake's tensors bit for
 bit; interrupting that command (the job closed, as Esc does) keeps its finished chunks and the
-next Bake resumes from them; an unsaved file and a missing command are one clear error."""
+next Bake resumes from them; an unsaved file and a missing command are one clear error. The
+Relight Command is the add-on's preferences' (test_untrusted_blend_records.py: never the
+.blend's)."""
 
 import json
 import os
@@ -38,7 +40,25 @@ def room(fresh_scene, tmp_path):
     try:
         yield fresh_scene, path
     finally:
+        entry = bpy.context.preferences.addons.get(relightable_textures.__name__)
+        if entry is not None:
+            bpy.context.preferences.addons.remove(entry)
         relightable_textures.unregister()
+
+
+def _relight_command(path):
+    """Set the Relight Command in the add-on's preferences (an entry as an enabled extension
+    has; registered from a path there is none)."""
+    import bpy
+
+    import relightable_textures
+
+    addons = bpy.context.preferences.addons
+    entry = addons.get(relightable_textures.__name__)
+    if entry is None:
+        entry = addons.new()
+        entry.module = relightable_textures.__name__
+    entry.preferences.relight_command = str(path)
 
 
 def _tensors(folder):
@@ -65,11 +85,12 @@ def test_bake_materials_on_dask_workers_from_the_panel(room, tmp_path):
 
     props.output_dir = str(tmp_path / "dask")
     props.run_on, props.dask_workers = "WORKERS", 2
-    props.dask_command = str(tmp_path / "nowhere" / "relight")
+    _relight_command(tmp_path / "nowhere" / "relight")
     bpy.ops.wm.save_mainfile()
-    with pytest.raises(RuntimeError, match="is not an executable file: set Relight Command"):
+    with pytest.raises(RuntimeError, match="is not an executable file: set the Relight Command "
+                                           "in Preferences"):
         bpy.ops.relight.bake_materials()
-    props.dask_command = str(BIN / "relight")
+    _relight_command(BIN / "relight")
     assert not (tmp_path / "dask").exists()
     bpy.ops.wm.save_mainfile()   # (background Blender flags every file dirty: no check here)
     assert bpy.ops.relight.bake_materials() == {"FINISHED"}
@@ -101,7 +122,7 @@ def test_an_interrupted_dask_bake_keeps_its_chunks_and_the_next_bake_resumes(roo
     scene, path = room
     props = scene.relight
     props.output_dir, props.run_on, props.dask_workers = str(tmp_path / "o"), "WORKERS", 2
-    props.dask_command = str(BIN / "relight")
+    _relight_command(BIN / "relight")
     bpy.ops.wm.save_mainfile()
     cmd = [str(BIN / "relight"), "bake-materials", str(path), "--object", "Floor", "--object",
            "Box", "--region", "RedMaterial", "--region", "GreenMaterial", "--directions",
