@@ -41,9 +41,10 @@ _TOKEN = re.compile(r"relight-(?P<host>[A-Za-z0-9_]+)-(?P<pid>\d+)-[0-9a-f]{8}")
 
 
 def owner_of(name: str) -> tuple[str, int] | None:
-    """``(host, pid)`` of the process that made a temporary name of :func:`token`, else None."""
+    """``(host, pid)`` of the process that made a temporary name of :func:`token`, else None
+    (also for pid 0: no process of ours has it, so a name with it is not ours to remove)."""
     m = _TOKEN.search(name)
-    return (m["host"], int(m["pid"])) if m else None
+    return (m["host"], int(m["pid"])) if m and int(m["pid"]) > 0 else None
 
 
 def _temporary_name(path: str) -> str:

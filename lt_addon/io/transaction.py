@@ -24,8 +24,9 @@ next run can finish or undo:
    of milliseconds, and leaves a journal the next run acts on.
 
 Undo (:meth:`~BakeTransaction.rollback`, and :func:`recover` for a killed run) needs no record
-of which renames happened: a staged entry that is gone was moved in (rename it back into the
-stage), and whatever is in ``.old`` goes back; both are renames, so an interrupted undo can be
+of which renames happened: a staged entry that is gone and whose file in ``out`` is the one the
+swap moved in (its device and inode, which the journal lists under ``moved``) goes back into the
+stage, and whatever is in ``.old`` goes back; both are renames, so an interrupted undo can be
 run again. A killed run in state ``swapped`` is rolled back when
 the ``.blend`` is unchanged (its save never happened) and forward otherwise; ``committed`` is
 only cleaned up. Windows: a rename fails while a file is open, so the texture bake drops its
@@ -34,6 +35,22 @@ memory maps of T before the swap; a failed rename raises and is undone like any 
 :func:`sweep` is the debris collector every bake and export runs first on its folder: it
 recovers stages and removes temporary files of this tool's processes that are gone (by the
 host and pid in their names, :func:`.atomic.token`), never anything else.
+
+**A stage from elsewhere** (issue 56; ``docs/security.md``). A bake folder may come from
+someone else, with a stage and journal in it made to look like a killed run's. So a journal is
+data, never a path list: it names basenames only (:func:`.untrusted.check_name`; a name with
+``..``, a separator or a drive refuses the whole stage before anything moves), and every path is
+re-derived under the folder the stage is in (its ``target`` field is not read). A stage is
+recovered only when its name is exactly this version's (``STAGE_PREFIX`` + a token of this host
+with a pid above 0 that is not running): older temporary-name patterns, pid 0 and other names are
+never recovered. The stage and its ``.old`` must be real folders (``lstat``: a symlinked stage is
+never entered). The undo moves a file out of the folder only when it is the very file the swap
+moved in (device and inode in the journal), and puts back only what is in ``.old``. The
+journal's ``blend_tmp`` (the new ``.blend`` under a temporary name) is never removed by a
+recovery: the journal cannot vouch for a path, and the CLI sweeps the ``.blend``'s own folder for
+our temporary files of dead processes by their token (``sweep(folder, stages=False)``), which is
+where that file is. A refused stage is left as it is, named in :func:`sweep`'s ``refused``
+list (the bake goes on; the CLI prints the list), for a person to look at.
 """
 
 from __future__ import annotations
@@ -45,7 +62,8 @@ import shutil
 import sys
 from typing import Iterable
 
-from . import atomic, versions
+from . import atomic, untrusted, versions
+from .untrusted import UntrustedFileError
 
 __all__ = ["BakeTransaction", "after_commit", "sweep", "recover", "check_file", "target_of", "pid_alive",
            "STAGE_PREFIX", "rewrite_paths"]
@@ -53,6 +71,11 @@ __all__ = ["BakeTransaction", "after_commit", "sweep", "recover", "check_file", 
 STAGE_PREFIX = ".relight-stage-"
 JOURNAL = ".journal.json"
 OLD = ".old"
+#: the chunk cache's folder in a bake folder (``operators/base/bake_inputs.CACHE_FOLDER``)
+CACHE = ".relight_cache"
+#: the whole name of a stage this version makes: ``STAGE_PREFIX`` + :func:`.atomic.token`
+_STAGE_NAME = re.compile(re.escape(STAGE_PREFIX)
+                         + r"relight-(?P<host>[A-Za-z0-9_]+)-(?P<pid>\d+)-[0-9a-f]{8}")
 FORMAT = "relightable_textures.commit_journal"
 
 
@@ -129,10 +152,14 @@ def _fsync_dir(folder: str) -> None:
 
 def _prune_empty(folder: str) -> None:
     """Remove ``folder`` and its subfolders bottom-up where they hold nothing (a chunk cache
-    whose bakes are all committed)."""
-    if not os.path.isdir(folder):
+    whose bakes are all committed). Real folders only: a symlinked ``folder`` is left alone and
+    links inside are not walked (``lstat``; ``os.walk`` does not follow links below its top)."""
+    try:
+        if not untrusted.real_folder(folder):
+            return
+    except UntrustedFileError:
         return
-    for root, _, _ in sorted(os.walk(folder), key=lambda w: -len(w[0])):
+    for root, _, _ in sorted(os.walk(folder, followlinks=False), key=lambda w: -len(w[0])):
         try:
             os.rmdir(root)
         except OSError:
@@ -289,9 +316,11 @@ class BakeTransaction:
             "target": self.target, "entries": self.entries, "retired": self.retired,
             "blend": self.blend, "blend_before": self.blend_before,
             "blend_tmp": getattr(self, "blend_tmp", None),
-            # names that existed in the target before the swap: an undo never moves one of
-            # those out unless its old file is at hand in .old to take its place
-            "existed": getattr(self, "existed", [])})
+            # names that existed in the target before the swap (for a person reading it)
+            "existed": getattr(self, "existed", []),
+            # name -> [device, inode] of each staged entry: an undo moves a file out of the
+            # target only when it is the one the swap moved in (a rename keeps both)
+            "moved": getattr(self, "moved", {})})
         self.state = state
 
     def staged(self) -> list:
@@ -375,6 +404,7 @@ class BakeTransaction:
         self._check_blend()
         self.blend_tmp = blend_tmp
         self.existed = [n for n in self.entries if os.path.lexists(os.path.join(self.target, n))]
+        self.moved = {n: _identity(self.path(n)) for n in self.entries}
         self._journal("swapping")
         os.makedirs(self.old)
         for name in self.retired:
@@ -413,7 +443,7 @@ class BakeTransaction:
                 action()
             except Exception as exc:   # e.g. a chunk cache that would not go
                 self.warnings.append(f"could not remove the chunks that served: {exc}")
-        _prune_empty(os.path.join(self.target, ".relight_cache"))
+        _prune_empty(os.path.join(self.target, CACHE))
 
     def rollback(self) -> None:
         """Undo whatever part of the swap happened and remove the stage."""
@@ -421,9 +451,10 @@ class BakeTransaction:
             return
         _AFTER_COMMIT.pop(self.stage, None)
         if os.path.isdir(self.stage):
-            _undo(self.stage, self.target, self.entries, self.retired)
+            _undo(self.stage, self.target, self.entries, self.retired,
+                  getattr(self, "moved", {}))
         self.state = "rolled back"
-        _prune_empty(os.path.join(self.target, ".relight_cache"))
+        _prune_empty(os.path.join(self.target, CACHE))
         if getattr(self, "created_target", False):   # a folder this bake made, left empty
             try:
                 os.rmdir(self.target)
@@ -435,61 +466,123 @@ class ChangedMeanwhile(RuntimeError):
     """The ``.blend`` a bake would record into changed on disk while the bake ran."""
 
 
-def _undo(stage: str, target: str, entries: list, retired: list) -> None:
+def _identity(path: str) -> list:
+    """[device, inode] of the entry ``path`` itself (``lstat``): kept by a rename."""
+    st = os.lstat(path)
+    return [st.st_dev, st.st_ino]
+
+
+def _undo(stage: str, target: str, entries: list, retired: list, moved: dict | None = None) -> None:
     """Put ``target`` back as it was before the swap. Every step is a rename that leaves the
     stage explaining the state, so an undo that is itself interrupted (a kill, a file Windows
     holds open) can be run again: a new file moved in goes back into the stage (never deleted
-    while the old one may be missing), then the old one comes back from ``.old``."""
+    while the old one may be missing), then the old one comes back from ``.old``.
+
+    ``moved``: name -> [device, inode] of the entries the swap moved in (None: the journal's);
+    a file in ``target`` goes back into the stage only when it is that very file. A journal of
+    an earlier version has none: a file then goes back only when its old file is in ``.old``
+    to take its place. Names are basenames (:func:`.untrusted.check_name`, all checked before
+    anything moves); ``.old`` must be a real folder, and only regular files and real folders
+    come back from it (UntrustedFileError otherwise, nothing moved)."""
+    names = list(entries) + list(retired)
+    for name in names:
+        untrusted.check_name(name)
     old = os.path.join(stage, OLD)
-    for name in list(entries) + list(retired):
+    have_old = untrusted.real_folder(old)
+    if moved is None:
+        moved = _journal_of(stage).get("moved")
+    for name in names:
         dest = os.path.join(target, name)
         staged = os.path.join(stage, name)
         kept = os.path.join(old, name)
         if name in entries and not os.path.lexists(staged) and os.path.lexists(dest) and (
-                os.path.lexists(kept) or name not in _previous(stage)):
+                _identity(dest) == list(moved.get(name) or []) if isinstance(moved, dict)
+                else have_old and os.path.lexists(kept)):
             os.rename(dest, staged)          # the new file, back into the stage
-        if os.path.lexists(kept) and not os.path.lexists(dest):
+        if have_old and _plain(kept) and not os.path.lexists(dest):
             os.rename(kept, dest)            # the old file, back into place
     _fsync_dir(target)
     shutil.rmtree(stage, ignore_errors=True)
 
 
-def _previous(stage: str) -> set:
-    """Names the journal says existed in the target before the swap (``existed``)."""
+def _plain(path: str) -> bool:
+    """Whether ``path`` is a regular file or a real folder (``lstat``; False when absent)."""
     try:
-        with open(os.path.join(stage, JOURNAL), encoding="utf-8") as fh:
-            return set(json.load(fh).get("existed", []))
-    except (OSError, ValueError):
-        return set()
+        mode = os.lstat(path).st_mode
+    except OSError:
+        return False
+    import stat
+
+    return stat.S_ISREG(mode) or stat.S_ISDIR(mode)
+
+
+def _journal_of(stage: str) -> dict:
+    """The journal of ``stage`` as it reads ({} when missing or unreadable)."""
+    try:
+        return untrusted.read_json(os.path.join(stage, JOURNAL))
+    except UntrustedFileError:
+        return {}
+
+
+def _checked_journal(stage: str) -> dict | None:
+    """The journal of ``stage`` (None when there is none), its fields checked: names are
+    basenames, ``moved`` pairs of integers. UntrustedFileError (naming the journal) otherwise:
+    the stage is then left alone."""
+    path = os.path.join(stage, JOURNAL)
+    if not os.path.lexists(path):
+        return None
+    j = untrusted.read_json(path)
+
+    def bad(cause):
+        return UntrustedFileError(path, f"{cause}; the stage is left alone")
+
+    for field in ("entries", "retired"):
+        names = j.get(field, [])
+        if not isinstance(names, list):
+            raise bad(f"its {field} are not a list")
+        for name in names:
+            try:
+                untrusted.check_name(name)
+            except UntrustedFileError as exc:
+                raise bad(f"its {field} name {exc.cause}") from None
+    moved = j.get("moved")
+    if moved is not None and not (isinstance(moved, dict) and all(
+            isinstance(v, list) and len(v) == 2 and all(type(x) is int for x in v)
+            for v in moved.values())):
+        raise bad("its moved entries are not [device, inode] pairs")
+    if j.get("blend") is not None and not isinstance(j["blend"], str):
+        raise bad("its blend is not a path")
+    return j
 
 
 def recover(stage: str) -> str:
     """Finish or undo the stage of a process that is gone (by its journal); returns what was
-    done: ``removed`` (never swapped: the previous bake is untouched), ``rolled back`` or
-    ``rolled forward``."""
-    try:
-        with open(os.path.join(stage, JOURNAL), encoding="utf-8") as fh:
-            j = json.load(fh)
-    except (OSError, ValueError):
-        j = None
+    done: ``removed`` (never swapped: the previous bake is untouched), ``rolled back``,
+    ``rolled forward`` or ``left`` (old files without a journal, or a newer version's
+    journal). Raises UntrustedFileError, having changed nothing, when ``stage`` is not a real
+    folder, its journal does not read or names anything but basenames, or its ``.old`` is not
+    a real folder (module docstring: a stage from elsewhere). The journal's ``blend_tmp`` is
+    never removed here (the caller's sweep of the ``.blend``'s folder removes ours)."""
+    if not untrusted.real_folder(stage):
+        return "removed"   # (gone meanwhile)
+    j = _checked_journal(stage)
     if j and int(j.get("format_version", 1)) > versions.version_of(FORMAT):
         return "left"   # a newer version's journal: not ours to interpret
     if not j or j.get("state") not in ("swapping", "swapped", "committed"):
         old = os.path.join(stage, OLD)
-        if os.path.isdir(old) and os.listdir(old):
+        if os.path.lexists(old) and (not os.path.isdir(old) or os.path.islink(old)
+                                     or os.listdir(old)):
             return "left"   # old files without a readable journal: for a person to look at
         shutil.rmtree(stage, ignore_errors=True)
         return "removed"
+    untrusted.real_folder(os.path.join(stage, OLD))   # (before anything moves)
     if j["state"] == "committed" or (
             j["state"] == "swapped" and j.get("blend")
             and file_identity(j["blend"]) != j.get("blend_before")):
         shutil.rmtree(stage, ignore_errors=True)   # the .blend was saved: keep the new bake
         return "rolled forward"
     _undo(stage, os.path.dirname(os.path.abspath(stage)), j.get("entries", []),
-          j.get("retired", []))
-    tmp = j.get("blend_tmp")
-    if tmp and os.path.isfile(tmp) and atomic.owner_of(os.path.basename(tmp)):
-        os.remove(tmp)   # the new .blend that was never renamed into place
+          j.get("retired", []), j.get("moved"))
     return "rolled back"
 
 
@@ -501,52 +594,81 @@ _LEGACY = (re.compile(r"^\..+\.(\d+)-[0-9a-f]{8}\.tmp(\.[A-Za-z0-9]+)*$"),
 
 
 def _debris_owner(name: str, legacy: bool = True):
-    """(host or None, pid) when ``name`` is a temporary name of this tool, else None."""
+    """(host or None, pid) when ``name`` is a temporary name of this tool, else None (also for
+    pid 0 or below: no process of ours has one)."""
     own = atomic.owner_of(name)
     if own is not None or not legacy:
         return own
     for rx in _LEGACY:
         m = rx.match(name)
         if m:
-            return None, int(m.group(1))
+            return (None, int(m.group(1))) if int(m.group(1)) > 0 else None
     return None
+
+
+def _looks_like_debris(name: str) -> bool:
+    """Whether ``name`` has the shape of a temporary name of this tool, whatever its pid."""
+    return bool(atomic._TOKEN.search(name)) or any(rx.match(name) for rx in _LEGACY)
 
 
 def sweep(folder: str, stages: bool = True) -> dict:
     """Recover the stages and remove the temporary files and folders in ``folder`` (and its
     chunk cache, ``.relight_cache``) that processes of this tool on this host left when they
     were killed. A name counts only when it carries our token (or an earlier version's temporary
-    pattern) and its pid is not running; anything else is left alone. Returns
-    ``{"removed": [...], "rolled_back": [...], "rolled_forward": [...]}`` (names)."""
-    out = {"removed": [], "rolled_back": [], "rolled_forward": []}
+    pattern; a stage only this version's exact name) and its pid is above 0 and not running;
+    anything else is left alone. Links are never followed: a symlinked chunk cache is not
+    walked, a symlinked stage not entered. Returns ``{"removed": [...], "rolled_back": [...],
+    "rolled_forward": [...], "refused": [...]}`` (names; ``refused``: "name: why" of what looked
+    like our debris but was left alone, e.g. a planted stage -- for the caller to report)."""
+    out = {"removed": [], "rolled_back": [], "rolled_forward": [], "refused": []}
     if not os.path.isdir(folder):
         return out
     host = atomic._host()
     places = [folder]
-    cache = os.path.join(folder, ".relight_cache")
-    if stages and os.path.isdir(cache):
-        places += [root for root, _, _ in os.walk(cache)]
+    cache = os.path.join(folder, CACHE)
+    if stages:
+        try:
+            if untrusted.real_folder(cache):
+                places += [root for root, _, _ in os.walk(cache, followlinks=False)]
+        except UntrustedFileError as exc:
+            out["refused"].append(f"{CACHE}: {exc.cause}")
     for place in places:
         try:
             names = os.listdir(place)
         except OSError:
             continue
         for name in names:
+            p = os.path.join(place, name)
+            rel = os.path.relpath(p, folder)
+            if name.startswith(STAGE_PREFIX):
+                if not stages or place != folder:
+                    continue
+                m = _STAGE_NAME.fullmatch(name)
+                if m is None or int(m["pid"]) <= 0:
+                    if m is not None or _looks_like_debris(name):
+                        why = ("pid 0 is no process's" if m is not None else
+                               "not a stage name of this version")
+                        out["refused"].append(f"{rel}: {why}; left alone")
+                    continue
+                if m["host"] != host or int(m["pid"]) == os.getpid() or pid_alive(int(m["pid"])):
+                    continue
+                try:
+                    done = recover(p)
+                except UntrustedFileError as exc:
+                    what = rel if exc.path in ("", p) else os.path.relpath(exc.path, folder)
+                    out["refused"].append(f"{what}: {exc.cause}")
+                    continue
+                except OSError:
+                    continue
+                if done != "left":
+                    out[{"removed": "removed", "rolled back": "rolled_back",
+                         "rolled forward": "rolled_forward"}[done]].append(rel)
+                continue
             owner = _debris_owner(name, legacy=stages)   # (old names: only in our folders)
             if owner is None:
                 continue
             h, pid = owner
             if (h is not None and h != host) or pid == os.getpid() or pid_alive(pid):
-                continue
-            p = os.path.join(place, name)
-            rel = os.path.relpath(p, folder)
-            if name.startswith(STAGE_PREFIX) and os.path.isdir(p):
-                if not stages:
-                    continue
-                done = recover(p)
-                if done != "left":
-                    out[{"removed": "removed", "rolled back": "rolled_back",
-                         "rolled forward": "rolled_forward"}[done]].append(rel)
                 continue
             try:
                 _remove(p)

@@ -81,3 +81,19 @@ def test_no_other_module_renames_files_itself():
             if rel not in allowed and ("os.replace(" in text or "os.rename(" in text):
                 offenders.append(rel)
     assert offenders == []
+
+
+def test_a_temporary_name_with_pid_0_is_no_process_of_ours(tmp_path):
+    """Issue 56: pid 0 is no process's (``os.kill(0, 0)`` signals the caller's group), so a
+    name carrying it was made by hand: never counted ours, never removed by a sweep."""
+    from relightable_textures.lt_addon.io import transaction
+
+    host = atomic._host()
+    assert atomic.owner_of(f".A.relight-{host}-0-deadbeef.tmp.npy") is None
+    assert atomic.owner_of(f".A.relight-{host}-12-deadbeef.tmp.npy") == (host, 12)
+    names = [f".A.relight-{host}-0-deadbeef.tmp.npy", ".A.npy.0.tmp.npy",
+             ".A_report.0-0badcafe.tmp.json"]
+    for n in names:
+        (tmp_path / n).write_bytes(b"someone's")
+    assert transaction.sweep(str(tmp_path))["removed"] == []
+    assert _listing(tmp_path) == sorted(names)

@@ -228,3 +228,146 @@ def test_an_undo_that_is_itself_interrupted_can_be_run_again(tmp_path, monkeypat
     monkeypatch.setattr(tr.os, "rename", real)
     assert tr.recover(txn.stage) == "rolled back"
     assert _state(out) == before
+
+
+# ------------------------------------------------------------------------------------------
+# issue 56: a bake folder is untrusted input -- a planted stage or chunk cache never reaches
+# outside it (sentinel files beside the folder are compared byte for byte afterwards)
+
+
+def _dead_pid():
+    return int(subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                              capture_output=True, text=True).stdout)
+
+
+def _outside(tmp_path):
+    """A victim file and folder beside ``bk/``, and what they hold."""
+    (tmp_path / "victim.txt").write_bytes(b"the user's file next to the bake folder")
+    ext = tmp_path / "elsewhere"
+    (ext / "sub").mkdir(parents=True)
+    (ext / "keep.txt").write_bytes(b"keep")
+    return {"victim.txt": (tmp_path / "victim.txt").read_bytes(), "elsewhere": _state(ext)}
+
+
+def _assert_outside_unchanged(tmp_path, before):
+    assert (tmp_path / "victim.txt").read_bytes() == before["victim.txt"]
+    assert _state(tmp_path / "elsewhere") == before["elsewhere"]
+    assert (tmp_path / "elsewhere" / "sub").is_dir()
+
+
+def _plant(stage, entries, state="swapping", old=(), extra=None):
+    """A stage as a killed commit would leave it, with a journal naming ``entries``."""
+    stage.mkdir()
+    atomic.write_json(stage / tr.JOURNAL, {
+        "format": tr.FORMAT, "format_version": 1, "state": state, "target": "/",
+        "entries": entries, "retired": [], "blend": None, "blend_before": None,
+        "blend_tmp": None, "existed": [], **(extra or {})})
+    (stage / "victim.txt").write_bytes(b"planted")   # what '../victim.txt' would bring in
+    if old is not None:
+        (stage / tr.OLD).mkdir()
+        for n in old:
+            (stage / tr.OLD / n).write_bytes(b"planted old")
+
+
+@pytest.mark.parametrize("attack", ["dotdot", "absolute", "separator", "legacy-name", "pid-0",
+                                    "symlinked-stage", "symlinked-old"])
+def test_a_planted_stage_never_moves_a_file_outside_the_folder(tmp_path, attack):
+    """Issue 56: ``bk/.relight-stage-x.0-deadbeef.tmp/`` (an old-style name, pid 0) with a
+    journal in state ``swapping`` naming ``../victim.txt`` made the next bake's sweep replace
+    ``victim.txt`` beside ``bk/``. Names from a journal are basenames re-joined under the
+    folder, stages of other name formats or pid 0 are never recovered, links never entered;
+    each refusal leaves the planted stage alone and is reported."""
+    out = tmp_path / "bk"
+    inside = _previous_bake(out)
+    outside = _outside(tmp_path)
+    host, dead = atomic._host(), _dead_pid()
+    name = f"{tr.STAGE_PREFIX}relight-{host}-{dead}-0badcafe"
+    victim = str(tmp_path / "victim.txt")
+    if attack == "dotdot":
+        _plant(out / name, ["../victim.txt"], old=["../victim.txt"])
+    elif attack == "absolute":
+        _plant(out / name, [victim])
+    elif attack == "separator":   # a path through a link planted in bk, and Windows' separator
+        os.symlink(tmp_path / "elsewhere", out / "link")
+        _plant(out / name, ["link/keep.txt", "x\\..\\..\\victim.txt"], old=[])
+        (out / name / "link").mkdir()
+        (out / name / tr.OLD / "link").mkdir()
+        (out / name / tr.OLD / "link" / "keep.txt").write_bytes(b"planted old")
+    elif attack == "legacy-name":   # the issue's own stage
+        _plant(out / f"{tr.STAGE_PREFIX}x.0-deadbeef.tmp", ["../victim.txt"])
+    elif attack == "pid-0":
+        _plant(out / f"{tr.STAGE_PREFIX}relight-{host}-0-deadbeef", ["A_t.npy", "notes.txt"])
+    elif attack == "symlinked-stage":   # the stage is a link to a folder elsewhere
+        ext = tmp_path / "elsewhere"
+        atomic.write_json(ext / tr.JOURNAL, {"format": tr.FORMAT, "format_version": 1,
+                                              "state": "swapping", "entries": ["keep.txt"],
+                                              "retired": [], "existed": []})
+        outside["elsewhere"] = _state(ext)
+        os.symlink(ext, out / name)
+    elif attack == "symlinked-old":     # .old a link: its files would be renamed into bk
+        _plant(out / name, ["keep.txt"], old=None)
+        os.symlink(tmp_path / "elsewhere", out / name / tr.OLD)
+    done = tr.sweep(str(out))
+    _assert_outside_unchanged(tmp_path, outside)
+    assert {k: v for k, v in _state(out).items() if not k.startswith(tr.STAGE_PREFIX)} == inside
+    assert len(done["refused"]) == 1, done
+    assert not done["rolled_back"] and not done["rolled_forward"]
+    planted = [n for n in os.listdir(out) if n.startswith(tr.STAGE_PREFIX)]
+    assert len(planted) == 1 and planted[0] in done["refused"][0]   # left alone, named
+    # a real bake into the folder goes on and commits
+    with tr.BakeTransaction(str(out)) as txn:
+        _new_bake(txn.stage)
+        txn.commit()
+    _assert_outside_unchanged(tmp_path, outside)
+    np.testing.assert_array_equal(np.load(out / "A_t.npy"), np.arange(6.0) * 2)
+    assert txn.swept["refused"] == done["refused"]
+
+
+def test_a_planted_journal_cannot_take_the_users_file_inside_the_folder(tmp_path):
+    """A stage of our name format whose journal lists a file of the user's that the swap never
+    moved (``notes.txt``): the undo moves back only what the swap moved in (its identity is in
+    the journal), so the user's file stays."""
+    out = tmp_path / "bk"
+    inside = _previous_bake(out)
+    stage = out / f"{tr.STAGE_PREFIX}relight-{atomic._host()}-{_dead_pid()}-0badcafe"
+    _plant(stage, ["notes.txt", "A_t.npy"], old=[], extra={"moved": {}})
+    done = tr.sweep(str(out))
+    assert done["rolled_back"] == [stage.name]
+    assert _state(out) == inside
+
+
+def test_the_recovery_never_removes_a_blend_tmp_the_journal_names(tmp_path):
+    """``blend_tmp`` came from the journal: a path anywhere (here another process's temporary
+    .blend in another folder). The recovery leaves it; the CLI's own sweep of the .blend's
+    folder removes our temporary .blend files of dead processes by their token."""
+    out = tmp_path / "bk"
+    _previous_bake(out)
+    (tmp_path / "elsewhere").mkdir()
+    other = tmp_path / "elsewhere" / f".scene.relight-{atomic._host()}-{_dead_pid()}-12345678.tmp.blend"
+    other.write_bytes(b"BLENDER-someone's")
+    stage = out / f"{tr.STAGE_PREFIX}relight-{atomic._host()}-{_dead_pid()}-0badcafe"
+    _plant(stage, [], old=[], extra={"blend_tmp": str(other), "moved": {}})
+    done = tr.sweep(str(out))
+    assert done["rolled_back"] == [stage.name]
+    assert other.read_bytes() == b"BLENDER-someone's"
+
+
+def test_a_symlinked_chunk_cache_is_never_walked_or_pruned(tmp_path):
+    """``bk/.relight_cache`` a link to a folder elsewhere holding a key-like folder with our
+    debris name and an empty folder: neither the sweep nor the commit's prune of empty cache
+    folders reaches through it; the sweep reports it."""
+    out = tmp_path / "bk"
+    _previous_bake(out)
+    ext = tmp_path / "elsewhere"
+    (ext / "empty").mkdir(parents=True)
+    key = ext / "0123456789abcdef0123"
+    key.mkdir()
+    (key / f".direct_00000.relight-{atomic._host()}-{_dead_pid()}-11111111.tmp.npy").write_bytes(b"x")
+    before = _state(ext)
+    os.symlink(ext, out / ".relight_cache")
+    with tr.BakeTransaction(str(out)) as txn:
+        _new_bake(txn.stage)
+        txn.commit()
+    assert _state(ext) == before and (ext / "empty").is_dir()
+    assert os.path.islink(out / ".relight_cache")
+    assert any(".relight_cache" in r for r in txn.swept["refused"]), txn.swept
