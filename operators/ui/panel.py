@@ -141,17 +141,19 @@ def _last_bake(layout, scene):
 def run_on_lines(props) -> list:
     """The lines under Run On Dask, as ``[(text, icon)]``: the add-on's preferences' Relight
     Command and Dask Scheduler (read-only here: a .blend does not choose them), what trusting a
-    scheduler means, and a legacy value this .blend carries, said to be ignored."""
+    scheduler means, and a legacy value this .blend carries, said to be ignored (also when the
+    bake runs here)."""
     from ..farm import external_bake as eb
 
-    if props.run_on == "HERE":
-        return []
-    prefs = eb.farm_preferences()
-    lines = [(f"Relight Command: {prefs.relight_command or '`relight` on PATH'}", "CONSOLE")]
-    if props.run_on == "SCHEDULER":
-        lines.append((f"Dask Scheduler: {prefs.scheduler or 'not set'}", "NETWORK_DRIVE"))
-        lines.append(("Connecting trusts that cluster with running code here", "ERROR"))
-    lines.append((f"Set in {eb.WHERE}", "PREFERENCES"))
+    lines = []
+    if props.run_on != "HERE":
+        prefs = eb.farm_preferences()
+        lines.append((f"Relight Command: {prefs.relight_command or '`relight` on PATH'}",
+                      "CONSOLE"))
+        if props.run_on == "SCHEDULER":
+            lines.append((f"Dask Scheduler: {prefs.scheduler or 'not set'}", "NETWORK_DRIVE"))
+            lines.append(("Connecting trusts that cluster with running code here", "ERROR"))
+        lines.append((f"Set in {eb.WHERE}", "PREFERENCES"))
     for name, what in (("dask_command", "Relight Command"), ("dask_scheduler", "Scheduler")):
         legacy = getattr(props, name, "").strip()
         if legacy:

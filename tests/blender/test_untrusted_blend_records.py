@@ -150,6 +150,9 @@ def test_bake_runs_no_relight_command_from_the_blend(opened, pack, tmp_path):
 
     lines = " | ".join(text for text, _ in panel.run_on_lines(scene.relight))
     assert "'//evil.sh'" in lines and "ignored" in lines and "Preferences" in lines
+    scene.relight.run_on = "HERE"      # said also when the bake runs here
+    assert any("'//evil.sh' is ignored" in t for t, _ in panel.run_on_lines(scene.relight))
+    scene.relight.run_on = "WORKERS"
 
     # the user's own command, from the preferences, is what runs (the helper reads it there)
     mine = _recorder(tmp_path, "my-relight")
