@@ -28,7 +28,7 @@ import numpy as np
 
 from ..errors import InputError
 from .. import faults
-from ..io import atomic, exrio, versions
+from ..io import atomic, exrio, untrusted, versions
 from ..settings import check_ranges, setting
 from ..sphere.hemisphere import direction_from_az_el
 from . import texture as tt
@@ -679,50 +679,106 @@ def preview_cost(model, settings, store=None, view=None, horizon=None, indirect=
     return {"viewport": "pca", **model.preview_cost(extra)}
 
 
+#: The report's ``files`` a checksum is recorded for, and the order they are checked in.
+CHECKSUMMED = ("transport", "albedo", "indirect", "model", "viewport_blocks", "horizons")
+
+
+def file_checksums(files: dict) -> dict:
+    """``{key: "sha256:<hex>"}`` of a bundle's files (:func:`..io.untrusted.file_checksum`),
+    recorded in the report at bake time so a reader can tell a file changed after the bake.
+    T is hashed too (0.53 s/GiB), whatever its size: a reader verifies it when it is at most
+    :data:`..io.untrusted.CHECKSUM_MAX_BYTES`."""
+    out = {k: untrusted.file_checksum(files[k]) for k in CHECKSUMMED if k in files}
+    if "transport" in files:   # T's header: its resolution and directions
+        out["transport_header"] = untrusted.file_checksum(
+            tt.TransportStore.header_path(files["transport"]))
+    return out
+
+
+def _report_settings(report: dict, path: str) -> dict:
+    """The report's ``settings``, with the fields readers size or index by checked: the sun
+    size (degrees), the viewport table size (D, a D x D table; a D^2 loop), the kernel."""
+    s = untrusted.field(report, "settings", path, dict)
+    angle = untrusted.field(s, "sun_angle", path, float, where="settings")
+    if not 0.0 <= angle <= 90.0:
+        raise untrusted.UntrustedFileError(path, f"settings.sun_angle {angle} is not in 0..90")
+    if "table_size" in s:
+        untrusted.check_count(path, untrusted.field(s, "table_size", path, int,
+                                                    where="settings"),
+                              256, "settings.table_size", lo=8)
+    if "kernel" in s and untrusted.field(s, "kernel", path, str, where="settings") \
+            not in tt.KERNELS:
+        raise untrusted.UntrustedFileError(path, f"settings.kernel {s['kernel']!r:.40} is not "
+                                                 f"one of {', '.join(tt.KERNELS)}")
+    return s
+
+
 def load_bake(report_path: str) -> tuple:
-    """(ObjectBake, TransportStore, report) from a report written by :func:`write_bake`."""
+    """(ObjectBake, TransportStore, report) from a report written by :func:`write_bundle`.
+
+    The report and every file it names are read as files from elsewhere
+    (:mod:`..io.untrusted`): the report is a capped regular JSON file; the files are found by
+    their basenames in the report's folder (no link is followed, no other folder read); each
+    file's checksum, when the report records one (bakes from before have none), must match
+    (T only up to :data:`..io.untrusted.CHECKSUM_MAX_BYTES`: a larger T is checked by its
+    header and its values' range as it is read); the stores and models check their own
+    headers and values. Anything else is one :class:`..io.untrusted.UntrustedFileError`
+    naming the file."""
     from ..steerable.texture import SteerableTexture
 
-    with open(report_path) as fh:
-        report = json.load(fh)
-    report["report"] = os.path.abspath(report_path)
-    if report.get("kind", KIND) != KIND:
-        raise InputError(f"{report_path}: a {report.get('kind')!r} report, not a transport "
-                         f"texture bake's")
-    found = max(int(report.get("format", 1)), int(report.get("format_version", 1)))
+    rp = os.path.abspath(report_path)
+    report = untrusted.read_json(rp)
+    kind = untrusted.field(report, "kind", rp, str, KIND)
+    if kind != KIND:
+        raise InputError(f"{report_path}: a {kind!r} report, not a transport texture bake's")
+    found = max(untrusted.field(report, "format", rp, int, 1),
+                untrusted.field(report, "format_version", rp, int, 1))
     if found > FORMAT:
         raise InputError(f"{report_path}: bundle format {found} is newer than this "
                          f"version reads ({FORMAT}); update Relightable Textures")
-    files = report["files"]
-    folder = os.path.dirname(report_path)
+    report["report"] = rp
+    untrusted.field(report, "object", rp, str)
+    _report_settings(report, rp)
+    files = untrusted.field(report, "files", rp, dict)
+    sums = untrusted.field(report, "checksums", rp, dict, {})
+    folder = os.path.dirname(rp)
 
-    def where(p):  # the report's folder may have moved with the files
-        return p if os.path.exists(p) else os.path.join(folder, os.path.basename(p))
+    def where(key):   # the report's folder may have moved with the files: basenames only
+        name = os.path.basename(untrusted.field(files, key, rp, str, where="files"))
+        path = untrusted.confined(folder, name, must_exist=True, folder=False)
+        if key == "transport":   # T's data (up to the cap) and its header
+            untrusted.check_checksum(path, sums.get(key))
+            untrusted.check_checksum(tt.TransportStore.header_path(path),
+                                     sums.get("transport_header"))
+        else:
+            untrusted.check_checksum(path, sums.get(key), max_bytes=untrusted.MAX_ARRAY_BYTES)
+        return path
 
-    store = tt.TransportStore.open(where(files["transport"]))
-    ch, meta = exrio.read_exr(where(files["albedo"]))
+    store = tt.TransportStore.open(where("transport"))
+    albedo_path = where("albedo")
+    ch, meta = exrio.read_exr(albedo_path)
     if meta:   # (albedos before versioning carry a format but no version: 1)
-        versions.check(meta, "relightable_textures.albedo", where(files["albedo"]), "an albedo")
-    albedo = np.stack([ch[c] for c in "RGB"], axis=-1).astype(np.float32)
+        versions.check(meta, "relightable_textures.albedo", albedo_path, "an albedo")
+    albedo = exrio.stack_channels(albedo_path, ch, "RGB", (store.resolution, store.resolution))
     indirect = None
     if "indirect" in files:
-        ip = where(files["indirect"])
+        ip = where("indirect")
         indirect = (GatheredIndirect.load(ip, store.directions) if ip.endswith(".npz")
                     else SteerableTexture.load(ip))
     model = None
     if "model" in files:
-        m = where(files["model"])
-        model = SteerableTexture.load(m) if m.endswith(".exr") else tt.load_model(m)
+        m = where("model")
+        model = SteerableTexture.load(m) if m.endswith(".exr") else tt.load_model(m, store)
     view = None
     if "viewport_blocks" in files:
         from . import block_viewport as bv
 
-        view = bv.load(where(files["viewport_blocks"]), store)
+        view = bv.load(where("viewport_blocks"), store)
     horizon = None
     if "horizons" in files:
         from . import horizon_map as hmap
 
-        horizon = hmap.load(where(files["horizons"]))
+        horizon = hmap.load(where("horizons"), store.resolution)
     return ObjectBake(report["object"], store.path, albedo, indirect, model, view=view,
                       viewport=report.get("viewport"), horizon=horizon), store, report
 
@@ -781,6 +837,7 @@ def write_bundle(result: TransportTextureResult, names: list, out_dir: str,
             files["horizons"] = base + "_horizons.npz"
             hmap.save(files["horizons"], b.horizon)
         nbytes = {k: os.path.getsize(v) for k, v in files.items()}
+        sums = file_checksums(files)
         s = result.settings
         store = b.store or tt.TransportStore.open(b.store_path)
         report = {
@@ -789,6 +846,7 @@ def write_bundle(result: TransportTextureResult, names: list, out_dir: str,
             "direction_set": result.directions.spec,
             "objects_baked_together": list(names),
             "files": {k: os.path.abspath(v) for k, v in files.items()},
+            "checksums": sums,
             "bytes": {**nbytes, "total": int(sum(nbytes.values())),
                       **(b.model.storage_bytes() if hasattr(b.model, "storage_bytes") else {})},
             "model": model_summary(b.model, result.directions.size),

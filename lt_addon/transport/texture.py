@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.spatial
 
-from ..io import atomic, versions
+from ..io import atomic, untrusted, versions
 from ..sphere.directions import DirectionSet, hull_barycentric, parse_direction_spec
 from ..sphere.hemisphere import disk_to_hemisphere, hemisphere_to_disk, normalize_directions
 
@@ -237,6 +237,18 @@ def steer_environment(steerable, B: np.ndarray, weights) -> np.ndarray:
 # the on-disk store
 
 
+#: The range T's values lie in: direct transport ``cos * V / pi`` of a white Lambertian
+#: surface under a sun of unit normal irradiance is in [0, 1/pi] (cosine <= 1, visibility 0 or
+#: 1, a Cycles bake's antialiasing averages such values). The tolerance covers float16 rounding
+#: (half an ulp is 2^-11 relative; 1/pi is stored as 0.318359375, 1.00016/pi: the maximum of
+#: real bakes, both by rays and by Cycles, at 16^2 and 32^2 on the bumps). Indirect light and
+#: albedo are not in T (they are separate files).
+T_LO, T_HI = -1e-4, (1.0 + 1e-3) / np.pi
+#: dtypes T may be stored as: float16 (written by :meth:`TransportStore.create`) or float32,
+#: little-endian as NumPy writes it on every platform this runs on.
+T_DTYPES = (np.dtype("<f2"), np.dtype("<f4"))
+
+
 def transport_bytes(n_directions: int, n_texels: int, channels: int = 1) -> int:
     """Bytes of a float16 transport store (S x P x C)."""
     return int(n_directions) * int(n_texels) * int(channels) * 2
@@ -261,6 +273,8 @@ class TransportStore:
     resolution: int
     meta: dict = field(default_factory=dict)
     _array: np.ndarray | None = None
+    #: written by this process (:meth:`finish`'s reader): its values are not checked again
+    _trusted: bool = False
 
     @property
     def n_texels(self) -> int:
@@ -268,10 +282,57 @@ class TransportStore:
 
     @property
     def array(self) -> np.ndarray:
-        """The (S, P) float16 memmap (read-only once finished)."""
+        """The (S, P) float16 memmap (read-only once finished), its values checked on first
+        use (finite, in ``[T_LO, T_HI]``: :meth:`check_values`)."""
         if self._array is None:
-            self._array = np.load(self.path, mmap_mode="r")
+            arr = self._raw()
+            if not self._trusted:
+                self.check_values(arr)
+            self._array = arr
         return self._array
+
+    def _raw(self) -> np.ndarray:
+        """T's memory map after checking its NPY header against this store's header: a
+        regular file of dtype :data:`T_DTYPES`, shape (S, R^2), as long as its header says --
+        nothing of its data is read here."""
+        if self._array is not None:
+            return self._array
+        shape, fortran, dtype, _ = untrusted.npy_header(self.path)
+        if dtype not in T_DTYPES:
+            raise untrusted.UntrustedFileError(
+                self.path, f"holds {dtype.str}, not float16 or float32 (little-endian)")
+        untrusted.check_shape(self.path, shape, (self.directions.size, self.n_texels))
+        if fortran:
+            raise untrusted.UntrustedFileError(self.path, "is stored column-major; T is "
+                                                          "written row-major")
+        try:
+            return np.load(self.path, mmap_mode="r", allow_pickle=False)
+        except (ValueError, OSError) as exc:
+            raise untrusted.UntrustedFileError(self.path, f"cannot be read ({exc})") from None
+
+    def check_values(self, arr=None) -> None:
+        """UntrustedFileError ``<T>: holds NaN or infinite transport values`` or values out of
+        ``[T_LO, T_HI]`` (direct transport is in [0, 1/pi]). Read in blocks of 16 M values
+        with two integer reductions each: 4 ms for T of 400 directions at 256^2 (50 MiB of
+        float16) once in the page cache, ~80 ms a GiB."""
+        arr = self._raw() if arr is None else arr
+        untrusted.check_values(self.path, arr, lo=T_LO, hi=T_HI, what="transport values")
+
+    def rows(self, indices) -> np.ndarray:
+        """Rows ``indices`` of T (k, P) float32, each checked as it is read: a relight that
+        reads a few directions of a large T does not read the rest of it."""
+        if self._array is not None:
+            arr, checked = self._array, True
+        else:
+            arr, checked = self._raw(), self._trusted
+        out = np.empty((len(indices), self.n_texels), np.float32)
+        for i, s in enumerate(indices):
+            row = arr[int(s)]
+            if not checked:
+                untrusted.check_values(self.path, row, lo=T_LO, hi=T_HI,
+                                       what="transport values")
+            out[i] = row
+        return out
 
     @staticmethod
     def header_path(path: str) -> str:
@@ -325,7 +386,8 @@ class TransportStore:
                   "directions": self.directions.to_dict(include_arrays=True), **self.meta}
         with open(self.header_path(self._tmp), "w") as fh:
             json.dump(header, fh, indent=1)
-        reader = TransportStore(self._tmp, self.directions, self.resolution, dict(self.meta))
+        reader = TransportStore(self._tmp, self.directions, self.resolution, dict(self.meta),
+                                _trusted=True)
         reader._tmp, reader.final_path = self._tmp, self.path
         return reader
 
@@ -355,14 +417,30 @@ class TransportStore:
 
     @classmethod
     def open(cls, path: str) -> "TransportStore":
-        with open(cls.header_path(path)) as fh:
-            header = json.load(fh)
+        """The store at ``path`` (T's ``.npy``; its header ``.json`` beside it), read as a file
+        from elsewhere (:mod:`..io.untrusted`): the header is a capped regular JSON file whose
+        resolution (<= MAX_RESOLUTION) and direction count (<= MAX_DIRECTIONS) are checked
+        before anything is sized by them; T's NPY header must say its dtype (float16/32),
+        shape (S, R^2) and a length the file has. T's values are checked when first read
+        (:attr:`array`, :meth:`rows`). Every refusal is one UntrustedFileError naming the
+        file."""
+        hpath = cls.header_path(path)
+        header = untrusted.read_json(hpath)
         versions.check(header, STORE_FORMAT, path, "a transport texture store")
-        dset = DirectionSet.from_dict(header.pop("directions"))
-        res = int(header.pop("resolution"))
-        header.pop("format")
-        header.pop("format_version", None)
-        return cls(path, dset, res, header)
+        res = untrusted.check_count(hpath, untrusted.field(header, "resolution", hpath, int),
+                                    untrusted.MAX_RESOLUTION, "resolution", lo=1)
+        d = untrusted.field(header, "directions", hpath, dict)
+        try:
+            dset = DirectionSet.from_dict(d)
+        except (ValueError, TypeError, KeyError) as exc:
+            raise untrusted.UntrustedFileError(hpath, f"has a bad direction set ({exc})") \
+                from None
+        untrusted.check_count(hpath, dset.size, untrusted.MAX_DIRECTIONS, "directions", lo=1)
+        for key in ("directions", "resolution", "format", "format_version"):
+            header.pop(key, None)
+        store = cls(path, dset, res, header)
+        store._raw()            # T's own header against this one, before anyone maps it
+        return store
 
     # -- relighting --------------------------------------------------------------------------
     def relight(self, indices, weights, texels=None) -> np.ndarray:
@@ -371,10 +449,9 @@ class TransportStore:
         if texels is not None:
             texels = np.asarray(texels, np.int64)
         out = np.zeros(self.n_texels if texels is None else len(texels), dtype=np.float64)
-        arr = self.array
         for s, w in zip(np.asarray(indices), np.asarray(weights)):
-            row = arr[int(s)] if texels is None else arr[int(s)][texels]
-            out += float(w) * row.astype(np.float64)
+            row = self.rows([int(s)])[0]
+            out += float(w) * (row if texels is None else row[texels]).astype(np.float64)
         if texels is not None:
             return out.astype(np.float32)
         return out.reshape(self.resolution, self.resolution).astype(np.float32)
@@ -492,10 +569,22 @@ class TexturePCA:
                 "resolution": np.array(self.resolution), "residual": np.array(self.residual)}
 
     @classmethod
-    def from_arrays(cls, z) -> "TexturePCA":
-        V = np.asarray(z["V"])
-        return cls(V, np.asarray(z["U"], np.float32), int(z["resolution"]),
-                   float(z["residual"]), np.zeros(V.shape[1]))
+    def from_arrays(cls, z, S: int | None = None) -> "TexturePCA":
+        """From a model file's arrays (``z``: a checked NPZ, :func:`..io.untrusted.open_npz`,
+        or a dict); ``S``: T's direction count, when known, that V's rows must match."""
+        if hasattr(z, "get") and hasattr(z, "path"):
+            path = z.path
+            R = untrusted.check_count(path, untrusted.npz_scalar(z, "resolution", int),
+                                      untrusted.MAX_RESOLUTION, "resolution", lo=1)
+            V = z.get("V", shape=(S, None), dtype="f")
+            U = z.get("U", shape=(V.shape[1], R * R), dtype="f")
+            untrusted.check_values(path, V, what="loadings")
+            untrusted.check_values(path, U, what="eigen-texture values")
+            residual = untrusted.npz_scalar(z, "residual", float)
+        else:
+            V, U = np.asarray(z["V"]), z["U"]
+            R, residual = int(z["resolution"]), float(z["residual"])
+        return cls(V, np.asarray(U, np.float32), R, residual, np.zeros(V.shape[1]))
 
 
 def fit_texture_pca(store: TransportStore, *, k: int | None = None, tol: float | None = None,
@@ -591,8 +680,32 @@ class BlockPCA:
                 "U": np.concatenate([u.ravel() for u in self.U]).astype(np.float16)}
 
     @classmethod
-    def from_arrays(cls, z) -> "BlockPCA":
-        B, V, U = int(z["block"]), np.asarray(z["V"]), np.asarray(z["U"])
+    def from_arrays(cls, z, S: int | None = None) -> "BlockPCA":
+        """From a model file's arrays (a checked NPZ, see :meth:`TexturePCA.from_arrays`, or
+        a dict): the block divides the resolution, ``dims`` has one count per block, each at
+        most S and block^2, and V's columns and U's length are what ``dims`` say."""
+        if hasattr(z, "get") and hasattr(z, "path"):
+            path = z.path
+            R = untrusted.check_count(path, untrusted.npz_scalar(z, "resolution", int),
+                                      untrusted.MAX_RESOLUTION, "resolution", lo=1)
+            B = untrusted.check_count(path, untrusted.npz_scalar(z, "block", int), R,
+                                      "block", lo=1)
+            if R % B:
+                raise untrusted.UntrustedFileError(path, f"block {B} does not divide the "
+                                                         f"resolution {R}")
+            dims = z.get("dims", shape=((R // B) ** 2,), dtype="iu")
+            V = z.get("V", shape=(S, None), dtype="f")
+            if len(dims) and (dims.min() < 1 or dims.max() > min(V.shape[0], B * B)
+                              or int(dims.sum()) != V.shape[1]):
+                raise untrusted.UntrustedFileError(path, "its block dims do not match its "
+                                                         "loadings")
+            U = z.get("U", shape=(int(dims.sum()) * B * B,), dtype="f")
+            untrusted.check_values(path, V, what="loadings")
+            untrusted.check_values(path, U, what="eigen-texture values")
+            residual = untrusted.npz_scalar(z, "residual", float)
+            z = {"dims": dims, "resolution": R, "residual": residual}
+        else:
+            B, V, U = int(z["block"]), np.asarray(z["V"]), np.asarray(z["U"])
         Vs, Us, a, u0 = [], [], 0, 0
         for n in np.asarray(z["dims"]):
             Vs.append(V[:, a:a + n])
@@ -640,18 +753,25 @@ def save_model(path: str, model, directions_spec: str) -> None:
                  **{k: np.array(v) for k, v in versions.stamp(MODEL_FORMAT).items()})
 
 
-def load_model(path: str):
-    """The model written by :func:`save_model`; a clear ValueError for an unknown kind."""
-    with np.load(path, allow_pickle=False) as z:
-        if "format" in z.files:   # (files before versioning have none: version 1)
-            versions.check({"format": str(z["format"]),
-                            "format_version": int(z["format_version"])}, MODEL_FORMAT, path,
-                           "a transport model")
-        kind = str(z["kind"])
+def load_model(path: str, store: "TransportStore | None" = None):
+    """The model written by :func:`save_model`, read as a file from elsewhere: a capped NPZ
+    (:func:`..io.untrusted.open_npz`), every array's header checked before it is read; with
+    ``store`` its directions and resolution must be T's. A clear UntrustedFileError (an
+    InputError) for an unknown kind or anything else wrong, naming the file."""
+    with untrusted.open_npz(path) as z:
+        if "format" in z:   # (files before versioning have none: version 1)
+            versions.check({"format": untrusted.npz_scalar(z, "format", str),
+                            "format_version": untrusted.npz_scalar(z, "format_version", int)},
+                           MODEL_FORMAT, path, "a transport model")
+        kind = untrusted.npz_scalar(z, "kind", str)
         if kind not in MODEL_KINDS:
-            raise ValueError(f"{path}: unknown model kind {kind!r} "
-                             f"(known: {', '.join(MODEL_KINDS)})")
-        return MODEL_KINDS[kind].from_arrays(z)
+            raise untrusted.UntrustedFileError(path, f"unknown model kind {kind!r:.40} "
+                                                     f"(known: {', '.join(MODEL_KINDS)})")
+        model = MODEL_KINDS[kind].from_arrays(z, None if store is None else store.directions.size)
+    if store is not None and model.resolution != store.resolution:
+        raise untrusted.UntrustedFileError(path, f"is fitted at {model.resolution}^2; its T is "
+                                                 f"{store.resolution}^2")
+    return model
 
 
 def quadrature_sampled_lights(store: TransportStore, sampled_basis) -> np.ndarray:

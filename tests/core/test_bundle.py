@@ -22,7 +22,7 @@ HALF = 2.0 ** -11
 def _bundle(tmp_path, model="none"):
     dset = hemisphere_fibonacci(S, 1.5)
     rng = np.random.default_rng(3)
-    T = rng.uniform(0.0, 1.0, size=(S, R, R)).astype(np.float32)
+    T = rng.uniform(0.0, 1.0 / np.pi, size=(S, R, R)).astype(np.float32)   # direct: <= 1/pi
     store = tt.TransportStore.create(str(tmp_path / "Patch_transport.npy"), dset, R)
     for s in range(S):
         store.write(s, T[s])

@@ -172,7 +172,7 @@ def test_fit_streams_with_a_bounded_working_set(tmp_path, monkeypatch):
     rng = np.random.default_rng(0)
     base = rng.random((8, R * R)).astype(np.float32)
     for s in range(d.size):
-        st.write(s, rng.random(8).astype(np.float32) @ base)
+        st.write(s, rng.random(8).astype(np.float32) @ base / (8 * np.pi))   # in [0, 1/pi]
     st.finish().commit()
     st = tt.TransportStore.open(str(tmp_path / "big.npy"))
     T_bytes = st.array.nbytes
