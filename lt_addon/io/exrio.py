@@ -84,8 +84,51 @@ def write_exr(path: str, channels: dict, metadata: dict | None = None,
     return os.path.getsize(path)
 
 
-def read_exr(path: str) -> tuple[dict, dict]:
-    """Read every channel and the metadata written by :func:`write_exr`.
+def exr_header(path: str, max_bytes: int | None = None) -> dict:
+    """The header of EXR file ``path`` alone (``header_only``: no pixel is read or inflated),
+    checked as a file from elsewhere (:mod:`.untrusted`): a regular file with one part, at
+    most MAX_CHANNELS channels, a data window of at most MAX_RESOLUTION on a side whose pixels
+    (4 bytes a channel at most) take at most ``max_bytes`` (default MAX_ARRAY_BYTES) -- a
+    header may claim sizes its compressed data would inflate to. Returns ``dict(header)``
+    with ``"width"``, ``"height"`` and ``"channel_names"`` added."""
+    from . import untrusted as ut
+
+    cap = ut.MAX_ARRAY_BYTES if max_bytes is None else int(max_bytes)
+    if not os.path.lexists(path):
+        raise FileNotFoundError(f"EXR file not found: {path}")
+    ut.regular_file(path)
+    OpenEXR = _openexr()
+    try:
+        with OpenEXR.File(path, header_only=True) as exr:
+            parts = len(exr.parts)
+            header = dict(exr.header())
+    except (RuntimeError, ValueError, TypeError, IndexError) as exc:
+        raise ut.UntrustedFileError(path, f"is not a readable OpenEXR image ({exc})") from None
+    if parts != 1:
+        raise ut.UntrustedFileError(path, f"has {parts} parts; this tool writes one")
+    try:
+        lo, hi = (np.asarray(v, np.int64) for v in header["dataWindow"])
+        names = [c.name for c in header["channels"]]
+    except (KeyError, TypeError, ValueError, AttributeError):
+        raise ut.UntrustedFileError(path, "has no data window or channel list") from None
+    width, height = int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1)
+    if not (1 <= width <= ut.MAX_RESOLUTION and 1 <= height <= ut.MAX_RESOLUTION):
+        raise ut.UntrustedFileError(path, f"is {width} x {height} pixels; the limit is "
+                                          f"{ut.MAX_RESOLUTION} on a side")
+    if not 1 <= len(names) <= ut.MAX_CHANNELS:
+        raise ut.UntrustedFileError(path, f"has {len(names)} channels; the limit is "
+                                          f"{ut.MAX_CHANNELS}")
+    need = width * height * len(names) * 4
+    if need > cap:
+        raise ut.UntrustedFileError(path, f"would inflate to {need} bytes of pixels, more than "
+                                          f"the {cap} this file may have")
+    header.update(width=width, height=height, channel_names=names)
+    return header
+
+
+def read_exr(path: str, max_bytes: int | None = None) -> tuple[dict, dict]:
+    """Read every channel and the metadata written by :func:`write_exr`, its header checked
+    first (:func:`exr_header`: sizes and channel count capped before any pixel is inflated).
 
     Returns
     -------
@@ -99,19 +142,52 @@ def read_exr(path: str) -> tuple[dict, dict]:
     FileNotFoundError
         No such file.
     ValueError
-        The file is not an OpenEXR image OpenEXR can read.
+        The file is not an OpenEXR image OpenEXR can read, is larger than the caps, or its
+        metadata is not a JSON object (:class:`.untrusted.UntrustedFileError`, naming it).
     """
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"EXR file not found: {path}")
+    from . import untrusted as ut
+
+    exr_header(path, max_bytes)
     OpenEXR = _openexr()
     try:
         exr = OpenEXR.File(path, separate_channels=True)  # keep "b00.R" etc. apart
     except RuntimeError as exc:  # OpenEXR's only error for "not an EXR" / unreadable
-        raise ValueError(f"{path} is not a readable OpenEXR image ({exc})") from None
+        raise ut.UntrustedFileError(path, f"is not a readable OpenEXR image ({exc})") from None
     with exr:
         header = dict(exr.header())  # the live header is emptied when the file closes
-        channels = {name: np.ascontiguousarray(ch.pixels[::-1]) for name, ch in exr.channels().items()}
+        try:
+            channels = {name: np.ascontiguousarray(ch.pixels[::-1])
+                        for name, ch in exr.channels().items()}
+        except (RuntimeError, ValueError, TypeError) as exc:
+            raise ut.UntrustedFileError(path, f"cannot be read ({exc})") from None
     raw = header.get(METADATA_KEY)
     if isinstance(raw, bytes):
-        raw = raw.decode("utf-8")
-    return channels, (json.loads(raw) if raw else {})
+        try:
+            raw = raw.decode("utf-8")
+        except UnicodeDecodeError:
+            raise ut.UntrustedFileError(path, f"its {METADATA_KEY} is not UTF-8") from None
+    if not raw:
+        return channels, {}
+    try:
+        meta = json.loads(raw)
+    except (ValueError, RecursionError):
+        raise ut.UntrustedFileError(path, f"its {METADATA_KEY} is not JSON") from None
+    if not isinstance(meta, dict):
+        raise ut.UntrustedFileError(path, f"its {METADATA_KEY} is not a JSON object")
+    return channels, meta
+
+
+def stack_channels(path: str, channels: dict, names, shape) -> np.ndarray:
+    """``(H, W, C)`` float32 of ``channels[name]`` for ``names`` read from ``path``, each of
+    ``shape`` (H, W) and finite; UntrustedFileError naming the file and the channel otherwise."""
+    from . import untrusted as ut
+
+    out = np.empty(tuple(shape) + (len(names),), np.float32)
+    for i, name in enumerate(names):
+        if name not in channels:
+            raise ut.UntrustedFileError(path, f"has no channel {name}")
+        ch = channels[name]
+        ut.check_shape(f"{path}[{name}]", np.shape(ch), shape)
+        out[..., i] = ch
+    ut.check_values(path, out)
+    return out

@@ -46,6 +46,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.spatial
 
+from ..errors import InputError
+from ..io import untrusted as _untrusted
 from .hemisphere import direction_to_equirect_uv, equirect_uv_to_direction, normalize_directions
 
 KINDS = ("halton", "latlong", "cube", "cubegauss", "hemi")
@@ -62,8 +64,10 @@ CUBE_FACES = np.array([
 ], dtype=np.float64)
 CUBE_FACE_NAMES = ("+X", "-X", "+Y", "-Y", "+Z", "-Z")
 
-#: Largest number of directions a spec may ask for (a guard against typos like "halton:1e9").
-MAX_DIRECTIONS = 1 << 22
+#: Largest number of directions a spec may ask for (a guard against typos like "halton:1e9",
+#: and against a spec read from someone else's file sizing the allocations): the cap on
+#: direction sets of :mod:`..io.untrusted` (65536; a production bake uses 400-1600).
+MAX_DIRECTIONS = _untrusted.MAX_DIRECTIONS
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -146,6 +150,11 @@ class DirectionSet:
     def from_dict(cls, data: dict) -> "DirectionSet":
         """Inverse of :meth:`to_dict` (rebuilds from the spec when arrays are absent)."""
         if "directions" in data and "solid_angles" in data:
+            for key in ("directions", "solid_angles"):   # (read from a file: count first)
+                n = len(data[key]) if isinstance(data[key], (list, tuple, np.ndarray)) else -1
+                if not 1 <= n <= MAX_DIRECTIONS:
+                    raise InputError(f"a direction set's {key} must be a list of 1.."
+                                     f"{MAX_DIRECTIONS} entries, got {n if n >= 0 else 'none'}")
             return cls(np.asarray(data["directions"], dtype=np.float64),
                        np.asarray(data["solid_angles"], dtype=np.float64),
                        data.get("kind", "custom"), data.get("params", {}))
@@ -378,7 +387,7 @@ def parse_direction_spec(spec: str) -> DirectionSet:
             raise ValueError(f"bad direction spec {spec!r}: the horizon power must be a number "
                              "in [1, 4], e.g. 'hemi:400:1.5'")
         if n > MAX_DIRECTIONS:
-            raise ValueError(f"direction spec {spec!r} asks for {n} directions; the limit is "
+            raise InputError(f"direction spec {spec!r} asks for {n} directions; the limit is "
                              f"{MAX_DIRECTIONS}")
         return hemisphere_fibonacci(n, p)
     if kind == "latlong":
@@ -392,7 +401,7 @@ def parse_direction_spec(spec: str) -> DirectionSet:
         n = _int(arg)
         total = n if kind == "halton" else 6 * n * n
     if total > MAX_DIRECTIONS:
-        raise ValueError(f"direction spec {spec!r} asks for {total} directions; the limit is "
+        raise InputError(f"direction spec {spec!r} asks for {total} directions; the limit is "
                          f"{MAX_DIRECTIONS}")
     if kind == "latlong":
         return latlong(rows, cols)

@@ -204,23 +204,49 @@ class SteerableTexture:
     @classmethod
     def load(cls, path: str) -> "SteerableTexture":
         """Read a file written by :meth:`save` (any storage mode); images come back float32."""
+        from ..io import untrusted as ut
+
+        # a file from elsewhere: the EXR's header is checked (sizes, channel count) before its
+        # pixels are inflated (exrio.read_exr), and the metadata's order and resolution must
+        # describe the channels the file has before they size anything
         channels, meta = exrio.read_exr(path)
         if meta.get("format") != "relightable_textures.steerable_texture":
-            raise ValueError(f"{path} is not a steerable texture written by Relightable Textures")
-        if meta.get("format_version", 0) > FORMAT_VERSION:
-            raise ValueError(f"{path} was written by a newer version (format "
-                             f"{meta['format_version']}); update the extension")
-        n = meta["order"] ** 2
-        r = meta["resolution"]
+            raise ut.UntrustedFileError(path, "is not a steerable texture written by "
+                                              "Relightable Textures")
+        version = ut.field(meta, "format_version", path, int, 0)
+        if version > FORMAT_VERSION:
+            raise ut.UntrustedFileError(path, f"was written by a newer version (format "
+                                              f"{version}); update the extension")
+        order = ut.check_count(path, ut.field(meta, "order", path, int), 12, "order", lo=1)
+        r = ut.check_count(path, ut.field(meta, "resolution", path, int),
+                           ut.MAX_RESOLUTION, "resolution", lo=1)
+        storage = ut.field(meta, "storage", path, str)
+        n = order ** 2
+        if len(channels) != 3 * n:
+            raise ut.UntrustedFileError(path, f"has {len(channels)} channels; order {order} "
+                                              f"needs {3 * n}")
         imgs = np.empty((n, r, r, 3), dtype=np.float32)
         for k in range(n):
             for ci, cn in enumerate(_CHANNELS):
-                imgs[k, :, :, ci] = channels[f"b{k:02d}.{cn}"]
-        if meta["storage"] == "u8":
-            imgs = Uint8Encoded(imgs.astype(np.uint8), np.asarray(meta["u8_min"], np.float32),
-                                np.asarray(meta["u8_max"], np.float32), per_channel=True).decode()
-        return cls(imgs, meta["order"], meta["width"], np.asarray(meta["centres"]),
-                   meta["frame"], meta["calibration"], meta.get("settings", {}))
+                name = f"b{k:02d}.{cn}"
+                if name not in channels:
+                    raise ut.UntrustedFileError(path, f"has no channel {name}")
+                ut.check_shape(f"{path}[{name}]", channels[name].shape, (r, r))
+                imgs[k, :, :, ci] = channels[name]
+        ut.check_values(path, imgs, what="basis image values")
+        try:
+            if storage == "u8":
+                imgs = Uint8Encoded(imgs.astype(np.uint8),
+                                    np.asarray(meta["u8_min"], np.float32),
+                                    np.asarray(meta["u8_max"], np.float32),
+                                    per_channel=True).decode()
+            return cls(imgs, order, ut.field(meta, "width", path, float),
+                       np.asarray(ut.field(meta, "centres", path, list), np.float64),
+                       meta["frame"], meta["calibration"], meta.get("settings", {}))
+        except (ValueError, TypeError, KeyError, IndexError) as exc:
+            text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise ut.UntrustedFileError(path, f"is not a usable steerable texture ({text})") \
+                from None
 
 
 def build_from_sampled_bakes(sampled_images: np.ndarray, order: int = 7, width: float = 0.01,

@@ -439,17 +439,36 @@ def recover_loadings(store, eigen, block: int) -> np.ndarray:
 
 def load(path: str, store) -> BlockViewport:
     """The viewport :func:`save` wrote; its loadings are recovered from ``store`` (T) when
-    first needed (re-tabulating for a new sun size, a relight of the model)."""
-    from ..io import versions
+    first needed (re-tabulating for a new sun size, a relight of the model). Read as a file
+    from elsewhere (:func:`..io.untrusted.open_npz`): its resolution and direction count must
+    be T's, its block divide the resolution, ``eigen`` be (K, Rp, Rp) with K <= S and
+    ``Rp = nb (B + 2)``, ``dims`` (nb^2,) counts in 0..K -- all from the headers before any
+    array is inflated; the eigen images finite."""
+    from ..io import untrusted as ut, versions
 
-    with np.load(path, allow_pickle=False) as z:
-        versions.check({"format": str(z["format"]), "format_version": int(z["format_version"])},
+    with ut.open_npz(path) as z:
+        versions.check({"format": ut.npz_scalar(z, "format", str),
+                        "format_version": ut.npz_scalar(z, "format_version", int)},
                        FORMAT, path, "a block viewport")
-        eigen = np.asarray(z["eigen"], np.float32)
-        block, R = int(z["block"]), int(z["resolution"])
-        if R != store.resolution or int(z["directions"]) != store.directions.size:
-            raise ValueError(f"{path} was fitted to another T ({R}^2, {int(z['directions'])} "
-                             f"directions; this T: {store.resolution}^2, "
-                             f"{store.directions.size})")
-        return BlockViewport(None, eigen, np.asarray(z["dims"]), R, block,
-                             float(z["residual"]), str(z["method"]), store)
+        block, R = ut.npz_scalar(z, "block", int), ut.npz_scalar(z, "resolution", int)
+        S = ut.npz_scalar(z, "directions", int)
+        if R != store.resolution or S != store.directions.size:
+            raise ut.UntrustedFileError(path, f"was fitted to another T ({R}^2, {S} "
+                                              f"directions; this T: {store.resolution}^2, "
+                                              f"{store.directions.size})")
+        ut.check_count(path, block, R, "block", lo=1)
+        if R % block:
+            raise ut.UntrustedFileError(path, f"block {block} does not divide {R}")
+        nb = R // block
+        Rp = nb * (block + 2)
+        eigen = z.get("eigen", shape=(None, Rp, Rp), dtype="f")
+        if eigen.shape[0] > S:
+            raise ut.UntrustedFileError(path, f"has {eigen.shape[0]} components for {S} "
+                                              "directions")
+        ut.check_values(path, eigen, what="eigen-image values")
+        dims = z.get("dims", shape=(nb * nb,), dtype="iu")
+        if dims.size and (dims.min() < 0 or dims.max() > eigen.shape[0]):
+            raise ut.UntrustedFileError(path, f"has block dims outside 0..{eigen.shape[0]}")
+        return BlockViewport(None, np.asarray(eigen, np.float32), dims, R, block,
+                             ut.npz_scalar(z, "residual", float),
+                             ut.npz_scalar(z, "method", str), store)

@@ -125,12 +125,39 @@ class GatheredIndirect:
 
     @classmethod
     def load(cls, path: str, directions) -> "GatheredIndirect":
-        """Read a file written by :meth:`save`; ``directions``: T's (its count is checked)."""
-        with np.load(path, allow_pickle=False) as z:
-            header = json.loads(bytes(z["header"]).decode()) if "header" in z.files else {}
+        """Read a file written by :meth:`save`; ``directions``: T's (its count is checked).
+        Read as a file from elsewhere (:func:`..io.untrusted.open_npz`): the header a capped
+        JSON object; ``coefficients`` (S, k) and ``images`` (k, R, R, 3) checked against each
+        other and T's S from their headers before they are inflated, k <= S, R <= the cap;
+        values finite."""
+        from ..io import untrusted as ut
+
+        with ut.open_npz(path) as z:
+            header = {}
+            if "header" in z:
+                raw = z.get("header", shape=(None,), dtype=np.uint8)
+                if raw.size > ut.MAX_JSON_BYTES:
+                    raise ut.UntrustedFileError(path, "has a header larger than the cap")
+                try:
+                    header = json.loads(bytes(raw).decode())
+                except (ValueError, RecursionError):
+                    raise ut.UntrustedFileError(path, "has a header that is not JSON") from None
+                if not isinstance(header, dict):
+                    raise ut.UntrustedFileError(path, "has a header that is not a JSON object")
             versions.check(header, FORMAT, path, "a gathered indirect term")
-            return cls(z["images"].astype(np.float32), z["coefficients"], directions,
-                       header.get("settings", {}))
+            S = directions.size
+            coef = z.get("coefficients", shape=(S, None), dtype="f")
+            k = coef.shape[1]
+            ut.check_count(path, k, S, "components", lo=1)
+            shape, _ = z.header("images") if "images" in z else ((), None)
+            R = shape[1] if len(shape) == 4 else 0
+            ut.check_count(path, R, ut.MAX_RESOLUTION, "resolution", lo=1)
+            imgs = z.get("images", shape=(k, R, R, 3), dtype="f")
+            ut.check_values(path, coef, what="coefficients")
+            ut.check_values(path, imgs, what="image values")
+            settings = header.get("settings", {})
+            return cls(imgs.astype(np.float32), coef, directions,
+                       settings if isinstance(settings, dict) else {})
 
 
 def indirect_images(term, direction, sun_angle: float = 0.0, kernel: str = "linear"):

@@ -337,11 +337,26 @@ def save(path: str, hm: HorizonMap) -> None:
                             **{k: np.array(v) for k, v in versions.stamp(FORMAT).items()})
 
 
-def load(path: str) -> HorizonMap:
-    """The map :func:`save` wrote (a newer format version is refused in one line)."""
-    from ..io import versions
+def load(path: str, resolution: int | None = None) -> HorizonMap:
+    """The map :func:`save` wrote (a newer format version is refused in one line), read as a
+    file from elsewhere (:func:`..io.untrusted.open_npz`: capped, each array's header checked
+    before it is inflated): ``q`` (2, A, Rh, Rh) uint8 with 3 <= A <= 4096 azimuths, Rh at
+    most the texture's side; ``normals`` (R, R, 3) float16, finite, R = ``resolution``
+    (T's) when given."""
+    from ..io import untrusted as ut, versions
 
-    with np.load(path, allow_pickle=False) as z:
-        versions.check({"format": str(z["format"]), "format_version": int(z["format_version"])},
+    with ut.open_npz(path) as z:
+        versions.check({"format": ut.npz_scalar(z, "format", str),
+                        "format_version": ut.npz_scalar(z, "format_version", int)},
                        FORMAT, path, "a horizon map")
-        return HorizonMap(np.asarray(z["q"], np.uint8), np.asarray(z["normals"], np.float16))
+        (n_shape, n_dtype) = z.header("normals") if "normals" in z else ((), None)
+        R = resolution if resolution is not None else (n_shape[0] if n_shape else 1)
+        ut.check_count(path, R, ut.MAX_RESOLUTION, "resolution", lo=1)
+        normals = z.get("normals", shape=(R, R, 3), dtype="f")
+        qs, _ = z.header("q") if "q" in z else ((), None)
+        if len(qs) != 4 or not 3 <= qs[1] <= 4096 or not 1 <= qs[2] <= R or qs[2] != qs[3]:
+            raise ut.UntrustedFileError(path, f"has horizon codes of shape {qs}, expected "
+                                              f"(2, azimuths 3..4096, Rh, Rh) with Rh <= {R}")
+        q = z.get("q", shape=(2, None, None, None), dtype=np.uint8)
+        ut.check_values(path, normals, what="normals")
+        return HorizonMap(np.asarray(q, np.uint8), np.asarray(normals, np.float16))

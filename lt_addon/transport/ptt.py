@@ -617,34 +617,74 @@ class TransferTensors:
 
     @classmethod
     def load(cls, path: str) -> "TransferTensors":
-        with np.load(path, allow_pickle=False) as z:
-            header = json.loads(bytes(z["header"]).decode())
-            if header.get("format") != FORMAT:
-                raise ValueError(f"{path} is not a transfer-tensor file")
-            if header.get("version") not in READS:
-                raise ValueError(f"{path} has version {header.get('version')}; this build "
-                                 f"reads versions {', '.join(map(str, READS))}: bake the "
-                                 "materials again")
-            bounce = None
-            if "transfer" in z.files:
-                bounce = BounceTransfer(z["patch"], z["patch_region"], z["transfer"],
-                                        z["source_albedo"], z["two_scale"])
-            fix = None
-            if "fix_direct_one" in z.files:
-                from scipy import sparse
+        """Read a file written by :meth:`save` as a file from elsewhere (the material-edit
+        handler reads it without asking): a capped NPZ (:func:`..io.untrusted.open_npz`), its
+        header a JSON object; the receiver transfer's sparse index arrays checked before SciPy
+        builds the matrix (:func:`..io.untrusted.sparse_matrix`: its C++ products index
+        without bounds checks); region and patch indices in range; the terms' shapes by
+        :meth:`__post_init__`. Anything wrong: one UntrustedFileError naming the file."""
+        from ..io import untrusted as ut
 
-                V = z["direct"].shape[1]
-                fix = ReceiverTransfer(
-                    sparse.csc_matrix((z["fix_data"], z["fix_indices"], z["fix_indptr"]),
-                                      shape=((len(header["regions"]) + 1) * V, V)),
-                    z["fix_direct_one"], z["fix_source_albedo"])
-            return cls(z["direct"], z["one"], z["two"], tuple(header["specs"]),
-                       list(header["regions"]), z["base_colors"], z["receiver_region"],
-                       z["receiver_albedo"], [tuple(o) for o in header["objects"]],
-                       header.get("metadata", {}), bounce, tuple(header.get("roughness", ())),
-                       z["gloss"] if "gloss" in z.files else None,
-                       z["base_finish"] if "base_finish" in z.files else None,
-                       header.get("gloss_spec"), fix)
+        with ut.open_npz(path) as z:
+            raw = z.get("header", shape=(None,), dtype=np.uint8)
+            if raw.size > ut.MAX_JSON_BYTES:
+                raise ut.UntrustedFileError(path, "has a header larger than the cap")
+            try:
+                header = json.loads(bytes(raw).decode())
+            except (ValueError, RecursionError):
+                raise ut.UntrustedFileError(path, "has a header that is not JSON") from None
+            if not isinstance(header, dict) or header.get("format") != FORMAT:
+                raise ut.UntrustedFileError(path, "is not a transfer-tensor file")
+            if header.get("version") not in READS:
+                raise ut.UntrustedFileError(
+                    path, f"has version {header.get('version')!r:.20}; this build reads "
+                          f"versions {', '.join(map(str, READS))}: bake the materials again")
+            regions = ut.field(header, "regions", path, list)
+            specs = ut.field(header, "specs", path, list)
+            objects = ut.field(header, "objects", path, list)
+            R1 = len(regions) + 1
+            try:
+                direct = z.get("direct", shape=(None, None), dtype="f")
+                V = direct.shape[1]
+                arrays = {k: z.get(k, dtype="fiu") for k in (
+                    "one", "two", "base_colors", "receiver_region", "receiver_albedo")}
+                for k in ("direct", "one", "two", "base_colors", "receiver_albedo"):
+                    ut.check_values(path, direct if k == "direct" else arrays[k], what=k)
+                reg = arrays["receiver_region"]
+                if reg.size and (int(reg.min()) < 0 or int(reg.max()) > len(regions)):
+                    raise ut.UntrustedFileError(path, "has receiver regions outside "
+                                                      f"0..{len(regions)}")
+                bounce = None
+                if "transfer" in z:
+                    patch = z.get("patch", shape=(V,), dtype="iu")
+                    preg = z.get("patch_region", shape=(None,), dtype="iu")
+                    if patch.size and (int(patch.min()) < 0 or int(patch.max()) >= len(preg)):
+                        raise ut.UntrustedFileError(path, "has patch indices out of range")
+                    if preg.size and (int(preg.min()) < 0 or int(preg.max()) > len(regions)):
+                        raise ut.UntrustedFileError(path, "has patch regions out of range")
+                    bounce = BounceTransfer(patch, preg, z.get("transfer", dtype="f"),
+                                            z.get("source_albedo", dtype="f"),
+                                            z.get("two_scale", dtype="f"))
+                fix = None
+                if "fix_direct_one" in z:
+                    fix = ReceiverTransfer(
+                        ut.sparse_matrix(path, "csc", z.get("fix_data", dtype="f"),
+                                         z.get("fix_indices", dtype="iu"),
+                                         z.get("fix_indptr", dtype="iu"), (R1 * V, V)),
+                        z.get("fix_direct_one", dtype="f"),
+                        z.get("fix_source_albedo", dtype="f"))
+                return cls(direct, arrays["one"], arrays["two"], tuple(specs), list(regions),
+                           arrays["base_colors"], reg, arrays["receiver_albedo"],
+                           [tuple(o) for o in objects], header.get("metadata", {}), bounce,
+                           tuple(header.get("roughness", ())),
+                           z.get("gloss", dtype="f") if "gloss" in z else None,
+                           z.get("base_finish", dtype="f") if "base_finish" in z else None,
+                           header.get("gloss_spec"), fix)
+            except ut.UntrustedFileError:
+                raise
+            except (ValueError, TypeError, IndexError, KeyError) as exc:
+                raise ut.UntrustedFileError(path, f"does not hold consistent terms "
+                                                  f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
 
 
 def bake_count(s0: int, s1: int, s2: int, regions: int, bounces: int, anchors: int = 0,

@@ -57,15 +57,35 @@ class TransportData:
     def __init__(self, path: str):
         if not os.path.isfile(path):
             raise FileNotFoundError(f"transport sidecar not found: {path}")
-        with np.load(path, allow_pickle=False) as z:
-            self.model = cpca_mod.model_from_arrays(z)
-            params = json.loads(str(z["direction_set"][()]))
-            self.direction_set = DirectionSet(z["directions"], z["solid_angles"],
-                                              params.get("kind", "custom"),
-                                              params.get("params", {}))
-            self.positions = np.asarray(z["positions"], np.float64)
-            self.normals = np.asarray(z["normals"], np.float64)
-            self.bake = json.loads(str(z["bake"][()]))
+        from ..io import untrusted as ut
+
+        # a file from elsewhere: a capped NPZ, every member's header checked before it is
+        # inflated, the direction count capped, the arrays finite; any refusal names the file
+        with ut.open_npz(path) as z:
+            try:
+                self.model = cpca_mod.model_from_arrays(z)
+                params = json.loads(ut.npz_scalar(z, "direction_set", str))
+                if not isinstance(params, dict):
+                    raise ValueError("its direction_set is not a JSON object")
+                dirs = z.get("directions", shape=(None, 3), dtype="f")
+                ut.check_count(path, len(dirs), ut.MAX_DIRECTIONS, "directions", lo=1)
+                self.direction_set = DirectionSet(dirs, z.get("solid_angles", shape=(len(dirs),),
+                                                              dtype="f"),
+                                                  params.get("kind", "custom"),
+                                                  params.get("params", {}))
+                V = self.model.n_vertices
+                self.positions = np.asarray(z.get("positions", shape=(V, 3), dtype="f"),
+                                            np.float64)
+                self.normals = np.asarray(z.get("normals", shape=(V, 3), dtype="f"), np.float64)
+                ut.check_values(path, self.positions, what="positions")
+                ut.check_values(path, self.normals, what="normals")
+                self.bake = json.loads(ut.npz_scalar(z, "bake", str))
+            except ut.UntrustedFileError:
+                raise
+            except (ValueError, TypeError, KeyError, IndexError, RecursionError) as exc:
+                text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                raise ut.UntrustedFileError(path, f"is not a usable transport sidecar "
+                                                  f"({text})") from None
         self.path = path
 
     def weighted_environment(self, env, rotate_deg: float = 0.0) -> np.ndarray:

@@ -60,7 +60,7 @@ def test_the_file_keeps_it_to_half_float_precision(term, tmp_path):
     np.testing.assert_allclose(back.basis_images, term.basis_images, rtol=2 ** -10, atol=1e-6)
     np.testing.assert_array_equal(back.coefficients, term.coefficients)
     assert back.settings == {"rays_per_point": 8}
-    with pytest.raises(ValueError, match="coefficients must have shape"):
+    with pytest.raises(ValueError, match=r"coefficients.*shape"):
         gt.GatheredIndirect.load(path, tt.parse_directions("hemi:100"))
     np.savez(str(tmp_path / "other.npz"), header=np.frombuffer(b'{"format": "x"}', np.uint8))
     with pytest.raises(InputError, match="not a gathered indirect term"):
