@@ -648,7 +648,7 @@ def sweep(folder: str, stages: bool = True) -> dict:
                     if m is not None or _looks_like_debris(name):
                         why = ("pid 0 is no process's" if m is not None else
                                "not a stage name of this version")
-                        out["refused"].append(f"{rel}: {why}; left alone")
+                        out["refused"].append(f"{rel}: {why}")
                     continue
                 if m["host"] != host or int(m["pid"]) == os.getpid() or pid_alive(int(m["pid"])):
                     continue
