@@ -626,16 +626,38 @@ class RELIGHT_OT_discard_chunks(bpy.types.Operator):
                ("materials", "Materials", "The material bake")])
 
     def execute(self, context):
-        import shutil
+        from ...lt_addon.io.untrusted import UntrustedFileError
 
         kept = kept_chunks(context, None if self.kind == "ALL" else self.kind)
-        for folder, _ in kept:
-            shutil.rmtree(folder, ignore_errors=True)
-        root = os.path.dirname(kept[0][0]) if kept else None
-        if root and os.path.isdir(root) and not os.listdir(root):
-            os.rmdir(root)
+        try:
+            _discard_chunk_folders([folder for folder, _ in kept])
+        except UntrustedFileError as exc:   # a link in the cache: nothing removed, said so
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
         self.report({"INFO"}, f"Discarded {sum(n for _, n in kept)} kept chunk(s)")
         return {"FINISHED"}
+
+
+def _discard_chunk_folders(folders: list) -> None:
+    """Remove the chunk ``folders`` (of :func:`kept_chunks`, all in one ``.relight_cache``),
+    then that folder when left empty. The bake folder may come from someone else (issue 56):
+    the cache and every folder must be a real folder (``lstat``), checked before anything
+    goes, else UntrustedFileError naming the link and nothing is removed; ``shutil.rmtree``
+    of a real folder removes links inside it, never what they point to."""
+    import shutil
+
+    from ...lt_addon.io import untrusted
+
+    if not folders:
+        return
+    root = os.path.dirname(folders[0])
+    untrusted.real_folder(root)
+    for folder in folders:
+        untrusted.real_folder(folder)
+    for folder in folders:
+        shutil.rmtree(folder)
+    if untrusted.real_folder(root) and not os.listdir(root):
+        os.rmdir(root)
 
 
 #: Scene property holding the last estimate's lines, shown in the panel.
