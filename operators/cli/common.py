@@ -508,6 +508,9 @@ def describe_sweep(swept: dict) -> str:
         parts.append(f"finished the commit of a killed run ({len(swept['rolled_forward'])})")
     if swept.get("removed"):
         parts.append(f"removed {len(swept['removed'])} temporary file(s) of killed runs")
+    if swept.get("refused"):   # a planted stage, a symlinked cache: for the user to look at
+        parts.append("left alone what is not this tool's to recover or remove (look at "
+                     f"it): {', '.join(swept['refused'])}")
     return "; ".join(parts)
 
 
