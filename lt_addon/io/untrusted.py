@@ -154,10 +154,10 @@ def real_folder(path: str) -> bool:
 
 def read_json(path: str, max_bytes: int = MAX_JSON_BYTES, kind: type | None = dict):
     """The parsed JSON of regular file ``path`` (at most ``max_bytes``), of type ``kind``."""
-    regular_file(path, max_bytes)
+    size = regular_file(path, max_bytes)
     try:
-        with open(path, "rb") as fh:
-            data = json.loads(fh.read(max_bytes + 1).decode("utf-8"))
+        with open(path, "rb") as fh:   # (read(n) allocates n bytes first: the file's size)
+            data = json.loads(fh.read(min(size, max_bytes) + 1).decode("utf-8"))
     except UnicodeDecodeError:
         raise UntrustedFileError(path, "is not UTF-8 text") from None
     except ValueError as exc:
