@@ -618,11 +618,12 @@ def sweep(folder: str, stages: bool = True) -> dict:
     pattern; a stage only this version's exact name) and its pid is above 0 and not running;
     anything else is left alone. Links are never followed: a symlinked chunk cache is not
     walked, a symlinked stage not entered. Returns ``{"removed": [...], "rolled_back": [...],
-    "rolled_forward": [...], "refused": [...]}`` (names; ``refused``: "name: why" of what looked
-    like our debris but was left alone, e.g. a planted stage -- for the caller to report)."""
+    "rolled_forward": [...]}`` (names), with ``"refused": [...]`` when something was: "name:
+    why" of what looked like our debris but was left alone, e.g. a planted stage -- for the
+    caller to report."""
     out = {"removed": [], "rolled_back": [], "rolled_forward": [], "refused": []}
     if not os.path.isdir(folder):
-        return out
+        return _without_empty_refused(out)
     host = atomic._host()
     places = [folder]
     cache = os.path.join(folder, CACHE)
@@ -675,4 +676,10 @@ def sweep(folder: str, stages: bool = True) -> dict:
             except OSError:
                 continue
             out["removed"].append(rel)
+    return _without_empty_refused(out)
+
+
+def _without_empty_refused(out: dict) -> dict:
+    if not out["refused"]:
+        del out["refused"]
     return out
