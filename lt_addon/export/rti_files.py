@@ -101,17 +101,37 @@ def read(folder: str):
     """(q (R, R, K, 3) uint8 with row 0 at v = 0, scale (K, 3), bias (K, 3), info) of a folder
     written by :func:`write` (or any relight-layout rgb PTM/HSH folder with JPEG or PNG
     planes; JPEG is decoded with Pillow, a development dependency)."""
-    with open(os.path.join(folder, "info.json")) as fh:
-        info = json.load(fh)
+    from ..io import untrusted as ut
+
+    path = ut.confined(folder, "info.json", must_exist=True, folder=False)
+    info = ut.read_json(path)       # (a folder from elsewhere: capped, typed, one line)
     if info.get("colorspace") != "rgb" or info.get("type") not in ("ptm", "hsh"):
-        raise ValueError(f"{folder}: only rgb PTM/HSH planes are read, got "
-                         f"{info.get('type')}/{info.get('colorspace')}")
-    K = int(info["nplanes"]) // 3
-    fmt = info.get("format", "jpg")
+        raise ut.UntrustedFileError(path, f"only rgb PTM/HSH planes are read, got "
+                                          f"{info.get('type')!r:.20}/"
+                                          f"{info.get('colorspace')!r:.20}")
+    K = ut.check_count(path, ut.field(info, "nplanes", path, int), 3 * 64, "nplanes", lo=3) // 3
+    fmt = ut.field(info, "format", path, str, "jpg")
+    if fmt not in ("jpg", "png"):
+        raise ut.UntrustedFileError(path, f"format {fmt!r:.20} is not jpg or png")
+    for k in range(K):
+        ut.confined(folder, f"plane_{k}.{fmt}", must_exist=True, folder=False)
     planes = [_read_plane(folder, k, fmt)[::-1] for k in range(K)]
+    if len({p.shape for p in planes}) != 1:
+        raise ut.UntrustedFileError(path, "its planes differ in size")
     q = np.stack(planes, axis=2)
-    scale = np.asarray(info["materials"][0]["scale"], np.float64).reshape(K, 3)
-    bias = np.asarray(info["materials"][0]["bias"], np.float64).reshape(K, 3)
+    try:
+        mat = ut.field(info, "materials", path, list)[0]
+        scale = np.asarray(ut.field(mat, "scale", path, list, where="materials[0]"),
+                           np.float64).reshape(K, 3)
+        bias = np.asarray(ut.field(mat, "bias", path, list, where="materials[0]"),
+                          np.float64).reshape(K, 3)
+    except (IndexError, ValueError, TypeError) as exc:
+        if isinstance(exc, ut.UntrustedFileError):
+            raise
+        raise ut.UntrustedFileError(path, f"its materials' scale and bias are not {K} x 3 "
+                                          "numbers") from None
+    ut.check_values(path, scale, what="scales")
+    ut.check_values(path, bias, what="biases")
     return q, scale, bias, info
 
 

@@ -79,10 +79,16 @@ def analysis_job(scene, obj, direction_set, out_dir: str, bounces: int = 0,
     path, why = reusable_samples(obj, direction_set, bounces) if reuse else (None, "--rebake")
     T = None
     if path is not None:
+        from ...lt_addon.io import untrusted
+
         yield Progress(0, 1, f"reusing {os.path.basename(path)}")
-        T = np.load(path, allow_pickle=False)
-        if T.shape != (len(obj.data.vertices), direction_set.directions.shape[0]):
-            T, path, why = None, None, f"the samples file holds {T.shape}, not this mesh's"
+        want = (len(obj.data.vertices), direction_set.directions.shape[0])
+        shape = untrusted.npy_header(path)[0]   # (its header only: the file may be anyone's)
+        if shape != want:
+            T, path, why = None, None, f"the samples file holds {shape}, not this mesh's"
+        else:
+            T = untrusted.load_npy(path, shape=want, dtype="f")
+            untrusted.check_values(path, T, what="transport values")
     if T is None:
         # as the vertex bake makes it (rays where they reproduce the scene): a reused bake
         # and a fresh one are the same transport

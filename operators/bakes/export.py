@@ -107,6 +107,7 @@ def export_job(scene, obj, settings: ExportSettings, out_dir: str, force: bool =
             report = {"report": bake_file(obj, "steerable_texture", "steerable texture")}
         else:
             bake, store, report = load_bake(bake_file(obj, TT_KIND, "transport texture"))
+            store.array     # T's values checked (finite, in [0, 1/pi]) before any work
             kernel = report["settings"].get("kernel", "linear")
             source = transport_source(bake, store, kernel)
     except (FileNotFoundError, ValueError, KeyError) as exc:

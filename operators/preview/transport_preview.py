@@ -423,14 +423,17 @@ def write_sparse_atlas(base: str, store) -> dict:
 
 
 def _scales(path: str) -> np.ndarray:
-    import json
-
+    from ...lt_addon.io import untrusted
     from ...lt_addon.io.versions import check
 
-    with open(path) as fh:
-        meta = json.load(fh)
+    meta = untrusted.read_json(path)   # (a capped regular file; one line naming it)
     check(meta, "relightable_textures.transport_sparse_atlas", path, "a transport atlas's scales")
-    return np.asarray(meta["scales"], np.float64)
+    try:
+        scales = np.asarray(untrusted.field(meta, "scales", path, list), np.float64)
+    except (ValueError, TypeError):
+        raise untrusted.UntrustedFileError(path, "its scales are not numbers") from None
+    untrusted.check_values(path, scales, lo=0.0, what="scales")
+    return scales
 
 
 def _closest(b, image, vector, x, y):
