@@ -44,10 +44,12 @@ MAX_RESOLUTION = 16384               # a texture's side
 MAX_DIRECTIONS = 65536               # directions of one direction set
 MAX_ZIP_RATIO = 1100                 # deflate's own ceiling is ~1032:1; more is a crafted file
 MAX_CHANNELS = 4096                  # channels of one EXR (a steerable texture of order 12: 432)
-#: T (or any file) above this many bytes is not hashed on load: its values are range-checked
-#: instead (:func:`check_checksum`). SHA-256 ran at 0.53 s/GiB on the CI machine (SHA-NI, page
-#: cache warm; 50 MiB in 26 ms), so a load verifies up to ~0.5 s of hashing.
-CHECKSUM_MAX_BYTES = 1 << 30
+#: T above this many bytes is not hashed on load: its values are range-checked instead
+#: (:func:`check_checksum`). SHA-256 measured 0.53 s/GiB on an idle core (SHA-NI, bytes in
+#: memory) and 1.0-1.7 s/GiB reading a 50 MiB T from the page cache on a busy 2-core machine
+#: (2026-12-06): over the ~1 s a GiB a load may spend, so T is verified up to 256 MiB (512^2 at
+#: 400 directions: ~0.1-0.4 s) and larger ones rely on the range check (~0.3 s/GiB as read).
+CHECKSUM_MAX_BYTES = 256 << 20
 
 
 class UntrustedFileError(InputError):
@@ -422,8 +424,8 @@ def check_count(path: str, n, cap: int, what: str, lo: int = 0) -> int:
 
 
 def file_checksum(path: str, chunk: int = 1 << 22) -> str:
-    """``"sha256:<hex>"`` of file ``path``, read in chunks (0.53 s/GiB measured: SHA-256 with
-    the CPU's SHA extensions beat BLAKE2b's 0.77 s/GiB on the CI machine)."""
+    """``"sha256:<hex>"`` of file ``path``, read in chunks (0.53 s/GiB on an idle core: SHA-256
+    with the CPU's SHA extensions beat BLAKE2b's 0.77 s/GiB here)."""
     import hashlib
 
     h = hashlib.sha256()
@@ -440,10 +442,12 @@ def check_checksum(path: str, recorded, max_bytes: int = CHECKSUM_MAX_BYTES) -> 
     """Compare file ``path`` with the checksum a report ``recorded`` for it at bake time.
 
     Returns True when verified, False when there was nothing to verify (``recorded`` None: a
-    report written before checksums) or the file is larger than ``max_bytes`` -- hashing T of
-    a production bake (2048^2, 400 directions: 3.4 GB) would add ~1.8 s to every relight, so
-    there the loaders rely on the range check of T's values (cheap: integer reductions, read as
-    used) and on its header checks. UntrustedFileError ``<file>: does not match the checksum
+    report written before checksums) or the file is larger than ``max_bytes``
+    (:data:`CHECKSUM_MAX_BYTES`) -- hashing T of a production bake (2048^2, 400 directions:
+    3.4 GB) would add 2-6 s to every relight, so there the loaders rely on the range check of
+    T's values (integer reductions over the rows read: a relight reads a few rows, a dense
+    pass ~0.3 s/GiB) and on its header checks. Garbage in range (a T from another bake of the
+    same size) is then not detected above the cap. UntrustedFileError ``<file>: does not match the checksum
     its report records (changed after the bake?)`` otherwise."""
     if recorded is None:
         return False

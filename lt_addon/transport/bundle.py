@@ -686,8 +686,8 @@ CHECKSUMMED = ("transport", "albedo", "indirect", "model", "viewport_blocks", "h
 def file_checksums(files: dict) -> dict:
     """``{key: "sha256:<hex>"}`` of a bundle's files (:func:`..io.untrusted.file_checksum`),
     recorded in the report at bake time so a reader can tell a file changed after the bake.
-    T is hashed too (0.53 s/GiB), whatever its size: a reader verifies it when it is at most
-    :data:`..io.untrusted.CHECKSUM_MAX_BYTES`."""
+    T is hashed too (0.5-1.7 s/GiB, once per bake), whatever its size: a reader verifies it
+    when it is at most :data:`..io.untrusted.CHECKSUM_MAX_BYTES` (256 MiB)."""
     out = {k: untrusted.file_checksum(files[k]) for k in CHECKSUMMED if k in files}
     if "transport" in files:   # T's header: its resolution and directions
         out["transport_header"] = untrusted.file_checksum(
