@@ -12,7 +12,8 @@ complete (:meth:`ChunkCache.clear`).
 
 A chunk is checked before it is reused: beside it, ``<chunk>.sha256`` holds
 ``hmac-sha256:<hex>``, the HMAC-SHA256 under this user's chunk key (:func:`chunk_key`) of its
-file name, shape, dtype and bytes, written once the chunk is in place. A chunk whose checksum is
+file name and every byte of the file (:func:`mac`), written once the chunk is in place; it is
+checked after the header and before the data is parsed. A chunk whose checksum is
 missing or differs (a worker or a disk that wrote something else, a file edited by hand, a chunk
 planted by someone who can write the bake folder, an unkeyed SHA-256 of an earlier version),
 whose header is not what the bake asks for (read before its data: :func:`.untrusted.load_npy`),
@@ -80,13 +81,41 @@ def checksum(array) -> str:
     return h.hexdigest()
 
 
-def mac(array, key: bytes, name: str) -> str:
-    """HMAC-SHA256 (hex) under ``key`` of chunk file ``name``'s name, shape, dtype and bytes
-    (C order): only a process holding the key can make one (:func:`chunk_key`)."""
-    a = np.ascontiguousarray(array)
-    h = hmac.new(key, f"{name}|{a.shape}|{a.dtype.str}|".encode(), hashlib.sha256)
-    h.update(a.reshape(-1).view(np.uint8).data if a.size else b"")
+def mac(path: str, key: bytes, name: str | None = None) -> str:
+    """HMAC-SHA256 (hex) under ``key`` of the chunk file ``path``'s name (``name``, default
+    its basename) and every byte of it (the NPY header, hence shape and dtype, and the data),
+    read in blocks: only a process holding the key can make one (:func:`chunk_key`), and it is
+    checked before the data is parsed."""
+    h = hmac.new(key, b"relight-chunk-v1|" + (name or os.path.basename(path)).encode() + b"|",
+                 hashlib.sha256)
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
     return h.hexdigest()
+
+
+def _check_header(path: str, shape=None, dtype=None) -> None:
+    """The chunk file ``path``'s NPY header checked before its data is read: a regular file,
+    no Python objects (a structured dtype of numbers is fine), ``shape`` / ``dtype`` when
+    given (None entries: any length), and exactly as long as the header says."""
+    size = untrusted.regular_file(path)
+    try:
+        with open(path, "rb") as fh:
+            version = np.lib.format.read_magic(fh)
+            read = {(1, 0): np.lib.format.read_array_header_1_0,
+                    (2, 0): np.lib.format.read_array_header_2_0}.get(version)
+            if read is None:
+                raise ValueError(f"NPY format {version} is not read by this tool")
+            hshape, _, hdtype = read(fh, max_header_size=10000)
+            offset = fh.tell()
+    except (ValueError, EOFError, SyntaxError, TypeError) as exc:
+        raise UntrustedFileError(path, f"is not a whole NPY file (its header: {exc})") from None
+    if hdtype.hasobject:
+        raise UntrustedFileError(path, f"holds Python objects ({hdtype})")
+    untrusted.check_shape(path, hshape, shape, hdtype, dtype)
+    need = offset + int(np.prod(hshape, dtype=object)) * hdtype.itemsize
+    if need != size:
+        raise UntrustedFileError(path, f"is {size} bytes, its header says {need}")
 
 
 def key_file() -> str:
@@ -236,8 +265,9 @@ class ChunkCache:
         safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in str(chunk))
         return os.path.join(self.folder, safe + ".npy")
 
-    def _signature(self, p: str, arr) -> str:
-        return MAC_PREFIX + mac(arr, self.secret, os.path.basename(p))
+    def _signature(self, p: str, data: str | None = None) -> str:
+        """The checksum line of chunk file ``p`` (its bytes from ``data``, default ``p``)."""
+        return MAC_PREFIX + mac(data or p, self.secret, os.path.basename(p))
 
     def get(self, chunk: str, shape: tuple | None = None, dtype=None, lo: float | None = None,
             hi: float | None = None) -> np.ndarray | None:
@@ -250,13 +280,15 @@ class ChunkCache:
         p = self.path(chunk)
         if not os.path.lexists(p):
             return None
-        try:
-            arr = untrusted.load_npy(p, shape=shape, dtype=None if dtype is None
-                                     else np.dtype(dtype))
+        arr = None
+        try:   # header, then the keyed checksum of every byte, then the data
+            _check_header(p, shape, None if dtype is None else np.dtype(dtype))
             untrusted.regular_file(p + ".sha256", 4096)
             with open(p + ".sha256", encoding="ascii") as fh:
-                ok = hmac.compare_digest(fh.read(4096).strip(), self._signature(p, arr))
-        except (UntrustedFileError, OSError, ValueError, EOFError):
+                ok = hmac.compare_digest(fh.read(4096).strip(), self._signature(p))
+            if ok:
+                arr = np.load(p, allow_pickle=False)
+        except (UntrustedFileError, OSError, ValueError, EOFError, UnicodeDecodeError):
             ok = False
         if ok and arr.dtype.kind == "f":
             ok = bool(np.isfinite(arr).all())
@@ -303,7 +335,8 @@ class ChunkCache:
         _unlink(p + ".device")   # baked here now, not adopted
         with atomic.atomic_path(p) as tmp:   # (a rename: replaces a link, never writes into it)
             np.save(tmp, array, allow_pickle=False)
-        atomic.write_text(p + ".sha256", self._signature(p, array) + "\n")
+            signature = self._signature(p, tmp)
+        atomic.write_text(p + ".sha256", signature + "\n")
         self.written += 1
 
     def prune_others(self, adopt_devices: bool = False) -> int:

@@ -196,8 +196,8 @@ def test_a_symlinked_chunk_is_not_read_and_its_target_stays(tmp_path):
     os.remove(cache.path("direct_00000"))
     os.symlink(target, cache.path("direct_00000"))      # a link with a valid keyed checksum
     with open(cache.path("direct_00000") + ".sha256", "w") as fh:
-        fh.write(chunk_cache.mac(np.load(target), chunk_cache.chunk_key(),
-                                 "direct_00000") + "\n")
+        fh.write(chunk_cache.MAC_PREFIX + chunk_cache.mac(str(target), chunk_cache.chunk_key(),
+                                                          "direct_00000.npy") + "\n")
     assert cache.get("direct_00000") is None and cache.rejected == 1
     assert not os.path.lexists(cache.path("direct_00000"))   # the link went, not its target
     assert _tree(ext) == before
@@ -262,3 +262,15 @@ def test_a_chunk_is_checked_against_its_header_before_its_data_is_read(tmp_path)
     assert cache.get("big") is None and cache.rejected == 1
     cache.put("small", np.zeros((2, 4), np.float16))
     assert cache.get("small", shape=(4, 2)) is None and cache.rejected == 2
+
+
+def test_a_chunk_of_records_round_trips(tmp_path):
+    """Chunks of a structured dtype (the gathered transfer's entries: origin, column, weight)
+    are numbers too: kept, checked and reused like any other."""
+    entry = np.dtype([("origin", np.int64), ("column", np.int64), ("weight", np.float64)])
+    rec = np.zeros(5, entry)
+    rec["weight"] = np.linspace(0, 1, 5)
+    cache = ChunkCache(str(tmp_path / "c"), {"k": 1})
+    cache.put("gather_00000", rec)
+    back = ChunkCache(str(tmp_path / "c"), {"k": 1}).get("gather_00000")
+    assert back is not None and back.dtype == entry and np.array_equal(back, rec)
