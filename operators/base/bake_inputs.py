@@ -24,8 +24,9 @@ import numpy as np
 from ... import __version__
 
 #: The chunk cache's folder inside a bake's output folder (hidden; removed when the bake
-#: completes).
-CACHE_FOLDER = ".relight_cache"
+#: completes). :class:`...lt_addon.io.chunk_cache.ChunkCache` checks every folder from it down
+#: to a key's folder is a real folder (a symlinked cache is refused, never followed).
+from ...lt_addon.io.chunk_cache import CACHE_FOLDER  # (".relight_cache")
 
 
 def cache_root(out_dir: str) -> str:
