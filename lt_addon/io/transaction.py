@@ -552,6 +552,8 @@ def _checked_journal(stage: str) -> dict | None:
         raise bad("its moved entries are not [device, inode] pairs")
     if j.get("blend") is not None and not isinstance(j["blend"], str):
         raise bad("its blend is not a path")
+    if type(j.get("format_version", 1)) is not int:
+        raise bad("its format_version is not a number")
     return j
 
 

@@ -270,7 +270,7 @@ def _plant(stage, entries, state="swapping", old=(), extra=None):
 
 
 @pytest.mark.parametrize("attack", ["dotdot", "absolute", "separator", "legacy-name", "pid-0",
-                                    "symlinked-stage", "symlinked-old"])
+                                    "symlinked-stage", "symlinked-old", "garbage-journal"])
 def test_a_planted_stage_never_moves_a_file_outside_the_folder(tmp_path, attack):
     """Issue 56: ``bk/.relight-stage-x.0-deadbeef.tmp/`` (an old-style name, pid 0) with a
     journal in state ``swapping`` naming ``../victim.txt`` made the next bake's sweep replace
@@ -304,6 +304,8 @@ def test_a_planted_stage_never_moves_a_file_outside_the_folder(tmp_path, attack)
                                               "retired": [], "existed": []})
         outside["elsewhere"] = _state(ext)
         os.symlink(ext, out / name)
+    elif attack == "garbage-journal":   # fields of the wrong type: refused, not a crash
+        _plant(out / name, ["A_t.npy"], extra={"format_version": "x", "moved": {"A_t.npy": 1}})
     elif attack == "symlinked-old":     # .old a link: its files would be renamed into bk
         _plant(out / name, ["keep.txt"], old=None)
         os.symlink(tmp_path / "elsewhere", out / name / tr.OLD)
