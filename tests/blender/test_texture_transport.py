@@ -505,7 +505,7 @@ def test_memory_is_refused_up_front_with_the_figure(bumps, tmp_path):
     before = {o.name for o in scene.objects}
     with pytest.raises(BakeInputError, match=r"MiB"):
         next(tx.bake_transport_textures(scene, [obj],
-                                        settings(directions="hemi:4000000", resolution=8192),
+                                        settings(directions="hemi:60000", resolution=8192),
                                         str(tmp_path)))
     assert {o.name for o in scene.objects} == before
     assert not os.listdir(tmp_path)
