@@ -53,6 +53,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .texture import disk_kernel_matrix
+from ..io.npz import save_npz
 
 FORMAT = "relightable_textures.block_viewport"
 #: Bytes per texel of a half-float RGBA image on the GPU (Blender uploads float images as
@@ -405,7 +406,7 @@ def save(path: str, view: BlockViewport) -> None:
     from ..io import atomic, versions
 
     with atomic.atomic_path(path) as tmp:
-        np.savez(tmp, eigen=view.eigen.astype(np.float16), dims=view.dims,
+        save_npz(tmp, eigen=view.eigen.astype(np.float16), dims=view.dims,
                  resolution=np.array(view.resolution), block=np.array(view.block),
                  residual=np.array(view.residual), method=np.array(view.method),
                  components=np.array(view.k), directions=np.array(view.loadings().shape[1]),

@@ -30,6 +30,7 @@ import numpy as np
 
 from ..io import atomic, versions
 from . import texture as tt
+from ..io.npz import save_npz
 
 FORMAT = "relightable_textures.gathered_indirect"
 
@@ -117,10 +118,9 @@ class GatheredIndirect:
                   "settings": self.settings}
         imgs = self.basis_images.astype(np.float16 if storage == "half" else np.float32)
         with atomic.atomic_path(path) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, images=imgs, coefficients=self.coefficients,
-                         header=np.frombuffer(json.dumps(header).encode(), np.uint8),
-                         **{k: np.array(v) for k, v in versions.stamp(FORMAT).items()})
+            save_npz(tmp, images=imgs, coefficients=self.coefficients,
+                     header=np.frombuffer(json.dumps(header).encode(), np.uint8),
+                     **{k: np.array(v) for k, v in versions.stamp(FORMAT).items()})
         return os.path.getsize(path)
 
     @classmethod

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..rays.horizon import FROM_BELOW, visible_fraction
+from ..io.npz import save_npz
 
 FORMAT = "relightable_textures.horizon_map"
 #: Azimuths of a horizon map by default: 2.8 degrees apart. Measured on the bumps demo at 256^2
@@ -333,8 +334,8 @@ def save(path: str, hm: HorizonMap) -> None:
     from ..io import atomic, versions
 
     with atomic.atomic_path(path) as tmp:
-        np.savez_compressed(tmp, q=hm.q, normals=hm.normals,
-                            **{k: np.array(v) for k, v in versions.stamp(FORMAT).items()})
+        save_npz(tmp, compressed=True, q=hm.q, normals=hm.normals,
+                 **{k: np.array(v) for k, v in versions.stamp(FORMAT).items()})
 
 
 def load(path: str, resolution: int | None = None) -> HorizonMap:

@@ -66,6 +66,7 @@ from ..sphere.directions import DirectionSet
 from .bounce_transfer import BounceTransfer
 from .gathered_transfer import ReceiverTransfer
 from .texture import environment_weights, parse_directions, sun_weights
+from ..io.npz import save_npz
 
 FORMAT = "relight-transfer-tensors"
 VERSION = 4
@@ -609,11 +610,10 @@ class TransferTensors:
             extra.update({"fix_direct_one": rt.direct_one, "fix_source_albedo": rt.source_albedo,
                           "fix_data": m.data, "fix_indices": m.indices, "fix_indptr": m.indptr})
         with atomic.atomic_path(path) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, header=np.frombuffer(json.dumps(header).encode(), np.uint8),
-                         direct=self.direct, one=self.one, two=self.two,
-                         base_colors=self.base_colors, receiver_region=self.receiver_region,
-                         receiver_albedo=self.receiver_albedo, **extra)
+            save_npz(tmp, header=np.frombuffer(json.dumps(header).encode(), np.uint8),
+                     direct=self.direct, one=self.one, two=self.two,
+                     base_colors=self.base_colors, receiver_region=self.receiver_region,
+                     receiver_albedo=self.receiver_albedo, **extra)
 
     @classmethod
     def load(cls, path: str) -> "TransferTensors":

@@ -22,6 +22,7 @@ from ..io import atomic, exrio
 from ..sphere.directions import DirectionSet
 from . import cpca as cpca_mod
 from . import eigentransport as et_mod
+from ..io.npz import save_npz
 
 #: suffix of the raw (V, S) transport samples kept next to a ``<object>_transport.npz`` sidecar
 #: (half floats, ``np.save``), so an analysis can reuse them instead of baking again
@@ -45,8 +46,8 @@ def save_sidecar(path: str, model, direction_set: DirectionSet, positions, norma
         direction_set=np.array(json.dumps(direction_set.to_dict())),
         positions=np.asarray(positions, np.float32), normals=np.asarray(normals, np.float32),
         bake=np.array(json.dumps(metadata)))
-    with atomic.atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        np.savez(fh, **arrays)
+    with atomic.atomic_path(path) as tmp:
+        save_npz(tmp, **arrays)
     return os.path.getsize(path)
 
 

@@ -42,6 +42,7 @@ import scipy.spatial
 from ..io import atomic, untrusted, versions
 from ..sphere.directions import DirectionSet, hull_barycentric, parse_direction_spec
 from ..sphere.hemisphere import disk_to_hemisphere, hemisphere_to_disk, normalize_directions
+from ..io.npz import save_npz
 
 KERNELS = ("gauss", "linear")
 #: Bytes of float64 working array per chunk when streaming over the store's texels.
@@ -750,7 +751,7 @@ def save_model(path: str, model, directions_spec: str) -> None:
     from ..io import atomic
 
     with atomic.atomic_path(path) as tmp:
-        np.savez(tmp, directions_spec=np.array(directions_spec), **model.to_arrays(),
+        save_npz(tmp, directions_spec=np.array(directions_spec), **model.to_arrays(),
                  **{k: np.array(v) for k, v in versions.stamp(MODEL_FORMAT).items()})
 
 
