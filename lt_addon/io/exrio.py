@@ -11,8 +11,11 @@ attributes are plain bytes; one JSON string keeps nested values and is easy to r
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import sys
+import tempfile
 
 import numpy as np
 
@@ -126,6 +129,51 @@ def exr_header(path: str, max_bytes: int | None = None) -> dict:
     return header
 
 
+#: what OpenEXR's C++ library prints on standard error when a chunk of pixels does not decode
+#: (it then returns the image with those pixels left unset, and raises nothing)
+_DECODE_ERRORS = ("EXR_ERR_", "Exception raised reading pixel data", "Unable to run decoder")
+
+
+@contextlib.contextmanager
+def _library_errors(path: str):
+    """Refuse ``path`` when OpenEXR reports a pixel chunk it could not decode. The library
+    prints those on file descriptors 2 (``EXR_ERR_...``) and 1 (``Warning: Exception raised
+    reading pixel data``) and goes on with a partial image: a damaged file from elsewhere would
+    load with holes, and its messages would follow the CLI's one line. So both descriptors go
+    to a temporary file while it reads: decode errors become one UntrustedFileError, anything
+    else it printed is passed on."""
+    from . import untrusted as ut
+
+    saved = {}
+    try:
+        for fd, stream in ((1, sys.stdout), (2, sys.stderr)):
+            if stream is not None:
+                stream.flush()
+            saved[fd] = os.dup(fd)
+    except (OSError, ValueError, AttributeError):   # no such descriptor (a GUI without console)
+        for dup in saved.values():
+            os.close(dup)
+        yield
+        return
+    with tempfile.TemporaryFile() as sink:
+        for fd in saved:
+            os.dup2(sink.fileno(), fd)
+        try:
+            yield
+        finally:
+            for fd, dup in saved.items():
+                os.dup2(dup, fd)
+                os.close(dup)
+            sink.seek(0)
+            said = sink.read(1 << 16).decode("utf-8", "replace")
+        errors = [ln.strip() for ln in said.splitlines() if any(e in ln for e in _DECODE_ERRORS)]
+        if errors:
+            first = errors[0].replace(path, "").strip(": ")
+            raise ut.UntrustedFileError(path, f"has pixel data that does not decode ({first[:160]})")
+        if said:
+            sys.stderr.write(said)
+
+
 def read_exr(path: str, max_bytes: int | None = None) -> tuple[dict, dict]:
     """Read every channel and the metadata written by :func:`write_exr`, its header checked
     first (:func:`exr_header`: sizes and channel count capped before any pixel is inflated).
@@ -149,17 +197,18 @@ def read_exr(path: str, max_bytes: int | None = None) -> tuple[dict, dict]:
 
     exr_header(path, max_bytes)
     OpenEXR = _openexr()
-    try:
-        exr = OpenEXR.File(path, separate_channels=True)  # keep "b00.R" etc. apart
-    except RuntimeError as exc:  # OpenEXR's only error for "not an EXR" / unreadable
-        raise ut.UntrustedFileError(path, f"is not a readable OpenEXR image ({exc})") from None
-    with exr:
-        header = dict(exr.header())  # the live header is emptied when the file closes
+    with _library_errors(path):
         try:
-            channels = {name: np.ascontiguousarray(ch.pixels[::-1])
-                        for name, ch in exr.channels().items()}
-        except (RuntimeError, ValueError, TypeError) as exc:
-            raise ut.UntrustedFileError(path, f"cannot be read ({exc})") from None
+            exr = OpenEXR.File(path, separate_channels=True)  # keep "b00.R" etc. apart
+        except RuntimeError as exc:  # OpenEXR's only error for "not an EXR" / unreadable
+            raise ut.UntrustedFileError(path, f"is not a readable OpenEXR image ({exc})") from None
+        with exr:
+            header = dict(exr.header())  # the live header is emptied when the file closes
+            try:
+                channels = {name: np.ascontiguousarray(ch.pixels[::-1])
+                            for name, ch in exr.channels().items()}
+            except (RuntimeError, ValueError, TypeError) as exc:
+                raise ut.UntrustedFileError(path, f"cannot be read ({exc})") from None
     raw = header.get(METADATA_KEY)
     if isinstance(raw, bytes):
         try:

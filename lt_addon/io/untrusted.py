@@ -25,6 +25,7 @@ import json
 import os
 import stat
 import zipfile
+import zlib
 
 import numpy as np
 
@@ -232,6 +233,18 @@ def load_npy(path: str, *, shape=None, dtype=None, mmap: bool = False,
         raise UntrustedFileError(path, f"cannot be read ({exc})") from None
 
 
+#: what zipfile and zlib raise on a damaged archive (a bad local header, a member compressed
+#: with a method zipfile lacks, an "encrypted" flag, a corrupt deflate stream)
+_ZIP_ERRORS = (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error,
+               NotImplementedError, RuntimeError)
+
+
+def _short(exc: BaseException, limit: int = 200) -> str:
+    """``exc``'s message cut to ``limit`` characters (zipfile quotes whole headers)."""
+    text = str(exc)
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
 class _Npz:
     """A checked NPZ: members are inflated only after their stated sizes passed the caps."""
 
@@ -273,9 +286,13 @@ class _Npz:
 
     def header(self, key):
         """(shape, dtype) of member ``key`` from its NPY header alone."""
-        with self.zf.open(self.members[key]) as fh:
-            # (NPZ files hold their strings as fixed-width unicode scalars, kind "U")
-            shape, _, dtype, _ = _header_from(fh, f"{self.path}[{key}]", "biufU")
+        try:
+            with self.zf.open(self.members[key]) as fh:
+                # (NPZ files hold their strings as fixed-width unicode scalars, kind "U")
+                shape, _, dtype, _ = _header_from(fh, f"{self.path}[{key}]", "biufU")
+        except _ZIP_ERRORS as exc:
+            raise UntrustedFileError(self.path, f"member {key} cannot be read "
+                                                f"({_short(exc)})") from None
         return shape, dtype
 
     def get(self, key, shape=None, dtype=None) -> np.ndarray:
@@ -290,8 +307,9 @@ class _Npz:
         try:
             with self.zf.open(self.members[key]) as fh:
                 return np.lib.format.read_array(fh, allow_pickle=False)
-        except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
-            raise UntrustedFileError(self.path, f"member {key} cannot be read ({exc})") from None
+        except _ZIP_ERRORS as exc:
+            raise UntrustedFileError(self.path, f"member {key} cannot be read "
+                                                f"({_short(exc)})") from None
 
     def __getitem__(self, key) -> np.ndarray:
         return self.get(key)
