@@ -7,7 +7,7 @@ OUT    := out
 # Never touch the user's real Blender configuration from make targets.
 export BLENDER_USER_RESOURCES ?= $(CURDIR)/build/blender-user
 
-.PHONY: venv demo test test-core bench bench-full dist matrix validate clean
+.PHONY: venv demo test test-core bench bench-full fuzz dist matrix validate clean
 
 venv: $(STAMP)
 
@@ -129,6 +129,15 @@ bench-full: $(STAMP)
 	$(PY) benchmarks/bench_steerable.py --json $(OUT)/bench/steerable.json
 	$(PY) benchmarks/bench_texture_bake.py --presets draft,balanced
 	$(PY) benchmarks/bench_transport.py --scenes statue,room --directions cube:16
+
+## fuzz: damaged bake files and planted stages, journals, links and FIFOs against every reader
+##   of bake files and the commit recovery, for an hour (FUZZ_SECONDS); counts and failures in
+##   out/fuzz.json (docs/security.md; a bounded smoke of it runs in make test)
+FUZZ_SECONDS ?= 3600
+fuzz: $(STAMP)
+	mkdir -p $(OUT) $(BLENDER_USER_RESOURCES)
+	$(PY) devtools/fuzz_bake_files.py --bakes $(OUT)/fuzz-bakes --seconds $(FUZZ_SECONDS) \
+	  --json $(OUT)/fuzz.json
 
 ## dist: validate and build the extension zips, one per platform, with Blender's own
 ##   extension tool (dist/relightable_textures-<version>-<platform>.zip)
