@@ -48,7 +48,7 @@ import numpy as np
 
 import time
 
-from ...lt_addon.io import exrio
+from ...lt_addon.io import exrio, untrusted
 from ...lt_addon.transport import sparse_tables as sp
 from ...lt_addon.transport import gathered_texture as gt
 from ...lt_addon.transport import texture as tt
@@ -235,8 +235,12 @@ def install_indirect_group(obj, report: dict, bake, base: str, sun_angle: float,
     # an earlier bake's atlas of the other kind of term (another file): loading ours beside it
     # would name ours "... .001" and leave the World group reading the stale one by name
     gathered = isinstance(bake.indirect, gt.GatheredIndirect)
+    # the steerable term's atlas is written beside it: its basename in the report's own folder
+    # (a report from elsewhere may name any path; a write there is refused, issue 56)
+    indirect_file = untrusted.confined(os.path.dirname(report["report"]),
+                                       os.path.basename(str(report["files"]["indirect"])))
     atlas = (f"{base}_preview_indirect_eigen.exr" if gathered else
-             os.path.splitext(report["files"]["indirect"])[0] + "_atlas.exr")
+             os.path.splitext(indirect_file)[0] + "_atlas.exr")
     if stale is not None and stale.get(pn._TAG) and (
             os.path.abspath(bpy.path.abspath(stale.filepath)) != os.path.abspath(atlas)):
         bpy.data.images.remove(stale)
@@ -252,7 +256,7 @@ def install_indirect_group(obj, report: dict, bake, base: str, sun_angle: float,
                                      timg, uv_map, iname + " new")
         group["relight_indirect"] = "gathered"
     else:
-        atlas_path, _ = pn.write_atlas(bake.indirect, report["files"]["indirect"])
+        atlas_path, _ = pn.write_atlas(bake.indirect, indirect_file)
         iimg = pn.load_atlas_image(atlas_path, aname)
         group = pn.build_group(bake.indirect, iimg, uv_map, name=iname + " new")
         group["relight_indirect"] = "steerable"

@@ -189,3 +189,35 @@ def test_planted_chunks_with_valid_unkeyed_checksums_are_not_reused(scene, baked
     rep = json.loads((out / "Bumps_texture_report.json").read_text())
     assert rep["chunks_reused"] == 0 and rep["chunks_rejected"] == len(chunks)
     _assert_same_data(_data(out), _data(baked / "bk"))
+
+
+def test_a_report_naming_another_folder_for_its_indirect_term_writes_nothing_there(tmp_path):
+    """``files.indirect`` of a report from elsewhere named where the preview writes the steerable
+    term's atlas (``<that path>_atlas.exr``): a report edited to name a folder outside wrote
+    there when the panel loaded the bake. Now the atlas goes beside the indirect file the bake
+    folder holds (its basename), and the folder named stays untouched. In process, as the
+    panel's *Load* does (operators/ui/bake_ops.py: load_bake + install_transport_preview)."""
+    import bpy
+
+    from relightable_textures.operators.bakes import texture_transport as tx
+
+    blend = make_scene("bumps", tmp_path / "b.blend")
+    bk = tmp_path / "bk"
+    r = relight("bake-textures", blend, "--object", "Bumps", "--preset", "draft", "--directions",
+                "hemi:16", "--resolution", "16", "--indirect", "steerable", "--no-compare",
+                "--truth", "0", "--out", bk, "--force")
+    assert r.returncode == 0, r.stderr[-3000:]
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "victim.txt").write_bytes(b"mine")
+    report_path = bk / "Bumps_texture_report.json"
+    report = json.loads(report_path.read_text())
+    name = os.path.basename(report["files"]["indirect"])
+    assert name.endswith(".exr")   # the steerable term: its atlas is written beside it
+    report["files"]["indirect"] = str(outside / name)
+    report_path.write_text(json.dumps(report))
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    bake, store, rep = tx.load_bake(str(report_path))
+    tx.install_transport_preview(bpy.context.scene, bpy.data.objects["Bumps"], rep, bake, store)
+    assert sorted(p.name for p in outside.iterdir()) == ["victim.txt"]
+    assert (bk / (os.path.splitext(name)[0] + "_atlas.exr")).is_file()
