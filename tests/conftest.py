@@ -15,6 +15,10 @@ import pytest
 
 _USER_RESOURCES = tempfile.mkdtemp(prefix="relight-test-blender-user-")
 os.environ["BLENDER_USER_RESOURCES"] = _USER_RESOURCES
+# The chunk caches' HMAC key (lt_addon/io/chunk_cache.py): one per test session, never the
+# user's ~/.cache/relightable-textures/chunk-key; the CLI's subprocesses and Dask workers share it.
+os.environ["RELIGHT_CHUNK_KEY_FILE"] = os.path.join(
+    tempfile.mkdtemp(prefix="relight-test-chunk-key-"), "chunk-key")
 # Bakes of the CLI (and its Dask workers) on the CPU, as in-process bakes that choose no device,
 # even on a machine with a GPU: the tests compare against CPU references and Cycles truths.
 # Tests of --device auto / gpu pass it explicitly.
