@@ -248,7 +248,7 @@ def _short(exc: BaseException, limit: int = 200) -> str:
 class _Npz:
     """A checked NPZ: members are inflated only after their stated sizes passed the caps."""
 
-    def __init__(self, path: str, max_bytes: int, max_ratio: float):
+    def __init__(self, path: str, max_bytes: int, max_ratio: float, stored: bool = False):
         self.path = path
         regular_file(path, max_bytes)
         try:
@@ -265,6 +265,11 @@ class _Npz:
                 self.close()
                 raise UntrustedFileError(path, f"member {name} inflates to {info.file_size} "
                                                f"bytes, more than {max_bytes}")
+            if stored and info.compress_type != zipfile.ZIP_STORED:
+                self.close()
+                raise UntrustedFileError(path, f"member {name} is compressed; this tool writes "
+                                               "these files uncompressed (refused before it is "
+                                               "inflated)")
             if info.compress_size and info.file_size / info.compress_size > max_ratio:
                 self.close()
                 raise UntrustedFileError(path, f"member {name} inflates {info.file_size} "
@@ -326,11 +331,13 @@ class _Npz:
 
 
 def open_npz(path: str, *, max_bytes: int = MAX_ARRAY_BYTES,
-             max_ratio: float = MAX_ZIP_RATIO) -> _Npz:
+             max_ratio: float = MAX_ZIP_RATIO, stored: bool = False) -> _Npz:
     """NPZ file ``path`` opened for checked reads (a context manager with ``z[key]``,
     ``key in z``, ``z.get(key, shape=, dtype=)``): a regular file at most ``max_bytes`` whose
-    members together inflate to at most ``max_bytes``, none by more than ``max_ratio`` : 1."""
-    return _Npz(path, max_bytes, max_ratio)
+    members together inflate to at most ``max_bytes``, none by more than ``max_ratio`` : 1.
+    ``stored``: every member must be stored uncompressed (formats this tool has always written
+    with ``np.savez``: a deflated member, a possible bomb of ~1000:1, is refused unread)."""
+    return _Npz(path, max_bytes, max_ratio, stored)
 
 
 _EXP_BITS = {2: 0x7C00, 4: 0x7F800000, 8: 0x7FF0000000000000}

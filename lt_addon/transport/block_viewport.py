@@ -447,7 +447,7 @@ def load(path: str, store) -> BlockViewport:
     array is inflated; the eigen images finite."""
     from ..io import untrusted as ut, versions
 
-    with ut.open_npz(path) as z:
+    with ut.open_npz(path, stored=True) as z:
         versions.check({"format": ut.npz_scalar(z, "format", str),
                         "format_version": ut.npz_scalar(z, "format_version", int)},
                        FORMAT, path, "a block viewport")

@@ -132,7 +132,7 @@ class GatheredIndirect:
         values finite."""
         from ..io import untrusted as ut
 
-        with ut.open_npz(path) as z:
+        with ut.open_npz(path, stored=True) as z:
             header = {}
             if "header" in z:
                 raw = z.get("header", shape=(None,), dtype=np.uint8)

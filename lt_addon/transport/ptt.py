@@ -625,7 +625,7 @@ class TransferTensors:
         :meth:`__post_init__`. Anything wrong: one UntrustedFileError naming the file."""
         from ..io import untrusted as ut
 
-        with ut.open_npz(path) as z:
+        with ut.open_npz(path, stored=True) as z:
             raw = z.get("header", shape=(None,), dtype=np.uint8)
             if raw.size > ut.MAX_JSON_BYTES:
                 raise ut.UntrustedFileError(path, "has a header larger than the cap")

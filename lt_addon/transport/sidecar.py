@@ -62,7 +62,7 @@ class TransportData:
 
         # a file from elsewhere: a capped NPZ, every member's header checked before it is
         # inflated, the direction count capped, the arrays finite; any refusal names the file
-        with ut.open_npz(path) as z:
+        with ut.open_npz(path, stored=True) as z:
             try:
                 self.model = cpca_mod.model_from_arrays(z)
                 params = json.loads(ut.npz_scalar(z, "direction_set", str))

@@ -760,7 +760,7 @@ def load_model(path: str, store: "TransportStore | None" = None):
     (:func:`..io.untrusted.open_npz`), every array's header checked before it is read; with
     ``store`` its directions and resolution must be T's. A clear UntrustedFileError (an
     InputError) for an unknown kind or anything else wrong, naming the file."""
-    with untrusted.open_npz(path) as z:
+    with untrusted.open_npz(path, stored=True) as z:
         if "format" in z:   # (files before versioning have none: version 1)
             versions.check({"format": untrusted.npz_scalar(z, "format", str),
                             "format_version": untrusted.npz_scalar(z, "format_version", int)},

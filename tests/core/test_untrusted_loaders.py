@@ -248,7 +248,8 @@ def test_an_npz_member_claiming_more_than_it_holds_is_refused_before_inflating(t
     open(m, "wb").write(bytes(raw))
     tracemalloc.start()
     try:
-        _refused(m, tt.load_model, m, match="inflates")
+        _refused(m, ut.open_npz, m, match="inflates")      # the stated sizes, any NPZ
+        _refused(m, tt.load_model, m, match="is compressed")   # a model: stored members only
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
@@ -480,3 +481,23 @@ def test_other_bundle_files_give_one_line_naming_them(tmp_path):
     _refused(albedo, bundle.load_bake, rep["report"], match="OpenEXR")
     exrio.write_exr(albedo, {c: np.zeros((R + 1, R), np.float32) for c in "RGB"})
     _refused(albedo, bundle.load_bake, rep["report"], match="shape")
+
+
+def test_a_deflated_member_in_a_format_written_uncompressed_is_refused_unread(tmp_path):
+    """A transport model is always written stored (np.savez / save_npz); the same arrays
+    deflated -- the shape of a ~1000:1 bomb whose header matches what the reader expects -- are
+    refused before any member is inflated (issue 56: the ratio cap alone let 1030:1 through)."""
+    import zipfile
+
+    from relightable_textures.lt_addon.io import untrusted as ut
+    from relightable_textures.lt_addon.io.npz import save_npz
+
+    good = tmp_path / "m.npz"
+    save_npz(good, a=np.zeros((256, 256), np.float32))
+    with ut.open_npz(str(good), stored=True) as z:
+        assert z.get("a").shape == (256, 256)
+    bomb = tmp_path / "bomb.npz"
+    save_npz(bomb, compressed=True, a=np.zeros((256, 256), np.float32))
+    assert zipfile.ZipFile(bomb).infolist()[0].compress_size < 1000   # 256 KiB from < 1 KiB
+    with pytest.raises(ut.UntrustedFileError, match="is compressed; this tool writes"):
+        ut.open_npz(str(bomb), stored=True)
