@@ -72,9 +72,11 @@ def _cmd_export(args) -> int:
     obj = open_object(path, args.object)
     device = bake_device(args, "export")
     from ...lt_addon.io.transaction import BakeTransaction
-    from .common import BakeFailed
+    from .common import BakeFailed, describe_sweep
 
     with BakeTransaction(out_dir) as txn:   # the export's files swap in whole, or not at all
+        if any(txn.swept.values()):   # (a planted stage or a linked cache: said, left alone)
+            print(f"export: {describe_sweep(txn.swept)}", file=sys.stderr)
         try:
             result = run_job(export_job(bpy.context.scene, obj, settings, txn.stage,
                                         args.force), "export", device)

@@ -177,6 +177,10 @@ class ModalBake:
         # the session's bake records as they were: a failed bake puts them back
         self._records = {o.name: _plain(o.get(BAKES_KEY)) for o in bpy.data.objects}
         self.txn = BakeTransaction(self.out_dir).begin()
+        refused = self.txn.swept.get("refused")
+        if refused:   # a planted stage or a linked cache: left alone, for the user to look at
+            self.report({"WARNING"}, "Output folder: left alone what is not this tool's to "
+                                     "recover or remove (look at it): " + ", ".join(refused))
         return self.txn.stage
 
     def _abort(self):
@@ -592,14 +596,16 @@ def kept_chunks(context, kind: str | None = None) -> list:
         root = os.path.join(_output_dir(context.scene.relight), CACHE_FOLDER)
     except BakeInputError:
         return []
-    if obj is None or not os.path.isdir(root):
-        return []
+    if obj is None or not os.path.isdir(root) or os.path.islink(root):
+        return []   # (a linked cache is someone else's folder: the bake refuses it, in a line)
     active = safe_name(obj.name)
     out = []
     for folder in sorted(glob.glob(os.path.join(root, "*"))):
         base = os.path.basename(folder)   # "A+B" (baked together), "A_vertex", "A_materials",
         what = next((k for k in ("vertex", "materials") if base.endswith("_" + k)), "texture")
         if kind not in (None, what):      # "A_lobes" (the lobes method: a texture bake)
+            continue
+        if os.path.islink(folder):
             continue
         if (base == f"{active}_{what}" if what != "texture" else
                 base == f"{active}_lobes" or active in base.split("+")):
