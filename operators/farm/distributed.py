@@ -195,11 +195,19 @@ def stage_name(stage) -> str:
     return f"{stage.__module__}:{stage.__qualname__}"
 
 
+#: the only modules whose chunk functions a worker imports by name (this package's bakes)
+_STAGE_MODULES = __name__.rsplit(".operators.farm.", 1)[0] + ".operators.bakes."
+
+
 def _resolve(stage: str):
-    """The chunk function a worker runs, imported by its name (:func:`stage_name`)."""
+    """The chunk function a worker runs, imported by its name (:func:`stage_name`): a
+    function of this package's ``operators.bakes`` modules, nothing else (a task names a
+    module to import; the cluster is trusted, but a name costs nothing to check)."""
     import importlib
 
     module, _, name = str(stage).partition(":")
+    if not module.startswith(_STAGE_MODULES) or not name.isidentifier():
+        raise ValueError(f"not a chunk function of this package's bakes: {stage!r:.120}")
     return getattr(importlib.import_module(module), name)
 
 

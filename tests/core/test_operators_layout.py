@@ -157,3 +157,18 @@ def test_the_product_never_imports_the_development_tools():
     found = [f"{a}:{line}" for a, edges in graph.items() for b, line in edges
              if b.split(".")[0] == "devtools"]
     assert not found, f"imports of devtools/ in the product: {found}"
+
+
+def test_a_dask_task_names_only_chunk_functions_of_this_package_s_bakes():
+    """A worker imports the chunk function a task names (distributed._resolve): only one of
+    this package's ``operators.bakes`` modules, never another module (issue 56)."""
+    pytest.importorskip("bpy")
+    from relightable_textures.operators.farm import distributed as d
+    from relightable_textures.operators.bakes import texture_transport
+
+    for bad in ("os:system", "subprocess:run", "relightable_textures.operators.bakes.x:a.b",
+                "relightable_textures.operators.farm.distributed:_resolve"):
+        with pytest.raises(ValueError, match="not a chunk function"):
+            d._resolve(bad)
+    stage = texture_transport.direct_chunk_cache
+    assert d._resolve(d.stage_name(stage)) is stage
