@@ -217,6 +217,8 @@ def read_exr(path: str, max_bytes: int | None = None) -> tuple[dict, dict]:
             raise ut.UntrustedFileError(path, f"its {METADATA_KEY} is not UTF-8") from None
     if not raw:
         return channels, {}
+    if not isinstance(raw, str):   # (a flipped type byte: OpenEXR hands an OpaqueAttribute)
+        raise ut.UntrustedFileError(path, f"its {METADATA_KEY} is not text")
     try:
         meta = json.loads(raw)
     except (ValueError, RecursionError):

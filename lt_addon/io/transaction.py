@@ -217,17 +217,13 @@ def check_file(path: str) -> None:
     elif ext == ".npy":
         import numpy as np
 
-        with open(path, "rb") as fh:
+        from .untrusted import UntrustedFileError, read_npy_header
+
+        with open(path, "rb") as fh:   # (3.0, a UTF-8 header: this package never writes one)
             try:
-                version = np.lib.format.read_magic(fh)
-                read = {(1, 0): np.lib.format.read_array_header_1_0,
-                        (2, 0): np.lib.format.read_array_header_2_0}.get(version)
-                if read is None:   # (3.0: a UTF-8 header; this package never writes one)
-                    raise ValueError(f"NPY format {version} is not checked here")
-                shape, fortran, dtype = read(fh)
-            except ValueError as exc:
-                raise ValueError(f"{path} is truncated (its header: {exc})") from None
-            offset = fh.tell()
+                shape, fortran, dtype, offset = read_npy_header(fh, path, kinds="biufUSV")
+            except UntrustedFileError as exc:
+                raise ValueError(f"{path} is truncated ({exc.cause})") from None
         need = offset + int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
         if size < need:
             raise ValueError(f"{path} is truncated ({size} of {need} bytes)")

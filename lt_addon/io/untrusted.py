@@ -24,6 +24,7 @@ from __future__ import annotations
 import json
 import os
 import stat
+import tokenize
 import zipfile
 import zlib
 
@@ -173,7 +174,17 @@ def read_json(path: str, max_bytes: int = MAX_JSON_BYTES, kind: type | None = di
     return data
 
 
-def _header_from(fh, path: str, kinds: str = "biuf"):
+#: what numpy's NPY header parser raises on a damaged header (it tokenizes and evaluates the
+#: header's text: a cut string is a tokenize.TokenError, deep nesting a RecursionError)
+_NPY_HEADER_ERRORS = (ValueError, EOFError, SyntaxError, TypeError, tokenize.TokenError,
+                      UnicodeDecodeError, OverflowError, RecursionError, MemoryError)
+
+
+def read_npy_header(fh, path: str, kinds: str = "biuf"):
+    """(shape, fortran_order, dtype, data offset) of the NPY stream ``fh`` at its start: the
+    one parser of NPY headers from elsewhere (bake files, chunk caches, staged files), format
+    1.0 / 2.0 only, headers of at most 10,000 bytes, dtype kinds in ``kinds`` (``"V"``:
+    structured records of numbers), no Python objects, no negative dimension."""
     try:
         version = np.lib.format.read_magic(fh)
         read = {(1, 0): np.lib.format.read_array_header_1_0,
@@ -181,8 +192,9 @@ def _header_from(fh, path: str, kinds: str = "biuf"):
         if read is None:
             raise ValueError(f"NPY format {version} is not read by this tool")
         shape, fortran, dtype = read(fh, max_header_size=10000)
-    except (ValueError, EOFError, SyntaxError, TypeError) as exc:
-        raise UntrustedFileError(path, f"is not a whole NPY file (its header: {exc})") from None
+    except _NPY_HEADER_ERRORS as exc:
+        raise UntrustedFileError(path, f"is not a whole NPY file (its header: "
+                                       f"{_short(exc, 120)})") from None
     if dtype.hasobject or dtype.kind not in kinds:
         raise UntrustedFileError(path, f"holds {dtype}, not numbers")
     if any(int(n) < 0 for n in shape):
@@ -195,7 +207,7 @@ def npy_header(path: str, max_bytes: int = MAX_ARRAY_BYTES):
     alone, after checking the file is regular, capped, and as long as the header says."""
     size = regular_file(path, max_bytes)
     with open(path, "rb") as fh:
-        shape, fortran, dtype, offset = _header_from(fh, path)
+        shape, fortran, dtype, offset = read_npy_header(fh, path)
     need = offset + int(np.prod(shape, dtype=object)) * dtype.itemsize
     if need > size:
         raise UntrustedFileError(path, f"is truncated ({size} of the {need} bytes its header "
@@ -294,7 +306,7 @@ class _Npz:
         try:
             with self.zf.open(self.members[key]) as fh:
                 # (NPZ files hold their strings as fixed-width unicode scalars, kind "U")
-                shape, _, dtype, _ = _header_from(fh, f"{self.path}[{key}]", "biufU")
+                shape, _, dtype, _ = read_npy_header(fh, f"{self.path}[{key}]", "biufU")
         except _ZIP_ERRORS as exc:
             raise UntrustedFileError(self.path, f"member {key} cannot be read "
                                                 f"({_short(exc)})") from None

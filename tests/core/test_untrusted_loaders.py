@@ -501,3 +501,29 @@ def test_a_deflated_member_in_a_format_written_uncompressed_is_refused_unread(tm
     assert zipfile.ZipFile(bomb).infolist()[0].compress_size < 1000   # 256 KiB from < 1 KiB
     with pytest.raises(ut.UntrustedFileError, match="is compressed; this tool writes"):
         ut.open_npz(str(bomb), stored=True)
+
+
+def test_an_npy_header_cut_inside_its_dict_is_refused_in_one_line(tmp_path):
+    """Found by the fuzz harness: numpy's header parser tokenizes the header's text, and a dict
+    left open ends in tokenize.TokenError, which no loader caught (a traceback at the CLI)."""
+    head = b"{'descr': '<f4', 'shape': (3,\n"
+    p = tmp_path / "t.npy"
+    p.write_bytes(b"\x93NUMPY\x01\x00" + struct.pack("<H", len(head)) + head + b"\0" * 12)
+    _refused(p, ut.load_npy, str(p), match="is not a whole NPY file")
+
+
+def test_exr_metadata_of_another_attribute_type_is_refused(tmp_path):
+    """Found by the fuzz harness: a flipped bit in the metadata attribute's type name made
+    OpenEXR hand back an opaque attribute, and json.loads raised TypeError."""
+    import OpenEXR
+
+    p = str(tmp_path / "m.exr")
+    exrio.write_exr(p, {"R": np.zeros((4, 4), np.float32)}, metadata={"a": 1})
+    raw = bytearray(open(p, "rb").read())
+    at = raw.find(exrio.METADATA_KEY.encode()) + len(exrio.METADATA_KEY) + 1
+    assert raw[at:at + 6] == b"string"
+    raw[at:at + 6] = b"strinf"                      # an attribute type OpenEXR does not know
+    open(p, "wb").write(bytes(raw))
+    with OpenEXR.File(p, header_only=True) as f:   # (the library reads it, as another type)
+        assert not isinstance(f.header()[exrio.METADATA_KEY], (str, bytes))
+    _refused(p, exrio.read_exr, p, match="is not text")
