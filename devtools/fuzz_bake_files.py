@@ -329,7 +329,24 @@ def run_case(bakes: pathlib.Path, scratch: pathlib.Path, rng: random.Random,
     bk = scratch / "bk"
     shutil.copytree(bakes / kind, bk, symlinks=True)
     entry = next(p for p in bk.iterdir() if p.name.endswith(ENTRY[kind]))
-    if rng.random() < 0.2:
+    if rng.random() < 0.1:   # a kept chunk of a resumed bake, damaged: rejected or reused whole
+        from relightable_textures.lt_addon.io.chunk_cache import ChunkCache
+
+        cache = ChunkCache(str(bk / ".relight_cache"), {"fuzz": 1})
+        chunk = np.random.default_rng(rng.randrange(2**31)).random((64, 16), np.float32)
+        cache.put("00000", chunk)
+        files = sorted(p for p in pathlib.Path(cache.folder).iterdir() if p.is_file())
+        target = rng.choice(files)
+        what = f"chunk: {target.name} {damage(target, rng.choice(OPS), rng, outside)}"
+
+        def action():
+            got = ChunkCache(str(bk / ".relight_cache"), {"fuzz": 1}).get(
+                "00000", shape=(64, 16), dtype=np.float32, lo=0.0, hi=1.0)
+            if got is None:
+                raise InputError("rejected: baked again")
+            if not np.array_equal(got, chunk):
+                raise AssertionError("a damaged chunk was reused")
+    elif rng.random() < 0.2:
         what = "planted: " + plant(bk, rng, outside)
         action = lambda: tr.sweep(str(bk))   # noqa: E731
     else:
@@ -456,8 +473,11 @@ def main(argv=None) -> int:
           f"{counts['refused']} refused, {counts['failure']} failed (memory cap "
           f"{a.mem_cap_gib:g} GiB, {a.case_timeout:g} s a case)")
     for kind, row in sorted(counts["by_kind"].items()):
-        print(f"fuzz:   {kind}: {row['loaded']} loaded (planted stages: swept), "
-              f"{row['refused']} refused, {row['failure']} failed")
+        ok = {"planted": "swept (left alone or recovered inside)",
+              "chunk": "reused whole"}.get(kind, "loaded")
+        no = {"chunk": "rejected (baked again)"}.get(kind, "refused")
+        print(f"fuzz:   {kind}: {row['loaded']} {ok}, {row['refused']} {no}, "
+              f"{row['failure']} failed")
     if a.json:
         pathlib.Path(a.json).parent.mkdir(parents=True, exist_ok=True)
         pathlib.Path(a.json).write_text(json.dumps(counts, indent=1))
