@@ -192,6 +192,26 @@ def test_a_full_disk_is_one_line_and_changes_nothing(scene):
     assert _debris(bk) == []
 
 
+def test_a_full_disk_inside_an_npz_write_is_one_line_without_a_second_traceback(scene):
+    """RLIMIT_FSIZE at 200 KiB: T (32 KiB) and the chunks fit, the gathered indirect term's NPZ
+    (~390 KiB) does not. np.savez left its ZipFile open, and the garbage collector's
+    ``ZipFile.__del__`` then printed ``Exception ignored`` with a traceback after the one line
+    (issue 56); io.npz.save_npz closes it on every path."""
+    import resource
+
+    blend, bk, (files, blend_bytes) = scene
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (200 * 1024, 200 * 1024))
+
+    r = _run(blend, bk, preexec_fn=limit)
+    _assert_one_line(r, "larger than this system allows", "Bumps_indirect.npz")
+    assert "Exception ignored" not in r.stderr
+    assert _files(bk) == files and blend.read_bytes() == blend_bytes
+    assert _debris(bk) == []
+
+
 def test_permission_denied_is_one_line_and_changes_nothing(scene):
     """A folder the bake cannot write. Root is not stopped by permissions, so there the
     same error is injected where the bake writes its first file (EACCES, as the OS raises it)."""
