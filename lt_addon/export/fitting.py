@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..io.names import object_stem
 from ..io import atomic, exrio, jpeg
 from ..progress import Progress
 from ..settings import check_ranges, setting
@@ -162,7 +163,7 @@ def output_stem(obj_name: str, settings: "ExportSettings") -> str:
     fmt = settings.format
     if fmt == "rti-hsh":
         fmt += str(settings.terms or 9)
-    return f"{atomic.safe_name(obj_name)}_{fmt}"
+    return f"{object_stem(obj_name)}_{fmt}"
 
 
 def output_names(obj_name: str, settings: "ExportSettings") -> list:

@@ -28,6 +28,7 @@ import numpy as np
 
 from ..errors import InputError
 from .. import faults
+from ..io.names import object_stem
 from ..io import atomic, exrio, untrusted, versions
 from ..settings import check_ranges, setting
 from ..sphere.hemisphere import direction_from_az_el
@@ -807,7 +808,7 @@ def write_bundle(result: TransportTextureResult, names: list, out_dir: str,
     t0 = time.perf_counter()
     reports = []
     for b in result.objects:
-        base = os.path.join(out_dir, atomic.safe_name(b.name))
+        base = os.path.join(out_dir, object_stem(b.name))
         if b.store is not None and getattr(b.store, "_tmp", None):
             b.store_path = b.store.commit()
         files = {"transport": b.store_path}

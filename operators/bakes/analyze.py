@@ -25,6 +25,7 @@ import numpy as np
 
 from ...lt_addon import plugins
 from ...lt_addon.io import atomic
+from ...lt_addon.io.names import object_stem
 from ...lt_addon.transport import cluster_analysis
 from ...lt_addon.transport.sidecar import samples_path
 from ..base.jobs import Progress
@@ -127,7 +128,7 @@ def write_analysis(report: dict, out_dir: str) -> dict:
     """Write the JSON report (and, where the development tools are present, the two charts)
     into ``out_dir``; returns the paths written."""
     os.makedirs(out_dir, exist_ok=True)
-    safe = atomic.safe_name(report["object"])
+    safe = object_stem(report["object"])
     paths = {"json": os.path.join(out_dir, f"{safe}_analysis.json")}
     draw = plugins.get("analysis-charts")   # the development tools' (matplotlib), if installed
     if draw is not None:

@@ -49,6 +49,7 @@ import numpy as np
 from ...lt_addon.io.transaction import after_commit
 from ...lt_addon.io.versions import REPORT_VERSION
 from ...lt_addon.io import atomic
+from ...lt_addon.io.names import object_stem
 from ...lt_addon.settings import check_ranges, setting
 from ...lt_addon.transport import bounce_transfer, gathered_transfer, ptt
 from ...lt_addon.transport.texture import parse_directions
@@ -651,7 +652,7 @@ def material_chunk_cache(scene, objects, settings: MaterialBakeSettings, out_dir
     key = {"stage": "materials", "scene": scene_key(scene, list(objects)),
            "device": current().id, "settings": baked, "chunk_directions": CHUNK_DIRECTIONS,
            "seeds": "per direction"}   # chunks of the one-seed bakes are not these
-    folder = atomic.safe_name(objects[0].name) + "_materials"
+    folder = object_stem(objects[0].name) + "_materials"
     cache = ChunkCache(os.path.join(cache_root(out_dir), folder), key)
     cache.prune_others(adopt_devices=current().mix_devices)   # --mix-devices
     return cache
@@ -994,7 +995,7 @@ class MaterialsBakeOutput:
 
 
 def tensors_path(out_dir: str, objects) -> str:
-    safe = atomic.safe_name(objects[0].name)
+    safe = object_stem(objects[0].name)
     return os.path.join(out_dir, safe + "_materials.npz")
 
 

@@ -20,6 +20,7 @@ from ... import __version__
 from ...lt_addon.io.transaction import after_commit
 from ...lt_addon.io.versions import REPORT_VERSION
 from ...lt_addon.io import atomic
+from ...lt_addon.io.names import object_stem
 from ...lt_addon.settings import check_ranges, setting
 from ...lt_addon.steerable.sampled_basis import build_sampled_basis
 from ...lt_addon.steerable.basis import paper_basis
@@ -174,7 +175,7 @@ def lobes_chunk_cache(scene, obj, settings: TextureBakeSettings, out_dir: str):
     from ..base.bake_inputs import cache_root
 
     return light_cache(scene, [obj], lobes_spec(settings),
-                       os.path.join(cache_root(out_dir), atomic.safe_name(obj.name) + "_lobes"))
+                       os.path.join(cache_root(out_dir), object_stem(obj.name) + "_lobes"))
 
 
 def default_output_dir(blend_path: str) -> str:
@@ -194,7 +195,7 @@ def write_bake(result: BakeResult, obj, out_dir: str, settings: TextureBakeSetti
     report next to it as ``.json``; both replace earlier files only once complete.
     """
     os.makedirs(out_dir, exist_ok=True)
-    safe = atomic.safe_name(obj.name)
+    safe = object_stem(obj.name)
     exr_path = os.path.join(out_dir, f"{safe}_steerable.exr")
     json_path = os.path.join(out_dir, f"{safe}_steerable.json")
     t0 = time.perf_counter()

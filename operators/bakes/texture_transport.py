@@ -36,6 +36,7 @@ from ...lt_addon.io.transaction import after_commit
 from ...lt_addon import blas_threads, faults
 from ...lt_addon.peak_memory import PeakMemory
 from ...lt_addon.io import atomic
+from ...lt_addon.io.names import object_stem
 from ...lt_addon.transport import texture as tt
 from ...lt_addon.transport.gathered_texture import indirect_images
 from ...lt_addon.sphere.hemisphere import direction_from_az_el
@@ -164,7 +165,7 @@ def _bake_transport_textures(scene, objects, settings, out_dir, resume, client, 
     # back; the cache folder still holds the indirect stage's chunks)
     cache = direct_chunk_cache(scene, objects, settings, out_dir, dset) if resume else None
     stores = [tt.TransportStore.create(
-        os.path.join(out_dir, f"{atomic.safe_name(o.name)}_transport_texture.npy"), dset, R,
+        os.path.join(out_dir, f"{object_stem(o.name)}_transport_texture.npy"), dset, R,
         {"object": o.name, "kind": "direct_irradiance_over_pi", "samples": 1,
          "seed": settings.seed, "direct_engine": engine["engine"],
          "texel_sampling": "1 sample at the texel centre (Cycles' first bake sample)"
@@ -412,7 +413,7 @@ def direct_chunk_cache(scene, objects, settings: TransportTextureSettings, out_d
            **({"direction_set": digest(dset.directions.round(9).tolist())}
               if dset.kind == "custom" else {}),
            "seed": settings.seed, "chunk_directions": CHUNK_DIRECTIONS}
-    root = os.path.join(cache_root(out_dir), "+".join(atomic.safe_name(o.name) for o in objects))
+    root = os.path.join(cache_root(out_dir), "+".join(object_stem(o.name) for o in objects))
     cache = ChunkCache(root, key)
     cache.prune_others(adopt_devices=current().mix_devices)   # --mix-devices
     return cache
@@ -604,7 +605,7 @@ def retire_globs(objects) -> tuple:
     indirect term, a model kind, a camera comparison): they would belong to no bake."""
     out = []
     for o in objects:
-        safe = atomic.safe_name(o.name)
+        safe = object_stem(o.name)
         out += [f"{safe}_preview_{part}" for part in (
                     "eigen.exr", "tables.exr", "sparse_index.exr", "sparse_weights.exr",
                     "transport.png", "transport.json", "block_eigen.exr", "block_tables.exr")]
@@ -612,7 +613,7 @@ def retire_globs(objects) -> tuple:
                 f"{safe}_preview_indirect_eigen.exr", f"{safe}_preview_indirect_tables.exr",
                 f"{safe}_transport_model.npz", f"{safe}_transport_steerable.exr",
                 f"{safe}_viewport_blocks.npz"]
-    return tuple(out) + (f"{atomic.safe_name(objects[0].name)}_compare.png",)
+    return tuple(out) + (f"{object_stem(objects[0].name)}_compare.png",)
 
 
 def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: dict | None = None,
@@ -763,9 +764,14 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
     sides (``object_resolutions``). Returns a :class:`TextureBakeOutput` of all objects."""
     from dataclasses import replace
 
+    from ...lt_addon.io.names import StemCollision, check_stems
     from ...lt_addon.transport import object_resolution as orr
 
     objects = list(objects)
+    try:   # two objects whose files would be one (a hash collision, or case on macOS/Windows)
+        check_stems([o.name for o in objects])
+    except StemCollision as exc:
+        raise BakeInputError(str(exc)) from None
     parts = orr.groups([o.name for o in objects], settings.resolution, resolutions)
     kw.update(truth=truth, truth_samples=truth_samples, preview=preview)
     if len(parts) == 1:
@@ -907,7 +913,7 @@ def _camera_comparison(scene, objects, settings, out_dir: str, reports: list, tr
     from ..preview.compare_render import report_comparison
 
     yield Progress(1, 1, "rendering the comparison from the scene camera")
-    png = os.path.join(out_dir, f"{atomic.safe_name(objects[0].name)}_compare.png")
+    png = os.path.join(out_dir, f"{object_stem(objects[0].name)}_compare.png")
     cmp = report_comparison(scene, objects, truth_lights(truth), settings.sun_angle, png,
                             truth_samples)
     for rep in reports:

@@ -27,6 +27,7 @@ import numpy as np
 from ...lt_addon.io.transaction import after_commit
 from ...lt_addon.io.versions import REPORT_VERSION
 from ...lt_addon.io import atomic
+from ...lt_addon.io.names import object_stem
 from ...lt_addon.settings import check_ranges, setting
 from ..base import cycles_device
 from ..base.cycles_bake import BakeInputError, EnvironmentBake, check_bakeable, check_memory
@@ -97,7 +98,7 @@ def vertex_chunk_cache(scene, obj, directions, bounces: int, samples, seed: int,
            "directions": hashlib.sha256(dirs.tobytes()).hexdigest(), "count": len(dirs),
            "bounces": int(bounces), "samples": _default_samples(samples, bounces),
            "seed": int(seed), "chunk_directions": CHUNK_DIRECTIONS}
-    safe = atomic.safe_name(obj.name)
+    safe = object_stem(obj.name)
     cache = ChunkCache(os.path.join(cache_root(out_dir), safe + "_vertex"), key)
     cache.prune_others(adopt_devices=current().mix_devices)   # --mix-devices
     return cache
@@ -436,7 +437,7 @@ def _stem(out_dir: str, obj) -> str:
     """``<out_dir>/<object>``, the object name made file-safe: every file of the bake starts so."""
     import os
 
-    safe = atomic.safe_name(obj.name)
+    safe = object_stem(obj.name)
     return os.path.join(out_dir, safe)
 
 

@@ -24,6 +24,7 @@ import numpy as np
 from ... import __version__
 from ...lt_addon import plugins
 from ...lt_addon.io import atomic
+from ...lt_addon.io.names import object_stem
 from ...lt_addon.transport.bundle import direct_summary
 from .common import (CliError, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, add_device_option,
                      add_distribution_options, add_setting_options, bake_device, can_create_in, check_bake_inputs,
@@ -551,7 +552,7 @@ def _cmd_bake_texture_transport(args) -> int:
         return _estimate_only(args, objects, settings, sides)
     if not args.force:
         for o in objects:
-            rp = os.path.join(out_dir, f"{atomic.safe_name(o.name)}_texture_report.json")
+            rp = os.path.join(out_dir, f"{object_stem(o.name)}_texture_report.json")
             if os.path.exists(rp):
                 raise CliError(f"a bake of {o.name} exists in {out_dir} (use --force to "
                                "replace it)")

@@ -12,6 +12,7 @@ import sys
 import numpy as np
 
 from ...lt_addon.io import atomic
+from ...lt_addon.io.names import object_stem
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
 
@@ -249,7 +250,7 @@ def open_objects(path: str, names: list) -> list:
 
 def refuse_existing(out_dir: str, obj_name: str, suffixes, force: bool, what: str) -> None:
     """Refuse (before any work) to replace ``<out_dir>/<object><suffix>`` without --force."""
-    safe = atomic.safe_name(obj_name)
+    safe = object_stem(obj_name)
     if force:
         return
     for suffix in suffixes:

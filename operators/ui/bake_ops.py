@@ -588,7 +588,7 @@ def kept_chunks(context, kind: str | None = None) -> list:
     folder yet. ``kind`` "texture", "vertex" or "materials" keeps only that bake's."""
     import glob
 
-    from ...lt_addon.io.atomic import safe_name
+    from ...lt_addon.io.names import object_stem
     from ..base.bake_inputs import CACHE_FOLDER
 
     obj = context.active_object
@@ -598,7 +598,7 @@ def kept_chunks(context, kind: str | None = None) -> list:
         return []
     if obj is None or not os.path.isdir(root) or os.path.islink(root):
         return []   # (a linked cache is someone else's folder: the bake refuses it, in a line)
-    active = safe_name(obj.name)
+    active = object_stem(obj.name)
     out = []
     for folder in sorted(glob.glob(os.path.join(root, "*"))):
         base = os.path.basename(folder)   # "A+B" (baked together), "A_vertex", "A_materials",
