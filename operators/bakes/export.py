@@ -153,7 +153,7 @@ def export_job(scene, obj, settings: ExportSettings, out_dir: str, force: bool =
             from ..base.gltf import write_glb
             with tempfile.TemporaryDirectory(prefix="relight-gltf-") as tmp:
                 glb = os.path.join(tmp, "object.glb")
-                gltf_info = write_glb(scene, obj, glb)
+                gltf_info = write_glb(scene, obj, glb, uv_map=report.get("uv_map"))
                 files.update(godot.write(base, L, R, settings.godot, gltf_info["node"], glb,
                                          meta))
             err = errors[f"godot_{settings.godot}"]

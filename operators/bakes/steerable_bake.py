@@ -21,18 +21,21 @@ from ...lt_addon.io.transaction import after_commit
 from ...lt_addon.io.versions import REPORT_VERSION
 from ...lt_addon.io import atomic
 from ...lt_addon.io.names import object_stem
+from ...lt_addon import caveats
+from ...lt_addon.caveats import uv_overlap
 from ...lt_addon.settings import check_ranges, setting
 from ...lt_addon.steerable.sampled_basis import build_sampled_basis
 from ...lt_addon.steerable.basis import paper_basis
 from ...lt_addon.steerable.texture import FRAMES, STORAGE_MODES, SteerableTexture
 from ..base import cycles_device
+from ..base.meshes import bake_uv_name
 from ..base.jobs import Progress, run  # noqa: F401  (the bake's job primitives)
 from ..base.cycles_bake import (BAKE_MODES, WORLD_SAMPLING, BakeInputError, check_bakeable,
                                 check_memory)
 
 BAKE_KIND = "steerable_texture"
 #: Fraction of covered texels with overlapping UVs above which a bake warns.
-UV_OVERLAP_WARNING = 0.01
+UV_OVERLAP_WARNING = caveats.UV_OVERLAP_WARNING
 
 
 @dataclass
@@ -125,10 +128,9 @@ def bake_steerable_texture(scene, obj, settings: TextureBakeSettings, cache=None
     # every UV triangle of zero area: no texel can belong to a face. Blender 5.3's Cycles still
     # writes one texel plus its margin for such a face, 5.0's nothing; the bake keeps nothing.
     no_uv_area = not np.any(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
-    if uv_report["overlapping"] > UV_OVERLAP_WARNING:
-        yield Progress(0, 1, f"warning: {100 * uv_report['overlapping']:.1f}% of the covered "
-                             f"texels have overlapping UVs on {obj.name}; those texels mix "
-                             "several faces (unwrap without overlaps)")
+    overlap = uv_overlap(obj.name, uv_report)   # (the report's warning too: lobes_job)
+    if overlap:
+        yield Progress(0, 1, f"warning: {overlap}")
     basis = paper_basis(settings.order)
     sampled = build_sampled_basis(basis)
     k_total = sampled.n_lights
@@ -207,6 +209,7 @@ def write_bake(result: BakeResult, obj, out_dir: str, settings: TextureBakeSetti
     report = {
         "kind": BAKE_KIND,
         "object": obj.name,
+        "uv_map": bake_uv_name(obj),   # the map the bake wrote into (the preview reads it)
         "exr": os.path.abspath(exr_path),
         "settings": asdict(settings),
         "condition_number": result.condition_number,
@@ -352,6 +355,7 @@ def lobes_job(scene, obj, settings: TextureBakeSettings, out_dir: str, *, truth:
     if cache is not None:   # once the bake is committed the chunks have served
         after_commit(out_dir, cache.clear)
     report["timings"]["wall_total"] = round(time.perf_counter() - started, 4)
+    report["warnings"] = caveats.report_warnings(report)   # said by the CLI and the panel
     atomic.write_json(os.path.splitext(report["exr"])[0] + ".json",
                       {**report, "format_version": REPORT_VERSION})
     return LobesBakeOutput(report, result.texture)

@@ -37,6 +37,7 @@ from ...lt_addon import blas_threads, faults
 from ...lt_addon.peak_memory import PeakMemory
 from ...lt_addon.io import atomic
 from ...lt_addon.io.names import object_stem
+from ...lt_addon.caveats import report_warnings
 from ...lt_addon.transport import texture as tt
 from ...lt_addon.transport.gathered_texture import indirect_images
 from ...lt_addon.sphere.hemisphere import direction_from_az_el
@@ -619,13 +620,16 @@ def retire_globs(objects) -> tuple:
 def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: dict | None = None,
                started: float | None = None) -> list:
     """Write the bundle of every object (:func:`..lt_addon.transport.bundle.write_bundle`) and
-    record the bake on the object. Returns the reports."""
+    record the bake on the object. Returns the reports, each naming the UV map baked into
+    (``"uv_map"``; written to the file with the preview's figures by :func:`bake_job`)."""
     from ..base.blend_files import record_kind
+    from ..base.meshes import bake_uv_name
 
     reports = write_bundle(result, [o.name for o in objects], out_dir, figures, started,
                            cycles_device.current().report(), __version__)
     s = result.settings
     for report, obj in zip(reports, objects):
+        report["uv_map"] = bake_uv_name(obj)   # the map every stage baked into (the preview's)
         record_kind(obj, KIND, report["report"],
                     {"directions": result.directions.spec, "resolution": s.resolution,
                      "model": s.model, "bytes": report["bytes"]["total"],
@@ -806,6 +810,7 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
         rep["timings"]["wall_total"] = wall
         if why:
             rep["indirect"]["why"] = why
+        rep["warnings"] = report_warnings(rep)
         atomic.write_json(rep["report"], {k: v for k, v in rep.items() if k != "report"},
                           default=float)
     return TextureBakeOutput(reports, models)
@@ -877,6 +882,10 @@ def bake_group(scene, objects, settings: TransportTextureSettings, out_dir: str,
         raise
     figures["glossy"] = glossy_note(objects)
     reports = write_bake(result, objects, out_dir, figures)
+    from ..base.uv_layout import uv_layout
+
+    for rep, obj in zip(reports, objects):   # texels two faces claim (overlaps, Mirror copies)
+        rep["uv_layout"] = uv_layout(obj, settings.resolution)
 
     previewed = preview and settings.model == "pca"
     if previewed:
@@ -892,6 +901,7 @@ def bake_group(scene, objects, settings: TransportTextureSettings, out_dir: str,
     wall = round(time.perf_counter() - started, 3)
     for rep in reports:   # the wall time of everything the verb did, in the file too
         rep["timings"]["wall_total"] = wall
+        rep["warnings"] = report_warnings(rep)   # its caveats, as the CLI and panel say them
         if "estimate" in rep and not rep.get("chunks_reused"):   # how good the prediction was
             rep["estimate"]["measured_bake_seconds"] = rep["timings"].get("bake_total")
             rep["estimate"]["measured_over_estimated"] = round(

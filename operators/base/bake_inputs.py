@@ -113,6 +113,18 @@ def _material(mat) -> dict | None:
     return out
 
 
+def _bake_uv(obj):
+    """The UV map the bake reads (:func:`.meshes.bake_uv_name`), or None (no map, or not the
+    one chosen: the bake refuses it)."""
+    from ...lt_addon.errors import InputError
+    from .meshes import bake_uv_name
+
+    try:
+        return bake_uv_name(obj) if obj.type == "MESH" and obj.data.uv_layers else None
+    except InputError:
+        return None
+
+
 def _geometry(obj, depsgraph) -> dict:
     ev = obj.evaluated_get(depsgraph)
     try:
@@ -127,7 +139,7 @@ def _geometry(obj, depsgraph) -> dict:
         return {"type": obj.type, "positions": _sha(vertex_positions(mesh)),
                 "corners": _sha(corner_vertices(mesh)), "smooth": _sha(smooth),
                 "uvs": {layer.name: _sha(uv_corners(mesh, layer)) for layer in mesh.uv_layers},
-                "active_uv": next((u.name for u in mesh.uv_layers if u.active_render), None)}
+                "active_uv": _bake_uv(obj)}
     finally:
         ev.to_mesh_clear()
 

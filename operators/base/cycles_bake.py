@@ -121,19 +121,22 @@ def check_bakeable(obj, need_uv: bool = True) -> None:
         raise BakeInputError("no object given")
     if obj.type != "MESH":
         raise BakeInputError(f"{obj.name} is a {obj.type.lower()}, not a mesh")
-    if need_uv and not obj.data.uv_layers:
-        raise BakeInputError(f"{obj.name} has no UV map; add one (UV > Unwrap) before baking")
+    if need_uv:
+        from .meshes import bake_uv_name
+
+        bake_uv_name(obj)   # no UV map, or not the one chosen: refused in one line
     if not obj.data.polygons:
         raise BakeInputError(f"{obj.name} has no faces to bake")
     _check_area(obj, need_uv)
 
 
 def _check_area(obj, need_uv: bool) -> None:
-    """Refuse a mesh whose faces have no area, or whose render UV map has none (every UV on
-    one point or one line): either bakes nothing, and used to give an all-zero texture with
-    exit 0 or a raw ``ValueError`` from deep in the bake (issue 56). The mesh as stored: a
-    modifier that makes area from none is rare enough to be told to apply it."""
-    from .meshes import uv_corners
+    """Refuse a mesh whose faces have no area, or whose bake UV map (:func:`.meshes.bake_uv_name`)
+    has none (every UV on one point or one line): either bakes nothing, and used to give an
+    all-zero texture with exit 0 or a raw ``ValueError`` from deep in the bake (issue 56). The
+    mesh as stored: a modifier that makes area from none is rare enough to be told to apply
+    it."""
+    from .meshes import bake_uv_name, uv_corners
 
     mesh = obj.data
     area = np.empty(len(mesh.polygons))
@@ -142,7 +145,7 @@ def _check_area(obj, need_uv: bool) -> None:
         raise BakeInputError(f"{obj.name}: its faces have no area (every face is degenerate: "
                              "a point or a line); nothing to bake")
     if need_uv and mesh.uv_layers:
-        uv = uv_corners(mesh)
+        uv = uv_corners(mesh, bake_uv_name(obj))
         start = np.empty(len(mesh.polygons), np.int64)
         mesh.polygons.foreach_get("loop_start", start)
         total = np.empty(len(mesh.polygons), np.int64)
@@ -237,7 +240,8 @@ class EnvironmentBake(SceneChanges):
     ----------
     scene : bpy.types.Scene
     obj : bpy.types.Object or list of them
-        Mesh(es) with a UV map (the active render UV map is used). Several objects are baked
+        Mesh(es) with a UV map (the bake's map, :func:`.meshes.bake_uv_name`: the active one
+        unless one was chosen; made active for the bake and named to Cycles). Several objects are baked
         in the same Cycles calls, each into its own texture or per-vertex colour attribute
         (:meth:`bake_all`), so shadows and light fall between them; for textures, a material
         shared by two of them is replaced by a temporary copy on the second during the bake.
@@ -390,6 +394,7 @@ class EnvironmentBake(SceneChanges):
             self.target = self.targets[0]
         else:
             self._unshare_materials()
+            self._bake_uv_maps()
             self.targets = [self._setup_image_target(o) for o in self.objects]
             self.target = self.targets[0]
         self._select_only(self.objects)
@@ -474,6 +479,25 @@ class EnvironmentBake(SceneChanges):
                     mat = copy
                 mine.add(mat.name)
             seen |= mine
+
+    def _bake_uv_maps(self):
+        """Every object's bake UV map (:func:`.meshes.bake_uv_name`) made its active map for the
+        bake (restored on exit), and named to Cycles (``uv_layer``) where all objects' maps
+        share one name: the map Cycles bakes into is ours, not Blender's default."""
+        from .meshes import bake_uv_name
+
+        names = []
+        for o in self.objects:
+            name = bake_uv_name(o)
+            names.append(name)
+            layers = o.data.uv_layers
+            if layers.active is None or layers.active.name != name:
+                old = layers.active.name if layers.active is not None else None
+                layers.active = layers[name]
+                self._restore.append(lambda ls=layers, n=old: n is not None and setattr(
+                    ls, "active", ls[n]))
+        self.uv_layer = names[0] if len(set(names)) == 1 else ""
+        self.uv_maps = names
 
     def _setup_image_target(self, obj):
         """Our own float image, made the active node of every material of ``obj``."""
@@ -561,7 +585,8 @@ class EnvironmentBake(SceneChanges):
         start = time.perf_counter()
         with _reports_to_stderr():   # Blender's "Info: Baking map saved ..." is not a result
             result = bpy.ops.object.bake(type="DIFFUSE", use_clear=True, margin=self.margin,
-                                         margin_type="EXTEND")
+                                         margin_type="EXTEND",
+                                         **self._uv_kw())
         self.bake_seconds += time.perf_counter() - start
         self.bake_calls += 1
         if "FINISHED" not in result:
@@ -574,6 +599,11 @@ class EnvironmentBake(SceneChanges):
                 out.append(values)
             return out
         return [image_pixels(target)[..., :3].copy() for target in self.targets]
+
+    def _uv_kw(self) -> dict:
+        """``uv_layer=`` for bpy.ops.object.bake: the bake's map (image targets, one name)."""
+        name = "" if self.per_vertex else getattr(self, "uv_layer", "")
+        return {"uv_layer": name} if name else {}
 
     def bake_sun(self, direction, strength: float, angle_deg: float) -> np.ndarray:
         """Bake under a Cycles Sun lamp only (the environment set to black).
@@ -633,7 +663,8 @@ class EnvironmentBake(SceneChanges):
         start = time.perf_counter()
         with _reports_to_stderr():
             result = bpy.ops.object.bake(type="NORMAL", normal_space="OBJECT", use_clear=True,
-                                         margin=self.margin, margin_type="EXTEND")
+                                         margin=self.margin, margin_type="EXTEND",
+                                         **self._uv_kw())
         self.bake_seconds += time.perf_counter() - start
         self.bake_calls += 1
         if "FINISHED" not in result:

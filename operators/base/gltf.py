@@ -25,20 +25,18 @@ def _uvs(layer) -> np.ndarray:
     return uv
 
 
-def bake_uv_name(mesh) -> str:
-    """The UV map a bake samples: the active-render map (else the first)."""
-    return next((uv.name for uv in mesh.uv_layers if uv.active_render), mesh.uv_layers[0].name)
-
-
-def write_glb(scene, obj, path: str) -> dict:
+def write_glb(scene, obj, path: str, uv_map: str | None = None) -> dict:
     """Write ``obj`` (modifiers applied as for the render, world transform as the node's) to
     ``path`` with TEXCOORD_0 = its first non-bake UV map (or the bake map when it has one
-    map) and TEXCOORD_1 = the bake's UV map. Returns what was written: {"node", "texcoord_0",
+    map) and TEXCOORD_1 = the bake's UV map (``uv_map``, the one its report names, else the
+    rule of :func:`.meshes.baked_uv_name`). Returns what was written: {"node", "texcoord_0",
     "texcoord_1"}."""
     import bpy
 
     mesh = obj.data
-    bake_uv = bake_uv_name(mesh)
+    from .meshes import baked_uv_name
+
+    bake_uv = baked_uv_name(obj, {"uv_map": uv_map})
     first = next((uv.name for uv in mesh.uv_layers if uv.name != bake_uv), bake_uv)
     name = obj.name
     coll = bpy.data.collections.new("relight-gltf-export")

@@ -86,12 +86,13 @@ def object_from_bmesh(name: str, bm, collection, smooth: bool = True):
 
 
 def uv_triangles(obj) -> np.ndarray:
-    """UV coordinates of the mesh's triangulated faces (active render UV map), shape (T, 3, 2)."""
+    """UV coordinates of the mesh's triangulated faces (the bake's UV map, :func:`bake_uv_name`),
+    shape (T, 3, 2)."""
     mesh = obj.data
     mesh.calc_loop_triangles()
     loops = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int64)
     mesh.loop_triangles.foreach_get("loops", loops)
-    return uv_corners(mesh)[loops].reshape(-1, 3, 2)
+    return uv_corners(mesh, bake_uv_name(obj))[loops].reshape(-1, 3, 2)
 
 
 def mesh_edges(obj) -> np.ndarray:
@@ -125,9 +126,82 @@ def polygon_arrays(mesh) -> tuple:
     return area, start, total
 
 
+#: The UV map a bake uses when the user chose one (``--uv-map NAME``, the panel's UV Map), for
+#: every object of the bake; None: each mesh's active UV map (:func:`bake_uv_name`).
+_UV_MAP_CHOICE: list = [None]
+
+
+class chosen_uv_map:
+    """Context manager: bakes inside it use the UV map named ``name`` on every object (None or
+    "" leaves the default, the active map); an object without it is refused in one line
+    (:func:`bake_uv_name`)."""
+
+    def __init__(self, name: str | None):
+        self.name = name or None
+
+    def __enter__(self):
+        self._old = _UV_MAP_CHOICE[0]
+        _UV_MAP_CHOICE[0] = self.name
+        return self
+
+    def __exit__(self, *exc):
+        _UV_MAP_CHOICE[0] = self._old
+        return False
+
+
+def uv_map_choice() -> str | None:
+    """The UV map the user chose for this bake (:class:`chosen_uv_map`), or None."""
+    return _UV_MAP_CHOICE[0]
+
+
+def bake_uv_name(obj_or_mesh, choice: str | None = None) -> str:
+    """The one UV map every stage of a bake of this object uses -- the rays' texels, Cycles'
+    bakes (albedo, truths, normals: given as ``uv_layer``), the indirect term, the previews'
+    UV Map nodes and the exports: the map chosen (``choice``, else :func:`uv_map_choice`),
+    else the mesh's *active* UV map, which is the one Cycles' bake writes into when it is
+    given no ``uv_layer`` (``RE_bake_pixels_populate`` in source/blender/render/intern/bake.cc:
+    ``CustomData_get_layer(..., CD_PROP_FLOAT2)``, the active layer, in 4.x;
+    ``mesh->active_uv_map_name()`` in 5.x; confirmed with bpy 5.0.1 by baking a plane with two
+    maps) -- not the map marked for rendering (``active_render``). Raises the bake's input
+    error in one line when the chosen map does not exist or the mesh has no UV map."""
+    from ...lt_addon.errors import InputError
+
+    mesh = obj_or_mesh.data if isinstance(obj_or_mesh, bpy.types.Object) else obj_or_mesh
+    owner = obj_or_mesh.name
+    choice = choice or uv_map_choice()
+    if not mesh.uv_layers:
+        raise InputError(f"{owner} has no UV map; add one (UV > Unwrap) before baking")
+    if choice:
+        if choice not in mesh.uv_layers:
+            have = ", ".join(repr(u.name) for u in mesh.uv_layers)
+            raise InputError(f"{owner} has no UV map named {choice!r} (it has {have}); choose "
+                             "one of them or leave the UV map unset (the active one)")
+        return choice
+    active = mesh.uv_layers.active
+    return (active if active is not None else mesh.uv_layers[0]).name
+
+
+def baked_uv_name(obj, report: dict | None = None) -> str:
+    """The UV map a finished bake of ``obj`` was baked into, for what reads its textures (the
+    previews' UV Map nodes, the exports): the report's ``uv_map`` where the mesh still has it,
+    else the rule of :func:`bake_uv_name` (reports written before it was recorded)."""
+    name = (report or {}).get("uv_map")
+    if name and name in obj.data.uv_layers:
+        return name
+    from ...lt_addon.errors import InputError
+
+    try:
+        return bake_uv_name(obj)
+    except InputError:   # a choice (of a later bake) this object lacks: its active map
+        layers = obj.data.uv_layers
+        return (layers.active or layers[0]).name
+
+
 def uv_corners(mesh, layer=None) -> np.ndarray:
-    """UVs per face corner of ``layer`` (default: the active render map), shape (L, 2)."""
-    layer = layer or next((uv for uv in mesh.uv_layers if uv.active_render), mesh.uv_layers[0])
+    """UVs per face corner of ``layer`` (a UV layer or its name; default: the bake's map,
+    :func:`bake_uv_name`), shape (L, 2)."""
+    if layer is None or isinstance(layer, str):
+        layer = mesh.uv_layers[layer or bake_uv_name(mesh)]
     uv = np.empty(len(mesh.loops) * 2, dtype=np.float64)
     layer.data.foreach_get("uv", uv)
     return uv.reshape(-1, 2)

@@ -17,7 +17,7 @@ import numpy as np
 
 from ...lt_addon.rays.shading import shading_points
 from ...lt_addon.rays.texels import texel_samples
-from .meshes import uv_corners
+from .meshes import bake_uv_name, uv_corners
 
 #: Object types whose evaluated geometry Blender can triangulate (to_mesh).
 CASTER_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
@@ -78,7 +78,8 @@ class MeshArrays:
     co (V, 3) vertices;  tri, loops (T, 3) each loop triangle's vertices and face corners;
     poly (T,) its face;  smooth, mat_index (F,) per face;  corner_vertex (C,);  corner_normals
     (C, 3) unit, world ((M^-1)^T n: a zero scale is not an error);  face_centre (F, 3);
-    loop_start, loop_total (F,);  uv (C, 2) the active render UV map (None without one);
+    loop_start, loop_total (F,);  uv (C, 2) the bake's UV map (:func:`.meshes.bake_uv_name`;
+    None without one);
     matrix (4, 4) the object's world matrix.
     """
 
@@ -102,10 +103,24 @@ class MeshArrays:
         return bool(np.linalg.det(self.matrix[:3, :3]) < 0)
 
 
+def _uv_name_or_none(obj):
+    """The bake's UV map of ``obj`` (:func:`.meshes.bake_uv_name`), or None where it has none
+    (an object read only as a caster or per vertex; a receiver was refused before)."""
+    from ...lt_addon.errors import InputError
+
+    if obj.type != "MESH" or not obj.data.uv_layers:
+        return None
+    try:
+        return bake_uv_name(obj)
+    except InputError:
+        return None
+
+
 def mesh_arrays(obj, depsgraph) -> MeshArrays:
     """The evaluated mesh of ``obj`` (its render geometry within :class:`RenderGeometry`) as
     :class:`MeshArrays`: the one reader of the texture bake's texels, the vertex bake's points,
     the live preview's rays and the gathered bounces."""
+    uv_name = _uv_name_or_none(obj)
     ev = obj.evaluated_get(depsgraph)
     mesh = ev.to_mesh()
     try:
@@ -135,7 +150,8 @@ def mesh_arrays(obj, depsgraph) -> MeshArrays:
         mesh.corner_normals.foreach_get("vector", cn)
         cn = cn.reshape(-1, 3) @ np.linalg.pinv(M[:3, :3])     # (M^-T n), as row vectors
         cn /= np.maximum(np.linalg.norm(cn, axis=1, keepdims=True), 1e-30)
-        uv = uv_corners(mesh) if len(mesh.uv_layers) else None
+        uv = (uv_corners(mesh, uv_name) if uv_name is not None and uv_name in mesh.uv_layers
+              else None)
     finally:
         ev.to_mesh_clear()
     return MeshArrays(co, tri.reshape(-1, 3), loops.reshape(-1, 3), poly, smooth, mat_index,
@@ -273,8 +289,8 @@ def normal_mapped(obj) -> bool:
 
 def receiver_points(obj, depsgraph, resolution: int, Ns_image=None):
     """(TexelSamples, ShadingPoints) of ``obj``'s texture bake at ``resolution``: the evaluated
-    mesh in world space, its active render UV map, corner normals, smooth flags and the object's
-    shadow-terminator geometry offset. ``Ns_image``: (R, R, 3) world closure normals (a Cycles
+    mesh in world space, its bake UV map (:func:`.meshes.bake_uv_name`), corner normals, smooth
+    flags and the object's shadow-terminator geometry offset. ``Ns_image``: (R, R, 3) world closure normals (a Cycles
     normal bake) for normal-mapped materials, or None."""
     m = mesh_arrays(obj, depsgraph)
     if m.uv is None:

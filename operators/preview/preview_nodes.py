@@ -475,8 +475,9 @@ def install_preview(scene, obj, exr_path: str, texture, sun=None) -> dict:
     """
     atlas_path, atlas_bytes = write_atlas(texture, exr_path)
     image = load_atlas_image(atlas_path, f"{obj.name} steerable atlas")
-    uv_map = next((uv.name for uv in obj.data.uv_layers if uv.active_render),
-                  obj.data.uv_layers[0].name)
+    from ..base.meshes import baked_uv_name
+
+    uv_map = baked_uv_name(obj)
     old = bpy.data.node_groups.get(f"{GROUP_PREFIX} ({obj.name})")
     group = build_group(texture, image, uv_map, name=f"{GROUP_PREFIX} ({obj.name})")
     if old is not None:

@@ -53,6 +53,7 @@ from ...lt_addon.transport import sparse_tables as sp
 from ...lt_addon.transport import gathered_texture as gt
 from ...lt_addon.transport import texture as tt
 from ...lt_addon.io.atlas import atlas_layout, pack_atlas
+from ..base.meshes import baked_uv_name
 from . import preview_nodes as pn
 
 GROUP_PREFIX = "Relight Transport"
@@ -734,8 +735,7 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
         raise ValueError("the live preview shows PCA models (model 'pca'); this bake has "
                          f"{report['model']['kind']!r}")
     base = os.path.splitext(report["report"])[0].removesuffix("_texture_report")
-    uv_map = next((uv.name for uv in obj.data.uv_layers if uv.active_render),
-                  obj.data.uv_layers[0].name)
+    uv_map = baked_uv_name(obj, report)
     gname = f"{GROUP_PREFIX} ({obj.name})"
     old = bpy.data.node_groups.get(gname)
     info = report.get("viewport") or {}
@@ -899,8 +899,7 @@ def rewrite_tables(obj, report: dict, bake, store, sun_angle: float) -> None:
         i_img = pn.load_atlas_image(files["sparse_index"], f"{obj.name} transport T index")
         w_img = pn.load_atlas_image(files["sparse_weights"], f"{obj.name} transport T weights")
         if group.get("relight_taps") != idx.shape[-1]:   # a wider sun needs more taps
-            uv_map = next((uv.name for uv in obj.data.uv_layers if uv.active_render),
-                          obj.data.uv_layers[0].name)
+            uv_map = baked_uv_name(obj, report)
             eig_img = bpy.data.images.get(f"{obj.name} transport eigen atlas")
             new = build_sparse_group(
                 store.directions.size, bake.model.resolution, D, idx.shape[-1],
@@ -1126,8 +1125,7 @@ def set_light_mode(scene, obj, mode: str) -> bool:
             eig_img = bpy.data.images.get(f"{obj.name} transport eigen atlas")
             if eig_img is None:   # left out of the preview (over the GPU budget): made now
                 eig_img = pca_atlas_image(obj, bake, data["store"], data["report"])
-            uv_map = next((uv.name for uv in obj.data.uv_layers if uv.active_render),
-                          obj.data.uv_layers[0].name)
+            uv_map = baked_uv_name(obj, data["report"])
             env_g = build_env_group(n_tiles, bake.model.resolution, eig_img, uv_map, env_name)
             env_g[pn.OWNER] = obj.name
             if sun_i is not None and bake.indirect is not None:
