@@ -50,6 +50,7 @@ from ...lt_addon.io.transaction import after_commit
 from ...lt_addon.io.versions import REPORT_VERSION
 from ...lt_addon.io import atomic
 from ...lt_addon.io.names import object_stem
+from ...lt_addon.caveats import report_warnings
 from ...lt_addon.settings import check_ranges, setting
 from ...lt_addon.transport import bounce_transfer, gathered_transfer, ptt
 from ...lt_addon.transport.texture import parse_directions
@@ -1142,5 +1143,6 @@ def materials_job(scene, objects, settings: MaterialBakeSettings, out_dir: str,
     if cache is not None:   # once the bake is committed the chunks have served
         after_commit(out_dir, cache.clear)
     report["timings"]["wall_total"] = round(time.perf_counter() - started, 4)
+    report["warnings"] = report_warnings(report)   # its notes and checks, as the CLI says them
     atomic.write_json(report_path(out_dir, objects), {**report, "format_version": REPORT_VERSION})
     return MaterialsBakeOutput(report, tensors)

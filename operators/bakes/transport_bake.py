@@ -28,6 +28,7 @@ from ...lt_addon.io.transaction import after_commit
 from ...lt_addon.io.versions import REPORT_VERSION
 from ...lt_addon.io import atomic
 from ...lt_addon.io.names import object_stem
+from ...lt_addon.caveats import report_warnings
 from ...lt_addon.settings import check_ranges, setting
 from ..base import cycles_device
 from ..base.cycles_bake import BakeInputError, EnvironmentBake, check_bakeable, check_memory
@@ -520,6 +521,7 @@ def transport_job(scene, obj, settings: TransportSettings, out_dir: str, *,
         report["preview"] = {"shade_ms": round(timings.get(obj.name, {}).get("shade_ms", 0), 3),
                              "warnings": timings.get("warnings", [])}
     report["timings"]["wall_total"] = round(time.perf_counter() - started, 4)
+    report["warnings"] = report_warnings(report)   # said by the CLI and the panel
     atomic.write_json(report_path(out_dir, obj), {**report, "format_version": REPORT_VERSION})
     return TransportBakeOutput(report, model)
 

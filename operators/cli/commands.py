@@ -30,7 +30,7 @@ from .common import (CliError, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, add_device_opt
                      add_distribution_options, add_setting_options, bake_device, can_create_in, check_bake_inputs,
                     check_input_blend, check_output_dir, check_output_path, open_object,
                      open_objects, parse_az_el, parse_point_light, parse_rgb, print_chunks,
-                     print_direct, refuse_existing, run_bake, run_job)
+                     print_direct, print_warnings, refuse_existing, run_bake, run_job)
 
 
 
@@ -477,6 +477,7 @@ def _cmd_bake_textures(args) -> int:
               + (f", 4x samples {e['same_light_4x']['rel_fro']:.4f}" if "same_light_4x" in e else "")
               + (f", vs Sun lamp {e['sun']['rel_fro']:.4f}" if "sun" in e else ""))
     print_chunks(report)
+    print_warnings([report])
     return EXIT_OK
 
 
@@ -623,6 +624,7 @@ def _cmd_bake_texture_transport(args) -> int:
         if rep["glossy"]["materials"]:
             print(f"  note: {rep['glossy']['note']}: "
                   + ", ".join(m["material"] for m in rep["glossy"]["materials"]))
+    print_warnings(reports)
     return EXIT_OK
 
 
@@ -708,8 +710,6 @@ def _cmd_bake_transport(args) -> int:
     if out is None:
         return 130
     report, t = out.report, out.report["timings"]
-    for w in report.get("preview", {}).get("warnings", []):
-        print(f"relight: warning: {w}", file=sys.stderr)
     print(f"baked {obj.name}: {report['vertices']} vertices x {report['directions']} directions "
           f"in {t['wall_total']:.2f} s in all (bake {t['total_bake_seconds']:.2f} s, "
           f"{t['directions_per_second']:.1f} directions/s; fit {t['fit_seconds']:.2f} s"
@@ -729,6 +729,7 @@ def _cmd_bake_transport(args) -> int:
         print(f"  all {report['directions']} directions, no PCA: "
               f"{report['ground_truth']['all_directions_rel_rms_error']:.4f} (sampling floor)")
     print_chunks(report)
+    print_warnings([report])
     return EXIT_OK
 
 

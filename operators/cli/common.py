@@ -258,10 +258,19 @@ def refuse_existing(out_dir: str, obj_name: str, suffixes, force: bool, what: st
             raise CliError(f"{what} of {obj_name} exists in {out_dir} (use --force to replace it)")
 
 
+def print_warnings(reports) -> None:
+    """Every caveat the bake's reports record (:func:`...lt_addon.caveats.all_warnings`), each
+    once, as ``relight: warning: <text>`` on stderr."""
+    from ...lt_addon.caveats import all_warnings
+
+    for line in all_warnings(reports):
+        print(f"relight: warning: {line}", file=sys.stderr)
+
+
 def print_direct(direct: dict) -> None:
     """How a per-vertex bake made its direct light (the report's ``direct``): by rays, with how
-    close Cycles' bake of the checked directions came, or by Cycles and why; and a warning when
-    the Dask workers it was given sat idle."""
+    close Cycles' bake of the checked directions came, or by Cycles and why (a check past its
+    tolerance, or Dask workers that sat idle, are warnings: :func:`print_warnings`)."""
     direct = direct or {}
     if direct.get("engine") == "rays":
         check = direct["vs_cycles"]
@@ -272,8 +281,6 @@ def print_direct(direct: dict) -> None:
               "more than 1e-4 apart")
     elif direct:
         print(f"  direct light by Cycles: {direct['why']}")
-    if direct.get("workers_unused"):
-        print(f"relight: warning: {direct['workers_unused']}", file=sys.stderr)
 
 
 def print_chunks(rep: dict) -> None:

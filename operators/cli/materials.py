@@ -134,7 +134,7 @@ def _cmd_bake_materials(args) -> int:
 
     from ..bakes import material_bake, material_edit
     from .common import (CliError, check_bake_inputs, open_objects, print_chunks, print_direct,
-                         refuse_existing, run_bake)
+                         print_warnings, refuse_existing, run_bake)
 
     settings = material_bake.MaterialBakeSettings(
         regions=list(args.region), anchors=args.anchors, bounces=args.bounces,
@@ -182,8 +182,7 @@ def _cmd_bake_materials(args) -> int:
               f"{truth['rel_error']:.4f}, noise floor {truth['noise_floor']:.4f} (two truth "
               f"seeds); without the two-bounce term {truth['rel_error_without_two_bounce']:.4f}")
     print_chunks(rep)
-    for note in rep["notes"]:
-        print(f"relight: warning: {note}", file=sys.stderr)
+    print_warnings([rep])   # its notes, a direct check past its tolerance
     return 0
 
 
