@@ -79,7 +79,7 @@ def _finish(operator, scene, result):
     :class:`.texture_transport.TextureBakeOutput` or a :class:`.steerable_bake.LobesBakeOutput`
     -- and keep the lines for the panel."""
     reports = result.reports if hasattr(result, "reports") else [result.report]
-    lines = []
+    lines, warned = [], []
     for rep in reports:
         t, gt = rep["timings"], rep.get("ground_truth") or {}
         size = rep["bytes"].get("total", rep["bytes"].get("exr_file", 0))
@@ -89,6 +89,9 @@ def _finish(operator, scene, result):
                         if "headline_rel_rmse" in gt else ""))
         if rep.get("glossy", {}).get("materials"):
             operator.report({"WARNING"}, rep["glossy"]["note"])
+        for warning in rep.get("warnings", ()):   # the report's caveats, each once
+            if warning not in warned:
+                warned.append(warning)
         direct = rep.get("direct")
         if direct and rep is reports[0]:
             lines.append(direct_summary(direct, rep["directions"]))
@@ -105,7 +108,21 @@ def _finish(operator, scene, result):
                      f"{cmp['rel_rmse_covered_pixels']:.3f})")
     for line in lines:
         operator.report({"INFO"}, line)
-    scene[LAST_BAKE_KEY] = "\n".join(lines)
+    report_warnings(operator, warned)
+    scene[LAST_BAKE_KEY] = "\n".join(lines + [WARNING_PREFIX + w for w in warned])
+
+
+#: A line of the last-bake box that is a warning (the panel draws it with a warning icon).
+WARNING_PREFIX = "Warning: "
+
+
+def report_warnings(operator, warnings) -> None:
+    """Each of a bake report's ``warnings`` as a WARNING report, but those the bake already said
+    while it ran (a progress step ``warning: ...``: :class:`ModalBake` keeps them)."""
+    said = getattr(operator, "_warned", None) or set()
+    for warning in warnings:
+        if warning not in said:
+            operator.report({"WARNING"}, warning)
 
 
 def _fault_line(exc, op) -> str:
@@ -125,6 +142,15 @@ class ModalBake:
 
     _timer = None
     _gen = None
+
+    def _say_warning(self, text: str) -> None:
+        """A warning a bake step gave, reported now and kept so that the report's own list
+        (:func:`report_warnings`) does not say it twice."""
+        if not isinstance(getattr(self, "_warned", None), set):
+            self._warned = set()
+        if text not in self._warned:
+            self._warned.add(text)
+            self.report({"WARNING"}, text)
 
     @classmethod
     def poll(cls, context):
@@ -255,7 +281,7 @@ class ModalBake:
 
             def warn(step):
                 if step.message.startswith("warning:"):
-                    self.report({"WARNING"}, step.message[len("warning: "):])
+                    self._say_warning(step.message[len("warning: "):])
 
             result = jobs.run(gen, on_progress=warn)
             self._done(context, result)
@@ -329,7 +355,7 @@ class ModalBake:
             self.report({"ERROR"}, _fault_line(exc, self))
             return {"CANCELLED"}
         if step.message.startswith("warning:"):
-            self.report({"WARNING"}, step.message[len("warning: "):])
+            self._say_warning(step.message[len("warning: "):])
         context.window_manager.progress_update(int(1000 * step.done / step.total))
         context.workspace.status_text_set(f"Relight bake: {step.message} (Esc to cancel)")
         return {"RUNNING_MODAL"}
@@ -419,8 +445,7 @@ class RELIGHT_OT_bake_transport(ModalBake, bpy.types.Operator):
 
     def _finish(self, context, result):
         report, t = result.report, result.report["timings"]
-        for message in report.get("preview", {}).get("warnings", []):
-            self.report({"WARNING"}, message)
+        report_warnings(self, report.get("warnings", []))   # the preview's, the checks'
         self.report({"INFO"}, f"Baked {report['object']}: {report['vertices']} vertices x "
                               f"{report['directions']} directions in {t['wall_total']:.1f} s "
                               f"in all, d = {report.get('d', '?')}, preview "

@@ -67,8 +67,9 @@ class RELIGHT_OT_bake_materials(ModalBake, bpy.types.Operator):
                 f"{rep['bytes']['tensors'] / 2**20:.1f} MiB; light direct {s['direct']:.2f}, "
                 f"1 bounce {s['one_bounce']:.2f}, 2 bounces {s['two_bounce']:.2f}")
         context.scene[SUMMARY_KEY] = text
-        for note in rep["notes"]:
-            self.report({"WARNING"}, note)
+        from .bake_ops import report_warnings
+
+        report_warnings(self, rep.get("warnings", rep["notes"]))   # notes and checks
         self.report({"INFO"}, text)
 
 

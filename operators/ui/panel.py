@@ -131,11 +131,12 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
 
 
 def _last_bake(layout, scene):
-    """The last texture bake's one-line summary (cost, error vs Cycles, comparison image)."""
-    from .bake_ops import LAST_BAKE_KEY
+    """The last texture bake's one-line summary (cost, error vs Cycles, comparison image) and
+    its report's warnings (overlapping UVs, a check past its tolerance, a fallback)."""
+    from .bake_ops import LAST_BAKE_KEY, WARNING_PREFIX
 
     for line in str(scene.get(LAST_BAKE_KEY, "")).splitlines():
-        layout.label(text=line, icon="INFO")
+        layout.label(text=line, icon="ERROR" if line.startswith(WARNING_PREFIX) else "INFO")
 
 
 def run_on_lines(props) -> list:

@@ -121,3 +121,36 @@ def test_overlapping_uv_islands_are_a_warning_naming_the_object(blend, tmp_path)
     rep = _report(out, "Lap")
     assert len(rep["warnings"]) == 1 and rep["warnings"][0] in warned[0]
     assert rep["uv_layout"]["overlapping"] == pytest.approx(1.0)
+
+
+def test_the_panel_says_a_bakes_warnings_in_its_last_bake_box(blend, tmp_path):
+    """The Relight tab's Bake of ``Lap``: its overlap warning is a WARNING report and a line of
+    the last-bake box (the panel showed only the JSON's figures before)."""
+    import os
+
+    import bpy
+
+    import relightable_textures
+    from relightable_textures.operators.ui.bake_ops import LAST_BAKE_KEY
+
+    bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False)
+    scene = bpy.context.scene
+    relightable_textures.register()
+    try:
+        props = scene.relight
+        props.preset = "draft"
+        props.directions, props.resolution, props.truth_lights = 64, 16, 0
+        props.output_dir = str(tmp_path) + os.sep
+        props.device = "cpu"
+        lap = bpy.data.objects["Lap"]
+        for o in scene.objects:
+            o.select_set(o is lap)
+        bpy.context.view_layer.objects.active = lap
+        assert bpy.ops.relight.bake_textures() == {"FINISHED"}
+        lines = str(scene[LAST_BAKE_KEY]).splitlines()
+        warned = [ln for ln in lines if ln.startswith("Warning: ")]
+        assert len(warned) == 1 and "Lap: 100.0% of the covered texels have overlapping UVs" \
+            in warned[0], lines
+    finally:
+        relightable_textures.unregister()
+        bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
