@@ -84,6 +84,11 @@ class GatherScene:
                 mesh.calc_loop_triangles()
                 tl = np.empty(len(mesh.loop_triangles) * 3, np.int64)
                 mesh.loop_triangles.foreach_get("loops", tl)
+                if np.linalg.det(np.array(o.matrix_world, np.float64)[:3, :3]) < 0:
+                    # mirrored (negative scale): its world winding turns inward; reversed, the
+                    # triangles' normals (the front-side test of the gather) face out as
+                    # Cycles' flipped geometric normal does
+                    tl = tl.reshape(-1, 3)[:, ::-1].ravel()
                 face, mi = _corner_faces(mesh)
                 n = len(mesh.loops)
             finally:

@@ -34,17 +34,22 @@ MAX_OTHER = 0.05
 
 def receiver_geometry(objects, depsgraph):
     """World triangles of the receivers (each with its UVs) and of every other shadow caster:
-    (V (N, 3), T (M, 3), receiver (M,) index or -1, uv (M, 3, 2))."""
+    (V (N, 3), T (M, 3), receiver (M,) index or -1, uv (M, 3, 2)). A receiver's triangles wind
+    counter-clockwise seen from outside in world space -- a mirrored object's (negative scale)
+    reversed -- so the gather's front-side test (the winding's normal) is Cycles' own."""
     names = [o.name for o in objects]
     V, T, recv, UV, offset = [], [], [], [], 0
     for i, o in enumerate(objects):
         m = ray_scene.mesh_arrays(o, depsgraph)
         if m.uv is None:
             raise ValueError(f"{o.name} has no UV map")
+        tri, loops = m.tri, m.loops
+        if m.mirrored:   # its world winding turns inward: reversed, the triangles' normals
+            tri, loops = tri[:, ::-1], loops[:, ::-1]   # face out as Cycles' flipped Ng does
         V.append(m.co)
-        T.append(m.tri + offset)
-        recv.append(np.full(len(m.tri), i))
-        UV.append(m.uv[m.loops.ravel()].reshape(-1, 3, 2))
+        T.append(tri + offset)
+        recv.append(np.full(len(tri), i))
+        UV.append(m.uv[loops.ravel()].reshape(-1, 3, 2))
         offset += len(m.co)
     co, tri, _ = ray_scene.casters(depsgraph, exclude_names=names)   # every other caster
     V.append(co)
