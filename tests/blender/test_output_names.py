@@ -154,3 +154,32 @@ def test_the_panel_says_a_bakes_warnings_in_its_last_bake_box(blend, tmp_path):
     finally:
         relightable_textures.unregister()
         bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+
+
+_CUBE = r'''
+import bpy, sys
+bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+bpy.ops.mesh.primitive_cube_add(size=1, location=(0, 0, 0.5))
+bpy.context.active_object.name = "Cube"
+bpy.ops.mesh.primitive_plane_add(size=6, location=(0, 0, 0))
+sc = bpy.context.scene
+sc.collection.objects.link(bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN")))
+sc.render.engine = "CYCLES"
+bpy.ops.wm.save_as_mainfile(filepath=sys.argv[-1])
+'''
+
+
+def test_a_vertex_bakes_direct_check_past_its_tolerance_is_a_warning(tmp_path):
+    """A cube on a ground plane: the rays and Cycles' check disagree (its bottom corners touch
+    the ground; lights below the horizon: rays 0.12 mean, Cycles 0) -- said in one line."""
+    blend = tmp_path / "cube.blend"
+    subprocess.run([sys.executable, "-c", _CUBE, str(blend)], check=True, capture_output=True,
+                   timeout=120)
+    r = relight("bake-transport", blend, "--object", "Cube", "--directions", "cube:4", "--out",
+                tmp_path / "bk")
+    assert r.returncode == 0, r.stderr[-2000:]
+    rep = json.loads((tmp_path / "bk" / "Cube_transport.json").read_text())
+    assert rep["direct"]["vs_cycles"]["values_apart"] > 0.01
+    warned = [ln for ln in our_lines(r.stderr) if ln.startswith("relight: warning:")]
+    assert warned == [f"relight: warning: {rep['warnings'][0]}"], r.stderr
+    assert warned[0].startswith("relight: warning: Cube: the direct light by rays disagrees")
