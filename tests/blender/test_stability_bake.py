@@ -257,15 +257,16 @@ def test_missing_uvs_are_refused_before_anything_changes(fresh_scene):
 
 
 @pytest.mark.version_sensitive
-def test_collapsed_uvs_bake_nothing_and_say_so_in_the_figures(fresh_scene):
-    """Every UV at one point: no texel is covered (figures: covered 0), the bake writes no
-    texel, so every basis image is exactly 0 and relighting gives black."""
+def test_collapsed_uvs_are_refused_in_one_line_naming_the_object(fresh_scene):
+    """Every UV at one point: no texel would be covered. The bake baked an all-zero texture
+    and said so only in its figures (covered 0); since issue 56 it refuses before any Cycles
+    bake, in one line naming the object."""
+    from relightable_textures.operators.base.cycles_bake import BakeInputError
+
     obj = mesh("Collapsed", [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2, 3]],
                fresh_scene, uv=[[0.5, 0.5]] * 4, material=diffuse("Grey", 0.5))
-    result = bake_texture(fresh_scene, obj)
-    assert result.figures["uv_layout"] == {"resolution": R, "covered": 0.0, "overlapping": 0.0}
-    assert np.all(result.texture.basis_images == 0.0)
-    assert np.all(result.texture.relight(direction_from_az_el(0.0, 60.0)) == 0.0)
+    with pytest.raises(BakeInputError, match="Collapsed: its UV map covers no area"):
+        bake_texture(fresh_scene, obj)
 
 
 # ----------------------------------------------------------------------------------------------
