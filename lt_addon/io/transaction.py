@@ -210,7 +210,7 @@ def check_file(path: str) -> None:
         try:
             with zipfile.ZipFile(path) as zf:
                 bad = zf.testzip()
-        except zipfile.BadZipFile as exc:
+        except (zipfile.BadZipFile, NotImplementedError, EOFError) as exc:
             raise ValueError(f"{path} is not a whole NPZ file: {exc}") from None
         if bad is not None:
             raise ValueError(f"{path}: member {bad} fails its CRC")

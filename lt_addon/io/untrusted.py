@@ -265,8 +265,8 @@ class _Npz:
         regular_file(path, max_bytes)
         try:
             self.zf = zipfile.ZipFile(path)
-        except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
-            raise UntrustedFileError(path, f"is not a whole NPZ file ({exc})") from None
+        except _ZIP_ERRORS as exc:   # (a damaged version field: NotImplementedError)
+            raise UntrustedFileError(path, f"is not a whole NPZ file ({_short(exc)})") from None
         total = 0
         self.members = {}
         for info in self.zf.infolist():

@@ -527,3 +527,17 @@ def test_exr_metadata_of_another_attribute_type_is_refused(tmp_path):
     with OpenEXR.File(p, header_only=True) as f:   # (the library reads it, as another type)
         assert not isinstance(f.header()[exrio.METADATA_KEY], (str, bytes))
     _refused(p, exrio.read_exr, p, match="is not text")
+
+
+def test_an_npz_asking_for_a_newer_zip_version_is_refused_in_one_line(tmp_path):
+    """Found by the hour-long fuzz run: a damaged 'version needed to extract' field makes
+    zipfile.ZipFile raise NotImplementedError ("zip file version 16.2") while opening."""
+    from relightable_textures.lt_addon.io.npz import save_npz
+
+    p = tmp_path / "v.npz"
+    save_npz(p, a=np.zeros(4, np.float32))
+    raw = bytearray(p.read_bytes())
+    at = raw.find(b"PK\x01\x02")                          # the central directory entry
+    raw[at + 6:at + 8] = struct.pack("<H", 162)           # version needed: 16.2
+    p.write_bytes(bytes(raw))
+    _refused(p, ut.open_npz, str(p), match="is not a whole NPZ file")
