@@ -126,6 +126,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "time ($RELIGHT_ESTIMATE=1: at any size; 0: never)")
     p.add_argument("--force", action="store_true",
                    help="replace an existing bake of the same object in --out")
+    _add_uv_map_option(p)
     add_setting_options(p, TransportTextureSettings, SHARED_OPTIONS)
     add_setting_options(p, TextureBakeSettings, LOBES_OPTIONS, what="lobes: ")
     p.add_argument("--truth", type=int, default=0, metavar="K",
@@ -161,6 +162,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "`bake-textures` must say --direct cycles to use them)")
     p.add_argument("--resolution", type=int)
     p.add_argument("--seed", type=int)
+    _add_uv_map_option(p)
     p.add_argument("--out", metavar="DIR", help="the bake's output folder (default: next to "
                    "the .blend, <name>_relight/)")
     add_device_option(p)
@@ -306,11 +308,28 @@ def _add_transport_source_args(p) -> None:
     add_setting_options(p, TransportSettings, ("directions", "bounces"), defaults=True)
 
 
+def _add_uv_map_option(p) -> None:
+    """--uv-map: the one UV map every stage bakes into (operators/base/meshes.bake_uv_name)."""
+    p.add_argument("--uv-map", metavar="NAME",
+                   help="UV map to bake into on every object (default: each object's active "
+                        "UV map, the one Cycles' own bake writes into; the report names it). An "
+                        "object without it is refused")
+
+
 def run(argv: list[str]) -> int:
     """Run one CLI invocation; returns the process exit code (never raises SystemExit)."""
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
+        uv_map = getattr(args, "uv_map", None)
+        if uv_map:
+            if getattr(args, "workers", None) is not None or getattr(args, "scheduler", None):
+                raise CliError("--uv-map is not passed on to Dask workers yet: make that map "
+                               "the active UV map in the .blend instead (the default)")
+            from ..base.meshes import chosen_uv_map
+
+            with chosen_uv_map(uv_map):
+                return int(args.func(args) or EXIT_OK)
         return int(args.func(args) or EXIT_OK)
     except CliError as exc:
         print(f"relight: error: {exc}", file=sys.stderr)

@@ -71,7 +71,7 @@ def unmirrored():
 
 def test_a_mirrored_statue_and_its_bounce_light_bake_as_cycles_renders_them(unmirrored):
     """(a) The mirrored statue's relit texture is as close to Cycles as its unmirrored twin's
-    (measured 2026-12-07, bpy 5.0.1: 0.122 / 0.141 / 0.129 against 0.122 / 0.142 / 0.129;
+    (measured 2026-12-06, bpy 5.0.1: 0.122 / 0.141 / 0.129 against 0.122 / 0.142 / 0.129;
     before, 0.133 / 0.205 / 0.177): within 1.1x the twin's, Cycles' per-texel noise (the
     mirrored texture's texels are other pixels of Cycles' sample pattern; two seeds differ by
     about 2 % of the error here). (b) The ground's bounce light off it is there and as strong

@@ -6,7 +6,7 @@ another (:class:`operators.base.meshes.chosen_uv_map`: ``--uv-map``, the panel).
 
 Before, the rays used the map marked for rendering and Cycles' albedo bake the active one: a
 statue with a texture map and a lightmap relit 0.91-1.10 from Cycles (relative RMSE over the
-covered texels, measured 2026-12-07 with bpy 5.0.1) where its one-map twin is 0.12-0.14.
+covered texels, measured 2026-12-06 with bpy 5.0.1) where its one-map twin is 0.12-0.14.
 
 The scene: the statue on its ground, baked together (draft preset, 64 directions, 32^2); the
 statue's second map ``Lightmap`` is its ``UVMap`` transposed -- (u, v) -> (v, u): mirrored, so
@@ -144,3 +144,24 @@ def test_a_chosen_map_is_baked_and_a_missing_one_refused(plain):
     import os
 
     assert os.listdir(out) == []
+
+
+def test_the_cli_bakes_into_uv_map_and_refuses_a_map_an_object_lacks(tmp_path):
+    """``--uv-map NAME`` chooses the map (the report names it); an object without it is one
+    ``relight: error:`` line and nothing is written; with Dask workers it is refused (the
+    workers would bake their active map)."""
+    from relight_cli import assert_refused, make_scene, relight
+
+    blend = make_scene("bumps", tmp_path / "b.blend")
+    out = tmp_path / "bk"
+    out.mkdir()
+    base = ["bake-textures", blend, "--object", "Bumps", "--preset", "draft", "--directions",
+            "hemi:16", "--resolution", "16", "--out", out, "--force"]
+    assert_refused(out, "Bumps has no UV map named 'Lightmap'", *base, "--uv-map", "Lightmap")
+    assert_refused(out, "--uv-map is not passed on to Dask workers", *base, "--uv-map",
+                   "UVMap", "--workers", "1")
+    r = relight(*base, "--uv-map", "UVMap")
+    assert r.returncode == 0, r.stderr[-2000:]
+    import json
+
+    assert json.loads((out / "Bumps_texture_report.json").read_text())["uv_map"] == "UVMap"
