@@ -33,13 +33,18 @@ MAX_OTHER = 0.05
 
 
 def receiver_geometry(objects, depsgraph):
-    """World triangles of the receivers (each with its UVs) and of every other shadow caster:
-    (V (N, 3), T (M, 3), receiver (M,) index or -1, uv (M, 3, 2)). A receiver's triangles wind
-    counter-clockwise seen from outside in world space -- a mirrored object's (negative scale)
-    reversed -- so the gather's front-side test (the winding's normal) is Cycles' own."""
+    """World triangles of what diffuse bounce rays meet, as Cycles has them: the receivers
+    (each with its UVs) and every other rendered object, each unless its Ray Visibility >
+    Diffuse is off (``visible_diffuse``: the rays pass through it, as Cycles' do, though it
+    may cast shadows; an object that casts no shadow still reflects): (V (N, 3), T (M, 3),
+    receiver (M,) index or -1, uv (M, 3, 2)). A receiver's triangles wind counter-clockwise
+    seen from outside in world space -- a mirrored object's (negative scale) reversed -- so the
+    gather's front-side test (the winding's normal) is Cycles' own."""
     names = [o.name for o in objects]
     V, T, recv, UV, offset = [], [], [], [], 0
     for i, o in enumerate(objects):
+        if not getattr(o, "visible_diffuse", True):
+            continue      # gathers light at its points, met by no bounce ray
         m = ray_scene.mesh_arrays(o, depsgraph)
         if m.uv is None:
             raise ValueError(f"{o.name} has no UV map")
@@ -51,7 +56,7 @@ def receiver_geometry(objects, depsgraph):
         recv.append(np.full(len(tri), i))
         UV.append(m.uv[loops.ravel()].reshape(-1, 3, 2))
         offset += len(m.co)
-    co, tri, _ = ray_scene.casters(depsgraph, exclude_names=names)   # every other caster
+    co, tri, _ = ray_scene.casters(depsgraph, exclude_names=names, ray="diffuse")   # the rest
     V.append(co)
     T.append(tri + offset)
     recv.append(np.full(len(tri), -1))

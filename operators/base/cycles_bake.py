@@ -116,11 +116,18 @@ def _size(nbytes: float) -> str:
 
 
 def check_bakeable(obj, need_uv: bool = True) -> None:
-    """Raise :class:`BakeInputError` unless ``obj`` is a mesh object (with a UV map if asked)."""
+    """Raise :class:`BakeInputError` unless ``obj`` is a mesh object in the render
+    (:func:`.visibility.render_hidden`), with a UV map if asked."""
     if obj is None:
         raise BakeInputError("no object given")
     if obj.type != "MESH":
         raise BakeInputError(f"{obj.name} is a {obj.type.lower()}, not a mesh")
+    from .visibility import render_hidden
+
+    hidden = render_hidden(obj)
+    if hidden:   # Cycles refuses to bake it; the rays would bake it with no shadow of its own
+        raise BakeInputError(f"{obj.name} {hidden}: Cycles would not bake it; enable it or "
+                             "leave it out")
     if need_uv:
         from .meshes import bake_uv_name
 

@@ -89,8 +89,13 @@ def ray_engine(vertices, triangles):
 
 
 def shadow_casters(scene):
-    """The scene's rendered shadow casters (instances and point clouds, volumes not)."""
-    return [o for o in scene.objects if o.type in CASTER_TYPES and not o.hide_render
+    """The scene's rendered shadow casters (instances and point clouds, volumes not): in the
+    render of the context's view layer (:func:`.visibility.rendered_names`: neither their own
+    camera icon nor their collections' off, nor excluded) and visible to shadow rays."""
+    from .visibility import rendered_names
+
+    rendered = rendered_names()
+    return [o for o in scene.objects if o.type in CASTER_TYPES and o.name in rendered
             and getattr(o, "visible_shadow", True)]
 
 

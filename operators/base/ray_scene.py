@@ -177,11 +177,15 @@ def _to_world_mesh(obj_eval, matrix):
         obj_eval.to_mesh_clear()
 
 
-def casters(depsgraph, exclude_names=()):
-    """World-space triangles of every shadow caster: (vertices (N, 3), triangles (T, 3),
-    count of objects and instances). Objects whose ``visible_shadow`` is off are left out, as
-    Cycles leaves them out of shadow rays, and so are the objects named in ``exclude_names``
-    (a caller that reads them itself)."""
+def casters(depsgraph, exclude_names=(), ray: str = "shadow"):
+    """World-space triangles of every object ``ray`` rays meet: (vertices (N, 3), triangles
+    (T, 3), count of objects and instances). ``ray`` "shadow": the shadow casters (objects
+    whose ``visible_shadow`` is off are left out, as Cycles leaves them out of shadow rays);
+    "diffuse": what diffuse bounce rays meet (``visible_diffuse``; an object that casts no
+    shadow still reflects light). The objects named in ``exclude_names`` are left out too (a
+    caller that reads them itself). The depsgraph is :class:`RenderGeometry`'s: objects hidden
+    from render, or in collections hidden from render or excluded, are not in it."""
+    flag = f"visible_{ray}"
     verts, tris, n, offset = [], [], 0, 0
     for inst in depsgraph.object_instances:
         ob = inst.object
@@ -189,8 +193,8 @@ def casters(depsgraph, exclude_names=()):
             continue
         original = ob.original
         parent = inst.parent.original if inst.is_instance and inst.parent else None
-        if not getattr(original, "visible_shadow", True) or (
-                parent is not None and not getattr(parent, "visible_shadow", True)):
+        if not getattr(original, flag, True) or (
+                parent is not None and not getattr(parent, flag, True)):
             continue
         got = _to_world_mesh(ob, inst.matrix_world)
         if got is None:
