@@ -521,6 +521,27 @@ class EnvironmentBake(SceneChanges):
                 setattr(t.nodes, "active", a), t.nodes.remove(n)))
         return target
 
+    def _bake_as_surfaces(self, objs, view_layer):
+        """The baked objects as plain surfaces for the session, restored on exit: a holdout
+        or shadow catcher is baked black by Cycles (measured, bpy 5.0.1: the statue's and the
+        ground's DIFFUSE bakes all zero), where the other objects' bakes see it as a plain
+        surface (its shadow and bounce light unchanged) -- so its flag is cleared, as the
+        rays' stages see it; and a collection hidden in the viewport (its eye icon: the render
+        ignores it) is shown, as Cycles' bake of an object in it is black too (docs/
+        bake-files.md "The scene's visibility flags")."""
+        from .visibility import _paths
+
+        for o in objs:
+            for flag in ("is_holdout", "is_shadow_catcher"):
+                if getattr(o, flag, False):
+                    setattr(o, flag, False)
+                    self._restore.append(lambda o=o, f=flag: setattr(o, f, True))
+            for path in _paths(view_layer.layer_collection, o):
+                for lc in path[1:]:
+                    if lc.hide_viewport:
+                        lc.hide_viewport = False
+                        self._restore.append(lambda lc=lc: setattr(lc, "hide_viewport", True))
+
     def _select_only(self, objs):
         """Select only the baked objects (bake works on the selection); restored on exit."""
         view_layer = bpy.context.view_layer
@@ -535,6 +556,7 @@ class EnvironmentBake(SceneChanges):
             o.hide_set(False)
             o.hide_viewport = False
             o.hide_render = False
+        self._bake_as_surfaces(objs, view_layer)
 
         def restore_selection():
             # only touch the objects we changed: the view layer's list can hold stale entries

@@ -65,3 +65,13 @@ def rendered_names(view_layer=None) -> set:
         names.update(o.name for o in lc.collection.objects if not o.hide_render)
         stack.extend(c for c in lc.children if not c.exclude and not c.collection.hide_render)
     return names
+
+
+def baked_as_surface(obj) -> str | None:
+    """The one-line note of a baked holdout or shadow catcher (its flag cleared for the bake:
+    :meth:`.cycles_bake.EnvironmentBake._bake_as_surfaces`), or None."""
+    for flag, what in (("is_shadow_catcher", "a shadow catcher"), ("is_holdout", "a holdout")):
+        if getattr(obj, flag, False):
+            return (f"{obj.name} is {what}: baked as a plain surface, lit and shadowed as the "
+                    "other objects see it (Cycles' own bake of it is black)")
+    return None
