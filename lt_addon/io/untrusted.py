@@ -561,3 +561,18 @@ def npz_scalar(z, key: str, kind=float):
         return float(v)
     except (ValueError, TypeError):
         raise UntrustedFileError(z.path, f"member {key} is not a {kind.__name__}") from None
+
+
+def npz_json(z, key: str = "header") -> dict:
+    """A JSON object stored as a uint8 member of a checked NPZ (``z``: :func:`open_npz`),
+    capped at MAX_JSON_BYTES; one line naming the file when it is not a JSON object."""
+    raw = z.get(key, shape=(None,), dtype=np.uint8)
+    if raw.size > MAX_JSON_BYTES:
+        raise UntrustedFileError(z.path, f"has a {key} larger than the cap")
+    try:
+        doc = json.loads(bytes(raw).decode())
+    except (ValueError, RecursionError):
+        raise UntrustedFileError(z.path, f"has a {key} that is not JSON") from None
+    if not isinstance(doc, dict):
+        raise UntrustedFileError(z.path, f"has a {key} that is not a JSON object")
+    return doc

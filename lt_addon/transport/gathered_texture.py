@@ -133,17 +133,7 @@ class GatheredIndirect:
         from ..io import untrusted as ut
 
         with ut.open_npz(path, stored=True) as z:
-            header = {}
-            if "header" in z:
-                raw = z.get("header", shape=(None,), dtype=np.uint8)
-                if raw.size > ut.MAX_JSON_BYTES:
-                    raise ut.UntrustedFileError(path, "has a header larger than the cap")
-                try:
-                    header = json.loads(bytes(raw).decode())
-                except (ValueError, RecursionError):
-                    raise ut.UntrustedFileError(path, "has a header that is not JSON") from None
-                if not isinstance(header, dict):
-                    raise ut.UntrustedFileError(path, "has a header that is not a JSON object")
+            header = ut.npz_json(z) if "header" in z else {}
             versions.check(header, FORMAT, path, "a gathered indirect term")
             S = directions.size
             coef = z.get("coefficients", shape=(S, None), dtype="f")

@@ -626,14 +626,8 @@ class TransferTensors:
         from ..io import untrusted as ut
 
         with ut.open_npz(path, stored=True) as z:
-            raw = z.get("header", shape=(None,), dtype=np.uint8)
-            if raw.size > ut.MAX_JSON_BYTES:
-                raise ut.UntrustedFileError(path, "has a header larger than the cap")
-            try:
-                header = json.loads(bytes(raw).decode())
-            except (ValueError, RecursionError):
-                raise ut.UntrustedFileError(path, "has a header that is not JSON") from None
-            if not isinstance(header, dict) or header.get("format") != FORMAT:
+            header = ut.npz_json(z)
+            if header.get("format") != FORMAT:
                 raise ut.UntrustedFileError(path, "is not a transfer-tensor file")
             if header.get("version") not in READS:
                 raise ut.UntrustedFileError(
