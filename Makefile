@@ -108,6 +108,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_horizon_model.py
 	$(PY) benchmarks/bench_env_preview.py
 	$(PY) benchmarks/bench_low_sun_floor.py
+	$(PY) benchmarks/bench_file_features.py --json $(OUT)/bench/file_features.json
 	$(PY) benchmarks/bench_export.py --out $(OUT)/bench
 	$(PY) benchmarks/bench_materials.py --size demo
 	$(PY) benchmarks/bench_materials.py --size demo --anchors roughness:0.4,0.8 \
