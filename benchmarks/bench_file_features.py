@@ -10,6 +10,9 @@ within 1.25x the plain box's (the same scene without the feature, same run). A b
 refused prints its one line; the warnings a bake prints are listed.
 
 Usage: python benchmarks/bench_file_features.py [--resolution 64] [--json out/bench/features.json]
+
+Another version's row ("before"): run it with that version first on the path, e.g.
+``git archive REV | tar -x -C /tmp/old/relightable_textures`` and ``PYTHONPATH=/tmp/old``.
 """
 
 from __future__ import annotations
@@ -167,7 +170,11 @@ ROWS = {"plain box": row_plain, "two UV maps (lightmap active)": row_two_uv_maps
 
 def measure(build, resolution: int) -> dict:
     """Bake the row's objects together and compare each with Cycles (module docstring)."""
-    from relightable_textures.lt_addon.caveats import report_warnings
+    try:
+        from relightable_textures.lt_addon.caveats import report_warnings
+    except ImportError:   # (a version from before the caveats were said: --before runs)
+        def report_warnings(rep):
+            return list(rep.get("warnings", []))
     from relightable_textures.lt_addon.errors import InputError
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
     from relightable_textures.lt_addon.transport import bundle
@@ -206,6 +213,7 @@ def measure(build, resolution: int) -> dict:
         rows["objects"][obj.name] = {"worst": round(max(e), 4), "errors": [round(x, 4) for x in e]}
         store.close()
     rows["uv_map"] = {r["object"]: r.get("uv_map") for r in out.reports}
+    rows["same_files"] = len({r["files"]["transport"] for r in out.reports}) < len(out.reports)
     rows["files"] = sorted({r["files"]["transport"].rsplit("/", 1)[-1] for r in out.reports})
     return rows
 

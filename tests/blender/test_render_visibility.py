@@ -139,7 +139,7 @@ def test_an_occluder_hidden_from_render_casts_no_shadow_and_reflects_nothing():
 def test_an_occluder_invisible_to_diffuse_rays_casts_its_shadow_and_reflects_nothing():
     """A statue with Ray Visibility > Diffuse off casts its shadow on the ground and reflects
     no light onto it (Cycles: ground max 0.0796 and 0.0545, the unshadowed ground's; mean
-    0.0772 and 0.0535, the shadow's). Measured 2026-12-08, bpy 5.0.1: baked with the ground,
+    0.0772 and 0.0535, the shadow's). Measured 2026-12-06, bpy 5.0.1: baked with the ground,
     the gathered term added the statue's bounce light (ground max 0.098 and 0.075, error 0.136
     and 0.166) and its own (the statue's error 0.157 and 0.187); baked alone, the ground fell
     back to Cycles' steerable term (the statue's hits counted as objects not baked). Now the
