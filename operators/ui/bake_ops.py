@@ -659,8 +659,17 @@ class RELIGHT_OT_discard_chunks(bpy.types.Operator):
     def execute(self, context):
         from ...lt_addon.io.untrusted import UntrustedFileError
 
+        from ...lt_addon.io import untrusted
+        from ..base.bake_inputs import CACHE_FOLDER
+
         kept = kept_chunks(context, None if self.kind == "ALL" else self.kind)
         try:
+            root = os.path.join(_output_dir(context.scene.relight), CACHE_FOLDER)
+        except BakeInputError:   # no output folder yet: no chunks either
+            root = None
+        try:
+            if root is not None:   # (kept_chunks does not look through a linked cache)
+                untrusted.real_folder(root)
             _discard_chunk_folders([folder for folder, _ in kept])
         except UntrustedFileError as exc:   # a link in the cache: nothing removed, said so
             self.report({"ERROR"}, str(exc))
