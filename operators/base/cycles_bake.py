@@ -121,7 +121,9 @@ def check_bakeable(obj, need_uv: bool = True) -> None:
     if obj is None:
         raise BakeInputError("no object given")
     if obj.type != "MESH":
-        raise BakeInputError(f"{obj.name} is a {obj.type.lower()}, not a mesh")
+        kind = obj.type.lower().replace("_", " ")
+        article = "an" if kind[:1] in "aeiou" else "a"
+        raise BakeInputError(f"{obj.name} is {article} {kind}, not a mesh")
     from .visibility import render_hidden
 
     hidden = render_hidden(obj)

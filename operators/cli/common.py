@@ -216,8 +216,7 @@ def open_object(path: str, name: str):
         bpy.ops.wm.open_mainfile(filepath=path, load_ui=False)
     obj = bpy.data.objects.get(name)
     if obj is None:
-        meshes = sorted(o.name for o in bpy.data.objects if o.type == "MESH")
-        raise CliError(f"no object {name!r} in {path}; mesh objects: {', '.join(meshes) or 'none'}")
+        raise CliError(f"no object {name!r} in {path}; mesh objects: {_bakeable_meshes()}")
     from ..base.blend_files import activate_scene_of
     from ..base.cycles_bake import BakeInputError
 
@@ -226,6 +225,16 @@ def open_object(path: str, name: str):
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
     return obj
+
+
+def _bakeable_meshes() -> str:
+    """The mesh objects a bake could name: those in a view layer of a scene (an object only in
+    an excluded collection, or in no scene, renders in none), sorted, comma-separated."""
+    import bpy
+
+    seen = {o.name for sc in bpy.data.scenes for vl in sc.view_layers for o in vl.objects
+            if o.type == "MESH"}
+    return ", ".join(sorted(seen)) or "none"
 
 
 def open_objects(path: str, names: list) -> list:
@@ -239,8 +248,11 @@ def open_objects(path: str, names: list) -> list:
     for name in names[1:]:
         obj = bpy.data.objects.get(name)
         if obj is None:
-            meshes = sorted(o.name for o in bpy.data.objects if o.type == "MESH")
-            raise CliError(f"no object {name!r} in {path}; mesh objects: {', '.join(meshes)}")
+            raise CliError(f"no object {name!r} in {path}; mesh objects: {_bakeable_meshes()}")
+        if obj.name in bpy.context.scene.objects and obj.name not in bpy.context.view_layer.objects:
+            raise CliError(f"{obj.name!r} is only in collections excluded from view layer "
+                           f"{bpy.context.view_layer.name!r}: Cycles would not render it; "
+                           "include its collection or leave it out")
         if obj.name not in bpy.context.view_layer.objects:
             raise CliError(f"{obj.name!r} is not in scene {bpy.context.scene.name!r} with "
                            f"{objects[0].name!r}; objects baked together share one scene")

@@ -46,3 +46,39 @@ def test_an_object_that_bakes_nothing_is_refused_in_one_line(tmp_path, kind, mes
     assert_refused(out, message, "bake-textures", blend, "--object", "Thing", "--preset",
                    "draft", "--resolution", "16", "--out", out, "--force")
     assert list(out.iterdir()) == []
+
+
+_NAMES = r'''
+import bpy, sys
+path = sys.argv[-1]
+bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+sc = bpy.context.scene
+sc.render.engine = "CYCLES"
+bpy.ops.mesh.primitive_plane_add()
+bpy.context.active_object.name = "Thing"
+sc.collection.objects.link(bpy.data.objects.new("Inst", None))
+props = bpy.data.collections.new("Props")
+sc.collection.children.link(props)
+me = bpy.data.meshes.new("H")
+me.from_pydata([(0, 0, 1), (1, 0, 1), (1, 1, 1)], [], [(0, 1, 2)])
+props.objects.link(bpy.data.objects.new("Hidden", me))
+bpy.context.view_layer.layer_collection.children["Props"].exclude = True
+bpy.ops.wm.save_as_mainfile(filepath=path)
+'''
+
+
+def test_objects_that_are_not_meshes_or_not_rendered_are_named_plainly(tmp_path):
+    """Issue 59's small ones: an empty is "an empty", the hint for an unknown name lists only
+    meshes a view layer renders (not one in an excluded collection), and a second object only in
+    an excluded collection is said to be so (it was "not in scene")."""
+    blend = tmp_path / "names.blend"
+    subprocess.run([sys.executable, "-c", _NAMES, str(blend)], check=True, capture_output=True,
+                   timeout=120)
+    out = tmp_path / "bk"
+    out.mkdir()
+    base = ["bake-textures", blend, "--preset", "draft", "--resolution", "16", "--out", out]
+    assert_refused(out, "Inst is an empty, not a mesh", *base, "--object", "Inst")
+    r = assert_refused(out, "mesh objects: Thing", *base, "--object", "Nope")
+    assert "Hidden" not in r.stderr
+    assert_refused(out, "'Hidden' is only in collections excluded from view layer", *base,
+                   "--object", "Thing", "--object", "Hidden")
