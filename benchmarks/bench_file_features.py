@@ -159,13 +159,21 @@ def row_overlapping_uvs():
     return [box, ground]
 
 
+def row_array_copies():
+    box, ground = _box(location=(-0.8, 0, 0.5)), _ground()
+    mod = box.modifiers.new("Array", "ARRAY")   # two copies laid on the same UVs
+    mod.count, mod.relative_offset_displace = 2, (1.6, 0, 0)
+    return [box, ground]
+
+
 ROWS = {"plain box": row_plain, "two UV maps (lightmap active)": row_two_uv_maps,
         "Suzanne": row_suzanne, "Suzanne mirrored (scale x -1)": row_suzanne_mirrored,
         "two boxes (Red, Blue)": row_two_boxes, "the same named a/b and a_b": row_colliding_names,
         "hidden from render and baked": row_hidden_occluder_baked,
         "hidden occluder": row_hidden_occluder, "visible_diffuse off": row_not_diffuse_visible,
         "visible_shadow off": row_no_shadow, "shadow-catcher ground": row_shadow_catcher,
-        "holdout occluder": row_holdout, "overlapping UV islands": row_overlapping_uvs}
+        "holdout occluder": row_holdout, "overlapping UV islands": row_overlapping_uvs,
+        "Array copies sharing UVs": row_array_copies}
 
 
 def measure(build, resolution: int) -> dict:
