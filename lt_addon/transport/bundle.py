@@ -466,14 +466,43 @@ def upsample(img, R):
     return rows[:, i0] * (1 - f.T)[..., None] + rows[:, i1] * f.T[..., None]
 
 
+#: what each viewport the bake chose (its report's ``viewport.shows``) relights from
+VIEWPORT_SOURCES = {"horizon": "horizon", "transport": "transport", "pca": "model",
+                    "blocks": "blocks", "none": "model"}
+
+
+def viewport_source(bake: ObjectBake, environment: bool = False) -> str:
+    """The source that relights what the panel's viewport shows for this bake (its report's
+    ``viewport.shows``): ``horizon``, ``transport`` (T through its sparse tables: T),
+    ``model`` (the PCA) or ``blocks``. Under an environment the viewport's environment group
+    reads the PCA (``model``; T where there is none): a horizon map holds one sun's shadows."""
+    shows = str((bake.viewport or {}).get("shows", "pca"))
+    source = VIEWPORT_SOURCES.get(shows, "model")
+    if source == "blocks" and bake.view is None:
+        source = "model"
+    if environment and source in ("horizon", "blocks"):
+        source = "model"
+    if source == "model" and bake.model is None:
+        source = "transport"
+    return source
+
+
 def relight(bake: ObjectBake, store, direction, sun_angle: float = 0.0, intensity: float = 1.0,
             source: str = "transport", kernel: str = "linear") -> np.ndarray:
     """Radiance (R, R, 3) under a sun: ``source="transport"`` relights from T itself (the
     full-accuracy reference at T's directions), ``"model"`` from the fitted model,
-    ``"horizon"`` from the horizon map (what its viewport shows)."""
+    ``"horizon"`` from the horizon map, ``"blocks"`` from the block viewport, ``"viewport"``
+    from whichever of them the viewport shows (:func:`viewport_source`: what the panel and its
+    figures show)."""
+    if source == "viewport":
+        source = viewport_source(bake)
     idx, w = tt.sun_weights(store.directions, direction, sun_angle, kernel)
     R = store.resolution
-    if source == "horizon":
+    if source == "blocks":
+        if bake.view is None:
+            raise InputError(f"{bake.name}: this bake's viewport shows no blocks")
+        direct = np.asarray(bake.view.relight_weights(idx, w)).reshape(R, R)[..., None] * bake.albedo
+    elif source == "horizon":
         if bake.horizon is None:
             raise InputError(f"{bake.name}: this bake keeps no horizon map (its viewport shows "
                              f"{(bake.viewport or {}).get('shows', 'no horizons')}); use "
@@ -499,9 +528,11 @@ def relight_environment(bake: ObjectBake, store, env_image, rotation_deg: float 
     light from T (``source="transport"``) or from the PCA model (``"model"``, what the
     viewport shows), plus the indirect term steered by the same environment
     (:func:`..lt_addon.transport.texture.steer_environment`)."""
-    if source == "horizon":
+    if source == "viewport":
+        source = viewport_source(bake, environment=True)
+    if source in ("horizon", "blocks"):
         raise InputError("an environment relights from T or the model (--source transport or "
-                         "model): the horizon map holds one sun's shadows")
+                         "model): the horizon map and the blocks' tables hold one sun")
     w = tt.environment_weights(store.directions, env_image, row_order=row_order,
                                rotation_deg=rotation_deg)
     model = bake.model

@@ -183,9 +183,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rotate", type=float, default=0.0, metavar="DEG",
                    help="with --env: rotate the environment about +z like a world Mapping "
                         "node's Z rotation (Point type)")
-    p.add_argument("--source", choices=("model", "transport", "horizon"), default="model",
-                   help="transport bakes: relight from the fitted model, from T itself, or "
-                        "from the horizon map (what the horizon viewport shows)")
+    p.add_argument("--source", choices=("viewport", "model", "transport", "horizon", "blocks"),
+                   default="viewport",
+                   help="transport bakes: relight what the viewport shows for this object "
+                        "(viewport, the default: the one the panel and the report's figure "
+                        "show -- its horizon map, T through sparse tables, the PCA or blocks), "
+                        "or from the fitted model, T itself, the horizon map or the blocks")
     p.add_argument("--out", metavar="IMG.exr", help="write the relit texture (float RGB EXR)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
     p.set_defaults(func=_cmd_relight)

@@ -31,12 +31,13 @@ def texture_kind(obj, environment: bool = False) -> str:
 
 def relight_texture(obj, *, light=None, env_path: str | None = None, rotate: float = 0.0,
                     sun_angle: float | None = None, intensity: float = 1.0,
-                    color=(1.0, 1.0, 1.0), source: str = "model") -> tuple:
+                    color=(1.0, 1.0, 1.0), source: str = "viewport") -> tuple:
     """``obj``'s texture relit: radiance (R, R, 3) float32 and what was done (a dict).
 
     ``light`` (azimuth, elevation) in degrees, or ``env_path`` an equirectangular EXR turned by
     ``rotate`` degrees like a world Mapping node (transport bakes; their direct light from T or
-    the model, ``source``, and the indirect term steered by the same light). ``sun_angle``: the
+    the model, ``source``: by default what the viewport shows for it, and the indirect term
+    steered by the same light). ``sun_angle``: the
     sun's size (default: the bake's); ``intensity`` the sun's normal irradiance or the
     environment's scale; ``color`` an RGB tint."""
     if (light is None) == (env_path is None):
@@ -63,6 +64,8 @@ def relight_texture(obj, *, light=None, env_path: str | None = None, rotate: flo
     angle = report["settings"]["sun_angle"] if sun_angle is None else sun_angle
     if not 0.0 <= angle <= 90.0:
         raise InputError(f"--sun-angle must be in 0..90 degrees, got {angle}")
+    if source == "viewport":   # what the panel shows for this object (the report's figure)
+        source = bundle.viewport_source(bake, environment=env_path is not None)
     info = {"object": obj.name, "method": "transport"}
     if env_path is not None:
         from ...lt_addon.export.fitting import read_environment
