@@ -146,23 +146,28 @@ def test_an_occluder_invisible_to_diffuse_rays_casts_its_shadow_and_reflects_not
     gather's rays pass through it: the ground's maximum within 3 % of Cycles', its error that
     of the ground baked alone beside a shown statue (about 0.15), and baked alone it keeps the
     gathered term."""
+    # the errors every flag at its default has, same run (0.122 / 0.142 statue, 0.147 / 0.158
+    # ground on 5.0.1): the bound, not a number measured on one Blender (5.1+ draw other
+    # samples, 5.3 fills UV margins otherwise)
+    plain, _ = _bake(_statue(), ["Statue", "Ground"])
     scene = _statue(visible_diffuse=False)
     pairs, rep = _bake(scene, ["Statue", "Ground"])
     assert rep["indirect"]["method"] == "gathered"
-    for (st_truth, st_got), (gr_truth, gr_got) in pairs:
+    for ((st_truth, st_got), (gr_truth, gr_got)), ((st_t0, st_g0), (gr_t0, gr_g0)) in zip(
+            pairs, plain):
         m = gr_truth.sum(-1) > 0
         print("statue", _rel(st_truth, st_got), "ground", _rel(gr_truth, gr_got),
               gr_got[m].max(), gr_truth[m].max())
         assert gr_got[m].max() < 1.03 * gr_truth[m].max()
-        assert _rel(gr_truth, gr_got) < 0.16
-        assert _rel(st_truth, st_got) < 0.16
+        assert _rel(gr_truth, gr_got) < 1.15 * _rel(gr_t0, gr_g0)
+        assert _rel(st_truth, st_got) < 1.15 * _rel(st_t0, st_g0)
     scene = _statue(visible_diffuse=False)
     pairs, rep = _bake(scene, ["Ground"])
     assert rep["indirect"]["method"] == "gathered", rep["indirect"].get("why")
-    for ((truth, got),) in pairs:
+    for ((truth, got),), (_, (gr_t0, gr_g0)) in zip(pairs, plain):
         m = truth.sum(-1) > 0
         assert got[m].max() < 1.03 * truth[m].max()
-        assert _rel(truth, got) < 0.16
+        assert _rel(truth, got) < 1.15 * _rel(gr_t0, gr_g0)
 
 
 def test_a_baked_holdout_or_shadow_catcher_is_a_plain_surface_with_a_warning():
