@@ -148,17 +148,12 @@ def _check_area(obj, need_uv: bool) -> None:
     from .meshes import bake_uv_name, uv_corners
 
     mesh = obj.data
-    area = np.empty(len(mesh.polygons))
-    mesh.polygons.foreach_get("area", area)
+    area, start, total = polygon_arrays(mesh)
     if not np.isfinite(area).all() or float(area.sum()) <= 0.0:
         raise BakeInputError(f"{obj.name}: its faces have no area (every face is degenerate: "
                              "a point or a line); nothing to bake")
     if need_uv and mesh.uv_layers:
         uv = uv_corners(mesh, bake_uv_name(obj))
-        start = np.empty(len(mesh.polygons), np.int64)
-        mesh.polygons.foreach_get("loop_start", start)
-        total = np.empty(len(mesh.polygons), np.int64)
-        mesh.polygons.foreach_get("loop_total", total)
         nxt = np.arange(len(uv)) + 1   # each corner's next corner around its face
         last = start + total - 1
         nxt[last] = start
