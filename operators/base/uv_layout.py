@@ -17,14 +17,10 @@ MAX_CHECK_SIDE = 256
 
 
 def _uv_map_name(obj) -> str | None:
-    from . import meshes
+    """The map the bake writes into (:func:`.meshes.bake_uv_name`), None without a UV map."""
+    from .meshes import bake_uv_name
 
-    named = getattr(meshes, "bake_uv_name", None)   # the map the bake writes into, where known
-    if named is not None:
-        return named(obj)
-    layers = obj.data.uv_layers
-    layer = next((uv for uv in layers if uv.active_render), layers[0] if len(layers) else None)
-    return layer.name if layer is not None else None
+    return bake_uv_name(obj) if len(obj.data.uv_layers) else None
 
 
 def evaluated_uv_triangles(obj, depsgraph=None) -> np.ndarray:
