@@ -899,13 +899,13 @@ def bake_group(scene, objects, settings: TransportTextureSettings, out_dir: str,
         yield from _camera_comparison(scene, objects, settings, out_dir, reports, truth,
                                       truth_samples)
     wall = round(time.perf_counter() - started, 3)
-    from ..base.visibility import baked_as_surface
+    from ..base.visibility import baked_notes
 
     for rep, obj in zip(reports, objects):   # the wall time of everything the verb did, too
         rep["timings"]["wall_total"] = wall
-        note = baked_as_surface(obj)
-        if note:
-            rep["notes"] = [note]
+        notes = baked_notes(obj)
+        if notes:
+            rep["notes"] = notes
         rep["warnings"] = report_warnings(rep)   # its caveats, as the CLI and panel say them
         if "estimate" in rep and not rep.get("chunks_reused"):   # how good the prediction was
             rep["estimate"]["measured_bake_seconds"] = rep["timings"].get("bake_total")
