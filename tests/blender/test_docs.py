@@ -1,5 +1,6 @@
 """The documentation: the generated CLI reference is current, every relative link and image in
-README.md and docs/*.md resolves (files and ``#anchor`` headings), and the README stays short.
+README.md, docs/*.md and docs/bench/*.md resolves (files and ``#anchor`` headings), and the
+README stays short.
 
 The CLI reference is generated from ``build_parser()`` (tools/cli_reference.py), which imports
 bpy: hence tests/blender. Everything else here reads Markdown files only.
@@ -104,7 +105,9 @@ def broken_links(files) -> list[str]:
 
 
 def _doc_files():
-    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    """README, the docs and the dated measurement records under docs/bench."""
+    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")),
+            *sorted((ROOT / "docs" / "bench").glob("*.md"))]
 
 
 def test_cli_reference_is_generated_from_the_parser():
