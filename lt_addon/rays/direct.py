@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 
+from . import contact
 from .shading import ShadingPoints, cosine, shadow_origins
 
 
@@ -37,6 +38,7 @@ def direct_rows(occluder, points: ShadingPoints, directions, out=None) -> np.nda
         out = out[:len(D)]
         out[...] = 0.0
     cast = getattr(occluder, "occluded_async", None)
+    touching = None if points.contact is None else points.contact.touching
     pending = None        # the rays in flight: (row, their points, Future of what is blocked)
 
     def land(row, lit, future):
@@ -50,11 +52,21 @@ def direct_rows(occluder, points: ShadingPoints, directions, out=None) -> np.nda
                 lit = np.nonzero(cos > 0)[0]
                 if not lit.size:
                     continue
-                out[s, a + lit] = cos[lit] / np.pi
                 if lit.size > (b - a) // 4:   # every point's origin, then the lit ones': faster
                     origins = np.take(shadow_origins(points, L, slice(a, b)), lit, axis=0)
                 else:                         # (the same bits: shadow_origins is per point)
                     origins = shadow_origins(points, L, lit + a)
+                if touching is not None:    # another object's surface at t ~ 0 (.contact)
+                    near = np.nonzero(touching[a + lit])[0]
+                    if near.size:
+                        dark = contact.blocked(points, a + lit[near], L, origins[near])
+                        if dark.any():
+                            keep = np.ones(lit.size, bool)
+                            keep[near[dark]] = False
+                            lit, origins = lit[keep], origins[keep]
+                            if not lit.size:
+                                continue
+                out[s, a + lit] = cos[lit] / np.pi
                 # one engine call per direction and block, its direction given once: no per-ray
                 # copy of it (the rays of 64 directions in one call held ~400 MB at 512^2).
                 # Cast while the next direction's origins are made (they took as long as the

@@ -89,14 +89,16 @@ class Occluder:
             TriangleMesh(self._scene, v, t)
         self.rays = 0
 
-    def occluded(self, origins, directions) -> np.ndarray:
-        """Whether each ray ``origins[i] + t directions[i]`` (t > 0) meets a triangle.
+    def occluded(self, origins, directions, tfar=None) -> np.ndarray:
+        """Whether each ray ``origins[i] + t directions[i]`` (0 < t < tfar[i]) meets a triangle.
 
         Parameters
         ----------
         origins : array_like, shape (M, 3)
         directions : array_like, shape (M, 3) or (3,)
             Unit directions (one for all rays when given once).
+        tfar : array_like, shape (M,), optional
+            Each ray's length (metres for unit directions; None: unbounded).
 
         Returns
         -------
@@ -107,8 +109,17 @@ class Occluder:
         if not len(o) or not self.n_triangles:
             return out
 
-        def run(a, b, dd):
-            out[a:b] = self._scene.run(o[a:b], dd, query="OCCLUDED") == 0
+        if tfar is None:
+            def run(a, b, dd):
+                out[a:b] = self._scene.run(o[a:b], dd, query="OCCLUDED") == 0
+        else:
+            far = np.ascontiguousarray(np.broadcast_to(np.asarray(tfar, np.float32), (len(o),)))
+
+            def run(a, b, dd):
+                if len(dd) == 1:   # (a length per ray: so a direction per ray too)
+                    dd = np.broadcast_to(dd, (b - a, 3)).copy()
+                out[a:b] = self._scene.run(o[a:b], dd, dists=far[a:b].copy(),
+                                           query="OCCLUDED") == 0
         self._batched(o, d, run)
         return out
 

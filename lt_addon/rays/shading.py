@@ -56,6 +56,7 @@ class ShadingPoints:
     bump: str = "conty"            # Cycles' bump terminator term: "conty" (4.5+) or "chiang"
     correction: np.ndarray = None  # (P,) bool: the material's bump map correction (conty)
     epsilon: float = EPSILON       # the origin's push off the plane (see EPSILON)
+    contact: object = None         # .contact.Contact: points touching another object's surface
 
     @property
     def size(self) -> int:
@@ -92,7 +93,8 @@ class ShadingPoints:
         return ShadingPoints(self.P[rows], self.Ng[rows], self.N[rows], self.Ns[rows],
                              self.lift[rows], self.cutoff[rows], self.bump,
                              None if self.correction is None else self.correction[rows],
-                             self.epsilon)
+                             self.epsilon,
+                             None if self.contact is None else self.contact.subset(rows))
 
 
 def _unit(v):

@@ -153,6 +153,11 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
         # the horizons at their own (coarser) side: their own texel centres
         coarse = ([ray_scene.receiver_points(o, depsgraph, Rh, _nearest(nrm, Rh))
                    for o, nrm in zip(objects, normals)] if A and Rh < R else None)
+        # points touching another object's surface (a box's bottom on its floor): Cycles'
+        # rays meet it at once (lt_addon/rays/contact.py)
+        touching = ray_scene.with_contacts(depsgraph, [(o.name, pts) for o, (_, pts)
+                                                       in zip(objects, receivers)],
+                                           threads=cycles_device.current().threads)
     t_scene = time.perf_counter() - t0
     margins = [extend_margin(smp.covered(), margin) for smp, _ in receivers]
     S = dset.size
@@ -247,6 +252,8 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
             "rays": int(rays), "rays_per_second": round(rays / max(seconds - t_scene, 1e-9)),
             "casters": int(n_casters), "caster_triangles": int(len(T)),
             "texels": [int(smp.size) for smp, _ in receivers],
+            # texels touching another object's surface: a contact ray each per lit direction
+            "contact_texels": int(touching),
             "margin_texels": margin, "threads": occluder.threads,
             "directions_per_call": chunk}
 

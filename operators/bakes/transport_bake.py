@@ -236,6 +236,8 @@ def _bake_by_rays(scene, obj, dirs, rays, choice: dict, T, seed: int, start: flo
         cycles, calls = session.bake_seconds, session.bake_calls
     cast = (rays.bake_engine or rays.engine).rays
     choice.update(checked_directions=len(checks), rays=int(cast),
+                  # corners touching another object's surface (lt_addon/rays/contact.py)
+                  contact_points=int(getattr(rays, "touching", 0)),
                   ray_seconds=round(ray_seconds, 3),
                   vs_cycles=direct_agreement(np.stack(cycles_rows), T[:, checks].T))
     return TransportBakeResult(T, dirs, cycles, time.perf_counter() - start, calls, None, choice)

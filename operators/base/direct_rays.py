@@ -238,7 +238,9 @@ class ReceiverRays:
         it with the depsgraph evaluated as the bake evaluates it (the render's geometry)."""
         import bpy
 
+        from ...lt_addon.rays.contact import Contact
         from ...lt_addon.rays.shading import ShadingPoints
+        from . import ray_scene
 
         depsgraph = bpy.context.evaluated_depsgraph_get()
         parts, groups, start = [], [], 0
@@ -247,10 +249,16 @@ class ReceiverRays:
             parts.append(points)
             groups.append((corner_v[corner] if self.domain == "POINT" else corner) + start)
             start += count
+        # corners touching another object's surface (a box's bottom on its floor): Cycles'
+        # rays meet it at once (lt_addon/rays/contact.py)
+        self.touching = ray_scene.with_contacts(
+            depsgraph, [(name, p) for (name, _), p in zip(self.objects, parts)])
         fields = ("P", "Ng", "N", "Ns", "lift", "cutoff", "correction")
         points = ShadingPoints(*(np.concatenate([getattr(p, f) for p in parts])
                                  for f in fields[:6]), parts[0].bump,
-                               np.concatenate([p.correction for p in parts]), parts[0].epsilon)
+                               np.concatenate([p.correction for p in parts]), parts[0].epsilon,
+                               Contact.join([p.contact for p in parts],
+                                            [p.size for p in parts]))
         self._bake = (points, np.concatenate(groups))
 
     def bake_rows(self, directions) -> np.ndarray:

@@ -209,6 +209,51 @@ def casters(depsgraph, exclude_names=(), ray: str = "shadow"):
     return np.concatenate(verts), np.concatenate(tris), n
 
 
+def with_contacts(depsgraph, receivers, threads: int = 0):
+    """Give each receiver's shading points (``receivers``: (object name, ShadingPoints)) the
+    :class:`...lt_addon.rays.contact.Contact` of the other shadow casters' surfaces they touch
+    (a box's bottom on its floor: :mod:`...lt_addon.rays.contact`), in place. The casters are
+    read once; per receiver an occluder of the other objects' triangles near it is built only
+    where some lie within its points' reach. Returns the touching points in all."""
+    from ...lt_addon.rays import contact
+    from ...lt_addon.rays.engine import Occluder
+
+    receivers = [(n, p) for n, p in receivers if p.size]
+    if not receivers:
+        return 0
+    verts, tris, owner, offset = [], [], [], 0
+    for inst in depsgraph.object_instances:
+        ob = inst.object
+        if ob.type not in CASTER_TYPES:
+            continue
+        parent = inst.parent.original if inst.is_instance and inst.parent else None
+        if not getattr(ob.original, "visible_shadow", True) or (
+                parent is not None and not getattr(parent, "visible_shadow", True)):
+            continue
+        got = _to_world_mesh(ob, inst.matrix_world)
+        if got is None:
+            continue
+        co, tri = got
+        verts.append(co)
+        tris.append(tri + offset)
+        owner.append(np.full(len(tri), ob.original.name, object))
+        offset += len(co)
+    if not verts:
+        return 0
+    V, T, owner = np.concatenate(verts), np.concatenate(tris), np.concatenate(owner)
+    touching = 0
+    for name, points in receivers:
+        rows = contact.near_triangles(V, T, points.P.min(axis=0), points.P.max(axis=0),
+                                      contact.reach(points))
+        rows = rows[owner[rows] != name]
+        if not len(rows):
+            continue
+        found = contact.find(points, Occluder(V, T[rows], threads=threads))
+        points.contact = found
+        touching += found.count if found is not None else 0
+    return touching
+
+
 def _material_trees(obj):
     for slot in getattr(obj, "material_slots", ()):
         mat = slot.material
