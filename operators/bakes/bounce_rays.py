@@ -111,6 +111,24 @@ class GatherScene:
             offset += n
         if not offset:
             raise ValueError("the scene has no rendered meshes to gather light from")
+        # the gather's bounce rays meet the shadow casters: an object that reflects light but
+        # casts no shadow, or casts one but is not seen by bounce rays, is not modelled (said)
+        from ..base.direct_rays import CASTER_TYPES
+        from ..base.visibility import rendered_names
+
+        rendered = rendered_names()
+        for o in scene.objects:
+            if o.type not in CASTER_TYPES or o.name not in rendered:
+                continue
+            shadow = getattr(o, "visible_shadow", True)
+            diffuse = getattr(o, "visible_diffuse", True)
+            if shadow != diffuse:
+                note = (f"{o.name}: {'casts no shadow but reflects light' if diffuse else 'casts a shadow but bounce rays pass through it'} "
+                        "(Ray Visibility); the material edits' bounce light treats it as "
+                        f"{'absent' if diffuse else 'a reflecting surface'} (not modelled: "
+                        "set both Shadow and Diffuse alike for an exact bake)")
+                if note not in self.notes:
+                    self.notes.append(note)
         self.front = ReceiverRays(scene, self.objects, "CORNER")
         self._back = None
         self.tri_corners = np.concatenate(tris)

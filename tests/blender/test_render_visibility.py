@@ -206,3 +206,17 @@ def test_a_baked_object_that_casts_no_shadow_is_said_in_one_line():
     said = [w for w in reports["Statue"]["warnings"] if "casts no shadow" in w]
     assert len(said) == 1 and said[0].startswith("Statue casts no shadow"), reports["Statue"]
     assert not any("casts no shadow" in w for w in reports["Ground"]["warnings"])
+
+
+@pytest.mark.parametrize("flag, said", [("visible_diffuse", "bounce rays pass through it"),
+                                        ("visible_shadow", "casts no shadow but reflects light")])
+def test_the_material_edits_gather_says_what_it_does_not_model(flag, said):
+    """The material edits' bounce rays meet the shadow casters: an object whose Shadow and
+    Diffuse ray visibility differ is not modelled there, and the bake's notes (its warnings)
+    say so in one line naming it; with both flags alike there is no such line."""
+    from relightable_textures.operators.bakes.bounce_rays import GatherScene
+
+    assert not any("Ray Visibility" in n for n in GatherScene(_statue(), []).notes)
+    notes = GatherScene(_statue(**{flag: False}), []).notes
+    lines = [n for n in notes if "Ray Visibility" in n]
+    assert len(lines) == 1 and lines[0].startswith("Statue: ") and said in lines[0], notes
