@@ -45,7 +45,7 @@ def test_no_blender_imports_in_source(path):
 def test_the_walk_sees_every_subpackage():
     packages = {p.parent.name for p in CORE.glob("*/__init__.py")}
     assert packages == {"checks", "export", "geometry", "io", "rays", "sphere", "steerable",
-                        "transport"}
+                        "sun", "transport"}
     for pkg in packages:
         assert any(m.startswith(pkg + ".") for m in MODULES), pkg
 
