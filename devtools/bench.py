@@ -20,8 +20,9 @@ high samples, the sweep's largest resolution, same bounces) for three light dire
 resolutions are compared after nearest-texel upsampling (what the preview's Closest lookup
 shows). Transport scenes (statue, room): one bake per direction set (s), then eigentransport at
 several d and CPCA (fixed clusters and adaptive) fitted from it; the reference is a Cycles vertex
-bake under a sun-and-sky environment at 256 samples. There is no PCA of textures in this
-extension, so "PCA k" and "d" are the same knob (eigentransports kept).
+bake under a sun-and-sky environment at 256 samples. For these per-vertex bakes the PCA is the
+eigentransport, so "PCA k" and "d" are the same knob (eigentransports kept); this sweep fits no
+texture PCA (the transport textures' is benchmarks/bench_transport_textures.py's).
 
 Outputs per scene in ``--out``: ``<scene>.json`` (settings, points, Pareto masks, chosen presets
 for texture scenes), ``<scene>.csv`` and three charts ``<scene>_error_vs_{time,bytes,preview}.png``
