@@ -23,11 +23,13 @@ Conventions (all float64):
 * results in degrees: ``zenith`` and ``elevation`` topocentric and refracted (what is seen),
   ``azimuth`` eastward from north in [0, 360) ("navigators' azimuth", the paper's Phi).
 
-Delta-T (TT - UT1, seconds) is a parameter: :data:`DELTA_T_2020S` is the value observed through
-the 2020s (69.4 s in 2020 to 69.1 s in 2025, IERS Bulletin A); a Delta-T off by 10 s moves the
-Sun by ~1e-4 degrees. ``delta_ut1`` (UT1 - UTC, within +-0.9 s) is 0 by default like pvlib's; it
-shifts the hour angle by up to 0.004 degrees, more than the algorithm's own error, so give
-it from IERS Bulletin A where that matters.
+Delta-T (TT - UT1, seconds) is a parameter: :data:`DELTA_T_2020S` = 69.2 s. Since the last
+leap second (2017) Delta-T = 32.184 s + (TAI - UTC = 37 s) - (UT1 - UTC), and IERS keeps
+|UT1 - UTC| < 0.9 s, so 69.2 is within 1 s until the next leap second (observed: 69.36 s at
+2020.0, ~69.1 s in 2025); a Delta-T off by 10 s moves the Sun by ~1e-4 degrees.
+``delta_ut1`` (UT1 - UTC, within +-0.9 s) is 0 by default like pvlib's; it shifts the hour
+angle by up to 0.004 degrees, more than the algorithm's own error, so give it from IERS
+Bulletin A where that matters.
 
 The coefficient tables below are the paper's; this listing was written out from pvlib's
 transcription of them (``pvlib.spa``, BSD-3-Clause) and is checked by the paper's own worked
@@ -45,7 +47,7 @@ import numpy as np
 __all__ = ["DELTA_T_2020S", "SolarPosition", "solar_position", "sun_direction",
            "posix_seconds", "julian_day", "heliocentric", "nutation", "DEFAULT_ATMOS_REFRACT"]
 
-#: Delta-T = TT - UT1 in seconds for the 2020s (observed 69.36 s at 2020.0, ~69.1 s in 2025).
+#: Delta-T = TT - UT1 in seconds for the 2020s (32.184 + 37 - (UT1 - UTC); module docstring).
 DELTA_T_2020S = 69.2
 
 #: Refraction at sunrise/sunset (degrees) that decides whether the refraction term applies (the
