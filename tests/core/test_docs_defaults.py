@@ -5,9 +5,12 @@ values the tutorial's command-line overview shows.
 
 The figures come from the presets files themselves (operators/bakes/transport_presets.json,
 presets.json), merged over the built-in fallbacks of operators/bakes/presets.py as
-:class:`Presets` merges them, then the settings dataclass's defaults; panel and CLI defaults are
-read from their source with ``ast`` (those modules import bpy). A documented number must equal
-the code's value rounded to the digits the doc shows. No bpy, well under a second.
+:class:`Presets` merges them, then the settings dataclass's defaults. Panel and CLI defaults are
+read from their source with ``ast`` (those modules import bpy): the panel's property defaults,
+the CLI's --preset default, and the output-folder function that both the CLI
+(``check_output_dir``) and the panel (``default_output_dir``) call, which runs here on its own.
+A documented number must equal the code's value rounded to the digits the doc shows. No bpy,
+well under a second.
 """
 
 from __future__ import annotations
@@ -154,16 +157,39 @@ def cli_preset_defaults() -> set:
     return found
 
 
-def cli_output_dir(blend_path: str) -> str:
-    """The CLI's default output folder for ``blend_path``:
-    ``operators.bakes.steerable_bake.default_output_dir`` (that module imports bpy; the function
-    uses ``os`` only, so it runs here on its own)."""
-    for node in _tree(BAKES / "steerable_bake.py").body:
-        if isinstance(node, ast.FunctionDef) and node.name == "default_output_dir":
+def _function(module_path: pathlib.Path, name: str):
+    """The module-level function ``name`` of ``module_path``, compiled on its own with ``os`` as
+    its only global (the modules import bpy; these functions use ``os`` only)."""
+    for node in _tree(module_path).body:
+        if isinstance(node, ast.FunctionDef) and node.name == name:
             namespace = {"os": os}
-            exec(compile(ast.Module([node], []), "steerable_bake.py", "exec"), namespace)
-            return namespace["default_output_dir"](blend_path)
-    raise AssertionError("operators/bakes/steerable_bake.py has no default_output_dir")
+            exec(compile(ast.Module([node], []), str(module_path), "exec"), namespace)
+            return namespace[name]
+    raise AssertionError(f"{module_path.relative_to(ROOT)} has no function {name}")
+
+
+def _module_file(package_dir: pathlib.Path, module: str, level: int) -> pathlib.Path:
+    """The file of ``from <level dots><module> import ...`` written in ``package_dir``."""
+    base = package_dir
+    for _ in range(level - 1):
+        base = base.parent
+    return base.joinpath(*module.split(".")).with_suffix(".py")
+
+
+def output_folder_rule(path: pathlib.Path, caller: str):
+    """The function that names the default output folder in ``caller`` of ``path``: the one it
+    imports from this package and calls with the .blend's path, found with ``ast``."""
+    fn = next(n for n in ast.walk(_tree(path))
+              if isinstance(n, ast.FunctionDef) and n.name == caller)
+    imports = {alias.asname or alias.name: (node.module, node.level)
+               for node in ast.walk(fn) if isinstance(node, ast.ImportFrom)
+               for alias in node.names}
+    called = {n.func.id for n in ast.walk(fn)
+              if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)}
+    rules = sorted(name for name in called & set(imports) if "output" in name)
+    assert len(rules) == 1, f"{path.name}:{caller} calls {sorted(called)}; no one output rule"
+    module, level = imports[rules[0]]
+    return rules[0], _function(_module_file(path.parent, module, level), rules[0])
 
 
 # -- the tests ----------------------------------------------------------------------------------
@@ -222,14 +248,22 @@ def test_the_defaults_table_holds_the_codes_defaults(tmp_path):
     sun, _ = number(rows["sun size of the preview"]["default"])
     assert sun == balanced["sun_angle"] == property_default("sun_angle")
 
-    # the CLI: <name>_relight/ next to the .blend
-    rule = rows["output folder, command line"]["default"]
+    # one folder for the CLI and the panel: <name>_relight/ next to the .blend
+    rule = rows["output folder"]["default"]
     assert "next to the .blend" in rule
+    name, cli_rule = output_folder_rule(ROOT / "operators" / "cli" / "common.py",
+                                        "check_output_dir")
+    panel_name, panel_rule = output_folder_rule(ROOT / "operators" / "ui" / "bake_ops.py",
+                                                "default_output_dir")
+    assert panel_name == name, f"the panel names its folder by {panel_name}, the CLI by {name}"
+    assert property_default("output_dir") == "", "the panel's Output field is not empty"
     folder = code(rule).replace("<name>", "scene").rstrip("/")
-    blend = tmp_path / "scene.blend"
-    assert cli_output_dir(str(blend)) == str(tmp_path / folder)
-    # the panel: its Output field's default
-    assert code(rows["output folder, panel"]["default"]) == property_default("output_dir")
+    assert cli_rule(str(tmp_path / "scene.blend")) == str(tmp_path / folder)
+    # an unsaved file (the panel's): ~/relight/untitled-<date-time>_relight/
+    unsaved = code(rows["output folder of an unsaved file"]["default"])
+    home = tmp_path / "home"
+    want = unsaved.replace("~", str(home)).replace("<date-time>", "20261206-031500").rstrip("/")
+    assert cli_rule("", home=str(home), stamp="20261206-031500") == want
 
 
 def test_the_tutorials_command_line_shows_the_default_values():
