@@ -434,7 +434,11 @@ def _periodic(tables, jme) -> np.ndarray:
         acc = np.zeros_like(t)
         for i in reversed(range(len(tables))):          # Horner in JME
             A, B, C = tables[i].T
-            acc = acc * t + A @ np.cos(B[:, None] + C[:, None] * t[None, :])
+            arg = np.multiply.outer(C, t)                # (terms, n), in place from here
+            arg += B[:, None]
+            np.cos(arg, out=arg)
+            arg *= A[:, None]                            # no BLAS: its threads contend
+            acc = acc * t + arg.sum(axis=0)
         out[s:s + _BLOCK] = acc / 1e8
     return out
 
@@ -471,10 +475,11 @@ def nutation(jce):
     dpsi, deps = np.empty_like(jce), np.empty_like(jce)
     for s in range(0, len(jce), _BLOCK):
         part = slice(s, s + _BLOCK)
-        arg = np.radians(_NUT_Y @ X[:, part])                                  # (63, n)
+        arg = np.radians(sum(_NUT_Y[:, j:j + 1] * X[j, part] for j in range(5)))  # (63, n)
         S, C = np.sin(arg), np.cos(arg)
-        dpsi[part] = (a @ S + jce[part] * (b @ S)) / 36e6
-        deps[part] = (c @ C + jce[part] * (d @ C)) / 36e6
+        tc = jce[part]
+        dpsi[part] = ((a[:, None] + b[:, None] * tc) * S).sum(axis=0) / 36e6
+        deps[part] = ((c[:, None] + d[:, None] * tc) * C).sum(axis=0) / 36e6
     return dpsi, deps
 
 
