@@ -29,8 +29,8 @@ $(STAMP): requirements.txt pyproject.toml
 	$(PIP_OFFLINE) --no-deps --no-build-isolation -e .
 	touch $(STAMP)
 
-## demo: set up the venv and run the main job on the bundled sample scenes (writes out/; 494 s
-##   measured on 2 cores with the venv in place, 2026-12-01)
+## demo: set up the venv and run the main job on the bundled sample scenes (writes out/; its
+##   time on 2 cores with the venv in place: README.md's make demo line)
 demo: $(STAMP)
 	mkdir -p $(OUT) $(BLENDER_USER_RESOURCES)
 	for s in bumps noise statue room; do \
