@@ -110,7 +110,7 @@ def test_an_animated_sun_raises_the_horizons_to_the_texture_side(fresh_scene, tm
     least PATH_AZIMUTHS azimuths, whatever coarser ones the settings (a preset's) ask, and says
     so; those horizons relight a hard Sun at 8 degrees on the path closer to Cycles' bake of it
     than the coarse ones. benchmarks/bench_sun_path.py measures the 2-degree Sun with bounces at
-    256^2 (docs/transport-textures.md)."""
+    256^2 (docs/bench/2026-transport-log.md)."""
     from relightable_textures.lt_addon.transport import horizon_map as hmap
     from relightable_textures.lt_addon.transport.bundle import direct_summary
     from relightable_textures.operators.bakes.texture_transport import bake_transport_textures
