@@ -22,6 +22,7 @@ from ...lt_addon.io import exrio
 from ...lt_addon.io.contact_sheet import linear_to_srgb8, write_png
 from ...lt_addon.io.label import labelled_row
 from ..base.cycles_bake import BakeInputError
+from . import preview_nodes
 
 
 def render_camera(scene, path: str, samples: int) -> np.ndarray:
@@ -52,30 +53,6 @@ def saved_render_settings(scene):
             except (TypeError, ValueError):   # e.g. a depth the restored format lacks
                 pass
     return restore
-
-
-def _set_preview_outputs(objects, on: bool) -> list:
-    """Make our preview outputs active (on) or the user's (off); returns undo callables."""
-    undo = []
-    for obj in objects:
-        for slot in obj.material_slots:
-            mat = slot.material
-            tree = mat.node_tree if mat is not None else None
-            if tree is None:
-                continue
-            outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
-            # a texture preview (lit by the Sun, like the truth), the one shown now first;
-            # a vertex transport preview in the same material is lit by the world instead
-            ours = sorted((n for n in outs if n.get("relight_preview")
-                           and n.get("relight_preview_kind") != "eigentransport"),
-                          key=lambda n: not n.is_active_output)
-            theirs = [n for n in outs if not n.get("relight_preview")]
-            if not ours or not theirs:
-                continue
-            active = next((n for n in outs if n.is_active_output), None)
-            undo.append(lambda n=active: setattr(n, "is_active_output", True))
-            (ours[0] if on else theirs[0]).is_active_output = True
-    return undo
 
 
 def compare(scene, objects, azimuth: float, elevation: float, sun_angle: float, out_png: str,
@@ -122,9 +99,14 @@ def compare(scene, objects, azimuth: float, elevation: float, sun_angle: float, 
         scene.update_tag()
         bpy.context.view_layer.update()
         with tempfile.TemporaryDirectory() as tmp:
-            undo += _set_preview_outputs(previews, True)
-            preview = render_camera(scene, os.path.join(tmp, "preview.exr"), 1)
-            undo += _set_preview_outputs(previews, False)
+            # Cycles sees the preview for this render only (its output targets EEVEE)
+            undo = preview_nodes.render_previews(previews, "CYCLES")
+            try:
+                preview = render_camera(scene, os.path.join(tmp, "preview.exr"), 1)
+            finally:
+                for f in undo:
+                    f()
+                undo = []
             scene.collection.objects.link(sun)
             data.energy, data.angle = 1.0, math.radians(sun_angle)
             towards = Vector(direction_from_az_el(azimuth, elevation).tolist())

@@ -16,9 +16,10 @@ so moving a slider (or the Sun lamp) needs no Python at all:
 This equals :meth:`SteerableTexture.relight` up to float32 rounding and the half-float atlas
 (tests render it with Cycles and compare with NumPy).
 
-Material wiring is reversible: the nodes live in a frame "Relight Preview" with their own
-Material Output made active; :func:`remove_preview` deletes them and re-activates the user's
-output. Scene sliders are ID custom properties on the scene (``relight_azimuth`` ...), read by
+Material wiring is reversible and leaves renders alone: the nodes live in a frame "Relight
+Preview" and end in a Material Output of target EEVEE, so Material Preview shows the preview
+while Cycles (renders, bakes) keeps the user's own active output; :func:`remove_preview`
+deletes them (and puts back a material copied because other objects share it). Scene sliders are ID custom properties on the scene (``relight_azimuth`` ...), read by
 simple single-variable drivers, so the preview also works where the extension is not installed.
 """
 
@@ -343,10 +344,34 @@ def set_sun_drivers(sun_dir_node, sun) -> None:
 
 # ---------------------------------------------------------------------------------------------
 # material wiring
+#
+# The preview never takes the render over (issue 57). Each bake kind's nodes end in a tagged
+# Emission; at most one preview Material Output per material shows one of them, with target
+# EEVEE. Blender picks the output of an engine by exact target first (``ntreeShaderOutputNode``:
+# an output of target EEVEE beats one of target All whatever is active), so EEVEE -- Material
+# Preview, and EEVEE's Rendered view and renders -- shows the preview, while Cycles (its renders,
+# its Rendered view and its bakes) still finds the user's own output, which stays the active one.
+# *Show Preview* off takes the preview output away (the user's material everywhere); Remove
+# Preview takes every node of ours away and puts back a material that was copied.
 
 
 #: custom property naming the bake kind a preview node belongs to (its frame, nodes and output)
 _KIND = "relight_preview_kind"
+#: marks our one preview Material Output of a material (older versions had one per kind)
+_OUTPUT = "relight_preview_output"
+#: on a kind's Emission: the kind the material shows (kept while Show Preview is off)
+_SHOWN = "relight_preview_shown"
+#: on our output: the name of the user's output that was active before ours had to be
+_WAS_ACTIVE = "relight_preview_was_active"
+#: on a material copied for one object's preview: the material it copies (an ID pointer)
+COPY_OF = "relight_preview_copy_of"
+#: on a material the preview made for an object that had none
+MADE = "relight_preview_made"
+#: the target of the preview's Material Output: EEVEE only, never Cycles
+PREVIEW_TARGET = "EEVEE"
+#: kinds whose material is copied when other objects use it too (the material edits' preview
+#: reads a per-object attribute in the materials its regions are named after: never copied)
+_COPIED_KINDS = ("steerable_texture", "transport_texture", "eigentransport")
 
 
 def _preview_nodes(tree, kind: str | None = None):
@@ -356,63 +381,269 @@ def _preview_nodes(tree, kind: str | None = None):
     return [n for n in tree.nodes if n.get(_TAG) and (kind is None or n.get(_KIND) == kind)]
 
 
+def _emission(tree, kind: str):
+    """The Emission that ends ``kind``'s preview nodes in ``tree``, or None."""
+    return next((n for n in _preview_nodes(tree, kind) if n.bl_idname == "ShaderNodeEmission"),
+                None)
+
+
+def _outputs(tree):
+    return [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+
+
+def _our_output(tree):
+    return next((n for n in _outputs(tree) if n.get(_TAG) and n.get(_OUTPUT)), None)
+
+
+def _drop_output(tree, node) -> None:
+    """Remove our preview output ``node``; the user's output it deactivated is active again."""
+    was = node.get(_WAS_ACTIVE)
+    tree.nodes.remove(node)
+    theirs = [n for n in _outputs(tree) if not n.get(_TAG)]
+    back = next((n for n in theirs if n.name == was), None)
+    if back is not None:
+        back.is_active_output = True
+    elif theirs and not any(n.is_active_output for n in theirs):
+        theirs[0].is_active_output = True
+
+
+def _legacy_outputs(tree) -> str | None:
+    """Outputs of versions before issue 57 (one per kind, target All, the shown one active, so
+    renders showed the preview): removed, the user's output active again. Returns the kind the
+    material showed, or None."""
+    shown = None
+    for node in [n for n in _outputs(tree) if n.get(_TAG) and not n.get(_OUTPUT)]:
+        if node.is_active_output:
+            shown = node.get(_KIND)
+        _drop_output(tree, node)
+    return shown
+
+
+def _show_kind(tree, kind: str) -> bool:
+    """Make our preview output (target EEVEE) show ``kind``'s Emission in ``tree``; False when
+    the tree has no preview of that kind."""
+    emission = _emission(tree, kind)
+    if emission is None:
+        return False
+    for node in _preview_nodes(tree):
+        if node.bl_idname == "ShaderNodeEmission":
+            node[_SHOWN] = node == emission
+    out = _our_output(tree)
+    if out is None:
+        out = tree.nodes.new("ShaderNodeOutputMaterial")
+        out.label, out[_TAG], out[_OUTPUT] = "Relight Preview Output (EEVEE)", True, True
+        out.location = (emission.location.x + 250, emission.location.y)
+    out.target = PREVIEW_TARGET
+    out[_KIND] = kind
+    if emission.parent is not None:
+        out.parent = emission.parent
+    tree.links.new(emission.outputs[0], out.inputs["Surface"])
+    # an output of the user's with the same target would win while active: ours is made the
+    # active one then (and gives it back when it goes)
+    theirs = [n for n in _outputs(tree) if not n.get(_TAG)]
+    if any(n.target == PREVIEW_TARGET for n in theirs):
+        active = next((n for n in theirs if n.is_active_output), None)
+        if active is not None:
+            out[_WAS_ACTIVE] = active.name
+        out.is_active_output = True
+    return True
+
+
+def _materials(obj) -> list:
+    return list({s.material for s in obj.material_slots if s.material})
+
+
 def preview_kinds(obj) -> list:
-    """The bake kinds whose previews the object's materials hold, the shown one first."""
-    kinds, shown = [], None
-    for mat in {s.material for s in obj.material_slots if s.material}:
-        for n in _preview_nodes(mat.node_tree):
-            if n.bl_idname == "ShaderNodeOutputMaterial" and n.get(_KIND):
-                kinds.append(n[_KIND])
-                if n.is_active_output:
+    """The bake kinds whose previews the object's materials hold, the shown one first (the
+    one Show Preview shows, also while it is off)."""
+    kinds, shown = set(), None
+    for mat in _materials(obj):
+        tree = mat.node_tree
+        for n in _preview_nodes(tree):
+            if n.bl_idname == "ShaderNodeEmission" and n.get(_KIND):
+                kinds.add(n[_KIND])
+                if n.get(_SHOWN):
                     shown = n[_KIND]
-    kinds = sorted(set(kinds))
-    return ([shown] if shown else []) + [k for k in kinds if k != shown]
+        legacy = [n for n in _outputs(tree) if n.get(_TAG) and not n.get(_OUTPUT)
+                  and n.is_active_output] if tree is not None else []
+        if legacy:
+            shown = legacy[0].get(_KIND)
+    kinds = sorted(kinds)
+    return ([shown] if shown in kinds else []) + [k for k in kinds if k != shown]
+
+
+def preview_shown(obj) -> bool:
+    """Whether EEVEE shows a preview on ``obj`` now (a preview output in its materials)."""
+    return any(mat.node_tree is not None and _our_output(mat.node_tree) is not None
+               for mat in _materials(obj))
 
 
 def activate_preview(obj, kind: str) -> bool:
     """Show the object's existing preview of ``kind`` (previews of different bakes coexist in
-    a material, each with its own output; this makes its output the active one). False when a
-    material of the object holds no preview of that kind (nothing changed then)."""
-    mats = [m for m in {s.material for s in obj.material_slots if s.material}]
-    outs = []
+    a material; this points the preview output at its nodes). False when a material of the
+    object holds no preview of that kind (nothing changed then)."""
+    mats = _materials(obj)
+    if not mats or any(_emission(m.node_tree, kind) is None for m in mats):
+        return False
     for mat in mats:
-        ours = [n for n in _preview_nodes(mat.node_tree, kind)
-                if n.bl_idname == "ShaderNodeOutputMaterial"]
-        if not ours:
-            return False
-        outs.append((mat, ours[0]))
-    for mat, out in outs:
-        for node in mat.node_tree.nodes:
-            if node.bl_idname == "ShaderNodeOutputMaterial":
-                node.is_active_output = node == out
-    return bool(outs)
+        _legacy_outputs(mat.node_tree)
+        _show_kind(mat.node_tree, kind)
+    return True
+
+
+def set_previews_shown(objects, shown: bool) -> int:
+    """*Show Preview*: with ``shown`` False take the preview outputs of ``objects``' materials
+    away (EEVEE then shows the user's material as well), with True put them back for the kind
+    each material showed. Returns how many materials changed."""
+    changed = 0
+    for mat in {m for o in objects if o.type == "MESH" for m in _materials(o)}:
+        tree = mat.node_tree
+        if not _preview_nodes(tree):
+            continue
+        legacy = _legacy_outputs(tree)
+        out = _our_output(tree)
+        if not shown:
+            if out is not None:
+                _drop_output(tree, out)
+                changed += 1
+            continue
+        kinds = [n.get(_KIND) for n in _preview_nodes(tree)
+                 if n.bl_idname == "ShaderNodeEmission"]
+        kind = legacy or next((n.get(_KIND) for n in _preview_nodes(tree)
+                               if n.bl_idname == "ShaderNodeEmission" and n.get(_SHOWN)),
+                              kinds[0] if kinds else None)
+        if out is None and kind is not None and _show_kind(tree, kind):
+            changed += 1
+    return changed
+
+
+def render_previews(objects, engine: str = "CYCLES") -> list:
+    """Let ``engine``'s renders show the texture previews of ``objects`` (Relight Compare and
+    the tests render the preview with Cycles): each such material's preview output gets that
+    engine's target. Returns the callables that undo it, last first."""
+    target = {"CYCLES": "CYCLES"}.get(engine, PREVIEW_TARGET)
+    undo = []
+    for mat in {m for o in objects for m in _materials(o)}:
+        tree = mat.node_tree
+        kinds = [k for k in preview_kinds_of(tree) if k != "eigentransport"]
+        if not kinds:
+            continue
+        flags = {n.name: n.get(_SHOWN) for n in _preview_nodes(tree)
+                 if n.bl_idname == "ShaderNodeEmission"}
+        undo.append(lambda t=tree, f=flags: [t.nodes[k].__setitem__(_SHOWN, v)
+                                             for k, v in f.items() if v is not None])
+        out = _our_output(tree)
+        if out is None:
+            _show_kind(tree, kinds[0])
+            out = _our_output(tree)
+            undo.append(lambda t=tree, o=out: _drop_output(t, o))
+        elif out.get(_KIND) == "eigentransport":   # a texture preview, lit like the truth
+            was = out.get(_KIND)
+            _show_kind(tree, kinds[0])
+            undo.append(lambda t=tree, k=was: _show_kind(t, k))
+        old = out.target
+        out.target = target
+        undo.append(lambda o=out, t=old: setattr(o, "target", t))
+    return undo[::-1]
+
+
+def preview_kinds_of(tree) -> list:
+    """The kinds of the previews ``tree`` holds, the shown one first."""
+    emissions = [n for n in _preview_nodes(tree) if n.bl_idname == "ShaderNodeEmission"]
+    emissions.sort(key=lambda n: not n.get(_SHOWN))
+    return [n.get(_KIND) for n in emissions]
+
+
+def _others_use(mat, obj) -> list:
+    """Objects other than ``obj`` (and those sharing its mesh) whose slots hold ``mat``."""
+    return sorted(o.name for o in bpy.data.objects
+                  if o != obj and o.data != obj.data
+                  and any(s.material == mat for s in getattr(o, "material_slots", ())))
+
+
+def _own_materials(obj, kind: str) -> list:
+    """Give ``obj`` its own copy of each material other objects use too, so its preview (of
+    its own UVs and texture) does not show on them; returns notes, one per copy. A copy made
+    for an earlier preview of ``obj`` is kept."""
+    notes = []
+    if kind not in _COPIED_KINDS:
+        return notes
+    for mat in _materials(obj):
+        if mat.get(COPY_OF) is not None:
+            continue
+        others = _others_use(mat, obj)
+        if not others:
+            continue
+        copy = mat.copy()
+        copy.name = f"{mat.name} (Relight {obj.name})"
+        copy[COPY_OF] = mat
+        for slot in obj.material_slots:
+            if slot.material == mat:
+                slot.material = copy
+        notes.append(f"{obj.name}: material {mat.name!r} is also used by "
+                     f"{', '.join(others[:3])}{' ...' if len(others) > 3 else ''}; the preview "
+                     f"is on a copy, {copy.name!r} (Remove Preview puts {mat.name!r} back)")
+    return notes
+
+
+def _restore_materials(obj) -> int:
+    """Put back the materials the preview copied or made for ``obj`` once no preview is in
+    them any more; returns how many slots changed."""
+    changed = 0
+    for slot in obj.material_slots:
+        mat = slot.material
+        if mat is None or _preview_nodes(mat.node_tree):
+            continue
+        if mat.get(COPY_OF) is not None:
+            slot.material = mat[COPY_OF]
+        elif mat.get(MADE):
+            slot.material = None
+        else:
+            continue
+        changed += 1
+        if mat.users == 0:
+            bpy.data.materials.remove(mat)
+    made = obj.get(MADE)   # the slot the preview added to an object without one
+    if made is not None and all(s.material is None for s in obj.material_slots):
+        while len(obj.data.materials) > int(made):
+            obj.data.materials.pop()
+        del obj[MADE]
+    return changed
 
 
 def remove_preview(obj, scene=None, purge: bool = True, kind: str | None = None) -> int:
     """Remove our preview from the object's materials completely: the tagged nodes and the
-    drivers on them, then our node groups and atlas images nothing uses any more, and -- given
-    ``scene`` and when no material shows a preview any more -- the scene's light sliders (so the
-    Preview Light panel offers no sliders that drive nothing). Returns how many materials
-    changed. The user's own nodes, images and properties are never touched. ``purge=False``
+    drivers on them, a material copied or made for it (the original is put back), then our
+    node groups and atlas images nothing uses any more, and -- given ``scene`` and when no
+    material shows a preview any more -- the scene's light sliders (so the Preview Light panel
+    offers no sliders that drive nothing). Returns how many materials changed. The user's own
+    nodes, their active output, images and properties are never touched. ``purge=False``
     keeps the unused groups and images (a new preview about to use them is being wired)."""
     changed = 0
-    for mat in {s.material for s in obj.material_slots if s.material}:
+    for mat in _materials(obj):
         tree = mat.node_tree
         ours = _preview_nodes(tree, kind)
         if not ours:
             continue
+        legacy = _legacy_outputs(tree)
+        shown = _our_output(tree)
+        if shown is not None and (kind is None or shown.get(_KIND) == kind):
+            _drop_output(tree, shown)
+        ours = _preview_nodes(tree, kind)
         names = {f'nodes["{n.name}"]' for n in ours}
         anim = tree.animation_data
         if anim is not None:
             for fc in [fc for fc in anim.drivers if fc.data_path.split(".")[0] in names]:
                 anim.drivers.remove(fc)
+            if not anim.drivers and anim.action is None and not anim.nla_tracks:
+                tree.animation_data_clear()
         for node in ours:
             tree.nodes.remove(node)
-        outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
-        if outputs and not any(n.is_active_output for n in outputs):
-            # the user's own output, not another bake's preview
-            (next((n for n in outputs if not n.get(_TAG)), outputs[0])).is_active_output = True
+        if legacy and legacy != kind and kind is not None:
+            _show_kind(tree, legacy)    # an older file's other kind stays shown
         changed += 1
+    if purge:
+        _restore_materials(obj)
     if not purge:
         return changed
     # A group only a fake user holds is the other light mode of a transport preview: unused
@@ -426,23 +657,50 @@ def remove_preview(obj, scene=None, purge: bool = True, kind: str | None = None)
         bpy.data.images.remove(image)
     if scene is not None and not any(_preview_nodes(m.node_tree) for m in bpy.data.materials
                                      if m.node_tree is not None):
-        for key in (*SLIDERS, COLOR_SLIDER):
+        for key in (*SLIDERS, COLOR_SLIDER, "relight_sun"):
             if key in scene:
                 del scene[key]
     return changed
 
 
-def _wire_preview(obj, build_color, kind: str) -> None:
+def copy_notes(obj) -> list:
+    """One line per material of ``obj`` that its preview shows on a copy (other objects use the
+    original), for the bake's summary."""
+    out = []
+    for mat in _materials(obj):
+        orig = mat.get(COPY_OF)
+        if orig is not None:
+            others = _others_use(orig, obj)
+            out.append(f"{obj.name}'s preview is on a copy of material {orig.name!r}, "
+                       f"{mat.name!r}: " + (f"{', '.join(others[:3])} use"
+                                            f"{'s' if len(others) == 1 else ''} it too"
+                                            if others else "it was shared")
+                       + " (Remove Preview puts it back)")
+    return out
+
+
+def _wire_preview(obj, build_color, kind: str) -> list:
     """Put a preview of bake ``kind`` into every material of ``obj``: ``build_color(builder)``
-    adds the nodes computing the preview colour and returns its socket; it is shown through an
-    Emission and our own Material Output, made active. All new nodes are tagged with the kind
-    and framed, so :func:`remove_preview` can take them out again and previews of other kinds
-    stay (switched by :func:`activate_preview`); the user's nodes are not touched."""
+    adds the nodes computing the preview colour and returns its socket; it ends in an Emission
+    that our preview output (target EEVEE: never Cycles, never the user's active output)
+    shows. A material other objects use too is copied for ``obj`` first (a note per copy is
+    returned; :func:`copy_notes` says them later); an object without a material gets one (Remove
+    Preview takes it away again). All new nodes are tagged with the kind and framed, so
+    :func:`remove_preview` can take them out again and previews of other kinds stay (switched
+    by :func:`activate_preview`); the user's nodes are not touched."""
     remove_preview(obj, purge=False, kind=kind)
     if not obj.material_slots or not any(s.material for s in obj.material_slots):
-        obj.data.materials.append(bpy.data.materials.new(f"{obj.name} Relight"))
-    for mat in {s.material for s in obj.material_slots if s.material}:
+        made = bpy.data.materials.new(f"{obj.name} Relight")
+        made[MADE] = True
+        if not obj.material_slots:
+            obj[MADE] = len(obj.data.materials)
+            obj.data.materials.append(made)
+        else:
+            obj.material_slots[0].material = made
+    notes = _own_materials(obj, kind)
+    for mat in _materials(obj):
         tree = ensure_node_tree(mat)
+        _legacy_outputs(tree)
         before = {nd.name for nd in tree.nodes}
         b = _Builder(tree)
         frame = b.node("NodeFrame", -200, 900, label=f"{FRAME_NAME}: {kind.replace('_', ' ')}")
@@ -450,21 +708,17 @@ def _wire_preview(obj, build_color, kind: str) -> None:
         emission = b.node("ShaderNodeEmission", 1100, 700)
         emission.inputs["Strength"].default_value = 1.0
         b.links.new(color, emission.inputs["Color"])
-        out = b.node("ShaderNodeOutputMaterial", 1300, 700, label="Relight Preview Output",
-                     target="ALL")
-        b.links.new(emission.outputs[0], out.inputs["Surface"])
-        for node in tree.nodes:
-            if node.bl_idname == "ShaderNodeOutputMaterial":
-                node.is_active_output = node == out
         for nd in tree.nodes:
             if nd.name not in before:
                 nd[_TAG] = True
                 nd[_KIND] = kind
                 if nd != frame:
                     nd.parent = frame
+        _show_kind(tree, kind)
         # each kind's frame in its own band of the node editor, so coexisting previews
         # do not overlap
         frame.location.y -= 1600 * PREVIEW_KINDS.index(kind)
+    return notes
 
 
 def install_preview(scene, obj, exr_path: str, texture, sun=None) -> dict:
@@ -496,9 +750,9 @@ def install_preview(scene, obj, exr_path: str, texture, sun=None) -> dict:
         b.links.new(color, gnode.inputs["Color"])
         return gnode.outputs["Color"]
 
-    _wire_preview(obj, steered_color, "steerable_texture")
+    notes = _wire_preview(obj, steered_color, "steerable_texture")
     return {"atlas": atlas_path, "atlas_bytes": atlas_bytes, "group": group.name,
-            "group_nodes": len(group.nodes)}
+            "group_nodes": len(group.nodes), "copied_materials": notes}
 
 
 def set_follow_sun(scene, sun) -> int:
@@ -540,7 +794,7 @@ def _base_color(b):
 
 
 def install_attribute_preview(obj, attribute: str, kind: str = "eigentransport",
-                              base_color: bool = True) -> None:
+                              base_color: bool = True) -> list:
     """Show a colour attribute as emission: white-surface radiance (the per-vertex
     eigentransport preview) multiplied by the material's own base colour (issue 12: an orange
     object previewed grey), or with ``base_color=False`` the attribute as it is (the material
@@ -556,4 +810,4 @@ def install_attribute_preview(obj, attribute: str, kind: str = "eigentransport",
         b.links.new(base, mul.inputs[1])
         return mul.outputs[0]
 
-    _wire_preview(obj, build, kind)
+    return _wire_preview(obj, build, kind)

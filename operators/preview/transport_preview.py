@@ -839,7 +839,7 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
             out = b.vmath("ADD", out, gi.outputs["Color"], x=900, y=700)
         return out
 
-    pn._wire_preview(obj, color, "transport_texture")
+    notes = pn._wire_preview(obj, color, "transport_texture")
     # environment groups of an earlier bake are stale: rebuilt from this one when shown
     for name in (f"{ENV_PREFIX} ({obj.name})", f"{ENV_PREFIX} indirect ({obj.name})"):
         stale = bpy.data.node_groups.get(name)
@@ -851,7 +851,7 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
         set_light_mode(scene, obj, "WORLD")
     return {**files, **sparse, **ifiles, "group": gname, "group_nodes": len(group.nodes),
             "sun_angle": angle, "tiles": -(-model.k // 3), "viewport": viewport,
-            "viewport_why": why}
+            "viewport_why": why, "copied_materials": notes}
 
 
 def rewrite_tables(obj, report: dict, bake, store, sun_angle: float) -> None:

@@ -7,8 +7,12 @@ from relightable_textures.lt_addon.io import exrio
 
 def render_rgb(scene, tmp_path, resolution: int, engine: str = "CYCLES") -> np.ndarray:
     """One-sample render at ``resolution``^2 with pixel centres on texel centres; (R, R, 3)
-    float64, row 0 at the bottom. The world is removed so only the preview emits."""
+    float64, row 0 at the bottom. The world is removed so only the preview emits. The preview
+    targets EEVEE only (issue 57: renders keep the user's material), so a Cycles render here
+    lets Cycles see it for this render (``preview_nodes.render_previews``)."""
     import bpy
+
+    from relightable_textures.operators.preview import preview_nodes
 
     scene.update_tag()
     bpy.context.view_layer.update()
@@ -25,6 +29,11 @@ def render_rgb(scene, tmp_path, resolution: int, engine: str = "CYCLES") -> np.n
     scene.render.image_settings.file_format = "OPEN_EXR"
     scene.render.image_settings.color_depth = "32"
     scene.render.filepath = str(tmp_path / f"render-{engine.lower()}.exr")
-    bpy.ops.render.render(write_still=True)
+    undo = preview_nodes.render_previews(list(scene.objects), engine)
+    try:
+        bpy.ops.render.render(write_still=True)
+    finally:
+        for f in undo:
+            f()
     ch, _ = exrio.read_exr(scene.render.filepath)
     return np.stack([ch["R"], ch["G"], ch["B"]], -1).astype(np.float64)

@@ -61,12 +61,14 @@ def test_bake_materials_operator_and_live_colour_edit(fresh_scene, tmp_path):
                                                                   everywhere=False))
 
         np.testing.assert_allclose(shown(), want({}), rtol=1e-5, atol=1e-7)
-        # the preview is the active output of every receiver's material
+        # every receiver's material shows the preview in EEVEE (its output of target EEVEE);
+        # the user's own output stays the active one, what Cycles renders (issue 57)
         for n in names:
             mat = bpy.data.objects[n].material_slots[0].material
-            active = [x for x in mat.node_tree.nodes
-                      if x.bl_idname == "ShaderNodeOutputMaterial" and x.is_active_output]
-            assert active[0].get("relight_preview_kind") == mb.KIND
+            outs = [x for x in mat.node_tree.nodes if x.bl_idname == "ShaderNodeOutputMaterial"]
+            (ours,) = [x for x in outs if x.get("relight_preview")]
+            assert ours.get("relight_preview_kind") == mb.KIND and ours.target == "EEVEE"
+            assert [x.is_active_output for x in outs if not x.get("relight_preview")] == [True]
         before = shown().copy()
         # a colour edit in the material re-shades through the depsgraph handler
         socket = mb.material_colour_socket(red)
