@@ -19,6 +19,7 @@ never by re-deriving a name.
 from __future__ import annotations
 
 import hashlib
+import os
 import re
 
 from .atomic import safe_name
@@ -54,3 +55,16 @@ def check_stems(names) -> None:
                 "on macOS and Windows); rename one of them or bake them apart into different "
                 "folders")
         seen.setdefault(key, name)
+
+
+def output_folder(blend_path: str, home: str | None = None, stamp: str = "") -> str:
+    """The default bake folder, one rule for the panel and the command line (issue 57):
+    ``<blend folder>/<blend stem>_relight`` for a saved .blend; for an unsaved session (only the
+    panel has one) ``<home>/relight/untitled-<stamp>_relight``, ``stamp`` fixed once per
+    session by the caller, so two unsaved sessions never replace each other's bakes."""
+    if blend_path:
+        folder, base = os.path.split(os.path.abspath(blend_path))
+        return os.path.join(folder, os.path.splitext(base)[0] + "_relight")
+    home = home or os.path.expanduser("~")
+    return os.path.join(home, "relight", f"untitled-{stamp}_relight" if stamp
+                        else "untitled_relight")

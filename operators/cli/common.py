@@ -339,10 +339,11 @@ def check_bake_inputs(args, settings) -> tuple[str, str]:
 
 
 def check_output_dir(out: str | None, blend_path: str) -> str:
-    """The output folder (default next to the .blend), checked creatable and writable."""
-    from ..bakes.steerable_bake import default_output_dir
+    """The output folder (default ``<blend>_relight`` next to the .blend, the panel's rule too:
+    :func:`...lt_addon.io.names.output_folder`), checked creatable and writable."""
+    from ...lt_addon.io.names import output_folder
 
-    out_dir = os.path.abspath(out) if out else default_output_dir(blend_path)
+    out_dir = os.path.abspath(out) if out else output_folder(blend_path)
     parent = os.path.dirname(out_dir)
     if not os.path.isdir(parent):
         raise CliError(f"output folder's parent does not exist: {parent}")
