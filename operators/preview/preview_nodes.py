@@ -19,7 +19,8 @@ This equals :meth:`SteerableTexture.relight` up to float32 rounding and the half
 Material wiring is reversible and leaves renders alone: the nodes live in a frame "Relight
 Preview" and end in a Material Output of target EEVEE, so Material Preview shows the preview
 while Cycles (renders, bakes) keeps the user's own active output; :func:`remove_preview`
-deletes them (and puts back a material copied because other objects share it). Scene sliders are ID custom properties on the scene (``relight_azimuth`` ...), read by
+deletes them (and puts back a material copied because other objects share it). Scene sliders
+are ID custom properties on the scene (``relight_azimuth`` ...), read by
 simple single-variable drivers, so the preview also works where the extension is not installed.
 """
 

@@ -20,7 +20,7 @@ from ..base import jobs
 from ..preview import preview_nodes
 from ..bakes import steerable_bake
 from ..base.cycles_bake import BakeInputError, check_bakeable
-from .properties import VERTEX_FIELDS, VERTEX_PROPS, settings_from_scene
+from .properties import VERTEX_FIELDS, VERTEX_PROPS, settings_from_scene, truth_count
 from .settings_props import values
 
 
@@ -33,21 +33,47 @@ def _inside(path: str, folder: str) -> bool:
         return False
 
 
+#: The stamp of this session's unsaved-file bake folder, made at its first use.
+_UNSAVED_STAMP: list = []
+
+
+def default_output_dir() -> str:
+    """The folder an empty Output field bakes into: ``<file>_relight`` next to the saved .blend,
+    as the command line writes (:func:`...lt_addon.io.names.output_folder`); for an unsaved
+    file ``~/relight/untitled-<date-time>_relight``, one per Blender session (the panel shows
+    it and offers to save the .blend first)."""
+    import time
+
+    from ...lt_addon.io.names import output_folder
+
+    if bpy.data.filepath:
+        return output_folder(bpy.data.filepath)
+    if not _UNSAVED_STAMP:
+        _UNSAVED_STAMP.append(time.strftime("%Y%m%d-%H%M%S"))
+    return output_folder("", stamp=_UNSAVED_STAMP[0])
+
+
 def _output_dir(props) -> str:
-    """The folder a panel bake writes into, from the Output field.
+    """The folder a panel bake writes into, from the Output field (empty: the default folder,
+    :func:`default_output_dir`).
 
     The field is saved in the .blend, and a bake sweeps, retires and removes files in its
     folder, so a received .blend could aim that at any folder of the user's (``//../..``). The
     rule: a folder the .blend names is used only when it lies inside the .blend's own folder
     (after normalising '..' and resolving links); any other folder only when the user set the
     Output field in this Blender session (``properties.CONFIRMED_OUTPUT_DIRS``). Otherwise
-    BakeInputError, one line asking to choose the Output folder again."""
+    BakeInputError, one line asking to choose the Output folder again. The default folder is
+    the code's own choice, never the file's."""
     from .properties import CONFIRMED_OUTPUT_DIRS
 
-    raw = props.output_dir or "//relight/"
+    raw = props.output_dir
+    if not raw.strip():
+        return default_output_dir()
     path = bpy.path.abspath(raw)
     if path.startswith("//") or not os.path.isabs(path):  # unsaved file: no '//' base
-        raise BakeInputError("save the .blend first or choose an absolute output folder")
+        raise BakeInputError(f"the Output folder {raw!r} is relative to the .blend, which is "
+                             "not saved: save the .blend, or clear Output to bake into "
+                             f"{default_output_dir()}")
     if os.path.normpath(path) in CONFIRMED_OUTPUT_DIRS:
         return path
     if bpy.data.filepath and _inside(path, os.path.dirname(bpy.data.filepath)):
@@ -97,8 +123,8 @@ def _finish(operator, scene, result):
             lines.append(direct_summary(direct, rep["directions"]))
         fid = rep.get("model_vs_T") or {}
         if "headline" in fid:
-            via = {"transport": "T", "blocks": "blocks", "horizon": "horizons"}.get(
-                fid.get("viewport"), "PCA")
+            via = {"transport": "all directions", "blocks": "block PCA",
+                   "horizon": "horizons"}.get(fid.get("viewport"), "PCA")
             lines.append(f"{rep['object']}: the preview ({via}) is {fid['headline']:.3f} from "
                          f"the bake itself (worst {fid['worst']['rel']:.3f} at "
                          f"{fid['worst']['elevation']:g} deg)")
@@ -106,10 +132,103 @@ def _finish(operator, scene, result):
     if "png" in cmp:
         lines.append(f"Camera comparison: {os.path.basename(cmp['png'])} (rel. RMSE "
                      f"{cmp['rel_rmse_covered_pixels']:.3f})")
+    baked = [o for o in (bpy.data.objects.get(rep.get("object", "")) for rep in reports)
+             if o is not None]
+    for obj in baked:   # a material other objects share: the preview is on a copy
+        lines += preview_nodes.copy_notes(obj)
+    if any(preview_nodes.preview_kinds(o) for o in baked):
+        lines.append(PREVIEW_NOTE)
+    else:
+        lines.append("No live preview: only the PCA model previews in the viewport "
+                     "(Advanced > Model)")
     for line in lines:
         operator.report({"INFO"}, line)
     report_warnings(operator, warned)
     scene[LAST_BAKE_KEY] = "\n".join(lines + [WARNING_PREFIX + w for w in warned])
+    folder = getattr(operator, "out_dir", None)
+    if folder:
+        remember_bake(folder, cmp.get("png"))
+
+
+#: The last line of a bake's summary: where the preview shows and what renders keep.
+PREVIEW_NOTE = ("The preview shows in Material Preview (EEVEE); Cycles renders (F12) keep your "
+                "materials")
+
+#: The bake folder and comparison picture of this session's last texture bake (Open Folder,
+#: Open Comparison): kept here, never read from the .blend, so a received file cannot make the
+#: panel open a path of its choosing.
+_SESSION_BAKE: dict = {}
+
+
+def remember_bake(folder: str, comparison: str | None = None) -> None:
+    """Keep the folder this session's bake committed into and its comparison picture."""
+    _SESSION_BAKE.clear()
+    _SESSION_BAKE["folder"] = os.path.abspath(folder)
+    if comparison:
+        _SESSION_BAKE["comparison"] = os.path.abspath(comparison)
+
+
+def last_bake_folder() -> str | None:
+    """This session's last bake folder while it is still a real folder (not a link); else
+    None."""
+    from ...lt_addon.io import untrusted
+
+    folder = _SESSION_BAKE.get("folder")
+    try:
+        return folder if folder and untrusted.real_folder(folder) else None
+    except untrusted.UntrustedFileError:
+        return None
+
+
+def last_comparison() -> str | None:
+    """This session's last comparison picture while it is a regular ``.png`` file directly in
+    that bake's folder (``lstat``: no link followed); else None."""
+    from ...lt_addon.io import untrusted
+
+    folder, png = last_bake_folder(), _SESSION_BAKE.get("comparison")
+    if not folder or not png or not png.lower().endswith(".png") \
+            or os.path.dirname(png) != folder:
+        return None
+    try:
+        path = untrusted.confined(folder, os.path.basename(png), must_exist=True, folder=False)
+        untrusted.regular_file(path)
+    except untrusted.UntrustedFileError:
+        return None
+    return path
+
+
+def open_path(path: str) -> None:
+    """Open ``path`` (a folder or a file) with the system's default application."""
+    bpy.ops.wm.path_open(filepath=path)
+
+
+def show_in_viewport(context) -> int:
+    """Switch the 3D views of the current screen that are in Solid or Wireframe shading to
+    Material Preview, where the preview shows (EEVEE); returns how many were switched."""
+    screen = getattr(context, "screen", None)
+    switched = 0
+    for area in (screen.areas if screen is not None else ()):
+        if area.type != "VIEW_3D":
+            continue
+        for space in area.spaces:
+            if space.type == "VIEW_3D" and space.shading.type in ("SOLID", "WIREFRAME"):
+                space.shading.type = "MATERIAL"
+                switched += 1
+    return switched
+
+
+def after_preview(operator, context) -> None:
+    """After a bake installed a preview: Show Preview on, and Solid views switched to Material
+    Preview (said in one line), so the result is what the viewport shows."""
+    obj = context.active_object
+    if obj is None or not preview_nodes.preview_kinds(obj):
+        return
+    props = context.scene.relight
+    if not props.show_preview:
+        props.show_preview = True
+    if show_in_viewport(context):
+        operator.report({"INFO"}, "Switched the 3D view to Material Preview to show the "
+                                  "relit preview")
 
 
 #: A line of the last-bake box that is a warning (the panel draws it with a warning icon).
@@ -134,6 +253,12 @@ def _fault_line(exc, op) -> str:
                                       f"nothing was replaced in {folder}" if folder else "")
 
 
+def _set_failure(context, text: str) -> None:
+    wm = getattr(context, "window_manager", None) or bpy.context.window_manager
+    if wm is not None and hasattr(wm, "relight_last_failure"):
+        wm.relight_last_failure = text
+
+
 class ModalBake:
     """A bake job driven one step per timer tick (progress, status text, Esc cancels), or to
     completion by ``execute`` (scripts, background mode). Subclasses give ``_prepare`` (the
@@ -142,6 +267,19 @@ class ModalBake:
 
     _timer = None
     _gen = None
+    #: what the panel's failure line calls this operator's run
+    failure_word = "Bake"
+
+    def _fail(self, context, text: str) -> None:
+        """Report a failure and keep its line for the panel until the next bake starts (the
+        window manager's ``relight_last_failure``: this session's, not saved, not undone)."""
+        self.report({"ERROR"}, text)
+        line = text.removeprefix("Bake failed: ")
+        _set_failure(context, f"{self.failure_word} failed: {line}")
+
+    def _started(self, context) -> None:
+        """A new bake (or estimate) clears the last failure's line."""
+        _set_failure(context, "")
 
     def _say_warning(self, text: str) -> None:
         """A warning a bake step gave, reported now and kept so that the report's own list
@@ -276,6 +414,7 @@ class ModalBake:
             reload_when_idle(result.blend_path)
 
     def execute(self, context):
+        self._started(context)
         try:
             gen = self._job(context)
 
@@ -287,26 +426,27 @@ class ModalBake:
             self._done(context, result)
         except BakeInputError as exc:
             self._abort()
-            self.report({"ERROR"}, str(exc))
+            self._fail(context, str(exc))
             return {"CANCELLED"}
         except Exception as exc:   # a fault: one line, the traceback in the log it names
             self._abort()
-            self.report({"ERROR"}, _fault_line(exc, self))
+            self._fail(context, _fault_line(exc, self))
             return {"CANCELLED"}
         return {"FINISHED"}
 
     def invoke(self, context, event):
         if bpy.app.background:
             return self.execute(context)
+        self._started(context)
         try:
             self._gen = self._job(context)
         except BakeInputError as exc:
             self._abort()
-            self.report({"ERROR"}, str(exc))
+            self._fail(context, str(exc))
             return {"CANCELLED"}
         except Exception as exc:
             self._abort()
-            self.report({"ERROR"}, _fault_line(exc, self))
+            self._fail(context, _fault_line(exc, self))
             return {"CANCELLED"}
         wm = context.window_manager
         self._timer = wm.event_timer_add(0.01, window=context.window)
@@ -341,18 +481,18 @@ class ModalBake:
                 self._done(context, stop.value)
             except Exception as exc:
                 self._abort()
-                self.report({"ERROR"}, _fault_line(exc, self))
+                self._fail(context, _fault_line(exc, self))
                 return {"CANCELLED"}
             return {"FINISHED"}
         except BakeInputError as exc:
             self._end(context)
             self._abort()
-            self.report({"ERROR"}, str(exc))
+            self._fail(context, str(exc))
             return {"CANCELLED"}
         except Exception as exc:  # Cycles failure: the generator has restored the scene
             self._end(context)
             self._abort()
-            self.report({"ERROR"}, _fault_line(exc, self))
+            self._fail(context, _fault_line(exc, self))
             return {"CANCELLED"}
         if step.message.startswith("warning:"):
             self._say_warning(step.message[len("warning: "):])
@@ -367,7 +507,9 @@ class RELIGHT_OT_bake_textures(ModalBake, bpy.types.Operator):
 
     bl_idname = "relight.bake_textures"
     bl_label = "Bake Relightable Texture"
-    bl_options = {"REGISTER"}
+    # one undo step: Ctrl-Z takes the preview and the bake's records out of the scene again
+    # (the files stay in the bake folder); a cancelled or failed bake pushes none
+    bl_options = {"REGISTER", "UNDO"}
 
     def _prepare(self, context):
         props = context.scene.relight
@@ -387,14 +529,14 @@ class RELIGHT_OT_bake_textures(ModalBake, bpy.types.Operator):
                 args += [a for n, r in sides.items() for a in ("--object-resolution", f"{n}={r}")]
                 args += to_argv(self.settings)   # components None: --tol, no preset components
                 return self._external(context, "bake-textures",
-                                      args + ["--truth", str(props.truth_lights)])
+                                      args + ["--truth", str(truth_count(props))])
             stage = self._make_out_dir(props)
             self.txn.retire_globs = list(tx.retire_globs(objects))
             from ..bakes.estimate import wanted
 
             # a large bake is estimated first: its cost in the status line, the time left
             return tx.bake_job(context.scene, objects, self.settings, stage, resolutions=sides,
-                               truth=props.truth_lights,
+                               truth=truth_count(props),
                                estimator=wanted(self.settings, resolutions=sides))
         check_bakeable(obj)
         self.settings = settings_from_scene(props)
@@ -402,13 +544,14 @@ class RELIGHT_OT_bake_textures(ModalBake, bpy.types.Operator):
         if props.run_on != "HERE":
             args = ["--object", obj.name, "--method", "lobes"] + to_argv(self.settings)
             return self._external(context, "bake-textures",
-                                  args + ["--truth", str(props.truth_lights)])
+                                  args + ["--truth", str(truth_count(props))])
         stage = self._make_out_dir(props)
         return steerable_bake.lobes_job(context.scene, obj, self.settings, stage,
-                                        truth=props.truth_lights, sun=props.sun)
+                                        truth=truth_count(props), sun=props.sun)
 
     def _finish(self, context, result):
         _finish(self, context.scene, result)
+        after_preview(self, context)
 
     def _cancel_note(self, context) -> str:
         if context.scene.relight.method != "transport":
@@ -422,7 +565,7 @@ class RELIGHT_OT_bake_transport(ModalBake, bpy.types.Operator):
 
     bl_idname = "relight.bake_transport"
     bl_label = "Bake Vertex Transport"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}
 
     def _prepare(self, context):
         from ..bakes import transport_bake
@@ -446,6 +589,8 @@ class RELIGHT_OT_bake_transport(ModalBake, bpy.types.Operator):
     def _finish(self, context, result):
         report, t = result.report, result.report["timings"]
         report_warnings(self, report.get("warnings", []))   # the preview's, the checks'
+        remember_bake(self.out_dir)
+        after_preview(self, context)
         self.report({"INFO"}, f"Baked {report['object']}: {report['vertices']} vertices x "
                               f"{report['directions']} directions in {t['wall_total']:.1f} s "
                               f"in all, d = {report.get('d', '?')}, preview "
@@ -460,6 +605,7 @@ class RELIGHT_OT_analyze(ModalBake, bpy.types.Operator):
     bl_idname = "relight.analyze"
     bl_label = "Analyze Clusters"
     bl_options = {"REGISTER"}
+    failure_word = "Analysis"
 
     def _prepare(self, context):
         from ..bakes import analyze, transport_bake
@@ -561,6 +707,8 @@ class RELIGHT_OT_show_preview(bpy.types.Operator):
         except (ValueError, OSError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
+        if not context.scene.relight.show_preview:   # Show means shown
+            context.scene.relight.show_preview = True
         self.report({"INFO"}, f"Showing {os.path.basename(path)}")
         return {"FINISHED"}
 
@@ -603,6 +751,46 @@ class RELIGHT_OT_remove_preview(bpy.types.Operator):
     def execute(self, context):
         n = preview_nodes.remove_preview(context.active_object, context.scene)
         self.report({"INFO"}, f"Removed the preview from {n} material(s)")
+        return {"FINISHED"}
+
+
+class RELIGHT_OT_open_bake_folder(bpy.types.Operator):
+    """Open the folder this session's last bake wrote into, in the file browser of the system"""
+
+    bl_idname = "relight.open_bake_folder"
+    bl_label = "Open Folder"
+
+    @classmethod
+    def poll(cls, context):
+        return last_bake_folder() is not None
+
+    def execute(self, context):
+        folder = last_bake_folder()
+        if folder is None:
+            self.report({"ERROR"}, "no bake folder of this session to open: bake first")
+            return {"CANCELLED"}
+        open_path(folder)
+        return {"FINISHED"}
+
+
+class RELIGHT_OT_open_comparison(bpy.types.Operator):
+    """Open the picture of this session's last bake next to Cycles (preview | Cycles |
+    difference), made when Check vs Cycles is on and the scene has a camera"""
+
+    bl_idname = "relight.open_comparison"
+    bl_label = "Open Comparison"
+
+    @classmethod
+    def poll(cls, context):
+        return last_comparison() is not None
+
+    def execute(self, context):
+        png = last_comparison()
+        if png is None:
+            self.report({"ERROR"}, "no comparison picture of this session: bake with Check vs "
+                                   "Cycles on and a scene camera")
+            return {"CANCELLED"}
+        open_path(png)
         return {"FINISHED"}
 
 
@@ -712,6 +900,7 @@ class RELIGHT_OT_estimate(ModalBake, bpy.types.Operator):
     bl_idname = "relight.estimate"
     bl_label = "Estimate"
     bl_options = {"REGISTER"}
+    failure_word = "Estimate"
 
     @classmethod
     def poll(cls, context):
@@ -736,7 +925,7 @@ class RELIGHT_OT_estimate(ModalBake, bpy.types.Operator):
         settings = transport_settings_from_scene(props)
         settings.validate()
         return estimate_groups(context.scene, objects, settings, object_resolutions(objects),
-                               props.truth_lights)
+                               truth_count(props))
 
     def _finish(self, context, result):
         for line in result["lines"]:
@@ -747,4 +936,4 @@ class RELIGHT_OT_estimate(ModalBake, bpy.types.Operator):
 CLASSES = (RELIGHT_OT_bake_textures, RELIGHT_OT_estimate, RELIGHT_OT_bake_transport,
            RELIGHT_OT_analyze,
            RELIGHT_OT_show_preview, RELIGHT_OT_follow_sun, RELIGHT_OT_remove_preview,
-           RELIGHT_OT_discard_chunks)
+           RELIGHT_OT_discard_chunks, RELIGHT_OT_open_bake_folder, RELIGHT_OT_open_comparison)

@@ -74,6 +74,7 @@ class RELIGHT_OT_export(ModalBake, bpy.types.Operator):
     bl_idname = "relight.export"
     bl_label = "Export"
     bl_options = {"REGISTER"}
+    failure_word = "Export"
 
     def _prepare(self, context):
         from ..bakes.export import export_job

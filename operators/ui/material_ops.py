@@ -22,7 +22,7 @@ class RELIGHT_OT_bake_materials(ModalBake, bpy.types.Operator):
 
     bl_idname = "relight.bake_materials"
     bl_label = "Bake Materials"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}   # one undo step, as the texture bake
 
     def _prepare(self, context):
         scene, props = context.scene, context.scene.relight
@@ -67,10 +67,12 @@ class RELIGHT_OT_bake_materials(ModalBake, bpy.types.Operator):
                 f"{rep['bytes']['tensors'] / 2**20:.1f} MiB; light direct {s['direct']:.2f}, "
                 f"1 bounce {s['one_bounce']:.2f}, 2 bounces {s['two_bounce']:.2f}")
         context.scene[SUMMARY_KEY] = text
-        from .bake_ops import report_warnings
+        from .bake_ops import after_preview, remember_bake, report_warnings
 
         report_warnings(self, rep.get("warnings", rep["notes"]))   # notes and checks
         self.report({"INFO"}, text)
+        remember_bake(self.out_dir)
+        after_preview(self, context)
 
 
 CLASSES = (RELIGHT_OT_bake_materials,)

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import bpy
 
+import os
+
 from ..bakes.analyze import SUMMARY_KEY
 from ..base.blend_files import object_bakes
-from ..bakes.presets import BY_METHOD
-from .properties import preset_differences
+from .properties import measured_line, preset_differences, ui_label
 from ..preview.preview_nodes import COLOR_SLIDER, SLIDERS
 
 
@@ -19,6 +20,11 @@ class _RelightTab:
 
 class _RelightSubPanel(_RelightTab):
     bl_parent_id = "VIEW3D_PT_relight"
+
+
+#: What the panel calls each bake kind (the records' ``kind``).
+KIND_LABELS = {"transport_texture": "Transport texture", "steerable_texture": "Steerable texture",
+               "eigentransport": "Vertex transport", "material_tensors": "Material edits"}
 
 
 class VIEW3D_PT_relight(_RelightTab, bpy.types.Panel):
@@ -48,50 +54,148 @@ class VIEW3D_PT_relight(_RelightTab, bpy.types.Panel):
         for bake in bakes:
             col = box.column(align=True)
             row = col.row()
-            row.label(text=f"{bake.get('kind', '?')}: {bake.get('path', '?')}", icon="IMAGE_DATA")
-            if bake.get("kind") in ("steerable_texture", "transport_texture", "eigentransport",
-                                    "material_tensors"):
-                row.operator("relight.show_preview", text="Show").kind = bake["kind"]
+            kind = bake.get("kind", "?")
+            row.label(text=f"{KIND_LABELS.get(kind, kind)}: "
+                           f"{os.path.basename(str(bake.get('path', '?')))}", icon="IMAGE_DATA")
+            if kind in KIND_LABELS:
+                row.operator("relight.show_preview", text="Show").kind = kind
             if "order" in bake:
-                col.label(text=f"order {bake['order']}, {bake['resolution']} px, "
-                               f"{bake['samples']} spp, {bake['storage']}, "
+                col.label(text=f"Order {bake['order']}, {bake['resolution']} px, "
+                               f"{bake['samples']} samples, {bake['storage']} storage, "
                                f"{bake.get('bake_seconds', 0):.1f} s")
 
 
+def preset_lines(props) -> list:
+    """The lines under Preset, as ``[(text, icon)]``: the fields that differ from what the
+    preset was measured with (by their labels), or its measured cost and error for the Sun Size
+    in use, or that it has no measured figures."""
+    changed = preset_differences(props)
+    if changed:
+        names = [ui_label(props, n) for n in changed]
+        shown = ", ".join(names[:3]) + (f" and {len(names) - 3} more" if len(names) > 3 else "")
+        verb = "differs" if len(names) == 1 else "differ"
+        return [(f"Custom: {shown} {verb} from {props.preset.capitalize()}", "MODIFIER"),
+                ("(its measured figures do not apply)", "BLANK1")]
+    line = measured_line(props.method, props.preset, props.sun_angle)
+    if line is None:
+        return [("This preset has no measured figures", "INFO")]
+    return [(line, "INFO")]
+
+
+def output_lines(props) -> list:
+    """Where the next bake writes, as ``[(text, icon)]``, and whether the file is unsaved."""
+    from .bake_ops import BakeInputError, _output_dir
+
+    try:
+        folder = _output_dir(props)
+    except BakeInputError as exc:
+        return [(str(exc), "ERROR")]
+    home = os.path.expanduser("~")
+    shown = ("~" + folder[len(home):]) if folder.startswith(home + os.sep) else folder
+    lines = [(f"Bakes into {shown}", "FILE_FOLDER")]
+    if not bpy.data.filepath and not props.output_dir.strip():
+        lines.append(("Unsaved file: save it to bake next to it", "INFO"))
+    return lines
+
+
+def _last_failure(layout, context) -> None:
+    wm = context.window_manager
+    text = getattr(wm, "relight_last_failure", "")
+    if text:
+        box = layout.box()
+        box.alert = True
+        for i, part in enumerate(_wrap(text, 70)):
+            box.label(text=part, icon="ERROR" if i == 0 else "BLANK1")
+
+
+def _wrap(text: str, width: int) -> list:
+    import textwrap
+
+    return textwrap.wrap(text, width) or [text]
+
+
+def _viewport_hint(layout, context) -> None:
+    """Where the preview shows: a line (and the view's shading buttons) when this 3D view
+    shows Solid or Wireframe, or Cycles' Rendered view, which do not show the preview."""
+    space = context.space_data
+    shading = getattr(space, "shading", None)
+    if shading is None:
+        return
+    engine = context.scene.render.engine
+    if shading.type in ("SOLID", "WIREFRAME"):
+        text = "Solid view: the preview shows in Material Preview"
+    elif shading.type == "RENDERED" and engine == "CYCLES":
+        text = "Cycles' Rendered view shows your materials: the preview is in Material Preview"
+    else:
+        return
+    layout.label(text=text, icon="INFO")
+    layout.row().prop(shading, "type", expand=True)
+
+
 class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
-    """Bake settings and presets"""
+    """Bake: the few settings a first bake needs; the rest is in Advanced"""
 
     bl_label = "Bake Relightable Texture"
 
     def draw(self, context):
         props = context.scene.relight
         layout = self.layout
+        col = layout.column()
+        col.prop(props, "preset")
+        for text, icon in preset_lines(props):
+            col.label(text=text, icon=icon)
+        col.prop(props, "resolution")
+        row = col.row(align=True)
+        row.prop(props, "check_vs_cycles")
+        if props.check_vs_cycles:
+            row.prop(props, "truth_lights")
+        col.prop(props, "output_dir", placeholder="Default: next to the .blend")
+        for text, icon in output_lines(props):
+            col.label(text=text, icon=icon)
+        if not bpy.data.filepath and not props.output_dir.strip():
+            col.operator("wm.save_as_mainfile", text="Save .blend First", icon="FILE_TICK")
+        meshes = [o for o in context.selected_objects if o.type == "MESH"]
+        if len(meshes) > 1:
+            sides = {o.relight_resolution or props.resolution for o in meshes}
+            layout.label(text=f"{len(meshes)} selected meshes are baked together" +
+                         (f" ({len(sides)} groups by resolution)" if len(sides) > 1 else ""),
+                         icon="INFO")
+        row = layout.row(align=True)
+        row.operator("relight.estimate", icon="TIME")
+        from .bake_ops import LAST_ESTIMATE_KEY
+
+        for line in str(context.scene.get(LAST_ESTIMATE_KEY, "")).splitlines():
+            layout.label(text=line, icon="TIME")
+        layout.operator("relight.bake_textures", text="Bake", icon="RENDER_STILL")
+        _last_failure(layout, context)
+        _last_bake(layout, context.scene)
+        row = layout.row(align=True)
+        row.operator("relight.open_bake_folder", icon="FILE_FOLDER")
+        row.operator("relight.open_comparison", icon="IMAGE_DATA")
+        if context.scene.get("relight_azimuth") is not None:
+            _viewport_hint(layout, context)
+        _kept_chunks(layout, context, "texture")
+
+
+class VIEW3D_PT_relight_bake_advanced(_RelightTab, bpy.types.Panel):
+    """Every other bake setting: method, directions, light paths, model, viewport, device"""
+
+    bl_label = "Advanced"
+    bl_parent_id = "VIEW3D_PT_relight_bake"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        props = context.scene.relight
+        layout = self.layout
         layout.prop(props, "method")
-        layout.prop(props, "preset")
-        changed = preset_differences(props)
-        if changed:
-            # the measured figures belong to the preset's values, not to these
-            layout.label(text=f"Custom: {', '.join(changed)} differ from "
-                              f"{props.preset.capitalize()}", icon="MODIFIER")
-        presets = BY_METHOD[props.method]
-        fig = presets.figures(props.preset)
-        if changed:
-            pass   # the preset's figures do not describe these values
-        elif fig:
-            layout.label(text=f"measured: {fig['bake_seconds']:.1f} s, rel. RMSE "
-                              f"{fig['rel_rmse']:.3f} ({fig['scene']}, {fig['machine']})")
-        else:
-            layout.label(text="preset not measured yet (make bench)", icon="INFO")
+        col = layout.column(align=True)
         if props.method == "transport":
-            col = layout.column(align=True)
-            for name in ("directions", "horizon_power", "sun_path", "sun_path_step",
-                         "resolution", "transport_direct", "bounces", "transport_indirect",
+            for name in ("directions", "horizon_power", "sun_angle", "sun_path",
+                         "sun_path_step", "transport_direct", "bounces", "transport_indirect",
                          "indirect_rays", "indirect_components", "indirect_samples",
-                         "indirect_resolution", "transport_model",
-                         "transport_components", "transport_tol", "transport_viewport",
-                         "horizon_azimuths", "horizon_resolution", "gpu_budget", "sun_angle",
-                         "table_size",
-                         "truth_lights", "output_dir"):
+                         "indirect_resolution", "transport_components", "transport_tol",
+                         "transport_viewport", "horizon_azimuths", "horizon_resolution",
+                         "gpu_budget", "table_size"):
                 # the gather's rays and components only when it gathers; the steerable term's
                 # samples also serve the gather's fallback (objects not baked, several sides)
                 if (name in ("indirect_rays", "indirect_components")
@@ -99,44 +203,31 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
                         name.startswith("indirect_") and props.transport_indirect == "none"):
                     continue
                 col.prop(props, name)
+            if props.transport_model != "pca":
+                # only the PCA previews live: the others are the command line's (a file of an
+                # older version may hold one; the menu sets it back)
+                col.prop(props, "transport_model")
+                col.label(text=f"{ui_label(props, 'transport_model')}: only PCA previews live "
+                               "in the viewport", icon="ERROR")
             obj = context.active_object
             if obj is not None and obj.type == "MESH":   # e.g. the ground at its own size
                 layout.prop(obj, "relight_resolution", text=f"{obj.name} Resolution")
-            n = len([o for o in context.selected_objects if o.type == "MESH"])
-            if n > 1:
-                sides = {o.relight_resolution or props.resolution
-                         for o in context.selected_objects if o.type == "MESH"}
-                layout.label(text=f"{n} selected meshes are baked together" +
-                             (f" ({len(sides)} groups by resolution)" if len(sides) > 1 else ""),
-                             icon="INFO")
-            _run_on(layout, props)
-            row = layout.row(align=True)
-            row.operator("relight.bake_textures", icon="RENDER_STILL")
-            row.operator("relight.estimate", icon="TIME")
-            from .bake_ops import LAST_ESTIMATE_KEY
-
-            for line in str(context.scene.get(LAST_ESTIMATE_KEY, "")).splitlines():
-                layout.label(text=line, icon="TIME")
-            _kept_chunks(layout, context, "texture")
-            _last_bake(layout, context.scene)
-            return
-        col = layout.column(align=True)
-        for name in ("frame", "order", "resolution", "samples", "bounces", "storage", "mode",
-                     "world_sampling", "truth_lights", "output_dir"):
-            col.prop(props, name)
+        else:
+            for name in ("frame", "order", "samples", "bounces", "storage", "mode",
+                         "world_sampling"):
+                col.prop(props, name)
         _run_on(layout, props)
-        layout.operator("relight.bake_textures", icon="RENDER_STILL")
-        _kept_chunks(layout, context, "texture")
-        _last_bake(layout, context.scene)
 
 
 def _last_bake(layout, scene):
-    """The last texture bake's one-line summary (cost, error vs Cycles, comparison image) and
-    its report's warnings (overlapping UVs, a check past its tolerance, a fallback)."""
+    """The last texture bake's summary (cost, error vs Cycles, comparison image) and its
+    report's warnings (overlapping UVs, a check past its tolerance, a fallback)."""
     from .bake_ops import LAST_BAKE_KEY, WARNING_PREFIX
 
     for line in str(scene.get(LAST_BAKE_KEY, "")).splitlines():
-        layout.label(text=line, icon="ERROR" if line.startswith(WARNING_PREFIX) else "INFO")
+        warn = line.startswith(WARNING_PREFIX)
+        for i, part in enumerate(_wrap(line, 80)):
+            layout.label(text=part, icon=("ERROR" if warn else "INFO") if i == 0 else "BLANK1")
 
 
 def run_on_lines(props) -> list:
@@ -196,7 +287,7 @@ def _kept_chunks(layout, context, kind: str):
 
 
 class VIEW3D_PT_relight_light(_RelightSubPanel, bpy.types.Panel):
-    """Light sliders of the live preview"""
+    """The light of the live preview, and whether it shows"""
 
     bl_label = "Preview Light"
 
@@ -207,6 +298,13 @@ class VIEW3D_PT_relight_light(_RelightSubPanel, bpy.types.Panel):
             layout.label(text="Bake first: the sliders come with the preview")
             return
         props = scene.relight
+        layout.prop(props, "show_preview")
+        if not props.show_preview:
+            layout.label(text="Showing your own materials", icon="HIDE_ON")
+        _viewport_hint(layout, context)
+        if props.show_preview and scene.render.engine != "CYCLES":
+            layout.label(text="EEVEE renders (F12) show the preview too: untick Show Preview "
+                              "or render with Cycles", icon="INFO")
         if any(g.name.startswith("Relight Transport (") for g in bpy.data.node_groups):
             layout.row().prop(props, "texture_light", expand=True)
         if props.texture_light == "WORLD":
@@ -216,13 +314,14 @@ class VIEW3D_PT_relight_light(_RelightSubPanel, bpy.types.Panel):
             warning = scene.get("relight_texture_env_warning")
             for line in (warning.split("; ") if warning else ()):
                 layout.label(text=line, icon="ERROR")
-            layout.label(text="Transport textures: the world; steerable previews: the sliders",
-                         icon="INFO")
+            layout.label(text="World lights the transport-texture previews; steerable ones "
+                              "follow the sliders", icon="INFO")
         col = layout.column(align=True)
         for key in SLIDERS:
             if key != "relight_follow_sun":
                 col.prop(scene, f'["{key}"]', text=key.replace("relight_", "").capitalize())
         col.prop(scene, f'["{COLOR_SLIDER}"]', text="Color")
+        layout.prop(props, "sun_angle")
         row = layout.row(align=True)
         row.prop(scene.relight, "sun")
         follow = scene.get("relight_follow_sun", 0.0) > 0.5
@@ -357,7 +456,6 @@ class VIEW3D_PT_relight_samples(_RelightSubPanel, bpy.types.Panel):
     """Add the paper sample scenes"""
 
     bl_label = "Sample Scenes"
-    bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
         settings = context.scene.relight
@@ -369,6 +467,6 @@ class VIEW3D_PT_relight_samples(_RelightSubPanel, bpy.types.Panel):
         op.size = settings.sample_size
 
 
-CLASSES = (VIEW3D_PT_relight, VIEW3D_PT_relight_bake, VIEW3D_PT_relight_light,
-           VIEW3D_PT_relight_vertex, VIEW3D_PT_relight_materials, VIEW3D_PT_relight_export,
-           VIEW3D_PT_relight_samples)
+CLASSES = (VIEW3D_PT_relight, VIEW3D_PT_relight_bake, VIEW3D_PT_relight_bake_advanced,
+           VIEW3D_PT_relight_light, VIEW3D_PT_relight_samples, VIEW3D_PT_relight_vertex,
+           VIEW3D_PT_relight_materials, VIEW3D_PT_relight_export)

@@ -33,16 +33,85 @@ def preset_values(method: str, preset: str) -> dict:
             "horizon_azimuths": t.horizon_azimuths, "horizon_resolution": t.horizon_resolution}
 
 
+def measured_values(method: str, preset: str) -> dict:
+    """The panel fields as the preset's figures were measured: the preset's own values and, for
+    the transport method, the declared defaults of the fields it leaves alone (Model, Viewport,
+    Indirect Light, ...), by property name. Sun Size, Check vs Cycles, Output and the device
+    are not in it (the figures are chosen by Sun Size; the rest do not change the result)."""
+    values = preset_values(method, preset)
+    if method != "transport":
+        return values
+    from ...lt_addon.settings import declared
+    from ..bakes.texture_transport import TransportTextureSettings
+
+    for s in declared(TransportTextureSettings, ("bounces",) + TRANSPORT_FIELDS):
+        prop = TRANSPORT_PROPS.get(s.name, s.name)
+        if prop not in values:
+            values[prop] = (str(s.default) if s.choices else
+                            int(s.default or 0) if s.kind == "int" else s.default)
+    return values
+
+
 def preset_differences(props) -> list:
-    """Names of the fields that no longer hold the chosen preset's values (the panel then says
-    "Custom" instead of showing the preset's measured figures)."""
+    """Names of the fields that no longer hold the values the chosen preset was measured with
+    (the panel then says "Custom" instead of showing the preset's measured figures)."""
     out = []
-    for name, value in preset_values(props.method, props.preset).items():
+    for name, value in measured_values(props.method, props.preset).items():
         mine = getattr(props, name)
         if (abs(mine - value) > 1e-6 * max(1.0, abs(value)) if isinstance(value, float)
                 else mine != value):
             out.append(name)
     return out
+
+
+def ui_label(props, name: str) -> str:
+    """The panel's label of property ``name`` (what the user reads, never the identifier)."""
+    prop = props.bl_rna.properties.get(name)
+    return prop.name if prop is not None and prop.name else name.replace("_", " ").title()
+
+
+#: The Sun Sizes (degrees) the presets' figures were measured at, by figure key.
+FIGURE_SUNS = {"rel_rmse_2deg": 2.0, "rel_rmse": 10.0}
+
+
+def measured_line(method: str, preset: str, sun_angle: float) -> str | None:
+    """The preset's measured cost and error against Cycles for the Sun Size in use (the figure
+    of the nearest size measured, said when it is not the same), or None when the preset has no
+    measured figures."""
+    from ..bakes.presets import BY_METHOD
+
+    fig = BY_METHOD[method].figures(preset)
+    keys = [k for k in FIGURE_SUNS if k in fig]
+    if not fig or not keys:
+        return None
+    key = min(keys, key=lambda k: abs(FIGURE_SUNS[k] - sun_angle))
+    at = FIGURE_SUNS[key]
+    where = f"{fig.get('scene', '?')}, {fig.get('machine', '?')}"
+    same = abs(at - sun_angle) < 1e-6
+    return (f"Measured: {fig['bake_seconds']:.1f} s, error {fig[key]:.3f} vs Cycles at a "
+            f"{at:g}\u00b0 sun" + ("" if same else f" (Sun Size is {sun_angle:g}\u00b0)")
+            + f" ({where})")
+
+
+def _preset_items():
+    """The Preset menu with a tooltip per preset: what it is for and what the transport bake
+    (the default method) does with it, with its measured cost and error where measured."""
+    from ..bakes.presets import TRANSPORT
+
+    use = {"draft": "Quickest: to try the light, framing and resolution",
+           "balanced": "The default: sharp shadows at a few seconds per object",
+           "production": "Most accurate: for final results, several times the balanced cost"}
+    items = []
+    for name in PRESET_NAMES:
+        v, fig = TRANSPORT.values(name), TRANSPORT.figures(name)
+        count = str(v.get("directions", "")).split(":")[1:2]
+        text = (f"{use.get(name, name.capitalize())}. Transport: {count[0] if count else '?'} "
+                f"sun directions at {v.get('resolution', '?')}x{v.get('resolution', '?')}")
+        if fig.get("bake_seconds") is not None and fig.get("rel_rmse_2deg") is not None:
+            text += (f"; measured {fig['bake_seconds']:.0f} s and {fig['rel_rmse_2deg']:.3f} "
+                     f"from Cycles at a 2 degree sun ({fig.get('scene', '?')})")
+        items.append((name, name.capitalize(), text))
+    return items
 
 
 def _apply_preset(self, context):
@@ -107,6 +176,36 @@ def _on_texture_light(self, context):
             set_light_mode(context.scene, obj, self.texture_light)
 
 
+def _get_check(self) -> bool:
+    """Check vs Cycles: the stored tick, or for a file of an older version (an integer count
+    only) whether its count is above 0."""
+    stored = self.get("check_vs_cycles")
+    if stored is not None:
+        return bool(stored)
+    count = self.get("truth_lights")
+    return bool(count) and int(count) > 0
+
+
+def _set_check(self, value: bool) -> None:
+    self["check_vs_cycles"] = bool(value)
+    if value and self.truth_lights < 1:
+        self.truth_lights = 4
+
+
+def truth_count(props) -> int:
+    """Held-out lights a bake checks against Cycles: the count when Check vs Cycles is ticked,
+    else 0."""
+    return int(props.truth_lights) if props.check_vs_cycles else 0
+
+
+def _on_show_preview(self, context):
+    from ..preview.preview_nodes import set_previews_shown
+
+    scene = context.scene if context is not None else None
+    if scene is not None:
+        set_previews_shown(list(scene.objects), self.show_preview)
+
+
 #: Output folders the user set in this Blender session (normalised absolute paths), filled by
 #: the Output field's update callback -- Blender calls it when the field is edited (in the UI or
 #: by a script), never when a file is loaded. A bake uses a folder a .blend names outside that
@@ -117,7 +216,9 @@ CONFIRMED_OUTPUT_DIRS: set = set()
 def _confirm_output_dir(self, context):
     """The user chose this Output folder in this session: remember it (resolved against the
     open .blend now; a '//' path of an unsaved file has no folder yet and is not kept)."""
-    path = bpy.path.abspath(self.output_dir or "//relight/")
+    if not self.output_dir:
+        return     # the default folder (one rule with the CLI: bake_ops.default_output_dir)
+    path = bpy.path.abspath(self.output_dir)
     if not path.startswith("//") and os.path.isabs(path):
         CONFIRMED_OUTPUT_DIRS.add(os.path.normpath(path))
 
@@ -130,19 +231,23 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         items=[(k, k.capitalize(), v) for k, v in DESCRIPTIONS.items()], default="bumps")
     sample_size: EnumProperty(
         name="Size", description="Sample scene size",
-        items=[(s, s.capitalize(), f"{s} size") for s in SIZES], default="test")
+        items=[(s, s.capitalize(), {"test": "Small and quick (the tests' size)",
+                                    "demo": "The size the documentation's pictures use"}.get(
+                    s, f"{s} size")) for s in SIZES], default="demo")
 
     preset: EnumProperty(
-        name="Preset", description="Starting values for the bake settings (measured by make bench)",
-        items=[(k, k.capitalize(), "") for k in PRESET_NAMES], default="balanced",
-        update=_apply_preset)
+        name="Preset",
+        description="Starting values for the bake settings, each measured for its cost and its "
+                    "error against Cycles",
+        items=_preset_items(), default="balanced", update=_apply_preset)
     output_dir: StringProperty(
-        name="Output", subtype="DIR_PATH", default="//relight/", options=path_options(),
+        name="Output", subtype="DIR_PATH", default="", options=path_options(),
         update=_confirm_output_dir,
-        description="Folder for the EXR files and the JSON report ('//' = next to the .blend). "
-                    "A bake writes, replaces and removes its files there, so a folder saved in "
-                    "a .blend is used only inside that .blend's folder; any other must be "
-                    "chosen here in this session")
+        description="Folder for the bake's files. Empty: <file>_relight next to the .blend, "
+                    "as the command line does (an unsaved file: relight/untitled-<time>_relight "
+                    "in your home folder; the panel says which). A bake writes, replaces and "
+                    "removes its files there, so a folder saved in a .blend is used only inside "
+                    "that .blend's folder; any other must be chosen here in this session")
     sun: PointerProperty(name="Sun", type=bpy.types.Object, poll=_sun_poll,
                          description="Sun lamp whose direction the preview follows")
 
@@ -270,9 +375,19 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         description="Legacy, ignored: the Relight Command is set in " + WHERE)
 
     truth_lights: IntProperty(
-        name="Check vs Cycles", default=0, min=0, max=12,
-        description="Also bake Cycles Sun truths for this many held-out lights and report the "
-                    "error (0 = skip)")
+        name="Lights", default=4, min=0, max=12,
+        description="How many held-out Sun directions Check vs Cycles renders with Cycles (each "
+                    "a full Cycles bake of the objects: the check's cost)")
+    check_vs_cycles: BoolProperty(
+        name="Check vs Cycles", get=_get_check, set=_set_check,
+        description="After the bake, bake Cycles with a real Sun at a few held-out directions "
+                    "and report how far the preview is from it (costs one Cycles bake per "
+                    "light)")
+    show_preview: BoolProperty(
+        name="Show Preview", default=True, update=_on_show_preview,
+        description="Show the relit preview in EEVEE (Material Preview). Off: your own "
+                    "materials in every view. Cycles renders (F12) and bakes always use your "
+                    "materials")
 
 
 # The bakes' own settings, declared once on their dataclasses (lt_addon/settings.py): the lobes
@@ -404,6 +519,10 @@ def register() -> None:
         description="This object's texture side in a transport bake (0: the Resolution above). "
                     "Objects of one side are baked together; every object still casts shadows "
                     "on the others")
+    # the last failed bake's line, shown in the panel until the next bake (this session only:
+    # not saved in the .blend, not undone)
+    bpy.types.WindowManager.relight_last_failure = StringProperty(
+        name="Last Failure", default="", options={"SKIP_SAVE"})
     bpy.app.handlers.depsgraph_update_post.append(_on_depsgraph_update)
 
 
@@ -412,4 +531,5 @@ def unregister() -> None:
         bpy.app.handlers.depsgraph_update_post.remove(_on_depsgraph_update)
     del bpy.types.Scene.relight
     del bpy.types.Object.relight_resolution
+    del bpy.types.WindowManager.relight_last_failure
 

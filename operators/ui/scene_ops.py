@@ -20,7 +20,7 @@ class RELIGHT_OT_add_sample_scene(bpy.types.Operator):
         default="bumps",
     )
     size: bpy.props.EnumProperty(
-        name="Size", items=[(s, s.capitalize(), "") for s in samples.SIZES], default="test")
+        name="Size", items=[(s, s.capitalize(), "") for s in samples.SIZES], default="demo")
 
     def execute(self, context):
         scene = bpy.data.scenes.new(f"{self.name}-{self.size}")

@@ -31,7 +31,7 @@ def test_output_dir_takes_a_blend_relative_path_without_warning(fresh_scene):
     relightable_textures.register()
     try:
         props = fresh_scene.relight
-        assert props.output_dir == "//relight/"
+        assert props.output_dir == ""   # the default folder, <file>_relight (issue 57)
         with warnings.catch_warnings():
             warnings.simplefilter("error")  # Blender 5 warns for '//' unless the flag is set
             props.output_dir = "//elsewhere/"
