@@ -132,6 +132,12 @@ def _viewport_hint(layout, context) -> None:
     layout.row().prop(shading, "type", expand=True)
 
 
+#: The empty Output field's hint, where this Blender's UI has placeholders (4.1 and later).
+_PLACEHOLDER = ({"placeholder": "Default: next to the .blend"}
+                if "placeholder" in bpy.types.UILayout.bl_rna.functions["prop"].parameters
+                else {})
+
+
 class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
     """Bake: the few settings a first bake needs; the rest is in Advanced"""
 
@@ -149,7 +155,7 @@ class VIEW3D_PT_relight_bake(_RelightSubPanel, bpy.types.Panel):
         row.prop(props, "check_vs_cycles")
         if props.check_vs_cycles:
             row.prop(props, "truth_lights")
-        col.prop(props, "output_dir", placeholder="Default: next to the .blend")
+        col.prop(props, "output_dir", **_PLACEHOLDER)
         for text, icon in output_lines(props):
             col.label(text=text, icon=icon)
         if not bpy.data.filepath and not props.output_dir.strip():
