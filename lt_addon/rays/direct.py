@@ -81,6 +81,13 @@ def direct_rows(occluder, points: ShadingPoints, directions, out=None) -> np.nda
         if pending is not None:
             land(*pending)
             pending = None
+        footprint = getattr(points, "footprint", None)
+        if footprint is not None:    # each texel's footprint where a shadow edge passes
+            for s, L in enumerate(D):
+                idx = footprint.edges(out[s])
+                if len(idx):
+                    out[s, idx] = footprint.refine(points, idx, L, out[s, idx], occluder,
+                                                   cosine, shadow_origins)
     finally:
         if pending is not None:     # (an error or a cancel: no rays left in flight)
             pending[2].cancel() or pending[2].exception()

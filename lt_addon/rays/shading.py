@@ -57,6 +57,7 @@ class ShadingPoints:
     correction: np.ndarray = None  # (P,) bool: the material's bump map correction (conty)
     epsilon: float = EPSILON       # the origin's push off the plane (see EPSILON)
     contact: object = None         # .contact.Contact: points touching another object's surface
+    footprint: object = None       # .footprint.Footprint: a texture bake's texel footprints
 
     @property
     def size(self) -> int:
@@ -88,7 +89,8 @@ class ShadingPoints:
 
     def subset(self, rows) -> "ShadingPoints":
         """The points ``rows`` (indices) alone: every ray from them leaves as from the whole
-        set (origins are computed per point)."""
+        set (origins are computed per point); texel centres only (no footprint: its
+        neighbours are the whole set's)."""
         rows = np.asarray(rows, np.int64)
         return ShadingPoints(self.P[rows], self.Ng[rows], self.N[rows], self.Ns[rows],
                              self.lift[rows], self.cutoff[rows], self.bump,

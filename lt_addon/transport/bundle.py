@@ -118,6 +118,12 @@ class TransportTextureSettings:
              "Sun's shadows)")
     resolution: int = setting(256, lo=4, hi=8192, soft=(8, 8192), help="Texture side in texels")
     bounces: int = setting(2, lo=0, hi=64, help="Diffuse bounces (0 = direct light only)")
+    texel_sampling: str = setting("footprint", label="Texel Sampling", choices=(
+        ("footprint", "Footprint", "Where a shadow edge or a thin triangle passes a texel, "
+         "average 16 rays over the texel as a converged Cycles bake does (at 2 degrees on a "
+         "brick relief: 0.03 from Cycles' converged bake, where one ray is 0.20)"),
+        ("centre", "Centre", "One ray per texel, at its centre: exactly a 1-spp Cycles bake")),
+        help="Where in each texel the direct rays start")
     direct: str = setting("auto", label="Direct Light", choices=(
         ("auto", "Auto", "Ray-traced (Embree) when the scene allows it, else one Cycles call per "
          "direction; the report says which and why"),

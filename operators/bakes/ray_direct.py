@@ -148,10 +148,12 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
     with ray_scene.RenderGeometry(scene) as depsgraph:
         V, T, n_casters = ray_scene.casters(depsgraph)
         occluder = ray_engine.Occluder(V, T, threads=cycles_device.current().threads)
-        receivers = [ray_scene.receiver_points(o, depsgraph, R, nrm)
+        footprint = getattr(settings, "texel_sampling", "footprint") == "footprint"
+        receivers = [ray_scene.receiver_points(o, depsgraph, R, nrm, footprint=footprint)
                      for o, nrm in zip(objects, normals)]
         # the horizons at their own (coarser) side: their own texel centres
-        coarse = ([ray_scene.receiver_points(o, depsgraph, Rh, _nearest(nrm, Rh))
+        coarse = ([ray_scene.receiver_points(o, depsgraph, Rh, _nearest(nrm, Rh),
+                                             footprint=False)
                    for o, nrm in zip(objects, normals)] if A and Rh < R else None)
         # points touching another object's surface (a box's bottom on its floor): Cycles'
         # rays meet it at once (lt_addon/rays/contact.py)
@@ -254,6 +256,13 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
             "texels": [int(smp.size) for smp, _ in receivers],
             # texels touching another object's surface: a contact ray each per lit direction
             "contact_texels": int(touching),
+            # each texel's footprint (lt_addon/rays/footprint.py): texel-directions refined
+            # (where a shadow edge or a thin triangle passes) and the rays they cast
+            "texel_sampling": "footprint" if footprint else "centre",
+            **({"footprint_refined": [int(p.footprint.refined) for _, p in receivers],
+                "footprint_rays": int(sum(p.footprint.rays for _, p in receivers)),
+                "footprint_thin_texels": [int(len(p.footprint.thin())) for _, p in receivers]}
+               if footprint else {}),
             "margin_texels": margin, "threads": occluder.threads,
             "directions_per_call": chunk}
 

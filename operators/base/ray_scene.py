@@ -336,11 +336,13 @@ def normal_mapped(obj) -> bool:
     return False
 
 
-def receiver_points(obj, depsgraph, resolution: int, Ns_image=None):
+def receiver_points(obj, depsgraph, resolution: int, Ns_image=None, footprint: bool = True):
     """(TexelSamples, ShadingPoints) of ``obj``'s texture bake at ``resolution``: the evaluated
     mesh in world space, its bake UV map (:func:`.meshes.bake_uv_name`), corner normals, smooth
     flags and the object's shadow-terminator geometry offset. ``Ns_image``: (R, R, 3) world closure normals (a Cycles
-    normal bake) for normal-mapped materials, or None."""
+    normal bake) for normal-mapped materials, or None. ``footprint``: the points carry their
+    texels' :class:`...lt_addon.rays.footprint.Footprint` (rays where a shadow edge passes
+    average the texel as a converged Cycles bake does)."""
     m = mesh_arrays(obj, depsgraph)
     if m.uv is None:
         raise ValueError(f"{obj.name} has no UV map")
@@ -365,11 +367,17 @@ def receiver_points(obj, depsgraph, resolution: int, Ns_image=None):
     Ns = None if Ns_image is None else np.asarray(Ns_image, np.float64).reshape(-1, 3)[samples.texel]
     if Ns is not None:   # texels the normal bake left empty keep the smooth normal
         Ns = np.where(np.linalg.norm(Ns, axis=1, keepdims=True) > 0.5, Ns, np.nan)
-    points = shading_points(m.co, tri, cn[loops].reshape(-1, 3, 3),
-                            m.smooth[poly], samples.triangle, samples.bary,
-                            cutoff=float(getattr(obj, "shadow_terminator_geometry_offset", 0.1)),
-                            mirrored=m.mirrored, Ns=None, bump=bump,
+    corner_normals, smooth = cn[loops].reshape(-1, 3, 3), m.smooth[poly]
+    cutoff = float(getattr(obj, "shadow_terminator_geometry_offset", 0.1))
+    points = shading_points(m.co, tri, corner_normals, smooth, samples.triangle, samples.bary,
+                            cutoff=cutoff, mirrored=m.mirrored, Ns=None, bump=bump,
                             correction=correction)
+    if footprint:
+        from ...lt_addon.rays.footprint import Footprint
+
+        points.footprint = Footprint(m.co, tri, corner_normals, smooth, cutoff, m.mirrored, bump,
+                                     correction, uv, resolution, samples.texel,
+                                     samples.triangle, samples.bary)
     if Ns is not None:
         bad = np.isnan(Ns).any(axis=1)
         Ns[bad] = points.N[bad]

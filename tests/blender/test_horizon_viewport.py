@@ -141,7 +141,10 @@ def test_horizons_relight_a_low_sun_as_well_as_hard_suns_over_its_disc(bumps, tm
     with ray_scene.RenderGeometry(scene) as dg:
         V, T, _ = ray_scene.casters(dg)
         occ = engine.Occluder(V, T)
-        smp, pts = ray_scene.receiver_points(obj, dg, R2, None)
+        # the texel centres (the map's own points): what the representation adds, apart from
+        # the footprint (with it, rays over the disc are 0.027 from Cycles at 10 degrees,
+        # the map 0.158: the map does not model footprints; measured 2026-12-06)
+        smp, pts = ray_scene.receiver_points(obj, dg, R2, None, footprint=False)
     assert smp.size == R2 * R2
     for i, (az, el) in enumerate(lights):
         truth = truths[1][i]

@@ -431,7 +431,8 @@ def test_two_objects_baked_together_shadow_each_other(statue, tmp_path):
     (exactly: same seed, 1 spp), and the ground shows the statue's shadow (darker than the
     ground baked with the statue hidden)."""
     scene, statue_obj, ground = statue
-    res = bake(scene, [statue_obj, ground], tmp_path, directions="hemi:24", model="none")
+    res = bake(scene, [statue_obj, ground], tmp_path, directions="hemi:24", model="none",
+               texel_sampling="centre")      # (1 spp: the texel centres)
     assert [b.name for b in res.objects] == ["Statue", "Ground"]
     stores = [tt.TransportStore.open(b.store_path) for b in res.objects]
     d = stores[1].directions.directions[3]
@@ -1005,7 +1006,7 @@ def test_world_lit_preview_rendered_by_cycles_equals_numpy_relight(bumps, tmp_pa
         padded[:, :C.shape[1]] = C
         np.testing.assert_allclose(np.array(group[tp.ENV_VALUES]),
                                    padded.reshape(3, ntile, 3).transpose(1, 0, 2).ravel(),
-                                   rtol=1e-6, atol=1e-9)
+                                   rtol=1e-6, atol=2e-8)      # (float32 node values)
         # the rotation moved the light (the sky is brighter towards one azimuth)
         assert rel(render_rgb(scene, tmp_path, R), sun_img) > 0.05
         scene.world = world
