@@ -267,6 +267,23 @@ def cosine(points: ShadingPoints, L, sl: slice | None = None) -> np.ndarray:
     return cos
 
 
+def cosine_at(points: ShadingPoints, L, rows) -> np.ndarray:
+    """:func:`cosine` of the points ``rows`` (indices) alone (M,)."""
+    rows = np.asarray(rows, np.int64)
+    cos = np.maximum(points.Ns[rows] @ L, 0.0)
+    mapped = points.mapped()
+    if mapped is not None:
+        pos = np.nonzero(np.isin(rows, mapped))[0]
+        if len(pos):
+            r = rows[pos]
+            N, Ns = points.N[r], points.Ns[r]
+            if points.bump == "chiang":
+                cos[pos] *= bump_shadowing(N, Ns, L)
+            else:
+                cos[pos] *= bump_correction(N, Ns, L, points.correction[r])
+    return cos
+
+
 def _dot3(A, L):
     """Row-wise dot products (M,) of (M, 3) ``A`` with ``L`` (3,) or (M, 3), one rounding per
     operation: a point's result does not depend on which other points are asked with it (a

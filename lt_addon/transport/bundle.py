@@ -117,7 +117,9 @@ class TransportTextureSettings:
         help="Degrees between the directions added along the Sun's path (0.5 holds a 2-degree "
              "Sun's shadows)")
     resolution: int = setting(256, lo=4, hi=8192, soft=(8, 8192), help="Texture side in texels")
-    bounces: int = setting(2, lo=0, hi=64, help="Diffuse bounces (0 = direct light only)")
+    bounces: int = setting(-1, lo=-1, hi=64, help=(
+        "Diffuse bounces (0 = direct light only); -1: the scene's own (Render > Light Paths: "
+        "Diffuse, capped by Total), as its render has them"))
     texel_sampling: str = setting("footprint", label="Texel Sampling", choices=(
         ("footprint", "Footprint", "Where a shadow edge or a thin triangle passes a texel, "
          "average 16 rays over the texel as a converged Cycles bake does (at 2 degrees on a "
@@ -173,9 +175,10 @@ class TransportTextureSettings:
                               "given (fewer components when larger)")
     block: int = 16
     sun_angle: float = setting(
-        2.0, lo=0.0, hi=30.0, label="Sun Size", panel=False,
+        -1.0, lo=-1.0, hi=30.0, label="Sun Size", panel=False,
         help="Angular diameter of the preview sun in degrees, for the preview's tables and the "
-             "truths (changing it re-tabulates the preview, no re-bake)")
+             "truths (changing it re-tabulates the preview, no re-bake); -1: the scene's Sun's "
+             "(Blender's default 0.526), 2 without a Sun")
     kernel: str = "linear"
     table_size: int = setting(
         32, lo=8, hi=256, label="Preview Table Size",
@@ -227,8 +230,8 @@ class TransportTextureSettings:
             raise InputError(f"need at least 8 upper-hemisphere directions, got {dset.size}")
         if not 4 <= self.resolution <= 8192:
             raise InputError(f"resolution must be in 4..8192, got {self.resolution}")
-        if not 0 <= self.bounces <= 64:
-            raise InputError(f"bounces must be in 0..64, got {self.bounces}")
+        if not -1 <= self.bounces <= 64:
+            raise InputError(f"bounces must be in 0..64 (-1: the scene's), got {self.bounces}")
         if self.indirect not in INDIRECT:
             raise InputError(f"indirect must be one of {INDIRECT}, got {self.indirect!r}")
         if self.model not in MODELS:
@@ -249,8 +252,9 @@ class TransportTextureSettings:
             raise InputError(f"tol must be in (0, 1), got {self.tol}")
         if self.model == "blocks" and (self.block < 2 or self.resolution % self.block):
             raise InputError(f"block {self.block} must divide the resolution {self.resolution}")
-        if not 0.0 <= self.sun_angle <= 30.0:
-            raise InputError(f"sun angle must be in 0..30 degrees, got {self.sun_angle}")
+        if not (0.0 <= self.sun_angle <= 30.0 or self.sun_angle == -1.0):
+            raise InputError(f"sun angle must be in 0..30 degrees (-1: the scene Sun's), got "
+                             f"{self.sun_angle}")
         if self.kernel not in tt.KERNELS:
             raise InputError(f"kernel must be one of {tt.KERNELS}, got {self.kernel!r}")
         if not 8 <= self.table_size <= 256:
@@ -280,9 +284,16 @@ def direct_summary(direct: dict, directions: int) -> str:
         horizons = (f"; horizons at {direct['horizon_azimuths']} azimuths{side}{why}, "
                     f"{direct['horizon_seconds']:.1f} s of it" if direct.get("horizon_azimuths")
                     else "")
+        footprint = ""
+        if direct.get("texel_sampling") == "footprint" and direct.get("texels"):
+            texel_dirs = sum(direct["texels"]) * directions
+            refined = sum(direct.get("footprint_refined") or [0])
+            footprint = (f"; texel footprints at {100 * refined / max(texel_dirs, 1):.0f} % of "
+                         f"texel-directions, {direct.get('footprint_rays', 0) / max(texel_dirs, 1):.2f}"
+                         " rays per texel-direction more")
         return (f"Direct light: {directions} directions by rays ({direct.get('library', '')}, "
                 f"{direct.get('seconds', 0):.1f} s, "
-                f"{direct.get('rays_per_second', 0) / 1e6:.1f} M rays/s{horizons})")
+                f"{direct.get('rays_per_second', 0) / 1e6:.1f} M rays/s{horizons}{footprint})")
     return f"Direct light: {directions} Cycles calls ({direct.get('why', 'asked for')})"
 
 

@@ -57,7 +57,7 @@ def memory_bytes(settings, dset, n_objects: int) -> tuple:
 
     preview_gpu_bytes = viewport_gpu(settings, dset, n_objects, most=True)[1]
 
-    gathered = settings.bounces > 0 and settings.indirect == "gather"
+    gathered = settings.bounces != 0 and settings.indirect == "gather"   # (-1: the scene's)
     pts = n_objects * settings.indirect_resolution ** 2 if gathered else 0
     k = settings.components or bm.MAX_COMPONENTS
     pca_atlas = (-(-k // 3) + 1) * settings.resolution ** 2 * 8

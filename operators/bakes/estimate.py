@@ -45,6 +45,9 @@ def wanted(settings, client=None, env: str | None = None, resolutions: dict | No
 def calibrate(scene, objects, settings, truth: int, truth_samples: int):
     """Generator: the calibration bakes; returns the stage costs (:func:`.est.fit_costs`) and
     the seconds the calibration took."""
+    from .texture_transport import scene_light_settings
+
+    settings, _ = scene_light_settings(scene, settings)
     from .texture_transport import bake_transport_textures, truth_bakes, truth_lights
 
     from ...lt_addon.transport import sparse_tables as sp
@@ -94,6 +97,9 @@ def estimate(scene, objects, settings, truth: int = 4, truth_samples: int = 256)
     ``ram_available_bytes``,
     ``viewport_gpu_bytes`` and the viewport it would use; ``calibration_seconds``; ``lines``
     (what the CLI prints and the panel shows)."""
+    from .texture_transport import scene_light_settings
+
+    settings, _ = scene_light_settings(scene, settings)
     from .ray_direct import horizon_count
     from .texture_transport import path_horizons, resolve_directions
 

@@ -109,8 +109,30 @@ def bake_transport_textures(scene, objects, settings: TransportTextureSettings, 
         mem.stop()
 
 
+def scene_light_settings(scene, settings):
+    """``(settings, from_scene)``: the settings with what they leave to the scene (-1) taken
+    from it -- the bounces from its Light Paths (:func:`..base.scene_sun.scene_bounces`), the
+    Sun size from its Sun (Blender's default 0.526 degrees; 2 without a Sun) -- and
+    ``{field: value}`` of those taken, for the report."""
+    from dataclasses import replace
+
+    from ..base.scene_sun import DEFAULT_SUN_ANGLE, scene_bounces, scene_sun_angle
+
+    taken = {}
+    if settings.bounces is not None and settings.bounces < 0:
+        taken["bounces"] = scene_bounces(scene)
+    if settings.sun_angle is not None and settings.sun_angle < 0:
+        angle = scene_sun_angle(scene)
+        taken["sun_angle"] = round(angle, 4) if angle is not None else DEFAULT_SUN_ANGLE
+    fields = dict(taken)
+    if "sun_angle" in taken and scene_sun_angle(scene) is None:
+        taken["no_sun"] = True
+    return (replace(settings, **fields) if fields else settings), taken
+
+
 def _bake_transport_textures(scene, objects, settings, out_dir, resume, client, blend_path, mem):
     """:func:`bake_transport_textures`, with ``mem`` started once the inputs are checked."""
+    settings, from_scene = scene_light_settings(scene, settings)
     dset, path_info = resolve_directions(scene, settings)
     settings, raised = path_horizons(settings, path_info)
     if client is not None and (not resume or not blend_path):
@@ -298,6 +320,7 @@ def _bake_transport_textures(scene, objects, settings, out_dir, resume, client, 
             "workers": sorted({w for d in both for w in d["workers"]}),
             "worker_devices": {k: v for d in both for k, v in d.get("worker_devices", {}).items()},
             "cycles_threads_per_worker": both[0]["cycles_threads_per_worker"]}
+    result.from_scene = from_scene
     return result
 
 
@@ -630,6 +653,8 @@ def write_bake(result: TransportTextureResult, objects, out_dir: str, figures: d
     s = result.settings
     for report, obj in zip(reports, objects):
         report["uv_map"] = bake_uv_name(obj)   # the map every stage baked into (the preview's)
+        # what the settings left to the scene (-1): its Light Paths' bounces, its Sun's size
+        report["from_scene"] = dict(getattr(result, "from_scene", None) or {})
         record_kind(obj, KIND, report["report"],
                     {"directions": result.directions.spec, "resolution": s.resolution,
                      "model": s.model, "bytes": report["bytes"]["total"],
@@ -686,6 +711,7 @@ def pilot(scene, objects, settings: TransportTextureSettings, target: float, out
 
     from dataclasses import replace
 
+    settings, _ = scene_light_settings(scene, settings)
     t0 = time.perf_counter()
     truths = yield from truth_bakes(scene, objects, TRUTH_LIGHTS, settings.sun_angle,
                                     settings.bounces, truth_samples, resolution)
@@ -772,6 +798,7 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
     from ...lt_addon.transport import object_resolution as orr
 
     objects = list(objects)
+    bounces = scene_light_settings(scene, settings)[0].bounces   # (decides the groups' term)
     try:   # two objects whose files would be one (a hash collision, or case on macOS/Windows)
         check_stems([o.name for o in objects])
     except StemCollision as exc:
@@ -785,7 +812,7 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
     sides = {o.name: side for side, idx in parts for o in (objects[i] for i in idx)}
     reports, models = [], []
     why = None
-    if settings.bounces > 0 and settings.indirect == "gather":
+    if bounces > 0 and settings.indirect == "gather":
         # the gathered light reads T of the objects baked together only: the bounce light
         # between groups (the statue's on a ground of its own side, and back) would be lost
         settings = replace(settings, indirect="steerable")
@@ -832,6 +859,9 @@ def bake_group(scene, objects, settings: TransportTextureSettings, out_dir: str,
 
     started = time.perf_counter()
     figures = {}
+    # what the settings leave to the scene (its Light Paths' bounces, its Sun's size), for
+    # every stage from here: the pilot, the bake, its truths (the report's from_scene)
+    settings, from_scene = scene_light_settings(scene, settings)
     if preview and settings.model == "pca":   # refuse an impossible viewport before baking
         from ...lt_addon.transport import sparse_tables as sp
 
@@ -872,6 +902,7 @@ def bake_group(scene, objects, settings: TransportTextureSettings, out_dir: str,
             yield Progress(1, 1, line)
         bake = _with_eta(bake, time.perf_counter(), e["seconds"])
     result = yield from bake
+    result.from_scene = from_scene or getattr(result, "from_scene", {})
     try:
         figures.update((yield from _truth_figures(scene, objects, settings, result, truth,
                                                   truth_samples, target_error, figures)))

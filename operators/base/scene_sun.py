@@ -49,3 +49,27 @@ def sun_path(scene):
             return {"object": o.name, "frames": [first, last], "samples": int(len(d)),
                     "directions": d}
     return None
+
+
+#: The Sun size the bake takes where the scene has no Sun (degrees; the presets' measured
+#: figures are for 2 and 10 degrees).
+DEFAULT_SUN_ANGLE = 2.0
+
+
+def scene_bounces(scene) -> int:
+    """The diffuse bounces the scene's own render takes (Render > Light Paths): Diffuse, capped
+    by Total (Cycles stops a path at whichever it reaches first; a diffuse-only bake's paths
+    are diffuse)."""
+    cycles = getattr(scene, "cycles", None)
+    if cycles is None:
+        return 4
+    return int(max(0, min(int(cycles.diffuse_bounces), int(cycles.max_bounces))))
+
+
+def scene_sun_angle(scene) -> float | None:
+    """The angular diameter (degrees) of the scene's first rendered Sun (Blender's default
+    0.526), or None without a Sun."""
+    import math
+
+    suns = scene_suns(scene)
+    return math.degrees(float(suns[0].data.angle)) if suns else None

@@ -627,6 +627,14 @@ def _cmd_bake_texture_transport(args) -> int:
                   "shows T)")
         if first:
             print("  " + direct_summary(rep.get("direct") or {}, rep["directions"]))
+            taken = rep.get("from_scene") or {}
+            if taken:   # what the settings left to the scene (its Light Paths, its Sun)
+                print("  from the scene: " + ", ".join(
+                    ([f"{taken['bounces']} diffuse bounces (Light Paths)"]
+                     if "bounces" in taken else [])
+                    + ([f"Sun size {taken['sun_angle']:g} deg"
+                        + (" (the scene has no Sun)" if taken.get("no_sun") else "")]
+                       if "sun_angle" in taken else [])))
             print_chunks(rep)
         gt = rep.get("ground_truth")
         if gt and first:   # one headline over all objects baked together

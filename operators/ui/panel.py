@@ -208,6 +208,13 @@ class VIEW3D_PT_relight_bake_advanced(_RelightTab, bpy.types.Panel):
                         and props.transport_indirect != "gather") or (
                         name.startswith("indirect_") and props.transport_indirect == "none"):
                     continue
+                if name == "bounces":        # the scene's own, unless turned off
+                    col.prop(props, "scene_bounces")
+                    if props.scene_bounces:
+                        from ..base.scene_sun import scene_bounces
+
+                        col.label(text=f"Bounces: {scene_bounces(context.scene)} (the scene's)")
+                        continue
                 col.prop(props, name)
             if props.transport_model != "pca":
                 # only the PCA previews live: the others are the command line's (a file of an

@@ -44,7 +44,10 @@ def measured_values(method: str, preset: str) -> dict:
     from ...lt_addon.settings import declared
     from ..bakes.texture_transport import TransportTextureSettings
 
-    for s in declared(TransportTextureSettings, ("bounces",) + TRANSPORT_FIELDS):
+    # the figures were measured with 2 bounces (a scene's own are the scene's: the toggle
+    # Scene's Light Paths is not a difference from the preset)
+    values["bounces"] = 2
+    for s in declared(TransportTextureSettings, TRANSPORT_FIELDS):
         prop = TRANSPORT_PROPS.get(s.name, s.name)
         if prop not in values:
             values[prop] = (str(s.default) if s.choices else
@@ -295,6 +298,11 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         name="Horizon Density", default=_TRANSPORT["horizon_power"], min=1.0, max=4.0,
         description="1: uniform over the hemisphere; above 1: more directions near the horizon, "
                     "where grazing shadows change fastest")
+    scene_bounces: BoolProperty(
+        name="Scene's Light Paths", default=True,
+        description="Bake the interreflections with the bounces the scene renders with (Render "
+                    "> Light Paths: Diffuse, capped by Total), as Cycles renders it; off: the "
+                    "Bounces below")
     sun_angle: FloatProperty(
         name="Sun Size", default=2.0, min=0.0, max=30.0, update=_refresh_tables,
         description="Angular diameter of the preview sun in degrees (re-tabulates the preview "
@@ -469,10 +477,12 @@ def transport_settings_from_scene(props):
     from ..bakes.texture_transport import TransportTextureSettings
 
     power = f":{props.horizon_power:g}" if props.horizon_power != 1.0 else ""
+    given = values(TransportTextureSettings, props, ("resolution", "bounces") + TRANSPORT_FIELDS,
+                   rename=TRANSPORT_PROPS)
+    if getattr(props, "scene_bounces", False):
+        given["bounces"] = -1          # the scene's Light Paths (texture_transport)
     return TransportTextureSettings(
-        directions=f"hemi:{props.directions}{power}", sun_angle=props.sun_angle,
-        **values(TransportTextureSettings, props, ("resolution", "bounces") + TRANSPORT_FIELDS,
-                 rename=TRANSPORT_PROPS))
+        directions=f"hemi:{props.directions}{power}", sun_angle=props.sun_angle, **given)
 
 
 def settings_from_scene(props):
