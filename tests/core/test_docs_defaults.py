@@ -246,7 +246,15 @@ def test_the_defaults_table_holds_the_codes_defaults(tmp_path):
         == balanced["indirect_components"]
 
     sun, _ = number(rows["sun size of the preview"]["default"])
-    assert sun == balanced["sun_angle"] == property_default("sun_angle")
+    assert sun == property_default("sun_angle")
+    # the bake's own default: -1, the scene's (operators/base/scene_sun.py)
+    from relightable_textures.operators.base.scene_sun import DEFAULT_SUN_ANGLE
+    assert balanced["sun_angle"] == -1 and balanced["bounces"] == -1
+    truths = rows["sun size of the bake's truths"]["default"]
+    assert "scene's Sun" in truths and "0.526°" in truths
+    assert f"{DEFAULT_SUN_ANGLE:g}° without a Sun" in truths
+    assert "scene's own" in rows["diffuse bounces"]["default"]
+    assert rows["texel sampling"]["default"] == default.texel_sampling
 
     # one folder for the CLI and the panel: <name>_relight/ next to the .blend
     rule = rows["output folder"]["default"]
