@@ -117,6 +117,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_estimate.py
 	$(PY) benchmarks/bench_texel_cpca.py --out $(OUT)/bench
 	$(PY) benchmarks/bench_viewports.py --scenes statue,bumps --resolutions 1024,2048
+	$(PY) benchmarks/bench_gallery.py --out $(OUT)/bench/gallery --json $(OUT)/bench/gallery.json --camera all
 
 ## bench-full: the standard (demo-size) sweeps behind the tables in docs/ (results.md and the
 ##   method pages) and the presets (~2 h): writes docs/bench (presets.json among it: copy it over
