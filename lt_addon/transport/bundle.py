@@ -853,6 +853,10 @@ def write_bundle(result: TransportTextureResult, names: list, out_dir: str,
     the bake ran on (the bpy layer's report); ``version``: the add-on's."""
     from ..steerable.texture import SteerableTexture
 
+    s = result.settings
+    if (s.bounces is not None and s.bounces < 0) or (s.sun_angle is not None and s.sun_angle < 0):
+        raise ValueError("the settings leave the bounces or the Sun size to the scene (-1): "
+                         "take them from it first (texture_transport.scene_light_settings)")
     t0 = time.perf_counter()
     reports = []
     for b in result.objects:

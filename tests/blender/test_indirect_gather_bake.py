@@ -23,7 +23,8 @@ def settings(**kw):
 
     base = dict(directions="hemi:48:1.5", resolution=R, bounces=1, model="pca", components=12,
                 table_size=16, indirect="gather", indirect_resolution=R, indirect_rays=16,
-                indirect_components=7, viewport="pca", sun_angle=4.0)
+                indirect_components=7, viewport="pca", sun_angle=4.0,
+                texel_sampling="centre")   # (the tables: 0.020 measured with centre rays)
     base.update(kw)
     return TransportTextureSettings(**base)
 

@@ -29,7 +29,7 @@ def _bundle(tmp_path, model="none"):
     store = store.finish()          # a reader of the still-temporary store, as a bake has
     albedo = rng.uniform(0.1, 0.9, size=(R, R, 3)).astype(np.float32)
     settings = bundle.TransportTextureSettings(directions=f"hemi:{S}:1.5", resolution=R,
-                                               bounces=0, model=model)
+                                               bounces=0, model=model, sun_angle=2.0)
     fitted = bundle.fit_model(store, settings, albedo)
     ob = bundle.ObjectBake("Patch", store.path, albedo, None, fitted, 0.0, store)
     result = bundle.TransportTextureResult([ob], dset, settings, {"bake_total": 1.0}, S)

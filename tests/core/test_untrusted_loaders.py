@@ -39,7 +39,7 @@ def _bundle(tmp_path, model="pca"):
     store = store.finish()
     albedo = np.full((R, R, 3), 0.5, np.float32)
     settings = bundle.TransportTextureSettings(directions=f"hemi:{S}:1.5", resolution=R,
-                                               bounces=0, model=model)
+                                               bounces=0, model=model, sun_angle=2.0)
     fitted = bundle.fit_model(store, settings, albedo)
     ob = bundle.ObjectBake("Patch", store.path, albedo, None, fitted, 0.0, store)
     result = bundle.TransportTextureResult([ob], dset, settings, {"bake_total": 1.0}, S)
