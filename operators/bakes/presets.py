@@ -109,20 +109,24 @@ def scaled(values: dict, resolution: int, caps: dict) -> dict:
             for k, cap in caps.items() if (v := values.get(k)) is not None}
 
 
-#: The lobes bake's presets (relight bench --scene bumps --write-presets).
+#: The lobes bake's presets (relight bench --scene bumps --write-presets). The built-in values
+#: are the file's (it wins when present; these serve only without it): kept equal by
+#: tests/core/test_presets_fallback.py.
 LOBES = Presets(TextureBakeSettings, "presets.json", {
-    "draft": dict(order=5, resolution=128, samples=16, bounces=1, storage="u8"),
-    "balanced": dict(order=7, resolution=256, samples=64, bounces=2, storage="half"),
-    "production": dict(order=7, resolution=512, samples=128, bounces=3, storage="half")})
+    "draft": dict(order=3, resolution=128, samples=16, bounces=2, storage="u8"),
+    "balanced": dict(order=3, resolution=128, samples=64, bounces=2, storage="u8"),
+    "production": dict(order=5, resolution=256, samples=64, bounces=2, storage="u8")})
 
-#: The transport bake's presets (benchmarks/bench_transport_textures.py --write-presets).
+#: The transport bake's presets (benchmarks/bench_transport_textures.py --write-presets), the
+#: file's values built in as for LOBES.
 TRANSPORT = Presets(TransportTextureSettings, "transport_presets.json", {
-    "draft": dict(directions="hemi:100:1.5", resolution=128, indirect_resolution=64,
-                  indirect_samples=16, tol=0.03),
+    "draft": dict(directions="hemi:400:1.5", resolution=128, indirect_resolution=64,
+                  indirect_samples=64, components=48, table_size=32, horizon_azimuths=64),
     "balanced": dict(directions="hemi:400:1.5", resolution=256, indirect_resolution=128,
-                     indirect_samples=64, tol=0.02),
-    "production": dict(directions="hemi:1600:1.5", resolution=256, indirect_resolution=256,
-                       indirect_samples=256, tol=0.01, table_size=64)},
+                     indirect_samples=64, components=96, table_size=32, horizon_resolution=96,
+                     horizon_azimuths=96),
+    "production": dict(directions="hemi:2800:1.5", resolution=256, indirect_resolution=256,
+                       indirect_samples=256, components=256, table_size=64)},
     drops={"tol": ("components",)},
     # the indirect grid is chosen at the presets' 256^2; a larger texture scales it with it,
     # up to 512^2 (the statue demo at 1024^2, balanced, bench_viewports 2026-12-04: what auto
