@@ -108,6 +108,16 @@ class Footprint:
     refined: int = 0        # texel-directions refined so far
     rays: int = 0           # sub-sample rays cast so far
 
+    def subset(self, rows) -> "Footprint":
+        """The footprint of the points ``rows`` alone (the same mesh; their texels'
+        neighbours outside ``rows`` count as not covered): a tile of texels refines as the
+        whole texture does inside it."""
+        rows = np.asarray(rows, np.int64)
+        return Footprint(self.vertices, self.triangles, self.corner_normals, self.smooth,
+                         self.cutoff, self.mirrored, self.bump, self.correction, self.uv,
+                         self.resolution, self.texel[rows], self.triangle[rows],
+                         self.bary[rows])
+
     def edges(self, values) -> np.ndarray:
         """The points to refine at a direction whose centre values are ``values`` (P,):
         :func:`edges` of this bake's points, and the :meth:`thin` ones."""

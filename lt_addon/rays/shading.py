@@ -89,14 +89,15 @@ class ShadingPoints:
 
     def subset(self, rows) -> "ShadingPoints":
         """The points ``rows`` (indices) alone: every ray from them leaves as from the whole
-        set (origins are computed per point); texel centres only (no footprint: its
-        neighbours are the whole set's)."""
+        set (origins are computed per point); their footprint, if any, is theirs alone
+        (:meth:`.footprint.Footprint.subset`)."""
         rows = np.asarray(rows, np.int64)
         return ShadingPoints(self.P[rows], self.Ng[rows], self.N[rows], self.Ns[rows],
                              self.lift[rows], self.cutoff[rows], self.bump,
                              None if self.correction is None else self.correction[rows],
                              self.epsilon,
-                             None if self.contact is None else self.contact.subset(rows))
+                             None if self.contact is None else self.contact.subset(rows),
+                             None if self.footprint is None else self.footprint.subset(rows))
 
 
 def _unit(v):
