@@ -142,16 +142,22 @@ fuzz: $(STAMP)
 	  --json $(OUT)/fuzz.json
 
 ## dist: validate and build the extension zips, one per platform, with Blender's own
-##   extension tool (dist/relightable_textures-<version>-<platform>.zip)
-dist: $(STAMP)
-	$(PY) tools/extension_tool.py --output-dir dist
+##   extension tool (dist/relightable_textures-<version>-<platform>.zip). Needs only Python
+##   >= 3.11 with pip, not the venv: BLENDER=/path/to/blender (4.2 or later) uses that
+##   Blender's tool; else the venv's bpy where `make venv` has run; else the tool inside the
+##   pinned bpy wheel in WHEELHOUSE (downloaded once, ~360 MB; nothing is installed). The
+##   zips' wheels (requirements-wheels.txt) are downloaded with pip once, then kept in ~/.cache
+dist:
+	@py="$(PYTHON)"; [ ! -f $(STAMP) ] || py="$(PY)"; \
+	set -x; "$$py" tools/extension_tool.py --output-dir dist --wheelhouse "$(WHEELHOUSE)" \
+	  $(if $(BLENDER),--blender "$(BLENDER)")
 
 ## matrix: build the zips, install the linux-x64 one into each supported Blender (PyPI bpy
 ##   4.2.0 must refuse it, 4.2.13 ... newest 5.x must install, enable, bake) in venvs holding
 ##   only bpy, then run the full suite on the newest bpy and the version-sensitive subset on
 ##   5.2.3 LTS (both Python 3.13); cached under ~/.cache. MATRIX_ARGS passes options (.ci/run
 ##   passes --deadline)
-matrix: dist
+matrix: $(STAMP) dist
 	$(PY) tools/blender_matrix.py --markdown dist/blender-matrix.md $(MATRIX_ARGS)
 
 clean:

@@ -1,14 +1,29 @@
 """Build and validate the extension zips, one per platform, with Blender's own extension tool.
 
-Blender's ``blender_ext.py`` ships inside the ``bpy`` wheel (``bpy/<version>/scripts/addons_core/
-bl_pkg/cli/blender_ext.py``) and runs with plain Python; we locate it rather than re-implement
-it. The wheels the manifest lists (SciPy and OpenEXR for CPython 3.11 and 3.13 on every platform
-in ``platforms``) are downloaded first, pinned in requirements-wheels.txt. ``build
+Blender's extension tool (``blender_ext.py``, what ``blender --command extension`` runs) is used
+rather than re-implemented. It needs plain Python >= 3.11 and is found, in this order:
+
+1. ``--blender PATH`` (Blender 4.2 or later; ``make dist BLENDER=PATH``): the tool inside that
+   install (``<version>/scripts/addons_core/bl_pkg/cli/blender_ext.py`` next to the executable
+   on Linux and Windows, ``Blender.app/Contents/Resources/<version>/...`` on macOS,
+   ``/usr/share/blender/<version>/...`` for a Linux distribution's package), else
+   ``PATH --factory-startup --command extension ...`` itself;
+2. the ``bpy`` module of the Python running this script (the development venv, or a venv
+   holding only bpy), which ships the same tool (``bpy/<version>/scripts/...``);
+3. the pinned bpy wheel (requirements.txt) in the wheelhouse ``make venv`` shares
+   (``--wheelhouse``), downloaded there once (~360 MB) if missing: only the tool and Blender's
+   list of valid tags are read out of it; nothing is installed.
+
+The tags are validated against Blender's own list (``scripts/modules/_bpy_internal/extensions/
+tags.py``), as ``blender --command extension`` does. The wheels the manifest lists (SciPy,
+OpenEXR and embreex for CPython 3.11 and 3.13 on every platform in ``platforms``) are
+downloaded first with this Python's pip, pinned in requirements-wheels.txt. ``build
 --split-platforms`` then writes one zip per platform holding only that platform's wheels; each
 zip is validated by the tool and checked here against the manifest.
 
-Usage: ``python tools/extension_tool.py [--output-dir DIR]`` prints the built zips, one a line,
-as ``<blender platform> <path>``.
+Usage: ``python tools/extension_tool.py [--output-dir DIR] [--blender PATH] [--wheelhouse DIR]``
+prints the built zips, one a line, as ``<blender platform> <path>``; which tool built them goes
+to stderr.
 """
 
 from __future__ import annotations
@@ -17,11 +32,18 @@ import argparse
 import glob
 import importlib.util
 import os
+import re
 import shutil
 import subprocess
 import sys
-import tomllib
+import tempfile
 import zipfile
+
+if sys.version_info < (3, 11):   # Blender's extension tool and this script read TOML
+    raise SystemExit(f"extension_tool: needs Python 3.11 or later, not "
+                     f"{sys.version.split()[0]} ({sys.executable})")
+
+import tomllib  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -47,17 +69,151 @@ def requirements() -> list[str]:
         return [ln.split("#")[0].strip() for ln in fh if ln.split("#")[0].strip()]
 
 
-def blender_ext_script() -> str:
-    """Path of ``blender_ext.py`` inside the installed bpy wheel (bpy is not imported)."""
+#: Blender's extension tool and its list of valid tags inside a ``<version>/`` folder of a
+#: Blender install or of the bpy module.
+EXT_TOOL = ("scripts", "addons_core", "bl_pkg", "cli", "blender_ext.py")
+VALID_TAGS = ("scripts", "modules", "_bpy_internal", "extensions", "tags.py")
+
+#: Where a Blender install keeps its ``<version>/`` folder, relative to the folder of its
+#: executable: next to it (blender.org's Linux archive, Windows zip and installer, Steam,
+#: snap), ``Blender.app/Contents/Resources/`` on macOS (the executable is
+#: ``Contents/MacOS/Blender``), ``/usr/share/blender/`` for a Linux distribution's package
+#: (the executable is ``/usr/bin/blender``). Blender's manual, "Blender's Directory Layout".
+BLENDER_LAYOUTS = (".", os.path.join("..", "Resources"), os.path.join("..", "share", "blender"))
+
+#: Where ``make venv`` keeps the pinned wheels of requirements.txt (the Makefile's WHEELHOUSE),
+#: the bpy wheel among them.
+WHEELHOUSE = os.path.join(os.path.expanduser("~"), ".cache", "relightable-textures", "wheelhouse")
+
+
+class ExtTool:
+    """One way of running Blender's extension tool: ``command`` + a subcommand + arguments."""
+
+    def __init__(self, command: list[str], tags: str | None, origin: str):
+        self.command, self.tags, self.origin = command, tags, origin
+
+    def run(self, subcommand: str, *args: str) -> None:
+        cmd = [*self.command, subcommand]
+        if self.tags is not None:
+            cmd.append(f"--valid-tags={self.tags}")
+        try:
+            subprocess.run(cmd + list(args), check=True, stdout=sys.stderr)
+        except (OSError, subprocess.CalledProcessError) as exc:
+            why = (f"exit status {exc.returncode}"
+                   if isinstance(exc, subprocess.CalledProcessError) else str(exc))
+            hint = (" (the extension command needs Blender 4.2 or later)"
+                    if "--command" in self.command else "")
+            raise SystemExit(f"extension_tool: {subcommand} with {self.origin} failed: "
+                             f"{why}{hint}") from None
+
+
+def _version_folder(base: str) -> str | None:
+    """The newest ``<major>.<minor>`` folder under ``base`` that holds the extension tool."""
+    try:
+        names = os.listdir(base)
+    except OSError:
+        return None
+    found = sorted((tuple(int(x) for x in n.split(".")), n) for n in names
+                   if re.fullmatch(r"\d+\.\d+", n)
+                   and os.path.isfile(os.path.join(base, n, *EXT_TOOL)))
+    return os.path.join(base, found[-1][1]) if found else None
+
+
+def _tool_in(version_folder: str, origin: str) -> ExtTool:
+    tags = os.path.join(version_folder, *VALID_TAGS)
+    return ExtTool([sys.executable, os.path.join(version_folder, *EXT_TOOL)],
+                   tags if os.path.isfile(tags) else None, origin)
+
+
+def blender_tool(blender: str) -> ExtTool:
+    """The extension tool of the Blender install whose executable (or macOS ``Blender.app``)
+    is ``blender``, run with this Python; where the install's layout is none of
+    :data:`BLENDER_LAYOUTS`, that Blender's own ``--command extension``."""
+    exe = blender
+    if os.path.isdir(exe) and os.path.basename(os.path.normpath(exe)).endswith(".app"):
+        exe = os.path.join(exe, "Contents", "MacOS", "Blender")
+    if not os.path.isfile(exe):
+        found = shutil.which(exe)
+        if not found:
+            raise SystemExit(f"extension_tool: --blender {blender!r}: no such file or command")
+        exe = found
+    # a link on the PATH (/usr/local/bin/blender -> /opt/blender-5.0/blender): both folders
+    for folder in dict.fromkeys((os.path.dirname(os.path.abspath(exe)),
+                                 os.path.dirname(os.path.realpath(exe)))):
+        for rel in BLENDER_LAYOUTS:
+            found = _version_folder(os.path.normpath(os.path.join(folder, rel)))
+            if found:
+                return _tool_in(found, f"the Blender install at {found}")
+    return ExtTool([exe, "--factory-startup", "--command", "extension"], None,
+                   f"{exe} --command extension")
+
+
+def bpy_tool() -> ExtTool | None:
+    """The extension tool inside this Python's bpy module (bpy is not imported), or None."""
     spec = importlib.util.find_spec("bpy")
     if spec is None or not spec.submodule_search_locations:
-        raise SystemExit("extension_tool: the bpy module is not installed (run `make venv`)")
+        return None
     base = list(spec.submodule_search_locations)[0]
-    found = glob.glob(os.path.join(base, "*", "scripts", "addons_core", "bl_pkg", "cli",
-                                   "blender_ext.py"))
-    if not found:
+    found = _version_folder(base)
+    if found is None:
         raise SystemExit(f"extension_tool: blender_ext.py not found under {base}")
-    return sorted(found)[-1]
+    return _tool_in(found, f"the bpy module at {found}")
+
+
+def pinned_bpy() -> str:
+    """The bpy version requirements.txt pins (the development venv's)."""
+    with open(os.path.join(ROOT, "requirements.txt")) as fh:
+        for line in fh:
+            m = re.fullmatch(r"bpy==([\w.]+)", line.split("#")[0].strip())
+            if m:
+                return m.group(1)
+    raise SystemExit("extension_tool: requirements.txt pins no bpy version")
+
+
+def _require_pip(why: str) -> None:
+    if importlib.util.find_spec("pip") is None:
+        raise SystemExit(f"extension_tool: {sys.executable} has no pip, needed to {why} "
+                         "(`python -m ensurepip --user`, or the system's python3-pip)")
+
+
+def wheel_tool(wheelhouse: str, workdir: str) -> ExtTool:
+    """The extension tool read out of the pinned bpy wheel in ``wheelhouse`` (downloaded there
+    first if missing) into ``workdir``; bpy itself is not installed."""
+    version = pinned_bpy()
+    wheels = sorted(glob.glob(os.path.join(glob.escape(wheelhouse), f"bpy-{version}-*.whl")))
+    if not wheels:
+        _require_pip("download the bpy wheel")
+        print(f"extension_tool: no Blender given (make dist BLENDER=/path/to/blender) and no "
+              f"bpy module: downloading the bpy {version} wheel (~360 MB, once) into "
+              f"{wheelhouse} for Blender's extension tool inside it", file=sys.stderr)
+        # bpy is built for one CPython version per release (requirements.txt: 3.11 for 5.0);
+        # the tool inside is plain Python, the same in every platform's wheel
+        subprocess.run([sys.executable, "-m", "pip", "download", "--quiet", "--no-deps",
+                        "--only-binary=:all:", "--python-version", PYTHONS[0],
+                        "--implementation", "cp", "--platform", PIP_PLATFORMS["linux-x64"][0],
+                        "-d", wheelhouse, f"bpy=={version}"], check=True)
+        wheels = sorted(glob.glob(os.path.join(glob.escape(wheelhouse), f"bpy-{version}-*.whl")))
+        if not wheels:
+            raise SystemExit(f"extension_tool: pip wrote no bpy-{version} wheel to {wheelhouse}")
+    with zipfile.ZipFile(wheels[-1]) as whl:
+        wanted = [n for n in whl.namelist()
+                  if re.fullmatch(r"bpy/\d+\.\d+/" + "(%s|%s)" % ("/".join(EXT_TOOL),
+                                                                  "/".join(VALID_TAGS)), n)]
+        for name in wanted:
+            dst = os.path.join(workdir, *name.split("/"))
+            os.makedirs(os.path.dirname(dst), exist_ok=True)
+            with whl.open(name) as src, open(dst, "wb") as out:
+                shutil.copyfileobj(src, out)
+    found = _version_folder(os.path.join(workdir, "bpy"))
+    if found is None:
+        raise SystemExit(f"extension_tool: no blender_ext.py in {wheels[-1]}")
+    return _tool_in(found, f"the bpy {version} wheel {wheels[-1]}")
+
+
+def extension_tool(blender: str | None, wheelhouse: str, workdir: str) -> ExtTool:
+    """Blender's extension tool, found in the order the module's docstring gives."""
+    tool = blender_tool(blender) if blender else bpy_tool()
+    return tool or wheel_tool(wheelhouse, workdir)
 
 
 def manifest() -> dict:
@@ -111,6 +267,7 @@ def ensure_wheels() -> list[str]:
             os.makedirs(os.path.dirname(w), exist_ok=True)
             _copy_atomically(cached, w)
     if any(not os.path.exists(w) for w in wanted):
+        _require_pip("download the wheels of requirements-wheels.txt")
         for platform in m.get("platforms", []):
             for python in PYTHONS:
                 for req in requirements():
@@ -150,34 +307,42 @@ def check_zip(zip_path: str, platform: str, wheels: list[str]) -> None:
                          f"expected {expected}")
 
 
-def build(output_dir: str) -> dict[str, str]:
+def build(output_dir: str, blender: str | None = None,
+          wheelhouse: str = WHEELHOUSE) -> dict[str, str]:
     """Validate the source tree, build one zip per platform into ``output_dir``, validate and
-    check each; returns {blender platform: zip path}."""
+    check each; returns {blender platform: zip path}. ``blender``: a Blender executable whose
+    extension tool to use (else this Python's bpy, else the pinned bpy wheel's)."""
     wheels = ensure_wheels()
-    tool = blender_ext_script()
     os.makedirs(output_dir, exist_ok=True)
     m = manifest()
     base = os.path.join(os.path.abspath(output_dir), f"{m['id']}-{m['version']}.zip")
-    subprocess.run([sys.executable, tool, "validate", ROOT], check=True, stdout=sys.stderr)
-    subprocess.run([sys.executable, tool, "build", "--source-dir", ROOT, "--split-platforms",
-                    "--output-filepath", base], check=True, stdout=sys.stderr)
-    zips = {}
-    for platform in m["platforms"]:
-        zip_path = base[:-len(".zip")] + "-" + platform.replace("-", "_") + ".zip"
-        if not os.path.exists(zip_path):
-            raise SystemExit(f"extension_tool: the extension tool did not write {zip_path}")
-        subprocess.run([sys.executable, tool, "validate", zip_path], check=True,
-                       stdout=sys.stderr)
-        check_zip(zip_path, platform, wheels)
-        zips[platform] = zip_path
+    with tempfile.TemporaryDirectory(prefix="relight-ext-tool-") as workdir:
+        tool = extension_tool(blender, wheelhouse, workdir)
+        print(f"extension_tool: Blender's extension tool from {tool.origin}", file=sys.stderr)
+        tool.run("validate", ROOT)
+        tool.run("build", "--source-dir", ROOT, "--split-platforms", "--output-filepath", base)
+        zips = {}
+        for platform in m["platforms"]:
+            zip_path = base[:-len(".zip")] + "-" + platform.replace("-", "_") + ".zip"
+            if not os.path.exists(zip_path):
+                raise SystemExit(f"extension_tool: the extension tool did not write {zip_path}")
+            tool.run("validate", zip_path)
+            check_zip(zip_path, platform, wheels)
+            zips[platform] = zip_path
     return zips
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--output-dir", default=os.path.join(ROOT, "dist"))
+    parser.add_argument("--blender", metavar="PATH",
+                        help="a Blender 4.2+ executable (or macOS Blender.app) whose extension "
+                             "tool to use; default: this Python's bpy, else the pinned bpy wheel")
+    parser.add_argument("--wheelhouse", default=WHEELHOUSE,
+                        help="where the pinned bpy wheel is looked for and downloaded "
+                             "(default: %(default)s, make venv's)")
     args = parser.parse_args()
-    for platform, path in build(args.output_dir).items():
+    for platform, path in build(args.output_dir, args.blender, args.wheelhouse).items():
         print(platform, path)
 
 
