@@ -42,8 +42,12 @@ LATTICE = 7
 #: Cycles' redraws of a jitter that fell outside the triangle before it keeps the centre.
 TRIES = 10
 #: Triangles narrower than this many texels (UV inradius) are refined wherever the jitter box
-#: crosses their edges, whatever the neighbours say (:meth:`Footprint.thin`).
+#: crosses their edges, whatever the neighbours say (:meth:`Footprint.thin`), if they hold at
+#: least THIN_SHARE of the box: a triangle much smaller than a texel holds a sliver of it, where
+#: Cycles' jitter barely moves (a dense displaced relief at 128^2 had every texel "thin": the
+#: direct stage refined them all, at every direction).
 THIN = 1.0
+THIN_SHARE = 0.25
 #: Sub-samples of smooth (or touching) texels :meth:`Footprint.prepare` makes at most for a
 #: chunk of directions (about 200 bytes each).
 PREPARED_ROWS = 1 << 21
@@ -144,7 +148,12 @@ class Footprint:
                 # the centre's distance to each edge: its barycentric times the height
                 dist = self.bary[a:a + len(tri)] * area2[:, None] / np.maximum(length, 1e-30)
                 crosses = dist.min(axis=1) < BOX / np.sqrt(2.0)
-                out.append(np.nonzero((inradius < THIN) & crosses)[0] + a)
+                cand = np.nonzero((inradius < THIN) & crosses)[0]
+                if len(cand):   # ... and covers enough of the box for a sliver to matter
+                    owner = self.samples(cand + a)[0]
+                    share = np.bincount(owner, minlength=len(cand)) / SAMPLES
+                    cand = cand[share >= THIN_SHARE]
+                out.append(cand + a)
             self._thin = np.concatenate(out) if out else np.zeros(0, np.int64)
         return self._thin
 
