@@ -61,7 +61,7 @@ class StudySettings:
     north_deg: float = 0.0
     elevation_m: float = 0.0
     sun_angle: float = SUN_ANGLE_DEG
-    visibility: str = "fraction"
+    visibility: str = "threshold"
     sheet_hours: tuple = (9.0, 12.0, 15.0)
 
     def validate(self) -> None:

@@ -294,6 +294,8 @@ def build_parser() -> argparse.ArgumentParser:
     cli_materials.add_parsers(sub)
     from . import export as cli_export
     cli_export.add_parsers(sub)
+    from . import sun_study as cli_sun_study
+    cli_sun_study.add_parsers(sub)
 
     p = sub.add_parser("validate", help="reproduce a paper's figures and check them")
     p.add_argument("--paper", required=True, choices=sorted(PAPER_CHECKS),
