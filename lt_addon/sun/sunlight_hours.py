@@ -178,33 +178,36 @@ def visibility(store, normals, directions, *, sun_angle_deg: float = 0.0,
 
 
 def _blocks(store, normals, D, Wm, texels):
-    """(a, b, V (M, b - a)) over blocks of texels: :func:`visibility`'s computation."""
+    """(a, b, V (M, b - a) float32) over blocks of texels: :func:`visibility`'s computation,
+    in single precision (T is half precision; a year of hourly suns at 256^2 took 14 s in
+    double, 2026-12-06)."""
     Wm = Wm.tocsc()
     used = np.flatnonzero(np.diff(Wm.indptr) > 0)
-    Wu = Wm[:, used].tocsr()                                               # (M, k)
-    B = np.asarray(store.directions.directions, np.float64)[used]          # (k, 3)
+    Wu = Wm[:, used].tocsr().astype(np.float32)                            # (M, k)
+    B = np.asarray(store.directions.directions, np.float32)[used]          # (k, 3)
+    D = np.asarray(D, np.float32)
     arr = store.array
-    nrm = np.asarray(normals, np.float64).reshape(-1, 3)
+    nrm = np.asarray(normals, np.float32).reshape(-1, 3)
     P = store.n_texels if texels is None else len(texels)
     for a, b in _chunks(P, max(len(D), len(used))):
         if texels is None:
-            T = np.asarray(arr[used, a:b], np.float64) if len(used) else np.zeros((0, b - a))
+            T = np.asarray(arr[used, a:b], np.float32) if len(used) else np.zeros((0, b - a))
             n = nrm[a:b]
         else:
             t = np.asarray(texels, np.int64)[a:b]
-            T = (np.asarray(arr[np.ix_(used, t)], np.float64) if len(used) else
-                 np.zeros((0, b - a)))
+            T = (np.asarray(arr[np.ix_(used, t)], np.float32) if len(used) else
+                 np.zeros((0, b - a), np.float32))
             n = nrm[t]
-        E = Wu @ T                                                         # (M, c)
-        C = Wu @ (np.maximum(B @ n.T, 0.0) / np.pi)                        # (M, c)
-        cos = D @ n.T                                                      # (M, c)
-        ok = (cos > 0.0) & (C > C_MIN)
-        V = np.zeros(E.shape, np.float64)
+        E = np.asarray(Wu @ T, np.float32)                                 # (M, c)
+        C = np.asarray(Wu @ (np.maximum(B @ n.T, 0.0) * np.float32(1.0 / np.pi)),
+                       np.float32)                                         # (M, c)
+        ok = (D @ n.T > 0.0) & (C > C_MIN)                                 # sun in front
+        V = np.zeros(E.shape, np.float32)
         np.divide(E, C, out=V, where=ok)
-        V = np.clip(V, 0.0, 1.0)
+        np.clip(V, 0.0, 1.0, out=V)
         V[V > 1.0 - SNAP] = 1.0          # T's half floats: lit and dark exactly
         V[V < SNAP] = 0.0
-        yield a, b, V.astype(np.float32)
+        yield a, b, V
 
 
 @dataclass
@@ -264,10 +267,11 @@ def sunlight_hours(store, directions, weight_h, *, albedo=None, normals=None,
     hours = np.zeros(store.n_texels, np.float64)
     if len(D):
         Wm = sun_weight_matrix(store.directions, D, sun_angle_deg, kernel)
+        wh32 = wh.astype(np.float32)
         for a, b, V in _blocks(store, normals, D, Wm, None):
             if visibility == "threshold":
                 V = (V >= 0.5).astype(np.float32)
-            hours[a:b] = wh @ V
+            hours[a:b] = wh32 @ V
     covered = (covered_texels(albedo, store, normals) if albedo is not None
                else np.any(np.asarray(normals) != 0, axis=1))
     hours[~covered] = 0.0
