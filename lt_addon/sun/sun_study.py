@@ -368,9 +368,15 @@ def _span(times, s: StudySettings) -> str:
 
 def dates_from(dates=None, start=None, end=None, every_days: int = 1) -> list:
     """The study's dates: a list of ISO dates, or ``start``..``end`` every ``every_days``."""
+    def one(text):
+        try:
+            return _dt.date.fromisoformat(str(text).strip())
+        except ValueError as exc:
+            raise InputError(f"bad date {str(text).strip()[:40]!r}: {exc} (ISO dates: "
+                             "2026-06-21)") from None
+    if dates is not None:
+        return [one(d) for d in dates]
     try:
-        if dates is not None:
-            return [_dt.date.fromisoformat(str(d).strip()) for d in dates]
-        return date_range(start, end, every_days)
+        return date_range(one(start), one(end), every_days)
     except ValueError as exc:
-        raise InputError(f"bad date: {exc}") from None
+        raise InputError(str(exc)) from None

@@ -110,20 +110,20 @@ def _cmd_sun_study(args) -> int:
     from ...lt_addon.sun import sun_study as ss
     from .common import EXIT_OK, CliError
 
-    if args.dates is not None:
-        if args.date_to is not None:
-            raise CliError("--to goes with --from, not with --dates")
-        dates = ss.dates_from([d for d in args.dates.split(",") if d.strip()])
-    else:
-        if args.date_to is None:
-            raise CliError("--from needs --to (the last date of the range)")
-        if args.every_days < 1:
-            raise CliError(f"--every-days must be >= 1, got {args.every_days}")
-        try:
+    try:
+        if args.dates is not None:
+            if args.date_to is not None:
+                raise CliError("--to goes with --from, not with --dates")
+            dates = ss.dates_from([d for d in args.dates.split(",") if d.strip()])
+        else:
+            if args.date_to is None:
+                raise CliError("--from needs --to (the last date of the range)")
+            if args.every_days < 1:
+                raise CliError(f"--every-days must be >= 1, got {args.every_days}")
             dates = ss.dates_from(start=args.date_from, end=args.date_to,
                                   every_days=args.every_days)
-        except InputError as exc:
-            raise CliError(str(exc)) from None
+    except InputError as exc:
+        raise CliError(str(exc)) from None
     settings = ss.StudySettings(
         latitude=args.lat, longitude=args.lon, tz=args.tz, dates=dates,
         hours=args.hours, step_minutes=args.step_minutes, window=args.window,

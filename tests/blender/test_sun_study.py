@@ -214,6 +214,10 @@ def test_relight_sun_study_writes_the_study_and_warns_when_the_suns_are_far(cour
     bad = ["Europe/Londn" if a == TZ else a for a in args[:-1]] + [str(c["root"] / "x")]
     assert run(bad) == 2
     assert capsys.readouterr().err.startswith("relight: error: time zone 'Europe/Londn'")
+    bad = ["2026-13-01" if a == ",".join(DATES) else a for a in bad]
+    assert run(bad) == 2
+    assert capsys.readouterr().err == ("relight: error: bad date '2026-13-01': month must be "
+                                       "in 1..12 (ISO dates: 2026-06-21)\n")
 
 
 def test_a_bake_that_holds_the_studys_suns_is_not_warned_about(courtyard, capsys):

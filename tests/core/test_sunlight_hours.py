@@ -245,6 +245,11 @@ def test_bad_studies_and_bad_reports_are_refused_before_anything_is_written(tmp_
                     (dict(hours=None, step_minutes=10, window=(20, 6)), "window")):
         with pytest.raises(InputError, match=msg):
             ss.run_study([report_path], _settings(**kw), str(out))
+    with pytest.raises(InputError, match="bad date '2026-13-01'"):
+        ss.dates_from(["2026-06-21", "2026-13-01"])
+    with pytest.raises(InputError, match="before it starts"):
+        ss.dates_from(start="2026-03-01", end="2026-02-01")
+    assert len(ss.dates_from(start="2026-01-01", end="2026-12-31", every_days=7)) == 53
     other = bake / "other.json"
     other.write_text(json.dumps({"kind": "steerable_texture"}))
     with pytest.raises(InputError, match="not a transport texture"):
