@@ -229,7 +229,8 @@ def run_study(report_paths, settings: StudySettings, out_dir: str, *, force: boo
                                        visibility=settings.visibility)
             t_hours = time.perf_counter() - t0
             near = sh.nearest_baked(store.directions, suns.directions)
-            near_t = np.where(suns.up, near[np.maximum(suns.index, 0)], np.nan)
+            near_t = (np.where(suns.up, near[np.maximum(suns.index, 0)], np.nan) if len(near)
+                      else np.full(len(suns.index), np.nan))
             far = near > FAR_DEG
             if far.any():
                 warnings.append(

@@ -267,3 +267,16 @@ def test_daylight_saving_gaps_are_said_and_blank_on_the_sheet(tmp_path):
                                                 hours=[1.5, 12]), str(tmp_path / "s"))
     assert rep["instants"]["skipped_clock_times"] == ["2026-03-29T01:30:00"]
     assert any("do not exist" in w for w in rep["warnings"])
+
+
+def test_a_polar_night_gives_zero_hours_and_says_so(tmp_path):
+    bake = tmp_path / "bake"
+    bake.mkdir()
+    report_path, _ = _bundle(bake, parse_direction_spec("hemi:50"))
+    rep = ss.run_study([report_path], _settings(latitude=80.0, longitude=15.0, tz="UTC",
+                                                dates=ss.dates_from(["2026-12-21"])),
+                       str(tmp_path / "s"))
+    assert rep["instants"]["sun_up"] == 0 and rep["objects"][0]["hours"]["max_h"] == 0.0
+    assert any("below the horizon" in w for w in rep["warnings"])
+    sheet = read_png(str(tmp_path / "s" / "A_shadow_study.png"))
+    assert sheet.shape[1] == 3 * 256 + 2 * 4
