@@ -193,7 +193,7 @@ def measure(build, resolution: int) -> dict:
     scene = _scene()
     objs = build()
     s = tx.settings_from_preset("draft", directions="hemi:64", resolution=resolution,
-                                indirect_resolution=resolution // 2)
+                                indirect_resolution=resolution // 2, bounces=2, sun_angle=2.0)
     t0 = time.perf_counter()
     try:
         out = run(tx.bake_job(scene, objs, s, tempfile.mkdtemp(prefix="relight-feature-"),

@@ -154,6 +154,7 @@ def compare_edit(scene, tensors, edits: dict, out_png: str, samples: int = 64,
 
     from ...lt_addon.io.contact_sheet import linear_to_srgb8, write_png
     from ...lt_addon.io.label import labelled_grid
+    from ..preview import preview_nodes
     from ..preview.compare_render import render_camera, saved_render_settings
 
     light = preview_light(scene)
@@ -208,7 +209,15 @@ def compare_edit(scene, tensors, edits: dict, out_png: str, samples: int = 64,
                             knobs[r][k].default_value = float(v)
                 update_preview(scene)
                 bpy.context.view_layer.update()
-                preview = render_camera(scene, os.path.join(tmp, f"p_{label}.exr"), 1)
+                # Cycles sees the preview for this render only (its output targets EEVEE)
+                undo = preview_nodes.render_previews(
+                    [o for o in (scene.objects.get(n) for n, _ in tensors.objects) if o],
+                    "CYCLES")
+                try:
+                    preview = render_camera(scene, os.path.join(tmp, f"p_{label}.exr"), 1)
+                finally:
+                    for f in undo:
+                        f()
                 colours = {**material_bake.file_colours(tensors), **edit}
                 metal = {k: v for k, v in material_bake.file_finish(tensors).items() if v[0] > 0}
                 cyc.glossy_bounces = tensors.bounces if metal else 0

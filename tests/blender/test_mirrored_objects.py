@@ -44,7 +44,7 @@ def _bake(mirrored: bool):
         bpy.context.view_layer.update()
         assert np.linalg.det(np.array(statue.matrix_world)[:3, :3]) < 0
     s = tx.settings_from_preset("draft", directions="hemi:64", resolution=R,
-                                indirect_resolution=R // 2)
+                                indirect_resolution=R // 2, bounces=2, sun_angle=2.0)
     out = run(tx.bake_job(scene, [statue, ground], s, tempfile.mkdtemp(prefix="relight-mir-"),
                           truth=0, compare=False, preview=False))
     (b, store, _), (g, gstore, grep) = (tx.load_bake(r["report"]) for r in out.reports)

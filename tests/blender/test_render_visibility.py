@@ -45,7 +45,7 @@ def _bake(scene, names):
 
     objs = [bpy.data.objects[n] for n in names]
     s = tx.settings_from_preset("draft", directions="hemi:64", resolution=R,
-                                indirect_resolution=R // 2)
+                                indirect_resolution=R // 2, bounces=2, sun_angle=2.0)
     out = run(tx.bake_job(scene, objs, s, tempfile.mkdtemp(prefix="relight-vis-"), truth=0,
                           compare=False, preview=False))
     loaded = [tx.load_bake(r["report"]) for r in out.reports]

@@ -58,7 +58,7 @@ def _bake_and_compare(two_maps: bool, choice=None, preview=False):
 
     scene, objs = _scene(two_maps)
     s = tx.settings_from_preset("draft", directions="hemi:64", resolution=R,
-                                indirect_resolution=R // 2)
+                                indirect_resolution=R // 2, bounces=2, sun_angle=2.0)
     with chosen_uv_map(choice):
         out = run(tx.bake_job(scene, objs, s, tempfile.mkdtemp(prefix="relight-uv-"), truth=0,
                               compare=False, preview=preview))
