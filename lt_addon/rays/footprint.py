@@ -226,23 +226,13 @@ class Footprint:
             slot = self._slot[idx]
         return slot
 
-    def prepare(self, points, idx) -> None:
-        """Make the sub-sample shading points of the points ``idx`` that :meth:`refine` does not
-        take on its flat path (smooth faces, texels touching other objects) once for the
-        directions to come (a chunk's: the union of what they refine), up to
-        :data:`PREPARED_ROWS` sub-samples; :meth:`refine` then takes their rows instead of
-        making them again for every direction (on the smooth bumps that set-up was 2/3 of
-        the direct stage)."""
+    def _sub_points(self, points, idx):
+        """The sub-samples of points ``idx`` (M,) as shading points of their own: ``(owner (N,)
+        among idx, ShadingPoints (N), weight (N,), centre weight (M,))``, each made as the
+        centres were (normals, terminator lift), with its texel's closure normal where a normal
+        map changes it and its texel's contact with other objects."""
         from .shading import shading_points
 
-        self._prep = None
-        idx = np.asarray(idx, np.int64)
-        flat = ~np.asarray(self.smooth, bool)[self.triangle[idx]]
-        if points.contact is not None:
-            flat &= ~points.contact.touching[idx]
-        idx = idx[~flat][:PREPARED_ROWS // SAMPLES]
-        if not len(idx):
-            return
         owner, tri, bary, weight, centre_w = self.samples(idx)
         sub = shading_points(self.vertices, self.triangles, self.corner_normals, self.smooth,
                              tri, bary, cutoff=self.cutoff, mirrored=self.mirrored,
@@ -257,6 +247,24 @@ class Footprint:
                 sub.Ns[m] = points.Ns[of[m]]
         if points.contact is not None:
             sub.contact = points.contact.subset(of)
+        return owner, sub, weight, centre_w
+
+    def prepare(self, points, idx) -> None:
+        """Make the sub-sample shading points of the points ``idx`` that :meth:`refine` does not
+        take on its flat path (smooth faces, texels touching other objects) once for the
+        directions to come (a chunk's: the union of what they refine), up to
+        :data:`PREPARED_ROWS` sub-samples; :meth:`refine` then takes their rows instead of
+        making them again for every direction (on the smooth bumps that set-up was 2/3 of
+        the direct stage)."""
+        self._prep = None
+        idx = np.asarray(idx, np.int64)
+        flat = ~np.asarray(self.smooth, bool)[self.triangle[idx]]
+        if points.contact is not None:
+            flat &= ~points.contact.touching[idx]
+        idx = idx[~flat][:PREPARED_ROWS // SAMPLES]
+        if not len(idx):
+            return
+        owner, sub, weight, centre_w = self._sub_points(points, idx)
         slot = np.full(len(self.texel), -1, np.int64)
         slot[idx] = np.arange(len(idx))
         start = np.searchsorted(owner, np.arange(len(idx) + 1))   # rows of each slot
@@ -353,25 +361,11 @@ class Footprint:
         """:meth:`refine` by sub-sample shading points of their own (smooth faces, texels
         touching other objects, or past the cache)."""
         from . import contact as contact_rays
-        from .shading import shading_points
 
-        owner, tri, bary, weight, centre_w = self.samples(idx)
+        owner, sub, weight, centre_w = self._sub_points(points, idx)
         out = centre_w * np.asarray(centre, np.float64)
         if not len(owner):
             return out
-        of = idx[owner]                                   # each sub-sample's point
-        sub = shading_points(self.vertices, self.triangles, self.corner_normals, self.smooth,
-                             tri, bary, cutoff=self.cutoff, mirrored=self.mirrored,
-                             bump=self.bump, correction=self.correction)
-        sub.epsilon = points.epsilon
-        mapped = points.mapped()
-        if mapped is not None:        # a normal map: the texel's closure normal
-            m = np.isin(of, mapped)
-            if m.any():
-                sub.Ns = sub.N.copy()
-                sub.Ns[m] = points.Ns[of[m]]
-        if points.contact is not None:
-            sub.contact = points.contact.subset(of)
         cos = cosine(sub, L)
         lit = np.nonzero(cos > 0)[0]
         val = np.zeros(len(owner))

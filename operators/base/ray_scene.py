@@ -177,16 +177,10 @@ def _to_world_mesh(obj_eval, matrix):
         obj_eval.to_mesh_clear()
 
 
-def casters(depsgraph, exclude_names=(), ray: str = "shadow"):
-    """World-space triangles of every object ``ray`` rays meet: (vertices (N, 3), triangles
-    (T, 3), count of objects and instances). ``ray`` "shadow": the shadow casters (objects
-    whose ``visible_shadow`` is off are left out, as Cycles leaves them out of shadow rays);
-    "diffuse": what diffuse bounce rays meet (``visible_diffuse``; an object that casts no
-    shadow still reflects light). The objects named in ``exclude_names`` are left out too (a
-    caller that reads them itself). The depsgraph is :class:`RenderGeometry`'s: objects hidden
-    from render, or in collections hidden from render or excluded, are not in it."""
-    flag = f"visible_{ray}"
-    verts, tris, n, offset = [], [], 0, 0
+def _caster_meshes(depsgraph, flag: str, exclude_names=()):
+    """``(object name, world vertices, triangles)`` of every evaluated object and instance
+    whose rays ``flag`` (``visible_shadow``, ``visible_diffuse``) meet, ``exclude_names`` left
+    out: what :func:`casters` and :func:`with_contacts` read."""
     for inst in depsgraph.object_instances:
         ob = inst.object
         if ob.type not in CASTER_TYPES or ob.original.name in exclude_names:
@@ -197,9 +191,20 @@ def casters(depsgraph, exclude_names=(), ray: str = "shadow"):
                 parent is not None and not getattr(parent, flag, True)):
             continue
         got = _to_world_mesh(ob, inst.matrix_world)
-        if got is None:
-            continue
-        co, tri = got
+        if got is not None:
+            yield original.name, got[0], got[1]
+
+
+def casters(depsgraph, exclude_names=(), ray: str = "shadow"):
+    """World-space triangles of every object ``ray`` rays meet: (vertices (N, 3), triangles
+    (T, 3), count of objects and instances). ``ray`` "shadow": the shadow casters (objects
+    whose ``visible_shadow`` is off are left out, as Cycles leaves them out of shadow rays);
+    "diffuse": what diffuse bounce rays meet (``visible_diffuse``; an object that casts no
+    shadow still reflects light). The objects named in ``exclude_names`` are left out too (a
+    caller that reads them itself). The depsgraph is :class:`RenderGeometry`'s: objects hidden
+    from render, or in collections hidden from render or excluded, are not in it."""
+    verts, tris, n, offset = [], [], 0, 0
+    for _, co, tri in _caster_meshes(depsgraph, f"visible_{ray}", exclude_names):
         verts.append(co)
         tris.append(tri + offset)
         offset += len(co)
@@ -222,21 +227,10 @@ def with_contacts(depsgraph, receivers, threads: int = 0):
     if not receivers:
         return 0
     verts, tris, owner, offset = [], [], [], 0
-    for inst in depsgraph.object_instances:
-        ob = inst.object
-        if ob.type not in CASTER_TYPES:
-            continue
-        parent = inst.parent.original if inst.is_instance and inst.parent else None
-        if not getattr(ob.original, "visible_shadow", True) or (
-                parent is not None and not getattr(parent, "visible_shadow", True)):
-            continue
-        got = _to_world_mesh(ob, inst.matrix_world)
-        if got is None:
-            continue
-        co, tri = got
+    for name, co, tri in _caster_meshes(depsgraph, "visible_shadow"):
         verts.append(co)
         tris.append(tri + offset)
-        owner.append(np.full(len(tri), ob.original.name, object))
+        owner.append(np.full(len(tri), name, object))
         offset += len(co)
     if not verts:
         return 0
