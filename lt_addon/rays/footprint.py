@@ -13,14 +13,17 @@ the centre, in the centre's triangle only (the bake never moves to a neighbourin
 A converged bake is therefore, per texel, the mean over the part of that box inside the triangle
 (fraction ``p``), mixed with the centre by the chance ``(1 - p)^10`` that all 10 draws fell
 outside. :class:`Footprint` computes it with a fixed stratified pattern over the box
-(:func:`offsets`), adaptively: a texel is refined for a direction only where its centre's value (lit or not)
-differs from one of its four neighbours' -- a shadow edge or the terminator passes within a texel
-of it; elsewhere visibility is one value over the box and the centre already is the mean (flat
-faces: the cosine is constant over a triangle; smooth ones vary by the normal's change over half
-a texel, not refined). Shadows narrower than a texel that fall between texel centres are missed.
+(:func:`offsets`), adaptively: a texel is refined for a direction only where its centre's value
+(lit or not) differs from one of its four neighbours' -- a shadow edge or the terminator passes
+within a texel of it -- or where it crosses the edge of a triangle thinner than a texel
+(:meth:`Footprint.thin`); elsewhere visibility is one value over the box and the centre already
+is the mean (flat faces: the cosine is constant over a triangle; smooth ones vary by the
+normal's change over half a texel, not refined). Shadows narrower than a texel that fall between
+texel centres on wide triangles are missed.
 
 Measured against Cycles' 256-spp bake of a hard sun (a flat-shaded brick relief, 64^2, planar
-UVs): see docs/transport-textures.md "Footprint".
+UVs, tests/blender/test_footprint.py) and the costs: docs/bench/2026-transport-log.md
+"2026-12-06: texel footprints".
 """
 
 from __future__ import annotations
