@@ -29,7 +29,7 @@ T itself is never held: it is streamed to a memory-mapped file whose pages are p
 memory above the level before the bake (what :mod:`..peak_memory` samples).
 
 The constants are the measured bytes per unit rounded up (bench and dates in
-docs/transport-textures.md, "Memory"): the balanced preset on the bumps demo at 4096^2 (16.8 M
+docs/bench/2026-transport-log.md, "Memory"): the balanced preset on the bumps demo at 4096^2 (16.8 M
 texels) and the statue with its ground at 1024^2, 2 cores, 2026-12-04.
 """
 

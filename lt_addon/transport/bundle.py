@@ -145,7 +145,7 @@ class TransportTextureSettings:
     # lights, bumps 256^2 / statue + ground 128^2: 32 rays 0.0320 / 0.0377, 64 rays 0.0294 /
     # 0.0321, 128 rays 0.0286 / 0.0296 for 0.6 s more on the statue, 256 rays 0.0283 / 0.0287
     # for 2.1 s more; 8 / 32 components 0.0302 / 0.0290 and 0.0377 / 0.0305; smoothing the
-    # images by 0.75 texels helped only at 32 rays or fewer; docs/transport-textures.md)
+    # images by 0.75 texels helped only at 32 rays or fewer; docs/bench/2026-transport-log.md)
     indirect_rays: int = setting(
         128, lo=4, hi=4096, label="Indirect Rays",
         help="Cosine-weighted rays per point of the indirect grid (gathered indirect light)")

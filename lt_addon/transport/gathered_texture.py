@@ -14,7 +14,7 @@ an environment of weights ``W[s, c]`` (:func:`.texture.environment_weights`) add
 ``max(0, W^T V @ images)``: the same (S, J) "direction matrix" form as the steerable term's
 (:func:`.texture.steering_matrix`), so the environment preview and exports take either. The
 clamp at 0 removes the PCA's small negatives (4.7 % of the texels at 16 components on the bumps,
->= -0.001 against a mean of 0.0023; measured in docs/transport-textures.md).
+>= -0.001 against a mean of 0.0023; measured in docs/bench/2026-transport-log.md).
 
 File: one ``.npz`` (images float16, coefficients float32, a JSON header) -- :func:`save` /
 :meth:`GatheredIndirect.load`.

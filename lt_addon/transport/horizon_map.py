@@ -71,7 +71,7 @@ def side(resolution: int, horizon_resolution: int = 0) -> int:
 
 #: The fewest azimuths of the horizons when the scene's Sun is animated (its path is in the
 #: direction set): a low Sun on its path needs the horizons at the texture's side and this many
-#: azimuths (:func:`for_sun_path`; measured in docs/transport-textures.md).
+#: azimuths (:func:`for_sun_path`; measured in docs/bench/2026-transport-log.md).
 PATH_AZIMUTHS = 128
 
 

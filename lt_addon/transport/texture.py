@@ -902,7 +902,7 @@ def smooth_in_coverage(images, coverage, sigma: float) -> np.ndarray:
     The indirect light is smooth across a surface but a low-sample bake of it is noisy; a blur
     of ``sigma`` texels removes much of the noise, but also the term's spatial detail (measured
     on bumps, 400 directions, error of the indirect part relative to the whole image: 0.75 texels
-    beat 1.5 and 0.5 at 128^2 and 256^2; docs/transport-textures.md). Only covered texels contribute, so the empty space
+    beat 1.5 and 0.5 at 128^2 and 256^2; docs/bench/2026-transport-log.md). Only covered texels contribute, so the empty space
     between UV islands does not darken their borders; uncovered texels keep their values.
 
     Parameters

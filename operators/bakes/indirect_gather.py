@@ -5,7 +5,7 @@ triangles with its UVs, every other shadow caster's, the gather points of the in
 and stores the PCA over directions as one :class:`...lt_addon.transport.gathered_texture.
 GatheredIndirect` per object. Measured against the order-3 steerable bake (Cycles, 9 calls) by
 ``benchmarks/bench_indirect_gather.py``: lower error at every light measured, in 1/2 to 1/4 of
-its time (docs/transport-textures.md).
+its time (docs/bench/2026-transport-log.md).
 
 What it leaves out (the report's ``indirect`` figures count them): a ray that meets a
 receiver's back side or a non-receiver adds nothing (Cycles would shade that surface); gather

@@ -7,7 +7,7 @@ values, the links, images by file, size and packed size). Lamps and the world ar
 the bakes replace both with their own lights. Blender's and this extension's versions are, as
 Cycles' output may change between them.
 
-Known blind spot, said so in docs/transport-textures.md (Resumable bakes): an image edited in
+Known blind spot, said so in docs/transport-textures.md (Resume and cancel): an image edited in
 Blender and not saved or packed again keeps its key (its pixels are not hashed; a 4k image would
 cost seconds per bake).
 """
