@@ -276,8 +276,6 @@ class Footprint:
 
     def _refine_prepared(self, idx, L, centre, occluder, cosine_at, shadow_origins):
         """:meth:`refine` of points ``idx`` (all prepared) from the prepared rows."""
-        from . import contact as contact_rays
-
         pr = self._prep
         slot = pr["slot"][idx]
         start, stop = pr["start"][slot], pr["start"][slot + 1]
@@ -288,8 +286,16 @@ class Footprint:
         out = pr["centre"][slot] * np.asarray(centre, np.float64)
         if not len(rows):
             return out
-        sub = pr["sub"]
-        cos = cosine_at(sub, L, rows)
+        val = self._sub_values(pr["sub"], rows, cosine_at(pr["sub"], L, rows), L, occluder,
+                               shadow_origins)
+        return out + np.bincount(owner, weights=pr["weight"][rows] * val, minlength=len(idx))
+
+    def _sub_values(self, sub, rows, cos, L, occluder, shadow_origins) -> np.ndarray:
+        """cosine x visibility / pi (len(rows),) of the sub-sample shading points ``rows`` of
+        ``sub`` towards ``L``, given their cosines ``cos``: one shadow ray each where lit, and
+        a contact ray where it touches another object (:mod:`.contact`)."""
+        from . import contact as contact_rays
+
         lit = np.nonzero(cos > 0)[0]
         val = np.zeros(len(rows))
         if len(lit):
@@ -302,7 +308,7 @@ class Footprint:
                     hit[near] = contact_rays.blocked(sub, r[near], L, origins[near])
             val[lit] = np.where(hit, 0.0, cos[lit] / np.pi)
             self.rays += len(lit)
-        return out + np.bincount(owner, weights=pr["weight"][rows] * val, minlength=len(idx))
+        return val
 
     def refine(self, points, idx, L, centre, occluder, cosine, shadow_origins) -> np.ndarray:
         """The footprint means (M,) of points ``idx`` towards unit ``L`` (3,), given their
@@ -363,23 +369,10 @@ class Footprint:
                        shadow_origins) -> np.ndarray:
         """:meth:`refine` by sub-sample shading points of their own (smooth faces, texels
         touching other objects, or past the cache)."""
-        from . import contact as contact_rays
-
         owner, sub, weight, centre_w = self._sub_points(points, idx)
         out = centre_w * np.asarray(centre, np.float64)
         if not len(owner):
             return out
-        cos = cosine(sub, L)
-        lit = np.nonzero(cos > 0)[0]
-        val = np.zeros(len(owner))
-        if len(lit):
-            origins = shadow_origins(sub, L, lit)
-            hit = occluder.occluded(origins, np.asarray(L, np.float32))
-            if sub.contact is not None:
-                near = np.nonzero(sub.contact.touching[lit] & ~hit)[0]
-                if len(near):
-                    hit[near] = contact_rays.blocked(sub, lit[near], L, origins[near])
-            val[lit] = np.where(hit, 0.0, cos[lit] / np.pi)
-            self.rays += len(lit)
-        np.add.at(out, owner, weight * val)
-        return out
+        val = self._sub_values(sub, np.arange(len(owner)), cosine(sub, L), L, occluder,
+                               shadow_origins)
+        return out + np.bincount(owner, weights=weight * val, minlength=len(idx))

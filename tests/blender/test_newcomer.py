@@ -40,25 +40,15 @@ def _fingerprint(mat) -> dict:
 
 
 def _render(scene, path: str) -> np.ndarray:
-    """F12 with Cycles, tiny and few samples, fixed seed: (H, W, 3) linear RGB."""
-    import bpy
+    """F12 with Cycles, tiny and few samples, fixed seed: (H, W, 3) linear RGB (the project's
+    own camera render, as Relight Compare renders)."""
+    from relightable_textures.operators.preview.compare_render import render_camera
 
-    from relightable_textures.lt_addon.io import exrio
-
-    scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
-    scene.cycles.samples = 8
     scene.cycles.seed = 3
-    scene.cycles.use_denoising = False
-    scene.cycles.use_adaptive_sampling = False
     scene.render.resolution_x, scene.render.resolution_y = 48, 36
     scene.render.resolution_percentage = 100
-    scene.render.image_settings.file_format = "OPEN_EXR"
-    scene.render.image_settings.color_depth = "32"
-    scene.render.filepath = path
-    bpy.ops.render.render(write_still=True)
-    ch, _ = exrio.read_exr(path)
-    return np.stack([ch["R"], ch["G"], ch["B"]], -1).astype(np.float64)
+    return render_camera(scene, path, 8)
 
 
 def test_a_newcomer_bakes_previews_renders_removes_and_undoes(tmp_path, monkeypatch):
