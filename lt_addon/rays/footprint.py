@@ -5,25 +5,26 @@ Every further sample of Cycles' bake jitters the point within the texel
 (``bake_jitter_barycentric`` in ``kernel/integrator/init_from_bake.h``, Blender 4.2-5.x): the
 centre's barycentric coordinates move by ``(r - 0.5)`` times the differentials Blender computed
 for the texel (``bake_differentials`` in ``render/intern/bake.cc``), and a point that falls
-outside the centre's triangle is drawn again, up to 10 times, then left at the centre. Blender's
-differentials are ``0.5 / A`` times the UV edge terms (``A`` twice the UV triangle's area in
-texels): half the barycentric derivative, so the jitter spans a box of half a texel a side around
-the centre, in the centre's triangle only (the bake never moves to a neighbouring triangle).
+outside the centre's triangle is drawn again, up to 10 times, then left at the centre. The
+jitter spans a box around the centre, in the centre's triangle only (the bake never moves to a
+neighbouring triangle), whose side depends on the Blender release (:func:`jitter_box`): half a
+texel up to 5.2.0 (Blender's differentials were half the barycentric derivative), a whole texel
+from 5.2.1.
 
 A converged bake is therefore, per texel, the mean over the part of that box inside the triangle
 (fraction ``p``), mixed with the centre by the chance ``(1 - p)^10`` that all 10 draws fell
-outside. :class:`Footprint` computes it with a fixed stratified pattern over the box
-(:func:`offsets`), adaptively: a texel is refined for a direction only where its centre's value
-(lit or not) differs from one of its four neighbours' -- a shadow edge or the terminator passes
-within a texel of it -- or where it crosses the edge of a triangle thinner than a texel
-(:meth:`Footprint.thin`); elsewhere visibility is one value over the box and the centre already
-is the mean (flat faces: the cosine is constant over a triangle; smooth ones vary by the
-normal's change over half a texel, not refined). Shadows narrower than a texel that fall between
-texel centres on wide triangles are missed.
+outside. :class:`Footprint` computes it with a stratified pattern over the box (:func:`offsets`,
+shifted per texel: :func:`texel_shift`), adaptively: a texel is refined for a direction only
+where its centre's value (lit or not) differs from one of its four neighbours' -- a shadow edge
+or the terminator passes within a texel of it -- or where it crosses the edge of a triangle
+thinner than a texel (:meth:`Footprint.thin`); elsewhere visibility is one value over the box
+and the centre already is the mean (flat faces: the cosine is constant over a triangle; smooth
+ones vary by the normal's change over the box, not refined). Shadows narrower than a texel that
+fall between texel centres on wide triangles are missed.
 
 Measured against Cycles' 256-spp bake of a hard sun (a flat-shaded brick relief, 64^2, planar
 UVs, tests/blender/test_footprint.py) and the costs: docs/bench/2026-transport-log.md
-"2026-12-06: texel footprints".
+"2026-12-06: texel footprints" and "2026-12-06: Blender 5.2.1's whole-texel jitter".
 """
 
 from __future__ import annotations
@@ -32,14 +33,26 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: Side of Cycles' jitter box in texels (Blender's bake differentials: half the derivative).
+#: Side of Cycles' jitter box in texels up to Blender 5.2.0 (Blender's bake differentials: half
+#: the barycentric derivative) and from 5.2.1 (the whole derivative), measured 2026-12-06 on each
+#: release's bake of a step in an emission (a 16^2 plane, 1024 spp: the share of the box past
+#: the step; 4.2.13, 4.5.15, 5.0.1, 5.1.2, 5.2.0: 0.502; 5.2.1, 5.2.2, 5.2.3, 5.3.0: 0.999;
+#: tests/blender/test_footprint.py checks the running Blender's).
 BOX = 0.5
+BOX_FROM_5_2_1 = 1.0
+WHOLE_TEXEL_FROM = (5, 2, 1)
 #: Sub-samples of a refined texel and the generator of their rank-1 lattice over the box:
-#: sample i at ((i + 1/2) / N, ((i * K) mod N + 1/2) / N). A regular 4 x 4 grid has 4 distinct
-#: columns and rows, and against relief whose edges run along the UV axes its coverage came in
-#: quarters (1.40x Cycles' own 16-spp distance from its 1024-spp bake at one of 12 suns, brick
-#: relief at 128^2); the lattice has 16 of each: 1.01x at worst (13-point Fibonacci 2.18x,
-#: 16 with K = 5 1.14x, 34-point Fibonacci 1.01x at twice the rays). Measured 2026-12-06.
+#: sample i at ((i + 1/2) / N, ((i * K) mod N + 1/2) / N), shifted per texel (:func:`texel_shift`).
+#: One lattice for every texel errs alike on every texel of a repeated pattern: 16 rays with
+#: K = 7 were 1.01x Cycles' own 16-spp distance from its 1024-spp bake at worst over 12 suns on
+#: a brick relief at 128^2 with the half-texel box (an earlier set of suns), but 1.83x on the
+#: relief at 64^2 and 3.17x at 128^2 under the whole-texel box (a lit sliver along each brick's
+#: top edge held one of the 9 sub-samples inside in every such texel). Shifted per texel, that
+#: error is noise, about Cycles' own 16 samples': mean 0.98x / 0.91x, worst 1.73x / 1.19x (half /
+#: whole box, 12 suns at 128^2). The 34-point Fibonacci lattice (K = 21) halves it (worst 0.51x
+#: / 0.66x) but made the direct stage 1.6-2.1x slower on the smooth demo scenes (their
+#: sub-samples are shading points of their own). Measured 2026-12-06
+#: (benchmarks/bench_footprint.py; the log's "Blender 5.2.1's whole-texel jitter").
 SAMPLES = 16
 LATTICE = 7
 #: Cycles' redraws of a jitter that fell outside the triangle before it keeps the centre.
@@ -54,18 +67,42 @@ THIN_SHARE = 0.25
 #: Sub-samples of smooth (or touching) texels :meth:`Footprint.prepare` makes at most for a
 #: chunk of directions (about 200 bytes each).
 PREPARED_ROWS = 1 << 21
+#: Memory for the smooth texels :meth:`Footprint.centroids` keeps (20 bytes each: 13 M texels).
+CENTROID_BYTES = 256 << 20
 #: Memory for the flat texels' sub-sample positions, kept across directions (16 samples x 16
 #: bytes + 4 a texel: about a million texels); texels past it are set up every direction.
 CACHE_BYTES = 256 << 20
 
 
-def offsets(n: int | None = None, k: int | None = None) -> np.ndarray:
-    """(n, 2) sub-sample offsets from the texel centre in texels: the rank-1 lattice
-    (:data:`SAMPLES`, :data:`LATTICE` by default) over Cycles' jitter box."""
+def jitter_box(version) -> float:
+    """The side in texels of Cycles' bake jitter box in Blender ``version`` (a tuple such as
+    ``bpy.app.version``): :data:`BOX` before 5.2.1, :data:`BOX_FROM_5_2_1` from it."""
+    return BOX_FROM_5_2_1 if tuple(version)[:3] >= WHOLE_TEXEL_FROM else BOX
+
+
+def texel_shift(texel) -> np.ndarray:
+    """(M, 2) a fixed shift in [0, 1)^2 of the sub-sample lattice for each texel index
+    ``texel`` (M,) (integer hashes: the same texel gets the same shift in every tile, chunk
+    and run)."""
+    t = np.asarray(texel).astype(np.uint64)
+    with np.errstate(over="ignore"):
+        a = t * np.uint64(0x9E3779B97F4A7C15)
+        b = (t + np.uint64(0x632BE59BD9B4E019)) * np.uint64(0xC2B2AE3D27D4EB4F)
+    return np.stack([a >> np.uint64(40), b >> np.uint64(40)], axis=1) / float(1 << 24)
+
+
+def offsets(n: int | None = None, k: int | None = None, box: float = BOX,
+            shift=None) -> np.ndarray:
+    """Sub-sample offsets from the texel centre in texels: the rank-1 lattice (:data:`SAMPLES`,
+    :data:`LATTICE` by default) over a jitter box of side ``box``; (n, 2), or (M, n, 2) with
+    each of M texels' ``shift`` (M, 2) (:func:`texel_shift`) added modulo the box."""
     n = SAMPLES if n is None else int(n)
     k = LATTICE if k is None else int(k)
     i = np.arange(n)
-    return (np.stack([(i + 0.5) / n, ((i * k) % n + 0.5) / n], axis=1) - 0.5) * BOX
+    base = np.stack([(i + 0.5) / n, ((i * k) % n + 0.5) / n], axis=1)
+    if shift is not None:
+        base = np.mod(base[None] + np.asarray(shift, np.float64)[:, None, :] - 0.5 / n, 1.0)
+    return (base - 0.5) * float(box)
 
 
 def edges(texel, resolution: int, values) -> np.ndarray:
@@ -96,7 +133,8 @@ class Footprint:
     vertices : (V, 3) world;  triangles : (T, 3);  corner_normals : (T, 3, 3);  smooth : (T,)
     bool;  cutoff, mirrored, bump, correction : as :func:`.shading.shading_points` takes them;
     uv : (T, 3, 2) the bake's UV map;  resolution : texels a side;  texel : (P,) each point's
-    texel;  triangle : (P,);  bary : (P, 3) (the texel samples' own arrays, not copies).
+    texel;  triangle : (P,);  bary : (P, 3) (the texel samples' own arrays, not copies);
+    box : the jitter box's side in texels (:func:`jitter_box` of the Blender that bakes).
     """
 
     vertices: np.ndarray
@@ -112,7 +150,9 @@ class Footprint:
     texel: np.ndarray
     triangle: np.ndarray
     bary: np.ndarray
+    box: float = BOX
     refined: int = 0        # texel-directions refined so far
+    shifted: int = 0        # texel-directions moved to their box's centroid so far
     rays: int = 0           # sub-sample rays cast so far
 
     def subset(self, rows) -> "Footprint":
@@ -123,14 +163,94 @@ class Footprint:
         return Footprint(self.vertices, self.triangles, self.corner_normals, self.smooth,
                          self.cutoff, self.mirrored, self.bump, self.correction, self.uv,
                          self.resolution, self.texel[rows], self.triangle[rows],
-                         self.bary[rows])
+                         self.bary[rows], self.box)
 
     def edges(self, values) -> np.ndarray:
         """The points to refine at a direction whose centre values are ``values`` (P,):
-        :func:`edges` of this bake's points, and the :meth:`thin` ones."""
+        :func:`edges` of this bake's points, and the :meth:`thin` ones (but those
+        :meth:`centroids` shifts instead)."""
         found = edges(self.texel, self.resolution, values)
         thin = self.thin()
+        shifted = getattr(self, "_centroids", None)
+        if shifted is not None and len(shifted[0]) and len(thin):
+            thin = thin[~np.isin(thin, shifted[0], assume_unique=True)]
         return np.union1d(found, thin) if len(thin) else found
+
+    def centroids(self, points):
+        """The smooth texels whose jitter box their triangle clips: ``(idx (m,), N (m, 3)
+        float32, weight (m,) float32)``. Where no shadow edge passes (:func:`edges`), such a
+        texel's converged value is the cosine's mean over the inside of the box, not its value at
+        the centre -- first order in the cosine's change across the texel -- and that mean is,
+        to second order, the cosine at the inside's centroid: ``(1 - weight) * centre + weight *
+        max(N . L, 0) / pi`` with ``N`` the shading normal there and ``weight`` the chance that
+        a draw landed inside (:meth:`shift`); no ray. On the smooth bumps at 128^2 (triangles of
+        two texels: every other texel clipped) this is what the 16 rays of every such texel
+        bought (docs/bench/2026-transport-log.md, "Blender 5.2.1's whole-texel jitter").
+        Texels with a normal map's closure normal or touching another object are left to the
+        lattice. Made once, for up to :data:`CENTROID_BYTES` of them; the rest keep the
+        lattice."""
+        if getattr(self, "_centroids", None) is None:
+            from .shading import shading_points
+
+            skip = np.zeros(len(self.texel), bool)
+            if points.mapped() is not None:
+                skip[points.mapped()] = True
+            if points.contact is not None:
+                skip |= np.asarray(points.contact.touching, bool)
+            room = CENTROID_BYTES // 20
+            smooth = np.asarray(self.smooth, bool)
+            R = float(self.resolution)
+            I, N, W = [], [], []
+            for a in range(0, len(self.texel), 1 << 16):
+                cand = np.arange(a, min(a + (1 << 16), len(self.texel)))
+                cand = cand[smooth[self.triangle[cand]] & ~skip[cand]]
+                if not len(cand) or room <= 0:
+                    continue
+                # the centre's distance to each edge (its barycentric times the height) against
+                # the box's half-diagonal: only these can be clipped
+                uv = self.uv[self.triangle[cand]] * R
+                e = np.stack([uv[:, 2] - uv[:, 1], uv[:, 0] - uv[:, 2], uv[:, 1] - uv[:, 0]], 1)
+                length = np.linalg.norm(e, axis=2)
+                area2 = np.abs(e[:, 2, 0] * (-e[:, 1, 1]) - e[:, 2, 1] * (-e[:, 1, 0]))
+                dist = self.bary[cand] * area2[:, None] / np.maximum(length, 1e-30)
+                cand = cand[dist.min(axis=1) < self.box / np.sqrt(2.0)]
+                if not len(cand):
+                    continue
+                owner, tri, bary, weight, centre_w = self.samples(cand)
+                k_in = np.bincount(owner, minlength=len(cand))
+                keep = (k_in > 0) & (k_in < SAMPLES)
+                if not keep.any():
+                    continue
+                mean = np.stack([np.bincount(owner, weights=bary[:, j], minlength=len(cand))
+                                 for j in range(3)], axis=1) / np.maximum(k_in, 1)[:, None]
+                cand, mean, jit = cand[keep][:room], mean[keep][:room], (1 - centre_w)[keep][:room]
+                sp = shading_points(self.vertices, self.triangles, self.corner_normals,
+                                    self.smooth, self.triangle[cand], mean, cutoff=self.cutoff,
+                                    mirrored=self.mirrored, bump=self.bump,
+                                    correction=self.correction)
+                I.append(cand)
+                N.append(sp.N.astype(np.float32))
+                W.append(jit.astype(np.float32))
+                room -= len(cand)
+            self._centroids = ((np.concatenate(I), np.concatenate(N), np.concatenate(W)) if I
+                               else (np.zeros(0, np.int64), np.zeros((0, 3), np.float32),
+                                     np.zeros(0, np.float32)))
+        return self._centroids
+
+    def shift(self, values, refined, L) -> None:
+        """Move ``values`` (P,) (centre values towards unit ``L``) of the lit :meth:`centroids`
+        texels not among ``refined`` to their box's mean, in place."""
+        idx, N, w = self._centroids
+        if not len(idx):
+            return
+        take = values[idx] > 0
+        if len(refined):
+            take &= ~np.isin(idx, refined)
+        i = np.nonzero(take)[0]
+        if len(i):
+            cos = np.maximum(N[i].astype(np.float64) @ np.asarray(L, np.float64), 0.0)
+            values[idx[i]] = (1.0 - w[i]) * values[idx[i]] + w[i] * cos / np.pi
+            self.shifted += len(i)
 
     def thin(self) -> np.ndarray:
         """Indices of the points whose jitter box crosses an edge of a triangle narrower than
@@ -150,7 +270,7 @@ class Footprint:
                 inradius = area2 / np.maximum(length.sum(axis=1), 1e-30)
                 # the centre's distance to each edge: its barycentric times the height
                 dist = self.bary[a:a + len(tri)] * area2[:, None] / np.maximum(length, 1e-30)
-                crosses = dist.min(axis=1) < BOX / np.sqrt(2.0)
+                crosses = dist.min(axis=1) < self.box / np.sqrt(2.0)
                 cand = np.nonzero((inradius < THIN) & crosses)[0]
                 if len(cand):   # ... and covers enough of the box for a sliver to matter
                     owner = self.samples(cand + a)[0]
@@ -169,8 +289,8 @@ class Footprint:
         w = self.bary[idx]
         uv = self.uv[tri]                                            # (M, 3, 2)
         c = np.einsum("mk,mkj->mj", w, uv)
-        off = offsets() / float(self.resolution)                     # (K, 2)
-        q = c[:, None, :] + off[None]                                # (M, K, 2)
+        off = offsets(box=self.box, shift=texel_shift(self.texel[idx]))   # (M, K, 2) texels
+        q = c[:, None, :] + off / float(self.resolution)
         e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
         det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
         # Blender leaves the differentials 0 (no jitter) for a UV triangle of no area

@@ -122,8 +122,9 @@ class TransportTextureSettings:
         "Diffuse, capped by Total), as its render has them"))
     texel_sampling: str = setting("footprint", label="Texel Sampling", choices=(
         ("footprint", "Footprint", "Where a shadow edge or a thin triangle passes a texel, "
-         "average 16 rays over the texel as a converged Cycles bake does (at 2 degrees on a "
-         "brick relief: 0.03 from Cycles' converged bake, where one ray is 0.20)"),
+         "average 16 rays over the texel as a converged Cycles bake does (a brick relief under "
+         "a 2-degree sun: 0.07 from Cycles' converged bake, as close as 16 Cycles samples; "
+         "one ray is 0.36)"),
         ("centre", "Centre", "One ray per texel, at its centre: exactly a 1-spp Cycles bake")),
         help="Where in each texel the direct rays start")
     direct: str = setting("auto", label="Direct Light", choices=(
@@ -288,9 +289,12 @@ def direct_summary(direct: dict, directions: int) -> str:
         if direct.get("texel_sampling") == "footprint" and direct.get("texels"):
             texel_dirs = sum(direct["texels"]) * directions
             refined = sum(direct.get("footprint_refined") or [0])
+            shifted = sum(direct.get("footprint_shifted") or [0])
             footprint = (f"; texel footprints at {100 * refined / max(texel_dirs, 1):.0f} % of "
                          f"texel-directions, {direct.get('footprint_rays', 0) / max(texel_dirs, 1):.2f}"
-                         " rays per texel-direction more")
+                         " rays per texel-direction more"
+                         + (f", {100 * shifted / max(texel_dirs, 1):.0f} % moved to their "
+                            "jitter box's centroid" if shifted else ""))
         return (f"Direct light: {directions} directions by rays ({direct.get('library', '')}, "
                 f"{direct.get('seconds', 0):.1f} s, "
                 f"{direct.get('rays_per_second', 0) / 1e6:.1f} M rays/s{horizons}{footprint})")

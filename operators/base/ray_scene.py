@@ -367,11 +367,13 @@ def receiver_points(obj, depsgraph, resolution: int, Ns_image=None, footprint: b
                             cutoff=cutoff, mirrored=m.mirrored, Ns=None, bump=bump,
                             correction=correction)
     if footprint:
-        from ...lt_addon.rays.footprint import Footprint
+        from ...lt_addon.rays.footprint import Footprint, jitter_box
 
+        # the jitter box of the Blender that bakes: half a texel up to 5.2.0, a whole one from 5.2.1
         points.footprint = Footprint(m.co, tri, corner_normals, smooth, cutoff, m.mirrored, bump,
                                      correction, uv, resolution, samples.texel,
-                                     samples.triangle, samples.bary)
+                                     samples.triangle, samples.bary,
+                                     box=jitter_box(bpy.app.version))
     if Ns is not None:
         bad = np.isnan(Ns).any(axis=1)
         Ns[bad] = points.N[bad]
