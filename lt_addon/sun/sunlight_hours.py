@@ -30,9 +30,8 @@ directions. Here:
   blend of a shadow edge, or half covered at a wall's foot, counts half). Against a ray count
   from the texel centres (tests/blender/test_sun_study.py, docs/sun-studies.md) the threshold
   was closer on average: on a courtyard baked as users bake it (footprint texels, 400
-  directions plus the study's sun paths at 1 degree) 0.03 h a texel against 0.19 h over a
-  36-hour study; the fraction's worst texel was closer (5.8 h against 10.3 h, one texel at a
-  wall's foot whose centre is under the wall and most of its footprint outside).
+  directions plus the study's sun paths at 1 degree) 0.02 h a texel against 0.20 h over a
+  36-hour study, and its worst texel too (0.8 h against 5.2 h).
 
 Where the Sun is far from every baked direction the blend of neighbours' shadows places a
 shadow edge wrongly by up to the spacing: :func:`nearest_baked` says how far, and

@@ -124,15 +124,16 @@ def test_sunlight_hours_against_a_brute_force_ray_count(courtyard):
     solstices, in 10-minute instants). Measured (2026-12-06; mean / worst hours a texel,
     ground then north wall):
 
-    - hemi:400, the suns up to 5.7 deg from it: threshold (the default) 0.195 / 8.7 and
-      0.03 / 0.7, fraction 0.32 / 5.8 and 0.03 / 0.8;
-    - that set plus the study's paths (suns within 0.5 deg): threshold 0.030 / 10.3 and
-      0.01 / 0.7, fraction 0.20 / 5.8 and 0.03 / 0.9;
+    - hemi:400, the suns up to 5.7 deg from it: threshold (the default) 0.186 / 1.0 and
+      0.03 / 1.2, fraction 0.31 / 5.2 and 0.03 / 1.35;
+    - that set plus the study's paths (suns within 0.5 deg): threshold 0.024 / 0.8 and
+      0.01 / 1.2, fraction 0.20 / 5.2 and 0.03 / 1.4;
     - the same with centre texels: threshold 0.043 / 0.3 and 0.01 / 0.3, fraction 0.03 / 0.2
       and 0.01 / 0.2.
 
-    The worst texels of the footprint bakes sit at a wall's foot: their centre is under the
-    wall, most of their footprint outside (the ray count says 0 h, the bake's T lit). With
+    The worst texels of the footprint bakes sit at a wall's foot, where the bake's T averages
+    the texel's footprint and the ray count samples its centre. (Before each texel shifted the
+    footprint's lattice, one such texel, on the ground's diagonal, was 8.7-10.3 h off.) With
     centre texels, as the ray count samples, the map is within a few 10-minute instants of it
     everywhere once the bake holds the study's paths."""
     c = courtyard
@@ -153,10 +154,10 @@ def test_sunlight_hours_against_a_brute_force_ray_count(courtyard):
     feet = (abs(abs(x) - 1.6) < 0.25 or abs(abs(x) - 2.0) < 0.25) and -1.8 < y < 2.2 or \
         abs(y - 1.8) < 0.25 or abs(y - 2.2) < 0.25
     assert feet, (x, y)
-    # the suns 1-6 degrees from the default set's directions: shadow edges blended, off by
-    # hours near them -- the warning's case
+    # the suns 1-6 degrees from the default set's directions: shadow edges blended, an hour
+    # off near them -- the warning's case
     g_mean, g_worst, _ = got[("hemi:400", "threshold")]["Ground"]
-    assert 0.1 < g_mean < 0.4 and g_worst > 1.0
+    assert 0.1 < g_mean < 0.4 and g_worst > 0.5
     assert got[("paths", "threshold")]["Ground"][0] < g_mean / 3
 
 
