@@ -45,6 +45,22 @@ MAX_SHEET_CELLS = 60
 SHEET_DATES = 6
 
 
+def bake_for(settings) -> str:
+    """What to do about suns far from the bake's directions: the ``bake-textures --study``
+    that adds this study's hours and paths (:mod:`.study_directions`), or, past its dates,
+    what to pick."""
+    from .study_directions import MAX_DATES
+
+    dates = sorted({str(getattr(d, "isoformat", lambda: d)()) for d in settings.dates})
+    if len(dates) > MAX_DATES:
+        return (f"bake with --study for up to {MAX_DATES} of these {len(dates)} dates (their "
+                "hours and sun paths), or accept the blend")
+    extra = "".join(f",{k}={v:g}" for k, v in (("north", settings.north_deg),
+                                                 ("elevation", settings.elevation_m)) if v)
+    return (f"bake with --study {settings.latitude:g},{settings.longitude:g},{settings.tz},"
+            f"{','.join(dates)}{extra} to add the study's hours and sun paths")
+
+
 @dataclass
 class StudySettings:
     """What a study asks (the CLI's options). Dates: ISO strings or dates; ``hours`` clock
@@ -238,8 +254,7 @@ def run_study(report_paths, settings: StudySettings, out_dir: str, *, force: boo
                     f"are more than {FAR_DEG:g} deg from every baked direction (up to "
                     f"{near.max():.1f} deg, median {np.median(near):.1f}): their shadows are "
                     "blended from the neighbouring directions', and texels near a shadow edge "
-                    "can be off by hours; extend the bake's directions along the study's sun "
-                    "paths (lt_addon.sun.study_times.with_study; docs/sun-studies.md)")
+                    f"can be off by hours; {bake_for(settings)} (docs/sun-studies.md)")
             files = output_names(stem)
             t0 = time.perf_counter()
             summary = result.summary()

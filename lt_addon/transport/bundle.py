@@ -115,7 +115,13 @@ class TransportTextureSettings:
     sun_path_step: float = setting(
         0.5, lo=0.05, hi=10.0, label="Sun Path Step",
         help="Degrees between the directions added along the Sun's path (0.5 holds a 2-degree "
-             "Sun's shadows)")
+             "Sun's shadows), the animated Sun's or a study's")
+    study: str = setting(
+        "", label="Sun Study", metavar="LAT,LON,ZONE,DATE,...",
+        help="For a sun study to come (relight sun-study): add the Sun of every hour of these "
+             "dates at this place and each date's path, Sun Path Step apart, e.g. "
+             "'51.5,-0.13,Europe/London,2026-06-21,2026-12-21' (optional north=DEG, "
+             "elevation=M); empty: none")
     resolution: int = setting(256, lo=4, hi=8192, soft=(8, 8192), help="Texture side in texels")
     bounces: int = setting(-1, lo=-1, hi=64, help=(
         "Diffuse bounces (0 = direct light only); -1: the scene's own (Render > Light Paths: "
@@ -227,6 +233,10 @@ class TransportTextureSettings:
             raise InputError(str(exc)) from None
         if self.sun_path not in SUN_PATH:
             raise InputError(f"sun path must be one of {SUN_PATH}, got {self.sun_path!r}")
+        if self.study:
+            from ..sun.study_directions import parse as parse_study
+
+            parse_study(self.study)
         if dset.size < 8:
             raise InputError(f"need at least 8 upper-hemisphere directions, got {dset.size}")
         if not 4 <= self.resolution <= 8192:

@@ -160,7 +160,8 @@ def _bake_transport_textures(scene, objects, settings, out_dir, resume, client, 
 
     engine = ray_direct.choose(scene, objects, settings)
     engine["direction_set"] = {"size": dset.size, "spec": settings.directions,
-                               **({"sun_path": path_info} if path_info else {})}
+                               **(path_info if path_info and "study" in path_info else
+                                  {"sun_path": path_info} if path_info else {})}
     rays = engine["engine"] == "rays"
     if raised and rays and ray_direct.horizon_count(settings):
         engine["horizons_raised"] = raised
@@ -334,6 +335,18 @@ def resolve_directions(scene, settings):
 
     base = settings.validate()
     _, forced = split_sun_path(settings.directions)
+    if settings.study:     # a sun study's hours and paths (lt_addon/sun/study_directions.py)
+        from ...lt_addon.sun.study_directions import direction_set
+
+        if forced is not None:
+            raise BakeInputError("--study and +sun-path both add a Sun's path: give one (the "
+                                 "study's place and dates, or the scene Sun's animation)")
+        dset, info = direction_set(base, settings.study, settings.sun_path_step)
+        moving = sun_path(scene) if settings.sun_path == "auto" else None
+        if moving is not None:
+            info["note"] = (f"the scene's Sun {moving['object']} is animated; its path was not "
+                            "added (--study takes the study's)")
+        return dset, {"study": info}
     if forced is None and settings.sun_path == "off":
         return base, None
     path = sun_path(scene)
@@ -374,8 +387,10 @@ def path_horizons(settings, path_info):
         return settings, None
     note = {"from": {"azimuths": before[0], "side": before[1]},
             "to": {"azimuths": a, "side": hmap.side(R, h)},
-            "why": "the scene's Sun is animated: a low Sun on its path needs horizons at the "
-                   "texture's side (--sun-path off keeps the settings' horizons)"}
+            "why": ("the study's Sun runs low at its dates' mornings and evenings: its path "
+                    "needs horizons at the texture's side" if "study" in path_info else
+                    "the scene's Sun is animated: a low Sun on its path needs horizons at the "
+                    "texture's side (--sun-path off keeps the settings' horizons)")}
     return replace(settings, horizon_azimuths=a, horizon_resolution=h), note
 
 

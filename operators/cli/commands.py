@@ -48,7 +48,8 @@ class _Parser(argparse.ArgumentParser):
 
 #: bake-textures' options, made from the settings dataclasses (lt_addon/settings.py): the
 #: transport method's own, the three both methods take, the lobes method's own.
-TRANSPORT_OPTIONS = ("directions", "direct", "texel_sampling", "sun_path", "sun_path_step", "sun_angle", "model",
+TRANSPORT_OPTIONS = ("directions", "direct", "texel_sampling", "sun_path", "sun_path_step",
+                     "study", "sun_angle", "model",
                      "components", "tol", "indirect", "indirect_rays",
                      "indirect_components", "indirect_samples", "indirect_resolution",
                      "table_size", "viewport", "horizon_azimuths", "horizon_resolution",

@@ -413,7 +413,8 @@ MATERIAL_FIELDS = ("bounces", "direct", "bounce_bake", "rays", "samples", "ancho
                    "smoothing")
 MATERIAL_PROPS = {f: "material_" + f for f in MATERIAL_FIELDS}
 LOBES_FIELDS = ("frame", "order", "samples", "storage", "mode", "world_sampling")
-TRANSPORT_FIELDS = ("direct", "texel_sampling", "sun_path", "sun_path_step", "model", "viewport",
+TRANSPORT_FIELDS = ("direct", "texel_sampling", "sun_path", "sun_path_step", "study", "model",
+                    "viewport",
                     "horizon_azimuths", "horizon_resolution", "gpu_budget",
                     "tol",
                     "components", "indirect", "indirect_rays", "indirect_components",

@@ -18,7 +18,6 @@ import os
 import numpy as np
 import pytest
 
-from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
 from relightable_textures.lt_addon.sun import study_times as st
 from relightable_textures.lt_addon.sun import sunlight_hours as sh
 
@@ -47,23 +46,19 @@ def _courtyard(scene):
     return [ground, wall]
 
 
-def _bake(scene, objects, out, dset=None, **kw):
-    """The product's bake of ``objects`` (direct light only), its direction set ``dset`` when
-    given (the CLI cannot bake a study's directions yet: with_study's set goes in where the
-    scene's animated Sun's path would)."""
+#: The study as bake-textures --study takes it: the bake adds the Sun of every hour of the
+#: dates and each date's path (lt_addon/sun/study_directions.py).
+STUDY = "51.5,-0.13,Europe/London," + ",".join(DATES)
+
+
+def _bake(scene, objects, out, **kw):
+    """The product's bake of ``objects`` (direct light only), with ``kw`` settings."""
     from relightable_textures.operators.bakes import texture_transport as tx
     from relightable_textures.operators.base.jobs import run
 
     settings = tx.TransportTextureSettings(directions="hemi:400:1.5", resolution=R, bounces=0,
                                            model="none", **kw)
-    if dset is None:
-        return run(tx.bake_transport_textures(scene, objects, settings, str(out), False))
-    mp = pytest.MonkeyPatch()
-    mp.setattr(tx, "resolve_directions", lambda scene, settings: (dset, None))
-    try:
-        return run(tx.bake_transport_textures(scene, objects, settings, str(out), False))
-    finally:
-        mp.undo()
+    return run(tx.bake_transport_textures(scene, objects, settings, str(out), False))
 
 
 def _weights(times, suns):
@@ -95,14 +90,11 @@ def courtyard(tmp_path_factory):
                   for o in objects]
     brute = [(smp.texel, wh @ (direct_rows(occluder, pts, suns.directions) > 0), pts.P)
              for smp, pts in points]
-    hourly = st.study_times(DATES, TZ, step_minutes=60)
-    paths = st.with_study(parse_direction_spec("hemi:400:1.5"),
-                          st.study_suns(hourly, **PLACE), hourly, step_deg=1.0)
     root = tmp_path_factory.mktemp("sun_study")
     bakes = {"hemi:400": _bake(scene, objects, root / "base"),
-             "paths": _bake(scene, objects, root / "paths", paths),
-             "paths, centre texels": _bake(scene, objects, root / "centre", paths,
-                                           texel_sampling="centre")}
+             "paths": _bake(scene, objects, root / "paths", study=STUDY, sun_path_step=1.0),
+             "paths, centre texels": _bake(scene, objects, root / "centre", study=STUDY,
+                                           sun_path_step=1.0, texel_sampling="centre")}
     return dict(scene=scene, objects=objects, times=times, suns=suns, wh=wh, brute=brute,
                 bakes=bakes, root=root)
 
@@ -161,6 +153,43 @@ def test_sunlight_hours_against_a_brute_force_ray_count(courtyard):
     assert got[("paths", "threshold")]["Ground"][0] < g_mean / 3
 
 
+def test_a_study_bake_holds_every_hourly_sun_and_says_so(courtyard):
+    """bake-textures --study: the set is the default one plus the Sun of every whole hour of
+    the dates and each date's path at the step (with_study, built here independently from
+    SPA), and the report records the place, dates and counts."""
+    from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
+
+    c = courtyard
+    res = c["bakes"]["paths"]
+    info = res.direct["direction_set"]["study"]
+    assert info["dates"] == DATES and info["tz"] == TZ and info["step_deg"] == 1.0
+    hourly = st.study_times(DATES, TZ, step_minutes=60)
+    suns = st.study_suns(hourly, **PLACE)
+    want = st.with_study(parse_direction_spec("hemi:400:1.5"), suns, hourly, step_deg=1.0)
+    got = res.objects[0].store.directions.directions
+    assert got.shape == want.directions.shape and np.allclose(got, want.directions, atol=1e-6)
+    assert info["hour_directions"] == len(suns.directions) > 30
+    assert info["path_directions"] > 100 and res.direct["direction_set"]["size"] == len(got)
+    # every 10-minute sun of the study lies within half the step of a baked direction
+    assert sh.nearest_baked(want, c["suns"].directions).max() <= 0.51     # 0.50 measured
+
+
+@pytest.mark.parametrize("study, words", [
+    ("51.5,-0.13,Europe/London", "no date"),
+    ("95,0,UTC,2026-06-21", "latitude must be in -90..90"),
+    ("51.5,-0.13,Mars/Olympus,2026-06-21", "time zone 'Mars/Olympus' is not known"),
+    ("51.5,-0.13,UTC,2026-13-01", "bad study date '2026-13-01'"),
+    ("51.5,-0.13,UTC,2026-06-21,tilt=3", "bad study option 'tilt=3'"),
+    ("89,0,UTC,2026-12-21", "below the horizon at every hour"),
+])
+def test_a_bad_study_is_one_line_naming_what_is_wrong(courtyard, tmp_path, study, words):
+    from relightable_textures.lt_addon.errors import InputError
+
+    with pytest.raises(InputError, match=words.replace("(", r"\(").replace(".", r"\.")):
+        _bake(courtyard["scene"], courtyard["objects"][:1], tmp_path / "x", study=study)
+    assert not (tmp_path / "x").exists() or not any((tmp_path / "x").iterdir())
+
+
 def test_the_normals_fitted_to_T_are_the_surfaces(courtyard):
     """fit_normals against the shading normals the bake's rays used (flat faces: exact)."""
     import bpy
@@ -197,7 +226,8 @@ def test_relight_sun_study_writes_the_study_and_warns_when_the_suns_are_far(cour
     assert run(args) == 0
     std = capsys.readouterr()
     assert std.err.count("relight: warning: ") == 2            # one per object
-    assert "with_study" in std.err and "Ground: " in std.out
+    # the warning names the bake that fixes it: the one test_a_study_bake_... checks
+    assert f"bake with --study {STUDY} to add" in std.err and "Ground: " in std.out
     rep = json.loads((out / "sun_study.json").read_text())
     assert rep["instants"]["count"] == 3 * 144
     ground = rep["objects"][0]
