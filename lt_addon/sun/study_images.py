@@ -67,12 +67,14 @@ def _titled(img, title, scale: int):
 
 
 def hours_picture(hours, covered, top_h: float, title="", *,
-                  min_width: int = 640, scale: int = 2) -> np.ndarray:
+                  min_width: int = 640, scale: int = 2, legend: str | None = None) -> np.ndarray:
     """The sunlight-hours map ``hours`` (R, R) (row 0 at v = 0) in :data:`RAMP` from 0 to
     ``top_h`` hours (the study's possible hours: maps of one study share a scale), texels not
     ``covered`` in :data:`UNCOVERED`, enlarged (nearest texel) to at least ``min_width`` px,
     with ``title`` (a line or a list of lines) above and a legend strip below: the ramp, ticks
-    in hours, and what it shows."""
+    in hours (or ``legend``'s unit), and what it shows (``legend``: that line, for another
+    quantity on the same ramp)."""
+    what = legend                    # the legend's line of text (default: hours)
     h = np.asarray(hours, np.float64)
     cov = np.asarray(covered, bool)
     img = ramp(h / top_h if top_h > 0 else np.zeros_like(h))
@@ -96,8 +98,8 @@ def hours_picture(hours, covered, top_h: float, title="", *,
         w = (6 * len(label) - 1) * scale
         _text(legend, label, y_tick + 3 * scale + scale, int(np.clip(x - w // 2, 0, W - w)),
               scale)
-    _text(legend, f"hours of direct sun, of {top_h:g} h", y_tick + 3 * scale + line + scale,
-          x0, scale)
+    _text(legend, what or f"hours of direct sun, of {top_h:g} h",
+          y_tick + 3 * scale + line + scale, x0, scale)
     _text(legend, "dark grey: no texel", y_tick + 3 * scale + 2 * line + scale, x0, scale)
     return _titled(np.concatenate([img, legend], axis=0), title, scale)
 

@@ -79,6 +79,8 @@ class StudySettings:
     sun_angle: float = SUN_ANGLE_DEG
     visibility: str = "threshold"
     sheet_hours: tuple = (9.0, 12.0, 15.0)
+    radiation: bool = False          # also the clear-sky radiation map (lt_addon/sun/radiation.py)
+    turbidity: float = 3.0           # its Linke turbidity (lt_addon/sun/clear_sky.py)
 
     def validate(self) -> None:
         """InputError in one line for anything out of range."""
@@ -95,6 +97,7 @@ class StudySettings:
         finite("north", self.north_deg, -360.0, 360.0)
         finite("elevation", self.elevation_m, -500.0, 9000.0)
         finite("sun angle", self.sun_angle, 0.0, 5.0)
+        finite("Linke turbidity", self.turbidity, 1.0, 10.0)
         if self.visibility not in sh.VISIBILITY:
             raise InputError(f"visibility must be one of {', '.join(sh.VISIBILITY)}")
         if (self.hours is None) == (self.step_minutes is None):
@@ -125,10 +128,12 @@ class StudySettings:
             finite("a sheet hour", h, 0.0, 23.9999)
 
 
-def output_names(stem: str) -> dict:
+def output_names(stem: str, radiation: bool = False) -> dict:
     """The files one object's study writes, by role."""
     return {"hours_exr": f"{stem}_sunlight_hours.exr", "hours_png": f"{stem}_sunlight_hours.png",
-            "sheet_png": f"{stem}_shadow_study.png"}
+            "sheet_png": f"{stem}_shadow_study.png",
+            **({"radiation_exr": f"{stem}_radiation.exr",
+                "radiation_png": f"{stem}_radiation.png"} if radiation else {})}
 
 
 #: The files every study writes once.
@@ -203,6 +208,12 @@ def run_study(report_paths, settings: StudySettings, out_dir: str, *, force: boo
     step_h = times.step_h if times.step_h is not None else 1.0
     wh = np.bincount(suns.index[suns.up], minlength=len(suns.directions)) * step_h
     sheet_times, sheet_suns, sheet_dates, sheet_hours, sheet_why = _sheet_plan(settings, times)
+    irradiance = None
+    if settings.radiation:
+        from . import radiation as rad
+
+        irradiance = rad.study_irradiance(suns, times, linke_turbidity=settings.turbidity,
+                                          altitude_m=settings.elevation_m)
     t_suns = time.perf_counter() - t0
 
     # the bakes: every one read (and refused) before anything is written
@@ -218,7 +229,7 @@ def run_study(report_paths, settings: StudySettings, out_dir: str, *, force: boo
     t_load = time.perf_counter() - t0
     out_dir = os.path.abspath(out_dir)
     names = [CSV_NAME, REPORT_NAME] + [n for *_, stem in loaded
-                                       for n in output_names(stem).values()]
+                                       for n in output_names(stem, True).values()]
     if os.path.isdir(out_dir) and not force:
         there = [n for n in names if os.path.lexists(os.path.join(out_dir, n))]
         if there:
@@ -255,7 +266,33 @@ def run_study(report_paths, settings: StudySettings, out_dir: str, *, force: boo
                     f"{near.max():.1f} deg, median {np.median(near):.1f}): their shadows are "
                     "blended from the neighbouring directions', and texels near a shadow edge "
                     f"can be off by hours; {bake_for(settings)} (docs/sun-studies.md)")
-            files = output_names(stem)
+            files = output_names(stem, settings.radiation)
+            radiation = None
+            if irradiance is not None:
+                from . import radiation as rad
+
+                rmap = rad.radiation_map(store, suns, *irradiance,
+                                         sun_angle_deg=settings.sun_angle, kernel=kernel,
+                                         covered=result.covered)
+                radiation = rmap.summary()
+                radiation["seconds"] = round(rmap.seconds, 4)
+                exrio.write_exr(os.path.join(folder, files["radiation_exr"]),
+                                {"Y": rmap.total, "beam": rmap.beam, "diffuse": rmap.diffuse,
+                                 "sky_view": rmap.sky_view,
+                                 "A": rmap.covered.astype(np.float32)},
+                                {"format": "relightable_textures.radiation",
+                                 "object": bake.name, "unit": "kWh/m^2",
+                                 "sky": f"clear (Ineichen-Perez), Linke turbidity "
+                                        f"{settings.turbidity:g}",
+                                 "horizontal_kwh_m2": rmap.horizontal_kwh}, pixel_type="float")
+                top = max(float(rmap.total.max()), rmap.horizontal_kwh["total"])
+                write_png(os.path.join(folder, files["radiation_png"]),
+                          study_images.hours_picture(
+                              rmap.total, rmap.covered, top,
+                              [f"{bake.name}: solar radiation, clear sky",
+                               _place(settings), _span(times, settings)],
+                              legend=f"kWh/m2, sun + sky; open ground "
+                                     f"{rmap.horizontal_kwh['total']:.3g}"))
             t0 = time.perf_counter()
             summary = result.summary()
             exrio.write_exr(os.path.join(folder, files["hours_exr"]),
@@ -295,10 +332,13 @@ def run_study(report_paths, settings: StudySettings, out_dir: str, *, force: boo
             t_images = time.perf_counter() - t0
             rows.append({"object": bake.name, **{k: summary.get(k) for k in
                                                  ("texels", "min_h", "mean_h", "max_h", "p10_h",
-                                                  "median_h", "p90_h", "possible_h")}})
+                                                  "median_h", "p90_h", "possible_h")},
+                         **({f"radiation_{k}": radiation.get(k) for k in
+                             ("min_kwh_m2", "mean_kwh_m2", "max_kwh_m2")} if radiation else {})})
             objects.append({
                 "object": bake.name, "report": os.path.abspath(path), "files": files,
                 "hours": summary, "visibility": settings.visibility,
+                **({"radiation": radiation} if radiation else {}),
                 "normals": "fitted to T (lt_addon/sun/sunlight_hours.py fit_normals)",
                 "directions": {"size": int(store.directions.size),
                                "spec": store.directions.spec, "kind": store.directions.kind},

@@ -96,6 +96,13 @@ def add_parsers(sub) -> None:
     p.add_argument("--sheet-hours", type=_hours, default=(9.0, 12.0, 15.0), metavar="H,H,...",
                    help="the sheet's clock hours when --step-minutes is given or --hours lists "
                         "too many cells (default 9,12,15; then on up to 6 of the dates)")
+    p.add_argument("--radiation", action="store_true",
+                   help="also the solar radiation map in kWh/m2 under a clear sky (beam from "
+                        "T at each instant's Sun, the sky's diffuse light from the texel's view "
+                        "of it; Ineichen-Perez): <object>_radiation.exr and .png")
+    p.add_argument("--turbidity", type=float, default=3.0, metavar="TL",
+                   help="the clear sky's Linke turbidity with --radiation (2: clean mountain "
+                        "air, 3: rural, the default, 4-6: cities, summer haze)")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="output folder (created; its study files replaced only with --force)")
     p.add_argument("--force", action="store_true", help="replace an earlier study in --out")
@@ -128,7 +135,8 @@ def _cmd_sun_study(args) -> int:
         latitude=args.lat, longitude=args.lon, tz=args.tz, dates=dates,
         hours=args.hours, step_minutes=args.step_minutes, window=args.window,
         north_deg=args.north, elevation_m=args.elevation_m, sun_angle=args.sun_angle,
-        visibility=args.visibility, sheet_hours=tuple(args.sheet_hours))
+        visibility=args.visibility, sheet_hours=tuple(args.sheet_hours),
+        radiation=bool(args.radiation), turbidity=args.turbidity)
     out = os.path.abspath(args.out)
     if os.path.exists(out) and not os.path.isdir(out):
         raise CliError(f"output exists and is not a folder: {out}")
