@@ -9,7 +9,8 @@ every sun of the study with the project's engine (lt_addon/rays: Occluder, direc
 receiver points without footprints) and counts the hours lit. Bakes compared: 48 and 400
 directions (hemi:N:1.5), 400 plus the study's hourly suns (with_study), plus their paths at 2,
 1 and 0.5 degrees; footprint and centre texels. Then ``relight sun-study`` over a year of hourly
-suns on the 400-direction bake of the ground at each ``--year-sizes`` side, timed, and (with
+suns on the 400-direction bake of the ground at each ``--year-sizes`` side, with its clear-sky
+radiation map (``--radiation``), timed, and (with
 ``--pictures``) the docs' pictures at 256^2.
 
 Usage: python benchmarks/bench_sun_study.py [--resolution 32] [--step 10]
@@ -148,12 +149,14 @@ def year(R: int, pictures: str | None) -> dict:
         report = tx.write_bake(res, objects[:1], tmp)[0]["report"]
         t0 = time.perf_counter()
         rc = cli(["sun-study", report, *CLI_PLACE, "--from", "2026-01-01", "--to", "2026-12-31",
-                  "--step-minutes", "60", "--out", os.path.join(tmp, "year")])
+                  "--step-minutes", "60", "--radiation", "--out", os.path.join(tmp, "year")])
         wall = time.perf_counter() - t0
         rep = json.load(open(os.path.join(tmp, "year", "sun_study.json")))
         if pictures and rc == 0:
             shutil.copy(os.path.join(tmp, "year", "Ground_sunlight_hours.png"),
                         os.path.join(pictures, "sun-study-courtyard-year.png"))
+            shutil.copy(os.path.join(tmp, "year", "Ground_radiation.png"),
+                        os.path.join(pictures, "sun-study-courtyard-year-radiation.png"))
             rc2 = cli(["sun-study", report, *CLI_PLACE, "--dates", ",".join(DATES), "--hours",
                        "9,12,15", "--out", os.path.join(tmp, "sheet")])
             if rc2 == 0:
@@ -161,7 +164,8 @@ def year(R: int, pictures: str | None) -> dict:
                             os.path.join(pictures, "sun-study-courtyard-sheet-400.png"))
     out = {"resolution": R, "rc": rc, "bake_s": round(t_bake, 1), "wall_s": round(wall, 2),
            "instants": rep["instants"]["count"], "sun_up": rep["instants"]["sun_up"],
-           "timings": rep["timings"], "object_seconds": rep["objects"][0]["seconds"]}
+           "timings": rep["timings"], "object_seconds": rep["objects"][0]["seconds"],
+           "radiation": rep["objects"][0].get("radiation")}
     print(json.dumps(out), flush=True)
     return out
 

@@ -292,7 +292,7 @@ def run_study(report_paths, settings: StudySettings, out_dir: str, *, force: boo
                               [f"{bake.name}: solar radiation, clear sky",
                                _place(settings), _span(times, settings)],
                               legend=f"kWh/m2, sun + sky; open ground "
-                                     f"{rmap.horizontal_kwh['total']:.3g}"))
+                                     f"{rmap.horizontal_kwh['total']:.4g}"))
             t0 = time.perf_counter()
             summary = result.summary()
             exrio.write_exr(os.path.join(folder, files["hours_exr"]),
