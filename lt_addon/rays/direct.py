@@ -83,12 +83,10 @@ def direct_rows(occluder, points: ShadingPoints, directions, out=None) -> np.nda
             pending = None
         footprint = getattr(points, "footprint", None)
         if footprint is not None:    # each texel's footprint where a shadow edge passes
-            footprint.centroids(points)
             refine = [footprint.edges(out[s]) for s in range(len(D))]
             footprint.prepare(points, np.unique(np.concatenate(refine)) if refine else [])
             for s, L in enumerate(D):
                 idx = refine[s]
-                footprint.shift(out[s], idx, L)
                 if len(idx):
                     out[s, idx] = footprint.refine(points, idx, L, out[s, idx], occluder,
                                                    cosine, shadow_origins)

@@ -50,8 +50,8 @@ WHOLE_TEXEL_FROM = (5, 2, 1)
 #: top edge held one of the 9 sub-samples inside in every such texel). Shifted per texel, that
 #: error is noise, about Cycles' own 16 samples': mean 0.98x / 0.91x, worst 1.73x / 1.19x (half /
 #: whole box, 12 suns at 128^2). The 34-point Fibonacci lattice (K = 21) halves it (worst 0.51x
-#: / 0.66x) but made the direct stage 1.6-2.1x slower on the smooth demo scenes (their
-#: sub-samples are shading points of their own). Measured 2026-12-06
+#: / 0.66x) for about twice the footprint's rays and time (1.7-2.1x the direct stage on the
+#: smooth demo scenes, whose sub-samples are shading points of their own). Measured 2026-12-06
 #: (benchmarks/bench_footprint.py; the log's "Blender 5.2.1's whole-texel jitter").
 SAMPLES = 16
 LATTICE = 7
@@ -67,8 +67,6 @@ THIN_SHARE = 0.25
 #: Sub-samples of smooth (or touching) texels :meth:`Footprint.prepare` makes at most for a
 #: chunk of directions (about 200 bytes each).
 PREPARED_ROWS = 1 << 21
-#: Memory for the smooth texels :meth:`Footprint.centroids` keeps (20 bytes each: 13 M texels).
-CENTROID_BYTES = 256 << 20
 #: Memory for the flat texels' sub-sample positions, kept across directions (16 samples x 16
 #: bytes + 4 a texel: about a million texels); texels past it are set up every direction.
 CACHE_BYTES = 256 << 20
@@ -152,7 +150,6 @@ class Footprint:
     bary: np.ndarray
     box: float = BOX
     refined: int = 0        # texel-directions refined so far
-    shifted: int = 0        # texel-directions moved to their box's centroid so far
     rays: int = 0           # sub-sample rays cast so far
 
     def subset(self, rows) -> "Footprint":
@@ -167,90 +164,10 @@ class Footprint:
 
     def edges(self, values) -> np.ndarray:
         """The points to refine at a direction whose centre values are ``values`` (P,):
-        :func:`edges` of this bake's points, and the :meth:`thin` ones (but those
-        :meth:`centroids` shifts instead)."""
+        :func:`edges` of this bake's points, and the :meth:`thin` ones."""
         found = edges(self.texel, self.resolution, values)
         thin = self.thin()
-        shifted = getattr(self, "_centroids", None)
-        if shifted is not None and len(shifted[0]) and len(thin):
-            thin = thin[~np.isin(thin, shifted[0], assume_unique=True)]
         return np.union1d(found, thin) if len(thin) else found
-
-    def centroids(self, points):
-        """The smooth texels whose jitter box their triangle clips: ``(idx (m,), N (m, 3)
-        float32, weight (m,) float32)``. Where no shadow edge passes (:func:`edges`), such a
-        texel's converged value is the cosine's mean over the inside of the box, not its value at
-        the centre -- first order in the cosine's change across the texel -- and that mean is,
-        to second order, the cosine at the inside's centroid: ``(1 - weight) * centre + weight *
-        max(N . L, 0) / pi`` with ``N`` the shading normal there and ``weight`` the chance that
-        a draw landed inside (:meth:`shift`); no ray. On the smooth bumps at 128^2 (triangles of
-        two texels: every other texel clipped) this is what the 16 rays of every such texel
-        bought (docs/bench/2026-transport-log.md, "Blender 5.2.1's whole-texel jitter").
-        Texels with a normal map's closure normal or touching another object are left to the
-        lattice. Made once, for up to :data:`CENTROID_BYTES` of them; the rest keep the
-        lattice."""
-        if getattr(self, "_centroids", None) is None:
-            from .shading import shading_points
-
-            skip = np.zeros(len(self.texel), bool)
-            if points.mapped() is not None:
-                skip[points.mapped()] = True
-            if points.contact is not None:
-                skip |= np.asarray(points.contact.touching, bool)
-            room = CENTROID_BYTES // 20
-            smooth = np.asarray(self.smooth, bool)
-            R = float(self.resolution)
-            I, N, W = [], [], []
-            for a in range(0, len(self.texel), 1 << 16):
-                cand = np.arange(a, min(a + (1 << 16), len(self.texel)))
-                cand = cand[smooth[self.triangle[cand]] & ~skip[cand]]
-                if not len(cand) or room <= 0:
-                    continue
-                # the centre's distance to each edge (its barycentric times the height) against
-                # the box's half-diagonal: only these can be clipped
-                uv = self.uv[self.triangle[cand]] * R
-                e = np.stack([uv[:, 2] - uv[:, 1], uv[:, 0] - uv[:, 2], uv[:, 1] - uv[:, 0]], 1)
-                length = np.linalg.norm(e, axis=2)
-                area2 = np.abs(e[:, 2, 0] * (-e[:, 1, 1]) - e[:, 2, 1] * (-e[:, 1, 0]))
-                dist = self.bary[cand] * area2[:, None] / np.maximum(length, 1e-30)
-                cand = cand[dist.min(axis=1) < self.box / np.sqrt(2.0)]
-                if not len(cand):
-                    continue
-                owner, tri, bary, weight, centre_w = self.samples(cand)
-                k_in = np.bincount(owner, minlength=len(cand))
-                keep = (k_in > 0) & (k_in < SAMPLES)
-                if not keep.any():
-                    continue
-                mean = np.stack([np.bincount(owner, weights=bary[:, j], minlength=len(cand))
-                                 for j in range(3)], axis=1) / np.maximum(k_in, 1)[:, None]
-                cand, mean, jit = cand[keep][:room], mean[keep][:room], (1 - centre_w)[keep][:room]
-                sp = shading_points(self.vertices, self.triangles, self.corner_normals,
-                                    self.smooth, self.triangle[cand], mean, cutoff=self.cutoff,
-                                    mirrored=self.mirrored, bump=self.bump,
-                                    correction=self.correction)
-                I.append(cand)
-                N.append(sp.N.astype(np.float32))
-                W.append(jit.astype(np.float32))
-                room -= len(cand)
-            self._centroids = ((np.concatenate(I), np.concatenate(N), np.concatenate(W)) if I
-                               else (np.zeros(0, np.int64), np.zeros((0, 3), np.float32),
-                                     np.zeros(0, np.float32)))
-        return self._centroids
-
-    def shift(self, values, refined, L) -> None:
-        """Move ``values`` (P,) (centre values towards unit ``L``) of the lit :meth:`centroids`
-        texels not among ``refined`` to their box's mean, in place."""
-        idx, N, w = self._centroids
-        if not len(idx):
-            return
-        take = values[idx] > 0
-        if len(refined):
-            take &= ~np.isin(idx, refined)
-        i = np.nonzero(take)[0]
-        if len(i):
-            cos = np.maximum(N[i].astype(np.float64) @ np.asarray(L, np.float64), 0.0)
-            values[idx[i]] = (1.0 - w[i]) * values[idx[i]] + w[i] * cos / np.pi
-            self.shifted += len(i)
 
     def thin(self) -> np.ndarray:
         """Indices of the points whose jitter box crosses an edge of a triangle narrower than

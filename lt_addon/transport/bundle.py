@@ -299,12 +299,9 @@ def direct_summary(direct: dict, directions: int) -> str:
         if direct.get("texel_sampling") == "footprint" and direct.get("texels"):
             texel_dirs = sum(direct["texels"]) * directions
             refined = sum(direct.get("footprint_refined") or [0])
-            shifted = sum(direct.get("footprint_shifted") or [0])
             footprint = (f"; texel footprints at {100 * refined / max(texel_dirs, 1):.0f} % of "
                          f"texel-directions, {direct.get('footprint_rays', 0) / max(texel_dirs, 1):.2f}"
-                         " rays per texel-direction more"
-                         + (f", {100 * shifted / max(texel_dirs, 1):.0f} % moved to their "
-                            "jitter box's centroid" if shifted else ""))
+                         " rays per texel-direction more")
         return (f"Direct light: {directions} directions by rays ({direct.get('library', '')}, "
                 f"{direct.get('seconds', 0):.1f} s, "
                 f"{direct.get('rays_per_second', 0) / 1e6:.1f} M rays/s{horizons}{footprint})")

@@ -257,13 +257,11 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
             # texels touching another object's surface: a contact ray each per lit direction
             "contact_texels": int(touching),
             # each texel's footprint (lt_addon/rays/footprint.py): texel-directions refined
-            # (where a shadow edge or a thin triangle passes) and the rays they cast, those
-            # moved to the centroid of a clipped jitter box (smooth faces, no ray), and the
+            # (where a shadow edge or a thin triangle passes) and the rays they cast, and the
             # jitter box of this Blender in texels
             "texel_sampling": "footprint" if footprint else "centre",
             **({"footprint_refined": [int(p.footprint.refined) for _, p in receivers],
                 "footprint_rays": int(sum(p.footprint.rays for _, p in receivers)),
-                "footprint_shifted": [int(p.footprint.shifted) for _, p in receivers],
                 "footprint_box": float(receivers[0][1].footprint.box),
                 "footprint_thin_texels": [int(len(p.footprint.thin())) for _, p in receivers]}
                if footprint else {}),
