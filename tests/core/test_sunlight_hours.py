@@ -223,7 +223,9 @@ def test_a_study_folder_has_the_maps_the_sheet_the_csv_and_the_report(tmp_path):
     assert float(rows[0]["mean_h"]) == pytest.approx(expect.hours.ravel()[:15].mean(), abs=1e-4)
     # the suns of a 100-direction set are degrees from it: said
     assert obj["nearest_baked_deg"]["far_suns"] == 9 and len(rep["warnings"]) == 1
-    assert "with_study" in rep["warnings"][0] and lines[0].startswith("A: ")
+    # the warning names the bake that adds the study's suns (bake-textures --study)
+    assert ("bake with --study 51.5,-0.13,Europe/London,2026-03-20,2026-06-21,2026-12-21 to "
+            "add" in rep["warnings"][0]) and lines[0].startswith("A: ")
     sheet = read_png(str(out / "A_shadow_study.png"))
     assert sheet.shape[1] == 3 * 256 + 2 * 4
     # a second run into the same folder is refused without force, done with it
