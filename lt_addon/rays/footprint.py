@@ -103,6 +103,25 @@ def offsets(n: int | None = None, k: int | None = None, box: float = BOX,
     return (base - 0.5) * float(box)
 
 
+def thin_area_share(uv, resolution: int) -> float:
+    """The share of the UV map's area (``uv`` (T, 3, 2), 0..1) in triangles narrower than
+    :data:`THIN` texels (UV inradius) at ``resolution``: where :meth:`Footprint.thin` refines a
+    texel at every direction. Thin triangles appear at low resolutions, so a small bake of a
+    dense mesh refines far more of its texels than a large one (the bake-time estimate picks
+    its calibration sizes by it)."""
+    uv = np.asarray(uv, np.float64).reshape(-1, 3, 2)
+    if not len(uv):
+        return 0.0
+    e = np.stack([uv[:, 2] - uv[:, 1], uv[:, 0] - uv[:, 2], uv[:, 1] - uv[:, 0]], 1)
+    length = np.linalg.norm(e, axis=2).sum(axis=1)
+    area2 = np.abs(e[:, 2, 0] * (-e[:, 1, 1]) - e[:, 2, 1] * (-e[:, 1, 0]))
+    total = area2.sum()
+    if total <= 0:
+        return 0.0
+    inradius = area2 / np.maximum(length, 1e-30) * float(resolution)          # texels
+    return float(area2[inradius < THIN].sum() / total)
+
+
 def edges(texel, resolution: int, values) -> np.ndarray:
     """Indices of the points whose ``values`` (P,) (lit: > 0) differ from a covered grid
     neighbour's (left, right, below, above); ``texel`` (P,) row-major indices into

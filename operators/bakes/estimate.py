@@ -3,7 +3,10 @@
 Two calibration bakes of the same objects and settings at 64^2 and 128^2 (the indirect term at
 the same sizes), and one held-out truth light at each, give each stage's fixed and per-texel
 cost on this machine and scene (:mod:`...lt_addon.transport.estimate`). These costs are then
-applied to the asked sizes. The calibration takes a few seconds. It writes nothing that stays:
+applied to the asked sizes. Where the UV map's triangles are narrower than a texel at 64^2 but
+not at the asked size, the calibration moves up (:func:`calibration_sizes`): a texel footprint
+refines such texels at every direction, so the small bake's cost per texel is not the large
+one's. The calibration takes a few seconds. It writes nothing that stays:
 the calibration bakes go to a temporary folder, without chunk caches.
 """
 
@@ -14,6 +17,8 @@ import tempfile
 import time
 from dataclasses import replace
 
+import numpy as np
+
 from ...lt_addon.transport import estimate as est
 from .bake_cost import memory_bytes, viewport_gpu
 from ...lt_addon.transport import horizon_map as hmap
@@ -21,8 +26,44 @@ from ...lt_addon.transport import texture as tt
 from ..base.cycles_bake import _size, available_memory_bytes
 from ..base.jobs import Progress
 
-#: calibration sizes (texels across)
+#: calibration sizes (texels across), and the larger pairs tried when thin triangles make the
+#: small ones unlike the asked size (:func:`calibration_sizes`)
 CALIBRATION = (64, 128)
+CALIBRATION_LADDER = ((64, 128), (128, 256), (256, 512))
+#: How far the share of the UV area in thin triangles (:func:`...lt_addon.rays.footprint.
+#: thin_area_share`) may differ between a calibration size and the asked one. On the test-size
+#: bumps at 256^2 under Blender 5.3 (whole-texel jitter boxes) 64^2 had every texel thin and
+#: 128^2 none: calibrated at 64^2 and 128^2 the bake took 1.56-1.76x its estimate (2026-12-06).
+THIN_SHARE_TOLERANCE = 0.05
+
+
+def calibration_sizes(objects, settings) -> tuple:
+    """The calibration pair for ``settings.resolution``: the first of
+    :data:`CALIBRATION_LADDER` below it whose sizes both hold as much of the UV area in thin
+    triangles as the asked size (within :data:`THIN_SHARE_TOLERANCE`), else (64, 128)."""
+    import bpy
+
+    from ...lt_addon.rays.footprint import thin_area_share
+    from ..base.ray_scene import mesh_arrays
+
+    if getattr(settings, "texel_sampling", "footprint") != "footprint":
+        return CALIBRATION
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    uvs = []
+    for o in objects:
+        m = mesh_arrays(o, depsgraph)
+        if m.uv is not None:
+            uvs.append(m.uv[m.loops.ravel()].reshape(-1, 3, 2))
+    if not uvs:
+        return CALIBRATION
+    uv = np.concatenate(uvs)
+    want = thin_area_share(uv, settings.resolution)
+    for pair in CALIBRATION_LADDER:
+        if pair[1] > settings.resolution:
+            break
+        if all(abs(thin_area_share(uv, r) - want) <= THIN_SHARE_TOLERANCE for r in pair):
+            return pair
+    return CALIBRATION
 #: the calibration bakes' indirect grid: the bake's own, at most this side (texels across).
 #: The gathered term's cost depends on the grid (its points and rays) and on the texture (its
 #: PCA reads T's rows) apart; with the grid fixed, the calibration measures the texture's share
@@ -67,7 +108,8 @@ def calibrate(scene, objects, settings, truth: int, truth_samples: int):
     # will make them: which of the two auto then shows is decided after both
     A = horizon_count(settings)
     grid = min(settings.indirect_resolution, CALIBRATION_GRID)
-    for R in CALIBRATION:
+    sizes = calibration_sizes(objects, settings)
+    for R in sizes:
         s = replace(settings, resolution=R, indirect_resolution=grid,
                     viewport="blocks" if shown == "blocks" else settings.viewport)
         with tempfile.TemporaryDirectory(prefix="relight-estimate-") as tmp, \
@@ -86,8 +128,8 @@ def calibrate(scene, objects, settings, truth: int, truth_samples: int):
                                         settings.bounces, truth_samples, R)
             seconds["truth"] = tr["seconds"]
         samples.append((u, seconds))
-        yield Progress(len(samples), len(CALIBRATION), f"calibration bake at {R}^2")
-    return est.fit_costs(samples), time.perf_counter() - t0
+        yield Progress(len(samples), len(sizes), f"calibration bake at {R}^2")
+    return est.fit_costs(samples), time.perf_counter() - t0, sizes
 
 
 def estimate(scene, objects, settings, truth: int = 4, truth_samples: int = 256):
@@ -106,7 +148,7 @@ def estimate(scene, objects, settings, truth: int = 4, truth_samples: int = 256)
     # the bake's own direction set (with an animated Sun's path) and the horizons it then makes
     dset, path = resolve_directions(scene, settings)
     settings, _ = path_horizons(settings, path)
-    costs, cal = yield from calibrate(scene, objects, settings, truth, truth_samples)
+    costs, cal, sizes = yield from calibrate(scene, objects, settings, truth, truth_samples)
     # the indirect term's Cycles bakes (steerable) or points and rays (gathered) scale with the
     # indirect grid's texels (calibrated at this grid up to CALIBRATION_GRID); the gathered
     # term's PCA is a stage of its own, scaling with the texture's texels
@@ -140,8 +182,9 @@ def estimate(scene, objects, settings, truth: int = 4, truth_samples: int = 256)
            "costs": {s: {"fixed_seconds": round(c.fixed, 4),
                          "seconds_per_million_units": round(c.per_unit * 1e6, 4)}
                      for s, c in costs.items()},
-           "method": f"stage costs fitted to calibration bakes at {CALIBRATION[0]}^2 and "
-                     f"{CALIBRATION[1]}^2 of the same objects and settings on this machine, "
+           "calibration_sizes": list(sizes),
+           "method": f"stage costs fitted to calibration bakes at {sizes[0]}^2 and "
+                     f"{sizes[1]}^2 of the same objects and settings on this machine, "
                      "linear in texels (lt_addon/transport/estimate.py)"}
     out["lines"] = describe(out, settings, len(objects))
     return out

@@ -121,7 +121,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--estimate", action="store_true",
                    help="transport: print what the bake would cost -- time per stage, disk, "
                         "memory, the viewport's GPU memory -- from two calibration bakes at "
-                        "64^2 and 128^2 on this machine (a few seconds), and bake nothing. A bake "
+                        "64^2 and 128^2 on this machine (a few seconds; larger where the UV "
+                        "map's triangles are narrower than a texel at 64^2), and bake nothing. "
+                        "A bake "
                         "at 512^2 or more prints this estimate before it starts, then the time "
                         "left in its progress lines, and its report holds estimate and measured "
                         "time ($RELIGHT_ESTIMATE=1: at any size; 0: never)")

@@ -35,3 +35,17 @@ def test_shifted_lattices_stay_in_the_box_and_keep_one_sample_per_row_and_column
     assert np.abs(shift.mean(axis=0) - 0.5).max() < 4 * se
     # unshifted: the one lattice of every texel
     assert np.allclose(F.offsets(box=box), F.offsets(box=box, shift=np.full((1, 2), 0.5 / 16))[0])
+
+
+def test_thin_area_share_counts_the_uv_area_in_triangles_narrower_than_a_texel():
+    # right isosceles triangles: legs a, inradius a (2 - sqrt 2) / 2, area a^2 / 2. Two of
+    # legs 1/8 (inradius 0.0366 of the UV square) and one of legs 1/2 (0.146): the small ones
+    # hold 1/9 of the area
+    def tri(a):
+        return [[0, 0], [a, 0], [0, a]]
+    uv = np.array([tri(1 / 8), tri(1 / 8), tri(1 / 2)], float)
+    assert F.thin_area_share(uv, 4) == 1.0                       # 0.59 texel: all thin
+    assert F.thin_area_share(uv, 16) == pytest.approx(1 / 9)     # 0.59 and 2.3 texels
+    assert F.thin_area_share(uv, 20) == pytest.approx(1 / 9)     # 0.73 and 2.9
+    assert F.thin_area_share(uv, 40) == 0.0                      # 1.46 texels: none
+    assert F.thin_area_share(np.zeros((0, 3, 2)), 64) == 0.0
