@@ -37,24 +37,16 @@ CLI_PLACE = ["--lat", "51.5", "--lon", "-0.13", "--tz", TZ]
 
 
 def courtyard():
-    """A fresh factory scene with the courtyard; returns [ground, north wall]."""
+    """A fresh factory scene with the courtyard of tests/blender/test_sun_study.py (its own
+    builder); returns [ground, north wall]."""
     import bpy
 
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    bpy.ops.mesh.primitive_plane_add(size=8.0)
-    ground = bpy.context.object
-    ground.name = "Ground"
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                    "tests", "blender"))
+    from test_sun_study import _courtyard
 
-    def box(name, loc, dims):
-        bpy.ops.mesh.primitive_cube_add(size=1.0, location=loc)
-        o = bpy.context.object
-        o.name, o.scale = name, dims
-        bpy.ops.object.transform_apply(scale=True)
-        return o
-    wall = box("WallN", (0.0, 2.0, 1.0), (4.0, 0.4, 2.0))
-    box("WallW", (-1.8, 0.0, 1.0), (0.4, 3.6, 2.0))
-    box("WallE", (1.8, 0.0, 0.75), (0.4, 3.6, 1.5))
-    return [ground, wall]
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    return _courtyard(bpy.context.scene)
 
 
 def bake(scene, objects, out, R, dset=None, **kw):
