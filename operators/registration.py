@@ -10,6 +10,7 @@ import bpy
 
 from .ui import bake_ops, export_ops, material_ops, panel, properties, scene_ops
 from . import cli
+from .preview import render_guard
 
 CLASSES = (properties.CLASSES + scene_ops.CLASSES + bake_ops.CLASSES + material_ops.CLASSES
            + export_ops.CLASSES + panel.CLASSES)
@@ -22,12 +23,14 @@ def register() -> None:
         bpy.utils.register_class(cls)
     properties.register()
     material_ops.register()
+    render_guard.register()
     _cli_handles.append(bpy.utils.register_cli_command(CLI_COMMAND, cli.run))
 
 
 def unregister() -> None:
     while _cli_handles:
         bpy.utils.unregister_cli_command(_cli_handles.pop())
+    render_guard.unregister()
     material_ops.unregister()
     properties.unregister()
     for cls in reversed(CLASSES):

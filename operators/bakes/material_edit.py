@@ -121,7 +121,7 @@ def install_preview(scene, tensors) -> None:
         obj = scene.objects.get(name)
         if obj is not None and obj.type == "MESH":
             preview_nodes.install_attribute_preview(obj, ATTRIBUTE, kind=material_bake.KIND,
-                                                    base_color=False)
+                                                    base_color=False, gated=True)
 
 
 def bake_job(scene, objects, settings, out_dir: str, truth_samples: int = 0,

@@ -368,10 +368,17 @@ _WAS_ACTIVE = "relight_preview_was_active"
 COPY_OF = "relight_preview_copy_of"
 #: on a material the preview made for an object that had none
 MADE = "relight_preview_made"
+#: on a gated preview's Mix Shader: the node our output shows (instead of the Emission)
+_END = "relight_preview_end"
+#: object custom property a gated preview reads (Attribute node, type Object): 1 on the objects
+#: the bake covered; on others, which lack it, the attribute reads 0 and the material's own
+#: surface shows
+RECEIVER = "relight_preview_receiver"
 #: the target of the preview's Material Output: EEVEE only, never Cycles
 PREVIEW_TARGET = "EEVEE"
 #: kinds whose material is copied when other objects use it too (the material edits' preview
-#: reads a per-object attribute in the materials its regions are named after: never copied)
+#: reads a per-object attribute in the materials its regions are named after: never copied;
+#: it is gated instead, so objects the bake did not cover show their own surface)
 _COPIED_KINDS = ("steerable_texture", "transport_texture", "eigentransport")
 
 
@@ -438,7 +445,9 @@ def _show_kind(tree, kind: str) -> bool:
     out[_KIND] = kind
     if emission.parent is not None:
         out.parent = emission.parent
-    tree.links.new(emission.outputs[0], out.inputs["Surface"])
+    # a gated preview ends in a Mix Shader (the user's surface where the gate is 0)
+    end = next((n for n in _preview_nodes(tree, kind) if n.get(_END)), emission)
+    tree.links.new(end.outputs[0], out.inputs["Surface"])
     # an output of the user's with the same target would win while active: ours is made the
     # active one then (and gives it back when it goes)
     theirs = [n for n in _outputs(tree) if not n.get(_TAG)]
@@ -518,6 +527,46 @@ def set_previews_shown(objects, shown: bool) -> int:
     return changed
 
 
+#: on our output: an EEVEE render asked to show the preview (Relight Compare, the tests'
+#: renders); the F12 guard leaves such a material's preview in place
+RENDER_SHOWS = "relight_preview_render"
+
+
+def any_preview() -> bool:
+    """Whether any material holds preview nodes."""
+    return any(_preview_nodes(m.node_tree) for m in bpy.data.materials
+               if m.node_tree is not None)
+
+
+def step_aside_for_render() -> list:
+    """Take every material's preview output away for an EEVEE render (F12 keeps the user's
+    materials, issue 57); returns ``(material, kind)`` pairs for :func:`step_back`. Materials
+    whose preview a render asked for (:func:`render_previews`) keep it."""
+    gone = []
+    for mat in bpy.data.materials:
+        tree = mat.node_tree
+        out = _our_output(tree) if tree is not None else None
+        if out is None or out.get(RENDER_SHOWS):
+            continue
+        gone.append((mat, out.get(_KIND)))
+        _drop_output(tree, out)
+    return gone
+
+
+def step_back(gone) -> int:
+    """Put back the preview outputs :func:`step_aside_for_render` took away (those whose
+    material still exists and holds that kind's nodes). Returns how many came back."""
+    back = 0
+    for mat, kind in gone:
+        try:
+            tree = mat.node_tree
+        except ReferenceError:       # the material was removed meanwhile
+            continue
+        if tree is not None and kind and _our_output(tree) is None and _show_kind(tree, kind):
+            back += 1
+    return back
+
+
 def render_previews(objects, engine: str = "CYCLES") -> list:
     """Let ``engine``'s renders show the texture previews of ``objects`` (Relight Compare and
     the tests render the preview with Cycles): each such material's preview output gets that
@@ -544,7 +593,8 @@ def render_previews(objects, engine: str = "CYCLES") -> list:
             undo.append(lambda t=tree, k=was: _show_kind(t, k))
         old = out.target
         out.target = target
-        undo.append(lambda o=out, t=old: setattr(o, "target", t))
+        out[RENDER_SHOWS] = True
+        undo.append(lambda o=out, t=old: (setattr(o, "target", t), o.pop(RENDER_SHOWS, None)))
     return undo[::-1]
 
 
@@ -647,6 +697,10 @@ def remove_preview(obj, scene=None, purge: bool = True, kind: str | None = None)
         _restore_materials(obj)
     if not purge:
         return changed
+    # the gate's marks on objects none of whose materials holds a gated preview any more
+    for other in [o for o in bpy.data.objects if RECEIVER in o]:
+        if not any(n.get(_END) for m in _materials(other) for n in _preview_nodes(m.node_tree)):
+            del other[RECEIVER]
     # A group only a fake user holds is the other light mode of a transport preview: unused
     # once no group of the same object is in a material any more.
     ours = [g for g in bpy.data.node_groups if g.get(_TAG)]
@@ -656,8 +710,7 @@ def remove_preview(obj, scene=None, purge: bool = True, kind: str | None = None)
         bpy.data.node_groups.remove(group)
     for image in [i for i in bpy.data.images if i.get(_TAG) and i.users == 0]:
         bpy.data.images.remove(image)
-    if scene is not None and not any(_preview_nodes(m.node_tree) for m in bpy.data.materials
-                                     if m.node_tree is not None):
+    if scene is not None and not any_preview():
         for key in (*SLIDERS, COLOR_SLIDER, "relight_sun"):
             if key in scene:
                 del scene[key]
@@ -680,7 +733,33 @@ def copy_notes(obj) -> list:
     return out
 
 
-def _wire_preview(obj, build_color, kind: str) -> list:
+def _user_surface(tree):
+    """The socket feeding the Surface of the user's output EEVEE would show without the
+    preview (exact target EEVEE first, then All; the active one first), or None."""
+    theirs = [n for n in _outputs(tree) if not n.get(_TAG) and n.target in ("EEVEE", "ALL")]
+    theirs.sort(key=lambda n: (n.target != "EEVEE", not n.is_active_output))
+    for node in theirs:
+        links = node.inputs["Surface"].links
+        return links[0].from_socket if links else None
+    return None
+
+
+def _gate(b, emission) -> None:
+    """Show the preview only on objects with :data:`RECEIVER` (a material shared with objects
+    the bake did not cover shows its own surface on those): Mix Shader(attribute, user's
+    surface, preview), marked as the end our output shows."""
+    attr = b.node("ShaderNodeAttribute", 1100, 950, attribute_type="OBJECT",
+                  attribute_name=RECEIVER, label="Baked object?")
+    mix = b.node("ShaderNodeMixShader", 1300, 750, label="Preview on baked objects only")
+    b.links.new(attr.outputs["Fac"], mix.inputs[0])
+    surface = _user_surface(b.tree)
+    if surface is not None:
+        b.links.new(surface, mix.inputs[1])
+    b.links.new(emission.outputs[0], mix.inputs[2])
+    mix[_END] = True
+
+
+def _wire_preview(obj, build_color, kind: str, gated: bool = False) -> list:
     """Put a preview of bake ``kind`` into every material of ``obj``: ``build_color(builder)``
     adds the nodes computing the preview colour and returns its socket; it ends in an Emission
     that our preview output (target EEVEE: never Cycles, never the user's active output)
@@ -709,6 +788,8 @@ def _wire_preview(obj, build_color, kind: str) -> list:
         emission = b.node("ShaderNodeEmission", 1100, 700)
         emission.inputs["Strength"].default_value = 1.0
         b.links.new(color, emission.inputs["Color"])
+        if gated:
+            _gate(b, emission)
         for nd in tree.nodes:
             if nd.name not in before:
                 nd[_TAG] = True
@@ -795,11 +876,16 @@ def _base_color(b):
 
 
 def install_attribute_preview(obj, attribute: str, kind: str = "eigentransport",
-                              base_color: bool = True) -> list:
+                              base_color: bool = True, gated: bool = False) -> list:
     """Show a colour attribute as emission: white-surface radiance (the per-vertex
     eigentransport preview) multiplied by the material's own base colour (issue 12: an orange
     object previewed grey), or with ``base_color=False`` the attribute as it is (the material
-    edits' preview, which holds the edited colours already)."""
+    edits' preview, which holds the edited colours already). ``gated``: the materials are not
+    copied (the material edits' are the ones the user edits), so the preview shows only on
+    objects marked :data:`RECEIVER` (set here on ``obj``); other objects sharing a material
+    keep its own surface."""
+    if gated:
+        obj[RECEIVER] = 1.0
     def build(b):
         light = b.node("ShaderNodeVertexColor", 900, 900, layer_name=attribute).outputs["Color"]
         base = _base_color(b) if base_color else None
@@ -811,4 +897,4 @@ def install_attribute_preview(obj, attribute: str, kind: str = "eigentransport",
         b.links.new(base, mul.inputs[1])
         return mul.outputs[0]
 
-    return _wire_preview(obj, build, kind)
+    return _wire_preview(obj, build, kind, gated=gated)

@@ -17,7 +17,7 @@ import bpy
 from ...lt_addon.settings import to_argv
 from ...lt_addon.transport.bundle import direct_summary
 from ..base import jobs
-from ..preview import preview_nodes
+from ..preview import preview_nodes, render_guard
 from ..bakes import steerable_bake
 from ..base.cycles_bake import BakeInputError, check_bakeable
 from .properties import VERTEX_FIELDS, VERTEX_PROPS, settings_from_scene, truth_count
@@ -151,8 +151,8 @@ def _finish(operator, scene, result):
 
 
 #: The last line of a bake's summary: where the preview shows and what renders keep.
-PREVIEW_NOTE = ("The preview shows in Material Preview (EEVEE); Cycles renders (F12) keep your "
-                "materials")
+PREVIEW_NOTE = ("The preview shows in Material Preview (EEVEE); renders (F12) keep your "
+                "materials (EEVEE: with Lock Interface, in Preview Light)")
 
 #: The bake folder and comparison picture of this session's last texture bake (Open Folder,
 #: Open Comparison): kept here, never read from the .blend, so a received file cannot make the
@@ -229,6 +229,16 @@ def after_preview(operator, context) -> None:
     if show_in_viewport(context):
         operator.report({"INFO"}, "Switched the 3D view to Material Preview to show the "
                                   "relit preview")
+    if render_guard.lock_for_renders(context.scene):
+        operator.report({"INFO"}, LOCK_NOTE)
+        scene = context.scene
+        if LAST_BAKE_KEY in scene:
+            scene[LAST_BAKE_KEY] = scene[LAST_BAKE_KEY] + "\n" + LOCK_NOTE
+
+
+#: Said when a bake turned Lock Interface on so EEVEE renders keep the user's materials.
+LOCK_NOTE = ("Turned on Render > Lock Interface: EEVEE renders (F12) then use your own "
+             "materials (Remove Preview turns it back off)")
 
 
 #: A line of the last-bake box that is a warning (the panel draws it with a warning icon).
@@ -751,6 +761,9 @@ class RELIGHT_OT_remove_preview(bpy.types.Operator):
     def execute(self, context):
         n = preview_nodes.remove_preview(context.active_object, context.scene)
         self.report({"INFO"}, f"Removed the preview from {n} material(s)")
+        if render_guard.unlock_after_previews(context.scene):
+            self.report({"INFO"}, "Turned Render > Lock Interface back off (the bake had "
+                                  "turned it on)")
         return {"FINISHED"}
 
 

@@ -7,6 +7,7 @@ import bpy
 import os
 
 from ..bakes.analyze import SUMMARY_KEY
+from ..base import compat
 from ..base.blend_files import object_bakes
 from .properties import measured_line, preset_differences, ui_label
 from ..preview.preview_nodes import COLOR_SLIDER, SLIDERS
@@ -299,6 +300,18 @@ def _kept_chunks(layout, context, kind: str):
         layout.operator("relight.discard_chunks", icon="TRASH").kind = kind
 
 
+def _eevee_render_hint(layout, scene) -> None:
+    """What an EEVEE render (F12) shows while the preview is on (render_guard): the user's
+    materials when the interface is locked during renders, else the preview, with the toggle."""
+    if scene.render.use_lock_interface:
+        layout.label(text="EEVEE renders (F12) use your own materials", icon="INFO")
+        return
+    box = layout.box()
+    box.label(text="EEVEE renders (F12) show the preview unless the", icon="INFO")
+    box.label(text="interface is locked while rendering (safe to swap materials):")
+    box.prop(scene.render, "use_lock_interface", text="Lock Interface for Renders")
+
+
 class VIEW3D_PT_relight_light(_RelightSubPanel, bpy.types.Panel):
     """The light of the live preview, and whether it shows"""
 
@@ -315,9 +328,8 @@ class VIEW3D_PT_relight_light(_RelightSubPanel, bpy.types.Panel):
         if not props.show_preview:
             layout.label(text="Showing your own materials", icon="HIDE_ON")
         _viewport_hint(layout, context)
-        if props.show_preview and scene.render.engine != "CYCLES":
-            layout.label(text="EEVEE renders (F12) show the preview too: untick Show Preview "
-                              "or render with Cycles", icon="INFO")
+        if props.show_preview and scene.render.engine == compat.EEVEE_ENGINE:
+            _eevee_render_hint(layout, scene)
         if any(g.name.startswith("Relight Transport (") for g in bpy.data.node_groups):
             layout.row().prop(props, "texture_light", expand=True)
         if props.texture_light == "WORLD":

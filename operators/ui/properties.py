@@ -394,8 +394,8 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
     show_preview: BoolProperty(
         name="Show Preview", default=True, update=_on_show_preview,
         description="Show the relit preview in EEVEE (Material Preview). Off: your own "
-                    "materials in every view. Cycles renders (F12) and bakes always use your "
-                    "materials")
+                    "materials in every view. Renders (F12) and bakes use your materials (EEVEE "
+                    "renders from the UI with Lock Interface on)")
 
 
 # The bakes' own settings, declared once on their dataclasses (lt_addon/settings.py): the lobes

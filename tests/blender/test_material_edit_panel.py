@@ -9,7 +9,37 @@ import pytest
 pytestmark = pytest.mark.version_sensitive
 
 
-def test_bake_materials_operator_and_live_colour_edit(fresh_scene, tmp_path):
+def _render_alone(scene, camera, path) -> np.ndarray:
+    """What EEVEE's viewport shows from ``camera`` (which sees one object alone, far from the
+    rest: hiding the rest would re-shade the material preview without its shadows): an EEVEE
+    render with the previews shown (F12 itself never shows them), 32^2, 2 samples:
+    (32, 32, 3) linear RGB."""
+    import bpy
+
+    from relightable_textures.lt_addon.io import exrio
+    from relightable_textures.operators.base import compat
+    from relightable_textures.operators.preview import preview_nodes
+
+    saved = scene.camera, scene.render.engine
+    scene.camera, scene.render.engine = camera, compat.EEVEE_ENGINE
+    scene.eevee.taa_render_samples = 2
+    scene.render.resolution_x = scene.render.resolution_y = 32
+    scene.render.resolution_percentage = 100
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.filepath = str(path)
+    undo = preview_nodes.render_previews(list(scene.objects), compat.EEVEE_ENGINE)
+    try:
+        bpy.ops.render.render(write_still=True)
+    finally:
+        for f in undo:
+            f()
+        scene.camera, scene.render.engine = saved
+    ch, _ = exrio.read_exr(str(path))
+    return np.stack([ch["R"], ch["G"], ch["B"]], -1).astype(np.float64)
+
+
+def test_bake_materials_operator_and_live_colour_edit(fresh_scene, tmp_path,
+                                                     tmp_path_factory):
     import bpy
 
     import relightable_textures
@@ -29,6 +59,20 @@ def test_bake_materials_operator_and_live_colour_edit(fresh_scene, tmp_path):
         props.material_anchor_directions = 4
         red = bpy.data.materials["RedMaterial"]
         view_layer = bpy.context.view_layer
+        # an object of the user's that shares the floor's material and is not baked (issue
+        # 57): its EEVEE render must stay its own, and a camera that sees only it
+        floor_mat = bpy.data.objects["Floor"].material_slots[0].material
+        other = bpy.data.objects.new("Other", bpy.data.objects["Box"].data.copy())
+        other.data.materials.clear()
+        other.data.materials.append(floor_mat)
+        other.location = (40.0, 0.0, 0.0)
+        scene.collection.objects.link(other)
+        cam = bpy.data.objects.new("OtherCam", bpy.data.cameras.new("OtherCam"))
+        cam.location, cam.rotation_euler = (40.0, -6.0, 1.5), (1.45, 0.0, 0.0)
+        scene.collection.objects.link(cam)
+        renders = tmp_path_factory.mktemp("renders")     # the bake folder stays the bake's
+        other_before = _render_alone(scene, cam, renders / "other-before.exr")
+        assert other_before.mean() > 0.005
         for o in bpy.data.objects:
             o.select_set(o.name in names)
         view_layer.objects.active = bpy.data.objects["Floor"]
@@ -69,6 +113,17 @@ def test_bake_materials_operator_and_live_colour_edit(fresh_scene, tmp_path):
             (ours,) = [x for x in outs if x.get("relight_preview")]
             assert ours.get("relight_preview_kind") == mb.KIND and ours.target == "EEVEE"
             assert [x.is_active_output for x in outs if not x.get("relight_preview")] == [True]
+        # the object that shares the floor's material and was not baked keeps its own look:
+        # the preview is gated by a mark only the receivers carry
+        from relightable_textures.operators.preview import preview_nodes as pn
+        assert all(bpy.data.objects[n].get(pn.RECEIVER) == 1.0 for n in names)
+        assert pn.RECEIVER not in other
+        other_after = _render_alone(scene, cam, renders / "other-after.exr")
+        assert np.abs(other_after - other_before).max() < 1e-4
+        other[pn.RECEIVER] = 1.0           # marked, it shows the preview (no attribute: black)
+        gated_off = _render_alone(scene, cam, renders / "other-marked.exr")
+        del other[pn.RECEIVER]
+        assert np.abs(gated_off - other_before).max() > 0.01
         before = shown().copy()
         # a colour edit in the material re-shades through the depsgraph handler
         socket = mb.material_colour_socket(red)
@@ -88,6 +143,13 @@ def test_bake_materials_operator_and_live_colour_edit(fresh_scene, tmp_path):
         np.testing.assert_allclose(shown(), want({"RedMaterial": (0.1, 0.2, 0.9)}),
                                    rtol=1e-5, atol=1e-7)
         assert not np.allclose(shown(), after)
+        # Remove Preview on every receiver: no preview node and no receiver mark is left
+        for n in names:
+            view_layer.objects.active = bpy.data.objects[n]
+            assert bpy.ops.relight.remove_preview() == {"FINISHED"}
+        assert not [o.name for o in bpy.data.objects if pn.RECEIVER in o]
+        assert not [m.name for m in bpy.data.materials if m.node_tree is not None
+                    and any(x.get("relight_preview") for x in m.node_tree.nodes)]
     finally:
         relightable_textures.unregister()
 

@@ -5,11 +5,14 @@ material, a Sun added -- and a second object of the user's that shares the cube'
 is not baked. Each step's outcome is asserted: the bake lands in the folder the panel names
 (an unsaved file has no '//'), the viewport is switched to Material Preview, the preview is
 EEVEE's only (a Cycles F12 render equals the render before it, within noise), the shared
-material is left alone (the cube's preview is on a copy), Show Preview off/on, Remove Preview
+material is left alone (the cube's preview is on a copy), an EEVEE F12 render (the factory
+engine) equals the render before the bake too (the preview steps aside for it; the bake locked
+the interface so F12 from the UI may do that), Show Preview off/on, Remove Preview
 puts back exactly what was there, and undo brings the preview back (Remove Preview is an undo
 step) and takes the bake out (the bake is one)."""
 
 import os
+import threading
 
 import numpy as np
 import pytest
@@ -41,21 +44,47 @@ def _fingerprint(mat) -> dict:
 
 def _render(scene, path: str) -> np.ndarray:
     """F12 with Cycles, tiny and few samples, fixed seed: (H, W, 3) linear RGB (the project's
-    own camera render, as Relight Compare renders)."""
+    own camera render, as Relight Compare renders). The scene's engine is put back."""
     from relightable_textures.operators.preview.compare_render import render_camera
 
+    engine = scene.render.engine
     scene.cycles.device = "CPU"
     scene.cycles.seed = 3
     scene.render.resolution_x, scene.render.resolution_y = 48, 36
     scene.render.resolution_percentage = 100
-    return render_camera(scene, path, 8)
+    try:
+        return render_camera(scene, path, 8)
+    finally:
+        scene.render.engine = engine
+
+
+def _render_eevee(scene, path: str) -> np.ndarray:
+    """F12 with EEVEE, the factory scene's engine (software GL here: tiny, 4 samples; EEVEE
+    renders the same scene to the same pixels, measured: difference 0.0)."""
+    import bpy
+
+    from relightable_textures.lt_addon.io import exrio
+    from relightable_textures.operators.base import compat
+
+    scene.render.engine = compat.EEVEE_ENGINE
+    scene.eevee.taa_render_samples = 4
+    scene.render.resolution_x, scene.render.resolution_y = 48, 36
+    scene.render.resolution_percentage = 100
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.image_settings.color_depth = "32"
+    scene.render.filepath = path
+    bpy.ops.render.render(write_still=True)
+    ch, _ = exrio.read_exr(path)
+    return np.stack([ch["R"], ch["G"], ch["B"]], -1).astype(np.float64)
 
 
 def test_a_newcomer_bakes_previews_renders_removes_and_undoes(tmp_path, monkeypatch):
     import bpy
 
     import relightable_textures
+    from relightable_textures.operators.base import compat
     from relightable_textures.operators.preview import preview_nodes as pn
+    from relightable_textures.operators.preview import render_guard
     from relightable_textures.operators.ui import bake_ops
 
     monkeypatch.setenv("HOME", str(tmp_path / "home"))   # the unsaved file's bake folder
@@ -77,8 +106,12 @@ def test_a_newcomer_bakes_previews_renders_removes_and_undoes(tmp_path, monkeypa
         scene.collection.objects.link(other)
         assert other.material_slots[0].material == mat
         before = _fingerprint(mat)
+        assert scene.render.engine == compat.EEVEE_ENGINE    # the factory scene renders EEVEE
+        assert not scene.render.use_lock_interface
         render_before = _render(scene, str(tmp_path / "before.exr"))
         assert render_before.mean() > 0.01
+        eevee_before = _render_eevee(scene, str(tmp_path / "eevee-before.exr"))
+        assert eevee_before.mean() > 0.01
 
         # 1. the panel's defaults for a first bake: no folder to choose, nothing to save
         props = scene.relight
@@ -108,6 +141,10 @@ def test_a_newcomer_bakes_previews_renders_removes_and_undoes(tmp_path, monkeypa
         lines = scene[bake_ops.LAST_BAKE_KEY].splitlines()
         assert lines[0].startswith("Baked Cube:") and "error vs Cycles" in lines[0]
         assert bake_ops.PREVIEW_NOTE in lines
+        # EEVEE renders from the UI run on the render thread: the bake locked the interface
+        # so the preview may step aside there, and said so
+        assert scene.render.use_lock_interface and scene.get(render_guard.LOCKED_KEY)
+        assert bake_ops.LOCK_NOTE in lines
         # the shared material is left alone: the cube's preview is on a copy, said so
         copy = cube.material_slots[0].material
         assert copy != mat and copy.get(pn.COPY_OF) == mat
@@ -139,6 +176,28 @@ def test_a_newcomer_bakes_previews_renders_removes_and_undoes(tmp_path, monkeypa
         assert np.abs(shown - render_before).max() > 0.05
         assert ours.target == "EEVEE"
 
+        # 3b. F12 with EEVEE, the factory engine: the preview steps aside for the render and
+        # comes back after it (the same output node, target EEVEE)
+        eevee_after = _render_eevee(scene, str(tmp_path / "eevee-after.exr"))
+        assert np.abs(eevee_after - eevee_before).max() < 1e-4
+        assert pn.preview_shown(cube) and pn._our_output(copy.node_tree).target == "EEVEE"
+        undo = pn.render_previews([cube], compat.EEVEE_ENGINE)   # asked for: it shows
+        eevee_shown = _render_eevee(scene, str(tmp_path / "eevee-shown.exr"))
+        for f in undo:
+            f()
+        assert np.abs(eevee_shown - eevee_before).max() > 0.05
+        # the rule for the UI's render thread: step aside only with the interface locked
+        rule = {}
+        for locked in (True, False):
+            scene.render.use_lock_interface = locked
+            t = threading.Thread(target=lambda k=locked: rule.__setitem__(
+                k, render_guard.can_step_aside(scene)))
+            t.start()
+            t.join()
+        assert rule == {True: True, False: False}
+        assert render_guard.can_step_aside(scene)               # this (main) thread
+        scene.render.use_lock_interface = True
+
         # 4. Show Preview off: EEVEE shows the user's material too; on: the preview again
         props.show_preview = False
         assert not pn.preview_shown(cube) and pn.preview_kinds(cube) == ["transport_texture"]
@@ -158,6 +217,7 @@ def test_a_newcomer_bakes_previews_renders_removes_and_undoes(tmp_path, monkeypa
         assert not [i for i in bpy.data.images if i.get("relight_preview")]
         assert mat.node_tree.animation_data is None
         assert np.abs(_render(scene, str(tmp_path / "removed.exr")) - render_before).max() < 1e-4
+        assert not scene.render.use_lock_interface and render_guard.LOCKED_KEY not in scene
 
         # 6. Undo: Remove Preview was one step, so the preview is back; once more undoes the
         # bake (its preview and records), the files stay in the folder
@@ -166,9 +226,11 @@ def test_a_newcomer_bakes_previews_renders_removes_and_undoes(tmp_path, monkeypa
         assert pn.preview_kinds(cube) == ["transport_texture"]
         assert cube.material_slots[0].material.name == "Material (Relight Cube)"
         assert bpy.data.objects["Other"].material_slots[0].material.name == "Material"
+        assert bpy.context.scene.render.use_lock_interface
         bpy.ops.ed.undo()
         cube = bpy.data.objects["Cube"]
         assert "relightable_bakes" not in cube and pn.preview_kinds(cube) == []
+        assert not bpy.context.scene.render.use_lock_interface
         assert cube.material_slots[0].material.name == "Material"
         assert _fingerprint(bpy.data.materials["Material"]) == before
         assert "Cube_texture_report.json" in os.listdir(want)
