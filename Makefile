@@ -95,7 +95,9 @@ test-core: $(STAMP)
 ##   of a balanced bumps bake (lightmaps, RTI, equal-coefficient comparison; ~5 min), the
 ##   thread settings of a bake, the up-front estimate against the bake at 256^2 and 512^2,
 ##   Mahajan's figures on a 65k-texel transport texture, and the real texture sizes: statue +
-##   ground and the bumps at 1024^2 and 2048^2, each viewport against Cycles (~2 h more)
+##   ground and the bumps at 1024^2 and 2048^2, each viewport against Cycles (~2 h more),
+##   and the sun studies: hours against a ray count, two latitudes from a camera and the
+##   year's maps against the Cycles renders they replace (~20 min)
 bench: $(STAMP)
 	mkdir -p $(OUT)/bench $(BLENDER_USER_RESOURCES)
 	$(PY) benchmarks/bench_transport_textures.py --out $(OUT)/bench
@@ -118,6 +120,8 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_texel_cpca.py --out $(OUT)/bench
 	$(PY) benchmarks/bench_viewports.py --scenes statue,bumps --resolutions 1024,2048
 	$(PY) benchmarks/bench_gallery.py --out $(OUT)/bench/gallery --json $(OUT)/bench/gallery.json --camera all
+	$(PY) benchmarks/bench_sun_study.py --json $(OUT)/bench/sun_study.json
+	$(PY) benchmarks/bench_sun_study_places.py --out $(OUT)/bench/sun_study_places
 
 ## bench-full: the standard (demo-size) sweeps behind the tables in docs/ (results.md and the
 ##   method pages) and the presets (~2 h): writes docs/bench (presets.json among it: copy it over

@@ -10,12 +10,15 @@ and each date's path between them, ``step_deg`` apart (:func:`.study_times.with_
 Spec: ``LAT,LON,ZONE,DATE[,DATE...][,north=DEG][,elevation=M]`` -- degrees north and east, an
 IANA zone (or a fixed offset ``UTC+01:00``), ISO dates, and optionally the scene's north (the
 *Sun Position* add-on's North Offset, as ``relight sun-study --north``) and the site's height.
-Example: ``51.5,-0.13,Europe/London,2026-03-20,2026-06-21,2026-12-21``.
+Example: ``51.5,-0.13,Europe/London,2026-03-20,2026-06-21,2026-12-21``. Or
+``scene,DATE[,DATE...]``: the place, zone and north the scene's *Sun Position* add-on holds
+(:func:`place_from_sun_position`; the bpy layer reads them from the .blend).
 """
 
 from __future__ import annotations
 
 import datetime as _dt
+import math
 from dataclasses import dataclass
 
 from ..errors import InputError
@@ -26,14 +29,56 @@ from ..errors import InputError
 MAX_DATES = 24
 
 
+#: The first field of a study spec that takes the place from the scene's Sun Position add-on.
+FROM_SCENE = "scene"
+
+
 @dataclass(frozen=True)
 class StudySpec:
-    latitude: float
-    longitude: float
-    tz: str
+    latitude: float | None       # None: from the scene (FROM_SCENE)
+    longitude: float | None
+    tz: str | None
     dates: tuple
-    north_deg: float = 0.0
+    north_deg: float | None = 0.0    # None: not given (from the scene: the add-on's)
     elevation_m: float = 0.0
+
+    @property
+    def from_scene(self) -> bool:
+        return self.latitude is None
+
+
+def place_from_sun_position(values: dict) -> dict:
+    """The study's place from the *Sun Position* add-on's settings ``values``
+    (:mod:`...operators.base.sun_position`: ``latitude``, ``longitude`` in degrees, ``UTC_zone``
+    in hours, ``use_daylight_savings``, ``north_offset`` in radians): ``{latitude, longitude,
+    tz, north_deg}``. The add-on keeps one offset all year (its daylight saving adds an hour to
+    every date), so the zone is that fixed offset, ``UTC+HH:MM``. InputError when a value is
+    out of range."""
+    try:
+        lat, lon = float(values["latitude"]), float(values["longitude"])
+        hours = float(values.get("UTC_zone", 0.0)) + (1.0 if values.get("use_daylight_savings")
+                                                      else 0.0)
+        north = math.degrees(float(values.get("north_offset", 0.0)))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"the scene's Sun Position settings are not numbers ({exc})") from None
+    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0 and -14.0 <= hours <= 14.0
+            and math.isfinite(north)):
+        raise InputError(f"the scene's Sun Position settings are out of range: latitude "
+                         f"{lat:g}, longitude {lon:g}, UTC zone {hours:g} h")
+    minutes = int(round(hours * 60.0))
+    tz = "UTC" if minutes == 0 else (f"UTC{'+' if minutes > 0 else '-'}"
+                                     f"{abs(minutes) // 60:02d}:{abs(minutes) % 60:02d}")
+    # the file holds float32 (-33.87 reads -33.869998...): 4 decimals, 11 m, 1e-4 deg of Sun
+    return {"latitude": round(lat, 4), "longitude": round(lon, 4), "tz": tz,
+            "north_deg": round(((north + 180.0) % 360.0) - 180.0, 4)}
+
+
+def with_place(spec: StudySpec, place: dict) -> StudySpec:
+    """``spec`` (from the scene) with ``place`` (:func:`place_from_sun_position`); a north
+    given in the spec wins over the add-on's."""
+    north = spec.north_deg if spec.north_deg is not None else place["north_deg"]
+    return StudySpec(place["latitude"], place["longitude"], place["tz"], spec.dates, north,
+                     spec.elevation_m)
 
 
 def parse(text: str) -> StudySpec:
@@ -42,26 +87,31 @@ def parse(text: str) -> StudySpec:
     from .study_times import zone
 
     parts = [p.strip() for p in str(text).split(",") if p.strip()]
-    form = ("expected LAT,LON,ZONE,DATE[,DATE...][,north=DEG][,elevation=M], e.g. "
+    form = ("expected LAT,LON,ZONE,DATE[,DATE...][,north=DEG][,elevation=M] (or "
+            "scene,DATE,...: the Sun Position add-on's place), e.g. "
             "51.5,-0.13,Europe/London,2026-06-21")
-    if len(parts) < 3:
+    scene = bool(parts) and parts[0].lower() == FROM_SCENE
+    if len(parts) < (2 if scene else 3):
         raise InputError(f"bad study {str(text)[:80]!r}: {form}")
-    try:
-        lat, lon = float(parts[0]), float(parts[1])
-    except ValueError:
-        raise InputError(f"bad study {str(text)[:80]!r}: latitude and longitude are degrees; "
-                         f"{form}") from None
-    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
-        raise InputError(f"study latitude must be in -90..90 and longitude in -180..180, got "
-                         f"{lat:g}, {lon:g}")
-    tz = parts[2]
-    try:
-        zone(tz)
-    except Exception as exc:     # an unknown zone name: say which, not the library's words
-        raise InputError(f"study time zone {tz[:40]!r} is not known ({exc}); give an IANA "
-                         "name (Europe/London) or a fixed offset (UTC+01:00)") from None
-    dates, extra = [], {"north": 0.0, "elevation": 0.0}
-    for p in parts[3:]:
+    if scene:
+        lat = lon = tz = None
+    else:
+        try:
+            lat, lon = float(parts[0]), float(parts[1])
+        except ValueError:
+            raise InputError(f"bad study {str(text)[:80]!r}: latitude and longitude are "
+                             f"degrees; {form}") from None
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+            raise InputError(f"study latitude must be in -90..90 and longitude in -180..180, "
+                             f"got {lat:g}, {lon:g}")
+        tz = parts[2]
+        try:
+            zone(tz)
+        except Exception as exc:     # an unknown zone name: say which, not the library's words
+            raise InputError(f"study time zone {tz[:40]!r} is not known ({exc}); give an IANA "
+                             "name (Europe/London) or a fixed offset (UTC+01:00)") from None
+    dates, extra = [], {"north": None if scene else 0.0, "elevation": 0.0}
+    for p in parts[1 if scene else 3:]:
         if "=" in p:
             key, _, value = p.partition("=")
             key = key.strip().lower()
@@ -85,13 +135,20 @@ def parse(text: str) -> StudySpec:
                      extra["elevation"])
 
 
-def direction_set(base, text: str, step_deg: float):
+def direction_set(base, text: str, step_deg: float, place: dict | None = None):
     """``(DirectionSet, info)``: ``base`` plus the Sun of every whole hour of the study's dates
     and each date's path between them ``step_deg`` apart (:func:`.study_times.with_study`);
-    ``info`` is the report's ``study`` entry."""
+    ``info`` is the report's ``study`` entry. ``place``: the scene's Sun Position place
+    (:func:`place_from_sun_position`), which a ``scene,...`` spec needs."""
     from .study_times import study_suns, study_times, with_study
 
     spec = parse(text)
+    if spec.from_scene:
+        if place is None:
+            raise InputError("the study takes its place from the scene ('scene,...'), but the "
+                             "scene holds no Sun Position settings: set a place in the Sun "
+                             "Position add-on, or give LAT,LON,ZONE")
+        spec = with_place(spec, place)
     times = study_times(list(spec.dates), spec.tz, step_minutes=60)
     suns = study_suns(times, spec.latitude, spec.longitude, spec.elevation_m,
                       north_deg=spec.north_deg)
@@ -105,5 +162,7 @@ def direction_set(base, text: str, step_deg: float):
             "elevation_m": spec.elevation_m, "base": base.spec,
             "base_directions": p["base_kept"], "hour_directions": p["study_directions"],
             "path_directions": p["study_path_directions"], "step_deg": float(step_deg),
-            "elevation_deg": p["study_elevation_deg"], "why": "asked for (--study)"}
+            "elevation_deg": p["study_elevation_deg"], "why": "asked for (--study)",
+            **({"place_from": "the scene's Sun Position add-on"} if place is not None
+               and parse(text).from_scene else {})}
     return dset, info

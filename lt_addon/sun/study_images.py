@@ -107,20 +107,21 @@ def hours_picture(hours, covered, top_h: float, title="", *,
 def sheet(cells, n_cols: int, title="", *, min_width: int = 256, gap: int = 4,
           scale: int = 2) -> np.ndarray:
     """A shadow-study sheet: ``cells`` a row-major list of ``(image, line1, line2)`` --
-    ``image`` (R, R) linear grey in [0, 1] (row 0 at v = 0) or None (a blank cell: a clock
+    ``image`` (H, W) linear grey or (H, W, 3) linear RGB, display range [0, 1], row 0 at the
+    bottom (v = 0 of a texture, the first row of a render), or None (a blank cell: a clock
     time the day does not have) -- laid out ``n_cols`` a row, each enlarged to at least
     ``min_width`` px and captioned with two lines, under ``title`` (a line or lines)."""
     if not cells:
         raise ValueError("a sheet needs at least one cell")
-    shape = next((np.shape(c[0]) for c in cells if c[0] is not None), (32, 32))
+    shape = next((np.shape(c[0])[:2] for c in cells if c[0] is not None), (32, 32))
     tiles = []
     for img, line1, line2 in cells:
         if img is None:
-            rgb = np.zeros(shape + (3,), np.uint8)
+            rgb = np.zeros(tuple(shape) + (3,), np.uint8)
             rgb[:] = _BG
         else:
             g = linear_to_srgb8(np.asarray(img, np.float64))
-            rgb = np.repeat(g[..., None], 3, axis=2)
+            rgb = g if g.ndim == 3 else np.repeat(g[..., None], 3, axis=2)
         tile = _upscale(rgb[::-1], min_width)
         tiles.append(caption(caption(tile, line2, scale), line1, scale))
     th, tw = tiles[0].shape[:2]

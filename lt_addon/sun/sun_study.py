@@ -185,13 +185,43 @@ def _grid(times, dates, hours):
     return [[at.get((di, int(round(h * 3600.0)))) for h in hours] for di in range(len(dates))]
 
 
+def _sheet_cells(times, suns, dates, hours) -> list:
+    """The shadow-study sheet's cells, row-major (date, clock hour): captions, the Sun's
+    elevation and compass azimuth (degrees; None for a clock time the day does not have) and
+    its direction in the scene's frame (a unit 3-vector, None while the Sun is down)."""
+    cells = []
+    for di, line in enumerate(_grid(times, dates, hours)):
+        for hi, i in enumerate(line):
+            day = dates[di].isoformat()
+            cell = {"date": day, "clock": _clock(hours[hi]), "local": None, "elevation": None,
+                    "azimuth": None, "direction": None}
+            if i is None:
+                cell.update(line1=f"{day} {_clock(hours[hi])}", line2="no such time (DST)")
+                cells.append(cell)
+                continue
+            loc = times.local[i]
+            cell.update(local=loc.isoformat(), elevation=round(float(suns.elevation[i]), 4),
+                        azimuth=round(float(suns.azimuth[i]), 4),
+                        line1=f"{day} {_clock(hours[hi])} {loc.tzname() or ''}".rstrip())
+            if suns.up[i]:
+                cell["direction"] = [float(v) for v in suns.directions[suns.index[i]]]
+                cell["line2"] = f"el {suns.elevation[i]:.1f} az {suns.azimuth[i]:.1f}"
+            else:
+                cell["line2"] = f"sun down (el {suns.elevation[i]:.1f})"
+            cells.append(cell)
+    return cells
+
+
 def run_study(report_paths, settings: StudySettings, out_dir: str, *, force: bool = False,
-              version: str = "", echo=None) -> dict:
+              version: str = "", echo=None, camera=None) -> dict:
     """Run the study on each bake report of ``report_paths`` and write its files into
     ``out_dir`` (created; a folder that does not exist yet is made whole or not at all).
     Existing output files are refused without ``force``. ``echo(line)`` gets a line per
-    object as it is done. Returns the report (also written as :data:`REPORT_NAME`), its
-    ``warnings`` a list of lines."""
+    object as it is done. ``camera(folder, cells, n_cols, title, warnings, textures)``,
+    given, draws the sheet from a scene camera into the same folder before it commits (the
+    bpy layer's :mod:`...operators.preview.study_camera`; ``textures``: per object its UV map
+    and each cell's direct-light texture); its dict is the report's ``camera``. Returns
+    the report (also written as :data:`REPORT_NAME`), its ``warnings`` a list of lines."""
     from ..io import atomic, exrio
     from ..io.contact_sheet import write_png
     from ..io.names import object_stem
@@ -230,6 +260,7 @@ def run_study(report_paths, settings: StudySettings, out_dir: str, *, force: boo
     out_dir = os.path.abspath(out_dir)
     names = [CSV_NAME, REPORT_NAME] + [n for *_, stem in loaded
                                        for n in output_names(stem, True).values()]
+    names += list(getattr(camera, "outputs", ()))    # the camera sheet's, when it draws one
     if os.path.isdir(out_dir) and not force:
         there = [n for n in names if os.path.lexists(os.path.join(out_dir, n))]
         if there:
@@ -246,8 +277,10 @@ def run_study(report_paths, settings: StudySettings, out_dir: str, *, force: boo
         warnings.append("the Sun is below the horizon at every instant of the study: every "
                         "map is 0 hours")
 
+    sheet_cells = _sheet_cells(sheet_times, sheet_suns, sheet_dates, sheet_hours)
+
     def build(folder):
-        rows, objects = [], []
+        rows, objects, textures = [], [], {}
         for path, bake, store, rep, stem in loaded:
             t0 = time.perf_counter()
             kernel = str(rep.get("settings", {}).get("kernel", "linear"))
@@ -306,25 +339,16 @@ def run_study(report_paths, settings: StudySettings, out_dir: str, *, force: boo
                       study_images.hours_picture(result.hours, result.covered,
                                                  result.possible_h, title))
             cells = []
-            grid = _grid(sheet_times, sheet_dates, sheet_hours)
-            for di, line in enumerate(grid):
-                for hi, i in enumerate(line):
-                    day = sheet_dates[di].isoformat()
-                    if i is None:
-                        cells.append((None, f"{day} {_clock(sheet_hours[hi])}",
-                                      "no such time (DST)"))
-                        continue
-                    loc = sheet_times.local[i]
-                    head = f"{day} {_clock(sheet_hours[hi])} {loc.tzname() or ''}".rstrip()
-                    if sheet_suns.up[i]:
-                        d = sheet_suns.directions[sheet_suns.index[i]]
-                        img = sh.direct_light(store, d, settings.sun_angle, kernel)
-                        sub = (f"el {sheet_suns.elevation[i]:.1f} az "
-                               f"{sheet_suns.azimuth[i]:.1f}")
-                    else:
-                        img = np.zeros((store.resolution,) * 2, np.float32)
-                        sub = f"sun down (el {sheet_suns.elevation[i]:.1f})"
-                    cells.append((img, head, sub))
+            for cell in sheet_cells:
+                if cell["direction"] is not None:
+                    img = sh.direct_light(store, np.asarray(cell["direction"]),
+                                          settings.sun_angle, kernel)
+                elif cell["elevation"] is not None:     # the sun is down
+                    img = np.zeros((store.resolution,) * 2, np.float32)
+                else:                                   # no such clock time
+                    img = None
+                cells.append((img, cell["line1"], cell["line2"]))
+            textures[bake.name] = {"uv_map": rep.get("uv_map"), "cells": [c[0] for c in cells]}
             write_png(os.path.join(folder, files["sheet_png"]),
                       study_images.sheet(cells, len(sheet_hours),
                                          [f"{bake.name}: direct sun, white surface",
@@ -382,10 +406,18 @@ def run_study(report_paths, settings: StudySettings, out_dir: str, *, force: boo
                          "azimuth_deg": [round(float(v), 4) for v in suns.azimuth]},
             "sheet": {"what": sheet_why, "dates": [d.isoformat() for d in sheet_dates],
                       "hours": sheet_hours, "space": "texture (UV) space, not a camera",
-                      "shows": "direct sun on a white surface (cos x visibility), sRGB"},
+                      "shows": "direct sun on a white surface (cos x visibility), sRGB",
+                      "cells": sheet_cells},
             "objects": objects, "warnings": list(warnings),
             "timings": {"suns": round(t_suns, 4), "load": round(t_load, 4),
                         "total": round(time.perf_counter() - t_start, 4)}}
+        if camera is not None:   # pictures from the scene's camera, in the same folder
+            t0 = time.perf_counter()
+            report["camera"] = camera(folder, sheet_cells, len(sheet_hours),
+                                      [_place(settings)], warnings, textures)
+            report["warnings"] = list(warnings)
+            report["timings"]["camera"] = round(time.perf_counter() - t0, 4)
+            report["timings"]["total"] = round(time.perf_counter() - t_start, 4)
         atomic.write_json(os.path.join(folder, REPORT_NAME), report, default=_json_default)
         return report
 

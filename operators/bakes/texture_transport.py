@@ -341,7 +341,14 @@ def resolve_directions(scene, settings):
         if forced is not None:
             raise BakeInputError("--study and +sun-path both add a Sun's path: give one (the "
                                  "study's place and dates, or the scene Sun's animation)")
-        dset, info = direction_set(base, settings.study, settings.sun_path_step)
+        from ...lt_addon.sun.study_directions import parse, place_from_sun_position
+        from ..base import sun_position
+
+        place = None
+        if parse(settings.study).from_scene:     # 'scene,...': the Sun Position add-on's place
+            values = sun_position.read(scene)
+            place = place_from_sun_position(values) if values is not None else None
+        dset, info = direction_set(base, settings.study, settings.sun_path_step, place)
         moving = sun_path(scene) if settings.sun_path == "auto" else None
         if moving is not None:
             info["note"] = (f"the scene's Sun {moving['object']} is animated; its path was not "

@@ -324,11 +324,33 @@ def _add_uv_map_option(p) -> None:
                         "object without it is refused")
 
 
+#: Options whose value may start with a minus sign and a digit that argparse would take for
+#: an option (``--study -33.87,151.21,...``: a southern latitude first).
+_SIGNED_VALUES = ("--study",)
+
+
+def _join_signed_values(argv: list[str]) -> list[str]:
+    """``[--study, -33.87,...]`` -> ``[--study=-33.87,...]`` (argparse reads a lone
+    ``-33.87,151.21,...`` as an unknown option, not as the value)."""
+    out, i = [], 0
+    while i < len(argv):
+        a = argv[i]
+        nxt = argv[i + 1] if i + 1 < len(argv) else None
+        if a in _SIGNED_VALUES and nxt and len(nxt) > 1 and nxt[0] == "-" and \
+                (nxt[1].isdigit() or nxt[1] == "."):
+            out.append(f"{a}={nxt}")
+            i += 2
+            continue
+        out.append(a)
+        i += 1
+    return out
+
+
 def run(argv: list[str]) -> int:
     """Run one CLI invocation; returns the process exit code (never raises SystemExit)."""
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
+        args = parser.parse_args(_join_signed_values(list(argv)))
         uv_map = getattr(args, "uv_map", None)
         if uv_map:
             if getattr(args, "workers", None) is not None or getattr(args, "scheduler", None):

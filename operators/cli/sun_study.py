@@ -1,6 +1,7 @@
 """The ``relight sun-study`` verb: parsing and printing only; the work is
-:func:`...lt_addon.sun.sun_study.run_study` (bpy-free: the verb reads bake reports, never a
-.blend)."""
+:func:`...lt_addon.sun.sun_study.run_study` (bpy-free: it reads bake reports), and with
+``--camera`` :func:`..preview.study_camera.camera_sheet` (bpy: the .blend's camera and
+previews)."""
 
 from __future__ import annotations
 
@@ -53,17 +54,21 @@ def add_parsers(sub) -> None:
                     "a legend, a shadow-study sheet (the relit texture per date and hour, in "
                     "texture space) and a CSV of min / mean / max hours; sun_study.json "
                     "records the suns, how far each is from the bake's directions, and the "
-                    "timings. Reads the bakes' reports (bake-textures --method transport), "
-                    "never the .blend.")
+                    "timings. Reads the bakes' reports (bake-textures --method transport); "
+                    "with --camera also the baked .blend, for the sheet from its camera.")
     p.add_argument("reports", nargs="+", metavar="BAKE_REPORT.json",
                    help="an object's <object>_texture_report.json; several for several objects")
-    p.add_argument("--lat", type=float, required=True, metavar="DEG",
-                   help="latitude in degrees, north positive")
-    p.add_argument("--lon", type=float, required=True, metavar="DEG",
+    p.add_argument("--lat", type=float, metavar="DEG",
+                   help="latitude in degrees, north positive (required unless --place-from)")
+    p.add_argument("--lon", type=float, metavar="DEG",
                    help="longitude in degrees, east positive (west negative)")
-    p.add_argument("--tz", required=True, metavar="ZONE",
+    p.add_argument("--tz", metavar="ZONE",
                    help="IANA time zone (Europe/London, Australia/Sydney; daylight saving "
                         "followed) or a fixed offset UTC+01:00")
+    p.add_argument("--place-from", metavar="FILE.blend",
+                   help="the place, zone and north of this .blend's Sun Position add-on "
+                        "settings instead of --lat/--lon/--tz (its UTC zone, plus an hour "
+                        "with its Daylight Savings, as a fixed offset)")
     when = p.add_mutually_exclusive_group(required=True)
     when.add_argument("--dates", metavar="D,D,...",
                       help="local dates, ISO: 2026-06-21,2026-12-21")
@@ -81,9 +86,9 @@ def add_parsers(sub) -> None:
                            "counts M minutes): sunlight hours over whole days")
     p.add_argument("--window", type=_window, default=(0.0, 24.0), metavar="START,END",
                    help="with --step-minutes: the local hours of each day (default 0,24)")
-    p.add_argument("--north", type=float, default=0.0, metavar="DEG",
+    p.add_argument("--north", type=float, default=None, metavar="DEG",
                    help="the scene's north: +Y turned by DEG towards +X (the Sun Position "
-                        "add-on's North Offset; default 0: north is +Y)")
+                        "add-on's North Offset; default 0, or --place-from's: north is +Y)")
     p.add_argument("--elevation-m", type=float, default=0.0, metavar="M",
                    help="the site's height above sea level (SPA's parallax; default 0)")
     p.add_argument("--sun-angle", type=float, default=ss.SUN_ANGLE_DEG, metavar="DEG",
@@ -103,6 +108,18 @@ def add_parsers(sub) -> None:
     p.add_argument("--turbidity", type=float, default=3.0, metavar="TL",
                    help="the clear sky's Linke turbidity with --radiation (2: clean mountain "
                         "air, 3: rural, the default, 4-6: cities, summer haze)")
+    p.add_argument("--camera", metavar="FILE.blend",
+                   help="also the sheet from this .blend's scene camera (the file the bake put "
+                        "its previews in): camera_sheet.png, one frame a cell in "
+                        "camera_frames/, and one cell next to Cycles (camera_check.png)")
+    p.add_argument("--camera-size", type=int, default=320, metavar="PX",
+                   help="the camera sheet's cells, longer side in pixels (default 320; the "
+                        "Cycles check renders at twice that)")
+    p.add_argument("--check-cell", metavar="DATE,HH:MM",
+                   help="the sheet cell to render with Cycles too (default: the lowest Sun at "
+                        "least 5 deg up)")
+    p.add_argument("--check-samples", type=int, default=128, metavar="N",
+                   help="Cycles samples of that render (default 128; 0: no Cycles render)")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="output folder (created; its study files replaced only with --force)")
     p.add_argument("--force", action="store_true", help="replace an earlier study in --out")
@@ -131,19 +148,21 @@ def _cmd_sun_study(args) -> int:
                                   every_days=args.every_days)
     except InputError as exc:
         raise CliError(str(exc)) from None
+    place = _place(args)
     settings = ss.StudySettings(
-        latitude=args.lat, longitude=args.lon, tz=args.tz, dates=dates,
+        latitude=place["latitude"], longitude=place["longitude"], tz=place["tz"], dates=dates,
         hours=args.hours, step_minutes=args.step_minutes, window=args.window,
-        north_deg=args.north, elevation_m=args.elevation_m, sun_angle=args.sun_angle,
+        north_deg=place["north_deg"], elevation_m=args.elevation_m, sun_angle=args.sun_angle,
         visibility=args.visibility, sheet_hours=tuple(args.sheet_hours),
         radiation=bool(args.radiation), turbidity=args.turbidity)
     out = os.path.abspath(args.out)
     if os.path.exists(out) and not os.path.isdir(out):
         raise CliError(f"output exists and is not a folder: {out}")
+    camera = _camera(args) if args.camera else None
     try:
         report = ss.run_study([os.path.abspath(r) for r in args.reports], settings, out,
                               force=args.force, version=__version__,
-                              echo=None if args.json else print)
+                              echo=None if args.json else print, camera=camera)
     except InputError as exc:
         raise CliError(str(exc)) from None
     for line in report["warnings"]:
@@ -157,4 +176,89 @@ def _cmd_sun_study(args) -> int:
         n = report["instants"]
         print(f"sun study: {n['count']} instants, the Sun up at {n['sun_up']} "
               f"({n['possible_h']:g} h of sun), {report['timings']['total']:.2f} s; wrote {out}")
+        check = report.get("camera", {}).get("check")
+        if check:
+            print(f"camera: {len(report['camera']['frames'])} frames in "
+                  f"{report['camera']['seconds']['total']:.1f} s; {check['date']} "
+                  f"{check['clock']} vs Cycles: rel. RMSE "
+                  f"{check['rel_rmse_baked_pixels']:.3f} ({check['png']})")
     return EXIT_OK
+
+
+def _place(args) -> dict:
+    """``{latitude, longitude, tz, north_deg}`` from --lat/--lon/--tz/--north, or from
+    --place-from's Sun Position settings (--north still wins when given)."""
+    from .common import CliError, check_input_blend
+
+    given = [f for f, v in (("--lat", args.lat), ("--lon", args.lon), ("--tz", args.tz))
+             if v is not None]
+    if not args.place_from:
+        if len(given) < 3:
+            missing = [f for f in ("--lat", "--lon", "--tz") if f not in given]
+            raise CliError(f"give {', '.join(missing)} (the place and its time zone), or "
+                           "--place-from FILE.blend (its Sun Position add-on's place)")
+        return {"latitude": args.lat, "longitude": args.lon, "tz": args.tz,
+                "north_deg": args.north if args.north is not None else 0.0}
+    if given:
+        raise CliError(f"--place-from takes the place from the .blend: drop {given[0]}")
+    import bpy
+
+    from ...lt_addon.errors import InputError
+    from ...lt_addon.sun.study_directions import place_from_sun_position
+    from ..base import sun_position
+    from ..base.blend_files import blender_log_to_stderr
+
+    path = check_input_blend(args.place_from)
+    with blender_log_to_stderr():
+        bpy.ops.wm.open_mainfile(filepath=path, load_ui=False)
+    values = sun_position.read(bpy.context.scene)
+    if values is None:
+        raise CliError(f"{path}: its scene holds no Sun Position settings (set a place in the "
+                       "Sun Position add-on, or give --lat, --lon and --tz)")
+    try:
+        place = place_from_sun_position(values)
+    except InputError as exc:
+        raise CliError(f"{path}: {exc}") from None
+    if args.north is not None:
+        place["north_deg"] = args.north
+    return place
+
+
+def _camera(args):
+    """Open ``--camera``'s .blend (checked like every input .blend) and return the hook that
+    draws the sheet from its camera into the study's folder (:func:`run_study`'s
+    ``camera``)."""
+    import bpy
+
+    from ..base.blend_files import blender_log_to_stderr
+    from ..base.cycles_bake import BakeInputError
+    from ..preview import study_camera
+    from .common import CliError, check_input_blend
+
+    if not 16 <= args.camera_size <= 4096:
+        raise CliError(f"--camera-size must be in 16..4096, got {args.camera_size}")
+    if args.check_samples < 0:
+        raise CliError(f"--check-samples must be >= 0, got {args.check_samples}")
+    path = check_input_blend(args.camera)
+    with blender_log_to_stderr():
+        bpy.ops.wm.open_mainfile(filepath=path, load_ui=False)
+    scene = bpy.context.scene
+    if scene.camera is None:
+        raise CliError(f"{path}: scene {scene.name!r} has no camera for --camera")
+
+    def draw(folder, cells, n_cols, title, warnings, textures):
+        try:
+            with blender_log_to_stderr():
+                info = study_camera.camera_sheet(
+                    scene, folder, cells, n_cols, title, textures, sun_angle=args.sun_angle,
+                    size=args.camera_size, check=args.check_cell,
+                    check_size=2 * args.camera_size, check_samples=args.check_samples)
+        except (BakeInputError, ValueError) as exc:
+            raise CliError(f"--camera {args.camera}: {exc}") from None
+        if info["not_in_scene"]:
+            warnings.append(f"--camera {args.camera}: not a mesh of its scene, left out of the "
+                            f"camera sheet: {', '.join(info['not_in_scene'])}")
+        return info
+
+    draw.outputs = study_camera.output_names(args.check_samples > 0)
+    return draw

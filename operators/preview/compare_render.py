@@ -55,6 +55,27 @@ def saved_render_settings(scene):
     return restore
 
 
+def rel_rmse(preview, truth, mask=None) -> float:
+    """Relative RMSE of ``preview`` against ``truth`` (H, W, 3) over ``mask`` (default: the
+    pixels the preview covers, the relit objects: it renders nothing else); NaN where none."""
+    if mask is None:
+        mask = preview.sum(-1) > 0
+    return (float(np.linalg.norm((preview - truth)[mask]) / np.linalg.norm(truth[mask]))
+            if mask.any() else float("nan"))
+
+
+def comparison_row(preview, truth, captions) -> np.ndarray:
+    """``preview | truth | |difference| x 4`` (linear RGB, row 0 at the bottom) as one
+    captioned sRGB row, PNG order."""
+    diff = np.abs(preview - truth)
+    # captions readable at any size: about 40 characters across a panel
+    scale = max(2, preview.shape[1] // 256)
+    # renders come bottom row first; PNG rows go top first
+    return labelled_row([(linear_to_srgb8(img[::-1]), text) for img, text in
+                         zip((preview, truth, 4.0 * diff), captions)],
+                        gap=2 * scale, scale=scale)
+
+
 def compare(scene, objects, azimuth: float, elevation: float, sun_angle: float, out_png: str,
             samples: int = 128, resolution: int | None = None) -> dict:
     """Render preview vs Cycles Sun from the scene camera; write the PNG; return figures.
@@ -112,21 +133,12 @@ def compare(scene, objects, azimuth: float, elevation: float, sun_angle: float, 
             towards = Vector(direction_from_az_el(azimuth, elevation).tolist())
             sun.rotation_euler = (-towards).to_track_quat("-Z", "Y").to_euler()
             truth = render_camera(scene, os.path.join(tmp, "truth.exr"), samples)
-        diff = np.abs(preview - truth)
-        mask = preview.sum(-1) > 0
-        err = (float(np.linalg.norm((preview - truth)[mask]) / np.linalg.norm(truth[mask]))
-               if mask.any() else float("nan"))
+        err = rel_rmse(preview, truth)
         # short enough to fit a 256 px panel at scale 2 (20 characters)
         captions = [f"preview, az {azimuth:.0f} el {elevation:.0f}",
                     f"Cycles Sun {sun_angle:.3g} deg",
                     f"|diff| x4, rel {err:.3f}"]
-        # renders come bottom row first; PNG rows go top first
-        # captions readable at any size: about 40 characters across a panel
-        scale = max(2, preview.shape[1] // 256)
-        sheet = labelled_row([(linear_to_srgb8(img[::-1]), text) for img, text in
-                              zip((preview, truth, 4.0 * diff), captions)],
-                             gap=2 * scale, scale=scale)
-        write_png(out_png, sheet)
+        write_png(out_png, comparison_row(preview, truth, captions))
         return {"png": os.path.abspath(out_png), "azimuth": azimuth, "elevation": elevation,
                 "sun_angle": sun_angle, "truth_samples": samples,
                 "rel_rmse_covered_pixels": err, "panels": " | ".join(captions)}

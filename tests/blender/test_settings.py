@@ -135,3 +135,16 @@ def test_a_larger_texture_scales_the_presets_indirect_grid_with_it_up_to_512():
     assert sides("draft", resolution=256) == (128, 0) and sides("draft", resolution=2048)[0] == 512
     assert sides("production", resolution=1024) == (512, 0)
     assert sides("balanced", resolution=2048, indirect_resolution=64) == (64, 96)
+
+
+def test_a_southern_study_parses_as_typed():
+    """``--study -33.87,...`` (a southern latitude first) is the study, not an unknown option
+    (argparse alone refuses it: "expected one argument"); other values are left as they are."""
+    from relightable_textures.operators.cli import build_parser
+    from relightable_textures.operators.cli.commands import _join_signed_values
+
+    study = "-33.87,151.21,Australia/Sydney,2026-06-21"
+    argv = ["bake-textures", "x.blend", "--object", "A", "--study", study, "--sun-path-step", "1"]
+    assert build_parser().parse_args(_join_signed_values(argv)).study == study
+    assert _join_signed_values(["--study", "--force"]) == ["--study", "--force"]
+    assert _join_signed_values(["--lat", "-3", "--study"]) == ["--lat", "-3", "--study"]

@@ -201,3 +201,35 @@ def test_with_study_paths_need_no_jump_between_days():
     n1 = with_study(base, study_suns(one, 51.5, 0.0), one, step_deg=1.0).params[
         "study_path_directions"]
     assert ds.params["study_path_directions"] <= 1.1 * n1
+
+
+def test_the_sun_position_add_ons_place_as_a_study_place():
+    """The add-on keeps one UTC offset all year (its Daylight Savings adds an hour to every
+    date) and its north in radians: a fixed-offset zone and degrees; a ``scene,...`` study takes
+    them, a north given in the spec wins."""
+    import math
+
+    from relightable_textures.lt_addon.errors import InputError
+    from relightable_textures.lt_addon.sun import study_directions as sd
+
+    sydney = {"latitude": -33.869998931884766, "longitude": 151.2100067138672,
+              "UTC_zone": 10.0, "use_daylight_savings": True,
+              "north_offset": math.radians(-200.0)}
+    place = sd.place_from_sun_position(sydney)
+    assert place == {"latitude": -33.87, "longitude": 151.21, "tz": "UTC+11:00",
+                     "north_deg": 160.0}
+    assert zone(place["tz"]).utcoffset(None).total_seconds() == 11 * 3600
+    newfoundland = sd.place_from_sun_position({"latitude": 47.6, "longitude": -52.7,
+                                               "UTC_zone": -3.5})
+    assert newfoundland["tz"] == "UTC-03:30" and newfoundland["north_deg"] == 0.0
+    assert sd.place_from_sun_position({"latitude": 0, "longitude": 0})["tz"] == "UTC"
+    with pytest.raises(InputError, match="out of range"):
+        sd.place_from_sun_position({"latitude": 91.0, "longitude": 0.0})
+    spec = sd.parse("scene,2026-12-21,2026-06-21")
+    assert spec.from_scene and spec.north_deg is None and len(spec.dates) == 2
+    assert sd.with_place(spec, place).north_deg == 160.0
+    assert sd.with_place(sd.parse("Scene,2026-12-21,north=5"), place).north_deg == 5.0
+    with pytest.raises(InputError, match="no Sun Position settings"):
+        sd.direction_set(None, "scene,2026-12-21", 1.0)
+    with pytest.raises(InputError, match="no date"):
+        sd.parse("scene,north=3")
