@@ -64,6 +64,45 @@ def build(path: str) -> None:
     bpy.ops.wm.save_as_mainfile(filepath=path)
 
 
+def viewport_picture(blend: str, year: str, png: str, where: str, size: int = 800) -> dict:
+    """The year's hours map as the viewport shows it (*Show Sun Study Map*): the .blend's
+    camera, the previews rendered by Cycles (emission only, 16 samples), with the maps'
+    legend under it."""
+    import bpy
+    import numpy as np
+
+    from relightable_textures.lt_addon.io.contact_sheet import linear_to_srgb8, write_png
+    from relightable_textures.lt_addon.sun import study_images
+    from relightable_textures.operators.preview import compare_render, preview_nodes
+    from relightable_textures.operators.preview import sun_study_preview
+
+    bpy.ops.wm.open_mainfile(filepath=blend, load_ui=False)
+    scene = bpy.context.scene
+    info = sun_study_preview.show(scene, year, "hours")
+    restore = compare_render.saved_render_settings(scene)
+    r = scene.render
+    f = size / max(r.resolution_x, r.resolution_y)
+    r.resolution_x, r.resolution_y = round(r.resolution_x * f), round(r.resolution_y * f)
+    r.resolution_percentage = 100
+    scene.world = None
+    scene.cycles.use_denoising = False
+    undo = preview_nodes.render_previews(list(scene.objects), "CYCLES")
+    try:
+        img = compare_render.render_camera(scene, png + ".exr", 16)
+    finally:
+        for fn in undo:
+            fn()
+        restore()
+    os.remove(png + ".exr")
+    W = img.shape[1]
+    strip = study_images.hours_picture(np.zeros((1, W)), np.ones((1, W), bool), info["top"],
+                                       min_width=W)[1:]     # its legend, below the one row
+    pic = np.concatenate([linear_to_srgb8(img[::-1]), strip], axis=0)
+    title = f"{where}: hours of direct sun in 2026"
+    write_png(png, study_images._titled(pic, title, 2))
+    return info
+
+
 def relight(argv) -> None:
     from relightable_textures.operators.cli.commands import run
 
@@ -129,12 +168,16 @@ def main(argv=None) -> int:
                                    "nearest_baked_deg": o["nearest_baked_deg"]}
                      for o in yrep["objects"]}}
         print(json.dumps({place: figures["places"][place]}, indent=1), flush=True)
+        viewport_picture(blend, year, os.path.join(out, f"{place}_year_viewport.png"),
+                         place.capitalize())
         if args.pictures:
             os.makedirs(args.pictures, exist_ok=True)
             for src, dst in [(os.path.join(sheet, "camera_sheet.png"), "camera-sheet"),
                              (os.path.join(sheet, "camera_check.png"), "camera-check"),
                              (os.path.join(year, "Ground_sunlight_hours.png"), "year-hours"),
-                             (os.path.join(year, "Ground_radiation.png"), "year-radiation")]:
+                             (os.path.join(year, "Ground_radiation.png"), "year-radiation"),
+                             (os.path.join(out, f"{place}_year_viewport.png"),
+                              "year-hours-viewport")]:
                 shutil.copyfile(src, os.path.join(args.pictures,
                                                   f"sun-study-{place}-{dst}.png"))
 

@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import bpy
 
-from .ui import bake_ops, export_ops, material_ops, panel, properties, scene_ops
+from .ui import bake_ops, export_ops, material_ops, panel, properties, scene_ops, study_ops
 from . import cli
 from .preview import render_guard
 
 CLASSES = (properties.CLASSES + scene_ops.CLASSES + bake_ops.CLASSES + material_ops.CLASSES
-           + export_ops.CLASSES + panel.CLASSES)
+           + export_ops.CLASSES + study_ops.CLASSES + panel.CLASSES)
 CLI_COMMAND = "relight"
 _cli_handles = []
 

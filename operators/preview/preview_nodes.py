@@ -38,7 +38,8 @@ from ..base.compat import ensure_node_tree
 GROUP_PREFIX = "Steerable Illumination"
 FRAME_NAME = "Relight Preview"
 #: the bake kinds with a preview; a material holds at most one preview of each
-PREVIEW_KINDS = ("steerable_texture", "transport_texture", "eigentransport", "material_tensors")
+PREVIEW_KINDS = ("steerable_texture", "transport_texture", "eigentransport", "material_tensors",
+                 "sun_study")
 _TAG = "relight_preview"  # custom property marking our nodes
 OWNER = "relight_object"  # custom property: the object a preview's group belongs to
 
@@ -379,7 +380,7 @@ PREVIEW_TARGET = "EEVEE"
 #: kinds whose material is copied when other objects use it too (the material edits' preview
 #: reads a per-object attribute in the materials its regions are named after: never copied;
 #: it is gated instead, so objects the bake did not cover show their own surface)
-_COPIED_KINDS = ("steerable_texture", "transport_texture", "eigentransport")
+_COPIED_KINDS = ("steerable_texture", "transport_texture", "eigentransport", "sun_study")
 
 
 def _preview_nodes(tree, kind: str | None = None):

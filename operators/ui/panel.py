@@ -25,7 +25,8 @@ class _RelightSubPanel(_RelightTab):
 
 #: What the panel calls each bake kind (the records' ``kind``).
 KIND_LABELS = {"transport_texture": "Transport texture", "steerable_texture": "Steerable texture",
-               "eigentransport": "Vertex transport", "material_tensors": "Material edits"}
+               "eigentransport": "Vertex transport", "material_tensors": "Material edits",
+               "sun_study": "Sun study map"}
 
 
 class VIEW3D_PT_relight(_RelightTab, bpy.types.Panel):
@@ -477,6 +478,35 @@ class VIEW3D_PT_relight_export(_RelightSubPanel, bpy.types.Panel):
             layout.label(text=line, icon="INFO")
 
 
+class VIEW3D_PT_relight_sun_study(_RelightSubPanel, bpy.types.Panel):
+    """A relight sun-study folder's maps on the objects, with their legend"""
+
+    bl_label = "Sun Study Map"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        from ..preview import sun_study_preview
+
+        layout, props = self.layout, context.scene.relight
+        col = layout.column(align=True)
+        col.prop(props, "sun_study_folder")
+        col.row().prop(props, "sun_study_map", expand=True)
+        layout.operator("relight.show_sun_study", icon="LIGHT_SUN")
+        shown = sun_study_preview.legend(context.scene)
+        if shown is None:
+            layout.label(text="Make a study with relight sun-study (docs/sun-studies.md)")
+            return
+        ramp, info = shown
+        box = layout.box()
+        box.label(text=f"{info['title']}, {info['unit']}")
+        box.template_color_ramp(ramp, "color_ramp", expand=False)
+        row = box.row()
+        top = float(info["top"])
+        for f in (0.0, 0.25, 0.5, 0.75, 1.0):
+            row.label(text=f"{f * top:.4g}")
+        box.label(text="Dark grey: no texel. Material Preview shows it", icon="INFO")
+
+
 class VIEW3D_PT_relight_samples(_RelightSubPanel, bpy.types.Panel):
     """Add the paper sample scenes"""
 
@@ -494,4 +524,4 @@ class VIEW3D_PT_relight_samples(_RelightSubPanel, bpy.types.Panel):
 
 CLASSES = (VIEW3D_PT_relight, VIEW3D_PT_relight_bake, VIEW3D_PT_relight_bake_advanced,
            VIEW3D_PT_relight_light, VIEW3D_PT_relight_samples, VIEW3D_PT_relight_vertex,
-           VIEW3D_PT_relight_materials, VIEW3D_PT_relight_export)
+           VIEW3D_PT_relight_materials, VIEW3D_PT_relight_export, VIEW3D_PT_relight_sun_study)

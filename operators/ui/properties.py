@@ -348,6 +348,14 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         description="The environment's rotation about +z, as a world Mapping node's Z")
     export_force: BoolProperty(name="Replace Existing", default=False,
                                description="Replace an earlier export of this object and format")
+    sun_study_folder: StringProperty(
+        name="Study", subtype="DIR_PATH", default="", options=path_options(),
+        description="A folder relight sun-study wrote (its sun_study.json and maps); only "
+                    "read, never written")
+    sun_study_map: EnumProperty(name="Map", default="hours", items=[
+        ("hours", "Sunlight Hours", "Hours of direct sun per texel over the study"),
+        ("radiation", "Radiation", "Clear-sky solar radiation in kWh/m2 (a study run with "
+                                   "--radiation)")])
 
     # which device Cycles bakes on (operators/base/cycles_device.py), and the last bake's
     device: EnumProperty(name="Device", default="auto", items=[

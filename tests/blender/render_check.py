@@ -21,6 +21,7 @@ def render_rgb(scene, tmp_path, resolution: int, engine: str = "CYCLES") -> np.n
     scene.render.resolution_percentage = 100
     if engine == "CYCLES":
         scene.cycles.samples = 1
+        scene.cycles.use_denoising = False    # (on in the factory scene: it smears 1 spp)
         scene.cycles.filter_width = 0.01  # sample pixel centres = texel centres
     else:
         scene.eevee.taa_render_samples = 1

@@ -150,3 +150,70 @@ def test_the_study_takes_the_place_the_sun_position_add_on_holds(tmp_path, capsy
     assert run(["sun-study", report, "--dates", "2026-12-21", "--hours", "12", "--out",
                 str(tmp_path / "x")]) == 2
     assert "give --lat, --lon, --tz" in capsys.readouterr().err
+
+
+def test_the_sunlight_hours_map_shows_on_the_objects_in_its_pictures_ramp(tmp_path):
+    """*Show Sun Study Map* (the panel's operator) puts the study's hours map on the ground in
+    the viridis ramp of its PNGs: a Cycles render of the preview from straight above, one pixel
+    per texel centre, equals the ramp of the EXR's hours (linear interpolation of the ramp's
+    stops, as Blender's Color Ramp does), dark grey where no texel; Remove Preview takes it
+    out. A folder that is not a study is one line and nothing changes."""
+    import bpy
+    from render_check import render_rgb
+
+    import relightable_textures
+    from relightable_textures.lt_addon.io import exrio
+    from relightable_textures.lt_addon.sun import study_images
+    from relightable_textures.operators.cli.commands import run
+    from relightable_textures.operators.preview import preview_nodes as pn
+    from relightable_textures.operators.preview import sun_study_preview as ssp
+    from test_sun_study import _courtyard
+
+    R = 16
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    _courtyard(bpy.context.scene)
+    blend = str(tmp_path / "court.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=blend)
+    assert run(["bake-textures", blend, "--object", "Ground", "--directions", "hemi:48:1.5",
+                "--resolution", str(R), "--bounces", "0", "--model", "none"]) == 0
+    out = tmp_path / "study"
+    assert run(["sun-study", str(tmp_path / "court_relight" / "Ground_texture_report.json"),
+                *STUDY, "--hours", "9,12,15", "--out", str(out)]) == 0
+    bpy.ops.wm.open_mainfile(filepath=blend)
+    relightable_textures.register()
+    try:
+        scene = bpy.context.scene
+        ground = bpy.data.objects["Ground"]
+        props = scene.relight
+        props.sun_study_folder = str(tmp_path / "court_relight")     # a bake folder, no study
+        with pytest.raises(RuntimeError, match="Sun study: .*sun_study.json"):
+            bpy.ops.relight.show_sun_study()
+        assert pn.preview_kinds(ground) == []
+        props.sun_study_folder = str(out)
+        assert bpy.ops.relight.show_sun_study() == {"FINISHED"}
+        assert pn.preview_kinds(ground)[0] == ssp.KIND
+        ramp, info = ssp.legend(scene)
+        assert info["top"] == 9.0 and info["unit"] == "h" and len(ramp.color_ramp.elements) == 9
+
+        cam = bpy.data.objects.new("Top", bpy.data.cameras.new("Top"))
+        cam.data.type, cam.data.ortho_scale = "ORTHO", 8.0
+        cam.location = (0.0, 0.0, 10.0)
+        scene.collection.objects.link(cam)
+        scene.camera = cam
+        for o in scene.objects:         # the walls out of the way: the ground's texels only
+            o.hide_render = o.type == "MESH" and o != ground
+        img = render_rgb(scene, tmp_path, R)
+        ch, _ = exrio.read_exr(str(out / "Ground_sunlight_hours.exr"))
+        x = np.clip(ch["Y"] / 9.0, 0.0, 1.0)
+        stops = ssp._srgb_to_linear(study_images.RAMP)
+        t = x * (len(stops) - 1)
+        i = np.minimum(np.floor(t).astype(int), len(stops) - 2)
+        want = stops[i] + (stops[i + 1] - stops[i]) * (t - i)[..., None]
+        want[ch["A"] < 0.5] = ssp._srgb_to_linear(study_images.UNCOVERED)
+        assert x.min() < 0.5 < x.max()                 # shade and sun on the ground
+        assert np.abs(img - want).max() < 2e-3, np.abs(img - want).max()
+        bpy.context.view_layer.objects.active = ground
+        assert bpy.ops.relight.remove_preview() == {"FINISHED"}
+        assert pn.preview_kinds(ground) == [] and ssp.legend(scene) is None
+    finally:
+        relightable_textures.unregister()
