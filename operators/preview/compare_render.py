@@ -25,11 +25,17 @@ from ..base.cycles_bake import BakeInputError
 from . import preview_nodes
 
 
-def render_camera(scene, path: str, samples: int) -> np.ndarray:
-    scene.render.engine = "CYCLES"
-    scene.cycles.samples = samples
-    scene.cycles.use_denoising = False
-    scene.cycles.use_adaptive_sampling = False
+def render_camera(scene, path: str, samples: int, engine: str = "CYCLES") -> np.ndarray:
+    """F12 from the scene camera with ``engine`` (Cycles: ``samples``, no denoiser, no
+    adaptive sampling; EEVEE: ``samples`` anti-aliasing samples), written to ``path`` as a
+    32-bit EXR and read back: (H, W, 3) linear RGB, row 0 at the bottom."""
+    scene.render.engine = engine
+    if engine == "CYCLES":
+        scene.cycles.samples = samples
+        scene.cycles.use_denoising = False
+        scene.cycles.use_adaptive_sampling = False
+    else:
+        scene.eevee.taa_render_samples = samples
     scene.render.image_settings.file_format = "OPEN_EXR"
     scene.render.image_settings.color_depth = "32"
     scene.render.filepath = path

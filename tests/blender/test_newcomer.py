@@ -61,21 +61,12 @@ def _render(scene, path: str) -> np.ndarray:
 def _render_eevee(scene, path: str) -> np.ndarray:
     """F12 with EEVEE, the factory scene's engine (software GL here: tiny, 4 samples; EEVEE
     renders the same scene to the same pixels, measured: difference 0.0)."""
-    import bpy
-
-    from relightable_textures.lt_addon.io import exrio
     from relightable_textures.operators.base import compat
+    from relightable_textures.operators.preview.compare_render import render_camera
 
-    scene.render.engine = compat.EEVEE_ENGINE
-    scene.eevee.taa_render_samples = 4
     scene.render.resolution_x, scene.render.resolution_y = 48, 36
     scene.render.resolution_percentage = 100
-    scene.render.image_settings.file_format = "OPEN_EXR"
-    scene.render.image_settings.color_depth = "32"
-    scene.render.filepath = path
-    bpy.ops.render.render(write_still=True)
-    ch, _ = exrio.read_exr(path)
-    return np.stack([ch["R"], ch["G"], ch["B"]], -1).astype(np.float64)
+    return render_camera(scene, path, 4, engine=compat.EEVEE_ENGINE)
 
 
 def test_a_newcomer_bakes_previews_renders_removes_and_undoes(tmp_path, monkeypatch):
