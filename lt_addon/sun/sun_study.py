@@ -140,6 +140,27 @@ def output_names(stem: str, radiation: bool = False) -> dict:
 CSV_NAME, REPORT_NAME = "sunlight_hours.csv", "sun_study.json"
 
 
+def clock_hours(text: str) -> list:
+    """``"9,12,15"`` or ``"9:30,12"`` -> clock hours as floats; InputError in one line."""
+    out = []
+    for part in str(text).split(","):
+        part = part.strip()
+        if not part:
+            continue
+        try:
+            if ":" in part:
+                h, m = part.split(":", 1)
+                out.append(int(h) + int(m) / 60.0)
+            else:
+                out.append(float(part))
+        except ValueError:
+            raise InputError(f"bad clock hour {part!r}: give hours like 9,12,15 or 9:30") \
+                from None
+    if not out:
+        raise InputError("no clock hours given")
+    return out
+
+
 def _clock(h: float) -> str:
     s = int(round(float(h) * 3600.0))
     return f"{s // 3600:02d}:{s % 3600 // 60:02d}" + (f":{s % 60:02d}" if s % 60 else "")

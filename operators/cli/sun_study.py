@@ -11,25 +11,15 @@ import sys
 
 
 def _hours(text: str) -> list:
-    """``"9,12,15"`` or ``"9:30,12"`` -> clock hours as floats."""
+    """``"9,12,15"`` or ``"9:30,12"`` -> clock hours as floats (:func:`clock_hours`)."""
+    from ...lt_addon.errors import InputError
+    from ...lt_addon.sun.sun_study import clock_hours
     from .common import CliError
 
-    out = []
-    for part in str(text).split(","):
-        part = part.strip()
-        if not part:
-            continue
-        try:
-            if ":" in part:
-                h, m = part.split(":", 1)
-                out.append(int(h) + int(m) / 60.0)
-            else:
-                out.append(float(part))
-        except ValueError:
-            raise CliError(f"bad clock hour {part!r}: give hours like 9,12,15 or 9:30") from None
-    if not out:
-        raise CliError("no clock hours given")
-    return out
+    try:
+        return clock_hours(text)
+    except InputError as exc:
+        raise CliError(str(exc)) from None
 
 
 def _window(text: str) -> tuple:

@@ -489,6 +489,13 @@ class VIEW3D_PT_relight_sun_study(_RelightSubPanel, bpy.types.Panel):
 
         layout, props = self.layout, context.scene.relight
         col = layout.column(align=True)
+        col.label(text=f"Place and dates: {props.study or 'fill Sun Study (Bake > Advanced)'}")
+        row = col.row(align=True)
+        row.prop(props, "sun_study_hours")
+        row.prop(props, "sun_study_step")
+        col.prop(props, "sun_study_radiation")
+        col.operator("relight.run_sun_study", icon="PLAY")
+        col = layout.column(align=True)
         col.prop(props, "sun_study_folder")
         col.row().prop(props, "sun_study_map", expand=True)
         layout.operator("relight.show_sun_study", icon="LIGHT_SUN")

@@ -352,6 +352,18 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         name="Study", subtype="DIR_PATH", default="", options=path_options(),
         description="A folder relight sun-study wrote (its sun_study.json and maps); only "
                     "read, never written")
+    sun_study_hours: StringProperty(
+        name="Hours", default="9,12,15",
+        description="Run Sun Study: the clock hours of each date of Sun Study (each counts one "
+                    "hour, e.g. 9,12,15 or 9:30), the cells of its shadow-study sheet")
+    sun_study_step: IntProperty(
+        name="Every (min)", default=0, min=0, max=240,
+        description="Run Sun Study: 0 takes the Hours; more takes an instant every so many "
+                    "minutes through each day instead (each counts its step: real sunlight "
+                    "hours)")
+    sun_study_radiation: BoolProperty(
+        name="Radiation", default=True,
+        description="Run Sun Study: also the clear-sky solar radiation map (kWh/m2)")
     sun_study_map: EnumProperty(name="Map", default="hours", items=[
         ("hours", "Sunlight Hours", "Hours of direct sun per texel over the study"),
         ("radiation", "Radiation", "Clear-sky solar radiation in kWh/m2 (a study run with "

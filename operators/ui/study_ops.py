@@ -39,4 +39,82 @@ class RELIGHT_OT_show_sun_study(bpy.types.Operator):
         return {"FINISHED"}
 
 
-CLASSES = (RELIGHT_OT_show_sun_study,)
+class RELIGHT_OT_run_sun_study(bpy.types.Operator):
+    """Run a sun study on the selected meshes' transport bakes: the place and dates of Sun
+    Study (Advanced, as the bake takes them), at Hours or every few minutes; writes its maps
+    and sheets into a new sun_study-<time> folder in the bake's Output folder and shows the
+    map (relight sun-study does the same from the command line)"""
+
+    bl_idname = "relight.run_sun_study"
+    bl_label = "Run Sun Study"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        import os
+        import time
+
+        from ... import __version__
+        from ...lt_addon.errors import InputError
+        from ...lt_addon.io.untrusted import UntrustedFileError
+        from ...lt_addon.sun import study_directions as sd
+        from ...lt_addon.sun.sun_study import StudySettings, clock_hours, run_study
+        from ..base import sun_position
+        from ..base.blend_files import bake_file
+        from ..base.cycles_bake import BakeInputError
+        from ..preview import sun_study_preview
+        from .bake_ops import _output_dir, show_in_viewport
+
+        scene, props = context.scene, context.scene.relight
+        try:
+            if not props.study.strip():
+                raise InputError("fill Sun Study (Bake > Advanced) with the place and dates, "
+                                 "e.g. 51.5,-0.13,Europe/London,2026-06-21,2026-12-21 or "
+                                 "scene,2026-06-21 (the Sun Position add-on's place)")
+            spec = sd.parse(props.study)
+            if spec.from_scene:
+                values = sun_position.read(scene)
+                if values is None:
+                    raise InputError("Sun Study says 'scene', but the scene holds no Sun "
+                                     "Position settings: set a place in that add-on, or type "
+                                     "LAT,LON,ZONE")
+                spec = sd.with_place(spec, sd.place_from_sun_position(values))
+            meshes = [o for o in context.selected_objects if o.type == "MESH"]
+            reports = []
+            for o in meshes:
+                try:
+                    reports.append(bake_file(o, "transport_texture", "transport-texture"))
+                except ValueError:
+                    continue
+            if not reports:
+                raise InputError("select the meshes to study, baked with the Transport method "
+                                 "(and Sun Study filled, so the bake holds the study's suns)")
+            step = props.sun_study_step or None
+            settings = StudySettings(
+                latitude=spec.latitude, longitude=spec.longitude, tz=spec.tz,
+                dates=list(spec.dates),
+                hours=None if step else clock_hours(props.sun_study_hours),
+                step_minutes=step, north_deg=spec.north_deg or 0.0,
+                elevation_m=spec.elevation_m, radiation=props.sun_study_radiation)
+            out = os.path.join(_output_dir(props), time.strftime("sun_study-%Y%m%d-%H%M%S"))
+            report = run_study(reports, settings, out, version=__version__)
+            which = ("radiation" if props.sun_study_map == "radiation"
+                     and props.sun_study_radiation else "hours")
+            props.sun_study_folder = out
+            info = sun_study_preview.show(scene, out, which)
+        except (InputError, BakeInputError, UntrustedFileError, ValueError,
+                FileNotFoundError, OSError) as exc:
+            self.report({"ERROR"}, f"Run Sun Study: {exc}")
+            return {"CANCELLED"}
+        if not props.show_preview:
+            props.show_preview = True
+        show_in_viewport(context)
+        n = report["instants"]
+        self.report({"INFO"}, f"Sun study of {', '.join(info['objects'])}: {n['count']} "
+                              f"instants, the Sun up at {n['sun_up']} ({n['possible_h']:g} h); "
+                              f"{report['timings']['total']:.1f} s; wrote {out}")
+        for line in report["warnings"]:
+            self.report({"WARNING"}, line)
+        return {"FINISHED"}
+
+
+CLASSES = (RELIGHT_OT_show_sun_study, RELIGHT_OT_run_sun_study)

@@ -185,6 +185,23 @@ def test_the_sunlight_hours_map_shows_on_the_objects_in_its_pictures_ramp(tmp_pa
         scene = bpy.context.scene
         ground = bpy.data.objects["Ground"]
         props = scene.relight
+        # Run Sun Study: the panel's own run of the same study (the place and dates of the
+        # bake's Sun Study field) gives the CLI's map, and shows it
+        with pytest.raises(RuntimeError, match="Run Sun Study: fill Sun Study"):
+            bpy.ops.relight.run_sun_study()
+        props.study = "51.5,-0.13,Europe/London," + DATES
+        props.sun_study_hours, props.sun_study_radiation = "9,12,15", False
+        for o in scene.objects:
+            o.select_set(o == ground)
+        assert bpy.ops.relight.run_sun_study() == {"FINISHED"}
+        ran = props.sun_study_folder
+        assert os.path.dirname(ran) == str(tmp_path / "court_relight")
+        assert os.path.basename(ran).startswith("sun_study-")
+        a, _ = exrio.read_exr(os.path.join(ran, "Ground_sunlight_hours.exr"))
+        b, _ = exrio.read_exr(str(out / "Ground_sunlight_hours.exr"))
+        assert np.array_equal(a["Y"], b["Y"]) and pn.preview_kinds(ground)[0] == ssp.KIND
+        bpy.context.view_layer.objects.active = ground
+        assert bpy.ops.relight.remove_preview() == {"FINISHED"}
         props.sun_study_folder = str(tmp_path / "court_relight")     # a bake folder, no study
         with pytest.raises(RuntimeError, match="Sun study: .*sun_study.json"):
             bpy.ops.relight.show_sun_study()
