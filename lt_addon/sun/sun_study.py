@@ -369,7 +369,9 @@ def run_study(report_paths, settings: StudySettings, out_dir: str, *, force: boo
                 else:                                   # no such clock time
                     img = None
                 cells.append((img, cell["line1"], cell["line2"]))
-            textures[bake.name] = {"uv_map": rep.get("uv_map"), "cells": [c[0] for c in cells]}
+            if camera is not None:     # the camera sheet reprojects them; else not kept
+                textures[bake.name] = {"uv_map": rep.get("uv_map"),
+                                       "cells": [c[0] for c in cells]}
             write_png(os.path.join(folder, files["sheet_png"]),
                       study_images.sheet(cells, len(sheet_hours),
                                          [f"{bake.name}: direct sun, white surface",

@@ -86,10 +86,16 @@ class _Overrides:
     def __enter__(self):
         s = self.scene
         r, c = s.render, s.cycles
+        cam = s.camera.data
+        # what would change the UV pass's values (u, v and an object index, read back as
+        # numbers): clamping, exposure, a render region, motion blur, depth of field
         self.saved = [(r, "resolution_x", r.resolution_x), (r, "resolution_y", r.resolution_y),
                       (r, "resolution_percentage", r.resolution_percentage),
-                      (r, "film_transparent", r.film_transparent),
+                      (r, "use_border", r.use_border), (r, "use_motion_blur", r.use_motion_blur),
                       (c, "max_bounces", c.max_bounces), (c, "filter_width", c.filter_width),
+                      (c, "sample_clamp_direct", c.sample_clamp_direct),
+                      (c, "sample_clamp_indirect", c.sample_clamp_indirect),
+                      (c, "film_exposure", c.film_exposure), (cam.dof, "use_dof", cam.dof.use_dof),
                       (s, "world", s.world)]
         self.restore_render = compare_render.saved_render_settings(s)
         self.view_layer = bpy.context.view_layer
@@ -101,6 +107,9 @@ class _Overrides:
         f = self.size / max(base)
         r.resolution_x, r.resolution_y = (max(1, round(b * f)) for b in base)
         r.resolution_percentage = 100
+        r.use_border = r.use_motion_blur = cam.dof.use_dof = False
+        c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
+        c.film_exposure = 1.0
         s.world = None
         c.max_bounces = 0
         for o, _ in self.lamps:
@@ -214,7 +223,7 @@ def camera_sheet(scene, folder: str, cells, n_cols: int, title, textures: dict, 
     :data:`CHECK_PNG`. ``textures``: per baked object's name ``{"uv_map": ..., "cells": [a
     cell's direct-light texture (R, R) or None, ...]}``. ``size`` / ``check_size``: the longer
     side in pixels. Returns the figures for the study's report."""
-    if scene.camera is None:
+    if scene.camera is None or scene.camera.type != "CAMERA":
         raise ValueError(f"scene {scene.name!r} has no camera")
     t0 = time.perf_counter()
     frames_dir = os.path.join(folder, FRAMES_DIR)

@@ -42,51 +42,58 @@ def _srgb_to_linear(c):
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
-def read_study(folder: str, which: str = "hours") -> list:
-    """``[(object name, map (R, R) float32, covered (R, R) bool, top, unit)]`` of the study in
-    ``folder`` (untrusted input: confined names, capped sizes, finite values); ValueError /
-    UntrustedFileError in one line when it is not a study or lacks the map."""
+def _number(doc, *keys) -> float:
+    """A finite number >= 0 at ``doc[k0][k1]...`` of an untrusted report, else 0."""
+    for k in keys:
+        doc = doc.get(k) if isinstance(doc, dict) else None
+    ok = isinstance(doc, (int, float)) and not isinstance(doc, bool) and np.isfinite(doc)
+    return float(doc) if ok and doc >= 0 else 0.0
+
+
+def study_entries(folder: str, which: str = "hours"):
+    """``([(object name, map path)], top, unit)`` of the study in ``folder``, from its report
+    alone (untrusted input: the map names confined to the folder, fields type-checked; no map
+    read yet). ``top`` is the scale's right end: the possible hours, or the largest radiation
+    or the open ground's, whichever is more. ValueError / UntrustedFileError in one line when
+    it is not a study or lacks the map."""
     if which not in MAPS:
         raise ValueError(f"map must be one of {sorted(MAPS)}, got {which!r}")
-    key, _, unit = MAPS[which]
+    key = MAPS[which][0]
     from ...lt_addon.sun.sun_study import KIND as STUDY_KIND, REPORT_NAME
 
     path = untrusted.confined(folder, REPORT_NAME, must_exist=True, folder=False)
     rep = untrusted.read_json(path)
     if rep.get("kind") != STUDY_KIND:
         raise ValueError(f"{path} is not a sun study's report (kind {rep.get('kind')!r})")
-    objects = untrusted.field(rep, "objects", path, list)
-    out = []
-    for entry in objects[:1000]:
-        if not isinstance(entry, dict):
-            raise ValueError(f"{path}: an object entry is not a mapping")
+    entries, top = [], 0.0
+    for entry in untrusted.field(rep, "objects", path, list):
         name = untrusted.field(entry, "object", path, str)
         files = untrusted.field(entry, "files", path, dict)
         if key not in files:
             raise ValueError(f"{path}: {name}: no {which} map (run sun-study with "
                              f"{'--radiation' if which == 'radiation' else 'its defaults'})")
-        exr = untrusted.confined(folder, files[key], must_exist=True, folder=False)
-        untrusted.regular_file(exr, 4 * MAX_SIDE * MAX_SIDE * 3 + 2**20)
-        ch, _ = exrio.read_exr(exr)
-        if "Y" not in ch or "A" not in ch:
-            raise ValueError(f"{exr}: not a sun-study map (channels Y and A expected)")
-        values, alpha = np.asarray(ch["Y"], np.float32), np.asarray(ch["A"], np.float32)
-        if values.ndim != 2 or values.shape[0] != values.shape[1] or \
-                values.shape != alpha.shape or values.shape[0] > MAX_SIDE:
-            raise ValueError(f"{exr}: a map is square, up to {MAX_SIDE}^2; got {values.shape}")
-        if not (np.all(np.isfinite(values)) and values.min() >= 0.0):
-            raise ValueError(f"{exr}: values must be finite and >= 0")
-        covered = alpha > 0.5
-        if which == "hours":
-            top = float(untrusted.field(entry.get("hours", {}), "possible_h", path,
-                                        (int, float)))
-        else:
-            open_ground = entry.get("radiation", {}).get("horizontal_kwh_m2", {}).get("total", 0)
-            top = max(float(values.max()), float(open_ground or 0.0))
-        if not (np.isfinite(top) and top > 0.0):
-            top = max(float(values.max()), 1e-9)
-        out.append((name, values, covered, top, unit))
-    return out
+        entries.append((name, untrusted.confined(folder, files[key], must_exist=True,
+                                                  folder=False)))
+        top = max(top, _number(entry, "hours", "possible_h") if which == "hours" else
+                  max(_number(entry, "radiation", "max_kwh_m2"),
+                      _number(entry, "radiation", "horizontal_kwh_m2", "total")))
+    return entries, (top if top > 0.0 else 1.0), MAPS[which][2]
+
+
+def read_map(exr: str):
+    """``(values (R, R) float32, covered (R, R) bool)`` of one study map (untrusted: a
+    regular file of capped size, a square of at most :data:`MAX_SIDE`, finite values >= 0)."""
+    untrusted.regular_file(exr, 4 * MAX_SIDE * MAX_SIDE * 3 + 2**20)
+    ch, _ = exrio.read_exr(exr)
+    if "Y" not in ch or "A" not in ch:
+        raise ValueError(f"{exr}: not a sun-study map (channels Y and A expected)")
+    values, alpha = np.asarray(ch["Y"], np.float32), np.asarray(ch["A"], np.float32)
+    if values.ndim != 2 or values.shape[0] != values.shape[1] or \
+            values.shape != alpha.shape or values.shape[0] > MAX_SIDE:
+        raise ValueError(f"{exr}: a map is square, up to {MAX_SIDE}^2; got {values.shape}")
+    if not (np.all(np.isfinite(values)) and values.min() >= 0.0):
+        raise ValueError(f"{exr}: values must be finite and >= 0")
+    return values, alpha > 0.5
 
 
 def _build(b, image, uv_map: str, top: float):
@@ -123,22 +130,23 @@ def _build(b, image, uv_map: str, top: float):
 def show(scene, folder: str, which: str = "hours") -> dict:
     """Put the study's ``which`` map on every mesh of ``scene`` it names (module docstring);
     returns ``{"objects": [...], "not_in_scene": [...], "top", "unit"}``."""
-    maps = read_study(folder, which)
+    entries, top, unit = study_entries(folder, which)
     shown, missing = [], []
-    top = max(m[3] for m in maps) if maps else 1.0   # one scale for every object
-    unit = MAPS[which][2]
-    for name, values, covered, _, _ in maps:
+    for name, exr in entries:
         obj = scene.objects.get(name)
+        if name in shown:
+            continue
         if obj is None or obj.type != "MESH":
             missing.append(name)
             continue
+        # one map at a time, and only for the scene's own meshes: a report naming many
+        # objects cannot make this read more maps than the scene has meshes
+        values, covered = read_map(exr)
         R = values.shape[0]
         img_name = f"{name} sun study {which}"
         image = bpy.data.images.get(img_name)
-        if image is not None and image.get(pn._TAG) and tuple(image.size) == (R, R):
-            pass
-        else:
-            if image is not None and image.get(pn._TAG):
+        if image is None or not image.get(pn._TAG) or tuple(image.size) != (R, R):
+            if image is not None and image.get(pn._TAG):     # ours, of another size
                 bpy.data.images.remove(image)
             image = bpy.data.images.new(img_name, R, R, alpha=True, float_buffer=True)
         image.colorspace_settings.name = "Non-Color"
@@ -152,7 +160,7 @@ def show(scene, folder: str, which: str = "hours") -> dict:
         pn._wire_preview(obj, lambda b, i=image, m=uv_map, t=top: _build(b, i, m, t), KIND)
         shown.append(name)
     if not shown:
-        raise ValueError("none of the study's objects (" + ", ".join(m[0] for m in maps)
+        raise ValueError("none of the study's objects (" + ", ".join(n for n, _ in entries[:8])
                          + f") is a mesh of scene {scene.name!r}")
     info = {"folder": folder, "map": which, "title": MAPS[which][1], "top": top,
             "unit": unit, "objects": shown, "not_in_scene": missing}

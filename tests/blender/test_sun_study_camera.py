@@ -36,6 +36,10 @@ def courtyard_blend(tmp_path):
     scene.collection.objects.link(cam)
     scene.camera = cam
     scene.render.resolution_x, scene.render.resolution_y = 400, 300
+    # settings of the user's that would corrupt the UV pass's numbers if it kept them
+    scene.cycles.sample_clamp_direct, scene.cycles.film_exposure = 0.5, 2.0
+    scene.render.use_border = True
+    scene.render.border_max_x = 0.5
     path = str(tmp_path / "courtyard.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path)
     return path
