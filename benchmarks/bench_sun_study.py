@@ -129,6 +129,58 @@ def accuracy(R: int, step: float) -> list:
     return rows
 
 
+def year_range(R: int) -> list:
+    """A year of hourly suns against the brute-force ray count from texel centres: the
+    400-direction bake, and the bake of the study as a range (``--study
+    51.5,-0.13,Europe/London,2026-01-01..2026-12-31``: the paths of 24 dates spread over the
+    year's declinations, at 1 degree), both with centre texels (as the rays) and the default
+    footprint texels; hours per texel off the ray count, bake times."""
+    import bpy
+    from relightable_textures.lt_addon.rays.direct import direct_rows
+    from relightable_textures.lt_addon.rays.engine import Occluder
+    from relightable_textures.lt_addon.sun import study_times as st
+    from relightable_textures.lt_addon.sun import sunlight_hours as sh
+    from relightable_textures.operators.base import ray_scene
+
+    objects = courtyard()
+    scene = bpy.context.scene
+    times = st.study_times(st.date_range("2026-01-01", "2026-12-31"), TZ, step_minutes=60)
+    suns = st.study_suns(times, **PLACE)
+    wh = np.bincount(suns.index[suns.up], minlength=len(suns.directions)) * times.step_h
+    with ray_scene.RenderGeometry(scene) as depsgraph:
+        V, T, _ = ray_scene.casters(depsgraph)
+        occluder = Occluder(V, T)
+        points = [ray_scene.receiver_points(o, depsgraph, R, None, footprint=False)
+                  for o in objects]
+    brute = [(smp.texel, wh @ (direct_rows(occluder, pts, suns.directions) > 0))
+             for smp, pts in points]
+    study = "51.5,-0.13,Europe/London,2026-01-01..2026-12-31"
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for sampling in ("centre", "footprint"):
+            for name, kw in (("hemi:400:1.5", {}),
+                             ("+ the year as a range at 1 deg", {"study": study,
+                                                                 "sun_path_step": 1.0})):
+                res, t_bake = bake(scene, objects, os.path.join(tmp, "b"), R,
+                                   texel_sampling=sampling, **kw)
+                for ob, (texel, count) in zip(res.objects, brute):
+                    near = sh.nearest_baked(ob.store.directions, suns.directions)
+                    got = sh.sunlight_hours(ob.store, suns.directions, wh, albedo=ob.albedo,
+                                            sun_angle_deg=0.533, visibility="threshold")
+                    d = np.abs(got.hours.reshape(-1)[texel] - count)
+                    rows.append({"texels": sampling, "directions": name,
+                                 "size": int(ob.store.directions.size), "object": ob.name,
+                                 "mean_h": round(float(d.mean()), 2),
+                                 "p95_h": round(float(np.percentile(d, 95)), 1),
+                                 "worst_h": round(float(d.max()), 1),
+                                 "possible_h": round(float(wh.sum()), 1),
+                                 "nearest_baked_deg_median": round(float(np.median(near)), 2),
+                                 "nearest_baked_deg_max": round(float(near.max()), 2),
+                                 "bake_s": round(t_bake, 1)})
+                    print(json.dumps(rows[-1]), flush=True)
+    return rows
+
+
 def year(R: int, pictures: str | None) -> dict:
     """A year of hourly suns on the ground's 400-direction bake at R^2, by the CLI, timed."""
     import bpy
@@ -197,6 +249,7 @@ def main(argv=None) -> int:
            "cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
            "resolution": args.resolution, "step_minutes": args.step,
            "accuracy": accuracy(args.resolution, args.step),
+           "year_range": year_range(args.resolution),
            "year": [year(int(r), args.pictures if int(r) == 256 else None)
                     for r in args.year_sizes.split(",") if r.strip()]}
     if args.pictures:

@@ -44,7 +44,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["DELTA_T_2020S", "SolarPosition", "solar_position", "sun_direction",
+__all__ = ["DELTA_T_2020S", "SolarPosition", "solar_position", "sun_direction", "declination",
            "posix_seconds", "julian_day", "heliocentric", "nutation", "DEFAULT_ATMOS_REFRACT"]
 
 #: Delta-T = TT - UT1 in seconds for the 2020s (32.184 + 37 - (UT1 - UTC); module docstring).
@@ -563,6 +563,15 @@ def solar_position(instants, latitude, longitude, elevation_m=0.0, *,
                                   - np.tan(d_t) * np.cos(phi)))   # eq. 45
     az = (gamma + 180.0) % 360.0
     return SolarPosition(90.0 - e, e, az, e0)
+
+
+def declination(instants, delta_t=DELTA_T_2020S) -> np.ndarray:
+    """The Sun's geocentric apparent declination in degrees at UTC ``instants`` (as
+    :func:`solar_position` takes them; shape T -> T), by SPA's eq. 25: the parallel of the sky
+    the Sun's path follows that day."""
+    posix = posix_seconds(instants)
+    _, _, delta, _ = _ephemeris(_days_from_j2000(posix.reshape(-1)), delta_t)
+    return delta.reshape(posix.shape)
 
 
 def sun_direction(elevation_deg, azimuth_deg, north_deg=0.0) -> np.ndarray:

@@ -10,7 +10,10 @@ and each date's path between them, ``step_deg`` apart (:func:`.study_times.with_
 Spec: ``LAT,LON,ZONE,DATE[,DATE...][,north=DEG][,elevation=M]`` -- degrees north and east, an
 IANA zone (or a fixed offset ``UTC+01:00``), ISO dates, and optionally the scene's north (the
 *Sun Position* add-on's North Offset, as ``relight sun-study --north``) and the site's height.
-Example: ``51.5,-0.13,Europe/London,2026-03-20,2026-06-21,2026-12-21``. Or
+Example: ``51.5,-0.13,Europe/London,2026-03-20,2026-06-21,2026-12-21``. A date may be a range,
+``FIRST..LAST`` or ``FIRST..LAST/N`` (every N days): ``51.5,-0.13,Europe/London,2026-01-01..
+2026-12-31/7``. Past :data:`MAX_DATES` dates the bake adds the paths of that many of them, spread
+evenly over their declinations (:func:`bake_dates`), and the hours of those. Or
 ``scene,DATE[,DATE...]``: the place, zone and north the scene's *Sun Position* add-on holds
 (:func:`place_from_sun_position`; the bpy layer reads them from the .blend).
 """
@@ -21,12 +24,18 @@ import datetime as _dt
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..errors import InputError
 
-#: Most dates a study bake takes: each adds a day's path (about 100-200 directions at 1 degree);
-#: a year of dates fills the band between the solstices (use the dates that matter, or the
-#: default directions and the study's warning).
+#: Most dates whose paths a study bake adds: each adds a day's path (about 100-200 directions
+#: at 1 degree), and a year of them would fill the band between the solstices (17,786
+#: directions at 1 degree). A spec with more dates (a range, ``2026-01-01..2026-12-31``) bakes
+#: the paths of this many, spread evenly over the dates' declinations (:func:`bake_dates`):
+#: the other dates' paths lie between theirs.
 MAX_DATES = 24
+#: Most dates a spec may name, ranges expanded: four years of days.
+MAX_SPEC_DATES = 4 * 366
 
 
 #: The first field of a study spec that takes the place from the scene's Sun Position add-on.
@@ -122,17 +131,80 @@ def parse(text: str) -> StudySpec:
             except ValueError:
                 raise InputError(f"bad study option {p[:40]!r}: {key} takes a number") from None
             continue
-        try:
-            dates.append(_dt.date.fromisoformat(p))
-        except ValueError:
-            raise InputError(f"bad study date {p[:40]!r}: ISO dates, e.g. 2026-06-21") from None
+        dates.extend(_dates(p))
+        if len(dates) > MAX_SPEC_DATES:
+            raise InputError(f"a study spec names up to {MAX_SPEC_DATES} dates (four years of "
+                             f"days), ranges expanded; {p[:40]!r} makes more")
     if not dates:
         raise InputError(f"bad study {str(text)[:80]!r}: no date; {form}")
-    if len(dates) > MAX_DATES:
-        raise InputError(f"a study bake takes up to {MAX_DATES} dates, got {len(dates)} (each "
-                         "adds a day's sun path; pick the dates that matter)")
     return StudySpec(lat, lon, tz, tuple(sorted(set(dates))), extra["north"],
                      extra["elevation"])
+
+
+def _dates(part: str) -> list:
+    """The dates of one spec field: ``DATE``, ``FIRST..LAST`` or ``FIRST..LAST/N``."""
+    form = "ISO dates (2026-06-21) or a range FIRST..LAST[/EVERY_N_DAYS]"
+    if ".." not in part:
+        try:
+            return [_dt.date.fromisoformat(part)]
+        except ValueError:
+            raise InputError(f"bad study date {part[:40]!r}: {form}") from None
+    first, _, rest = part.partition("..")
+    last, _, every = rest.partition("/")
+    try:
+        a, b = _dt.date.fromisoformat(first.strip()), _dt.date.fromisoformat(last.strip())
+        n = int(every) if every.strip() else 1
+    except ValueError:
+        raise InputError(f"bad study date range {part[:40]!r}: {form}") from None
+    if b < a or n < 1:
+        raise InputError(f"bad study date range {part[:40]!r}: the last date comes after the "
+                         f"first and the step is >= 1 day")
+    if (b - a).days // n + 1 > MAX_SPEC_DATES:
+        raise InputError(f"study date range {part[:40]!r} has more than {MAX_SPEC_DATES} "
+                         "dates (four years of days)")
+    return [a + _dt.timedelta(days=i * n) for i in range((b - a).days // n + 1)]
+
+
+def bake_dates(dates, longitude: float = 0.0, max_dates: int = MAX_DATES) -> list:
+    """The dates (sorted ``datetime.date``) whose paths a study bake adds: all of ``dates`` up
+    to ``max_dates``, else ``max_dates`` of them spread evenly over the Sun's declination on
+    those dates (at local solar noon, ``longitude`` degrees east): the two extremes and the
+    dates nearest the levels between. A day's path is the parallel of its declination, so the
+    others' paths lie between two baked ones, at most half the largest gap away (about 1
+    degree for a year's 46.9 degrees over 24 dates)."""
+    from .solar_position import declination
+
+    dates = sorted(set(dates))
+    if len(dates) <= max_dates:
+        return dates
+    noon = np.array([_dt.datetime(d.year, d.month, d.day, 12, tzinfo=_dt.timezone.utc)
+                     .timestamp() - float(longitude) / 15.0 * 3600.0 for d in dates])
+    dec = declination(noon)
+    picked = set()
+    for level in np.linspace(dec.min(), dec.max(), int(max_dates)):
+        order = np.argsort(np.abs(dec - level), kind="stable")
+        picked.add(int(next((i for i in order if int(i) not in picked), order[0])))
+    return [dates[i] for i in sorted(picked)]
+
+
+def spec_text(latitude, longitude, tz, dates, north_deg=0.0, elevation_m=0.0) -> str:
+    """A study spec for these dates, the inverse of :func:`parse`: a regular run of dates
+    (three or more, N days apart) as ``FIRST..LAST[/N]``, a short list as it is, and a long
+    irregular one as the range from its first to its last date (a bake adds the paths of
+    :data:`MAX_DATES` spread over the range's declinations either way)."""
+    ds = sorted(set(d if isinstance(d, _dt.date) else _dt.date.fromisoformat(str(d))
+                    for d in dates))
+    gaps = {(b - a).days for a, b in zip(ds, ds[1:])}
+    if len(ds) >= 3 and len(gaps) == 1:
+        n = gaps.pop()
+        text = f"{ds[0]}..{ds[-1]}" + (f"/{n}" if n > 1 else "")
+    elif len(ds) <= MAX_DATES:
+        text = ",".join(d.isoformat() for d in ds)
+    else:
+        text = f"{ds[0]}..{ds[-1]}"
+    extra = "".join(f",{k}={v:g}" for k, v in (("north", north_deg or 0.0),
+                                                 ("elevation", elevation_m or 0.0)) if v)
+    return f"{latitude:g},{longitude:g},{tz},{text}{extra}"
 
 
 def direction_set(base, text: str, step_deg: float, place: dict | None = None):
@@ -149,7 +221,8 @@ def direction_set(base, text: str, step_deg: float, place: dict | None = None):
                              "scene holds no Sun Position settings: set a place in the Sun "
                              "Position add-on, or give LAT,LON,ZONE")
         spec = with_place(spec, place)
-    times = study_times(list(spec.dates), spec.tz, step_minutes=60)
+    baked = bake_dates(spec.dates, spec.longitude)
+    times = study_times(baked, spec.tz, step_minutes=60)
     suns = study_suns(times, spec.latitude, spec.longitude, spec.elevation_m,
                       north_deg=spec.north_deg)
     if not len(suns.directions):
@@ -158,7 +231,11 @@ def direction_set(base, text: str, step_deg: float, place: dict | None = None):
     dset = with_study(base, suns, times, step_deg=float(step_deg))
     p = dset.params
     info = {"latitude": spec.latitude, "longitude": spec.longitude, "tz": spec.tz,
-            "dates": [d.isoformat() for d in spec.dates], "north_deg": spec.north_deg,
+            "dates": [d.isoformat() for d in baked], "north_deg": spec.north_deg,
+            **({"spec_dates": len(spec.dates), "dates_chosen": (
+                f"{len(baked)} of the spec's {len(spec.dates)} dates, spread evenly over "
+                "their declinations (the others' paths lie between theirs)")}
+               if len(baked) < len(spec.dates) else {}),
             "elevation_m": spec.elevation_m, "base": base.spec,
             "base_directions": p["base_kept"], "hour_directions": p["study_directions"],
             "path_directions": p["study_path_directions"], "step_deg": float(step_deg),

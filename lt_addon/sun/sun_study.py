@@ -47,18 +47,17 @@ SHEET_DATES = 6
 
 def bake_for(settings) -> str:
     """What to do about suns far from the bake's directions: the ``bake-textures --study``
-    that adds this study's hours and paths (:mod:`.study_directions`), or, past its dates,
-    what to pick."""
-    from .study_directions import MAX_DATES
+    that adds this study's hours and paths (:mod:`.study_directions`; a run of dates as a
+    range, whose bake adds the paths of up to ``MAX_DATES`` of them spread over their
+    declinations)."""
+    from .study_directions import MAX_DATES, spec_text
 
-    dates = sorted({str(getattr(d, "isoformat", lambda: d)()) for d in settings.dates})
-    if len(dates) > MAX_DATES:
-        return (f"bake with --study for up to {MAX_DATES} of these {len(dates)} dates (their "
-                "hours and sun paths), or accept the blend")
-    extra = "".join(f",{k}={v:g}" for k, v in (("north", settings.north_deg),
-                                                 ("elevation", settings.elevation_m)) if v)
-    return (f"bake with --study {settings.latitude:g},{settings.longitude:g},{settings.tz},"
-            f"{','.join(dates)}{extra} to add the study's hours and sun paths")
+    text = spec_text(settings.latitude, settings.longitude, settings.tz, settings.dates,
+                     settings.north_deg, settings.elevation_m)
+    n = len(set(str(getattr(d, "isoformat", lambda: d)()) for d in settings.dates))
+    what = ("hours and sun paths" if n <= MAX_DATES else
+            f"sun paths on {MAX_DATES} of the dates, spread over their declinations")
+    return f"bake with --study {text} to add the study's {what}"
 
 
 @dataclass

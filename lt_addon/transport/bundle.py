@@ -121,8 +121,10 @@ class TransportTextureSettings:
         help="For a sun study to come (relight sun-study): add the Sun of every hour of these "
              "dates at this place and each date's path, Sun Path Step apart, e.g. "
              "'51.5,-0.13,Europe/London,2026-06-21,2026-12-21' (optional north=DEG, "
-             "elevation=M), or 'scene,2026-06-21,...' for the place, zone and north of the "
-             "scene's Sun Position add-on; empty: none")
+             "elevation=M); a date range FIRST..LAST[/N days] bakes the paths of 24 of its "
+             "dates spread over their declinations ('...,2026-01-01..2026-12-31'); "
+             "'scene,2026-06-21,...' takes the place, zone and north of the scene's Sun "
+             "Position add-on; empty: none")
     resolution: int = setting(256, lo=4, hi=8192, soft=(8, 8192), help="Texture side in texels")
     bounces: int = setting(-1, lo=-1, hi=64, help=(
         "Diffuse bounces (0 = direct light only); -1: the scene's own (Render > Light Paths: "

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import os
+
 import bpy
 
 
@@ -50,7 +52,6 @@ class RELIGHT_OT_run_sun_study(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
-        import os
         import time
 
         from ... import __version__
@@ -95,7 +96,7 @@ class RELIGHT_OT_run_sun_study(bpy.types.Operator):
                 hours=None if step else clock_hours(props.sun_study_hours),
                 step_minutes=step, north_deg=spec.north_deg or 0.0,
                 elevation_m=spec.elevation_m, radiation=props.sun_study_radiation)
-            out = os.path.join(_output_dir(props), time.strftime("sun_study-%Y%m%d-%H%M%S"))
+            out = _new_folder(_output_dir(props), time.strftime("sun_study-%Y%m%d-%H%M%S"))
             report = run_study(reports, settings, out, version=__version__)
             which = ("radiation" if props.sun_study_map == "radiation"
                      and props.sun_study_radiation else "hours")
@@ -115,6 +116,16 @@ class RELIGHT_OT_run_sun_study(bpy.types.Operator):
         for line in report["warnings"]:
             self.report({"WARNING"}, line)
         return {"FINISHED"}
+
+
+def _new_folder(parent: str, name: str) -> str:
+    """``parent/name``, or ``name-2``, ``name-3``... when a run in the same second took it: each
+    Run Sun Study writes a folder of its own."""
+    out, k = os.path.join(parent, name), 1
+    while os.path.lexists(out):
+        k += 1
+        out = os.path.join(parent, f"{name}-{k}")
+    return out
 
 
 CLASSES = (RELIGHT_OT_show_sun_study, RELIGHT_OT_run_sun_study)

@@ -200,6 +200,7 @@ def test_a_study_bake_holds_every_hourly_sun_and_says_so(courtyard):
     ("51.5,-0.13,UTC,2026-13-01", "bad study date '2026-13-01'"),
     ("51.5,-0.13,UTC,2026-06-21,tilt=3", "bad study option 'tilt=3'"),
     ("89,0,UTC,2026-12-21", "below the horizon at every hour"),
+    ("51.5,-0.13,UTC,2026-12-31..2026-01-01", "the last date comes after the first"),
 ])
 def test_a_bad_study_is_one_line_naming_what_is_wrong(courtyard, tmp_path, study, words):
     from relightable_textures.lt_addon.errors import InputError

@@ -204,6 +204,16 @@ def test_the_sunlight_hours_map_shows_on_the_objects_in_its_pictures_ramp(tmp_pa
         a, _ = exrio.read_exr(os.path.join(ran, "Ground_sunlight_hours.exr"))
         b, _ = exrio.read_exr(str(out / "Ground_sunlight_hours.exr"))
         assert np.array_equal(a["Y"], b["Y"]) and pn.preview_kinds(ground)[0] == ssp.KIND
+        # a range in the field: the CLI's --from/--to/--every-days study
+        props.study = "51.5,-0.13,Europe/London,2026-06-01..2026-06-30/7"
+        assert bpy.ops.relight.run_sun_study() == {"FINISHED"}
+        weekly = tmp_path / "weekly"
+        assert run(["sun-study", str(tmp_path / "court_relight" / "Ground_texture_report.json"),
+                    *STUDY[:6], "--from", "2026-06-01", "--to", "2026-06-30", "--every-days",
+                    "7", "--hours", "9,12,15", "--out", str(weekly)]) == 0
+        a, _ = exrio.read_exr(os.path.join(props.sun_study_folder, "Ground_sunlight_hours.exr"))
+        b, _ = exrio.read_exr(str(weekly / "Ground_sunlight_hours.exr"))
+        assert np.array_equal(a["Y"], b["Y"]) and a["Y"].max() == 15.0     # 5 dates x 3 h
         bpy.context.view_layer.objects.active = ground
         assert bpy.ops.relight.remove_preview() == {"FINISHED"}
         props.sun_study_folder = str(tmp_path / "court_relight")     # a bake folder, no study

@@ -233,3 +233,96 @@ def test_the_sun_position_add_ons_place_as_a_study_place():
         sd.direction_set(None, "scene,2026-12-21", 1.0)
     with pytest.raises(InputError, match="no date"):
         sd.parse("scene,north=3")
+
+
+# --- date ranges in a study spec, and the dates a study bake adds ------------------------------
+
+def test_a_spec_takes_date_ranges():
+    """``FIRST..LAST`` and ``FIRST..LAST/N`` expand to the dates, beside single dates; a
+    backward range, a zero step and more than four years of dates are one line each."""
+    from relightable_textures.lt_addon.errors import InputError
+    from relightable_textures.lt_addon.sun import study_directions as sd
+
+    spec = sd.parse("51.5,-0.13,Europe/London,2026-01-01..2026-12-31,north=3")
+    assert len(spec.dates) == 365 and spec.dates[0] == dt.date(2026, 1, 1)
+    assert spec.north_deg == 3.0
+    weekly = sd.parse("-33.87,151.21,Australia/Sydney,2026-01-01..2026-12-31/7,2026-06-21")
+    assert len(weekly.dates) == 54 and dt.date(2026, 6, 21) in weekly.dates
+    assert weekly.dates == tuple(sorted(weekly.dates))
+    for bad, words in (("2026-12-31..2026-01-01", "comes after"), ("2026-01-01..2026-02-01/0",
+                       "comes after"), ("2026-01-01..x", "bad study date range"),
+                       ("2020-01-01..2026-01-01", "more than 1464")):
+        with pytest.raises(InputError, match=words):
+            sd.parse(f"51.5,-0.13,UTC,{bad}")
+
+
+def test_declination_equals_pvlibs_spa():
+    """The Sun's declination (the parallel its day's path follows) against pvlib's SPA, over a
+    year of noons: equal to 1e-6 degrees (the same algorithm)."""
+    pvlib = pytest.importorskip("pvlib")
+    from pvlib import spa
+
+    from relightable_textures.lt_addon.sun.solar_position import declination
+
+    t = np.arange(np.datetime64("2026-01-01T12:00"), np.datetime64("2027-01-01T12:00"),
+                  np.timedelta64(1, "D"))
+    unix = (t - np.datetime64(0, "s")) / np.timedelta64(1, "s")
+    ours = declination(t)
+    _, _, ref = spa.solar_position(unix, 51.5, -0.13, 0.0, 1013.25, 12.0, 69.2, 0.5667,
+                                   sst=True)
+    assert np.abs(ours - ref).max() < 1e-6
+    assert ours.min() == pytest.approx(-23.44, abs=0.02) and ours.max() == pytest.approx(
+        23.44, abs=0.02)
+    del pvlib
+
+
+@pytest.mark.parametrize("lat, lon, tz", [(51.5, -0.13, "Europe/London"),
+                                          (-33.87, 151.21, "Australia/Sydney")])
+def test_a_year_range_bakes_24_paths_spread_over_the_declinations(lat, lon, tz):
+    """A year's range bakes the paths of 24 dates spread evenly over the year's declinations:
+    every hourly sun of the year lies near a baked direction (measured 2026-12-06, London /
+    Sydney: median 0.54 / 0.54 deg, 95 % within 1.02 / 1.00, worst 1.40 / 1.17, from 4,613 /
+    4,603 directions), where the 400 default directions leave a median 2.8 deg and a worst
+    6.6 deg, and 24 dates taken evenly in time (a date per fortnight or so: each declination
+    twice a year) leave more."""
+    from scipy.spatial import cKDTree
+
+    from relightable_textures.lt_addon.sun import study_directions as sd
+
+    base = parse_direction_spec("hemi:400")
+    spec = sd.parse(f"{lat},{lon},{tz},2026-01-01..2026-12-31")
+    dset, info = sd.direction_set(base, f"{lat},{lon},{tz},2026-01-01..2026-12-31", 1.0)
+    assert len(info["dates"]) == sd.MAX_DATES and info["spec_dates"] == 365
+    assert "24 of the spec's 365 dates" in info["dates_chosen"]
+    # the solstices (the declinations' extremes; a day either side by the local noon) are
+    # among them
+    for solstice in (dt.date(2026, 6, 21), dt.date(2026, 12, 21)):
+        assert any(abs((dt.date.fromisoformat(d) - solstice).days) <= 1 for d in info["dates"])
+    year = study_times(list(spec.dates), tz, step_minutes=60)
+    suns = study_suns(year, lat, lon)
+
+    def degrees(dirs):
+        d, _ = cKDTree(dirs).query(suns.directions)
+        return np.degrees(2 * np.arcsin(d / 2))
+
+    got = degrees(dset.directions)
+    assert np.median(got) < 0.6 and np.percentile(got, 95) < 1.1 and got.max() < 1.5
+    assert np.median(degrees(base.directions)) > 2.5
+    # the same count of dates evenly in time: a worse spread (the equinoxes' fast declination)
+    even = [spec.dates[i] for i in np.linspace(0, 364, sd.MAX_DATES).round().astype(int)]
+    times = study_times(even, tz, step_minutes=60)
+    in_time = with_study(base, study_suns(times, lat, lon), times, step_deg=1.0)
+    assert degrees(in_time.directions).max() > got.max()
+
+
+def test_spec_text_writes_ranges_back():
+    from relightable_textures.lt_addon.sun import study_directions as sd
+
+    year = sd.parse("51.5,-0.13,UTC,2026-01-01..2026-12-31/7").dates
+    text = sd.spec_text(51.5, -0.13, "UTC", year, north_deg=3.0)
+    assert text == "51.5,-0.13,UTC,2026-01-01..2026-12-31/7,north=3"
+    assert sd.parse(text).dates == year
+    assert sd.spec_text(1, 2, "UTC", ["2026-06-21", "2026-12-21"]).endswith(
+        "UTC,2026-06-21,2026-12-21")
+    odd = [dt.date(2026, 1, 1) + dt.timedelta(days=int(k * k / 7)) for k in range(40)]
+    assert sd.spec_text(1, 2, "UTC", odd).endswith(f"UTC,2026-01-01..{max(odd)}")
