@@ -16,10 +16,13 @@ rather than re-implemented. It needs plain Python >= 3.11 and is found, in this 
 
 The tags are validated against Blender's own list (``scripts/modules/_bpy_internal/extensions/
 tags.py``), as ``blender --command extension`` does. The wheels the manifest lists (SciPy,
-OpenEXR and embreex for CPython 3.11 and 3.13 on every platform in ``platforms``) are
+OpenEXR and embreex for CPython 3.11 and 3.13 on every platform in ``platforms``, and tzdata,
+the IANA time-zone database that :mod:`zoneinfo` reads where the system has none, as on
+Windows: one pure-Python ``py2.py3-none-any`` wheel for every platform and Python) are
 downloaded first with this Python's pip, pinned in requirements-wheels.txt. ``build
---split-platforms`` then writes one zip per platform holding only that platform's wheels; each
-zip is validated by the tool and checked here against the manifest.
+--split-platforms`` then writes one zip per platform holding only that platform's wheels and
+the platform-independent ones (Blender's tool keeps a wheel whose platform tag is ``any`` in
+every platform's zip); each zip is validated by the tool and checked here against the manifest.
 
 Usage: ``python tools/extension_tool.py [--output-dir DIR] [--blender PATH] [--wheelhouse DIR]``
 prints the built zips, one a line, as ``<blender platform> <path>``; which tool built them goes
@@ -221,8 +224,38 @@ def manifest() -> dict:
         return tomllib.load(fh)
 
 
+def wheel_package(name: str) -> str:
+    """The normalised project name of a wheel file name or a requirement line
+    (``embreex-4.4.0.post1-cp311-...whl``, ``openexr==3.5.3``): lower case, runs of ``-_.``
+    as one ``-`` (PEP 503)."""
+    base = os.path.basename(name)
+    project = base.split("-")[0] if base.endswith(".whl") else re.split(r"[=<>!~;\[ ]", base)[0]
+    return re.sub(r"[-_.]+", "-", project.strip()).lower()
+
+
+def is_pure(name: str) -> bool:
+    """Whether a wheel file name is platform-independent (platform tag ``any``, as tzdata's
+    ``py2.py3-none-any``): one file serves every platform and Python, and Blender's tool puts
+    it in every platform's zip."""
+    return os.path.basename(name)[:-len(".whl")].split("-")[-1] == "any"
+
+
+def pure_packages(wheels: list[str]) -> set[str]:
+    """The packages the manifest bundles as a platform-independent wheel (exactly one file for
+    all platforms and Pythons; more than one, or a platform wheel beside it, is an error)."""
+    pure = {wheel_package(w) for w in wheels if is_pure(w)}
+    for pkg in sorted(pure):
+        named = [os.path.basename(w) for w in wheels if wheel_package(w) == pkg]
+        if len(named) != 1:
+            raise SystemExit(f"extension_tool: the manifest names {named} for {pkg}: a "
+                             "platform-independent wheel serves every platform and Python "
+                             "alone, so list exactly one")
+    return pure
+
+
 def wheel_platform(name: str) -> str | None:
-    """The Blender platform a wheel file name is for (by its platform tag), or None."""
+    """The Blender platform a wheel file name is for (by its platform tag), or None (a
+    platform-independent wheel too: :func:`is_pure`)."""
     tag = os.path.basename(name)[:-len(".whl")].split("-")[-1]
     if "manylinux" in tag and tag.endswith("x86_64"):
         return "linux-x64"
@@ -237,7 +270,8 @@ def wheel_platform(name: str) -> str | None:
 
 #: Where the manifest's wheels are kept between checkouts (they are pinned by file name, so a
 #: file there is the file the manifest names): a fresh clone copies them instead of downloading
-#: them again (351 MB for the 24 wheels the manifest names with embreex; ~240 MB before it).
+#: them again (351 MB for the 25 wheels the manifest names with embreex and tzdata, tzdata's
+#: 0.35 MB of it; ~240 MB before embreex).
 WHEEL_CACHE = os.path.join(os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")),
                            "relightable-textures", "extension-wheels")
 
@@ -266,16 +300,30 @@ def ensure_wheels() -> list[str]:
         if not os.path.exists(w) and os.path.isfile(cached):
             os.makedirs(os.path.dirname(w), exist_ok=True)
             _copy_atomically(cached, w)
+    pure = pure_packages(wanted)
     if any(not os.path.exists(w) for w in wanted):
         _require_pip("download the wheels of requirements-wheels.txt")
+        dest = os.path.join(ROOT, "wheels")
+        # what is there already is not asked for again: (package, platform, python tag)
+        present = {(wheel_package(w), wheel_platform(w), os.path.basename(w).split("-")[-3])
+                   for w in wanted if os.path.exists(w)}
+        present_pure = {wheel_package(w) for w in wanted if is_pure(w) and os.path.exists(w)}
+        # a platform-independent wheel (tzdata) once: the same file for every platform/Python
+        for req in requirements():
+            if wheel_package(req) in pure - present_pure:
+                subprocess.run([sys.executable, "-m", "pip", "download", "--quiet", "--no-deps",
+                                "--only-binary=:all:", "-d", dest, req], check=True)
         for platform in m.get("platforms", []):
             for python in PYTHONS:
                 for req in requirements():
-                    name = req.split("==")[0].strip().lower()
+                    name = wheel_package(req)
+                    if name in pure or \
+                            (name, platform, "cp" + python.replace(".", "")) in present:
+                        continue
                     tags = NEWER_PLATFORMS.get(name, {}).get(platform, PIP_PLATFORMS[platform])
                     cmd = [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps",
                            "--only-binary=:all:", "--python-version", python,
-                           "--implementation", "cp", "-d", os.path.join(ROOT, "wheels"), req]
+                           "--implementation", "cp", "-d", dest, req]
                     for tag in tags:
                         cmd += ["--platform", tag]
                     subprocess.run(cmd, check=True)
@@ -297,12 +345,18 @@ def ensure_wheels() -> list[str]:
 
 
 def check_zip(zip_path: str, platform: str, wheels: list[str]) -> None:
-    """The zip holds exactly the manifest's wheels for ``platform``: both Pythons, every
-    package of requirements-wheels.txt, nothing of another platform."""
+    """The zip holds exactly the manifest's wheels for ``platform``: both Pythons of every
+    platform-specific package of requirements-wheels.txt, the one wheel of each
+    platform-independent package (tzdata), nothing of another platform."""
     inside = sorted(os.path.basename(n) for n in zipfile.ZipFile(zip_path).namelist()
                     if n.endswith(".whl"))
-    expected = sorted(os.path.basename(w) for w in wheels if wheel_platform(w) == platform)
-    if inside != expected or len(expected) != len(requirements()) * len(PYTHONS):
+    expected = sorted(os.path.basename(w) for w in wheels
+                      if wheel_platform(w) == platform or is_pure(w))
+    pure = pure_packages(wheels)
+    reqs = [wheel_package(r) for r in requirements()]
+    count = sum(1 if r in pure else len(PYTHONS) for r in reqs)
+    if inside != expected or len(expected) != count or \
+            sorted({wheel_package(w) for w in expected}) != sorted(reqs):
         raise SystemExit(f"extension_tool: {os.path.basename(zip_path)} holds wheels {inside}, "
                          f"expected {expected}")
 

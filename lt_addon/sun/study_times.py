@@ -23,12 +23,16 @@ Daylight saving (the two days a year a zone's clock jumps):
 
 Time zones come from the standard library's :mod:`zoneinfo`, which reads the operating system's
 IANA database (``/usr/share/zoneinfo`` on Linux and macOS) or else the ``tzdata`` package.
-**Windows has no system database: there zoneinfo needs the ``tzdata`` package**, and Blender's
-bundled Python does not ship it (its build installs cython, idna, charset-normalizer, urllib3,
-certifi, requests, zstandard, autopep8, pycodestyle, toml and meson besides numpy:
-``build_files/build_environment/cmake/python_site_packages.cmake`` in Blender's source; not
-checked on a Windows Blender). Without a database :func:`zone` says so in one line and accepts
-a fixed offset instead (``"UTC+01:00"``: no daylight saving).
+Windows has no system database, and Blender's bundled Python does not ship ``tzdata`` (its
+build installs cython, idna, charset-normalizer, urllib3, certifi, requests, zstandard,
+autopep8, pycodestyle, toml and meson besides numpy:
+``build_files/build_environment/cmake/python_site_packages.cmake`` in Blender's source), so
+**the extension ships tzdata itself**: one pure-Python wheel in every platform's zip
+(requirements-wheels.txt), which Blender installs into the extension's site-packages, where
+zoneinfo finds it (tests/blender/test_extension_install.py: with no system database, the
+installed extension's zoneinfo reads it; not run on a Windows Blender). A Python without either
+(this module outside the extension, on Windows) has no database: :func:`zone` says so in one
+line and accepts a fixed offset instead (``"UTC+01:00"``: no daylight saving).
 """
 
 from __future__ import annotations
@@ -51,7 +55,7 @@ def zone(name) -> _dt.tzinfo:
     """The time zone called ``name``: an IANA name (``"Europe/London"``, ``"Australia/Sydney"``)
     via :mod:`zoneinfo`, or a fixed offset ``"UTC"``, ``"UTC+2"``, ``"UTC-03:30"``; a tzinfo
     passes through. Raises ValueError in one line when the name is unknown or this Python has
-    no time-zone database (Windows without the ``tzdata`` package)."""
+    no time-zone database (Windows without the ``tzdata`` package, which the extension ships)."""
     if isinstance(name, _dt.tzinfo):
         return name
     text = str(name).strip()
@@ -71,8 +75,8 @@ def zone(name) -> _dt.tzinfo:
     except (zoneinfo.ZoneInfoNotFoundError, ValueError):
         have = bool(zoneinfo.available_timezones())
         why = ("not an IANA time-zone name (e.g. 'Europe/London')" if have else
-               "this Python has no IANA time-zone database (on Windows install the 'tzdata' "
-               "package)")
+               "this Python has no IANA time-zone database (the extension ships the "
+               "'tzdata' package: reinstall it, or outside Blender `pip install tzdata`)")
         raise ValueError(f"time zone {text!r}: {why}; or give a fixed offset such as "
                          "'UTC+01:00' (no daylight saving)") from None
 

@@ -31,7 +31,7 @@ INSTALL_SCRIPT = textwrap.dedent(r"""
 
     class OnlyBundledWheels:
         def find_spec(self, name, path=None, target=None):
-            if "." not in name and name in ("scipy", "OpenEXR", "embreex"):
+            if "." not in name and name in ("scipy", "OpenEXR", "embreex", "tzdata"):
                 return importlib.machinery.PathFinder.find_spec(name, [site]) or \
                     importlib.machinery.ModuleSpec(name, None)  # None loader: ImportError
             return None
@@ -60,9 +60,19 @@ INSTALL_SCRIPT = textwrap.dedent(r"""
                                             "RELIGHT_OT_remove_preview",
                                             "RELIGHT_OT_show_preview") if n in dir(bpy.types)]
     # The bundled wheels import from the extension's own site-packages.
-    import scipy, scipy.linalg, OpenEXR, embreex
+    import scipy, scipy.linalg, OpenEXR, embreex, tzdata
     report["site"] = site
-    report["imported_from"] = {m.__name__: m.__file__ for m in (scipy, OpenEXR, embreex)}
+    report["imported_from"] = {m.__name__: m.__file__
+                               for m in (scipy, OpenEXR, embreex, tzdata)}
+    # zoneinfo with no system database (as on Windows) reads the bundled tzdata
+    import zoneinfo
+    zoneinfo.reset_tzpath(to=[])
+    try:
+        report["zone_without_system_db"] = str(zoneinfo.ZoneInfo.no_cache("Europe/London"))
+    except Exception as ex:
+        report["zone_without_system_db"] = repr(ex)
+    finally:
+        zoneinfo.reset_tzpath()
     report["property"] = hasattr(bpy.types.Scene, "relight") and \
         bpy.context.scene.relight.preset == "balanced"
     report["panels"] = [n for n in ("VIEW3D_PT_relight", "VIEW3D_PT_relight_bake",
@@ -117,16 +127,38 @@ def _snapshot(path: pathlib.Path):
 
 
 @pytest.fixture(scope="module")
-def extension_zip(tmp_path_factory):
+def extension_zips(tmp_path_factory):
+    """{Blender platform: zip}: the four zips of tools/extension_tool.py (``make dist``)."""
     out = tmp_path_factory.mktemp("dist")
     r = subprocess.run([sys.executable, str(ROOT / "tools" / "extension_tool.py"),
                         "--output-dir", str(out)], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
-    zips = dict(line.split(" ", 1) for line in r.stdout.strip().splitlines())
+    zips = {k: pathlib.Path(v) for k, v in
+            (line.split(" ", 1) for line in r.stdout.strip().splitlines())}
     assert sorted(zips) == ["linux-x64", "macos-arm64", "macos-x64", "windows-x64"], r.stdout
-    zip_path = pathlib.Path(zips["linux-x64"])
-    assert zip_path.exists()
-    return zip_path
+    assert all(z.exists() for z in zips.values())
+    return zips
+
+
+@pytest.fixture(scope="module")
+def extension_zip(extension_zips):
+    return extension_zips["linux-x64"]
+
+
+def _tzdata_wheel() -> str:
+    """The tzdata wheel's file name, as the manifest names it (requirements-wheels.txt pins
+    its version)."""
+    import tomllib
+
+    wheels = tomllib.loads((ROOT / "blender_manifest.toml").read_text())["wheels"]
+    names = [w.rsplit("/", 1)[-1] for w in wheels if w.rsplit("/", 1)[-1].startswith("tzdata-")]
+    assert len(names) == 1, f"the manifest names {names} for tzdata, not its one wheel"
+    (name,) = names
+    pin = [ln.split("#")[0].strip() for ln in
+           (ROOT / "requirements-wheels.txt").read_text().splitlines()
+           if ln.split("#")[0].strip().startswith("tzdata==")]
+    assert pin == ["tzdata==" + name.split("-")[1]], (pin, name)
+    return name
 
 
 def test_zip_contents(extension_zip):
@@ -159,12 +191,84 @@ def test_zip_contents(extension_zip):
     # the exported RTI page's viewer travels with the extension
     assert {"lt_addon/export/web/viewer.js", "lt_addon/export/web/template.html"} <= names
     # This platform's SciPy, OpenEXR and embreex (the ray engine) for both Pythons Blender uses
-    # (3.11 and 3.13), no other.
+    # (3.11 and 3.13), no other, and the one pure-Python tzdata wheel for every Python.
     wheels = sorted(n.split("-")[0] + "-" + n.split("-")[2] for n in names
                     if n.startswith("wheels/") and n.endswith(".whl"))
     assert wheels == ["wheels/embreex-cp311", "wheels/embreex-cp313", "wheels/openexr-cp311",
-                      "wheels/openexr-cp313", "wheels/scipy-cp311", "wheels/scipy-cp313"]
-    assert all("x86_64" in n for n in names if n.endswith(".whl"))
+                      "wheels/openexr-cp313", "wheels/scipy-cp311", "wheels/scipy-cp313",
+                      "wheels/tzdata-py2.py3"]
+    assert all("x86_64" in n for n in names if n.endswith(".whl")
+               and not n.endswith("-none-any.whl"))
+
+
+#: Each platform's tag in its wheels' file names.
+PLATFORM_TAGS = {"linux-x64": "manylinux", "windows-x64": "win_amd64",
+                 "macos-arm64": "_arm64", "macos-x64": "_x86_64"}
+
+
+def test_every_platform_zip_bundles_tzdata(extension_zips):
+    """zoneinfo has no IANA database on Windows but the tzdata package's: the one pure-Python
+    wheel is in every platform's zip (Blender's split keeps ``any`` wheels in each) and in the
+    wheels list Blender's build writes into each zip's manifest, which Blender installs from."""
+    import tomllib
+    import zipfile
+
+    tz = _tzdata_wheel()
+    assert tz.endswith("-py2.py3-none-any.whl")
+    payloads = set()
+    for platform, path in extension_zips.items():
+        with zipfile.ZipFile(path) as z:
+            wheels = sorted(n for n in z.namelist() if n.endswith(".whl"))
+            generated = tomllib.loads(z.read("blender_manifest.toml").decode())["build"][
+                "generated"]
+            payloads.add(z.read("wheels/" + tz))
+        assert "wheels/" + tz in wheels, (platform, wheels)
+        assert [w for w in wheels if "tzdata" in w] == ["wheels/" + tz], platform
+        assert generated["platforms"] == [platform]
+        assert "./wheels/" + tz in generated["wheels"], (platform, generated["wheels"])
+        assert sorted(w.removeprefix("./") for w in generated["wheels"]) == wheels, platform
+        # the rest is the platform's own: 3 packages x 2 Pythons
+        own = [w for w in wheels if not w.endswith("-none-any.whl")]
+        assert len(own) == 6 and all(PLATFORM_TAGS[platform] in w for w in own), (platform, own)
+    assert len(payloads) == 1      # the same file in all four
+
+
+def test_the_bundled_tzdata_serves_zoneinfo_without_a_system_database(extension_zips, tmp_path):
+    """Where the system has no zone database (Windows: PYTHONTZPATH points to an empty folder
+    here), zoneinfo reads the tzdata package: the wheel out of the Windows zip, on sys.path,
+    gives Europe/London its summer time; without it the name is not found. ``-S``: the venv's
+    own tzdata (pvlib's dependency there) stays out of the path."""
+    import zipfile
+
+    tz = _tzdata_wheel()
+    wheel = tmp_path / tz
+    wheel.write_bytes(zipfile.ZipFile(extension_zips["windows-x64"]).read("wheels/" + tz))
+    empty = tmp_path / "no-zoneinfo"
+    empty.mkdir()
+    script = textwrap.dedent("""
+        import datetime, sys, zoneinfo
+        try:
+            z = zoneinfo.ZoneInfo("Europe/London")
+        except zoneinfo.ZoneInfoNotFoundError:
+            print("NOT FOUND"); sys.exit(3)
+        import tzdata
+        print(tzdata.__file__, tzdata.IANA_VERSION,
+              datetime.datetime(2026, 7, 1, 12, tzinfo=z).utcoffset().total_seconds(),
+              datetime.datetime(2026, 1, 1, 12, tzinfo=z).utcoffset().total_seconds())
+    """)
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
+    env["PYTHONTZPATH"] = str(empty)
+    run = [sys.executable, "-S", "-c", script]
+    r = subprocess.run(run, capture_output=True, text=True, timeout=60,
+                       env={**env, "PYTHONPATH": str(wheel)})
+    assert r.returncode == 0, r.stdout + r.stderr
+    origin, iana, summer, winter = r.stdout.split()
+    assert pathlib.Path(origin).is_relative_to(wheel), origin     # read out of the wheel
+    assert iana.startswith(tz.split("-")[1].split(".")[0])          # 2026.6: IANA 2026f
+    assert (float(summer), float(winter)) == (3600.0, 0.0)            # BST, GMT
+    # the same Python without the wheel has no database at all: the check above is the wheel's
+    r = subprocess.run(run, capture_output=True, text=True, timeout=60, env=env)
+    assert r.returncode == 3 and r.stdout.strip() == "NOT FOUND", r.stdout + r.stderr
 
 
 def test_install_enable_use_uninstall_in_temporary_user_dir(extension_zip, tmp_path):
@@ -188,8 +292,11 @@ def test_install_enable_use_uninstall_in_temporary_user_dir(extension_zip, tmp_p
                                 "export", "follow_sun", "open_export_page", "remove_preview",
                                 "show_preview"]
     assert len(rep["operator_types"]) == 11
+    assert "tzdata" in rep["wheels_installed"]
+    assert sorted(rep["imported_from"]) == ["OpenEXR", "embreex", "scipy", "tzdata"]
     for name, path in rep["imported_from"].items():
         assert path.startswith(rep["site"]), f"{name} imported from {path}, not the extension"
+    assert rep["zone_without_system_db"] == "Europe/London", rep["zone_without_system_db"]
     assert rep["property"]
     assert rep["panels"] == ["VIEW3D_PT_relight", "VIEW3D_PT_relight_bake",
                              "VIEW3D_PT_relight_light", "VIEW3D_PT_relight_vertex",
