@@ -181,6 +181,73 @@ def year_range(R: int) -> list:
     return rows
 
 
+def weather_year(R: int) -> dict:
+    """A year's radiation from a real weather file against the clear sky: pvlib's bundled TMY3
+    of Greensboro, NC (36.1 N, 79.95 W; measured and modelled hours of 1976-1990) written as an
+    EPW with the tests' writer, ``relight sun-study --weather`` on the courtyard's 400-direction
+    bake at R^2, then the same study under the clear sky. The open ground's total is checked
+    against the file's own global horizontal sum (independent of our suns: GHI = DNI cos z +
+    DHI, measured)."""
+    import pvlib
+    from relightable_textures.operators.cli.commands import run
+
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                    "tests", "core"))
+    objects = courtyard()
+    tmy, meta = pvlib.iotools.read_tmy3(os.path.join(pvlib.__path__[0], "data",
+                                                     "723170TYA.CSV"), map_variables=True)
+    out = {"file": "pvlib data/723170TYA.CSV (TMY3) as EPW", "place": meta["Name"].strip('"'),
+           "file_ghi_kwh_m2": round(float(tmy["ghi"].sum()) / 1000.0, 1),
+           "file_dni_kwh_m2": round(float(tmy["dni"].sum()) / 1000.0, 1),
+           "file_dhi_kwh_m2": round(float(tmy["dhi"].sum()) / 1000.0, 1), "resolution": R}
+    with tempfile.TemporaryDirectory() as tmp:
+        epw = os.path.join(tmp, "greensboro.epw")
+        head = [f"LOCATION,Greensboro,NC,USA,TMY3,723170,{meta['latitude']},"
+                f"{meta['longitude']},{meta['TZ']},{meta['altitude']}"] + [
+            "DESIGN CONDITIONS,0", "TYPICAL/EXTREME PERIODS,0", "GROUND TEMPERATURES,0",
+            "HOLIDAYS/DAYLIGHT SAVINGS,No,0,0,0", "COMMENTS 1,", "COMMENTS 2,",
+            "DATA PERIODS,1,1,Data,Sunday, 1/ 1,12/31"]
+        rows = []
+        for _, r in tmy.iterrows():       # TMY3's hours end at their time, as EPW's
+            month, day, year_ = (int(x) for x in r["Date (MM/DD/YYYY)"].split("/"))
+            hour = int(r["Time (HH:MM)"].split(":")[0])
+            rows.append(",".join(str(v) for v in [
+                year_, month, day, hour, 60, "?", 10, 5, 70, 101325, 0, 0,
+                300, int(r["ghi"]), int(r["dni"]), int(r["dhi"])] + ["0"] * 19))
+        with open(epw, "w") as fh:
+            fh.write("\n".join(head + rows) + "\n")
+        import bpy
+
+        blend = os.path.join(tmp, "court.blend")
+        bpy.ops.wm.save_as_mainfile(filepath=blend)
+        t0 = time.perf_counter()
+        assert run(["bake-textures", blend, "--object", "Ground", "--object", "WallN",
+                    "--method", "transport", "--resolution", str(R), "--bounces", "0",
+                    "--model", "none", "--out", os.path.join(tmp, "bake")]) == 0
+        out["bake_s"] = round(time.perf_counter() - t0, 1)
+        reports = [os.path.join(tmp, "bake", f"{o}_texture_report.json")
+                   for o in ("Ground", "WallN")]
+        when = ["--from", "2026-01-01", "--to", "2026-12-31", "--step-minutes", "60"]
+        place = ["--lat", str(meta["latitude"]), "--lon", str(meta["longitude"]), "--tz",
+                 "UTC-05:00", "--elevation-m", str(meta["altitude"])]
+        for name, extra in (("weather", ["--weather", epw]), ("clear sky", place
+                                                              + ["--radiation"])):
+            t0 = time.perf_counter()
+            folder = os.path.join(tmp, name.replace(" ", "_"))
+            assert run(["sun-study", *reports, *when, *extra, "--out", folder]) == 0
+            rep = json.load(open(os.path.join(folder, "sun_study.json")))
+            out[name] = {"seconds": round(time.perf_counter() - t0, 1),
+                         "open_ground_kwh_m2": {k: round(v, 1) for k, v in rep["objects"][0][
+                             "radiation"]["horizontal_kwh_m2"].items()},
+                         **{o["object"]: o["radiation"]["mean_kwh_m2"]
+                            for o in rep["objects"]},
+                         **({"weather": {k: rep["weather"][k] for k in (
+                             "records_used", "left_out_kwh_m2", "missing_values")}}
+                            if "weather" in rep else {})}
+    print(json.dumps(out), flush=True)
+    return out
+
+
 def year(R: int, pictures: str | None) -> dict:
     """A year of hourly suns on the ground's 400-direction bake at R^2, by the CLI, timed."""
     import bpy
@@ -250,6 +317,7 @@ def main(argv=None) -> int:
            "resolution": args.resolution, "step_minutes": args.step,
            "accuracy": accuracy(args.resolution, args.step),
            "year_range": year_range(args.resolution),
+           "weather_year": weather_year(64),
            "year": [year(int(r), args.pictures if int(r) == 256 else None)
                     for r in args.year_sizes.split(",") if r.strip()]}
     if args.pictures:

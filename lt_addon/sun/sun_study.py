@@ -39,6 +39,9 @@ FAR_DEG = 1.0
 SUN_ANGLE_DEG = 0.533
 #: Instants a study may have: a year every 5 minutes (105,120) and some.
 MAX_INSTANTS = 120_000
+#: A weather file further than this from the study's place is said to be (its station's
+#: sky is another place's).
+WEATHER_FAR_KM = 100.0
 #: Cells of a shadow-study sheet at most; a longer list of clock hours draws the sheet at
 #: ``sheet_hours`` on at most ``SHEET_DATES`` of the dates.
 MAX_SHEET_CELLS = 60
@@ -80,6 +83,8 @@ class StudySettings:
     sheet_hours: tuple = (9.0, 12.0, 15.0)
     radiation: bool = False          # also the clear-sky radiation map (lt_addon/sun/radiation.py)
     turbidity: float = 3.0           # its Linke turbidity (lt_addon/sun/clear_sky.py)
+    weather: str | None = None       # an EPW file: the radiation of its hours instead of a
+                                     # clear sky (lt_addon/sun/weather.py); implies radiation
 
     def validate(self) -> None:
         """InputError in one line for anything out of range."""
@@ -258,12 +263,43 @@ def run_study(report_paths, settings: StudySettings, out_dir: str, *, force: boo
     step_h = times.step_h if times.step_h is not None else 1.0
     wh = np.bincount(suns.index[suns.up], minlength=len(suns.directions)) * step_h
     sheet_times, sheet_suns, sheet_dates, sheet_hours, sheet_why = _sheet_plan(settings, times)
-    irradiance = None
-    if settings.radiation:
+    irradiance, rad_suns, weather_info, sky = None, suns, None, None
+    warnings = []
+    if settings.weather:
+        from . import weather as wx
+
+        w = wx.read_epw(settings.weather)
+        rad_suns, *irradiance, weather_info = wx.study_irradiance(
+            w, list(times.dates), settings.latitude, settings.longitude, settings.elevation_m,
+            settings.north_deg)
+        away = wx.distance_km(w.latitude, w.longitude, settings.latitude, settings.longitude)
+        weather_info = {"file": os.path.basename(settings.weather), **w.place(),
+                        "km_from_study": round(away, 1), **weather_info}
+        sky = (f"weather file {weather_info['file']} ({w.city}, {w.country}; hourly direct "
+               "normal and diffuse horizontal)")
+        if away > WEATHER_FAR_KM:
+            warnings.append(f"the weather file is for {w.city} ({w.latitude:g}, "
+                            f"{w.longitude:g}), {away:.0f} km from the study's place: its "
+                            "sky is not this place's")
+        if weather_info["dates_missing"]:
+            warnings.append(f"the weather file has no records for {len(weather_info['dates_missing'])} "
+                            f"of the study's dates ({', '.join(weather_info['dates_missing'][:3])}"
+                            f"{' ...' if len(weather_info['dates_missing']) > 3 else ''}): "
+                            "their radiation is 0")
+        if weather_info["left_out_kwh_m2"]["beam"] > 0.0:
+            warnings.append(f"{weather_info['left_out_kwh_m2']['beam']:g} kWh/m2 of the "
+                            "weather file's direct light falls in hours when the Sun is below "
+                            "this place's horizon all hour, and is left out (is the file for "
+                            "another place or time zone?)")
+        if any(weather_info["missing_values"].values()):
+            warnings.append(f"the weather file marks {weather_info['missing_values']} of its "
+                            "hours' radiation missing (9999): counted as 0")
+    elif settings.radiation:
         from . import radiation as rad
 
         irradiance = rad.study_irradiance(suns, times, linke_turbidity=settings.turbidity,
                                           altitude_m=settings.elevation_m)
+        sky = f"clear (Ineichen-Perez), Linke turbidity {settings.turbidity:g}"
     t_suns = time.perf_counter() - t0
 
     # the bakes: every one read (and refused) before anything is written
@@ -287,7 +323,6 @@ def run_study(report_paths, settings: StudySettings, out_dir: str, *, force: boo
             raise InputError(f"{out_dir} already holds a study ({there[0]}); use --force to "
                              "replace it or choose another --out")
 
-    warnings = []
     if len(times.skipped):
         warnings.append(f"{len(times.skipped)} clock time(s) do not exist in {settings.tz} "
                         f"(daylight saving), left out: "
@@ -319,12 +354,12 @@ def run_study(report_paths, settings: StudySettings, out_dir: str, *, force: boo
                     f"{near.max():.1f} deg, median {np.median(near):.1f}): their shadows are "
                     "blended from the neighbouring directions', and texels near a shadow edge "
                     f"can be off by hours; {bake_for(settings)} (docs/sun-studies.md)")
-            files = output_names(stem, settings.radiation)
+            files = output_names(stem, irradiance is not None)
             radiation = None
             if irradiance is not None:
                 from . import radiation as rad
 
-                rmap = rad.radiation_map(store, suns, *irradiance,
+                rmap = rad.radiation_map(store, rad_suns, *irradiance,
                                          sun_angle_deg=settings.sun_angle, kernel=kernel,
                                          covered=result.covered)
                 radiation = rmap.summary()
@@ -335,14 +370,14 @@ def run_study(report_paths, settings: StudySettings, out_dir: str, *, force: boo
                                  "A": rmap.covered.astype(np.float32)},
                                 {"format": "relightable_textures.radiation",
                                  "object": bake.name, "unit": "kWh/m^2",
-                                 "sky": f"clear (Ineichen-Perez), Linke turbidity "
-                                        f"{settings.turbidity:g}",
+                                 "sky": sky,
                                  "horizontal_kwh_m2": rmap.horizontal_kwh}, pixel_type="float")
                 top = max(float(rmap.total.max()), rmap.horizontal_kwh["total"])
                 write_png(os.path.join(folder, files["radiation_png"]),
                           study_images.hours_picture(
                               rmap.total, rmap.covered, top,
-                              [f"{bake.name}: solar radiation, clear sky",
+                              [f"{bake.name}: solar radiation, "
+                               + ("weather file" if weather_info else "clear sky"),
                                _place(settings), _span(times, settings)],
                               legend=f"kWh/m2, sun + sky; open ground "
                                      f"{rmap.horizontal_kwh['total']:.4g}"))
@@ -417,6 +452,8 @@ def run_study(report_paths, settings: StudySettings, out_dir: str, *, force: boo
                                        if settings.hours is not None else
                                        f"each instant counts its step, {step_h:g} h")},
             "solar_position": suns.params,
+            **({"radiation_sky": sky} if sky else {}),
+            **({"weather": weather_info} if weather_info else {}),
             "instants": {"count": len(times), "sun_up": int(suns.up.sum()),
                          "unique_sun_directions": int(len(suns.directions)),
                          "possible_h": float(wh.sum()),

@@ -98,6 +98,12 @@ def add_parsers(sub) -> None:
     p.add_argument("--turbidity", type=float, default=3.0, metavar="TL",
                    help="the clear sky's Linke turbidity with --radiation (2: clean mountain "
                         "air, 3: rural, the default, 4-6: cities, summer haze)")
+    p.add_argument("--weather", metavar="FILE.epw",
+                   help="the radiation map from this EnergyPlus weather file's hourly direct "
+                        "normal and diffuse horizontal radiation instead of a clear sky "
+                        "(implies --radiation; the study's dates by month and day); without "
+                        "--lat/--lon/--tz or --place-from, the place and standard-time zone of "
+                        "its LOCATION line")
     p.add_argument("--camera", metavar="FILE.blend",
                    help="also the sheet from this .blend's scene camera (the file the bake put "
                         "its previews in): camera_sheet.png, one frame a cell in "
@@ -139,12 +145,15 @@ def _cmd_sun_study(args) -> int:
     except InputError as exc:
         raise CliError(str(exc)) from None
     place = _place(args)
+    if place.get("elevation_m") is not None and args.elevation_m == 0.0:
+        args.elevation_m = place["elevation_m"]
     settings = ss.StudySettings(
         latitude=place["latitude"], longitude=place["longitude"], tz=place["tz"], dates=dates,
         hours=args.hours, step_minutes=args.step_minutes, window=args.window,
         north_deg=place["north_deg"], elevation_m=args.elevation_m, sun_angle=args.sun_angle,
         visibility=args.visibility, sheet_hours=tuple(args.sheet_hours),
-        radiation=bool(args.radiation), turbidity=args.turbidity)
+        radiation=bool(args.radiation or args.weather), turbidity=args.turbidity,
+        weather=os.path.abspath(args.weather) if args.weather else None)
     out = os.path.abspath(args.out)
     if os.path.exists(out) and not os.path.isdir(out):
         raise CliError(f"output exists and is not a folder: {out}")
@@ -182,6 +191,19 @@ def _place(args) -> dict:
 
     given = [f for f, v in (("--lat", args.lat), ("--lon", args.lon), ("--tz", args.tz))
              if v is not None]
+    if not args.place_from and not given and args.weather:
+        from ...lt_addon.errors import InputError
+        from ...lt_addon.sun.weather import read_epw
+
+        try:
+            w = read_epw(args.weather)
+        except InputError as exc:
+            raise CliError(str(exc)) from None
+        print(f"sun study: the place of {os.path.basename(args.weather)}: {w.city}, "
+              f"{w.latitude:g}, {w.longitude:g}, {w.tz} (standard time), {w.elevation_m:g} m")
+        return {"latitude": w.latitude, "longitude": w.longitude, "tz": w.tz,
+                "north_deg": args.north if args.north is not None else 0.0,
+                "elevation_m": w.elevation_m}
     if not args.place_from:
         if len(given) < 3:
             missing = [f for f in ("--lat", "--lon", "--tz") if f not in given]

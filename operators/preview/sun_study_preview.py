@@ -27,7 +27,7 @@ from . import preview_nodes as pn
 KIND = "sun_study"
 #: What a map is, per choice: the file key in the study's report, the title, the unit.
 MAPS = {"hours": ("hours_exr", "Hours of direct sun", "h"),
-        "radiation": ("radiation_exr", "Clear-sky solar radiation", "kWh/m2")}
+        "radiation": ("radiation_exr", "Solar radiation", "kWh/m2")}
 #: Scene property: the map shown (JSON: folder, map, top, unit, objects), for the legend.
 SHOWN_KEY = "relight_sun_study_shown"
 _RAMP_LABEL = "Sun Study Legend"

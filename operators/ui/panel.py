@@ -494,6 +494,7 @@ class VIEW3D_PT_relight_sun_study(_RelightSubPanel, bpy.types.Panel):
         row.prop(props, "sun_study_hours")
         row.prop(props, "sun_study_step")
         col.prop(props, "sun_study_radiation")
+        col.prop(props, "sun_study_weather")
         col.operator("relight.run_sun_study", icon="PLAY")
         col = layout.column(align=True)
         col.prop(props, "sun_study_folder")

@@ -364,10 +364,15 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
     sun_study_radiation: BoolProperty(
         name="Radiation", default=True,
         description="Run Sun Study: also the clear-sky solar radiation map (kWh/m2)")
+    sun_study_weather: StringProperty(
+        name="Weather", subtype="FILE_PATH", default="",
+        description="An EnergyPlus weather file (.epw): the radiation map from its hourly "
+                    "direct and diffuse radiation instead of a clear sky (implies Radiation; "
+                    "the study's dates by month and day)")
     sun_study_map: EnumProperty(name="Map", default="hours", items=[
         ("hours", "Sunlight Hours", "Hours of direct sun per texel over the study"),
-        ("radiation", "Radiation", "Clear-sky solar radiation in kWh/m2 (a study run with "
-                                   "--radiation)")])
+        ("radiation", "Radiation", "Solar radiation in kWh/m2, clear sky or a weather file's "
+                                   "(a study run with Radiation, --radiation or --weather)")])
 
     # which device Cycles bakes on (operators/base/cycles_device.py), and the last bake's
     device: EnumProperty(name="Device", default="auto", items=[

@@ -95,11 +95,14 @@ class RELIGHT_OT_run_sun_study(bpy.types.Operator):
                 dates=list(spec.dates),
                 hours=None if step else clock_hours(props.sun_study_hours),
                 step_minutes=step, north_deg=spec.north_deg or 0.0,
-                elevation_m=spec.elevation_m, radiation=props.sun_study_radiation)
+                elevation_m=spec.elevation_m,
+                radiation=props.sun_study_radiation or bool(props.sun_study_weather),
+                weather=(bpy.path.abspath(props.sun_study_weather)
+                         if props.sun_study_weather else None))
             out = _new_folder(_output_dir(props), time.strftime("sun_study-%Y%m%d-%H%M%S"))
             report = run_study(reports, settings, out, version=__version__)
             which = ("radiation" if props.sun_study_map == "radiation"
-                     and props.sun_study_radiation else "hours")
+                     and settings.radiation else "hours")
             props.sun_study_folder = out
             info = sun_study_preview.show(scene, out, which)
         except (InputError, BakeInputError, UntrustedFileError, ValueError,

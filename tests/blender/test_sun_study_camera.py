@@ -12,8 +12,10 @@ same cell measured 0.544, so the bound of 0.12 tells a right sheet from a wrong 
 
 from __future__ import annotations
 
+import datetime
 import json
 import os
+import sys
 
 import numpy as np
 import pytest
@@ -156,7 +158,7 @@ def test_the_study_takes_the_place_the_sun_position_add_on_holds(tmp_path, capsy
     assert "give --lat, --lon, --tz" in capsys.readouterr().err
 
 
-def test_the_sunlight_hours_map_shows_on_the_objects_in_its_pictures_ramp(tmp_path):
+def test_the_sunlight_hours_map_shows_on_the_objects_in_its_pictures_ramp(tmp_path, capsys):
     """*Show Sun Study Map* (the panel's operator) puts the study's hours map on the ground in
     the viridis ramp of its PNGs: a Cycles render of the preview from straight above, one pixel
     per texel centre, equals the ramp of the EXR's hours (linear interpolation of the ramp's
@@ -214,6 +216,29 @@ def test_the_sunlight_hours_map_shows_on_the_objects_in_its_pictures_ramp(tmp_pa
         a, _ = exrio.read_exr(os.path.join(props.sun_study_folder, "Ground_sunlight_hours.exr"))
         b, _ = exrio.read_exr(str(weekly / "Ground_sunlight_hours.exr"))
         assert np.array_equal(a["Y"], b["Y"]) and a["Y"].max() == 15.0     # 5 dates x 3 h
+        # a weather file (EPW): the panel's radiation from it equals the CLI's, whose place
+        # comes from the file's LOCATION line when none is given
+        sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..",
+                                        "core"))
+        from test_weather import LAT, LON, write_epw     # tests/core: the EPW's writer
+
+        epw = write_epw(tmp_path / "w.epw", days=[datetime.date(2026, 6, d) for d in
+                                                   (1, 8, 15, 22, 29)])
+        props.study = f"{LAT},{LON},UTC,2026-06-01..2026-06-30/7"
+        props.sun_study_weather, props.sun_study_map = str(epw), "radiation"
+        assert bpy.ops.relight.run_sun_study() == {"FINISHED"}
+        ssp_info = ssp.legend(scene)[1]
+        assert ssp_info["unit"] == "kWh/m2"
+        capsys.readouterr()
+        assert run(["sun-study", str(tmp_path / "court_relight" / "Ground_texture_report.json"),
+                    "--weather", str(epw), "--from", "2026-06-01", "--to", "2026-06-30",
+                    "--every-days", "7", "--hours", "9,12,15", "--out",
+                    str(tmp_path / "epw")]) == 0
+        assert "the place of w.epw: Gatwick, 51.15, -0.18, UTC" in capsys.readouterr().out
+        a, _ = exrio.read_exr(os.path.join(props.sun_study_folder, "Ground_radiation.exr"))
+        b, meta = exrio.read_exr(str(tmp_path / "epw" / "Ground_radiation.exr"))
+        assert np.array_equal(a["Y"], b["Y"]) and "w.epw" in meta["sky"]
+        props.sun_study_weather, props.sun_study_map = "", "hours"
         bpy.context.view_layer.objects.active = ground
         assert bpy.ops.relight.remove_preview() == {"FINISHED"}
         props.sun_study_folder = str(tmp_path / "court_relight")     # a bake folder, no study
