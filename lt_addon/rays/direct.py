@@ -83,12 +83,14 @@ def direct_rows(occluder, points: ShadingPoints, directions, out=None) -> np.nda
             pending = None
         footprint = getattr(points, "footprint", None)
         if footprint is not None:    # each texel's footprint where a shadow edge passes
-            refine = [footprint.edges(out[s]) for s in range(len(D))]
+            refine = [footprint.edges(out[s], points) for s in range(len(D))]
             footprint.prepare(points, np.unique(np.concatenate(refine)) if refine else [])
             for s, L in enumerate(D):
                 idx = refine[s]
+                row = out[s]
+                footprint.linear_means(points, row, L, idx)   # thin smooth texels, no rays
                 if len(idx):
-                    out[s, idx] = footprint.refine(points, idx, L, out[s, idx], occluder,
+                    out[s, idx] = footprint.refine(points, idx, L, row[idx], occluder,
                                                    cosine, shadow_origins)
     finally:
         if pending is not None:     # (an error or a cancel: no rays left in flight)

@@ -262,6 +262,8 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
             "texel_sampling": "footprint" if footprint else "centre",
             **({"footprint_refined": [int(p.footprint.refined) for _, p in receivers],
                 "footprint_rays": int(sum(p.footprint.rays for _, p in receivers)),
+                # thin smooth texels away from shadow edges: their mean normal, no rays
+                "footprint_linear": [int(p.footprint.linear) for _, p in receivers],
                 "footprint_box": float(receivers[0][1].footprint.box),
                 "footprint_thin_texels": [int(len(p.footprint.thin())) for _, p in receivers]}
                if footprint else {}),

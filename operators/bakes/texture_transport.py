@@ -192,8 +192,13 @@ def _bake_transport_textures(scene, objects, settings, out_dir, resume, client, 
         os.path.join(out_dir, f"{object_stem(o.name)}_transport_texture.npy"), dset, R,
         {"object": o.name, "kind": "direct_irradiance_over_pi", "samples": 1,
          "seed": settings.seed, "direct_engine": engine["engine"],
-         "texel_sampling": "1 sample at the texel centre (Cycles' first bake sample)"
-         + ("; rays from Cycles' shading point and shadow-ray rules" if rays else ""),
+         "texel_sampling": (
+             "each texel's footprint as a converged Cycles bake sees it: 16 rays over the "
+             "texel where a shadow edge or a thin triangle passes, else its centre "
+             "(lt_addon/rays/footprint.py); rays from Cycles' shading point and shadow-ray "
+             "rules" if rays and settings.texel_sampling == "footprint" else
+             "1 sample at the texel centre (Cycles' first bake sample)"
+             + ("; rays from Cycles' shading point and shadow-ray rules" if rays else "")),
          "addon_version": __version__}) for o in objects]
     chunks = ([] if rays else
               [range(a, min(a + CHUNK_DIRECTIONS, S)) for a in range(0, S, CHUNK_DIRECTIONS)])

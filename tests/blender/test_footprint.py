@@ -165,7 +165,9 @@ def test_smooth_texels_clipped_by_their_triangle(fresh_scene):
         _, centre = ray_scene.receiver_points(obj, depsgraph, 128, footprint=False)
     rows = direct_rows(occluder, fp, dirs)
     one = direct_rows(occluder, centre, dirs)
-    assert fp.footprint.refined > 0.2 * len(smp.texel) * len(suns)     # most texels
+    # most texels: by rays, or (thin smooth texels away from edges) by their mean normal
+    f = fp.footprint
+    assert f.refined + f.linear > 0.2 * len(smp.texel) * len(suns) and f.linear > 0
     for s, sun in enumerate(suns):
         ref = cyc[256][s][smp.texel]
 
@@ -178,3 +180,42 @@ def test_smooth_texels_clipped_by_their_triangle(fresh_scene):
         print(msg)
         assert got <= 1.25 * bar, msg
         assert centre_only > 2 * bar, msg
+
+
+def test_sub_samples_kept_across_chunks_give_the_rows_a_fresh_set_up_gives(fresh_scene,
+                                                                         monkeypatch):
+    """The smooth sub-samples a chunk of directions prepares are kept for the next chunks
+    (lt_addon/rays/footprint.py ``prepare``, segments dropped oldest first past
+    ``PREPARED_ROWS``): the demo bumps at 64^2, 24 low suns in chunks of 6 with the rows kept,
+    and with a cap so small that every chunk drops the last's, equal the same directions each
+    baked with a footprint of its own, bit for bit."""
+    import bpy
+
+    from relightable_textures import samples
+    from relightable_textures.lt_addon.rays import footprint as fpm
+    from relightable_textures.lt_addon.rays.direct import direct_rows
+    from relightable_textures.lt_addon.rays.engine import Occluder
+    from relightable_textures.operators.base import ray_scene
+
+    samples.build("bumps", fresh_scene, "demo")
+    obj = bpy.data.objects["Bumps"]
+    dirs = np.array([direction_from_az_el(15.0 * k, 3.0 + k % 5) for k in range(24)])
+    with ray_scene.RenderGeometry(fresh_scene) as depsgraph:
+        V, T, _ = ray_scene.casters(depsgraph)
+        occluder = Occluder(V, T)
+
+        def fresh():
+            return ray_scene.receiver_points(obj, depsgraph, 64)[1]
+        each = np.concatenate([direct_rows(occluder, fresh(), d[None]) for d in dirs])
+        kept = fresh()
+        chunks = np.concatenate([direct_rows(occluder, kept, dirs[a:a + 6])
+                                 for a in range(0, 24, 6)])
+        segs = len(kept.footprint._segs)
+        monkeypatch.setattr(fpm, "PREPARED_ROWS", 16 * 600)
+        small = fresh()
+        capped = np.concatenate([direct_rows(occluder, small, dirs[a:a + 6])
+                                 for a in range(0, 24, 6)])
+    assert kept.footprint.refined > 0 and segs >= 2
+    assert len(small.footprint._segs) < 4 or small.footprint._seg_rows <= 16 * 600
+    np.testing.assert_array_equal(chunks, each)
+    np.testing.assert_array_equal(capped, each)
