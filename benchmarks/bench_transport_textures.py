@@ -33,6 +33,9 @@ import numpy as np
 
 SCENES = {"bumps": ["Bumps"], "noise": ["Noise"], "statue": ["Statue", "Ground"]}
 ANGLES = (2.0, 10.0)
+#: The presets' figures add Blender's default Sun (0.526 degrees): the panel shows the figure
+#: of the Sun size nearest the scene's (operators/ui/properties.py FIGURE_SUNS).
+PRESET_ANGLES = (0.526,) + ANGLES
 
 
 def _rss():
@@ -56,7 +59,7 @@ def build(name, size):
     return scene, [bpy.data.objects[n] for n in SCENES[name]]
 
 
-def truths(scene, objects, R, spp, bounces=2, seed=1):
+def truths(scene, objects, R, spp, bounces=2, seed=1, angles=ANGLES):
     """{angle: {light: [image per object]}}: Cycles Sun bakes at the held-out lights
     (``tx.TRUTH_LIGHTS``) for each of :data:`ANGLES`; also used by the low-sun benchmarks
     (``bounces=0``: direct light only)."""
@@ -64,7 +67,7 @@ def truths(scene, objects, R, spp, bounces=2, seed=1):
     from relightable_textures.operators.base.jobs import run
 
     out = {}
-    for a in ANGLES:
+    for a in angles:
         t0 = time.perf_counter()
         out[a] = run(tx.truth_bakes(scene, objects, tx.TRUTH_LIGHTS, a, bounces, spp, R,
                                     seed=seed))
@@ -327,9 +330,9 @@ def user_bake_row(scene, objects, truth, settings, folder, one, label):
     t0 = time.perf_counter()
     result = run(tx.bake_transport_textures(scene, objects, settings, folder, resume=False))
     bake_s = time.perf_counter() - t0
-    errs = {a: tx.truth_errors(result, truth[a], a) for a in ANGLES}
+    errs = {a: tx.truth_errors(result, truth[a], a) for a in truth}
     pca = {a: float(np.sqrt(np.mean([r["model"] ** 2 for r in errs[a]["lights"]])))
-           if all("model" in r for r in errs[a]["lights"]) else None for a in ANGLES}
+           if all("model" in r for r in errs[a]["lights"]) else None for a in truth}
     costs = [preview_cost(b.model, settings, b.store, b.view, b.horizon, b.indirect)
              for b in result.objects]
     stores = [b.store for b in result.objects]
@@ -351,6 +354,9 @@ def user_bake_row(scene, objects, truth, settings, folder, one, label):
         "err_10deg": round(errs[10.0]["headline_rel_rmse"], 4),
         "err_from_T_2deg": round(errs[2.0]["transport_rel_rmse"], 4),
         "err_from_T_10deg": round(errs[10.0]["transport_rel_rmse"], 4),
+        **({"err_0526deg": round(errs[0.526]["headline_rel_rmse"], 4),
+            "err_from_T_0526deg": round(errs[0.526]["transport_rel_rmse"], 4)}
+           if 0.526 in errs else {}),
         "err_pca_10deg": None if pca[10.0] is None else round(pca[10.0], 4)}
     print(f"  {label}: {row['bake_seconds']} s = {row['single_bakes']} single bakes, shows "
           f"{'/'.join(row['shows'])}, err 2/10 deg {row['err_2deg']}/{row['err_10deg']} "
@@ -413,7 +419,7 @@ def measure_presets(out_dir, truth_spp=256, candidates=(), scene_name="bumps"):
     bounces = scene_bounces(scene)
     one = single_bake_seconds(scene, objects, R, bounces)
     print(f"one 64-spp Cycles bake at {R}^2, {bounces} bounces: {one:.2f} s", flush=True)
-    truth = truths(scene, objects, R, truth_spp, bounces=bounces)
+    truth = truths(scene, objects, R, truth_spp, bounces=bounces, angles=PRESET_ANGLES)
     rows = []
     with tempfile.TemporaryDirectory(dir=out_dir) as folder:
         for name, row in data["presets"].items():
@@ -424,6 +430,8 @@ def measure_presets(out_dir, truth_spp=256, candidates=(), scene_name="bumps"):
             row["figures"] = {
                 "viewport": "/".join(r["shows"]), "bake_seconds": r["bake_seconds"],
                 "rel_rmse": r["err_10deg"], "rel_rmse_2deg": r["err_2deg"],
+                "rel_rmse_0526deg": r["err_0526deg"],
+                "rel_rmse_from_T_0526deg": r["err_from_T_0526deg"],
                 "rel_rmse_from_T": r["err_from_T_10deg"],
                 "rel_rmse_from_T_2deg": r["err_from_T_2deg"], "rel_rmse_pca": r["err_pca_10deg"],
                 "single_bakes": r["single_bakes"], "single_bake_seconds": round(one, 2),
@@ -445,12 +453,13 @@ def measure_presets(out_dir, truth_spp=256, candidates=(), scene_name="bumps"):
           f"bake {one:.2f} s; truths {truth_spp} spp, {bounces} bounces (the scene's); "
           f"{time.strftime('%Y-%m-%d %H:%M')})\n")
     print("| setting | shows | bake | x one 64-spp bake | stages (s) | GPU MiB | lookups | "
-          "err 2° | err 10° | from T 2° / 10° |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "err 0.526° | err 2° | err 10° | from T 0.526° / 2° / 10° |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['setting']} | {'/'.join(r['shows'])} | {r['bake_seconds']:.1f} s | "
               f"{r['single_bakes']:.2f} | {r['stages']} | {r['gpu_mib']} | "
-              f"{r['preview_lookups']} | {r['err_2deg']:.4f} | {r['err_10deg']:.4f} | "
+              f"{r['preview_lookups']} | {r['err_0526deg']:.4f} | {r['err_2deg']:.4f} | "
+              f"{r['err_10deg']:.4f} | {r['err_from_T_0526deg']:.4f} / "
               f"{r['err_from_T_2deg']:.4f} / {r['err_from_T_10deg']:.4f} |")
     if scene_name == "bumps":
         print(f"measured figures written to {path}; to adopt them: cp {path} {PACKAGE_PRESETS}")

@@ -74,7 +74,7 @@ def ui_label(props, name: str) -> str:
 
 
 #: The Sun Sizes (degrees) the presets' figures were measured at, by figure key.
-FIGURE_SUNS = {"rel_rmse_2deg": 2.0, "rel_rmse": 10.0}
+FIGURE_SUNS = {"rel_rmse_0526deg": 0.526, "rel_rmse_2deg": 2.0, "rel_rmse": 10.0}
 
 
 def measured_line(method: str, preset: str, sun_angle: float) -> str | None:

@@ -128,6 +128,11 @@ def test_lines_say_labels_and_the_figure_of_the_sun_size_in_use(panel_scene, mon
     props.sun_angle = 4.0
     (line, _), = panel.preset_lines(props)
     assert "2\u00b0 sun" in line and "Sun Size is 4\u00b0" in line
+    # Blender's default Sun (0.526 degrees) has a figure of its own
+    props.sun_angle = 0.526
+    (line, _), = panel.preset_lines(props)
+    assert f"{fig['rel_rmse_0526deg']:.3f}" in line and "0.526\u00b0 sun" in line
+    assert "Sun Size" not in line
     # a changed field -- also one the preset does not set -- is named by its label
     props.horizon_power = 2.5
     props.transport_viewport = "pca"

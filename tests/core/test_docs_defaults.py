@@ -217,6 +217,7 @@ def test_the_measured_table_holds_the_presets_figures():
         row = rows[name]
         assert_shown(row["bake"], fig["bake_seconds"], f"{name} bake seconds")
         assert_shown(row["× one 64-spp bake"], fig["single_bakes"], f"{name} single bakes")
+        assert_shown(row["error, 0.526° Sun"], fig["rel_rmse_0526deg"], f"{name} error at 0.526°")
         assert_shown(row["error, 2° Sun"], fig["rel_rmse_2deg"], f"{name} error at 2°")
         assert_shown(row["error, 10° Sun"], fig["rel_rmse"], f"{name} error at 10°")
         assert_shown(row["T on disk"], fig["transport_bytes"] / 2 ** 20, f"{name} T MiB")
