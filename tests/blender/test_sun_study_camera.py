@@ -220,11 +220,11 @@ def test_the_sunlight_hours_map_shows_on_the_objects_in_its_pictures_ramp(tmp_pa
         # comes from the file's LOCATION line when none is given
         sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..",
                                         "core"))
-        from test_weather import LAT, LON, write_epw     # tests/core: the EPW's writer
+        from test_weather import ELEV, LAT, LON, write_epw   # tests/core: the EPW writer
 
         epw = write_epw(tmp_path / "w.epw", days=[datetime.date(2026, 6, d) for d in
                                                    (1, 8, 15, 22, 29)])
-        props.study = f"{LAT},{LON},UTC,2026-06-01..2026-06-30/7"
+        props.study = f"{LAT},{LON},UTC,2026-06-01..2026-06-30/7,elevation={ELEV:g}"
         props.sun_study_weather, props.sun_study_map = str(epw), "radiation"
         assert bpy.ops.relight.run_sun_study() == {"FINISHED"}
         ssp_info = ssp.legend(scene)[1]
