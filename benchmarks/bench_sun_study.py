@@ -68,21 +68,21 @@ def bake(scene, objects, out, R, dset=None, **kw):
         tx.resolve_directions = orig
 
 
-def accuracy(R: int, step: float) -> list:
+def _brute_force(R: int, dates, step: float):
+    """The courtyard, the study's instants every ``step`` minutes of ``dates`` at London, and
+    per baked object (texel indices, hours lit) by a ray from every texel centre to every sun:
+    ``(objects, scene, times, suns, hour weights, brute)``."""
     import bpy
     from relightable_textures.lt_addon.rays.direct import direct_rows
     from relightable_textures.lt_addon.rays.engine import Occluder
-    from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
     from relightable_textures.lt_addon.sun import study_times as st
-    from relightable_textures.lt_addon.sun import sunlight_hours as sh
     from relightable_textures.operators.base import ray_scene
 
     objects = courtyard()
     scene = bpy.context.scene
-    times = st.study_times(DATES, TZ, step_minutes=step)
+    times = st.study_times(dates, TZ, step_minutes=step)
     suns = st.study_suns(times, **PLACE)
     wh = np.bincount(suns.index[suns.up], minlength=len(suns.directions)) * times.step_h
-    t0 = time.perf_counter()
     with ray_scene.RenderGeometry(scene) as depsgraph:
         V, T, _ = ray_scene.casters(depsgraph)
         occluder = Occluder(V, T)
@@ -90,6 +90,16 @@ def accuracy(R: int, step: float) -> list:
                   for o in objects]
     brute = [(smp.texel, wh @ (direct_rows(occluder, pts, suns.directions) > 0))
              for smp, pts in points]
+    return objects, scene, times, suns, wh, brute
+
+
+def accuracy(R: int, step: float) -> list:
+    from relightable_textures.lt_addon.sphere.directions import parse_direction_spec
+    from relightable_textures.lt_addon.sun import study_times as st
+    from relightable_textures.lt_addon.sun import sunlight_hours as sh
+
+    t0 = time.perf_counter()
+    objects, scene, times, suns, wh, brute = _brute_force(R, DATES, step)
     t_brute = time.perf_counter() - t0
     hourly = st.study_times(DATES, TZ, step_minutes=60)
     hourly_suns = st.study_suns(hourly, **PLACE)
@@ -135,25 +145,11 @@ def year_range(R: int) -> list:
     51.5,-0.13,Europe/London,2026-01-01..2026-12-31``: the paths of 24 dates spread over the
     year's declinations, at 1 degree), both with centre texels (as the rays) and the default
     footprint texels; hours per texel off the ray count, bake times."""
-    import bpy
-    from relightable_textures.lt_addon.rays.direct import direct_rows
-    from relightable_textures.lt_addon.rays.engine import Occluder
     from relightable_textures.lt_addon.sun import study_times as st
     from relightable_textures.lt_addon.sun import sunlight_hours as sh
-    from relightable_textures.operators.base import ray_scene
 
-    objects = courtyard()
-    scene = bpy.context.scene
-    times = st.study_times(st.date_range("2026-01-01", "2026-12-31"), TZ, step_minutes=60)
-    suns = st.study_suns(times, **PLACE)
-    wh = np.bincount(suns.index[suns.up], minlength=len(suns.directions)) * times.step_h
-    with ray_scene.RenderGeometry(scene) as depsgraph:
-        V, T, _ = ray_scene.casters(depsgraph)
-        occluder = Occluder(V, T)
-        points = [ray_scene.receiver_points(o, depsgraph, R, None, footprint=False)
-                  for o in objects]
-    brute = [(smp.texel, wh @ (direct_rows(occluder, pts, suns.directions) > 0))
-             for smp, pts in points]
+    objects, scene, times, suns, wh, brute = _brute_force(
+        R, st.date_range("2026-01-01", "2026-12-31"), 60)
     study = "51.5,-0.13,Europe/London,2026-01-01..2026-12-31"
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
