@@ -198,9 +198,11 @@ class Footprint:
         found = edges(self.texel, self.resolution, values)
         thin = self.thin()
         if points is not None and len(thin):
-            lin = self._linear(points)[0]
-            if len(lin):
-                thin = np.setdiff1d(thin, lin, assume_unique=True)
+            if getattr(self, "_thin_rays", None) is None:     # the same every direction
+                lin = self._linear(points)[0]
+                self._thin_rays = (np.setdiff1d(thin, lin, assume_unique=True) if len(lin)
+                                   else thin)
+            thin = self._thin_rays
         return np.union1d(found, thin) if len(thin) else found
 
     def _linear(self, points):
@@ -246,7 +248,10 @@ class Footprint:
         idx, cw, nbar = self._linear(points)
         if not len(idx):
             return
-        keep = ~np.isin(idx, skip, assume_unique=False)
+        # (a mask over the points, not a sort of the thin texels, every direction)
+        refined = np.zeros(len(self.texel), bool)
+        refined[np.asarray(skip, np.int64)] = True
+        keep = ~refined[idx]
         i, cw, nbar = idx[keep], cw[keep], nbar[keep]
         centre = np.asarray(values[i], np.float64)
         lit = centre > 0

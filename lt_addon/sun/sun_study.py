@@ -39,6 +39,8 @@ FAR_DEG = 1.0
 SUN_ANGLE_DEG = 0.533
 #: Instants a study may have: a year every 5 minutes (105,120) and some.
 MAX_INSTANTS = 120_000
+#: Most dates of a study with a weather file (each date's 24 hours are 144 Sun positions).
+WEATHER_DATES = 4 * 366
 #: A weather file further than this from the study's place is said to be (its station's
 #: sky is another place's).
 WEATHER_FAR_KM = 100.0
@@ -130,6 +132,11 @@ class StudySettings:
                 raise InputError(f"over {MAX_INSTANTS} instants")
         for h in self.sheet_hours:
             finite("a sheet hour", h, 0.0, 23.9999)
+        if self.weather and len(self.dates) > WEATHER_DATES:
+            # its radiation places the Sun 144 times a date (weather.py): bounded here
+            raise InputError(f"a study with a weather file takes up to {WEATHER_DATES} dates "
+                             f"(four years of days; a weather file holds one), got "
+                             f"{len(self.dates)}")
 
 
 def output_names(stem: str, radiation: bool = False) -> dict:

@@ -365,7 +365,7 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         name="Radiation", default=True,
         description="Run Sun Study: also the clear-sky solar radiation map (kWh/m2)")
     sun_study_weather: StringProperty(
-        name="Weather", subtype="FILE_PATH", default="",
+        name="Weather", subtype="FILE_PATH", default="", options=path_options(),
         description="An EnergyPlus weather file (.epw): the radiation map from its hourly "
                     "direct and diffuse radiation instead of a clear sky (implies Radiation; "
                     "the study's dates by month and day)")

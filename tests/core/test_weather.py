@@ -152,6 +152,12 @@ def test_a_study_with_a_weather_file_writes_its_map_and_says_whose_sky(tmp_path)
         weather=str(short)), str(tmp_path / "s2"))
     assert rep["weather"]["dates_missing"] == ["2026-12-21"]
     assert any("no records for 1 of the study's dates" in line for line in rep["warnings"])
+    # the dates a weather study places the Sun for (144 a date) are bounded
+    many = ss.dates_from(start="2020-01-01", end="2025-01-04")
+    with pytest.raises(InputError, match="up to 1464 dates"):
+        ss.run_study([report_path], ss.StudySettings(
+            latitude=LAT, longitude=LON, tz="UTC", dates=many, hours=[12],
+            weather=str(short)), str(tmp_path / "s3"))
 
 
 def _record(text, field, value, month=None):
