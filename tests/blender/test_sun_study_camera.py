@@ -52,9 +52,10 @@ def test_the_camera_sheet_matches_cycles_at_its_check_cell(courtyard_blend, tmp_
     from relightable_textures.operators.cli.commands import run
 
     walls = ("Ground", "WallN", "WallW", "WallE")
-    assert run(["bake-textures", courtyard_blend, *[a for w in walls for a in ("--object", w)],
-                "--directions", "hemi:48:1.5", "--resolution", "32", "--sun-path-step", "2",
-                "--study", "51.5,-0.13,Europe/London," + DATES]) == 0
+    rc = run(["bake-textures", courtyard_blend, *[a for w in walls for a in ("--object", w)],
+              "--directions", "hemi:48:1.5", "--resolution", "32", "--sun-path-step", "2",
+              "--study", "51.5,-0.13,Europe/London," + DATES])
+    assert rc == 0, capsys.readouterr().err     # (the one line says why, should CI see it)
     reports = [str(tmp_path / "courtyard_relight" / f"{w}_texture_report.json") for w in walls]
     mtime = os.path.getmtime(courtyard_blend)
     capsys.readouterr()
