@@ -825,7 +825,8 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
     from ...lt_addon.transport import object_resolution as orr
 
     objects = list(objects)
-    bounces = scene_light_settings(scene, settings)[0].bounces   # (decides the groups' term)
+    lit = scene_light_settings(scene, settings)[0]   # the scene's bounces and Sun size
+    bounces = lit.bounces                             # (decides the groups' term)
     try:   # two objects whose files would be one (a hash collision, or case on macOS/Windows)
         check_stems([o.name for o in objects])
     except StemCollision as exc:
@@ -856,8 +857,9 @@ def bake_job(scene, objects, settings: TransportTextureSettings, out_dir: str, *
         reports += out.reports
         models += out.models
     if truth and preview and settings.model == "pca" and compare:
-        yield from _camera_comparison(scene, objects, settings, out_dir, reports, truth,
-                                      truth_samples)
+        # at the Sun size the groups' truths took (the scene's Sun's by default: -1 is no size)
+        yield from _camera_comparison(scene, objects, replace(settings, sun_angle=lit.sun_angle),
+                                      out_dir, reports, truth, truth_samples)
     wall = round(time.perf_counter() - started, 3)
     for rep in reports:   # each report: the sides of all groups, and the whole job's wall time
         rep["object_resolutions"] = sides

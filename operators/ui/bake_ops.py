@@ -20,7 +20,8 @@ from ..base import jobs
 from ..preview import preview_nodes, render_guard
 from ..bakes import steerable_bake
 from ..base.cycles_bake import BakeInputError, check_bakeable
-from .properties import VERTEX_FIELDS, VERTEX_PROPS, settings_from_scene, truth_count
+from .properties import (VERTEX_FIELDS, VERTEX_PROPS, preview_sun_angle, settings_from_scene,
+                         truth_count)
 from .settings_props import values
 
 
@@ -680,7 +681,8 @@ def show_preview(scene, obj, kind: str, reinstall: bool = False) -> str:
 
         bake, store, report = tx.load_bake(path)
         tx.install_transport_preview(scene, obj, report, bake, store,
-                                     sun_angle=scene.relight.sun_angle, sun=scene.relight.sun)
+                                     sun_angle=preview_sun_angle(scene)[0],
+                                     sun=scene.relight.sun)
     else:
         from ..preview import vertex_relight
 

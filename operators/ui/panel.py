@@ -67,6 +67,19 @@ class VIEW3D_PT_relight(_RelightTab, bpy.types.Panel):
                                f"{bake.get('bake_seconds', 0):.1f} s")
 
 
+def draw_sun_size(col, scene) -> None:
+    """*Scene's Sun* and the Sun Size it gives (the field itself when it is off)."""
+    from .properties import preview_sun_angle
+
+    props = scene.relight
+    col.prop(props, "scene_sun_size")
+    if props.scene_sun_size:
+        angle, where = preview_sun_angle(scene)
+        col.label(text=f"Sun Size: {angle:g}\u00b0 ({where})")
+    else:
+        col.prop(props, "sun_angle")
+
+
 def preset_lines(props) -> list:
     """The lines under Preset, as ``[(text, icon)]``: the fields that differ from what the
     preset was measured with (by their labels), or its measured cost and error for the Sun Size
@@ -78,7 +91,9 @@ def preset_lines(props) -> list:
         verb = "differs" if len(names) == 1 else "differ"
         return [(f"Custom: {shown} {verb} from {props.preset.capitalize()}", "MODIFIER"),
                 ("(its measured figures do not apply)", "BLANK1")]
-    line = measured_line(props.method, props.preset, props.sun_angle)
+    from .properties import preview_sun_angle
+
+    line = measured_line(props.method, props.preset, preview_sun_angle(props.id_data)[0])
     if line is None:
         return [("This preset has no measured figures", "INFO")]
     return [(line, "INFO")]
@@ -209,6 +224,9 @@ class VIEW3D_PT_relight_bake_advanced(_RelightTab, bpy.types.Panel):
                 if (name in ("indirect_rays", "indirect_components")
                         and props.transport_indirect != "gather") or (
                         name.startswith("indirect_") and props.transport_indirect == "none"):
+                    continue
+                if name == "sun_angle":      # the scene's Sun's, unless turned off
+                    draw_sun_size(col, context.scene)
                     continue
                 if name == "bounces":        # the scene's own, unless turned off
                     col.prop(props, "scene_bounces")
@@ -347,7 +365,7 @@ class VIEW3D_PT_relight_light(_RelightSubPanel, bpy.types.Panel):
             if key != "relight_follow_sun":
                 col.prop(scene, f'["{key}"]', text=key.replace("relight_", "").capitalize())
         col.prop(scene, f'["{COLOR_SLIDER}"]', text="Color")
-        layout.prop(props, "sun_angle")
+        draw_sun_size(layout.column(align=True), scene)
         row = layout.row(align=True)
         row.prop(scene.relight, "sun")
         follow = scene.get("relight_follow_sun", 0.0) > 0.5

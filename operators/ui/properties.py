@@ -146,13 +146,31 @@ _LOBES = preset_values("lobes", "balanced")
 _TRANSPORT = preset_values("transport", "balanced")
 
 
+def preview_sun_angle(scene) -> tuple[float, str]:
+    """``(degrees, where from)``: the Sun Size the panel's bakes and previews use. With
+    *Scene's Sun* (the default) the angle of the scene's first rendered Sun, as Cycles renders
+    it (Blender's default 0.526), or 2 without a Sun -- what ``bake-textures`` takes by default
+    (:func:`..bakes.texture_transport.scene_light_settings`); else the *Sun Size* field."""
+    from ..base.scene_sun import DEFAULT_SUN_ANGLE, scene_suns
+
+    props = scene.relight
+    if not props.scene_sun_size:
+        return float(props.sun_angle), "Sun Size"
+    suns = scene_suns(scene)
+    if not suns:
+        return DEFAULT_SUN_ANGLE, "the scene has no Sun"
+    import math
+
+    return round(math.degrees(float(suns[0].data.angle)), 4), f"the scene's Sun {suns[0].name}"
+
+
 def _refresh_tables(self, context):
     """A new sun size only changes the preview's coefficient tables (no re-bake)."""
     from ..preview.transport_preview import refresh_preview_tables
 
     obj = context.active_object if context is not None else None
     if obj is not None:
-        refresh_preview_tables(context.scene, obj, self.sun_angle)
+        refresh_preview_tables(context.scene, obj, preview_sun_angle(context.scene)[0])
 
 
 def _sun_poll(self, obj):
@@ -303,10 +321,15 @@ class RelightSceneSettings(bpy.types.PropertyGroup):
         description="Bake the interreflections with the bounces the scene renders with (Render "
                     "> Light Paths: Diffuse, capped by Total), as Cycles renders it; off: the "
                     "Bounces below")
+    scene_sun_size: BoolProperty(
+        name="Scene's Sun", default=True, update=_refresh_tables,
+        description="Bake and preview with the Sun Size of the scene's Sun (its Angle: "
+                    "Blender's default is 0.526 degrees), as Cycles renders the scene; 2 "
+                    "degrees when it has no Sun; off: the Sun Size below")
     sun_angle: FloatProperty(
         name="Sun Size", default=2.0, min=0.0, max=30.0, update=_refresh_tables,
-        description="Angular diameter of the preview sun in degrees (re-tabulates the preview "
-                    "coefficients, no re-bake)")
+        description="Angular diameter of the preview sun in degrees, when Scene's Sun is off "
+                    "(re-tabulates the preview coefficients, no re-bake)")
     # material edits (transfer tensors, Sun 2007)
     material_per_corner: BoolProperty(
         name="Per Face Corner", default=False,
@@ -507,8 +530,10 @@ def transport_settings_from_scene(props):
                    rename=TRANSPORT_PROPS)
     if getattr(props, "scene_bounces", False):
         given["bounces"] = -1          # the scene's Light Paths (texture_transport)
+    # the scene's Sun: -1, resolved by the bake as the CLI's default is (its report says so)
+    sun_angle = -1.0 if getattr(props, "scene_sun_size", False) else props.sun_angle
     return TransportTextureSettings(
-        directions=f"hemi:{props.directions}{power}", sun_angle=props.sun_angle, **given)
+        directions=f"hemi:{props.directions}{power}", sun_angle=sun_angle, **given)
 
 
 def settings_from_scene(props):

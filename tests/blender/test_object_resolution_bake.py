@@ -68,6 +68,9 @@ def test_the_panel_bakes_the_ground_at_its_own_side_with_the_statues_shadow(fres
             assert reps[n]["ground_truth"]          # each group against its own truths
         # the camera comparison: once, after both groups, of both objects
         assert reps["Statue"]["comparison"] == reps["Ground"]["comparison"]
+        # at the Sun size the groups took from the scene (Scene's Sun: none here, 2 degrees)
+        assert reps["Statue"]["comparison"]["sun_angle"] == 2.0
+        assert all(reps[n]["settings"]["sun_angle"] == 2.0 for n in reps)
         assert (tmp_path / "Statue_compare.png").exists()
         assert not (tmp_path / "Ground_compare.png").exists()
         stores = {n: tt.TransportStore.open(reps[n]["files"]["transport"])

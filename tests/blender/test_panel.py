@@ -96,9 +96,16 @@ def test_the_basic_part_is_six_controls_and_the_rest_is_advanced(panel_scene):
     adv = panel.VIEW3D_PT_relight_bake_advanced
     assert adv.bl_parent_id == "VIEW3D_PT_relight_bake" and "DEFAULT_CLOSED" in adv.bl_options
     advanced = [n for k, n, _ in _draw(adv, ctx) if k == "prop"]
-    for name in ("method", "directions", "sun_angle", "transport_indirect",
+    for name in ("method", "directions", "scene_sun_size", "transport_indirect",
                  "transport_viewport", "device", "run_on"):
         assert name in advanced
+    # the Sun Size is the scene's Sun's (the factory scene's light is a Point: 2 degrees),
+    # the field only once Scene's Sun is off
+    assert "sun_angle" not in advanced and any(
+        t == "Sun Size: 2\u00b0 (the scene has no Sun)" for k, _, t in _draw(adv, ctx))
+    panel_scene.relight.scene_sun_size = False
+    assert "sun_angle" in [n for k, n, _ in _draw(adv, ctx) if k == "prop"]
+    panel_scene.relight.scene_sun_size = True
     assert "transport_model" not in advanced        # only PCA previews live: not offered
     panel_scene.relight.transport_model = "blocks"   # (an older file's choice is shown, said)
     log = _draw(adv, ctx)
@@ -119,7 +126,19 @@ def test_lines_say_labels_and_the_figure_of_the_sun_size_in_use(panel_scene, mon
 
     props = panel_scene.relight
     fig = TRANSPORT.figures("balanced")
-    assert props.sun_angle == 2.0
+    assert props.sun_angle == 2.0 and props.scene_sun_size
+    # Scene's Sun (the default): a Sun of Blender's default size gives its own figure, as
+    # the bake takes that size from the scene
+    import bpy
+
+    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+    panel_scene.collection.objects.link(sun)
+    (line, _), = panel.preset_lines(props)
+    assert f"{fig['rel_rmse_0526deg']:.3f}" in line and "0.526\u00b0 sun" in line
+    bpy.data.objects.remove(sun)
+    (line, _), = panel.preset_lines(props)            # no Sun: 2 degrees
+    assert "2\u00b0 sun" in line
+    props.scene_sun_size = False                      # the field from here on
     (line, _), = panel.preset_lines(props)
     assert f"{fig['rel_rmse_2deg']:.3f}" in line and "2\u00b0 sun" in line
     props.sun_angle = 10.0

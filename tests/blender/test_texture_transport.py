@@ -645,11 +645,30 @@ def test_panel_operator_bakes_selected_objects_and_sun_size_retabulates(statue, 
         assert "Camera comparison: Statue_compare.png" in scene["relight_last_bake"]
         assert scene.render.engine == engine and scene.render.filepath == filepath   # restored
         assert [b["kind"] for b in object_bakes(ground)] == ["transport_texture"]
+        # the Sun Size the bake took: the scene's Sun's (Scene's Sun, the default), as the
+        # CLI's bake-textures takes it; the statue scene has none, so 2 degrees
+        assert props.scene_sun_size and rep["settings"]["sun_angle"] == 2.0
+        assert rep["from_scene"]["sun_angle"] == 2.0 and rep["from_scene"]["no_sun"]
         tables = lambda: exrio.read_exr(str(tmp_path / "Statue_preview_tables.exr"))[0]["R"]
         before = tables().copy()
-        props.sun_angle = 20.0                 # update callback re-tabulates, no bake
-        after = tables()
+        props.sun_angle = 20.0                 # the field is not in use: nothing changes
+        assert np.array_equal(tables(), before)
+        props.scene_sun_size = False           # update callback re-tabulates, no bake
+        after = tables().copy()
         assert not np.allclose(before, after)
+        # a Sun in the scene: its Angle is the preview's Sun Size; the tables equal the
+        # field's at the same size
+        sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+        scene.collection.objects.link(sun)
+        sun.data.angle = np.radians(20.0)
+        props.scene_sun_size = True
+        assert np.allclose(tables(), after, rtol=1e-6, atol=1e-7)
+        sun.data.angle = np.radians(0.526)     # (Blender's default)
+        props.scene_sun_size = True            # (the update runs on a set)
+        assert not np.allclose(tables(), after)
+        bpy.data.objects.remove(sun)
+        props.scene_sun_size = False
+        assert np.allclose(tables(), after, rtol=1e-6, atol=1e-7)
         assert sorted(os.listdir(tmp_path)) == files
         # previews of different bakes coexist in one material (issue 12: a vertex transport
         # bake silently replaced the texture preview) and Show Preview switches between them

@@ -246,14 +246,16 @@ def test_the_defaults_table_holds_the_codes_defaults(tmp_path):
     assert number(rows["indirect components"]["default"])[0] \
         == balanced["indirect_components"]
 
-    sun, _ = number(rows["sun size of the preview"]["default"])
-    assert sun == property_default("sun_angle")
-    # the bake's own default: -1, the scene's (operators/base/scene_sun.py)
+    # the bake's own default: -1, the scene's (operators/base/scene_sun.py); the panel's
+    # Scene's Sun (on) gives the bake -1 and the preview the same size
     from relightable_textures.operators.base.scene_sun import DEFAULT_SUN_ANGLE
     assert balanced["sun_angle"] == -1 and balanced["bounces"] == -1
-    truths = rows["sun size of the bake's truths"]["default"]
+    assert property_default("scene_sun_size") is True
+    row = rows["sun size of the bake, its truths and the preview"]
+    truths = row["default"]
     assert "scene's Sun" in truths and "0.526°" in truths
     assert f"{DEFAULT_SUN_ANGLE:g}° without a Sun" in truths
+    assert "*Scene's Sun*" in row["where to change it"]
     assert "scene's own" in rows["diffuse bounces"]["default"]
     assert rows["texel sampling"]["default"] == default.texel_sampling
 
