@@ -125,7 +125,7 @@ TRANSPORT = Presets(TransportTextureSettings, "transport_presets.json", {
                   indirect_samples=64, components=48, table_size=32, horizon_azimuths=64,
                   tol=0.03),
     "balanced": dict(directions="hemi:400:1.5", resolution=256, indirect_resolution=128,
-                     indirect_samples=64, components=96, table_size=32, horizon_resolution=96,
+                     indirect_samples=64, components=96, table_size=32, horizon_resolution=0,
                      horizon_azimuths=96, tol=0.02),
     "production": dict(directions="hemi:2800:1.5", resolution=256, indirect_resolution=256,
                        indirect_samples=256, components=256, table_size=64, tol=0.01)},

@@ -763,7 +763,7 @@ def test_new_scene_holds_the_preset_it_names_and_edits_make_it_custom(fresh_scen
         got = pr.transport_settings_from_scene(props)
         want = tx.settings_from_preset("balanced", resolution=2048)
         assert (got.indirect_resolution, got.horizon_resolution) == \
-            (want.indirect_resolution, want.horizon_resolution) == (512, 96)
+            (want.indirect_resolution, want.horizon_resolution) == (512, 0)
         props.resolution = 512
         assert props.indirect_resolution == 256
         props.indirect_resolution = 96
