@@ -300,3 +300,47 @@ def test_an_over_budget_pca_atlas_is_left_out_and_made_for_environment_light(bum
     finally:
         scene.relight.texture_light = "SUN"
         relightable_textures.unregister()
+
+
+def test_on_relief_horizons_at_the_textures_side_are_far_closer_than_coarser_ones(fresh_scene,
+                                                                                   tmp_path):
+    """Why the presets make the horizon map at the texture's side (balanced's was 96^2 for a
+    256^2 texture): on flat-shaded relief every horizon texel coarser than the texture spans
+    several faces, so a low sun's lit faces come out wrong. The brick relief of
+    test_footprint at 64^2, 100 directions, 48 azimuths, against Cycles' 256-spp bake of a 2-degree
+    Sun (direct light) at three low suns. Measured 2026-12-06 (bpy 5.0.1): at the texture's
+    side 0.343 / 0.083 / 0.104, at 48^2 1.197 / 0.229 / 0.392 (auto's check then chooses
+    between the map and T)."""
+    import bpy
+
+    from test_footprint import relief
+
+    from relightable_textures.lt_addon.transport import bundle
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.base.jobs import run
+
+    assert tx.settings_from_preset("balanced").horizon_resolution == 0    # the texture's side
+    obj = relief(fresh_scene)
+    bpy.context.view_layer.update()
+    n = 64
+    suns = [direction_from_az_el(a, e) for a, e in ((30.0, 3.0), (200.0, 3.0), (110.0, 8.0))]
+    with EnvironmentBake(fresh_scene, [obj], n, 256, 0, (8, 16), mode="radiance", seed=1,
+                         world_sampling="none") as session:
+        truths = [np.asarray(session.bake_sun_all(d, 1.0, 2.0)[0])[..., :3] for d in suns]
+    errs = {}
+    for side in (0, 48):
+        s = tx.settings_from_preset("balanced", resolution=n, bounces=0,
+                                    directions="hemi:100:1.5", horizon_azimuths=48,
+                                    horizon_resolution=side, viewport="horizon")
+        out = run(tx.bake_job(fresh_scene, [obj], s, str(tmp_path / f"h{side}"), truth=0,
+                              compare=False, preview=False))
+        b, store, _ = tx.load_bake(out.reports[0]["report"])
+        assert b.horizon.resolution == n and b.horizon.horizon_resolution == (side or n)
+        errs[side] = [rel(bundle.relight(b, store, d, 2.0, 1.0, source="horizon")[..., :3], t)
+                      for d, t in zip(suns, truths)]
+        store.close()
+    msg = f"texture's side {np.round(errs[0], 4)}, 48^2 {np.round(errs[48], 4)}"
+    print(msg)
+    assert all(a < b for a, b in zip(errs[0], errs[48])), msg
+    assert np.mean(errs[0]) < 0.6 * np.mean(errs[48]), msg
