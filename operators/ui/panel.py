@@ -9,7 +9,7 @@ import os
 from ..bakes.analyze import SUMMARY_KEY
 from ..base import compat
 from ..base.blend_files import object_bakes
-from .properties import measured_line, preset_differences, ui_label
+from .properties import measured_line, preset_differences, preview_sun_angle, ui_label
 from ..preview.preview_nodes import COLOR_SLIDER, SLIDERS
 
 
@@ -69,8 +69,6 @@ class VIEW3D_PT_relight(_RelightTab, bpy.types.Panel):
 
 def draw_sun_size(col, scene) -> None:
     """*Scene's Sun* and the Sun Size it gives (the field itself when it is off)."""
-    from .properties import preview_sun_angle
-
     props = scene.relight
     col.prop(props, "scene_sun_size")
     if props.scene_sun_size:
@@ -91,8 +89,6 @@ def preset_lines(props) -> list:
         verb = "differs" if len(names) == 1 else "differ"
         return [(f"Custom: {shown} {verb} from {props.preset.capitalize()}", "MODIFIER"),
                 ("(its measured figures do not apply)", "BLANK1")]
-    from .properties import preview_sun_angle
-
     line = measured_line(props.method, props.preset, preview_sun_angle(props.id_data)[0])
     if line is None:
         return [("This preset has no measured figures", "INFO")]

@@ -151,17 +151,15 @@ def preview_sun_angle(scene) -> tuple[float, str]:
     *Scene's Sun* (the default) the angle of the scene's first rendered Sun, as Cycles renders
     it (Blender's default 0.526), or 2 without a Sun -- what ``bake-textures`` takes by default
     (:func:`..bakes.texture_transport.scene_light_settings`); else the *Sun Size* field."""
-    from ..base.scene_sun import DEFAULT_SUN_ANGLE, scene_suns
+    from ..base.scene_sun import DEFAULT_SUN_ANGLE, scene_sun_angle, scene_suns
 
     props = scene.relight
     if not props.scene_sun_size:
         return float(props.sun_angle), "Sun Size"
-    suns = scene_suns(scene)
-    if not suns:
+    angle = scene_sun_angle(scene)      # (the bake's own reading, rounded as it rounds it)
+    if angle is None:
         return DEFAULT_SUN_ANGLE, "the scene has no Sun"
-    import math
-
-    return round(math.degrees(float(suns[0].data.angle)), 4), f"the scene's Sun {suns[0].name}"
+    return round(angle, 4), f"the scene's Sun {scene_suns(scene)[0].name}"
 
 
 def _refresh_tables(self, context):
