@@ -338,12 +338,15 @@ def place_open(H, open_) -> None:
     H[1][take] = m
 
 
-def visible_fraction(el, lo, hi, radius: float) -> np.ndarray:
+def visible_fraction(el, lo, hi, radius: float, radius_hi=None) -> np.ndarray:
     """The part of a sun's disc (angular ``radius`` > 0, centre at elevation ``el``) outside
     the blocked elevations ``[lo, hi]``, each edge taken as a straight line across the disc
-    (an empty interval, ``lo >= hi``, blocks nothing)."""
+    (an empty interval, ``lo >= hi``, blocks nothing). ``radius_hi`` (array or float): the
+    upper edge is cut by a wider disc (a soft edge: the edge's spread over a texel's
+    footprint folded into the disc, :func:`...transport.horizon_map.spread_radius`)."""
+    r_hi = radius if radius_hi is None else radius_hi
     return 1.0 - np.maximum(disc_fraction((el - lo) / radius)
-                            - disc_fraction((el - hi) / radius), 0.0)
+                            - disc_fraction((el - hi) / r_hi), 0.0)
 
 
 def disc_fraction(t) -> np.ndarray:

@@ -295,9 +295,12 @@ def direct_summary(direct: dict, directions: int) -> str:
         raised = direct.get("horizons_raised")
         why = (f", raised from {raised['from']['azimuths']} at {raised['from']['side']}^2 for "
                f"the animated Sun" if raised else "")
+        fh = direct.get("horizon_footprints") or {}
+        fh_text = (f" (footprints of {fh['texels']} texels, {fh['seconds']:.1f} s)"
+                   if fh.get("texels") else "")
         horizons = (f"; horizons at {direct['horizon_azimuths']} azimuths{side}{why}, "
-                    f"{direct['horizon_seconds']:.1f} s of it" if direct.get("horizon_azimuths")
-                    else "")
+                    f"{direct['horizon_seconds']:.1f} s of it{fh_text}"
+                    if direct.get("horizon_azimuths") else "")
         footprint = ""
         if direct.get("texel_sampling") == "footprint" and direct.get("texels"):
             texel_dirs = sum(direct["texels"]) * directions
@@ -345,8 +348,16 @@ class TransportTextureResult:
 
 
 #: Texture lookups per pixel of the horizon viewport: both edges at the two azimuths around each
-#: of the sun disc's three strips (horizon_map.STRIPS), the normal, the albedo.
+#: of the sun disc's three strips (horizon_map.STRIPS), the normal, the albedo; and the upper
+#: edges' spreads where the map has them (:func:`horizon_lookups`).
 HORIZON_LOOKUPS = 14
+HORIZON_SPREAD_LOOKUPS = 6
+
+
+def horizon_lookups(horizon) -> int:
+    """Texture lookups per pixel of ``horizon``'s viewport."""
+    return HORIZON_LOOKUPS + (HORIZON_SPREAD_LOOKUPS if getattr(horizon, "spread", None)
+                              is not None else 0)
 
 
 def fit_model(store, settings: TransportTextureSettings, albedo):
@@ -394,7 +405,8 @@ def fit_viewport(store, settings: TransportTextureSettings, model, lights=TRUTH_
         t0 = time.perf_counter()
         mib = horizon.gpu_bytes() / 2**20
         info = {"azimuths": horizon.azimuths, "gpu_mib": round(mib, 1),
-                "lookups_per_pixel": HORIZON_LOOKUPS, "gpu_budget_mib": settings.gpu_budget}
+                "lookups_per_pixel": horizon_lookups(horizon),
+                "gpu_budget_mib": settings.gpu_budget}
         if horizon_check is not None:
             e = trial if trial is not None else hmap.heldout_errors(
                 horizon, store, *horizon_check, settings.sun_angle, settings.kernel)
@@ -717,7 +729,7 @@ def preview_cost(model, settings, store=None, view=None, horizon=None, indirect=
     extra = indirect_lookups(settings, indirect)
     if horizon is not None:
         return {"viewport": "horizon", "azimuths": horizon.azimuths,
-                "texture_lookups_per_pixel": HORIZON_LOOKUPS + extra,
+                "texture_lookups_per_pixel": horizon_lookups(horizon) + extra,
                 "python_per_light_change": False,
                 "gpu_mib": round(horizon.gpu_bytes() / 2**20, 1)}
     if view is not None:

@@ -11,13 +11,25 @@ across the disc (:data:`STRIPS`) -- so a shadow edge moves continuously with the
 size, from ``2 A`` bytes per texel.
 
 It is exact where a texel's occluded elevations along an azimuth form one interval; where they
-form two (the sky between), their hull darkens the gap. Before the viewport is chosen,
+form two (the sky between), their hull darkens the gap.
+
+A texel is its footprint, as a converged Cycles bake sees it (:mod:`..rays.footprint`), not its
+centre: where the upper edge moves within the footprint (a shadow edge or a relief's rims
+across the texel) one centre's edge draws the texel wholly lit or wholly dark, where the bake
+sees it partly lit. The bake finds the horizons of a few sub-samples of such texels
+(:data:`..rays.footprint.HORIZON_LATTICE`) and keeps, per azimuth, the footprint's mean upper
+edge and its spread (standard deviation, :func:`footprint_edges`); the relight folds the spread
+into the disc that cuts the upper edge (:func:`spread_radius`). On the gallery's relief at
+128^2 (direct light against the 16-sample footprint of rays): 0.127 -> 0.045 at 3 degrees,
+0.109 -> 0.044 at 8 under a 0.526-degree Sun. Before the viewport is chosen,
 :func:`heldout_errors` measures the map and T against rays at directions neither holds.
 
 Arrays: ``q`` (2, A, Rh, Rh) uint8 codes -- ``q[1]`` the upper edges ``hi = q / 255 * pi / 2``,
 ``q[0]`` the lower edges, the same but code 0 for "blocked from below" (``-pi / 2``); rows from
-v = 0 -- and ``normals`` (R, R, 3) float16 world unit vectors (zeros on texels no triangle
-covers). Azimuth ``a`` is ``2 pi a / A`` from +x toward +y.
+v = 0 --, ``spread`` (A, Rh, Rh) uint8 codes of the upper edges' spread over the footprint
+(:func:`encode_spread`; None in a map without it: a sharp edge) and ``normals`` (R, R, 3)
+float16 world unit vectors (zeros on texels no triangle covers). Azimuth ``a`` is ``2 pi a /
+A`` from +x toward +y.
 
 The horizons may be kept at a coarser side ``Rh`` than the texture's ``R`` (:func:`side`): a
 shadow's edge is as sharp as the sun's penumbra, which on a large receiver spans many texels
@@ -55,10 +67,20 @@ STRIPS = tuple(zip(_X.tolist(), (_W / _W.sum()).tolist()))
 COS_MIN = 1e-3
 #: Radians per code step (0.35 degrees).
 STEP = np.pi / 2 / 255.0
+#: The largest spread of an upper edge a code holds (radians): codes are ``sqrt(spread /
+#: SPREAD_MAX)`` in 255 steps, fine where a hard sun needs them (0.0002 degrees at code 1, 0.03
+#: degrees a step near 1 degree).
+SPREAD_MAX = np.radians(15.0)
+#: Neighbouring texels whose edges differ by more than this (radians) at some azimuth mark a
+#: texel whose footprint the bake samples (:func:`varying`): 1 degree. Where the edge varies
+#: smoothly, a neighbour's difference over a half-texel box is a spread of about a seventh of
+#: it (0.14 degrees here, against a 0.526-degree Sun's 0.26-degree radius).
+VARYING = np.radians(1.0)
 #: The horizons' side at most when the settings leave it to the bake (0). With 128 azimuths a
 #: 2048^2 texture's horizon viewport then takes 426 MiB of GPU memory (its normals and albedo
 #: at 2048^2 included; 1507 MiB with the horizons at 2048^2), within the default 512 MiB
-#: budget; a 4096^2 texture's 618 MiB.
+#: budget; a 4096^2 texture's 618 MiB. The edges' spreads add a third of the horizons' part
+#: (594 MiB at 2048^2: over the default budget, such a bake leaves them out).
 AUTO_SIDE = 1024
 
 
@@ -90,6 +112,78 @@ def for_sun_path(resolution: int, azimuths: int, horizon_resolution: int,
         if h >= given and gpu_bytes(a, resolution, h) <= budget_bytes:
             return a, h
     return A, int(horizon_resolution)
+
+
+def encode_spread(S) -> np.ndarray:
+    """Spreads (radians, any shape) -> uint8 codes ``rint(sqrt(S / SPREAD_MAX) * 255)``."""
+    S = np.clip(np.asarray(S, np.float64) / SPREAD_MAX, 0.0, 1.0)
+    return np.rint(np.sqrt(S) * 255.0).astype(np.uint8)
+
+
+def decode_spread(c) -> np.ndarray:
+    """Codes (uint8, or interpolated floats) -> spreads in radians: ``(c / 255)^2 SPREAD_MAX``
+    -- the viewport's rule."""
+    c = np.asarray(c, np.float64) / 255.0
+    return c * c * SPREAD_MAX
+
+
+def spread_radius(radius, spread):
+    """The disc radius that cuts an upper edge spread by ``spread`` (radians, standard
+    deviation over the footprint) for a sun of ``radius``: the disc's vertical variance
+    ``r^2 / 4`` plus the edge's, as one disc's, ``sqrt(r^2 + 4 s^2)``."""
+    return np.sqrt(radius * radius + 4.0 * np.asarray(spread, np.float64) ** 2)
+
+
+def footprint_edges(Hc, Hs, owner, weight, centre_w):
+    """The footprint's upper edges of ``M`` texels: ``(mean (A, M), spread (A, M))`` radians,
+    float64, from the centres' horizons ``Hc`` (2, A, M) and the sub-samples' ``Hs`` (2, A, N)
+    (:class:`..rays.footprint.Footprint` ``._sub_points``: ``owner`` (N,) among the M,
+    ``weight`` (N,), ``centre_w`` (M,); a texel's weights sum to 1). A sub-sample open along an
+    azimuth (an empty interval) counts as an edge at its centre's lower edge (at 0 under one
+    blocked from below): visible wherever the centre's interval does not block."""
+    Hc = np.asarray(Hc, np.float64)
+    Hs = np.asarray(Hs, np.float64)
+    owner = np.asarray(owner, np.int64)
+    A, M = Hc.shape[1:]
+    floor = np.maximum(Hc[0], 0.0)                          # (A, M)
+    hi_c = np.where(Hc[1] > Hc[0], Hc[1], floor)
+    hi_s = np.where(Hs[1] > Hs[0], Hs[1], floor[:, owner])
+    w = np.asarray(weight, np.float64)
+    cw = np.asarray(centre_w, np.float64)
+    total = cw + np.bincount(owner, weights=w, minlength=M)
+    mean = np.empty((A, M))
+    sq = np.empty((A, M))
+    for a in range(A):
+        mean[a] = cw * hi_c[a] + np.bincount(owner, weights=w * hi_s[a], minlength=M)
+        sq[a] = cw * hi_c[a] ** 2 + np.bincount(owner, weights=w * hi_s[a] ** 2, minlength=M)
+    mean /= total
+    sq /= total
+    return mean, np.sqrt(np.maximum(sq - mean * mean, 0.0))
+
+
+def varying(H, texel, R: int, found=None, tol: float = VARYING) -> np.ndarray:
+    """Indices into ``texel`` (P,) of the texels whose lower or upper edge differs from a grid
+    neighbour's by more than ``tol`` (radians) at some azimuth: where the footprint's edges may
+    move within the texel. ``H`` (2, A, P); ``found`` (P,) bool: the points whose horizons are
+    known (neighbours not found do not count)."""
+    H = np.asarray(H)
+    texel = np.asarray(texel, np.int64)
+    ok = np.ones(len(texel), bool) if found is None else np.asarray(found, bool)
+    mask = np.zeros(R * R, bool)
+    mask[texel[ok]] = True
+    mask = mask.reshape(R, R)
+    flag = np.zeros((R, R), bool)
+    for e in range(2):
+        for a in range(H.shape[1]):
+            img = np.zeros(R * R, np.float32)
+            img[texel] = np.maximum(np.asarray(H[e, a], np.float32), -1.0)  # from below: -1
+            img = img.reshape(R, R)
+            for sa, sb in (((slice(None), slice(1, None)), (slice(None), slice(None, -1))),
+                           ((slice(1, None), slice(None)), (slice(None, -1), slice(None)))):
+                d = (np.abs(img[sa] - img[sb]) > tol) & mask[sa] & mask[sb]
+                flag[sa] |= d
+                flag[sb] |= d
+    return np.nonzero(flag.reshape(-1)[texel] & ok)[0]
 
 
 def quantize(H) -> np.ndarray:
@@ -151,6 +245,7 @@ def upsample_at(img, R: int, texels) -> np.ndarray:
 class HorizonMap:
     q: np.ndarray          # (2, A, Rh, Rh) uint8
     normals: np.ndarray    # (R, R, 3) float16
+    spread: np.ndarray | None = None    # (A, Rh, Rh) uint8 (encode_spread), or None
 
     @property
     def azimuths(self) -> int:
@@ -176,7 +271,8 @@ class HorizonMap:
 
         At each strip's azimuth (the sun's, and either side of it by 0.77 of the disc's
         radius) the disc is cut by that azimuth's interval (:func:`..rays.horizon.
-        visible_fraction`), the visibility linear between the two azimuths around it
+        visible_fraction`; the upper edge by the wider disc of :func:`spread_radius` where the
+        map has spreads), the visibility linear between the two azimuths around it
         (interpolating the visibility rather than the edges was measured better: statue demo's
         ground at a 2-degree Sun 0.042 against 0.074); the strips are weighted by the disc's
         chord there. A straight horizon is cut exactly, as by one cut at the sun's azimuth;
@@ -204,7 +300,12 @@ class HorizonMap:
             if k not in seen:
                 h = decode(upsample(self.q[:, k], R) if texels is None else
                            upsample_at(self.q[:, k], R, texels))
-                seen[k] = visible_fraction(el, *h, r)
+                r_hi = None
+                if self.spread is not None:    # the upper edge's spread over the footprint
+                    c = (upsample(self.spread[k], R) if texels is None else
+                         upsample_at(self.spread[k], R, texels))
+                    r_hi = spread_radius(r, decode_spread(c))
+                seen[k] = visible_fraction(el, *h, r, r_hi)
             return seen[k]
         vis = 0.0
         for x, w in STRIPS:
@@ -223,37 +324,48 @@ class HorizonMap:
 
     def gpu_bytes(self) -> int:
         """GPU memory of the viewport's images (:func:`gpu_bytes`)."""
-        return gpu_bytes(self.azimuths, self.resolution, self.horizon_resolution)
+        return gpu_bytes(self.azimuths, self.resolution, self.horizon_resolution,
+                         self.spread is not None)
 
     def storage_bytes(self) -> int:
-        return int(self.q.nbytes + self.normals.nbytes)
+        return int(self.q.nbytes + self.normals.nbytes
+                   + (self.spread.nbytes if self.spread is not None else 0))
 
 
-def gpu_bytes(azimuths: int, resolution: int, horizon_resolution: int = 0) -> int:
-    """GPU memory of a horizon viewport: the lower and upper edges as one 8-bit RGBA atlas
-    (three azimuths per tile) at the horizons' side (:func:`side`, of ``horizon_resolution``:
-    0 lets the bake choose) and the normals with the albedo in a half-float RGBA atlas (two
-    tiles) at the texture's."""
+def gpu_bytes(azimuths: int, resolution: int, horizon_resolution: int = 0,
+              spread: bool = False) -> int:
+    """GPU memory of a horizon viewport: the lower and upper edges (and their ``spread``, where
+    the map has them: a third more tiles) as one 8-bit RGBA atlas (three azimuths per tile) at
+    the horizons' side (:func:`side`, of ``horizon_resolution``: 0 lets the bake choose) and the
+    normals with the albedo in a half-float RGBA atlas (two tiles) at the texture's. Whether a
+    map can be shown at all is decided without the spreads (the bake leaves them out where they
+    would not fit the budget)."""
     from ..io.atlas import atlas_layout
 
-    h = atlas_layout(2 * -(-int(azimuths) // 3), side(resolution, horizon_resolution))
+    h = atlas_layout((3 if spread else 2) * -(-int(azimuths) // 3),
+                     side(resolution, horizon_resolution))
     n = atlas_layout(2, int(resolution))
     return int(h["width"] * h["height"] * 4 + n["width"] * n["height"] * 8)
 
 
-def from_points(H, texel, resolution: int, normals, margin=None, coarse=None) -> HorizonMap:
+def from_points(H, texel, resolution: int, normals, margin=None, coarse=None,
+                spread=None) -> HorizonMap:
     """A map from one object's shading points: ``H`` (2, A, P) radians and ``normals`` (P, 3)
     at the covered texels ``texel`` (P,) flat indices; ``margin``: ``(dst, op)`` of
     :func:`..rays.texels.extend_margin`, which fills the bake margin as Cycles' Extend does
     (edges linearly -- a lower edge blocked from below counts as 0 there --, normals then
     renormalised). One azimuth at a time: memory holds the codes and one row.
     ``coarse``: ``(texel, side, margin)`` when ``H`` was found at the points of a coarser
-    side (``normals`` stay at ``texel``, ``resolution``)."""
+    side (``normals`` stay at ``texel``, ``resolution``). ``spread``: (A, P) radians, the upper
+    edges' spread over the footprint (:func:`footprint_edges`; ``H[1]`` then holds the means),
+    or None."""
     if coarse is not None:
         h_texel, Rh, h_margin = coarse
-        q = _codes(H, np.asarray(h_texel), int(Rh), h_margin)
     else:
-        q = _codes(H, np.asarray(texel), int(resolution), margin)
+        h_texel, Rh, h_margin = texel, resolution, margin
+    q = _codes(H, np.asarray(h_texel), int(Rh), h_margin)
+    s_codes = (None if spread is None else
+               _spread_codes(spread, np.asarray(h_texel), int(Rh), h_margin))
     R = int(resolution)
     texel = np.asarray(texel)
     nrm = np.zeros((R * R, 3))
@@ -261,7 +373,22 @@ def from_points(H, texel, resolution: int, normals, margin=None, coarse=None) ->
     if margin is not None and len(margin[0]):
         n = margin[1] @ np.asarray(normals, np.float64)
         nrm[margin[0]] = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-    return HorizonMap(q, nrm.reshape(R, R, 3).astype(np.float16))
+    return HorizonMap(q, nrm.reshape(R, R, 3).astype(np.float16), s_codes)
+
+
+def _spread_codes(S, texel, R: int, margin) -> np.ndarray:
+    """The spread codes (A, R, R) of spreads ``S`` (A, P) at ``texel``, the margin filled as
+    the edges are (linearly); 0 (sharp) elsewhere."""
+    A = S.shape[0]
+    out = np.zeros((A, R * R), np.uint8)
+    has_margin = margin is not None and len(margin[0])
+    for a in range(A):
+        img = np.zeros(R * R)
+        img[texel] = S[a]
+        if has_margin:
+            img[margin[0]] = margin[1] @ np.asarray(S[a], np.float64)
+        out[a] = encode_spread(img)
+    return out.reshape(A, R, R)
 
 
 def _codes(H, texel, R: int, margin) -> np.ndarray:
@@ -334,7 +461,8 @@ def save(path: str, hm: HorizonMap) -> None:
     from ..io import atomic, versions
 
     with atomic.atomic_path(path) as tmp:
-        save_npz(tmp, compressed=True, q=hm.q, normals=hm.normals,
+        extra = {} if hm.spread is None else {"spread": hm.spread}
+        save_npz(tmp, compressed=True, q=hm.q, normals=hm.normals, **extra,
                  **{k: np.array(v) for k, v in versions.stamp(FORMAT).items()})
 
 
@@ -342,7 +470,7 @@ def load(path: str, resolution: int | None = None) -> HorizonMap:
     """The map :func:`save` wrote (a newer format version is refused in one line), read as a
     file from elsewhere (:func:`..io.untrusted.open_npz`: capped, each array's header checked
     before it is inflated): ``q`` (2, A, Rh, Rh) uint8 with 3 <= A <= 4096 azimuths, Rh at
-    most the texture's side; ``normals`` (R, R, 3) float16, finite, R = ``resolution``
+    most the texture's side; ``spread`` (A, Rh, Rh) uint8 where present; ``normals`` (R, R, 3) float16, finite, R = ``resolution``
     (T's) when given."""
     from ..io import untrusted as ut, versions
 
@@ -359,5 +487,8 @@ def load(path: str, resolution: int | None = None) -> HorizonMap:
             raise ut.UntrustedFileError(path, f"has horizon codes of shape {qs}, expected "
                                               f"(2, azimuths 3..4096, Rh, Rh) with Rh <= {R}")
         q = z.get("q", shape=(2, None, None, None), dtype=np.uint8)
+        spread = (z.get("spread", shape=tuple(qs[1:]), dtype=np.uint8) if "spread" in z
+                  else None)          # (version 2 maps have none: sharp edges)
         ut.check_values(path, normals, what="normals")
-        return HorizonMap(np.asarray(q, np.uint8), np.asarray(normals, np.float16))
+        return HorizonMap(np.asarray(q, np.uint8), np.asarray(normals, np.float16),
+                          None if spread is None else np.asarray(spread, np.uint8))

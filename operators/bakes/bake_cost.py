@@ -13,7 +13,7 @@ def viewport_gpu(settings, dset, n_objects: int, most: bool = False) -> tuple:
     bytes are the larger of the horizons' and of what auto shows where it rejects them (the
     statue at 2048^2: its ground the horizons, 70 MiB; the statue blocks, 410 MiB)."""
     from ...lt_addon.transport import sparse_tables as sp
-    from .ray_direct import horizon_count
+    from .ray_direct import horizon_count, horizon_spread
 
     k = settings.components or 48
     P = settings.resolution ** 2
@@ -30,7 +30,8 @@ def viewport_gpu(settings, dset, n_objects: int, most: bool = False) -> tuple:
     if horizons and not most:
         # rays bake the map; auto shows it where the held-out check finds it closer than T
         return "horizon", int(n_objects * hmap.gpu_bytes(
-            A, settings.resolution, settings.horizon_resolution)), blocks_if_not_horizons
+            A, settings.resolution, settings.horizon_resolution,
+            spread=horizon_spread(settings))), blocks_if_not_horizons
     if viewport == "transport":
         gpu = n_objects * sp.atlas_layout_bytes(dset.size, settings.resolution)[1]
     elif viewport == "blocks":   # the block size is chosen after the bake: at most this
@@ -44,7 +45,8 @@ def viewport_gpu(settings, dset, n_objects: int, most: bool = False) -> tuple:
         gpu = n_objects * (-(-k // 3)) * 4 * P * 2
     if horizons:   # (most)
         gpu = max(gpu, n_objects * hmap.gpu_bytes(A, settings.resolution,
-                                                  settings.horizon_resolution))
+                                                  settings.horizon_resolution,
+                                                  spread=horizon_spread(settings)))
     return viewport, int(gpu), blocks_if_not_horizons
 
 

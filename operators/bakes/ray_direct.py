@@ -21,6 +21,7 @@ from ...lt_addon.rays import horizon
 from ...lt_addon.transport import horizon_map as hmap
 from ...lt_addon.transport import horizon_trial
 from ...lt_addon.rays.direct import direct_rows
+from ...lt_addon.rays.footprint import HORIZON_LATTICE
 from ...lt_addon.rays.texels import extend_margin
 from ..base import cycles_device, ray_scene
 from ..base.jobs import Progress
@@ -136,6 +137,16 @@ def horizon_count(settings) -> int:
     return A
 
 
+def horizon_spread(settings) -> bool:
+    """Whether this bake's horizon maps get their edges' spread over the texels' footprints
+    (:func:`...lt_addon.transport.horizon_map.footprint_edges`): where the texels are sampled
+    by footprint and the map with its spreads fits the GPU budget (else the edges alone)."""
+    A = horizon_count(settings)
+    return bool(A) and getattr(settings, "texel_sampling", "footprint") == "footprint" and \
+        hmap.gpu_bytes(A, settings.resolution, settings.horizon_resolution,
+                       spread=True) <= int(settings.gpu_budget) << 20
+
+
 def bake(scene, objects, settings, dset, stores, normals, step: int, total: int, margin: int = 4):
     """Generator: fill ``stores`` (one per object, (S, R*R)) with the ray-traced direct
     transport; ``normals``: per object world closure normals (R, R, 3) or None; ``margin``: the
@@ -195,6 +206,7 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
         Dh = hmap.heldout_directions(HELDOUT, settings.seed)
         trial_ok = settings.viewport == "auto" and _CALIBRATION_AZIMUTHS is None
         maps, skipped, searched, castable, checks, trials = [], 0, 0, 0, [], []
+        edges, with_spread = [], horizon_spread(settings)
         for i, ((smp, pts), mg, store) in enumerate(zip(receivers, margins, stores)):
             if coarse is None:
                 h_smp, h_pts, low = smp, pts, None
@@ -204,6 +216,11 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                        extend_margin(h_smp.covered(), max(1, -(-margin * Rh // R))))
             who = f", object {i + 1}/{len(receivers)}" if len(receivers) > 1 else ""
             H = np.zeros((2, A, h_pts.size), np.float16)       # (open: [0, 0])
+            # the footprints' upper edges and their spreads, kept apart from the centres'
+            # edges until the map is made (which texels vary is read from the centres)
+            fph = (_Footprints(A, h_pts.size) if h_pts.footprint is not None and with_spread
+                   else None)
+            found = np.zeros(h_pts.size, bool)
             rest = np.arange(h_pts.size)
             picked = (horizon_trial.pick(h_smp.texel, h_smp.resolution, smp.texel, R,
                                          seed=settings.seed) if trial_ok else None)
@@ -214,8 +231,13 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                                              "horizon trial", who, step + S - 1, total)
                 H[:, :, h_rows] = H_t
                 counts.append((len(h_rows), figs))
+                found[h_rows] = True
+                edges.append((yield from _footprints(occluder, h_smp, h_pts, H, fph, found, A,
+                                                     who, step + S - 1, total)))
                 rest = np.setdiff1d(rest, h_rows, assume_unique=True)
-                sample = hmap.from_points(H, smp.texel, R, pts.Ns, mg, coarse=low)
+                h_now, s_now = _applied(H, fph)
+                sample = hmap.from_points(h_now, smp.texel, R, pts.Ns, mg, coarse=low,
+                                          spread=s_now)
                 trial = _trial(occluder, sample, store, pts.subset(t_rows),
                                smp.texel[t_rows], Dh, settings)
                 trial.update(tiles_texels=int(len(h_rows)), texels=int(len(t_rows)),
@@ -228,11 +250,17 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                                              "horizons", who, step + S - 1, total)
                 H[:, :, rest] = H_r
                 counts.append((len(rest), figs))
+                found[rest] = True
+                edges.append((yield from _footprints(occluder, h_smp, h_pts, H, fph, found, A,
+                                                     who, step + S - 1, total)))
+                if fph is not None:        # (in place: the trial's map was a copy)
+                    H[1][:, fph.done] = fph.hi[:, fph.done]
             skipped += sum(f["skipped"] for _, f in counts)
             searched += sum(f["searched"] for _, f in counts)
             castable += sum(f["castable"] for _, f in counts)
             maps.append(None if decided == "transport" else
-                        hmap.from_points(H, smp.texel, R, pts.Ns, mg, coarse=low))
+                        hmap.from_points(H, smp.texel, R, pts.Ns, mg, coarse=low,
+                                         spread=None if fph is None else fph.spread))
             trials.append(trial)
             checks.append(None if decided else _check_rows(occluder, smp, pts, mg, Dh,
                                                            settings))
@@ -243,6 +271,15 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                         "horizon_rays": int(occluder.rays - r2),
                         # scan rays no caster could meet (lt_addon/rays/reach.py): not cast
                         "horizon_rays_skipped": int(skipped),
+                        # texels whose edges vary between neighbours: their footprints'
+                        # sub-samples found horizons too (the map's spread, horizon_map.py)
+                        "horizon_footprints": {
+                            "texels": int(sum(e["texels"] for e in edges)),
+                            "points": int(sum(e["points"] for e in edges)),
+                            "seconds": round(sum(e["seconds"] for e in edges), 3),
+                            "lattice": list(HORIZON_LATTICE)} if with_spread else
+                        {"left_out": "centre texel sampling" if not footprint else
+                         "the spreads would not fit the GPU budget"},
                         # scan rays a caster could meet, and those the search cast of them
                         # (lt_addon/rays/horizon.py _search)
                         "horizon_scan_rays": {"castable": int(castable),
@@ -269,6 +306,64 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                if footprint else {}),
             "margin_texels": margin, "threads": occluder.threads,
             "directions_per_call": chunk}
+
+
+#: Memory for the footprint sub-samples' horizons at a time (float16 pairs per azimuth): the
+#: varying texels are taken in parts of at most this much (65k texels at 128 azimuths).
+FOOTPRINT_BYTES = 256 << 20
+
+
+class _Footprints:
+    """The footprints' upper edges ``hi`` and spreads ``spread`` (A, P) float16 (radians, as
+    the horizons are kept) of one object's horizon points, and which points have them (``done``
+    (P,))."""
+
+    def __init__(self, A: int, P: int):
+        self.hi = np.zeros((A, P), np.float16)
+        self.spread = np.zeros((A, P), np.float16)
+        self.done = np.zeros(P, bool)
+
+
+def _applied(H, fph):
+    """``(H, spread)`` for :func:`...lt_addon.transport.horizon_map.from_points`: a copy of
+    ``H`` with the footprints' upper edges where ``fph`` has them (``H`` itself without)."""
+    if fph is None:
+        return H, None
+    H = H.copy()
+    H[1][:, fph.done] = fph.hi[:, fph.done]
+    return H, fph.spread
+
+
+def _footprints(occluder, smp, pts, H, fph, found, A: int, who: str, step: int, total: int):
+    """Generator: the footprints of the points whose edges vary between neighbours among the
+    points ``found`` (:func:`...lt_addon.transport.horizon_map.varying`, of the centres'
+    horizons ``H`` (2, A, P)) and that ``fph`` (:class:`_Footprints`) does not hold yet: the
+    horizons of their sub-samples (:data:`...lt_addon.rays.footprint.HORIZON_LATTICE`) give
+    their upper edges' means and spreads (:func:`...lt_addon.transport.horizon_map.
+    footprint_edges`), into ``fph``. A texel's footprint depends on it alone, so a bake that
+    finds its horizons in two goes (the trial on sampled tiles, then the rest) gets the same
+    map as one go. Returns ``{"texels", "points", "seconds"}``; nothing where ``fph`` is None."""
+    t0 = time.perf_counter()
+    if fph is None or pts.footprint is None:
+        return {"texels": 0, "points": 0, "seconds": 0.0}
+    cand = hmap.varying(H, smp.texel, smp.resolution, found)
+    cand = cand[~fph.done[cand]]
+    n = HORIZON_LATTICE[0]
+    part = max(1, FOOTPRINT_BYTES // (4 * n * A))
+    parts = -(-len(cand) // part)
+    points = 0
+    for j, a in enumerate(range(0, len(cand), part)):
+        idx = cand[a:a + part]
+        owner, sub, weight, centre_w = pts.footprint._sub_points(pts, idx, HORIZON_LATTICE)
+        points += sub.size
+        label = "horizon footprints" + (f" (part {j + 1}/{parts})" if parts > 1 else "")
+        Hs, _ = yield from _find(occluder, sub, A, label, who, step, total)
+        mean, spread = hmap.footprint_edges(H[:, :, idx], Hs, owner, weight, centre_w)
+        fph.hi[:, idx] = mean
+        fph.spread[:, idx] = spread
+        fph.done[idx] = True
+    return {"texels": int(len(cand)), "points": int(points),
+            "seconds": time.perf_counter() - t0}
 
 
 def _find(occluder, pts, A: int, label: str, who: str, step: int, total: int):

@@ -513,14 +513,17 @@ def build_sparse_group(n_directions: int, resolution: int, table_size: int, taps
 
 
 def horizon_preview_arrays(hm, albedo):
-    """(8-bit horizon tiles (2 ceil(A/3), Rh, Rh, 3) uint8 -- the lower edges' tiles, then the
-    upper edges', three azimuths per RGB tile, at the horizons' side; normal and albedo tiles
-    (2, R, R, 3) float32 at the texture's) -- what :func:`build_horizon_group` reads."""
+    """(8-bit horizon tiles (2 or 3 ceil(A/3), Rh, Rh, 3) uint8 -- the lower edges' tiles, then
+    the upper edges', then their spreads' where the map has them, three azimuths per RGB tile,
+    at the horizons' side; normal and albedo tiles (2, R, R, 3) float32 at the texture's) --
+    what :func:`build_horizon_group` reads."""
     _, A, Rh, _ = hm.q.shape
     n = -(-A // 3)
-    q = np.zeros((2, n * 3, Rh, Rh), np.uint8)
-    q[:, :A] = hm.q
-    tiles = q.reshape(2 * n, 3, Rh, Rh).transpose(0, 2, 3, 1)
+    planes = [hm.q[0], hm.q[1]] + ([hm.spread] if hm.spread is not None else [])
+    q = np.zeros((len(planes), n * 3, Rh, Rh), np.uint8)
+    for i, plane in enumerate(planes):
+        q[i, :A] = plane
+    tiles = q.reshape(len(planes) * n, 3, Rh, Rh).transpose(0, 2, 3, 1)
     na = np.stack([hm.normals.astype(np.float32), np.asarray(albedo, np.float32)])
     return tiles, na
 
@@ -549,9 +552,10 @@ def viewport_relight_horizon(tiles, na, azimuths: int, direction, sun_angle: flo
     from ...lt_addon.transport.horizon_map import HorizonMap
 
     A = int(azimuths)
-    n, Rh = len(tiles) // 2, tiles.shape[1]
-    q = np.asarray(tiles).transpose(0, 3, 1, 2).reshape(2, 3 * n, Rh, Rh)[:, :A]
-    hm = HorizonMap(q, np.asarray(na[0], np.float16))
+    n, Rh = -(-A // 3), tiles.shape[1]
+    planes = len(tiles) // n          # 2: the edges; 3: and their spreads
+    q = np.asarray(tiles).transpose(0, 3, 1, 2).reshape(planes, 3 * n, Rh, Rh)[:, :A]
+    hm = HorizonMap(q[:2], np.asarray(na[0], np.float16), q[2] if planes == 3 else None)
     e = hm.direct(direction, sun_angle)
     return (e[..., None] * np.asarray(na[1], np.float64)).astype(np.float32)
 
@@ -602,18 +606,23 @@ def _disc_part(b, offset, radius, x, y):
 
 
 def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image, uv_map: str,
-                        name: str, sun_angle: float, horizon_resolution: int | None = None):
+                        name: str, sun_angle: float, horizon_resolution: int | None = None,
+                        spread: bool = False):
     """The sun group relighting from horizons (the sockets of :func:`build_group`): at three
     azimuths across the sun's disc (the sun's and either side, ``horizon_map.STRIPS``) the two
     azimuth channels around each are picked; at each, the sun's disc is cut by the blocked
     interval's edges (``1 - max(0, F((e - lo) / r) - F((e - hi) / r))`` with
     ``F(t) = 0.5 + (t sqrt(1 - t^2) + asin t) / pi``), the two visibilities linear between the
     azimuths, the three weighted by the disc's chord there; times ``max(0, N . d) / pi`` with
-    the baked normal: 14 lookups (12 horizon channels, the normal, the albedo). The horizon
+    the baked normal: 14 lookups (12 horizon channels, the normal, the albedo). With
+    ``spread`` (the atlas' third set of tiles) the upper edge is cut by the wider disc
+    ``sqrt(r^2 + 4 s^2)``, ``s = c^2 SPREAD_MAX`` from the spread channel ``c`` (0..1):
+    6 lookups more (:func:`...lt_addon.transport.horizon_map.spread_radius`). The horizon
     atlas may be coarser (``horizon_resolution``) than the normals' (``resolution``): its linear
     lookup reads the codes between its texels, as
     :func:`...lt_addon.transport.horizon_map.upsample`."""
-    from ...lt_addon.transport.horizon_map import COS_MIN, STEP, STRIPS, SUN_RADIUS_MIN
+    from ...lt_addon.transport.horizon_map import (COS_MIN, SPREAD_MAX, STEP, STRIPS,
+                                                   SUN_RADIUS_MIN)
 
     Rh = int(horizon_resolution or resolution)
 
@@ -631,7 +640,7 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
         return b.math("SUBTRACT", k, b.math("MULTIPLY", wrap, float(A), x=x + 200, y=y),
                       x=x + 300, y=y)
     uv = b.node("ShaderNodeUVMap", -1400, -600, uv_map=uv_map).outputs["UV"]
-    lay = atlas_layout(2 * n, Rh)
+    lay = atlas_layout((3 if spread else 2) * n, Rh)
     el = b.math("ARCSINE", b.math("MINIMUM", dz, 1.0, x=600, y=200), x=700, y=200)
     radius = b.node("ShaderNodeValue", 600, 0)
     radius.name = radius.label = SUN_RADIUS_NODE
@@ -661,7 +670,17 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
                 if not upper:    # code 0: blocked from below
                     below = b.math("LESS_THAN", q, 0.5 / 255.0, x=400, y=y - 60)
                     h = b.math("MULTIPLY_ADD", below, -np.pi / 2, h, x=500, y=y)
-                edge.append(_disc_part(b, b.math("SUBTRACT", el, h, x=800, y=y), r, 900, y))
+                r_e = r
+                if upper and spread:     # the edge's spread over the footprint widens the disc
+                    c = _atlas_channel(b, b.math("ADD", kk, float(6 * n), x=-800, y=y - 200),
+                                       uv, lay, horizon_image, Rh, acc, -700, y - 200)
+                    acc = c
+                    c2 = b.math("MULTIPLY", c, c, x=400, y=y - 200)
+                    s4 = b.math("MULTIPLY", b.math("MULTIPLY", c2, c2, x=500, y=y - 200),
+                                4.0 * SPREAD_MAX ** 2, x=600, y=y - 200)
+                    r_e = b.math("SQRT", b.math("MULTIPLY_ADD", r, r, s4, x=700, y=y - 200),
+                                 x=800, y=y - 200)
+                edge.append(_disc_part(b, b.math("SUBTRACT", el, h, x=800, y=y), r_e, 900, y))
             blocked = b.math("MAXIMUM", b.math("SUBTRACT", edge[0], edge[1], x=1600,
                                                y=y0 - 800 * j), 0.0, x=1650, y=y0 - 800 * j)
             part.append(b.math("SUBTRACT", 1.0, blocked, x=1700, y=y0 - 800 * j))
@@ -777,12 +796,15 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
         htiles, na = horizon_preview_arrays(bake.horizon, bake.albedo)
         sparse = {**write_horizon_files(base, htiles, na, bake.horizon.azimuths),
                   "azimuths": bake.horizon.azimuths,
-                  "horizon_resolution": bake.horizon.horizon_resolution}
+                  "horizon_resolution": bake.horizon.horizon_resolution,
+                  # the atlas' third set of tiles: the upper edges' spreads
+                  "horizon_spread": bake.horizon.spread is not None}
         h_img = pn.load_atlas_image(sparse["horizon_atlas"], f"{obj.name} transport horizons")
         n_img = pn.load_atlas_image(sparse["horizon_normals"], f"{obj.name} transport normals")
         group = build_horizon_group(bake.horizon.azimuths, model.resolution, h_img, n_img,
                                     uv_map, gname + " new", angle,
-                                    bake.horizon.horizon_resolution)
+                                    bake.horizon.horizon_resolution,
+                                    spread=bake.horizon.spread is not None)
     elif viewport == "blocks":
         view = bake.view
         beig, btab = block_preview_arrays(view, bake.albedo, store.directions, angle,

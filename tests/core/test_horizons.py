@@ -178,8 +178,90 @@ def test_save_load_round_trip_and_a_newer_format_is_refused(tmp_path):
     with pytest.raises(InputError, match="newer"):
         hmap.load(path)
     # the GPU figure: 2 x 6 azimuths in four 8-bit RGBA tiles (2 x 2 grid of 8 + 2 texel
-    # strides), normals and albedo in two half-float RGBA tiles (2 x 1)
+    # strides), normals and albedo in two half-float RGBA tiles (2 x 1); with the edges'
+    # spreads six tiles (3 x 2)
     assert hmap.gpu_bytes(6, 8) == 20 * 20 * 4 + 20 * 10 * 8
+    assert hmap.gpu_bytes(6, 8, spread=True) == 30 * 20 * 4 + 20 * 10 * 8
+    assert hm.gpu_bytes() == hmap.gpu_bytes(6, 8)
+    # a map with spreads keeps them (a version-2 map, without, reads as sharp edges)
+    hs = hmap.HorizonMap(hm.q, hm.normals, rng.integers(0, 256, (6, 8, 8), dtype=np.uint8))
+    hmap.save(path, hs)
+    back = hmap.load(path)
+    assert np.array_equal(back.spread, hs.spread)
+    assert back.gpu_bytes() == hmap.gpu_bytes(6, 8, spread=True)
+    np.savez(path, q=hm.q, normals=hm.normals, spread=hs.spread[:, :4],
+             format=np.array(hmap.FORMAT), format_version=np.array(3))
+    with pytest.raises(InputError, match="spread"):
+        hmap.load(path)
+
+
+def test_footprint_edges_are_the_weighted_mean_and_spread_of_the_sub_samples():
+    """Two texels, two azimuths: the footprint's upper edge is the weighted mean of its
+    centre's and sub-samples' edges, its spread their weighted standard deviation; an open
+    sub-sample counts at its centre's lower edge (0 under one blocked from below)."""
+    fb = -np.pi / 2
+    Hc = np.array([[[fb, 0.3]], [[0.2, 0.5]]]).repeat(2, axis=1)         # (2, A=2, M=2)
+    Hc[:, 1, 0] = [fb, 0.4]
+    # texel 0: subs 0.1, 0.3, open; texel 1 (floating [0.3, 0.5]): subs 0.7, open
+    Hs = np.array([[fb, fb, 0.0, 0.3, 0.2], [0.1, 0.3, 0.0, 0.7, 0.2]])[:, None, :].repeat(2, 1)
+    owner = np.array([0, 0, 0, 1, 1])
+    weight = np.array([0.2, 0.2, 0.2, 0.25, 0.25])
+    centre = np.array([0.4, 0.5])
+    mean, spread = hmap.footprint_edges(Hc, Hs, owner, weight, centre)
+    for a in range(2):
+        for m, (edges, w) in enumerate([([Hc[1, a, 0], 0.1, 0.3, 0.0], [0.4, 0.2, 0.2, 0.2]),
+                                        ([0.5, 0.7, 0.3], [0.5, 0.25, 0.25])]):
+            mu = np.average(edges, weights=w)
+            sd = np.sqrt(np.average((np.array(edges) - mu) ** 2, weights=w))
+            assert abs(mean[a, m] - mu) < 1e-12 and abs(spread[a, m] - sd) < 1e-12
+
+
+def test_a_spread_edge_relights_a_footprint_whose_edges_are_spread_over_an_interval():
+    """Sub-samples whose upper edges spread evenly over [h - w, h + w] see a hard sun at
+    elevation e with the fraction clamp((e - h + w) / 2w); the map of their mean edge and
+    spread gives that within 0.05 at every elevation -- a disc's chord profile for a ramp
+    differs from it by 0.029 at most, and the edge's code by up to half a 0.35-degree step,
+    0.029 of this 6-degree ramp (measured: 0.043) --, where the mean edge alone errs by up
+    to 0.5."""
+    h, w = np.radians(10.0), np.radians(3.0)
+    edges = np.linspace(h - w, h + w, 401)
+    Hc = np.array([[[-np.pi / 2]], [[h]]])
+    Hs = np.stack([np.full(401, -np.pi / 2), edges])[:, None, :]
+    mean, spread = hmap.footprint_edges(Hc, Hs, np.zeros(401, np.int64), np.full(401, 1 / 402),
+                                        np.array([1 / 402]))
+    A, R = 3, 1
+    H = np.stack([np.full((A, 1), -np.pi / 2), np.repeat(mean, A, 0)])
+    sharp = hmap.from_points(H, np.array([0]), R, np.array([[0, 0, 1.0]]))
+    soft = hmap.from_points(H, np.array([0]), R, np.array([[0, 0, 1.0]]),
+                            spread=np.repeat(spread, A, 0))
+    worst_soft = worst_sharp = 0.0
+    for e in np.linspace(h - 1.5 * w, h + 1.5 * w, 61):
+        d = np.array([np.cos(e), 0.0, np.sin(e)])
+        want = np.clip((e - h + w) / (2 * w), 0, 1)
+        cos = np.sin(e)
+        worst_soft = max(worst_soft, abs(soft.direct(d)[0, 0] * np.pi / cos - want))
+        worst_sharp = max(worst_sharp, abs(sharp.direct(d)[0, 0] * np.pi / cos - want))
+    assert worst_soft < 0.05 and worst_sharp > 0.45, (worst_soft, worst_sharp)
+    # the codes: 0 is sharp; a 1-degree spread is held to 0.03 degrees
+    assert hmap.decode_spread(hmap.encode_spread(0.0)) == 0.0
+    assert abs(np.degrees(hmap.decode_spread(hmap.encode_spread(np.radians(1.0)))) - 1) < 0.03
+
+
+def test_varying_flags_the_texels_beside_a_jump_in_an_edge():
+    """A 6 x 6 map whose upper edge jumps by 5 degrees between columns 2 and 3 at one
+    azimuth: the texels of those two columns vary; a jump of half a degree does not count."""
+    R, A = 6, 4
+    texel = np.arange(R * R)
+    H = np.zeros((2, A, R * R))
+    H[0] = -np.pi / 2
+    col = texel % R
+    H[1, 2] = np.where(col >= 3, np.radians(15.0), np.radians(10.0))
+    H[1, 1] = np.where(col >= 4, np.radians(10.5), np.radians(10.0))
+    got = hmap.varying(H, texel, R)
+    assert sorted(set(col[got])) == [2, 3] and len(got) == 2 * R
+    # a neighbour not yet found does not count
+    found = col != 3
+    assert len(hmap.varying(H, texel, R, found)) == 0
 
 
 @needs_engine
