@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import reach as reach_mod
-from .shading import ShadingPoints, cosine, shadow_origins
+from .shading import ShadingPoints, cosine, cosine_at, shadow_origins
 
 #: The scanned elevations (degrees): 1-2.5 degrees apart below 10, wider above (an object
 #: subtending less than its gap can be missed: 1 m seen from 25 m at the horizon is 2.3 degrees).
@@ -231,6 +231,79 @@ class _Scan:
             hi[up], lo[down] = edge[:up.size], edge[up.size:]
         return ai, pi, lo, hi, any_, {"skipped": skipped, "searched": rays,
                                       "castable": int(cast.sum())}
+
+
+    def pairs(self, ai, pi, bounds):
+        """:meth:`block` for explicit pairs: azimuths ``ai`` and points ``pi`` (m,) -> their
+        intervals' edges ``(lo, hi)`` (m,) (open: ``[0, 0]``); ``bounds`` of all the points
+        (:func:`_bounds`) or None."""
+        points, els, JJ = self.points, self.els, self.JJ
+        J, m = len(els), len(ai)
+        L = self.L[ai]                                               # (m, J, 3)
+        if points.mapped() is None:
+            care = np.einsum("mk,mjk->jm", points.Ns[pi], L) > 0                  # (J, m)
+        else:
+            care = np.zeros((J, m), bool)
+            for a in np.unique(ai):
+                at = np.nonzero(ai == a)[0]
+                for j in range(J):
+                    care[j, at] = cosine_at(points, self.L[a, j], pi[at]) > 0
+        Ns = points.Ns[pi]
+        e0 = np.arctan2(Ns[:, 2], Ns[:, 0] * self.ca[ai] + Ns[:, 1] * self.sa[ai])
+        if bounds is not None:
+            covered, e_lo, e_hi = bounds
+            upward = np.einsum("mk,mjk->jm", points.Ng[pi], L) > UPWARD
+            reachable = (covered[ai, pi][None, :] & (els[:, None] >= e_lo[pi][None, :])
+                         & (els[:, None] <= e_hi[pi][None, :]))
+            cast = care & ~(upward & ~reachable)
+        else:
+            cast = care
+        Lt = L.transpose(1, 0, 2)
+        top, bottom, _ = _search(self.occluder, points, Lt, Lt.astype(np.float32), None, pi,
+                                 cast, which=np.arange(m))
+        any_ = top >= 0
+        care_top = np.where(care, JJ, -1).max(0)
+        care_bottom = np.where(care, JJ, J).min(0)
+        hi = np.where(any_, np.clip(e0 + np.pi / 2, 0.0, np.pi / 2), 0.0)
+        start = e0 - np.pi / 2
+        lo = np.where(any_, np.where(start > 0, start, FROM_BELOW), 0.0)
+        up = np.nonzero(any_ & (top < care_top))[0]
+        down = np.nonzero(any_ & (bottom > care_bottom))[0]
+        if up.size or down.size:
+            both = np.concatenate([up, down])
+            edge = _bisect(self.occluder, points, self.ca[ai[both]], self.sa[ai[both]],
+                           pi[both], np.concatenate([els[top[up]], els[bottom[down] - 1]]),
+                           np.concatenate([els[top[up] + 1], els[bottom[down]]]),
+                           np.arange(up.size + down.size) < up.size, self.refine)
+            hi[up], lo[down] = edge[:up.size], edge[up.size:]
+        return lo, hi
+
+
+def iter_pair_horizons(occluder, points: ShadingPoints, azimuths: int, ai, pi,
+                       refine: int = REFINE):
+    """Generator: the intervals of chosen (azimuth, point) pairs only -- ``ai`` (m,) azimuth
+    indices of ``azimuths``, ``pi`` (m,) points -- as :func:`iter_horizons` finds them for
+    whole maps (the same scan, search and bisection; open pairs are ``[0, 0]``, not placed by
+    :func:`place_open`). Yields the pairs done after each block; returns ``(lo, hi)`` (m,)
+    float16 radians. The footprints of the horizon map (:func:`...transport.horizon_map.
+    varying_pairs`) want a texel's sub-samples only along the azimuths where its edges move."""
+    if azimuths < 3 or refine < 0:
+        raise ValueError(f"need azimuths >= 3 and refine >= 0; got {azimuths}, {refine}")
+    ai = np.asarray(ai, np.int64)
+    pi = np.asarray(pi, np.int64)
+    m = len(ai)
+    lo = np.zeros(m, np.float16)
+    hi = np.zeros(m, np.float16)
+    if not m:
+        return lo, hi
+    scan = _Scan(occluder, points, int(azimuths), refine)
+    bounds = _bounds(occluder, points, int(azimuths))
+    step = max(1, RAY_BUDGET // len(ELEVATIONS))
+    for a0 in range(0, m, step):
+        sel = slice(a0, min(a0 + step, m))
+        lo[sel], hi[sel] = scan.pairs(ai[sel], pi[sel], bounds)
+        yield sel.stop
+    return lo, hi
 
 
 def _search(occluder, points, L, L32, part: slice, idx, cast, which=None):

@@ -202,7 +202,9 @@ class TransportTextureSettings:
          "block, or the global PCA when it is measured closer to T"),
         ("horizon", "Horizons", "Per-texel horizons found by rays: a shadow edge moves with "
          "the sun instead of blending the baked directions' shadows (no ghosting at low suns); "
-         "14 lookups per pixel and 2.7 bytes per texel and azimuth; needs the ray engine"),
+         "20 lookups per pixel and 4 bytes per texel and azimuth with the edges' spread over "
+         "each texel's footprint (14 and 2.7 without, where the spreads would not fit the GPU "
+         "budget); needs the ray engine"),
         ("transport", "Transport (T)", "Relight from T itself: a few baked directions per "
          "pixel through sparse kernel tables; keeps cast shadows on large receivers; an atlas "
          "of every direction in memory"),

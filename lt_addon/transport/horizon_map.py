@@ -143,47 +143,82 @@ def footprint_edges(Hc, Hs, owner, weight, centre_w):
     blocked from below): visible wherever the centre's interval does not block."""
     Hc = np.asarray(Hc, np.float64)
     Hs = np.asarray(Hs, np.float64)
-    owner = np.asarray(owner, np.int64)
     A, M = Hc.shape[1:]
-    floor = np.maximum(Hc[0], 0.0)                          # (A, M)
-    hi_c = np.where(Hc[1] > Hc[0], Hc[1], floor)
-    hi_s = np.where(Hs[1] > Hs[0], Hs[1], floor[:, owner])
+    mean, spread = np.empty((A, M)), np.empty((A, M))
+    for a in range(A):
+        mean[a], spread[a] = pair_edges(Hc[0, a], Hc[1, a], Hs[0, a], Hs[1, a], owner, weight,
+                                        centre_w)
+    return mean, spread
+
+
+def pair_edges(lo_c, hi_c, lo_s, hi_s, group, weight, centre_w):
+    """:func:`footprint_edges` of ``n`` (azimuth, texel) pairs: the centres' edges ``lo_c``,
+    ``hi_c`` (n,), their sub-samples' ``lo_s``, ``hi_s`` (N,) along the same azimuths, each
+    sub-sample's pair ``group`` (N,) and ``weight`` (N,), the centres' ``centre_w`` (n,) ->
+    ``(mean, spread)`` (n,) float64 radians."""
+    lo_c, hi_c = np.asarray(lo_c, np.float64), np.asarray(hi_c, np.float64)
+    lo_s, hi_s = np.asarray(lo_s, np.float64), np.asarray(hi_s, np.float64)
+    group = np.asarray(group, np.int64)
+    n = len(lo_c)
+    floor = np.maximum(lo_c, 0.0)
+    hc = np.where(hi_c > lo_c, hi_c, floor)
+    hs = np.where(hi_s > lo_s, hi_s, floor[group])
     w = np.asarray(weight, np.float64)
     cw = np.asarray(centre_w, np.float64)
-    total = cw + np.bincount(owner, weights=w, minlength=M)
-    mean = np.empty((A, M))
-    sq = np.empty((A, M))
-    for a in range(A):
-        mean[a] = cw * hi_c[a] + np.bincount(owner, weights=w * hi_s[a], minlength=M)
-        sq[a] = cw * hi_c[a] ** 2 + np.bincount(owner, weights=w * hi_s[a] ** 2, minlength=M)
-    mean /= total
-    sq /= total
+    total = cw + np.bincount(group, weights=w, minlength=n)
+    mean = (cw * hc + np.bincount(group, weights=w * hs, minlength=n)) / total
+    sq = (cw * hc * hc + np.bincount(group, weights=w * hs * hs, minlength=n)) / total
     return mean, np.sqrt(np.maximum(sq - mean * mean, 0.0))
 
 
-def varying(H, texel, R: int, found=None, tol: float = VARYING) -> np.ndarray:
+def varying(H, texel, R: int, found=None, tol: float = VARYING, normals=None) -> np.ndarray:
     """Indices into ``texel`` (P,) of the texels whose lower or upper edge differs from a grid
     neighbour's by more than ``tol`` (radians) at some azimuth: where the footprint's edges may
     move within the texel. ``H`` (2, A, P); ``found`` (P,) bool: the points whose horizons are
-    known (neighbours not found do not count)."""
+    known (neighbours not found do not count). An open azimuth (an empty interval) has no
+    edges, whatever its placeholder (:func:`..rays.horizon.place_open`). ``normals`` (P, 3):
+    the closure normals, whose terminator bounds the range of elevations in front
+    (:mod:`..rays.horizon`): an edge at the terminator is no caster's (the cosine is 0 there:
+    a smooth surface's terminator moves from texel to texel without any shadow edge), so a
+    lower edge there counts as "from below" and an upper one as "to the zenith"."""
+    return np.nonzero(varying_pairs(H, texel, R, found, tol, normals).any(axis=0))[0]
+
+
+def varying_pairs(H, texel, R: int, found=None, tol: float = VARYING, normals=None) -> np.ndarray:
+    """(A, P) bool: the (azimuth, texel) pairs of :func:`varying` -- where an edge differs
+    from a grid neighbour's by more than ``tol`` along that azimuth."""
     H = np.asarray(H)
     texel = np.asarray(texel, np.int64)
+    A = H.shape[1]
     ok = np.ones(len(texel), bool) if found is None else np.asarray(found, bool)
     mask = np.zeros(R * R, bool)
     mask[texel[ok]] = True
     mask = mask.reshape(R, R)
-    flag = np.zeros((R, R), bool)
-    for e in range(2):
-        for a in range(H.shape[1]):
+    out = np.zeros((A, len(texel)), bool)
+    N = None if normals is None else np.asarray(normals, np.float64)
+    OPEN = 10.0                          # an open azimuth's edges (far from any elevation)
+    for a in range(A):
+        lo = np.maximum(np.asarray(H[0, a], np.float64), -1.0)      # from below: -1
+        hi = np.asarray(H[1, a], np.float64)
+        if N is not None:                # the terminator's elevations below and above
+            phi = 2 * np.pi * a / A
+            e0 = np.arctan2(N[:, 2], N[:, 0] * np.cos(phi) + N[:, 1] * np.sin(phi))
+            lo = np.where(lo <= np.maximum(e0 - np.pi / 2, 0.0) + tol / 4, -1.0, lo)
+            hi = np.where(hi >= np.clip(e0 + np.pi / 2, 0.0, np.pi / 2) - tol / 4, np.pi / 2,
+                          hi)
+        empty = np.asarray(H[1, a], np.float64) <= np.asarray(H[0, a], np.float64)
+        flag = np.zeros((R, R), bool)
+        for v in (np.where(empty, OPEN, lo), np.where(empty, OPEN, hi)):
             img = np.zeros(R * R, np.float32)
-            img[texel] = np.maximum(np.asarray(H[e, a], np.float32), -1.0)  # from below: -1
+            img[texel] = v
             img = img.reshape(R, R)
             for sa, sb in (((slice(None), slice(1, None)), (slice(None), slice(None, -1))),
                            ((slice(1, None), slice(None)), (slice(None, -1), slice(None)))):
                 d = (np.abs(img[sa] - img[sb]) > tol) & mask[sa] & mask[sb]
                 flag[sa] |= d
                 flag[sb] |= d
-    return np.nonzero(flag.reshape(-1)[texel] & ok)[0]
+        out[a] = flag.reshape(-1)[texel] & ok
+    return out
 
 
 def quantize(H) -> np.ndarray:

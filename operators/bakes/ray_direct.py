@@ -254,7 +254,7 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                 edges.append((yield from _footprints(occluder, h_smp, h_pts, H, fph, found, A,
                                                      who, step + S - 1, total)))
                 if fph is not None:        # (in place: the trial's map was a copy)
-                    H[1][:, fph.done] = fph.hi[:, fph.done]
+                    fph.apply(H)
             skipped += sum(f["skipped"] for _, f in counts)
             searched += sum(f["searched"] for _, f in counts)
             castable += sum(f["castable"] for _, f in counts)
@@ -275,6 +275,7 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                         # sub-samples found horizons too (the map's spread, horizon_map.py)
                         "horizon_footprints": {
                             "texels": int(sum(e["texels"] for e in edges)),
+                            "pairs": int(sum(e["pairs"] for e in edges)),
                             "points": int(sum(e["points"] for e in edges)),
                             "seconds": round(sum(e["seconds"] for e in edges), 3),
                             "lattice": list(HORIZON_LATTICE)} if with_spread else
@@ -308,20 +309,25 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
             "directions_per_call": chunk}
 
 
-#: Memory for the footprint sub-samples' horizons at a time (float16 pairs per azimuth): the
-#: varying texels are taken in parts of at most this much (65k texels at 128 azimuths).
+#: Memory for the footprints' sub-samples and their pairs at a time (a part's texels: at most
+#: all their azimuths' pairs, 64 bytes each with their working arrays; 4k texels at 128
+#: azimuths).
 FOOTPRINT_BYTES = 256 << 20
 
 
 class _Footprints:
     """The footprints' upper edges ``hi`` and spreads ``spread`` (A, P) float16 (radians, as
-    the horizons are kept) of one object's horizon points, and which points have them (``done``
-    (P,))."""
+    the horizons are kept) of one object's horizon points, and which (azimuth, point) pairs
+    have them (``done`` (A, P))."""
 
     def __init__(self, A: int, P: int):
         self.hi = np.zeros((A, P), np.float16)
         self.spread = np.zeros((A, P), np.float16)
-        self.done = np.zeros(P, bool)
+        self.done = np.zeros((A, P), bool)
+
+    def apply(self, H):
+        """The footprints' upper edges into ``H`` (2, A, P), in place."""
+        H[1][self.done] = self.hi[self.done]
 
 
 def _applied(H, fph):
@@ -330,39 +336,60 @@ def _applied(H, fph):
     if fph is None:
         return H, None
     H = H.copy()
-    H[1][:, fph.done] = fph.hi[:, fph.done]
+    fph.apply(H)
     return H, fph.spread
 
 
 def _footprints(occluder, smp, pts, H, fph, found, A: int, who: str, step: int, total: int):
-    """Generator: the footprints of the points whose edges vary between neighbours among the
-    points ``found`` (:func:`...lt_addon.transport.horizon_map.varying`, of the centres'
-    horizons ``H`` (2, A, P)) and that ``fph`` (:class:`_Footprints`) does not hold yet: the
-    horizons of their sub-samples (:data:`...lt_addon.rays.footprint.HORIZON_LATTICE`) give
-    their upper edges' means and spreads (:func:`...lt_addon.transport.horizon_map.
-    footprint_edges`), into ``fph``. A texel's footprint depends on it alone, so a bake that
-    finds its horizons in two goes (the trial on sampled tiles, then the rest) gets the same
-    map as one go. Returns ``{"texels", "points", "seconds"}``; nothing where ``fph`` is None."""
+    """Generator: the footprints of the (azimuth, point) pairs whose edges vary between
+    neighbours among the points ``found`` (:func:`...lt_addon.transport.horizon_map.
+    varying_pairs`, of the centres' horizons ``H`` (2, A, P), the terminator's edges left out)
+    and that ``fph`` (:class:`_Footprints`) does not hold yet: the horizons of their texels'
+    sub-samples (:data:`...lt_addon.rays.footprint.HORIZON_LATTICE`) along those azimuths
+    alone (:func:`...lt_addon.rays.horizon.iter_pair_horizons`) give the pairs' upper edges'
+    means and spreads (:func:`...lt_addon.transport.horizon_map.pair_edges`), into ``fph``.
+    A pair's footprint depends on it alone, so a bake that finds its horizons in two goes
+    (the trial on sampled tiles, then the rest) gets the same map as one go. Returns
+    ``{"texels", "pairs", "points", "seconds"}``; nothing where ``fph`` is None."""
     t0 = time.perf_counter()
     if fph is None or pts.footprint is None:
-        return {"texels": 0, "points": 0, "seconds": 0.0}
-    cand = hmap.varying(H, smp.texel, smp.resolution, found)
-    cand = cand[~fph.done[cand]]
+        return {"texels": 0, "pairs": 0, "points": 0, "seconds": 0.0}
+    want = hmap.varying_pairs(H, smp.texel, smp.resolution, found, normals=pts.Ns) & ~fph.done
+    texels = np.nonzero(want.any(axis=0))[0]
     n = HORIZON_LATTICE[0]
-    part = max(1, FOOTPRINT_BYTES // (4 * n * A))
-    parts = -(-len(cand) // part)
-    points = 0
-    for j, a in enumerate(range(0, len(cand), part)):
-        idx = cand[a:a + part]
+    part = max(1, FOOTPRINT_BYTES // (64 * n * A))     # sub-samples' points and pairs a part
+    parts = -(-len(texels) // part)
+    points = pairs = 0
+    for j, a0 in enumerate(range(0, len(texels), part)):
+        idx = texels[a0:a0 + part]
         owner, sub, weight, centre_w = pts.footprint._sub_points(pts, idx, HORIZON_LATTICE)
         points += sub.size
+        start = np.searchsorted(owner, np.arange(len(idx) + 1))
+        count = np.diff(start)
+        fa, fk = np.nonzero(want[:, idx])                   # the part's pairs (azimuth, texel)
+        pairs += len(fa)
+        c = count[fk]
+        group = np.repeat(np.arange(len(fa)), c)
+        rows = np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c) + np.repeat(start[fk], c)
         label = "horizon footprints" + (f" (part {j + 1}/{parts})" if parts > 1 else "")
-        Hs, _ = yield from _find(occluder, sub, A, label, who, step, total)
-        mean, spread = hmap.footprint_edges(H[:, :, idx], Hs, owner, weight, centre_w)
-        fph.hi[:, idx] = mean
-        fph.spread[:, idx] = spread
-        fph.done[idx] = True
-    return {"texels": int(len(cand)), "points": int(points),
+        gen = horizon.iter_pair_horizons(occluder, sub, A, np.repeat(fa, c), rows)
+        said, m = 0, len(rows)
+        while True:
+            try:
+                done = next(gen)
+            except StopIteration as stop:
+                lo_s, hi_s = stop.value
+                break
+            if done - said >= max(1, m // 16) or done == m:
+                said = done
+                yield Progress(step, total, f"{label} {100 * done // max(m, 1)} %{who}")
+        t = idx[fk]
+        mean, spread = hmap.pair_edges(H[0, fa, t], H[1, fa, t], lo_s, hi_s, group,
+                                       weight[rows], centre_w[fk])
+        fph.hi[fa, t] = mean
+        fph.spread[fa, t] = spread
+        fph.done[fa, t] = True
+    return {"texels": int(len(texels)), "pairs": int(pairs), "points": int(points),
             "seconds": time.perf_counter() - t0}
 
 

@@ -278,6 +278,45 @@ def test_a_ray_budget_splits_the_points_and_changes_no_bit(monkeypatch):
 
 
 @needs_engine
+def test_chosen_pairs_find_the_intervals_the_whole_scan_finds():
+    """The footprints' scan of chosen (azimuth, point) pairs (iter_pair_horizons) finds each
+    pair's interval as the whole map's scan does: a floating roof and a wall over floor points
+    (intervals from below and floating), 400 random pairs at 16 azimuths, in blocks of 7
+    pairs; open pairs are [0, 0] (the whole map places its open ones between neighbours)."""
+    roof = np.array([[0, -10, 1], [1, -10, 1], [1, 10, 1], [0, 10, 1],
+                     [1.5, -10, 0], [1.5, 10, 0], [1.5, 10, 1.5], [1.5, -10, 1.5]], float)
+    occ, pts, P = _floor_points(120, 7, roof, x=(-1.9, 1.4))
+    A = 16
+    whole, _ = _run(horizon.iter_horizons(occ, pts, A))
+    rng = np.random.default_rng(1)
+    ai, pi = rng.integers(0, A, 400), rng.integers(0, pts.size, 400)
+    gen = horizon.iter_pair_horizons(occ, pts, A, ai, pi)
+    lo, hi = _run(gen)
+    found = whole[1, ai, pi] > whole[0, ai, pi]
+    assert found.sum() > 150 and (~found).sum() > 20 and (whole[0, ai, pi] < -1).sum() > 50
+    assert np.array_equal(lo[found], whole[0, ai, pi][found])
+    assert np.array_equal(hi[found], whole[1, ai, pi][found])
+    assert np.all(lo[~found] == 0) and np.all(hi[~found] == 0)
+    import relightable_textures.lt_addon.rays.horizon as hz
+    budget = hz.RAY_BUDGET
+    try:
+        hz.RAY_BUDGET = 18 * 7
+        lo7, hi7 = _run(horizon.iter_pair_horizons(occ, pts, A, ai, pi))
+    finally:
+        hz.RAY_BUDGET = budget
+    assert np.array_equal(lo7, lo) and np.array_equal(hi7, hi)
+
+
+def _run(gen):
+    """A generator's return value."""
+    while True:
+        try:
+            next(gen)
+        except StopIteration as stop:
+            return stop.value
+
+
+@needs_engine
 def test_the_search_finds_the_highest_and_lowest_blocked_elevations_of_a_full_scan():
     """Down from the top to the first blocked ray, then up from the bottom: the same two
     elevations as casting every one, on floor points under a floating roof with a wall
