@@ -306,6 +306,62 @@ def iter_pair_horizons(occluder, points: ShadingPoints, azimuths: int, ai, pi,
     return lo, hi
 
 
+def iter_pair_edges(occluder, points: ShadingPoints, azimuths: int, ai, pi, lo_b, hi_b,
+                    refine: int = REFINE):
+    """Generator: the upper edges of chosen (azimuth, point) pairs expected within brackets
+    ``[lo_b, hi_b]`` (m,) radians -- a footprint's sub-sample's edge lies between its texel's
+    neighbours' --: a ray at each end, and where the lower end is blocked and the upper open
+    (both in front of the point), bisection narrows the bracket as the scan's does (3 steps
+    for a half-degree bracket; 2 + 3 rays where the scan casts about 25). Elsewhere (the edge
+    outside the bracket, an end behind the point, a normal-mapped point) the pair's whole scan
+    (:meth:`_Scan.pairs`). Yields the pairs done after each block; returns ``(lo, hi)`` (m,)
+    float16: a bracketed pair's lower edge is "from below" (only its upper edge is sought)."""
+    A = int(azimuths)
+    ai = np.asarray(ai, np.int64)
+    pi = np.asarray(pi, np.int64)
+    lo_b = np.clip(np.asarray(lo_b, np.float64), 0.0, np.pi / 2)
+    hi_b = np.clip(np.asarray(hi_b, np.float64), 0.0, np.pi / 2)
+    m = len(ai)
+    lo = np.full(m, FROM_BELOW, np.float16)
+    hi = np.zeros(m, np.float16)
+    if not m:
+        return lo, hi
+    scan = _Scan(occluder, points, A, refine)
+    bounds = None
+    mapped = points.mapped()
+    mapped_mask = np.zeros(points.size, bool)
+    if mapped is not None:
+        mapped_mask[mapped] = True
+    step = max(1, RAY_BUDGET // len(ELEVATIONS))
+    for a0 in range(0, m, step):
+        sel = np.arange(a0, min(a0 + step, m))
+        a, p = ai[sel], pi[sel]
+        ca, sa = scan.ca[a], scan.sa[a]
+        ends = []
+        for e in (lo_b[sel], hi_b[sel]):
+            ce = np.cos(e)
+            L = np.stack([ce * ca, ce * sa, np.sin(e)], -1)
+            front = (np.einsum("mk,mk->m", points.Ns[p], L) > 0) & ~mapped_mask[p]
+            blocked = np.zeros(len(sel), bool)
+            f = np.nonzero(front)[0]
+            if len(f):
+                blocked[f] = occluder.occluded(shadow_origins(points, L[f], p[f]),
+                                               L[f].astype(np.float32))
+            ends.append((front, blocked))
+        ok = ends[0][0] & ends[1][0] & ends[0][1] & ~ends[1][1] & (hi_b[sel] > lo_b[sel])
+        k = np.nonzero(ok)[0]
+        if len(k):
+            hi[sel[k]] = _bisect(occluder, points, ca[k], sa[k], p[k], lo_b[sel[k]],
+                                 hi_b[sel[k]], True, refine)
+        rest = np.nonzero(~ok)[0]
+        if len(rest):
+            if bounds is None:
+                bounds = (_bounds(occluder, points, A),)
+            lo[sel[rest]], hi[sel[rest]] = scan.pairs(a[rest], p[rest], bounds[0])
+        yield int(sel[-1]) + 1
+    return lo, hi
+
+
 def _search(occluder, points, L, L32, part: slice, idx, cast, which=None):
     """The highest and the lowest blocked elevation (indices into ``L``, (J, 3)) of the points
     ``part`` (``idx`` the same as indices), rays only where ``cast`` (J, n); or, ``which``

@@ -221,6 +221,56 @@ def varying_pairs(H, texel, R: int, found=None, tol: float = VARYING, normals=No
     return out
 
 
+#: A footprint's sub-samples look for their upper edges between the texel's and its grid
+#: neighbours' upper edges, widened by this (radians) each way (:func:`brackets`).
+BRACKET_MARGIN = np.radians(0.25)
+
+
+def _neighbours(texel, R: int) -> np.ndarray:
+    """(4, P) the point index of each point's left, right, lower and upper grid neighbour
+    (-1 where no point covers it)."""
+    texel = np.asarray(texel, np.int64)
+    img = np.full((R + 2) * (R + 2), -1, np.int64)
+    row, col = texel // R, texel % R
+    img[(row + 1) * (R + 2) + col + 1] = np.arange(len(texel))
+    img = img.reshape(R + 2, R + 2)
+    r, c = row + 1, col + 1
+    return np.stack([img[r, c - 1], img[r, c + 1], img[r - 1, c], img[r + 1, c]])
+
+
+def surrounded(texel, R: int, found) -> np.ndarray:
+    """(P,) bool: the points found whose covered grid neighbours are all found -- whose
+    :func:`varying_pairs` and :func:`brackets` no later point changes."""
+    found = np.asarray(found, bool)
+    nb = _neighbours(texel, R)
+    ok = found.copy()
+    for k in range(4):
+        ok &= (nb[k] < 0) | found[np.maximum(nb[k], 0)]
+    return ok
+
+
+def brackets(H, texel, R: int, ai, ti, margin: float = BRACKET_MARGIN):
+    """``(lo_b, hi_b)`` (n,) radians for the (azimuth, point) pairs ``ai``, ``ti``: the least
+    and greatest upper edge of the point and its grid neighbours along that azimuth (where
+    their intervals are not empty), widened by ``margin`` -- where the sub-samples of its
+    footprint find their edges (:func:`..rays.horizon.iter_pair_edges`)."""
+    ai, ti = np.asarray(ai, np.int64), np.asarray(ti, np.int64)
+    nb = _neighbours(texel, R)[:, ti]                                   # (4, n)
+    cand = [ti] + [nb[k] for k in range(4)]
+    lo_b = np.full(len(ti), np.inf)
+    hi_b = np.full(len(ti), -np.inf)
+    for c in cand:
+        has = c >= 0
+        cc = np.maximum(c, 0)
+        lo_e = np.asarray(H[0, ai, cc], np.float64)
+        hi_e = np.asarray(H[1, ai, cc], np.float64)
+        real = has & (hi_e > lo_e)
+        lo_b = np.where(real, np.minimum(lo_b, hi_e), lo_b)
+        hi_b = np.where(real, np.maximum(hi_b, hi_e), hi_b)
+    none = ~np.isfinite(lo_b)
+    return (np.where(none, 0.0, lo_b - margin), np.where(none, 0.0, hi_b + margin))
+
+
 def quantize(H) -> np.ndarray:
     """Intervals (2, ...) in radians -> uint8 codes (module docstring): upper edges in
     [0, pi/2] round to 0..255; lower edges below 0 (blocked from below) are code 0, others

@@ -346,15 +346,18 @@ def _footprints(occluder, smp, pts, H, fph, found, A: int, who: str, step: int, 
     varying_pairs`, of the centres' horizons ``H`` (2, A, P), the terminator's edges left out)
     and that ``fph`` (:class:`_Footprints`) does not hold yet: the horizons of their texels'
     sub-samples (:data:`...lt_addon.rays.footprint.HORIZON_LATTICE`) along those azimuths
-    alone (:func:`...lt_addon.rays.horizon.iter_pair_horizons`) give the pairs' upper edges'
-    means and spreads (:func:`...lt_addon.transport.horizon_map.pair_edges`), into ``fph``.
+    alone, searched between the texel's and its neighbours' edges (:func:`...lt_addon.rays.
+    horizon.iter_pair_edges`), give the pairs' upper edges' means and spreads (:func:`...lt_addon.transport.horizon_map.pair_edges`), into ``fph``.
     A pair's footprint depends on it alone, so a bake that finds its horizons in two goes
     (the trial on sampled tiles, then the rest) gets the same map as one go. Returns
     ``{"texels", "pairs", "points", "seconds"}``; nothing where ``fph`` is None."""
     t0 = time.perf_counter()
     if fph is None or pts.footprint is None:
         return {"texels": 0, "pairs": 0, "points": 0, "seconds": 0.0}
+    # only points whose neighbours are all found: their pairs and brackets are final
+    ready = hmap.surrounded(smp.texel, smp.resolution, found)
     want = hmap.varying_pairs(H, smp.texel, smp.resolution, found, normals=pts.Ns) & ~fph.done
+    want &= ready[None, :]
     texels = np.nonzero(want.any(axis=0))[0]
     n = HORIZON_LATTICE[0]
     part = max(1, FOOTPRINT_BYTES // (64 * n * A))     # sub-samples' points and pairs a part
@@ -372,7 +375,10 @@ def _footprints(occluder, smp, pts, H, fph, found, A: int, who: str, step: int, 
         group = np.repeat(np.arange(len(fa)), c)
         rows = np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c) + np.repeat(start[fk], c)
         label = "horizon footprints" + (f" (part {j + 1}/{parts})" if parts > 1 else "")
-        gen = horizon.iter_pair_horizons(occluder, sub, A, np.repeat(fa, c), rows)
+        # each sub-sample's edge between its texel's and the neighbours' (bracketed search)
+        lo_b, hi_b = hmap.brackets(H, smp.texel, smp.resolution, fa, idx[fk])
+        gen = horizon.iter_pair_edges(occluder, sub, A, np.repeat(fa, c), rows,
+                                      np.repeat(lo_b, c), np.repeat(hi_b, c))
         said, m = 0, len(rows)
         while True:
             try:
