@@ -327,7 +327,6 @@ def iter_pair_edges(occluder, points: ShadingPoints, azimuths: int, ai, pi, lo_b
     if not m:
         return lo, hi
     scan = _Scan(occluder, points, A, refine)
-    bounds = None
     mapped = points.mapped()
     mapped_mask = np.zeros(points.size, bool)
     if mapped is not None:
@@ -354,10 +353,11 @@ def iter_pair_edges(occluder, points: ShadingPoints, azimuths: int, ai, pi, lo_b
             hi[sel[k]] = _bisect(occluder, points, ca[k], sa[k], p[k], lo_b[sel[k]],
                                  hi_b[sel[k]], True, refine)
         rest = np.nonzero(~ok)[0]
-        if len(rest):
-            if bounds is None:
-                bounds = (_bounds(occluder, points, A),)
-            lo[sel[rest]], hi[sel[rest]] = scan.pairs(a[rest], p[rest], bounds[0])
+        if len(rest):          # the whole scan of these pairs, its reach of their points only
+            u, inv = np.unique(p[rest], return_inverse=True)
+            few = points.subset(u)
+            lo[sel[rest]], hi[sel[rest]] = _Scan(occluder, few, A, refine).pairs(
+                a[rest], inv, _bounds(occluder, few, A))
         yield int(sel[-1]) + 1
     return lo, hi
 

@@ -271,6 +271,36 @@ def brackets(H, texel, R: int, ai, ti, margin: float = BRACKET_MARGIN):
     return (np.where(none, 0.0, lo_b - margin), np.where(none, 0.0, hi_b + margin))
 
 
+#: An edge whose second difference over the grid (either axis) is under this (radians) is
+#: taken as linear across the texel (:func:`smooth_spreads`): 0.5 degrees.
+SMOOTH = np.radians(0.5)
+
+
+def smooth_spreads(H, texel, R: int, ai, ti, box: float, tol: float = SMOOTH):
+    """``(smooth (n,) bool, spread (n,) radians)`` for the (azimuth, point) pairs ``ai``,
+    ``ti``: where the upper edges of the point and its four grid neighbours are all edges
+    (their intervals not empty) and vary linearly (second differences under ``tol`` along both
+    axes), the footprint's edges are a linear function over its box (``box`` texels a side),
+    whose spread is ``|gradient| box / sqrt(12)`` -- no rays needed (a smooth floor beside a
+    sphere); elsewhere (a jump: a relief's rim, a thin post) rays are."""
+    ai, ti = np.asarray(ai, np.int64), np.asarray(ti, np.int64)
+    nb = _neighbours(texel, R)[:, ti]                                   # (4, n) l, r, d, u
+    ok = np.all(nb >= 0, axis=0)
+    lo0 = np.asarray(H[0, ai, ti], np.float64)
+    h0 = np.asarray(H[1, ai, ti], np.float64)
+    ok &= h0 > lo0
+    h = []
+    for k in range(4):
+        c = np.maximum(nb[k], 0)
+        lo_k = np.asarray(H[0, ai, c], np.float64)
+        h_k = np.asarray(H[1, ai, c], np.float64)
+        ok &= h_k > lo_k
+        h.append(h_k)
+    ok &= (np.abs(h[0] - 2 * h0 + h[1]) < tol) & (np.abs(h[2] - 2 * h0 + h[3]) < tol)
+    gx, gy = 0.5 * (h[1] - h[0]), 0.5 * (h[3] - h[2])
+    return ok, np.where(ok, np.hypot(gx, gy) * float(box) / np.sqrt(12.0), 0.0)
+
+
 def quantize(H) -> np.ndarray:
     """Intervals (2, ...) in radians -> uint8 codes (module docstring): upper edges in
     [0, pi/2] round to 0..255; lower edges below 0 (blocked from below) are code 0, others

@@ -276,6 +276,8 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                         "horizon_footprints": {
                             "texels": int(sum(e["texels"] for e in edges)),
                             "pairs": int(sum(e["pairs"] for e in edges)),
+                            # pairs whose edges vary linearly: the gradient's spread, no rays
+                            "smooth_pairs": int(sum(e["smooth_pairs"] for e in edges)),
                             "points": int(sum(e["points"] for e in edges)),
                             "seconds": round(sum(e["seconds"] for e in edges), 3),
                             "lattice": list(HORIZON_LATTICE)} if with_spread else
@@ -353,11 +355,20 @@ def _footprints(occluder, smp, pts, H, fph, found, A: int, who: str, step: int, 
     ``{"texels", "pairs", "points", "seconds"}``; nothing where ``fph`` is None."""
     t0 = time.perf_counter()
     if fph is None or pts.footprint is None:
-        return {"texels": 0, "pairs": 0, "points": 0, "seconds": 0.0}
+        return {"texels": 0, "pairs": 0, "points": 0, "smooth_pairs": 0, "seconds": 0.0}
     # only points whose neighbours are all found: their pairs and brackets are final
     ready = hmap.surrounded(smp.texel, smp.resolution, found)
     want = hmap.varying_pairs(H, smp.texel, smp.resolution, found, normals=pts.Ns) & ~fph.done
     want &= ready[None, :]
+    # where the edges vary linearly across the texel, their spread is the gradient's (no rays)
+    sa_, st_ = np.nonzero(want)
+    smooth, s_spread = hmap.smooth_spreads(H, smp.texel, smp.resolution, sa_, st_,
+                                           pts.footprint.box)
+    a_s, t_s = sa_[smooth], st_[smooth]
+    fph.hi[a_s, t_s] = H[1, a_s, t_s]
+    fph.spread[a_s, t_s] = s_spread[smooth]
+    fph.done[a_s, t_s] = True
+    want[a_s, t_s] = False
     texels = np.nonzero(want.any(axis=0))[0]
     n = HORIZON_LATTICE[0]
     part = max(1, FOOTPRINT_BYTES // (64 * n * A))     # sub-samples' points and pairs a part
@@ -396,7 +407,7 @@ def _footprints(occluder, smp, pts, H, fph, found, A: int, who: str, step: int, 
         fph.spread[fa, t] = spread
         fph.done[fa, t] = True
     return {"texels": int(len(texels)), "pairs": int(pairs), "points": int(points),
-            "seconds": time.perf_counter() - t0}
+            "smooth_pairs": int(len(a_s)), "seconds": time.perf_counter() - t0}
 
 
 def _find(occluder, pts, A: int, label: str, who: str, step: int, total: int):
