@@ -310,17 +310,19 @@ def iter_pair_edges(occluder, points: ShadingPoints, azimuths: int, ai, pi, lo_b
                     refine: int = REFINE):
     """Generator: the upper edges of chosen (azimuth, point) pairs expected within brackets
     ``[lo_b, hi_b]`` (m,) radians -- a footprint's sub-sample's edge lies between its texel's
-    neighbours' --: a ray at each end, and where the lower end is blocked and the upper open
-    (both in front of the point), bisection narrows the bracket as the scan's does (3 steps
-    for a half-degree bracket; 2 + 3 rays where the scan casts about 25). Elsewhere (the edge
-    outside the bracket, an end behind the point, a normal-mapped point) the pair's whole scan
-    (:meth:`_Scan.pairs`). Yields the pairs done after each block; returns ``(lo, hi)`` (m,)
-    float16: a bracketed pair's lower edge is "from below" (only its upper edge is sought)."""
+    neighbours' --, the brackets kept within the directions in front of the point (the
+    terminator's elevations along the azimuth). A ray at each end; where the lower end is
+    blocked and the upper open, bisection narrows the bracket as the scan's does (3 steps for a
+    half-degree bracket: 5 rays where the scan casts about 25). Where both ends are blocked, a
+    ray under the upper terminator says whether the edge is the terminator itself (as the scan
+    finds it) or lies between (bisected); where both are open, a ray over the lower terminator
+    whether the edge lies below the bracket (bisected). Elsewhere (a floating interval, an open
+    sky, a normal-mapped point) the pair's whole scan (:meth:`_Scan.pairs`). Yields the pairs
+    done after each block; returns ``(lo, hi)`` (m,) float16: a searched pair's lower edge is
+    "from below" (only its upper edge is sought)."""
     A = int(azimuths)
     ai = np.asarray(ai, np.int64)
     pi = np.asarray(pi, np.int64)
-    lo_b = np.clip(np.asarray(lo_b, np.float64), 0.0, np.pi / 2)
-    hi_b = np.clip(np.asarray(hi_b, np.float64), 0.0, np.pi / 2)
     m = len(ai)
     lo = np.full(m, FROM_BELOW, np.float16)
     hi = np.zeros(m, np.float16)
@@ -332,32 +334,50 @@ def iter_pair_edges(occluder, points: ShadingPoints, azimuths: int, ai, pi, lo_b
     if mapped is not None:
         mapped_mask[mapped] = True
     step = max(1, RAY_BUDGET // len(ELEVATIONS))
+    gap = 1e-4                            # inside the range in front, clear of rounding
     for a0 in range(0, m, step):
         sel = np.arange(a0, min(a0 + step, m))
         a, p = ai[sel], pi[sel]
         ca, sa = scan.ca[a], scan.sa[a]
-        ends = []
-        for e in (lo_b[sel], hi_b[sel]):
+        Ns = points.Ns[p]
+        e0 = np.arctan2(Ns[:, 2], Ns[:, 0] * ca + Ns[:, 1] * sa)
+        top = np.clip(e0 + np.pi / 2, 0.0, np.pi / 2)               # the scan's "to the top"
+        e_top, e_bot = top - gap, np.maximum(e0 - np.pi / 2, 0.0) + gap
+        lb = np.clip(np.asarray(lo_b, np.float64)[sel], e_bot, e_top)
+        hb = np.clip(np.asarray(hi_b, np.float64)[sel], e_bot, e_top)
+
+        def blocked_at(e, k):
+            """Whether the pairs ``k`` are blocked at elevations ``e`` (len(k),)."""
             ce = np.cos(e)
-            L = np.stack([ce * ca, ce * sa, np.sin(e)], -1)
-            front = (np.einsum("mk,mk->m", points.Ns[p], L) > 0) & ~mapped_mask[p]
-            blocked = np.zeros(len(sel), bool)
-            f = np.nonzero(front)[0]
-            if len(f):
-                blocked[f] = occluder.occluded(shadow_origins(points, L[f], p[f]),
-                                               L[f].astype(np.float32))
-            ends.append((front, blocked))
-        ok = ends[0][0] & ends[1][0] & ends[0][1] & ~ends[1][1] & (hi_b[sel] > lo_b[sel])
-        k = np.nonzero(ok)[0]
+            L = np.stack([ce * ca[k], ce * sa[k], np.sin(e)], -1)
+            return occluder.occluded(shadow_origins(points, L, p[k]), L.astype(np.float32))
+        use = np.nonzero((hb > lb) & ~mapped_mask[p])[0]
+        b_lo, b_hi = blocked_at(lb[use], use), blocked_at(hb[use], use)
+        lo_e, hi_e = lb.copy(), hb.copy()
+        done = np.zeros(len(sel), bool)
+        bis = np.zeros(len(sel), bool)
+        bis[use[b_lo & ~b_hi]] = True
+        up = use[b_lo & b_hi]                     # the edge above the bracket
+        if len(up):
+            t = blocked_at(e_top[up], up)
+            hi[sel[up[t]]] = top[up[t]]
+            done[up[t]] = True
+            lo_e[up[~t]], hi_e[up[~t]] = hb[up[~t]], e_top[up[~t]]
+            bis[up[~t]] = True
+        down = use[~b_lo & ~b_hi]                 # below it, or nothing blocked
+        if len(down):
+            t = blocked_at(e_bot[down], down)
+            lo_e[down[t]], hi_e[down[t]] = e_bot[down[t]], lb[down[t]]
+            bis[down[t]] = True
+        k = np.nonzero(bis)[0]
         if len(k):
-            hi[sel[k]] = _bisect(occluder, points, ca[k], sa[k], p[k], lo_b[sel[k]],
-                                 hi_b[sel[k]], True, refine)
-        rest = np.nonzero(~ok)[0]
-        if len(rest):          # the whole scan of these pairs, its reach of their points only
-            u, inv = np.unique(p[rest], return_inverse=True)
-            few = points.subset(u)
-            lo[sel[rest]], hi[sel[rest]] = _Scan(occluder, few, A, refine).pairs(
-                a[rest], inv, _bounds(occluder, few, A))
+            hi[sel[k]] = _bisect(occluder, points, ca[k], sa[k], p[k], lo_e[k], hi_e[k], True,
+                                 refine)
+            done[k] = True
+        rest = np.nonzero(~done)[0]
+        if len(rest):          # the whole scan of these pairs (every ray in front cast: the
+            # reach of their points, made for all azimuths, cost more than the rays it saved)
+            lo[sel[rest]], hi[sel[rest]] = scan.pairs(a[rest], p[rest], None)
         yield int(sel[-1]) + 1
     return lo, hi
 

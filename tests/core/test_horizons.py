@@ -311,43 +311,69 @@ def test_chosen_pairs_find_the_intervals_the_whole_scan_finds():
 def test_bracketed_edges_agree_with_the_scan_and_fall_back_to_it_outside_their_brackets():
     """Sub-samples' upper edges searched within brackets (iter_pair_edges): where the bracket
     holds the edge (the whole scan's edge -0.6 / +0.4 degrees) the edge is the scan's within
-    the bisections' precision (both narrow to 0.1 degrees: TOL each); where it does not (the
-    bracket 3-5 degrees above the edge) or the pair is open, the pair's whole scan, bit for
-    bit; the pairs whose brackets hold their edges cast under 7 rays each on average (6 where
-    the bracket is taken)."""
+    the bisections' precision (both narrow to 0.1 degrees: TOL each), and so where the bracket
+    lies 3-5 degrees above the edge (a ray over the lower terminator, then bisection); an
+    open pair is the pair's whole scan, bit for bit; the pairs whose brackets hold their
+    edges cast under 7 rays each on average."""
     roof = np.array([[0, -10, 1], [1, -10, 1], [1, 10, 1], [0, 10, 1],
                      [1.5, -10, 0], [1.5, 10, 0], [1.5, 10, 1.5], [1.5, -10, 1.5]], float)
     occ, pts, P = _floor_points(120, 7, roof, x=(-1.9, 1.4))
     A = 16
     rng = np.random.default_rng(3)
     ai, pi = rng.integers(0, A, 300), rng.integers(0, pts.size, 300)
-    r0 = occ.rays
     lo_w, hi_w = _run(horizon.iter_pair_horizons(occ, pts, A, ai, pi))
-    scan_rays = occ.rays - r0
     found = hi_w > lo_w
     hw = hi_w.astype(np.float64)
     miss = found & (rng.random(300) < 0.2) & (hw < np.radians(80))
     lo_b = np.where(miss, hw + np.radians(3.0), hw - np.radians(0.6))
     hi_b = np.where(miss, hw + np.radians(5.0), hw + np.radians(0.4))
-    r0 = occ.rays
     lo, hi = _run(horizon.iter_pair_edges(occ, pts, A, ai, pi, lo_b, hi_b))
-    rays = occ.rays - r0
     inside = found & ~miss & (hw > np.radians(0.6))
     assert inside.sum() > 100 and miss.sum() > 10 and (~found).sum() > 20
     assert np.abs(hi[inside].astype(np.float64) - hw[inside]).max() < 2 * TOL
     # most took the bracket (only the upper edge is sought: "from below"); one blocked to the
-    # zenith (under the roof: its bracket's top is blocked too) falls back to the scan
+    # zenith (under the roof) is the terminator's edge, as the scan has it
     took = lo < -1.5
     zenith = hw > np.radians(89.5)
     assert took[inside & ~zenith].mean() > 0.9, took[inside & ~zenith].mean()
     assert np.array_equal(hi[inside & ~took], hi_w[inside & ~took])
-    back = miss | ~found
+    z = inside & zenith
+    assert np.abs(hi[z].astype(np.float64) - hw[z]).max(initial=0) < 2 * TOL
+    # a bracket above the edge: a ray over the terminator finds it below, bisected there
+    assert np.abs(hi[miss].astype(np.float64) - hw[miss]).max() < 2 * TOL
+    # an open pair: the whole scan's, bit for bit (every ray in front cast: the same answer
+    # as the scan, which skips the upward rays no caster can meet)
+    back = ~found
     assert np.array_equal(hi[back], hi_w[back]) and np.array_equal(lo[back], lo_w[back])
     # a bracketed pair costs its two ends and the bisection of a 1-degree bracket (4 steps)
     k = np.nonzero(inside & ~zenith)[0]
     r0 = occ.rays
     _run(horizon.iter_pair_edges(occ, pts, A, ai[k], pi[k], lo_b[k], hi_b[k]))
-    assert occ.rays - r0 <= 7 * len(k) and rays < scan_rays, (occ.rays - r0, len(k))
+    assert occ.rays - r0 <= 7 * len(k), (occ.rays - r0, len(k))
+
+
+def test_a_linear_edge_takes_its_gradients_spread_and_a_jump_does_not():
+    """On a 6 x 6 grid, an upper edge rising 2 degrees a texel along x and 1 along y is linear:
+    its footprint's spread over a half-texel box is |(2, 1)| degrees x 0.5 / sqrt(12) -- the
+    standard deviation of a linear function over a uniform box, checked by sampling the box --
+    and where it jumps by 5 degrees (a rim) it is not linear: rays find that spread."""
+    R, A = 6, 2
+    texel = np.arange(R * R)
+    row, col = texel // R, texel % R
+    H = np.zeros((2, A, R * R))
+    H[0] = -np.pi / 2
+    H[1, 0] = np.radians(20.0 + 2.0 * col + 1.0 * row)
+    H[1, 1] = np.radians(20.0 + np.where(col >= 3, 5.0, 0.0))
+    inner = texel[(row > 0) & (row < R - 1) & (col > 0) & (col < R - 1)]
+    smooth, spread = hmap.smooth_spreads(H, texel, R, np.zeros(len(inner), int), inner, 0.5)
+    u = np.random.default_rng(0).uniform(-0.25, 0.25, (200000, 2))
+    want = np.radians(np.std(2.0 * u[:, 0] + 1.0 * u[:, 1]))
+    assert smooth.all() and np.allclose(spread, want, rtol=0.01)
+    smooth, _ = hmap.smooth_spreads(H, texel, R, np.ones(len(inner), int), inner, 0.5)
+    jump = (inner % R == 2) | (inner % R == 3)
+    assert not smooth[jump].any() and smooth[~jump].all()
+    # an edge texel (a neighbour missing) is never taken as linear
+    assert not hmap.smooth_spreads(H, texel, R, [0], [0], 0.5)[0][0]
 
 
 def _run(gen):
