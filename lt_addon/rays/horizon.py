@@ -319,7 +319,9 @@ def iter_pair_edges(occluder, points: ShadingPoints, azimuths: int, ai, pi, lo_b
     whether the edge lies below the bracket (bisected). Elsewhere (a floating interval, an open
     sky, a normal-mapped point) the pair's whole scan (:meth:`_Scan.pairs`). Yields the pairs
     done after each block; returns ``(lo, hi)`` (m,) float16: a searched pair's lower edge is
-    "from below" (only its upper edge is sought)."""
+    "from below" (only its upper edge is sought). (Bisecting the bracket without the end
+    rays, an edge outside it clamped to it, made the relief's footprints 0.13 from Cycles at
+    3 degrees against 0.07: measured 2026-12-06, not kept.)"""
     A = int(azimuths)
     ai = np.asarray(ai, np.int64)
     pi = np.asarray(pi, np.int64)

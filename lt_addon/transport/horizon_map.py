@@ -274,15 +274,20 @@ def brackets(H, texel, R: int, ai, ti, margin: float = BRACKET_MARGIN):
 #: An edge whose second difference over the grid (either axis) is under this (radians) is
 #: taken as linear across the texel (:func:`smooth_spreads`): 0.5 degrees.
 SMOOTH = np.radians(0.5)
+#: ... and so is one that differs from no neighbour's by more than this (radians): 3 degrees,
+#: where a jump (a rim, a post's side) is tens of degrees.
+JUMP = np.radians(3.0)
 
 
-def smooth_spreads(H, texel, R: int, ai, ti, box: float, tol: float = SMOOTH):
+def smooth_spreads(H, texel, R: int, ai, ti, box: float, tol: float = SMOOTH,
+                   jump: float = JUMP):
     """``(smooth (n,) bool, spread (n,) radians)`` for the (azimuth, point) pairs ``ai``,
     ``ti``: where the upper edges of the point and its four grid neighbours are all edges
     (their intervals not empty) and vary linearly (second differences under ``tol`` along both
-    axes), the footprint's edges are a linear function over its box (``box`` texels a side),
-    whose spread is ``|gradient| box / sqrt(12)`` -- no rays needed (a smooth floor beside a
-    sphere); elsewhere (a jump: a relief's rim, a thin post) rays are."""
+    axes) or differ by under ``jump`` from each, the footprint's edges are taken as a linear
+    function over its box (``box`` texels a side), whose spread is ``|gradient| box /
+    sqrt(12)`` -- no rays needed (a smooth floor beside a sphere); elsewhere (a jump: a
+    relief's rim, a thin post) rays are."""
     ai, ti = np.asarray(ai, np.int64), np.asarray(ti, np.int64)
     nb = _neighbours(texel, R)[:, ti]                                   # (4, n) l, r, d, u
     ok = np.all(nb >= 0, axis=0)
@@ -296,7 +301,9 @@ def smooth_spreads(H, texel, R: int, ai, ti, box: float, tol: float = SMOOTH):
         h_k = np.asarray(H[1, ai, c], np.float64)
         ok &= h_k > lo_k
         h.append(h_k)
-    ok &= (np.abs(h[0] - 2 * h0 + h[1]) < tol) & (np.abs(h[2] - 2 * h0 + h[3]) < tol)
+    linear = (np.abs(h[0] - 2 * h0 + h[1]) < tol) & (np.abs(h[2] - 2 * h0 + h[3]) < tol)
+    small = np.max(np.abs(np.stack(h) - h0), axis=0) < jump
+    ok &= linear | small
     gx, gy = 0.5 * (h[1] - h[0]), 0.5 * (h[3] - h[2])
     return ok, np.where(ok, np.hypot(gx, gy) * float(box) / np.sqrt(12.0), 0.0)
 
