@@ -311,10 +311,12 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
             "directions_per_call": chunk}
 
 
+#: Pairs whose linear edges :func:`_footprints` takes at a time (about 100 bytes each).
+SMOOTH_PAIRS = 1 << 18
 #: Memory for the footprints' sub-samples and their pairs at a time (a part's texels: at most
-#: all their azimuths' pairs, 64 bytes each with their working arrays; 4k texels at 128
+#: all their azimuths' pairs, 64 bytes each with their working arrays; 1k texels at 128
 #: azimuths).
-FOOTPRINT_BYTES = 256 << 20
+FOOTPRINT_BYTES = 64 << 20
 
 
 class _Footprints:
@@ -360,15 +362,21 @@ def _footprints(occluder, smp, pts, H, fph, found, A: int, who: str, step: int, 
     ready = hmap.surrounded(smp.texel, smp.resolution, found)
     want = hmap.varying_pairs(H, smp.texel, smp.resolution, found, normals=pts.Ns) & ~fph.done
     want &= ready[None, :]
-    # where the edges vary linearly across the texel, their spread is the gradient's (no rays)
-    sa_, st_ = np.nonzero(want)
-    smooth, s_spread = hmap.smooth_spreads(H, smp.texel, smp.resolution, sa_, st_,
-                                           pts.footprint.box)
-    a_s, t_s = sa_[smooth], st_[smooth]
-    fph.hi[a_s, t_s] = H[1, a_s, t_s]
-    fph.spread[a_s, t_s] = s_spread[smooth]
-    fph.done[a_s, t_s] = True
-    want[a_s, t_s] = False
+    # where the edges vary linearly across the texel, their spread is the gradient's (no rays);
+    # a block of texels at a time (the pairs' gathers of five edges are ~100 bytes a pair)
+    n_smooth = 0
+    block = max(1, SMOOTH_PAIRS // A)
+    for b0 in range(0, want.shape[1], block):
+        sa_, st_ = np.nonzero(want[:, b0:b0 + block])
+        st_ += b0
+        smooth, s_spread = hmap.smooth_spreads(H, smp.texel, smp.resolution, sa_, st_,
+                                               pts.footprint.box)
+        a_s, t_s = sa_[smooth], st_[smooth]
+        fph.hi[a_s, t_s] = H[1, a_s, t_s]
+        fph.spread[a_s, t_s] = s_spread[smooth]
+        fph.done[a_s, t_s] = True
+        want[a_s, t_s] = False
+        n_smooth += len(a_s)
     texels = np.nonzero(want.any(axis=0))[0]
     n = HORIZON_LATTICE[0]
     part = max(1, FOOTPRINT_BYTES // (64 * n * A))     # sub-samples' points and pairs a part
@@ -407,7 +415,7 @@ def _footprints(occluder, smp, pts, H, fph, found, A: int, who: str, step: int, 
         fph.spread[fa, t] = spread
         fph.done[fa, t] = True
     return {"texels": int(len(texels)), "pairs": int(pairs), "points": int(points),
-            "smooth_pairs": int(len(a_s)), "seconds": time.perf_counter() - t0}
+            "smooth_pairs": int(n_smooth), "seconds": time.perf_counter() - t0}
 
 
 def _find(occluder, pts, A: int, label: str, who: str, step: int, total: int):
