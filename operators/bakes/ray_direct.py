@@ -140,11 +140,15 @@ def horizon_count(settings) -> int:
 def horizon_spread(settings) -> bool:
     """Whether this bake's horizon maps get their edges' spread over the texels' footprints
     (:func:`...lt_addon.transport.horizon_map.footprint_edges`): where the texels are sampled
-    by footprint and the map with its spreads fits the GPU budget (else the edges alone)."""
+    by footprint, the horizons are at the texture's side (a coarser map's points are its own
+    texel centres, with no footprint) and the map with its spreads fits the GPU budget (else
+    the edges alone)."""
     A = horizon_count(settings)
+    R = settings.resolution
     return bool(A) and getattr(settings, "texel_sampling", "footprint") == "footprint" and \
-        hmap.gpu_bytes(A, settings.resolution, settings.horizon_resolution,
-                       spread=True) <= int(settings.gpu_budget) << 20
+        hmap.side(R, settings.horizon_resolution) == R and \
+        hmap.gpu_bytes(A, R, settings.horizon_resolution, spread=True) <= \
+        int(settings.gpu_budget) << 20
 
 
 def bake(scene, objects, settings, dset, stores, normals, step: int, total: int, margin: int = 4):
@@ -282,6 +286,7 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                             "seconds": round(sum(e["seconds"] for e in edges), 3),
                             "lattice": list(HORIZON_LATTICE)} if with_spread else
                         {"left_out": "centre texel sampling" if not footprint else
+                         "horizons coarser than the texture" if Rh < R else
                          "the spreads would not fit the GPU budget"},
                         # scan rays a caster could meet, and those the search cast of them
                         # (lt_addon/rays/horizon.py _search)
@@ -351,10 +356,13 @@ def _footprints(occluder, smp, pts, H, fph, found, A: int, who: str, step: int, 
     and that ``fph`` (:class:`_Footprints`) does not hold yet: the horizons of their texels'
     sub-samples (:data:`...lt_addon.rays.footprint.HORIZON_LATTICE`) along those azimuths
     alone, searched between the texel's and its neighbours' edges (:func:`...lt_addon.rays.
-    horizon.iter_pair_edges`), give the pairs' upper edges' means and spreads (:func:`...lt_addon.transport.horizon_map.pair_edges`), into ``fph``.
-    A pair's footprint depends on it alone, so a bake that finds its horizons in two goes
-    (the trial on sampled tiles, then the rest) gets the same map as one go. Returns
-    ``{"texels", "pairs", "points", "seconds"}``; nothing where ``fph`` is None."""
+    horizon.iter_pair_edges`), give the pairs' upper edges' means and spreads
+    (:func:`...lt_addon.transport.horizon_map.pair_edges`), into ``fph``; where the edges vary
+    linearly, the gradient's spread (:func:`...lt_addon.transport.horizon_map.
+    smooth_spreads`). A pair's footprint depends on it alone, so a bake that finds its
+    horizons in two goes (the trial on sampled tiles, then the rest) gets the same map as one
+    go. Returns ``{"texels", "pairs", "points", "smooth_pairs", "seconds"}``; nothing where
+    ``fph`` is None."""
     t0 = time.perf_counter()
     if fph is None or pts.footprint is None:
         return {"texels": 0, "pairs": 0, "points": 0, "smooth_pairs": 0, "seconds": 0.0}
