@@ -175,7 +175,7 @@ class _Scan:
         """The pairs of the points ``part`` and azimuths ``az`` ((g,) indices), azimuth-major:
         ``(ai, pi, lo, hi, any_, figures)``, their azimuths and points (m,), the interval's
         edges (m,) and whether anything is blocked (m,)."""
-        points, els, JJ = self.points, self.els, self.JJ
+        points, els = self.points, self.els
         J, n, g = len(els), part.stop - part.start, len(az)
         m = g * n
         ai = np.repeat(az, n)                                    # (m,) pair -> azimuth
@@ -211,6 +211,17 @@ class _Scan:
         top, bottom, rays = _search(self.occluder, points, self.L[az].transpose(1, 0, 2),
                                     self.L32[az].transpose(1, 0, 2), None, pi, cast,
                                     which=ai - az[0])
+        lo, hi, any_ = self._edges(ai, pi, care, e0, top, bottom)
+        return ai, pi, lo, hi, any_, {"skipped": skipped, "searched": rays,
+                                      "castable": int(cast.sum())}
+
+    def _edges(self, ai, pi, care, e0, top, bottom):
+        """The intervals' edges ``(lo, hi, any_)`` (m,) of pairs (azimuths ``ai``, points
+        ``pi``) from the search's highest and lowest blocked elevations ``top``, ``bottom``
+        (:func:`_search`), the directions in front ``care`` (J, m) and the terminators ``e0``
+        (m,): an edge between two scanned elevations bisected, one at the end of the range in
+        front the terminator itself."""
+        els, JJ, J = self.els, self.JJ, len(self.els)
         any_ = top >= 0
         care_top = np.where(care, JJ, -1).max(0)
         care_bottom = np.where(care, JJ, J).min(0)
@@ -224,20 +235,18 @@ class _Scan:
         down = np.nonzero(any_ & (bottom > care_bottom))[0]
         if up.size or down.size:
             both = np.concatenate([up, down])
-            edge = _bisect(self.occluder, points, self.ca[ai[both]], self.sa[ai[both]],
+            edge = _bisect(self.occluder, self.points, self.ca[ai[both]], self.sa[ai[both]],
                            pi[both], np.concatenate([els[top[up]], els[bottom[down] - 1]]),
                            np.concatenate([els[top[up] + 1], els[bottom[down]]]),
                            np.arange(up.size + down.size) < up.size, self.refine)
             hi[up], lo[down] = edge[:up.size], edge[up.size:]
-        return ai, pi, lo, hi, any_, {"skipped": skipped, "searched": rays,
-                                      "castable": int(cast.sum())}
-
+        return lo, hi, any_
 
     def pairs(self, ai, pi, bounds):
         """:meth:`block` for explicit pairs: azimuths ``ai`` and points ``pi`` (m,) -> their
         intervals' edges ``(lo, hi)`` (m,) (open: ``[0, 0]``); ``bounds`` of all the points
         (:func:`_bounds`) or None."""
-        points, els, JJ = self.points, self.els, self.JJ
+        points, els = self.points, self.els
         J, m = len(els), len(ai)
         L = self.L[ai]                                               # (m, J, 3)
         if points.mapped() is None:
@@ -261,21 +270,7 @@ class _Scan:
         Lt = L.transpose(1, 0, 2)
         top, bottom, _ = _search(self.occluder, points, Lt, Lt.astype(np.float32), None, pi,
                                  cast, which=np.arange(m))
-        any_ = top >= 0
-        care_top = np.where(care, JJ, -1).max(0)
-        care_bottom = np.where(care, JJ, J).min(0)
-        hi = np.where(any_, np.clip(e0 + np.pi / 2, 0.0, np.pi / 2), 0.0)
-        start = e0 - np.pi / 2
-        lo = np.where(any_, np.where(start > 0, start, FROM_BELOW), 0.0)
-        up = np.nonzero(any_ & (top < care_top))[0]
-        down = np.nonzero(any_ & (bottom > care_bottom))[0]
-        if up.size or down.size:
-            both = np.concatenate([up, down])
-            edge = _bisect(self.occluder, points, self.ca[ai[both]], self.sa[ai[both]],
-                           pi[both], np.concatenate([els[top[up]], els[bottom[down] - 1]]),
-                           np.concatenate([els[top[up] + 1], els[bottom[down]]]),
-                           np.arange(up.size + down.size) < up.size, self.refine)
-            hi[up], lo[down] = edge[:up.size], edge[up.size:]
+        lo, hi, _ = self._edges(ai, pi, care, e0, top, bottom)
         return lo, hi
 
 

@@ -8,21 +8,21 @@ azimuths, the elevations ``[lo, hi]`` between which the sky is blocked (:mod:`..
 found by rays), and the texel's closure normal. A sun is visible outside the interval -- for a
 disc, the part of it outside (:func:`..rays.horizon.visible_fraction`), read at three azimuths
 across the disc (:data:`STRIPS`) -- so a shadow edge moves continuously with the sun, at any sun
-size, from ``2 A`` bytes per texel.
+size, from ``2 A`` bytes per texel (``3 A`` with the edges' spreads, below).
 
 It is exact where a texel's occluded elevations along an azimuth form one interval; where they
-form two (the sky between), their hull darkens the gap.
+form two (the sky between), their hull darkens the gap. Before the viewport is chosen,
+:func:`heldout_errors` measures the map and T against rays at directions neither holds.
 
 A texel is its footprint, as a converged Cycles bake sees it (:mod:`..rays.footprint`), not its
 centre: where the upper edge moves within the footprint (a shadow edge or a relief's rims
 across the texel) one centre's edge draws the texel wholly lit or wholly dark, where the bake
 sees it partly lit. The bake finds the horizons of a few sub-samples of such texels
 (:data:`..rays.footprint.HORIZON_LATTICE`) and keeps, per azimuth, the footprint's mean upper
-edge and its spread (standard deviation, :func:`footprint_edges`); the relight folds the spread
+edge and its spread (standard deviation, :func:`pair_edges`); the relight folds the spread
 into the disc that cuts the upper edge (:func:`spread_radius`). On the gallery's relief at
 128^2 (direct light against the 16-sample footprint of rays): 0.127 -> 0.045 at 3 degrees,
-0.109 -> 0.044 at 8 under a 0.526-degree Sun. Before the viewport is chosen,
-:func:`heldout_errors` measures the map and T against rays at directions neither holds.
+0.109 -> 0.044 at 8 under a 0.526-degree Sun.
 
 Arrays: ``q`` (2, A, Rh, Rh) uint8 codes -- ``q[1]`` the upper edges ``hi = q / 255 * pi / 2``,
 ``q[0]`` the lower edges, the same but code 0 for "blocked from below" (``-pi / 2``); rows from
@@ -134,28 +134,15 @@ def spread_radius(radius, spread):
     return np.sqrt(radius * radius + 4.0 * np.asarray(spread, np.float64) ** 2)
 
 
-def footprint_edges(Hc, Hs, owner, weight, centre_w):
-    """The footprint's upper edges of ``M`` texels: ``(mean (A, M), spread (A, M))`` radians,
-    float64, from the centres' horizons ``Hc`` (2, A, M) and the sub-samples' ``Hs`` (2, A, N)
-    (:class:`..rays.footprint.Footprint` ``._sub_points``: ``owner`` (N,) among the M,
-    ``weight`` (N,), ``centre_w`` (M,); a texel's weights sum to 1). A sub-sample open along an
-    azimuth (an empty interval) counts as an edge at its centre's lower edge (at 0 under one
-    blocked from below): visible wherever the centre's interval does not block."""
-    Hc = np.asarray(Hc, np.float64)
-    Hs = np.asarray(Hs, np.float64)
-    A, M = Hc.shape[1:]
-    mean, spread = np.empty((A, M)), np.empty((A, M))
-    for a in range(A):
-        mean[a], spread[a] = pair_edges(Hc[0, a], Hc[1, a], Hs[0, a], Hs[1, a], owner, weight,
-                                        centre_w)
-    return mean, spread
-
-
 def pair_edges(lo_c, hi_c, lo_s, hi_s, group, weight, centre_w):
-    """:func:`footprint_edges` of ``n`` (azimuth, texel) pairs: the centres' edges ``lo_c``,
-    ``hi_c`` (n,), their sub-samples' ``lo_s``, ``hi_s`` (N,) along the same azimuths, each
-    sub-sample's pair ``group`` (N,) and ``weight`` (N,), the centres' ``centre_w`` (n,) ->
-    ``(mean, spread)`` (n,) float64 radians."""
+    """The footprint's upper edge of ``n`` (azimuth, texel) pairs: ``(mean, spread)`` (n,)
+    float64 radians, the weighted mean and standard deviation of the edges of the texel's
+    centre and its sub-samples along that azimuth. The centres' edges ``lo_c``, ``hi_c`` (n,),
+    the sub-samples' ``lo_s``, ``hi_s`` (N,), each sub-sample's pair ``group`` (N,) and
+    ``weight`` (N,), the centres' ``centre_w`` (n,) (:class:`..rays.footprint.Footprint`
+    ``._sub_points``; a texel's weights sum to 1). A sub-sample open along the azimuth (an
+    empty interval) counts as an edge at its centre's lower edge (at 0 under one blocked from
+    below): visible wherever the centre's interval does not block."""
     lo_c, hi_c = np.asarray(lo_c, np.float64), np.asarray(hi_c, np.float64)
     lo_s, hi_s = np.asarray(lo_s, np.float64), np.asarray(hi_s, np.float64)
     group = np.asarray(group, np.int64)
@@ -171,22 +158,16 @@ def pair_edges(lo_c, hi_c, lo_s, hi_s, group, weight, centre_w):
     return mean, np.sqrt(np.maximum(sq - mean * mean, 0.0))
 
 
-def varying(H, texel, R: int, found=None, tol: float = VARYING, normals=None) -> np.ndarray:
-    """Indices into ``texel`` (P,) of the texels whose lower or upper edge differs from a grid
-    neighbour's by more than ``tol`` (radians) at some azimuth: where the footprint's edges may
-    move within the texel. ``H`` (2, A, P); ``found`` (P,) bool: the points whose horizons are
-    known (neighbours not found do not count). An open azimuth (an empty interval) has no
-    edges, whatever its placeholder (:func:`..rays.horizon.place_open`). ``normals`` (P, 3):
-    the closure normals, whose terminator bounds the range of elevations in front
-    (:mod:`..rays.horizon`): an edge at the terminator is no caster's (the cosine is 0 there:
-    a smooth surface's terminator moves from texel to texel without any shadow edge), so a
-    lower edge there counts as "from below" and an upper one as "to the zenith"."""
-    return np.nonzero(varying_pairs(H, texel, R, found, tol, normals).any(axis=0))[0]
-
-
 def varying_pairs(H, texel, R: int, found=None, tol: float = VARYING, normals=None) -> np.ndarray:
-    """(A, P) bool: the (azimuth, texel) pairs of :func:`varying` -- where an edge differs
-    from a grid neighbour's by more than ``tol`` along that azimuth."""
+    """(A, P) bool: the (azimuth, texel) pairs whose lower or upper edge differs from a grid
+    neighbour's by more than ``tol`` (radians) along that azimuth: where the footprint's edges
+    may move within the texel. ``H`` (2, A, P); ``texel`` (P,); ``found`` (P,) bool: the points
+    whose horizons are known (neighbours not found do not count). An open azimuth (an empty
+    interval) has no edges, whatever its placeholder (:func:`..rays.horizon.place_open`).
+    ``normals`` (P, 3): the closure normals, whose terminator bounds the range of elevations in
+    front (:mod:`..rays.horizon`): an edge at the terminator is no caster's (the cosine is 0
+    there: a smooth surface's terminator moves from texel to texel without any shadow edge),
+    so a lower edge there counts as "from below" and an upper one as "to the zenith"."""
     H = np.asarray(H)
     texel = np.asarray(texel, np.int64)
     A = H.shape[1]
@@ -226,9 +207,10 @@ def varying_pairs(H, texel, R: int, found=None, tol: float = VARYING, normals=No
 BRACKET_MARGIN = np.radians(0.25)
 
 
-def _neighbours(texel, R: int) -> np.ndarray:
+def neighbours(texel, R: int) -> np.ndarray:
     """(4, P) the point index of each point's left, right, lower and upper grid neighbour
-    (-1 where no point covers it)."""
+    (-1 where no point covers it), of points at ``texel`` (P,) on an (R, R) grid: made once
+    per object for :func:`surrounded`, :func:`brackets` and :func:`smooth_spreads`."""
     texel = np.asarray(texel, np.int64)
     img = np.full((R + 2) * (R + 2), -1, np.int64)
     row, col = texel // R, texel % R
@@ -238,24 +220,25 @@ def _neighbours(texel, R: int) -> np.ndarray:
     return np.stack([img[r, c - 1], img[r, c + 1], img[r - 1, c], img[r + 1, c]])
 
 
-def surrounded(texel, R: int, found) -> np.ndarray:
-    """(P,) bool: the points found whose covered grid neighbours are all found -- whose
-    :func:`varying_pairs` and :func:`brackets` no later point changes."""
+def surrounded(nb, found) -> np.ndarray:
+    """(P,) bool: the points found whose covered grid neighbours (``nb``: :func:`neighbours`)
+    are all found -- whose :func:`varying_pairs` and :func:`brackets` no later point
+    changes."""
     found = np.asarray(found, bool)
-    nb = _neighbours(texel, R)
     ok = found.copy()
     for k in range(4):
         ok &= (nb[k] < 0) | found[np.maximum(nb[k], 0)]
     return ok
 
 
-def brackets(H, texel, R: int, ai, ti, margin: float = BRACKET_MARGIN):
+def brackets(H, nb, ai, ti, margin: float = BRACKET_MARGIN):
     """``(lo_b, hi_b)`` (n,) radians for the (azimuth, point) pairs ``ai``, ``ti``: the least
-    and greatest upper edge of the point and its grid neighbours along that azimuth (where
-    their intervals are not empty), widened by ``margin`` -- where the sub-samples of its
-    footprint find their edges (:func:`..rays.horizon.iter_pair_edges`)."""
+    and greatest upper edge of the point and its grid neighbours (``nb``: :func:`neighbours`)
+    along that azimuth (where their intervals are not empty), widened by ``margin`` -- where
+    the sub-samples of its footprint find their edges (:func:`..rays.horizon.
+    iter_pair_edges`)."""
     ai, ti = np.asarray(ai, np.int64), np.asarray(ti, np.int64)
-    nb = _neighbours(texel, R)[:, ti]                                   # (4, n)
+    nb = np.asarray(nb)[:, ti]                                          # (4, n)
     cand = [ti] + [nb[k] for k in range(4)]
     lo_b = np.full(len(ti), np.inf)
     hi_b = np.full(len(ti), -np.inf)
@@ -279,17 +262,17 @@ SMOOTH = np.radians(0.5)
 JUMP = np.radians(3.0)
 
 
-def smooth_spreads(H, texel, R: int, ai, ti, box: float, tol: float = SMOOTH,
-                   jump: float = JUMP):
+def smooth_spreads(H, nb, ai, ti, box: float, tol: float = SMOOTH, jump: float = JUMP):
     """``(smooth (n,) bool, spread (n,) radians)`` for the (azimuth, point) pairs ``ai``,
-    ``ti``: where the upper edges of the point and its four grid neighbours are all edges
+    ``ti``: where the upper edges of the point and its four grid neighbours (``nb``:
+    :func:`neighbours`) are all edges
     (their intervals not empty) and vary linearly (second differences under ``tol`` along both
     axes) or differ by under ``jump`` from each, the footprint's edges are taken as a linear
     function over its box (``box`` texels a side), whose spread is ``|gradient| box /
     sqrt(12)`` -- no rays needed (a smooth floor beside a sphere); elsewhere (a jump: a
     relief's rim, a thin post) rays are."""
     ai, ti = np.asarray(ai, np.int64), np.asarray(ti, np.int64)
-    nb = _neighbours(texel, R)[:, ti]                                   # (4, n) l, r, d, u
+    nb = np.asarray(nb)[:, ti]                                          # (4, n) l, r, d, u
     ok = np.all(nb >= 0, axis=0)
     lo0 = np.asarray(H[0, ai, ti], np.float64)
     h0 = np.asarray(H[1, ai, ti], np.float64)
@@ -479,7 +462,7 @@ def from_points(H, texel, resolution: int, normals, margin=None, coarse=None,
     renormalised). One azimuth at a time: memory holds the codes and one row.
     ``coarse``: ``(texel, side, margin)`` when ``H`` was found at the points of a coarser
     side (``normals`` stay at ``texel``, ``resolution``). ``spread``: (A, P) radians, the upper
-    edges' spread over the footprint (:func:`footprint_edges`; ``H[1]`` then holds the means),
+    edges' spread over the footprint (:func:`pair_edges`; ``H[1]`` then holds the means),
     or None."""
     if coarse is not None:
         h_texel, Rh, h_margin = coarse

@@ -195,7 +195,7 @@ def test_save_load_round_trip_and_a_newer_format_is_refused(tmp_path):
         hmap.load(path)
 
 
-def test_footprint_edges_are_the_weighted_mean_and_spread_of_the_sub_samples():
+def test_pair_edges_are_the_weighted_mean_and_spread_of_the_sub_samples():
     """Two texels, two azimuths: the footprint's upper edge is the weighted mean of its
     centre's and sub-samples' edges, its spread their weighted standard deviation; an open
     sub-sample counts at its centre's lower edge (0 under one blocked from below)."""
@@ -207,13 +207,14 @@ def test_footprint_edges_are_the_weighted_mean_and_spread_of_the_sub_samples():
     owner = np.array([0, 0, 0, 1, 1])
     weight = np.array([0.2, 0.2, 0.2, 0.25, 0.25])
     centre = np.array([0.4, 0.5])
-    mean, spread = hmap.footprint_edges(Hc, Hs, owner, weight, centre)
     for a in range(2):
+        mean, spread = hmap.pair_edges(Hc[0, a], Hc[1, a], Hs[0, a], Hs[1, a], owner, weight,
+                                       centre)
         for m, (edges, w) in enumerate([([Hc[1, a, 0], 0.1, 0.3, 0.0], [0.4, 0.2, 0.2, 0.2]),
                                         ([0.5, 0.7, 0.3], [0.5, 0.25, 0.25])]):
             mu = np.average(edges, weights=w)
             sd = np.sqrt(np.average((np.array(edges) - mu) ** 2, weights=w))
-            assert abs(mean[a, m] - mu) < 1e-12 and abs(spread[a, m] - sd) < 1e-12
+            assert abs(mean[m] - mu) < 1e-12 and abs(spread[m] - sd) < 1e-12
 
 
 def test_a_spread_edge_relights_a_footprint_whose_edges_are_spread_over_an_interval():
@@ -227,8 +228,10 @@ def test_a_spread_edge_relights_a_footprint_whose_edges_are_spread_over_an_inter
     edges = np.linspace(h - w, h + w, 401)
     Hc = np.array([[[-np.pi / 2]], [[h]]])
     Hs = np.stack([np.full(401, -np.pi / 2), edges])[:, None, :]
-    mean, spread = hmap.footprint_edges(Hc, Hs, np.zeros(401, np.int64), np.full(401, 1 / 402),
-                                        np.array([1 / 402]))
+    mean, spread = hmap.pair_edges(Hc[0, 0], Hc[1, 0], Hs[0, 0], Hs[1, 0],
+                                   np.zeros(401, np.int64), np.full(401, 1 / 402),
+                                   np.array([1 / 402]))
+    mean, spread = mean[None], spread[None]                              # (A = 1, 1 texel)
     A, R = 3, 1
     H = np.stack([np.full((A, 1), -np.pi / 2), np.repeat(mean, A, 0)])
     sharp = hmap.from_points(H, np.array([0]), R, np.array([[0, 0, 1.0]]))
@@ -257,11 +260,11 @@ def test_varying_flags_the_texels_beside_a_jump_in_an_edge():
     col = texel % R
     H[1, 2] = np.where(col >= 3, np.radians(15.0), np.radians(10.0))
     H[1, 1] = np.where(col >= 4, np.radians(10.5), np.radians(10.0))
-    got = hmap.varying(H, texel, R)
+    got = np.nonzero(hmap.varying_pairs(H, texel, R).any(axis=0))[0]
     assert sorted(set(col[got])) == [2, 3] and len(got) == 2 * R
     # a neighbour not yet found does not count
     found = col != 3
-    assert len(hmap.varying(H, texel, R, found)) == 0
+    assert not hmap.varying_pairs(H, texel, R, found).any()
 
 
 @needs_engine
@@ -365,15 +368,16 @@ def test_a_linear_edge_takes_its_gradients_spread_and_a_jump_does_not():
     H[1, 0] = np.radians(20.0 + 2.0 * col + 1.0 * row)
     H[1, 1] = np.radians(20.0 + np.where(col >= 3, 5.0, 0.0))
     inner = texel[(row > 0) & (row < R - 1) & (col > 0) & (col < R - 1)]
-    smooth, spread = hmap.smooth_spreads(H, texel, R, np.zeros(len(inner), int), inner, 0.5)
+    nb = hmap.neighbours(texel, R)
+    smooth, spread = hmap.smooth_spreads(H, nb, np.zeros(len(inner), int), inner, 0.5)
     u = np.random.default_rng(0).uniform(-0.25, 0.25, (200000, 2))
     want = np.radians(np.std(2.0 * u[:, 0] + 1.0 * u[:, 1]))
     assert smooth.all() and np.allclose(spread, want, rtol=0.01)
-    smooth, _ = hmap.smooth_spreads(H, texel, R, np.ones(len(inner), int), inner, 0.5)
+    smooth, _ = hmap.smooth_spreads(H, nb, np.ones(len(inner), int), inner, 0.5)
     jump = (inner % R == 2) | (inner % R == 3)
     assert not smooth[jump].any() and smooth[~jump].all()
     # an edge texel (a neighbour missing) is never taken as linear
-    assert not hmap.smooth_spreads(H, texel, R, [0], [0], 0.5)[0][0]
+    assert not hmap.smooth_spreads(H, nb, [0], [0], 0.5)[0][0]
 
 
 def _run(gen):
