@@ -4,6 +4,11 @@ For a shading point and an azimuth ``phi`` the occluded elevations are summed up
 ``[lo(phi), hi(phi)]``: ``hi`` is where the sky opens for good above, ``lo`` where it is blocked
 from (``-pi/2`` when it is blocked from the horizon up: heightfields, an object standing on the
 ground; above ``0`` under an object that floats or overhangs, where a low sun shines under it).
+Where nothing is blocked from the horizon up but the ground is below it (a wall, a slope facing
+away from the ground), the interval is ``[-pi/2, hi]`` with ``hi < 0`` (down to :data:`BELOW`):
+the part of a large sun's disc under the horizon is lit only where its rays pass the ground's
+edge, as Cycles finds them. Under a floating interval the ground below is not kept (the hull of
+the two would block the sky between them, where a low sun shines under the object).
 A sun at elevation ``e`` is visible outside the interval, and a sun's disc by the part of it
 outside (:func:`visible_fraction`) -- a soft shadow whose edges *move* with the sun, where
 interpolating visibility between two baked directions draws two faint copies of the shadow
@@ -34,10 +39,21 @@ from .shading import ShadingPoints, cosine, cosine_at, shadow_origins
 
 #: The scanned elevations (degrees): 1-2.5 degrees apart below 10, wider above (an object
 #: subtending less than its gap can be missed: 1 m seen from 25 m at the horizon is 2.3 degrees).
-ELEVATIONS = (0.0, 1.0, 2.0, 3.5, 5.0, 7.0, 9.5, 12.5, 16.0, 20.0, 25.0, 31.0, 38.0, 46.0,
-              55.0, 65.0, 77.0, 90.0)
+#: Below the horizon down to :data:`BELOW` (where the directions are in front of the point: a
+#: wall, a slope): a large sun near the horizon reaches there (a 10-degree Sun 3 degrees high
+#: down to -2), and whether those rays meet the ground or pass its edge is the scene's.
+ELEVATIONS = (-10.0, -7.0, -5.0, -3.5, -2.0, -1.0, 0.0, 1.0, 2.0, 3.5, 5.0, 7.0, 9.5, 12.5,
+              16.0, 20.0, 25.0, 31.0, 38.0, 46.0, 55.0, 65.0, 77.0, 90.0)
+#: The lowest elevation the horizons hold (radians): an upper edge under it is there (a sun
+#: reaches below it only when it is over 20 degrees wide at the horizon).
+BELOW = np.radians(ELEVATIONS[0])
+#: The index of the horizontal in :data:`ELEVATIONS`.
+J0 = ELEVATIONS.index(0.0)
 #: Bisection steps for each edge: the widest bracket (13 degrees) / 2^7 = 0.1 degrees.
 REFINE = 7
+#: ... for an upper edge below the horizon, which only a sun over a few degrees wide reaches:
+#: 13 / 2^5 = 0.41 degrees, about the map's code step.
+REFINE_BELOW = 5
 #: The lower edge of an interval blocked from the horizon up.
 FROM_BELOW = -np.pi / 2
 
@@ -70,7 +86,7 @@ def _bisect(occluder, points, ca, sa, idx, lo, hi, blocked_at_lo, refine: int):
     (:func:`steps`). Returns the midpoints."""
     lo, hi = np.array(lo, np.float64), np.array(hi, np.float64)
     at_lo = np.broadcast_to(blocked_at_lo, lo.shape)
-    n = steps(np.abs(hi - lo), refine)
+    n = steps(np.abs(hi - lo), refine)          # (refine: an int, or one per bracket)
     for k in range(int(n.max(initial=0))):
         act = np.flatnonzero(n > k)
         mid = 0.5 * (lo[act] + hi[act])
@@ -87,8 +103,9 @@ def steps(width, refine: int = REFINE) -> np.ndarray:
     """Bisection steps (int, like ``width``) that narrow brackets ``width`` (radians) to the
     widest scan gap's after ``refine`` steps (13 / 2^7 = 0.10 degrees): 4 for the 1-degree
     gaps near the horizon, where all 7 made them 0.008 degrees wide -- finer than the map's
-    0.35-degree codes by 40x, for 3 more rays each (the bisections' rays are the scan's
+    0.25-0.49-degree codes by 30x or more, for 3 more rays each (the bisections' rays are the scan's
     costliest: they graze the casters' edges)."""
+    refine = np.asarray(refine, np.float64)
     tol = np.radians(np.max(np.diff(ELEVATIONS))) / 2.0 ** refine
     w = np.maximum(np.asarray(width, np.float64), tol)
     return np.clip(np.ceil(np.log2(w / tol) - 1e-9), 0, refine).astype(np.int64)
@@ -105,7 +122,7 @@ def iter_horizons(occluder, points: ShadingPoints, azimuths: int = 128, refine: 
     """Generator form of :func:`horizons`: yields the azimuths done (whole-map equivalents:
     the (azimuth, point) pairs done / P) after each block of pairs (a caller may stop between
     them) and returns ``(H, figures)``; H (2, A, P) float16 (0.03 degrees at the zenith,
-    against the map's 0.35-degree codes); figures: ``skipped``, the scan's rays no caster
+    against the map's 0.25-0.49-degree codes); figures: ``skipped``, the scan's rays no caster
     could meet (not cast), ``castable``, the others, and ``searched``, those of them
     :func:`_search` cast.
 
@@ -223,22 +240,27 @@ class _Scan:
         front the terminator itself."""
         els, JJ, J = self.els, self.JJ, len(self.els)
         any_ = top >= 0
+        below = any_ & (top < J0)          # blocked only under the horizon: the ground
         care_top = np.where(care, JJ, -1).max(0)
-        care_bottom = np.where(care, JJ, J).min(0)
+        care_bottom = np.where(care[J0:], JJ[J0:], J).min(0)
         # blocked up to (or from) the end of the range in front: the edge is the terminator
         # itself -- continuous from one azimuth to the next, unlike "blocked to the zenith"
-        hi = np.where(any_, np.clip(e0 + np.pi / 2, 0.0, np.pi / 2), 0.0)
+        hi = np.where(any_, np.clip(e0 + np.pi / 2, BELOW, np.pi / 2), 0.0)
         start = e0 - np.pi / 2
-        lo = np.where(any_, np.where(start > 0, start, FROM_BELOW), 0.0)   # open: [0, 0]
-        # both edges bisected together: one engine call per step
+        lo = np.where(any_ & ~below, np.where(start > 0, start, FROM_BELOW), 0.0)  # open: [0, 0]
+        lo[below] = FROM_BELOW
+        # both edges bisected together: one engine call per step (an edge under the horizon
+        # to the coarser REFINE_BELOW)
         up = np.nonzero(any_ & (top < care_top))[0]
-        down = np.nonzero(any_ & (bottom > care_bottom))[0]
+        down = np.nonzero(any_ & ~below & (bottom > care_bottom))[0]
         if up.size or down.size:
             both = np.concatenate([up, down])
+            refine = np.where(np.concatenate([below[up], np.zeros(down.size, bool)]),
+                              min(self.refine, REFINE_BELOW), self.refine)
             edge = _bisect(self.occluder, self.points, self.ca[ai[both]], self.sa[ai[both]],
                            pi[both], np.concatenate([els[top[up]], els[bottom[down] - 1]]),
                            np.concatenate([els[top[up] + 1], els[bottom[down]]]),
-                           np.arange(up.size + down.size) < up.size, self.refine)
+                           np.arange(up.size + down.size) < up.size, refine)
             hi[up], lo[down] = edge[:up.size], edge[up.size:]
         return lo, hi, any_
 
@@ -338,8 +360,8 @@ def iter_pair_edges(occluder, points: ShadingPoints, azimuths: int, ai, pi, lo_b
         ca, sa = scan.ca[a], scan.sa[a]
         Ns = points.Ns[p]
         e0 = np.arctan2(Ns[:, 2], Ns[:, 0] * ca + Ns[:, 1] * sa)
-        top = np.clip(e0 + np.pi / 2, 0.0, np.pi / 2)               # the scan's "to the top"
-        e_top, e_bot = top - gap, np.maximum(e0 - np.pi / 2, 0.0) + gap
+        top = np.clip(e0 + np.pi / 2, BELOW, np.pi / 2)             # the scan's "to the top"
+        e_top, e_bot = top - gap, np.maximum(e0 - np.pi / 2, BELOW) + gap
         lb = np.clip(np.asarray(lo_b, np.float64)[sel], e_bot, e_top)
         hb = np.clip(np.asarray(hi_b, np.float64)[sel], e_bot, e_top)
 
@@ -363,8 +385,12 @@ def iter_pair_edges(occluder, points: ShadingPoints, azimuths: int, ai, pi, lo_b
             bis[up[~t]] = True
         down = use[~b_lo & ~b_hi]                 # below it, or nothing blocked
         if len(down):
-            t = blocked_at(e_bot[down], down)
-            lo_e[down[t]], hi_e[down[t]] = e_bot[down[t]], lb[down[t]]
+            # over the horizon where the bracket is (the ground under it is the scan's to find:
+            # between it and a caster above, bisection could find either edge)
+            e_up = np.maximum(e0[down] - np.pi / 2, 0.0) + gap
+            e_dn = np.where(lb[down] > e_up, e_up, e_bot[down])
+            t = blocked_at(e_dn, down)
+            lo_e[down[t]], hi_e[down[t]] = e_dn[t], lb[down[t]]
             bis[down[t]] = True
         k = np.nonzero(bis)[0]
         if len(k):
@@ -390,7 +416,9 @@ def _search(occluder, points, L, L32, part: slice, idx, cast, which=None):
     statue demo's objects (balanced preset, 256^2, the same intervals bit for bit). Returns
     ``(top, bottom, rays)``: top -1 and bottom J where nothing is blocked; rays cast. One
     engine call per elevation and direction of search (the direction given once, unless per
-    pair)."""
+    pair). The bottom is sought from the horizontal (:data:`J0`) up: under a top above it the
+    elevations below the horizon are not kept (a floating interval keeps the sky under it), and
+    under a top below it the ground blocks from below."""
     J, n = cast.shape
     rays = 0
 
@@ -412,7 +440,7 @@ def _search(occluder, points, L, L32, part: slice, idx, cast, which=None):
         if pick.size:
             top[pick[blocked(j, pick)]] = j
     bottom = np.where(top >= 0, top, -1)      # searched below the top only; -1: done
-    for j in range(J):
+    for j in range(J0, J):
         pick = np.flatnonzero(cast[j] & (bottom > j))
         if pick.size:
             bottom[pick[blocked(j, pick)]] = j
@@ -493,6 +521,29 @@ def visible_fraction(el, lo, hi, radius: float, radius_hi=None) -> np.ndarray:
     r_hi = radius if radius_hi is None else radius_hi
     return 1.0 - np.maximum(disc_fraction((el - lo) / radius)
                             - disc_fraction((el - hi) / r_hi), 0.0)
+
+
+def visible_moment(el, lo, hi, radius: float, radius_hi=None) -> np.ndarray:
+    """The first moment in elevation of the part of the sun's disc :func:`visible_fraction`
+    counts, about the disc's centre, over the disc's area (radians): ``fraction x (the visible
+    part's mean elevation - el)``. The whole disc's is 0; the part above a line ``t`` radii
+    under the centre has ``r (2/3) (1 - t^2)^(3/2) / pi`` (:func:`disc_moment`); a blocked band
+    takes its part away. A shading cosine linear in elevation over the disc is then exact:
+    ``cos(el) fraction + d cos / d el x moment``, where the centre's cosine alone counts the
+    visible part at the centre's height (a 10-degree Sun 3 degrees high whose upper half is
+    visible lights a floor 1.7 times as much as its centre says)."""
+    r_hi = radius if radius_hi is None else radius_hi
+    t_lo, t_hi = (el - lo) / radius, (el - hi) / r_hi
+    blocked = disc_fraction(t_lo) > disc_fraction(t_hi)
+    return np.where(blocked, r_hi * disc_moment(t_hi) - radius * disc_moment(t_lo), 0.0)
+
+
+def disc_moment(t) -> np.ndarray:
+    """First moment (in radii, along the line's normal, over the disc's area) of the part of
+    a disc of radius 1 on the far side of a line at signed distance ``t`` from its centre:
+    ``(2/3) (1 - t^2)^(3/2) / pi`` (0 for |t| >= 1)."""
+    t = np.clip(np.asarray(t, np.float64), -1.0, 1.0)
+    return (2.0 / 3.0) * (1.0 - t * t) ** 1.5 / np.pi
 
 
 def disc_fraction(t) -> np.ndarray:

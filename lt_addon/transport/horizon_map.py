@@ -24,12 +24,13 @@ into the disc that cuts the upper edge (:func:`spread_radius`). On the gallery's
 128^2 (direct light against the 16-sample footprint of rays): 0.127 -> 0.045 at 3 degrees,
 0.109 -> 0.044 at 8 under a 0.526-degree Sun.
 
-Arrays: ``q`` (2, A, Rh, Rh) uint8 codes -- ``q[1]`` the upper edges ``hi = q / 255 * pi / 2``,
-``q[0]`` the lower edges, the same but code 0 for "blocked from below" (``-pi / 2``); rows from
-v = 0 --, ``spread`` (A, Rh, Rh) uint8 codes of the upper edges' spread over the footprint
-(:func:`encode_spread`; None in a map without it: a sharp edge) and ``normals`` (R, R, 3)
-float16 world unit vectors (zeros on texels no triangle covers). Azimuth ``a`` is ``2 pi a /
-A`` from +x toward +y.
+Arrays: ``q`` (2, A, Rh, Rh) uint8 codes -- ``q[1]`` the upper edges (:func:`decode`: -10
+to 90 degrees, finest at the horizon; an upper edge under the horizon is the ground's, seen
+from a wall or a slope, which a large sun near the horizon reaches), ``q[0]`` the lower edges,
+the same but code 0 for "blocked from below" (``-pi / 2``); rows from v = 0 --, ``spread``
+(A, Rh, Rh) uint8 codes of the upper edges' spread over the footprint (:func:`encode_spread`;
+None in a map without it: a sharp edge) and ``normals`` (R, R, 3) float16 world unit vectors
+(zeros on texels no triangle covers). Azimuth ``a`` is ``2 pi a / A`` from +x toward +y.
 
 The horizons may be kept at a coarser side ``Rh`` than the texture's ``R`` (:func:`side`): a
 shadow's edge is as sharp as the sun's penumbra, which on a large receiver spans many texels
@@ -44,7 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..rays.horizon import FROM_BELOW, visible_fraction
+from ..rays.horizon import BELOW, FROM_BELOW, visible_fraction, visible_moment
 from ..io.npz import save_npz
 
 FORMAT = "relightable_textures.horizon_map"
@@ -65,8 +66,31 @@ STRIPS = tuple(zip(_X.tolist(), (_W / _W.sum()).tolist()))
 #: The smallest cos(elevation) the strips' azimuth offsets divide by (a sun near the zenith
 #: spans every azimuth; its disc is then read over 1/COS_MIN radii of azimuth at most).
 COS_MIN = 1e-3
-#: Radians per code step (0.35 degrees).
-STEP = np.pi / 2 / 255.0
+#: The edges' codes (:func:`decode`): 1-degree steps under the horizon (the ground's edges
+#: seen from a wall, down to the scan's lowest, :data:`..rays.horizon.BELOW`: only a sun a few
+#: degrees wide reaches there), from the horizon up a quadratic in the code whose steps widen
+#: from :data:`STEP_HORIZON` to 0.49 degrees at the zenith (a low sun's shadow edges are low;
+#: a 0.526-degree Sun's radius is 0.26 degrees). On the gallery's relief (a 0.526-degree Sun 3
+#: degrees high) the viewport erred 0.073 with 0.35-degree steps everywhere (the codes before
+#: edges under the horizon), 0.080 with even 0.39-degree steps from -10 degrees, 0.071 with
+#: these, 0.058 with 0.044-degree steps (not 8-bit); between two texels' codes the viewport's
+#: linear lookup bends the edge by 0.2 degrees midway across a 12-degree jump (1.2 across 30)
+#: (docs/bench/2026-12-gallery.md, "Under the horizon").
+CODE_ZERO = 10
+#: The step under the horizon, and at the horizon (radians).
+STEP_BELOW = np.radians(1.0)
+STEP_HORIZON = np.radians(0.25)
+#: The elevation of code 0 (radians).
+EDGE_MIN = -CODE_ZERO * STEP_BELOW
+#: The quadratic's coefficient: ``h = STEP_HORIZON u + CURVE u^2`` for ``u = code - CODE_ZERO``,
+#: pi/2 at code 255.
+CURVE = (np.pi / 2 - STEP_HORIZON * (255 - CODE_ZERO)) / (255 - CODE_ZERO) ** 2
+#: The widest step (radians): 0.49 degrees, at the zenith.
+STEP = STEP_HORIZON + 2 * CURVE * (255 - CODE_ZERO)
+assert EDGE_MIN <= BELOW
+#: The code step of maps before format 4, whose codes started at the horizon (0.35 degrees):
+#: :func:`load` recodes them.
+STEP_V3 = np.pi / 2 / 255.0
 #: The largest spread of an upper edge a code holds (radians): codes are ``sqrt(spread /
 #: SPREAD_MAX)`` in 255 steps, fine where a hard sun needs them (0.0002 degrees at code 1, 0.03
 #: degrees a step near 1 degree).
@@ -142,12 +166,16 @@ def pair_edges(lo_c, hi_c, lo_s, hi_s, group, weight, centre_w):
     ``weight`` (N,), the centres' ``centre_w`` (n,) (:class:`..rays.footprint.Footprint`
     ``._sub_points``; a texel's weights sum to 1). A sub-sample open along the azimuth (an
     empty interval) counts as an edge at its centre's lower edge (at 0 under one blocked from
-    below): visible wherever the centre's interval does not block."""
+    below): visible wherever the centre's interval does not block; where the ground under the
+    horizon is some edge of the pair's (an upper edge below 0), at :data:`EDGE_MIN`: visible
+    under the horizon too."""
     lo_c, hi_c = np.asarray(lo_c, np.float64), np.asarray(hi_c, np.float64)
     lo_s, hi_s = np.asarray(lo_s, np.float64), np.asarray(hi_s, np.float64)
     group = np.asarray(group, np.int64)
     n = len(lo_c)
-    floor = np.maximum(lo_c, 0.0)
+    ground = ((hi_c > lo_c) & (hi_c < 0)) | (np.bincount(
+        group, weights=((hi_s > lo_s) & (hi_s < 0)).astype(np.float64), minlength=n) > 0)
+    floor = np.where(ground, EDGE_MIN, np.maximum(lo_c, 0.0))
     hc = np.where(hi_c > lo_c, hi_c, floor)
     hs = np.where(hi_s > lo_s, hi_s, floor[group])
     w = np.asarray(weight, np.float64)
@@ -185,8 +213,8 @@ def varying_pairs(H, texel, R: int, found=None, tol: float = VARYING, normals=No
             phi = 2 * np.pi * a / A
             e0 = np.arctan2(N[:, 2], N[:, 0] * np.cos(phi) + N[:, 1] * np.sin(phi))
             lo = np.where(lo <= np.maximum(e0 - np.pi / 2, 0.0) + tol / 4, -1.0, lo)
-            hi = np.where(hi >= np.clip(e0 + np.pi / 2, 0.0, np.pi / 2) - tol / 4, np.pi / 2,
-                          hi)
+            hi = np.where(hi >= np.clip(e0 + np.pi / 2, EDGE_MIN, np.pi / 2) - tol / 4,
+                          np.pi / 2, hi)
         empty = np.asarray(H[1, a], np.float64) <= np.asarray(H[0, a], np.float64)
         flag = np.zeros((R, R), bool)
         for v in (np.where(empty, OPEN, lo), np.where(empty, OPEN, hi)):
@@ -292,23 +320,37 @@ def smooth_spreads(H, nb, ai, ti, box: float, tol: float = SMOOTH, jump: float =
 
 
 def quantize(H) -> np.ndarray:
-    """Intervals (2, ...) in radians -> uint8 codes (module docstring): upper edges in
-    [0, pi/2] round to 0..255; lower edges below 0 (blocked from below) are code 0, others
-    round to 1..255."""
+    """Intervals (2, ...) in radians -> uint8 codes (module docstring): edges in
+    [EDGE_MIN, pi/2] round to the nearest of 0..255 (:func:`decode`); lower edges below 0
+    (blocked from below) are code 0, others round to CODE_ZERO..255."""
     H = np.asarray(H, np.float64)
-    q = np.rint(np.clip(H / (np.pi / 2), 0.0, 1.0) * 255.0).astype(np.uint8)
+    u = np.where(H < 0, H / STEP_BELOW,       # the quadratic's inverse above the horizon
+                 2 * H / (STEP_HORIZON + np.sqrt(STEP_HORIZON ** 2 + 4 * CURVE * np.maximum(H, 0))))
+    q = np.rint(np.clip(u + CODE_ZERO, 0.0, 255.0)).astype(np.uint8)
     q[0] = np.where(H[0] < 0, 0, np.maximum(q[0], 1))
     return q
 
 
 def decode(q) -> np.ndarray:
     """Codes (2, ...) -> radians float64: uint8 codes, or codes interpolated between texels
-    as floats -- the viewport's rule: ``q * STEP``, and a lower code under 0.5 is "from
-    below", ``q * STEP - pi/2`` (exactly ``-pi/2`` for code 0)."""
+    as floats -- the viewport's rule: ``u = code - CODE_ZERO``, ``STEP_BELOW u`` under the
+    horizon (u < 0), ``(CURVE u + STEP_HORIZON) u`` above; a lower code under 0.5 is "from
+    below", ``-pi/2`` plus the code's part (exactly ``-pi/2`` for code 0)."""
     qf = np.asarray(q, np.float64)
-    h = qf * STEP
-    h[0] = np.where(qf[0] < 0.5, h[0] + FROM_BELOW, h[0])
+    u = qf - CODE_ZERO
+    up = np.maximum(u, 0.0)
+    h = np.minimum(u, 0.0) * STEP_BELOW + (up * CURVE + STEP_HORIZON) * up
+    h[0] = np.where(qf[0] < 0.5, h[0] + (FROM_BELOW - EDGE_MIN), h[0])
     return h
+
+
+def recode_v3(q) -> np.ndarray:
+    """A format-3 (or 2) map's codes (2, ...) uint8, whose edges were ``q * STEP_V3`` from the
+    horizon, as this format's codes (each edge within half a step of the old one)."""
+    qf = np.asarray(q, np.float64)
+    h = qf * STEP_V3
+    h[0] = np.where(qf[0] < 0.5, FROM_BELOW, h[0])
+    return quantize(h)
 
 
 def upsample(img, R: int) -> np.ndarray:
@@ -366,13 +408,21 @@ class HorizonMap:
         """The horizons' side (<= the texture's)."""
         return int(self.q.shape[2])
 
-    def direct(self, d, sun_angle_deg: float = 0.0, texels=None) -> np.ndarray:
+    def direct(self, d, sun_angle_deg: float = 0.0, texels=None,
+               moments: bool = True) -> np.ndarray:
         """Direct ``E / pi`` (R, R) float32 under a unit sun towards ``d``: the closure
         normal's cosine times the part of the sun's disc outside the blocked interval, read
-        across the disc at :data:`STRIPS` azimuths -- the viewport's computation
-        (:func:`...operators.preview.transport_preview.build_horizon_group`). ``texels``: flat
-        indices (n,) at the texture's side to compute only there (the same values, bit for
-        bit): (n,) float32.
+        across the disc at :data:`STRIPS` azimuths, plus the cosine's slope in elevation
+        times that part's first moment (:func:`..rays.horizon.visible_moment`: the cosine
+        over the visible part, not at the disc's centre; ``moments`` False: the centre's) --
+        the viewport's computation (:func:`...operators.preview.transport_preview.
+        build_horizon_group`). ``texels``: flat indices (n,) at the texture's side to compute
+        only there (the same values, bit for bit): (n,) float32.
+
+        The moments matter where a wide sun is low: on a floor 0.1 m under a wall's top, a
+        10-degree Sun 4 / 6 degrees high erred 0.29 / 0.13 against rays over its disc with the
+        centre's cosine, 0.010 / 0.007 with the moments; a 2-degree Sun 4 degrees high 0.043 /
+        0.030 (tests/core/test_horizons.py).
 
         At each strip's azimuth (the sun's, and either side of it by 0.77 of the disc's
         radius) the disc is cut by that azimuth's interval (:func:`..rays.horizon.
@@ -410,22 +460,31 @@ class HorizonMap:
                     c = (upsample(self.spread[k], R) if texels is None else
                          upsample_at(self.spread[k], R, texels))
                     r_hi = spread_radius(r, decode_spread(c))
-                seen[k] = visible_fraction(el, *h, r, r_hi)
+                seen[k] = (visible_fraction(el, *h, r, r_hi),
+                           # (the sun's own disc: a spread is the edge's over the
+                           # footprint, seen at the sun's one height)
+                           visible_moment(el, *h, r) if moments else 0.0)
             return seen[k]
-        vis = 0.0
+        vis, mom = 0.0, 0.0
         for x, w in STRIPS:
             xs = xa + x * r * across
             k = np.floor(xs)
             f = xs - k
             k0 = int(k) % A
-            vis = vis + w * ((1 - f) * vis_at(k0) + f * vis_at((k0 + 1) % A))
+            (v0, m0), (v1, m1) = vis_at(k0), vis_at((k0 + 1) % A)
+            vis = vis + w * ((1 - f) * v0 + f * v1)
+            mom = mom + w * ((1 - f) * m0 + f * m1)
         if texels is None:
             n = self.normals.astype(np.float64)
         else:
             n = self.normals.reshape(-1, 3)[np.asarray(texels)].astype(np.float64)
         length = np.linalg.norm(n, axis=-1)
-        cos = np.maximum(n @ d, 0.0) / np.maximum(length, 1e-12)
-        return (cos * vis / np.pi).astype(np.float32)
+        # the cosine linear in elevation across the disc: its slope along d / d el
+        ch = np.hypot(d[0], d[1])
+        g = (np.array([-d[2] * d[0] / ch, -d[2] * d[1] / ch, ch]) if ch > 1e-9 else
+             np.zeros(3))
+        e = np.maximum((n @ d) * vis + (n @ g) * mom, 0.0) / np.maximum(length, 1e-12)
+        return (e / np.pi).astype(np.float32)
 
     def gpu_bytes(self) -> int:
         """GPU memory of the viewport's images (:func:`gpu_bytes`)."""
@@ -517,10 +576,32 @@ def _codes(H, texel, R: int, margin) -> np.ndarray:
     return q.reshape(2, A, R, R)
 
 
-def heldout_directions(count: int = 16, seed: int = 0) -> np.ndarray:
+#: The lowest elevation (degrees) of a held-out direction on a Sun's path.
+PATH_HELDOUT_MIN_DEG = 1.0
+
+
+def heldout_directions(count: int = 16, seed: int = 0, path=None) -> np.ndarray:
     """``count`` unit directions (count, 3) off any baked set: half with elevations 3-20
     degrees (where shadows are long and sets are sparse), half 20-85, azimuths spread by the
-    golden angle from a seeded start."""
+    golden angle from a seeded start. ``path`` (P, 3): the baked directions along the scene
+    Sun's animated path, in order: the Sun the viewport will show is on it, so the directions
+    are midway between consecutive ones (those at least :data:`PATH_HELDOUT_MIN_DEG` high,
+    evenly along the path; where fewer than ``count / 2`` are, the sky's as above) -- on the
+    gallery's animated day Sun T, which holds the path, was 3 times closer to Cycles than the
+    horizon map the sky's directions chose (0.019 against 0.059 at 3 degrees)."""
+    if path is not None and len(path) > 1:
+        p = np.asarray(path, np.float64)
+        mid = p[:-1] + p[1:]
+        mid /= np.maximum(np.linalg.norm(mid, axis=1, keepdims=True), 1e-12)
+        # consecutive samples of one curve (a band or several days' paths jump between them)
+        gap = np.arccos(np.clip(np.einsum("ij,ij->i", p[:-1], p[1:]), -1.0, 1.0))
+        ok = (gap <= 1.5 * np.median(gap)) & \
+            (mid[:, 2] >= np.sin(np.radians(PATH_HELDOUT_MIN_DEG)))
+        cand = mid[ok]
+        if len(cand) >= max(1, count // 2):
+            pick = np.unique(np.linspace(0, len(cand) - 1, min(count, len(cand))).round()
+                             .astype(np.int64))
+            return cand[pick]
     rng = np.random.default_rng(seed)
     half = count // 2
     el = np.concatenate([np.linspace(3, 20, half, endpoint=False),
@@ -580,9 +661,9 @@ def load(path: str, resolution: int | None = None) -> HorizonMap:
     from ..io import untrusted as ut, versions
 
     with ut.open_npz(path) as z:
+        version = ut.npz_scalar(z, "format_version", int)
         versions.check({"format": ut.npz_scalar(z, "format", str),
-                        "format_version": ut.npz_scalar(z, "format_version", int)},
-                       FORMAT, path, "a horizon map")
+                        "format_version": version}, FORMAT, path, "a horizon map")
         (n_shape, n_dtype) = z.header("normals") if "normals" in z else ((), None)
         R = resolution if resolution is not None else (n_shape[0] if n_shape else 1)
         ut.check_count(path, R, ut.MAX_RESOLUTION, "resolution", lo=1)
@@ -595,5 +676,8 @@ def load(path: str, resolution: int | None = None) -> HorizonMap:
         spread = (z.get("spread", shape=tuple(qs[1:]), dtype=np.uint8) if "spread" in z
                   else None)          # (version 2 maps have none: sharp edges)
         ut.check_values(path, normals, what="normals")
-        return HorizonMap(np.asarray(q, np.uint8), np.asarray(normals, np.float16),
+        q = np.asarray(q, np.uint8)
+        if version < 4:                      # codes from the horizon up (recoded)
+            q = recode_v3(q)
+        return HorizonMap(q, np.asarray(normals, np.float16),
                           None if spread is None else np.asarray(spread, np.uint8))

@@ -207,7 +207,11 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
         t2, r2 = time.perf_counter(), occluder.rays
         # the check auto chooses the viewport by: hard suns by rays over the preview sun's
         # disc at held-out directions (neither set has them), per object, margins filled
-        Dh = hmap.heldout_directions(HELDOUT, settings.seed)
+        # (on the scene Sun's animated path where the set holds it: the Sun the viewport
+        # shows moves along it)
+        n_path = int((dset.params or {}).get("sun_path_directions", 0))
+        Dh = hmap.heldout_directions(HELDOUT, settings.seed,
+                                     dset.directions[-n_path:] if n_path > 1 else None)
         trial_ok = settings.viewport == "auto" and _CALIBRATION_AZIMUTHS is None
         maps, skipped, searched, castable, checks, trials = [], 0, 0, 0, [], []
         edges, with_spread = [], horizon_spread(settings)

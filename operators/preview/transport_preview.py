@@ -605,6 +605,18 @@ def _disc_part(b, offset, radius, x, y):
     return b.math("MULTIPLY_ADD", seg, 1.0 / np.pi, 0.5, x=x + 600, y=y)
 
 
+def _disc_moment(b, offset, radius, x, y):
+    """``radius * disc_moment(offset / radius)`` in nodes: the first moment of the part of a
+    disc of ``radius`` beyond a line ``offset`` below its centre
+    (:func:`...lt_addon.rays.horizon.disc_moment`)."""
+    t = b.math("DIVIDE", offset, radius, x=x, y=y)
+    t = b.math("MINIMUM", b.math("MAXIMUM", t, -1.0, x=x + 100, y=y), 1.0, x=x + 200, y=y)
+    c = b.math("SUBTRACT", 1.0, b.math("MULTIPLY", t, t, x=x + 300, y=y), x=x + 400, y=y)
+    m = b.math("POWER", b.math("MAXIMUM", c, 0.0, x=x + 500, y=y), 1.5, x=x + 600, y=y)
+    return b.math("MULTIPLY", b.math("MULTIPLY", m, 2.0 / (3.0 * np.pi), x=x + 700, y=y),
+                  radius, x=x + 800, y=y)
+
+
 def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image, uv_map: str,
                         name: str, sun_angle: float, horizon_resolution: int | None = None,
                         spread: bool = False):
@@ -613,15 +625,18 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     azimuth channels around each are picked; at each, the sun's disc is cut by the blocked
     interval's edges (``1 - max(0, F((e - lo) / r) - F((e - hi) / r))`` with
     ``F(t) = 0.5 + (t sqrt(1 - t^2) + asin t) / pi``), the two visibilities linear between the
-    azimuths, the three weighted by the disc's chord there; times ``max(0, N . d) / pi`` with
-    the baked normal: 14 lookups (12 horizon channels, the normal, the albedo). With
+    azimuths, the three weighted by the disc's chord there (``vis``); lit by ``max(0, (N . d)
+    vis + (N . g) mom) / pi`` with the baked normal, ``g`` the direction's slope in elevation
+    and ``mom`` the visible part's first moment, read likewise (the cosine over the visible
+    part: :func:`...lt_addon.rays.horizon.visible_moment`): 14 lookups (12 horizon channels,
+    the normal, the albedo). With
     ``spread`` (the atlas' third set of tiles) the upper edge is cut by the wider disc
     ``sqrt(r^2 + 4 s^2)``, ``s = c^2 SPREAD_MAX`` from the spread channel ``c`` (0..1):
     6 lookups more (:func:`...lt_addon.transport.horizon_map.spread_radius`). The horizon
     atlas may be coarser (``horizon_resolution``) than the normals' (``resolution``): its linear
     lookup reads the codes between its texels, as
     :func:`...lt_addon.transport.horizon_map.upsample`."""
-    from ...lt_addon.transport.horizon_map import (COS_MIN, SPREAD_MAX, STEP, STRIPS,
+    from ...lt_addon.transport.horizon_map import (COS_MIN, EDGE_MIN, SPREAD_MAX, STRIPS,
                                                    SUN_RADIUS_MIN)
 
     Rh = int(horizon_resolution or resolution)
@@ -650,7 +665,7 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     across = b.math("DIVIDE", b.math("MULTIPLY", r, A / (2 * np.pi), x=-1500, y=800),
                     b.math("MAXIMUM", b.math("COSINE", el, x=-1500, y=700), COS_MIN,
                            x=-1400, y=700), x=-1300, y=800)
-    vis, acc = None, None
+    vis, mom, acc = None, None, None
     for s_i, (x_s, w_s) in enumerate(STRIPS):
         y0 = 3200 - 1800 * s_i
         xs = b.math("MULTIPLY_ADD", across, x_s, xa, x=-1200, y=y0)
@@ -658,18 +673,18 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
         f = b.math("SUBTRACT", xs, k, x=-1000, y=y0 - 100)
         k0 = mod_a(k, -1000, y0)
         k1 = mod_a(b.math("ADD", k0, 1.0, x=-700, y=y0 + 100), -600, y0 + 100)
-        part = []
+        part, moment = [], []
         for j, kk in enumerate((k0, k1)):
-            edge = []
+            edge, hs, hv = [], [], []
             for e, upper in enumerate((False, True)):
                 y = y0 - 400 * (2 * j + e)
                 idx = b.math("ADD", kk, float(3 * n), x=-800, y=y) if upper else kk
                 q = _atlas_channel(b, idx, uv, lay, horizon_image, Rh, acc, -700, y)
                 acc = q
-                h = b.math("MULTIPLY", q, 255.0 * STEP, x=400, y=y)
-                if not upper:    # code 0: blocked from below
+                h = _decode_edge(b, q, 400, y)
+                if not upper:    # code 0: blocked from below (-pi/2)
                     below = b.math("LESS_THAN", q, 0.5 / 255.0, x=400, y=y - 60)
-                    h = b.math("MULTIPLY_ADD", below, -np.pi / 2, h, x=500, y=y)
+                    h = b.math("MULTIPLY_ADD", below, -np.pi / 2 - EDGE_MIN, h, x=500, y=y)
                 r_e = r
                 if upper and spread:     # the edge's spread over the footprint widens the disc
                     c = _atlas_channel(b, b.math("ADD", kk, float(6 * n), x=-800, y=y - 200),
@@ -680,25 +695,63 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
                                 4.0 * SPREAD_MAX ** 2, x=600, y=y - 200)
                     r_e = b.math("SQRT", b.math("MULTIPLY_ADD", r, r, s4, x=700, y=y - 200),
                                  x=800, y=y - 200)
-                edge.append(_disc_part(b, b.math("SUBTRACT", el, h, x=800, y=y), r_e, 900, y))
+                hv.append(h)
+                offset = b.math("SUBTRACT", el, h, x=800, y=y)
+                edge.append(_disc_part(b, offset, r_e, 900, y))
+                hs.append(_disc_moment(b, offset, r, 900, y - 150))   # the sun's own disc
             blocked = b.math("MAXIMUM", b.math("SUBTRACT", edge[0], edge[1], x=1600,
                                                y=y0 - 800 * j), 0.0, x=1650, y=y0 - 800 * j)
             part.append(b.math("SUBTRACT", 1.0, blocked, x=1700, y=y0 - 800 * j))
+            # the visible part's first moment: the band's taken from the whole disc's 0
+            band = b.math("LESS_THAN", hv[0], hv[1], x=1600, y=y0 - 800 * j - 100)
+            moment.append(b.math("MULTIPLY", b.math("SUBTRACT", hs[1], hs[0], x=1650,
+                                                    y=y0 - 800 * j - 100),
+                                 band, x=1700, y=y0 - 800 * j - 100))
         strip = b.math("MULTIPLY_ADD", b.math("SUBTRACT", part[1], part[0], x=1750, y=y0),
                        f, part[0], x=1800, y=y0)
         vis = (b.math("MULTIPLY", strip, w_s, x=1900, y=y0) if vis is None else
                b.math("MULTIPLY_ADD", strip, w_s, vis, x=1900, y=y0))
+        strip = b.math("MULTIPLY_ADD", b.math("SUBTRACT", moment[1], moment[0], x=1750,
+                                              y=y0 - 100), f, moment[0], x=1800, y=y0 - 100)
+        mom = (b.math("MULTIPLY", strip, w_s, x=1900, y=y0 - 100) if mom is None else
+               b.math("MULTIPLY_ADD", strip, w_s, mom, x=1900, y=y0 - 100))
     ntile = atlas_layout(2, resolution)["tiles"]
     nrm = b.vmath("NORMALIZE", _lookup(b, na_image, uv, ntile[0], 1200, -300), x=1600, y=-300)
     d = b.vmath("NORMALIZE", gin.outputs["Light Direction"], x=1600, y=-450)
-    cos = b.math("MAXIMUM", b.vmath("DOT_PRODUCT", nrm, d, x=1700, y=-300), 0.0, x=1800,
-                 y=-300)
-    irr = b.math("MULTIPLY", b.math("MULTIPLY", cos, vis, x=1900, y=0), 1.0 / np.pi, x=2000,
+    # the cosine linear in elevation across the disc: its slope d(d)/d(el) =
+    # (-dz dx / ch, -dz dy / ch, ch), ch = |(dx, dy)|
+    ch = b.math("SQRT", b.math("MULTIPLY_ADD", dx, dx, b.math("MULTIPLY", dy, dy, x=1400,
+                                                                 y=-700), x=1500, y=-700),
+                x=1600, y=-700)
+    k = b.math("DIVIDE", b.math("MULTIPLY", dz, -1.0, x=1600, y=-800),
+               b.math("MAXIMUM", ch, 1e-9, x=1650, y=-750), x=1700, y=-800)
+    g = b.node("ShaderNodeCombineXYZ", 1750, -750)
+    b.links.new(b.math("MULTIPLY", k, dx, x=1700, y=-850), g.inputs[0])
+    b.links.new(b.math("MULTIPLY", k, dy, x=1700, y=-900), g.inputs[1])
+    b.links.new(ch, g.inputs[2])
+    cos = b.vmath("DOT_PRODUCT", nrm, d, x=1700, y=-300)
+    slope = b.vmath("DOT_PRODUCT", nrm, g.outputs[0], x=1800, y=-700)
+    e = b.math("MULTIPLY_ADD", cos, vis, b.math("MULTIPLY", slope, mom, x=1850, y=-600),
+               x=1900, y=-300)
+    irr = b.math("MULTIPLY", b.math("MAXIMUM", e, 0.0, x=1950, y=0), 1.0 / np.pi, x=2000,
                  y=0)
     albedo = _lookup(b, na_image, uv, ntile[1], 1800, -600)
     _sun_group_tail(b, gin, gout, irr, albedo, dz, 2200)
     group["relight_azimuths"] = A
     return group
+
+
+def _decode_edge(b, q, x, y):
+    """An edge's code ``q`` (0..1, as the 8-bit image reads it) -> elevation (radians):
+    :func:`...lt_addon.transport.horizon_map.decode`'s rule in five nodes."""
+    from ...lt_addon.transport.horizon_map import CODE_ZERO, CURVE, STEP_BELOW, STEP_HORIZON
+
+    u = b.math("MULTIPLY_ADD", q, 255.0, -float(CODE_ZERO), x=x, y=y)
+    up = b.math("MAXIMUM", u, 0.0, x=x + 20, y=y - 20)
+    h = b.math("MULTIPLY", b.math("MULTIPLY_ADD", up, CURVE, STEP_HORIZON, x=x + 40, y=y - 30),
+               up, x=x + 60, y=y - 40)
+    return b.math("MULTIPLY_ADD", b.math("MINIMUM", u, 0.0, x=x + 20, y=y - 60), STEP_BELOW, h,
+                  x=x + 80, y=y - 50)
 
 
 def set_horizon_sun(group, sun_angle: float) -> bool:
