@@ -361,7 +361,12 @@ def iter_pair_edges(occluder, points: ShadingPoints, azimuths: int, ai, pi, lo_b
         Ns = points.Ns[p]
         e0 = np.arctan2(Ns[:, 2], Ns[:, 0] * ca + Ns[:, 1] * sa)
         top = np.clip(e0 + np.pi / 2, BELOW, np.pi / 2)             # the scan's "to the top"
-        e_top, e_bot = top - gap, np.maximum(e0 - np.pi / 2, BELOW) + gap
+        # the bracket from the horizon up (the lower terminator's, if higher), or under the
+        # horizon for an edge of the ground's (a bracket wholly under it)
+        e_up = np.maximum(e0 - np.pi / 2, 0.0) + gap
+        ground = np.asarray(hi_b, np.float64)[sel] < 0
+        e_top = np.where(ground, np.minimum(top, 0.0), top) - gap
+        e_bot = np.where(ground, np.maximum(e0 - np.pi / 2, BELOW) + gap, e_up)
         lb = np.clip(np.asarray(lo_b, np.float64)[sel], e_bot, e_top)
         hb = np.clip(np.asarray(hi_b, np.float64)[sel], e_bot, e_top)
 
@@ -379,18 +384,21 @@ def iter_pair_edges(occluder, points: ShadingPoints, azimuths: int, ai, pi, lo_b
         up = use[b_lo & b_hi]                     # the edge above the bracket
         if len(up):
             t = blocked_at(e_top[up], up)
-            hi[sel[up[t]]] = top[up[t]]
-            done[up[t]] = True
+            # (blocked to the top: the terminator's edge; for a bracket of the ground's,
+            # blocked at the horizon is no ground's edge: the whole scan, below)
+            term = t & ~ground[up]
+            hi[sel[up[term]]] = top[up[term]]
+            done[up[term]] = True
             lo_e[up[~t]], hi_e[up[~t]] = hb[up[~t]], e_top[up[~t]]
             bis[up[~t]] = True
         down = use[~b_lo & ~b_hi]                 # below it, or nothing blocked
+        # a ray over the horizon (the lower terminator's, if higher), where the bracket lies
+        # above it; elsewhere the whole scan (under the horizon the ground is the scan's to find:
+        # between it and a caster above, bisection could find either edge)
+        down = down[lb[down] > e_up[down]]
         if len(down):
-            # over the horizon where the bracket is (the ground under it is the scan's to find:
-            # between it and a caster above, bisection could find either edge)
-            e_up = np.maximum(e0[down] - np.pi / 2, 0.0) + gap
-            e_dn = np.where(lb[down] > e_up, e_up, e_bot[down])
-            t = blocked_at(e_dn, down)
-            lo_e[down[t]], hi_e[down[t]] = e_dn[t], lb[down[t]]
+            t = blocked_at(e_up[down], down)
+            lo_e[down[t]], hi_e[down[t]] = e_up[down[t]], lb[down[t]]
             bis[down[t]] = True
         k = np.nonzero(bis)[0]
         if len(k):

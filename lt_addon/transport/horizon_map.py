@@ -166,18 +166,23 @@ def pair_edges(lo_c, hi_c, lo_s, hi_s, group, weight, centre_w):
     ``weight`` (N,), the centres' ``centre_w`` (n,) (:class:`..rays.footprint.Footprint`
     ``._sub_points``; a texel's weights sum to 1). A sub-sample open along the azimuth (an
     empty interval) counts as an edge at its centre's lower edge (at 0 under one blocked from
-    below): visible wherever the centre's interval does not block; where the ground under the
-    horizon is some edge of the pair's (an upper edge below 0), at :data:`EDGE_MIN`: visible
-    under the horizon too."""
+    below): visible wherever the centre's interval does not block. Under a centre blocked from
+    below, a sub-sample's upper edge under the horizon (the ground's) is an edge, and an open
+    one counts at :data:`EDGE_MIN` where the ground is some edge of the pair's (visible under
+    the horizon too); under a floating or open centre, whose lower edge the map keeps, a
+    sub-sample that sees only the ground counts as open (its edge under the centre's lower
+    one would empty the interval: the caster's shadow gone)."""
     lo_c, hi_c = np.asarray(lo_c, np.float64), np.asarray(hi_c, np.float64)
     lo_s, hi_s = np.asarray(lo_s, np.float64), np.asarray(hi_s, np.float64)
     group = np.asarray(group, np.int64)
     n = len(lo_c)
-    ground = ((hi_c > lo_c) & (hi_c < 0)) | (np.bincount(
-        group, weights=((hi_s > lo_s) & (hi_s < 0)).astype(np.float64), minlength=n) > 0)
+    below = lo_c < 0                                 # the centre blocked from below
+    ground_s = (hi_s > lo_s) & (hi_s < 0) & below[group]
+    ground = below & (((hi_c > lo_c) & (hi_c < 0)) | (np.bincount(
+        group, weights=ground_s.astype(np.float64), minlength=n) > 0))
     floor = np.where(ground, EDGE_MIN, np.maximum(lo_c, 0.0))
     hc = np.where(hi_c > lo_c, hi_c, floor)
-    hs = np.where(hi_s > lo_s, hi_s, floor[group])
+    hs = np.where((hi_s > lo_s) & ((hi_s >= 0) | below[group]), hi_s, floor[group])
     w = np.asarray(weight, np.float64)
     cw = np.asarray(centre_w, np.float64)
     total = cw + np.bincount(group, weights=w, minlength=n)
@@ -268,6 +273,10 @@ def brackets(H, nb, ai, ti, margin: float = BRACKET_MARGIN):
     ai, ti = np.asarray(ai, np.int64), np.asarray(ti, np.int64)
     nb = np.asarray(nb)[:, ti]                                          # (4, n)
     cand = [ti] + [nb[k] for k in range(4)]
+    # an edge under the horizon (the ground's) brackets only a pair whose own edge is one: the
+    # ground beside a caster's edge would widen the bracket over the sky under the caster
+    lo0, hi0 = np.asarray(H[0, ai, ti], np.float64), np.asarray(H[1, ai, ti], np.float64)
+    own_ground = (hi0 > lo0) & (hi0 < 0)
     lo_b = np.full(len(ti), np.inf)
     hi_b = np.full(len(ti), -np.inf)
     for c in cand:
@@ -275,7 +284,7 @@ def brackets(H, nb, ai, ti, margin: float = BRACKET_MARGIN):
         cc = np.maximum(c, 0)
         lo_e = np.asarray(H[0, ai, cc], np.float64)
         hi_e = np.asarray(H[1, ai, cc], np.float64)
-        real = has & (hi_e > lo_e)
+        real = has & (hi_e > lo_e) & ((hi_e >= 0) | own_ground)
         lo_b = np.where(real, np.minimum(lo_b, hi_e), lo_b)
         hi_b = np.where(real, np.maximum(hi_b, hi_e), hi_b)
     none = ~np.isfinite(lo_b)

@@ -622,3 +622,32 @@ def test_held_out_suns_lie_on_an_animated_suns_path():
     # without a path (or too short a one above 1 degree): the sky's, as before
     sky = hmap.heldout_directions(16, 0)
     assert np.array_equal(hmap.heldout_directions(16, 0, path[:3]), sky)
+
+
+def test_the_grounds_edges_count_only_under_a_centre_blocked_from_below():
+    """A footprint under an overhang (the centre's interval floating at [2, 5] degrees) whose
+    sub-samples see the caster or only the ground under the horizon: the ground's sub-samples
+    count as open (at the centre's lower edge), so the mean edge stays over it and the shadow
+    stays (averaging their -3 degrees in would empty the interval). Under a centre that sees
+    only the ground, the sub-samples' ground edges are edges, an open one at EDGE_MIN."""
+    d = np.radians
+    w = np.full(4, 0.2)
+    group = np.zeros(4, np.int64)
+    lo_s = np.full(4, -np.pi / 2)
+    hi_s = d(np.array([5.0, 5.0, -3.0, -3.0]))
+    mean, _ = hmap.pair_edges([d(2.0)], [d(5.0)], lo_s, hi_s, group, w, [0.2])
+    assert abs(mean[0] - d(0.2 * 5 * 3 + 0.2 * 2 * 2)) < 1e-12        # 3.8 degrees
+    lo_s = np.array([-np.pi / 2, -np.pi / 2, 0.0, -np.pi / 2])
+    hi_s = d(np.array([-4.0, -2.0, 0.0, -3.0]))                          # one open: [0, 0]
+    mean, _ = hmap.pair_edges([-np.pi / 2], [d(-2.0)], lo_s, hi_s, group, w, [0.2])
+    want = 0.2 * (d(-2.0) + d(-4.0) + d(-2.0) + hmap.EDGE_MIN + d(-3.0))
+    assert abs(mean[0] - want) < 1e-12
+    # a bracket for a caster's edge takes no ground's edge from a neighbour
+    H = np.zeros((2, 1, 2))
+    H[:, 0, 0] = [d(2.0), d(5.0)]
+    H[:, 0, 1] = [-np.pi / 2, d(-3.0)]
+    nb = np.array([[1, -1], [-1, 0], [-1, -1], [-1, -1]])
+    lo_b, hi_b = hmap.brackets(H, nb, [0, 0], [0, 1])
+    assert abs(lo_b[0] - (d(5.0) - hmap.BRACKET_MARGIN)) < 1e-12
+    assert abs(lo_b[1] - (d(-3.0) - hmap.BRACKET_MARGIN)) < 1e-12
+    assert abs(hi_b[1] - (d(5.0) + hmap.BRACKET_MARGIN)) < 1e-12
