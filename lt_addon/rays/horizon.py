@@ -118,7 +118,8 @@ UPWARD = 1e-3
 RAY_BUDGET = 4 << 20
 
 
-def iter_horizons(occluder, points: ShadingPoints, azimuths: int = 128, refine: int = REFINE):
+def iter_horizons(occluder, points: ShadingPoints, azimuths: int = 128, refine: int = REFINE,
+                  gaps: bool = False):
     """Generator form of :func:`horizons`: yields the azimuths done (whole-map equivalents:
     the (azimuth, point) pairs done / P) after each block of pairs (a caller may stop between
     them) and returns ``(H, figures)``; H (2, A, P) float16 (0.03 degrees at the zenith,
@@ -131,20 +132,28 @@ def iter_horizons(occluder, points: ShadingPoints, azimuths: int = 128, refine: 
     calls of up to 233k rays on the bumps demo at 256^2 (128 azimuths, 16k points), where one
     azimuth at a time made 10,560 calls of ~2,600 rays (and the calls' set-up cost more than
     their rays). Each scan ray is the one a scan of one azimuth at a time casts, bit for bit
-    (tests), and so is each bisection step's."""
+    (tests), and so is each bisection step's.
+
+    ``gaps``: H is (4, A, P), ``H[2:]`` the widest open band inside each interval (the sky
+    through a window, between two casters: :func:`_gaps`), an empty one ``[0, 0]``; figures
+    add ``gap_rays``, the rays that sought them."""
     if azimuths < 3 or refine < 0:
         raise ValueError(f"need azimuths >= 3 and refine >= 0; got {azimuths}, {refine}")
     A, P = int(azimuths), points.size
-    H = np.empty((2, A, P), np.float16)
+    H = np.empty((4 if gaps else 2, A, P), np.float16)
     open_ = np.zeros((A, P), bool)
-    scan = _Scan(occluder, points, A, refine)
+    scan = _Scan(occluder, points, A, refine, gaps)
     figures = {"skipped": 0, "searched": 0, "castable": 0}
+    if gaps:
+        figures["gap_rays"] = 0
     done, bounds = 0, (None, None)        # (the chunk's first point, its bounds)
     for part, az in _blocks(P, A, len(ELEVATIONS)):
         if bounds[0] != part.start:              # once per chunk of points, before its blocks
             bounds = (part.start, _bounds(occluder, points, A, part))
         ai, pi, lo, hi, any_, figs = scan.block(part, az, bounds[1])
         H[0, ai, pi], H[1, ai, pi] = lo, hi
+        if gaps:
+            H[2, ai, pi], H[3, ai, pi] = scan.gap
         open_[ai, pi] = ~any_
         for k in figures:
             figures[k] += figs[k]
@@ -173,8 +182,9 @@ def _blocks(P: int, A: int, J: int) -> list:
 class _Scan:
     """The scan's per-call constants, and :meth:`block`: one block's intervals."""
 
-    def __init__(self, occluder, points, A: int, refine: int):
-        self.occluder, self.points, self.refine = occluder, points, refine
+    def __init__(self, occluder, points, A: int, refine: int, gaps: bool = False):
+        self.occluder, self.points, self.refine, self.gaps = occluder, points, refine, gaps
+        self.gap = None     # the last block's gaps (g_lo, g_hi) (m,), where ``gaps``
         self.els = np.radians(np.asarray(ELEVATIONS))
         J = len(self.els)
         phis = 2 * np.pi * np.arange(A) / A
@@ -229,8 +239,35 @@ class _Scan:
                                     self.L32[az].transpose(1, 0, 2), None, pi, cast,
                                     which=ai - az[0])
         lo, hi, any_ = self._edges(ai, pi, care, e0, top, bottom)
-        return ai, pi, lo, hi, any_, {"skipped": skipped, "searched": rays,
-                                      "castable": int(cast.sum())}
+        figures = {"skipped": skipped, "searched": rays, "castable": int(cast.sum())}
+        if self.gaps:
+            self.gap, figures["gap_rays"] = self._gap_edges(
+                ai, pi, self.L[az].transpose(1, 0, 2), self.L32[az].transpose(1, 0, 2),
+                care, cast, top, bottom, ai - az[0])
+        return ai, pi, lo, hi, any_, figures
+
+    def _gap_edges(self, ai, pi, L, L32, care, cast, top, bottom, which):
+        """The widest open band inside each pair's interval (:func:`_gaps`), its edges
+        bisected as the interval's are: ``((g_lo, g_hi) (m,) radians, rays)``; no band:
+        ``[0, 0]``."""
+        els = self.els
+        ga, gb, rays = _gaps(self.occluder, self.points, L, L32, pi, care, cast, top, bottom,
+                             which)
+        m = len(ai)
+        g_lo, g_hi = np.zeros(m), np.zeros(m)
+        has = np.nonzero(ga >= 0)[0]
+        if has.size:
+            # the band's lower edge: blocked under it, open over; its upper: the reverse
+            edge = _bisect(self.occluder, self.points, np.tile(self.ca[ai[has]], 2),
+                           np.tile(self.sa[ai[has]], 2), np.tile(pi[has], 2),
+                           np.concatenate([els[ga[has] - 1], els[gb[has]]]),
+                           np.concatenate([els[ga[has]], els[gb[has] + 1]]),
+                           np.arange(2 * has.size) < has.size, self.refine)
+            g_lo[has], g_hi[has] = edge[:has.size], edge[has.size:]
+            rays += int(steps(np.concatenate([els[ga[has]] - els[ga[has] - 1],
+                                              els[gb[has] + 1] - els[gb[has]]]),
+                              self.refine).sum())
+        return (g_lo, g_hi), rays
 
     def _edges(self, ai, pi, care, e0, top, bottom):
         """The intervals' edges ``(lo, hi, any_)`` (m,) of pairs (azimuths ``ai``, points
@@ -454,6 +491,48 @@ def _search(occluder, points, L, L32, part: slice, idx, cast, which=None):
             bottom[pick[blocked(j, pick)]] = j
     bottom[top < 0] = J
     return top, bottom, rays
+
+
+def _gaps(occluder, points, L, L32, idx, care, cast, top, bottom, which):
+    """The widest open band strictly inside each pair's blocked hull (the scan's ``bottom``
+    to ``top``, :func:`_search`): the elevations between them (which the search does not
+    cast) are cast where in front of the point; an elevation no caster can reach is open,
+    one behind the point blocked (its cosine is 0 whatever). ``(ga, gb, rays)``: the band's
+    first and last open indices into the elevations (n,), -1 where the hull has no open
+    elevation inside -- a room's wall around its window, the sky between two casters, which
+    the hull alone counts blocked (the gallery's interior: the map's direct light 0.43-1.0 from
+    Cycles' at 3-75 degrees, the hull blocking every sun through the window)."""
+    J, n = cast.shape
+    rays = 0
+    open_ = np.zeros((J, n), bool)
+    inside = (bottom >= 0) & (top - bottom >= 2)
+    for j in range(J0 + 1, J - 1):
+        between = inside & (bottom < j) & (top > j)
+        if not between.any():
+            continue
+        open_[j] = between & care[j] & ~cast[j]      # in front, no caster there: open
+        pick = np.flatnonzero(between & cast[j])
+        if pick.size:
+            rays += pick.size
+            d = np.take(L32[j], which[pick], axis=0)
+            b = occluder.occluded(shadow_origins(points, d, np.take(idx, pick)), d)
+            open_[j, pick] = ~b
+    # the widest run of open elevations (in radians), per pair
+    els = np.radians(np.asarray(ELEVATIONS))
+    ga = np.full(n, -1, np.int64)
+    gb = np.full(n, -1, np.int64)
+    best = np.zeros(n)
+    start = np.full(n, -1, np.int64)
+    for j in range(J0 + 1, J):
+        o = open_[j] if j < J - 1 else np.zeros(n, bool)
+        start = np.where(o & (start < 0), j, start)
+        ends = ~o & (start >= 0)             # a run ended at j - 1
+        if ends.any():
+            width = els[j] - els[np.maximum(start - 1, 0)]      # the bracket's span
+            better = ends & (width > best)
+            ga[better], gb[better], best[better] = start[better], j - 1, width[better]
+            start = np.where(ends, -1, start)
+    return ga, gb, rays
 
 
 def _bounds(occluder, points: ShadingPoints, azimuths: int, part: slice | None = None):

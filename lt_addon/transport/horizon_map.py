@@ -24,7 +24,14 @@ into the disc that cuts the upper edge (:func:`spread_radius`). On the gallery's
 128^2 (direct light against the 16-sample footprint of rays): 0.127 -> 0.045 at 3 degrees,
 0.109 -> 0.044 at 8 under a 0.526-degree Sun.
 
-Arrays: ``q`` (2, A, Rh, Rh) uint8 codes -- ``q[1]`` the upper edges (:func:`decode`: -10
+Where the sky opens between two blocked elevations along an azimuth (a room's window, the sky
+between two casters) the hull would block it: a map may keep the widest such open band too
+(``q[2:]``, :func:`..rays.horizon._gaps`), and the disc's part inside it counts lit again.
+On the gallery's interior (the window 1.6 x 1.2 m) the hull blocked every sun through the
+window.
+
+Arrays: ``q`` (2, A, Rh, Rh) uint8 codes (or (4, A, Rh, Rh): ``q[2]``, ``q[3]`` the open
+band's lower and upper edges, coded as upper edges; an empty band ``q[2] == q[3]``) -- ``q[1]`` the upper edges (:func:`decode`: -10
 to 90 degrees, finest at the horizon; an upper edge under the horizon is the ground's, seen
 from a wall or a slope, which a large sun near the horizon reaches), ``q[0]`` the lower edges,
 the same but code 0 for "blocked from below" (``-pi / 2``); rows from v = 0 --, ``spread``
@@ -408,6 +415,11 @@ class HorizonMap:
         return int(self.q.shape[1])
 
     @property
+    def gaps(self) -> bool:
+        """Whether the map keeps an open band inside each interval (``q[2:]``)."""
+        return int(self.q.shape[0]) == 4
+
+    @property
     def resolution(self) -> int:
         """The texture's side (the normals')."""
         return int(self.normals.shape[0])
@@ -469,10 +481,16 @@ class HorizonMap:
                     c = (upsample(self.spread[k], R) if texels is None else
                          upsample_at(self.spread[k], R, texels))
                     r_hi = spread_radius(r, decode_spread(c))
-                seen[k] = (visible_fraction(el, *h, r, r_hi),
-                           # (the sun's own disc: a spread is the edge's over the
-                           # footprint, seen at the sun's one height)
-                           visible_moment(el, *h, r) if moments else 0.0)
+                vis_k = visible_fraction(el, h[0], h[1], r, r_hi)
+                # (the sun's own disc: a spread is the edge's over the footprint, seen at
+                # the sun's one height)
+                mom_k = visible_moment(el, h[0], h[1], r) if moments else 0.0
+                if len(h) == 4:      # the open band inside the interval lit again (within it)
+                    g_lo, g_hi = np.maximum(h[2], h[0]), np.minimum(h[3], h[1])
+                    vis_k = vis_k + 1.0 - visible_fraction(el, g_lo, g_hi, r)
+                    if moments:
+                        mom_k = mom_k - visible_moment(el, g_lo, g_hi, r)
+                seen[k] = (vis_k, mom_k)
             return seen[k]
         vis, mom = 0.0, 0.0
         for x, w in STRIPS:
@@ -498,7 +516,7 @@ class HorizonMap:
     def gpu_bytes(self) -> int:
         """GPU memory of the viewport's images (:func:`gpu_bytes`)."""
         return gpu_bytes(self.azimuths, self.resolution, self.horizon_resolution,
-                         self.spread is not None)
+                         self.spread is not None, self.gaps)
 
     def storage_bytes(self) -> int:
         return int(self.q.nbytes + self.normals.nbytes
@@ -506,16 +524,17 @@ class HorizonMap:
 
 
 def gpu_bytes(azimuths: int, resolution: int, horizon_resolution: int = 0,
-              spread: bool = False) -> int:
+              spread: bool = False, gaps: bool = False) -> int:
     """GPU memory of a horizon viewport: the lower and upper edges (and their ``spread``, where
-    the map has them: a third more tiles) as one 8-bit RGBA atlas (three azimuths per tile) at
+    the map has them: a third more tiles; the open bands' two edges, where it has them: two
+    thirds more) as one 8-bit RGBA atlas (three azimuths per tile) at
     the horizons' side (:func:`side`, of ``horizon_resolution``: 0 lets the bake choose) and the
     normals with the albedo in a half-float RGBA atlas (two tiles) at the texture's. Whether a
     map can be shown at all is decided without the spreads (the bake leaves them out where they
     would not fit the budget)."""
     from ..io.atlas import atlas_layout
 
-    h = atlas_layout((3 if spread else 2) * -(-int(azimuths) // 3),
+    h = atlas_layout((2 + bool(spread) + 2 * bool(gaps)) * -(-int(azimuths) // 3),
                      side(resolution, horizon_resolution))
     n = atlas_layout(2, int(resolution))
     return int(h["width"] * h["height"] * 4 + n["width"] * n["height"] * 8)
@@ -536,7 +555,10 @@ def from_points(H, texel, resolution: int, normals, margin=None, coarse=None,
         h_texel, Rh, h_margin = coarse
     else:
         h_texel, Rh, h_margin = texel, resolution, margin
-    q = _codes(H, np.asarray(h_texel), int(Rh), h_margin)
+    q = _codes(H, np.asarray(h_texel), int(Rh), h_margin,
+               normals if coarse is None else None)
+    if len(q) == 4 and not (q[3] > q[2]).any():    # no open band anywhere: not kept
+        q = q[:2]
     s_codes = (None if spread is None else
                _spread_codes(spread, np.asarray(h_texel), int(Rh), h_margin))
     R = int(resolution)
@@ -564,25 +586,82 @@ def _spread_codes(S, texel, R: int, margin) -> np.ndarray:
     return out.reshape(A, R, R)
 
 
-def _codes(H, texel, R: int, margin) -> np.ndarray:
-    """The codes (2, A, R, R) of intervals ``H`` (2, A, P) at ``texel``, margin filled."""
-    _, A, P = H.shape
+def _codes(H, texel, R: int, margin, normals=None) -> np.ndarray:
+    """The codes (2, A, R, R) of intervals ``H`` (2, A, P) at ``texel``, margin filled; of
+    ``H`` (4, A, P) (open bands inside, ``H[2:]``) (4, A, R, R), an empty band placed at its
+    neighbours' (:func:`place_gaps`)."""
+    K, A, P = H.shape
     texel = np.asarray(texel)
-    q = np.zeros((2, A, R * R), np.uint8)           # uncovered: open, [-pi/2, 0]
+    q = np.zeros((K, A, R * R), np.uint8)           # uncovered: open, [-pi/2, 0]
     has_margin = margin is not None and len(margin[0])
+    covered = np.zeros(R * R, bool)
+    covered[texel] = True
+    if has_margin:
+        import scipy.sparse as sp
+
+        csr = sp.csr_matrix(margin[1])
+        rows = np.repeat(np.arange(csr.shape[0]), np.diff(csr.indptr))
+        nrm = None if normals is None else np.asarray(normals, np.float64)[csr.indices]
     for a in range(A):
-        img = np.zeros((2, R * R))
+        img = np.zeros((K, R * R))
         img[0] = FROM_BELOW
         img[:, texel] = H[:, a]
+        if K == 4:
+            place_gaps(img[2:], covered, R)
         if has_margin:
-            dst, op = margin
+            dst = margin[0]
+            op = csr
+            if nrm is not None:
+                # a source facing away from this azimuth (none of its elevations in front:
+                # its interval is "open" for want of a cosine) is left out of the mean: a box
+                # top's [25, 90] and its side's open mixed to [12, 45] opened the sky over a
+                # closed room's box
+                phi = 2 * np.pi * a / A
+                e0 = np.arctan2(nrm[:, 2], nrm[:, 0] * np.cos(phi) + nrm[:, 1] * np.sin(phi))
+                away = (e0 > np.pi - BACK) | (e0 < BACK - np.pi / 2)
+                if away.any():
+                    w = np.where(away, 0.0, csr.data)
+                    total = np.bincount(rows, weights=w, minlength=csr.shape[0])
+                    keep = total > 0                  # (all away: the mean of all)
+                    w = np.where(keep[rows], w / np.where(keep, total, 1.0)[rows], csr.data)
+                    op = sp.csr_matrix((w, csr.indices, csr.indptr), shape=csr.shape)
             lo = np.asarray(H[0, a], np.float64)
             below = lo < 0
             share = op @ below.astype(np.float64)          # weight of "from below"
             img[0, dst] = np.where(share >= 0.5, FROM_BELOW, op @ np.where(below, 0.0, lo))
             img[1, dst] = op @ np.asarray(H[1, a], np.float64)
+            if K == 4:
+                img[2:, dst] = np.stack([op @ img[2, texel], op @ img[3, texel]])
         q[:, a] = quantize(img)
-    return q.reshape(2, A, R, R)
+    return q.reshape(K, A, R, R)
+
+
+#: A margin's source counts as facing away from an azimuth when fewer than this many radians
+#: of its elevations 0-90 degrees along it are in front (:func:`_codes`): 5 degrees.
+BACK = np.radians(5.0)
+
+
+def place_gaps(G, covered, R: int) -> None:
+    """An empty open band (``G`` (2, R * R) radians, ``lo >= hi``) of a covered texel next to
+    texels with one becomes ``[m, m]``, ``m`` the mean middle of theirs: between the two the
+    viewport's linear lookup then narrows the band to nothing where it is, instead of moving
+    it towards wherever the empty one sat. In place."""
+    lo, hi = G[0].reshape(R, R), G[1].reshape(R, R)
+    has = ((hi > lo) & covered.reshape(R, R))
+    if not has.any():
+        G[:] = 0.0
+        return
+    mid = np.where(has, 0.5 * (lo + hi), 0.0)
+    pad_m, pad_h = np.pad(mid, 1), np.pad(has.astype(np.float64), 1)
+    s = sum(pad_m[1 + dy:R + 1 + dy, 1 + dx:R + 1 + dx] for dy, dx in _FOUR)
+    w = sum(pad_h[1 + dy:R + 1 + dy, 1 + dx:R + 1 + dx] for dy, dx in _FOUR)
+    m = np.where(w > 0, s / np.maximum(w, 1.0), 0.0)
+    empty = ~has
+    lo[empty] = m[empty]
+    hi[empty] = m[empty]
+
+
+_FOUR = ((0, 1), (0, -1), (1, 0), (-1, 0))
 
 
 #: The lowest elevation (degrees) of a held-out direction on a Sun's path.
@@ -678,10 +757,12 @@ def load(path: str, resolution: int | None = None) -> HorizonMap:
         ut.check_count(path, R, ut.MAX_RESOLUTION, "resolution", lo=1)
         normals = z.get("normals", shape=(R, R, 3), dtype="f")
         qs, _ = z.header("q") if "q" in z else ((), None)
-        if len(qs) != 4 or not 3 <= qs[1] <= 4096 or not 1 <= qs[2] <= R or qs[2] != qs[3]:
+        if (len(qs) != 4 or qs[0] not in (2, 4) or not 3 <= qs[1] <= 4096
+                or not 1 <= qs[2] <= R or qs[2] != qs[3] or (qs[0] == 4 and version < 5)):
             raise ut.UntrustedFileError(path, f"has horizon codes of shape {qs}, expected "
-                                              f"(2, azimuths 3..4096, Rh, Rh) with Rh <= {R}")
-        q = z.get("q", shape=(2, None, None, None), dtype=np.uint8)
+                                              f"(2 or 4, azimuths 3..4096, Rh, Rh) with "
+                                              f"Rh <= {R}")
+        q = z.get("q", shape=(int(qs[0]), None, None, None), dtype=np.uint8)
         spread = (z.get("spread", shape=tuple(qs[1:]), dtype=np.uint8) if "spread" in z
                   else None)          # (version 2 maps have none: sharp edges)
         ut.check_values(path, normals, what="normals")

@@ -214,6 +214,7 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                                      dset.directions[-n_path:] if n_path > 1 else None)
         trial_ok = settings.viewport == "auto" and _CALIBRATION_AZIMUTHS is None
         maps, skipped, searched, castable, checks, trials = [], 0, 0, 0, [], []
+        gap_rays, gap_maps = 0, 0
         edges, with_spread = [], horizon_spread(settings)
         for i, ((smp, pts), mg, store) in enumerate(zip(receivers, margins, stores)):
             if coarse is None:
@@ -223,7 +224,8 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                 low = (h_smp.texel, Rh,
                        extend_margin(h_smp.covered(), max(1, -(-margin * Rh // R))))
             who = f", object {i + 1}/{len(receivers)}" if len(receivers) > 1 else ""
-            H = np.zeros((2, A, h_pts.size), np.float16)       # (open: [0, 0])
+            # (open: [0, 0]); H[2:] the open bands inside the intervals (a window's sky)
+            H = np.zeros((4, A, h_pts.size), np.float16)
             # the footprints' upper edges and their spreads, kept apart from the centres'
             # edges until the map is made (which texels vary is read from the centres)
             fph = (_Footprints(A, h_pts.size) if h_pts.footprint is not None and with_spread
@@ -256,9 +258,13 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                 decided = horizon_trial.decide(trial["horizon"], trial["transport"])
                 trial["decided"] = decided or "whole map and check"
             if decided != "transport":
+                # the open bands sought for the rest only where the trial's map found and
+                # kept them (on the gallery's mutual shadows they cost 46 % more horizon
+                # time and helped nothing)
+                bands = trial is None or trial.get("open_bands", {"kept": False})["kept"]
                 H_r, figs = yield from _find(occluder, h_pts if len(rest) == h_pts.size
                                              else h_pts.subset(rest), A,
-                                             "horizons", who, step + S - 1, total)
+                                             "horizons", who, step + S - 1, total, bands)
                 H[:, :, rest] = H_r
                 counts.append((len(rest), figs))
                 found[rest] = True
@@ -269,6 +275,8 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
             skipped += sum(f["skipped"] for _, f in counts)
             searched += sum(f["searched"] for _, f in counts)
             castable += sum(f["castable"] for _, f in counts)
+            gap_rays += sum(f.get("gap_rays", 0) for _, f in counts)
+            gap_maps += int(maps_gaps(H))
             maps.append(None if decided == "transport" else
                         hmap.from_points(H, smp.texel, R, pts.Ns, mg, coarse=low,
                                          spread=None if fph is None else fph.spread))
@@ -295,6 +303,9 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                         {"left_out": "centre texel sampling" if not footprint else
                          "horizons coarser than the texture" if Rh < R else
                          "the spreads would not fit the GPU budget"},
+                        # the open bands inside the intervals (a window's sky): the rays
+                        # that sought them and the objects whose maps keep them
+                        "horizon_gaps": {"rays": int(gap_rays), "objects": int(gap_maps)},
                         # scan rays a caster could meet, and those the search cast of them
                         # (lt_addon/rays/horizon.py _search)
                         "horizon_scan_rays": {"castable": int(castable),
@@ -436,12 +447,24 @@ def _progress(gen, n: int, text, step: int, total: int):
             yield Progress(step, total, text(done))
 
 
-def _find(occluder, pts, A: int, label: str, who: str, step: int, total: int):
-    """Generator: the horizons (2, A, P) of ``pts`` (:func:`...rays.horizon.iter_horizons`),
+def maps_gaps(H) -> bool:
+    """Whether horizons ``H`` (4, A, P) hold an open band inside some interval."""
+    return bool((H[3] > H[2]).any())
+
+
+def _find(occluder, pts, A: int, label: str, who: str, step: int, total: int,
+          gaps: bool = True):
+    """Generator: the horizons (4, A, P) of ``pts`` (:func:`...rays.horizon.iter_horizons`,
+    with the open bands inside the intervals; ``gaps`` False: none sought, ``[0, 0]``),
     yielding Progress every A / 16 azimuths as "<label> k/A azimuths<who>" (the ETA reads
     "horizons k/A azimuths, object i/n": :func:`...lt_addon.transport.estimate.
     estimated_elapsed`); returns ``(H, figures)``."""
-    return (yield from _progress(horizon.iter_horizons(occluder, pts, A), A,
+    if not gaps:
+        H, figures = yield from _progress(horizon.iter_horizons(occluder, pts, A), A,
+                                          lambda done: f"{label} {done}/{A} azimuths{who}",
+                                          step, total)
+        return np.concatenate([H, np.zeros_like(H)]), figures
+    return (yield from _progress(horizon.iter_horizons(occluder, pts, A, gaps=True), A,
                                  lambda done: f"{label} {done}/{A} azimuths{who}", step, total))
 
 
@@ -471,5 +494,23 @@ def _trial(occluder, sample, store, pts, texels, directions, settings) -> dict:
     the map ``sample`` (its sampled tiles found) and T (the rows just written to ``store``)
     against :func:`_disc_mean` of points ``pts`` at ``texels`` (flat)."""
     refs = [_disc_mean(occluder, pts, d, settings) for d in directions]
-    return hmap.heldout_errors(sample, store, directions, refs, settings.sun_angle,
-                               settings.kernel, texels=texels)
+    got = hmap.heldout_errors(sample, store, directions, refs, settings.sun_angle,
+                              settings.kernel, texels=texels)
+    if sample.gaps:      # the open bands kept only where they help (bundle.fit_viewport)
+        hull = hmap.heldout_errors(hmap.HorizonMap(sample.q[:2], sample.normals, sample.spread),
+                                   store, directions, refs, settings.sun_angle,
+                                   settings.kernel, texels=texels)
+        got = bundle_gaps(got, hull)
+    return got
+
+
+def bundle_gaps(with_: dict, without: dict) -> dict:
+    """The held-out errors of a map with open bands (``with_``) and without (``without``) ->
+    those of the one kept (:data:`...lt_addon.transport.bundle.GAP_GAIN`), with
+    ``open_bands``: whether they were kept, and both figures."""
+    from ...lt_addon.transport.bundle import GAP_GAIN
+
+    kept = with_["horizon"] < (1.0 - GAP_GAIN) * without["horizon"]
+    return {**(with_ if kept else without),
+            "open_bands": {"kept": bool(kept), "heldout_with": round(with_["horizon"], 4),
+                           "heldout_without": round(without["horizon"], 4)}}

@@ -513,13 +513,15 @@ def build_sparse_group(n_directions: int, resolution: int, table_size: int, taps
 
 
 def horizon_preview_arrays(hm, albedo):
-    """(8-bit horizon tiles (2 or 3 ceil(A/3), Rh, Rh, 3) uint8 -- the lower edges' tiles, then
-    the upper edges', then their spreads' where the map has them, three azimuths per RGB tile,
-    at the horizons' side; normal and albedo tiles (2, R, R, 3) float32 at the texture's) --
-    what :func:`build_horizon_group` reads."""
+    """(8-bit horizon tiles (2 to 5 ceil(A/3), Rh, Rh, 3) uint8 -- the lower edges' tiles,
+    then the upper edges', then their spreads' where the map has them, then the open bands'
+    lower and upper edges' where it has them, three azimuths per RGB tile, at the horizons'
+    side; normal and albedo tiles (2, R, R, 3) float32 at the texture's) -- what
+    :func:`build_horizon_group` reads."""
     _, A, Rh, _ = hm.q.shape
     n = -(-A // 3)
-    planes = [hm.q[0], hm.q[1]] + ([hm.spread] if hm.spread is not None else [])
+    planes = ([hm.q[0], hm.q[1]] + ([hm.spread] if hm.spread is not None else [])
+              + ([hm.q[2], hm.q[3]] if hm.gaps else []))
     q = np.zeros((len(planes), n * 3, Rh, Rh), np.uint8)
     for i, plane in enumerate(planes):
         q[i, :A] = plane
@@ -553,9 +555,10 @@ def viewport_relight_horizon(tiles, na, azimuths: int, direction, sun_angle: flo
 
     A = int(azimuths)
     n, Rh = -(-A // 3), tiles.shape[1]
-    planes = len(tiles) // n          # 2: the edges; 3: and their spreads
-    q = np.asarray(tiles).transpose(0, 3, 1, 2).reshape(planes, 3 * n, Rh, Rh)[:, :A]
-    hm = HorizonMap(q[:2], np.asarray(na[0], np.float16), q[2] if planes == 3 else None)
+    planes = len(tiles) // n          # 2: the edges; 3: and their spreads; 4 / 5: and the
+    q = np.asarray(tiles).transpose(0, 3, 1, 2).reshape(planes, 3 * n, Rh, Rh)[:, :A]  # bands
+    edges = q[[0, 1, planes - 2, planes - 1]] if planes >= 4 else q[:2]
+    hm = HorizonMap(edges, np.asarray(na[0], np.float16), q[2] if planes in (3, 5) else None)
     e = hm.direct(direction, sun_angle)
     return (e[..., None] * np.asarray(na[1], np.float64)).astype(np.float32)
 
@@ -619,7 +622,7 @@ def _disc_moment(b, offset, radius, x, y):
 
 def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image, uv_map: str,
                         name: str, sun_angle: float, horizon_resolution: int | None = None,
-                        spread: bool = False):
+                        spread: bool = False, gaps: bool = False):
     """The sun group relighting from horizons (the sockets of :func:`build_group`): at three
     azimuths across the sun's disc (the sun's and either side, ``horizon_map.STRIPS``) the two
     azimuth channels around each are picked; at each, the sun's disc is cut by the blocked
@@ -632,7 +635,10 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     the normal, the albedo). With
     ``spread`` (the atlas' third set of tiles) the upper edge is cut by the wider disc
     ``sqrt(r^2 + 4 s^2)``, ``s = c^2 SPREAD_MAX`` from the spread channel ``c`` (0..1):
-    6 lookups more (:func:`...lt_addon.transport.horizon_map.spread_radius`). The horizon
+    6 lookups more (:func:`...lt_addon.transport.horizon_map.spread_radius`). With ``gaps``
+    (the atlas' last two sets of tiles: an open band inside each interval, a window's sky) the
+    disc's part inside the band, clipped to the interval, is lit again: 12 lookups more. The
+    horizon
     atlas may be coarser (``horizon_resolution``) than the normals' (``resolution``): its linear
     lookup reads the codes between its texels, as
     :func:`...lt_addon.transport.horizon_map.upsample`."""
@@ -655,7 +661,8 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
         return b.math("SUBTRACT", k, b.math("MULTIPLY", wrap, float(A), x=x + 200, y=y),
                       x=x + 300, y=y)
     uv = b.node("ShaderNodeUVMap", -1400, -600, uv_map=uv_map).outputs["UV"]
-    lay = atlas_layout((3 if spread else 2) * n, Rh)
+    lay = atlas_layout((2 + bool(spread) + 2 * bool(gaps)) * n, Rh)
+    gap0 = (3 if spread else 2) * 3 * n      # the bands' lower edges' first channel
     el = b.math("ARCSINE", b.math("MINIMUM", dz, 1.0, x=600, y=200), x=700, y=200)
     radius = b.node("ShaderNodeValue", 600, 0)
     radius.name = radius.label = SUN_RADIUS_NODE
@@ -701,12 +708,37 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
                 hs.append(_disc_moment(b, offset, r, 900, y - 150))   # the sun's own disc
             blocked = b.math("MAXIMUM", b.math("SUBTRACT", edge[0], edge[1], x=1600,
                                                y=y0 - 800 * j), 0.0, x=1650, y=y0 - 800 * j)
-            part.append(b.math("SUBTRACT", 1.0, blocked, x=1700, y=y0 - 800 * j))
+            visible = b.math("SUBTRACT", 1.0, blocked, x=1700, y=y0 - 800 * j)
             # the visible part's first moment: the band's taken from the whole disc's 0
             band = b.math("LESS_THAN", hv[0], hv[1], x=1600, y=y0 - 800 * j - 100)
-            moment.append(b.math("MULTIPLY", b.math("SUBTRACT", hs[1], hs[0], x=1650,
-                                                    y=y0 - 800 * j - 100),
-                                 band, x=1700, y=y0 - 800 * j - 100))
+            mom_j = b.math("MULTIPLY", b.math("SUBTRACT", hs[1], hs[0], x=1650,
+                                              y=y0 - 800 * j - 100),
+                           band, x=1700, y=y0 - 800 * j - 100)
+            if gaps:     # the open band inside the interval (clipped to it) lit again
+                g, gs = [], []
+                for e in range(2):
+                    y = y0 - 400 * (2 * j + e) - 250
+                    c = _atlas_channel(b, b.math("ADD", kk, float(gap0 + 3 * e * n), x=-800,
+                                                   y=y),
+                                       uv, lay, horizon_image, Rh, acc, -700, y)
+                    acc = c
+                    h = _decode_edge(b, c, 400, y)
+                    h = (b.math("MAXIMUM", h, hv[0], x=500, y=y) if e == 0 else
+                         b.math("MINIMUM", h, hv[1], x=500, y=y))
+                    g.append(h)
+                    offset = b.math("SUBTRACT", el, h, x=800, y=y)
+                    gs.append((_disc_part(b, offset, r, 900, y),
+                               _disc_moment(b, offset, r, 900, y - 100)))
+                reopened = b.math("MAXIMUM", b.math("SUBTRACT", gs[0][0], gs[1][0], x=1600,
+                                                    y=y0 - 800 * j - 250), 0.0, x=1650,
+                                  y=y0 - 800 * j - 250)
+                visible = b.math("ADD", visible, reopened, x=1750, y=y0 - 800 * j - 250)
+                open_band = b.math("LESS_THAN", g[0], g[1], x=1600, y=y0 - 800 * j - 350)
+                mom_j = b.math("MULTIPLY_ADD", b.math("SUBTRACT", gs[0][1], gs[1][1], x=1650,
+                                                      y=y0 - 800 * j - 350),
+                               open_band, mom_j, x=1750, y=y0 - 800 * j - 350)
+            part.append(visible)
+            moment.append(mom_j)
         strip = b.math("MULTIPLY_ADD", b.math("SUBTRACT", part[1], part[0], x=1750, y=y0),
                        f, part[0], x=1800, y=y0)
         vis = (b.math("MULTIPLY", strip, w_s, x=1900, y=y0) if vis is None else
@@ -851,13 +883,16 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
                   "azimuths": bake.horizon.azimuths,
                   "horizon_resolution": bake.horizon.horizon_resolution,
                   # the atlas' third set of tiles: the upper edges' spreads
-                  "horizon_spread": bake.horizon.spread is not None}
+                  "horizon_spread": bake.horizon.spread is not None,
+                  # its last two: the open bands inside the intervals
+                  "horizon_gaps": bool(bake.horizon.gaps)}
         h_img = pn.load_atlas_image(sparse["horizon_atlas"], f"{obj.name} transport horizons")
         n_img = pn.load_atlas_image(sparse["horizon_normals"], f"{obj.name} transport normals")
         group = build_horizon_group(bake.horizon.azimuths, model.resolution, h_img, n_img,
                                     uv_map, gname + " new", angle,
                                     bake.horizon.horizon_resolution,
-                                    spread=bake.horizon.spread is not None)
+                                    spread=bake.horizon.spread is not None,
+                                    gaps=bool(bake.horizon.gaps))
     elif viewport == "blocks":
         view = bake.view
         beig, btab = block_preview_arrays(view, bake.albedo, store.directions, angle,
