@@ -433,8 +433,8 @@ def fit_viewport(store, settings: TransportTextureSettings, model, lights=TRUTH_
                 and hmap.HorizonMap(horizon.q[:2], horizon.normals,
                                     horizon.spread).gpu_bytes() <= budget):
             gaps = {**gaps, "kept": False, "why": "over the GPU budget with them"}
-            if trial is None:     # the check again, of the map shown (a trial's figures
-                e = None          # stay those of the map it was made with)
+            # the figures of the map shown: the check again, or the trial's without them
+            e = None if trial is None else {**trial, **trial["without"]}
         if gaps is not None and not gaps["kept"]:     # (in place: the map written is the one
             horizon.q = horizon.q[:2]                  # shown)
         mib = horizon.gpu_bytes() / 2**20

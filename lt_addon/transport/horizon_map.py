@@ -487,7 +487,10 @@ class HorizonMap:
                 mom_k = visible_moment(el, h[0], h[1], r) if moments else 0.0
                 if len(h) == 4:      # the open band inside the interval lit again (within it)
                     g_lo, g_hi = np.maximum(h[2], h[0]), np.minimum(h[3], h[1])
-                    vis_k = vis_k + 1.0 - visible_fraction(el, g_lo, g_hi, r)
+                    # (at most the whole disc: the interval's upper edge may be cut by a
+                    # wider disc than the band's, which the footprint's mean edge can
+                    # lower under the centre's band)
+                    vis_k = np.minimum(vis_k + 1.0 - visible_fraction(el, g_lo, g_hi, r), 1.0)
                     if moments:
                         mom_k = mom_k - visible_moment(el, g_lo, g_hi, r)
                 seen[k] = (vis_k, mom_k)

@@ -262,6 +262,8 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                 # kept them (on the gallery's mutual shadows they cost 46 % more horizon
                 # time and helped nothing)
                 bands = trial is None or trial.get("open_bands", {"kept": False})["kept"]
+                if not bands:     # (none on the tiles either: a map is banded whole or not)
+                    H[2:, :, h_rows] = 0.0
                 H_r, figs = yield from _find(occluder, h_pts if len(rest) == h_pts.size
                                              else h_pts.subset(rest), A,
                                              "horizons", who, step + S - 1, total, bands)
@@ -304,8 +306,10 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                          "horizons coarser than the texture" if Rh < R else
                          "the spreads would not fit the GPU budget"},
                         # the open bands inside the intervals (a window's sky): the rays
-                        # that sought them and the objects whose maps keep them
-                        "horizon_gaps": {"rays": int(gap_rays), "objects": int(gap_maps)},
+                        # that sought them and the objects whose horizons hold some (the
+                        # viewport's open_bands says whether its map keeps them)
+                        "horizon_gaps": {"rays": int(gap_rays),
+                                         "objects_found": int(gap_maps)},
                         # scan rays a caster could meet, and those the search cast of them
                         # (lt_addon/rays/horizon.py _search)
                         "horizon_scan_rays": {"castable": int(castable),
@@ -511,6 +515,6 @@ def bundle_gaps(with_: dict, without: dict) -> dict:
     from ...lt_addon.transport.bundle import GAP_GAIN
 
     kept = with_["horizon"] < (1.0 - GAP_GAIN) * without["horizon"]
-    return {**(with_ if kept else without),
+    return {**(with_ if kept else without), "without": without,
             "open_bands": {"kept": bool(kept), "heldout_with": round(with_["horizon"], 4),
                            "heldout_without": round(without["horizon"], 4)}}

@@ -732,7 +732,9 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
                 reopened = b.math("MAXIMUM", b.math("SUBTRACT", gs[0][0], gs[1][0], x=1600,
                                                     y=y0 - 800 * j - 250), 0.0, x=1650,
                                   y=y0 - 800 * j - 250)
-                visible = b.math("ADD", visible, reopened, x=1750, y=y0 - 800 * j - 250)
+                visible = b.math("MINIMUM", b.math("ADD", visible, reopened, x=1750,
+                                                   y=y0 - 800 * j - 250), 1.0, x=1800,
+                                 y=y0 - 800 * j - 250)          # (at most the whole disc)
                 open_band = b.math("LESS_THAN", g[0], g[1], x=1600, y=y0 - 800 * j - 350)
                 mom_j = b.math("MULTIPLY_ADD", b.math("SUBTRACT", gs[0][1], gs[1][1], x=1650,
                                                       y=y0 - 800 * j - 350),

@@ -81,7 +81,7 @@ def test_horizon_viewport_rendered_by_cycles_equals_its_twin(bumps, tmp_path, si
     assert prev["horizon_spread"] is spread
     # the sky between two bumps makes open bands inside a few intervals, but the held-out
     # check sees no gain from them: the map leaves them out (and the group their lookups)
-    assert rep["direct"]["horizon_gaps"]["objects"] == 1
+    assert rep["direct"]["horizon_gaps"]["objects_found"] == 1
     assert info["open_bands"]["kept"] is False and prev["horizon_gaps"] is False
     assert len([n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]) == \
         (20 if spread else 14)

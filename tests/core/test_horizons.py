@@ -730,3 +730,19 @@ def test_the_map_lights_a_sun_through_a_window_as_rays_do():
                        / np.mean(ref ** 2)) for m in (hm, hull)]
         print(f"az {az}: bands {err[0]:.4f}, hull {err[1]:.4f}")
         assert err[0] < 0.1 and err[1] > 0.9, err
+
+
+def test_a_band_up_to_a_spread_upper_edge_lights_at_most_the_whole_disc():
+    """A band reaching the interval's upper edge, that edge spread over the footprint (cut by
+    a 3-degree disc where the band is cut by the sun's 1-degree one): the visible part is at
+    most the whole disc (it came to 1.12 unclamped), the NumPy relight and the node tree alike
+    (the twin test renders the latter)."""
+    d = np.radians
+    H = np.array([-np.pi / 2, d(30.3), d(20.0), d(30.3)]).reshape(4, 1, 1, 1) * np.ones(
+        (4, 8, 1, 1))
+    spread = hmap.encode_spread(np.full((8, 1, 1), np.sqrt((d(1.5) ** 2 - d(0.5) ** 2) / 4)))
+    hm = hmap.HorizonMap(hmap.quantize(H), np.array([[[0, 0, 1.0]]], np.float16), spread)
+    for el in (29.5, 30.0, 30.3, 31.0):
+        sun = horizon._dirs(0.1, d(el))
+        got = float(hm.direct(sun, 2.0)[0, 0])
+        assert got <= np.sin(d(el + 1.0)) / np.pi + 1e-6, el
