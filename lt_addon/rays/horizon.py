@@ -122,7 +122,8 @@ def iter_horizons(occluder, points: ShadingPoints, azimuths: int = 128, refine: 
                   gaps: bool = False):
     """Generator form of :func:`horizons`: yields the azimuths done (whole-map equivalents:
     the (azimuth, point) pairs done / P) after each block of pairs (a caller may stop between
-    them) and returns ``(H, figures)``; H (2, A, P) float16 (``gaps``: (4, A, P), below) (0.03 degrees at the zenith,
+    them) and returns ``(H, figures)``; H (2, A, P) float16 (``gaps``: (4, A, P), below)
+    (0.03 degrees at the zenith,
     against the map's 0.25-0.49-degree codes); figures: ``skipped``, the scan's rays no caster
     could meet (not cast), ``castable``, the others, and ``searched``, those of them
     :func:`_search` cast.

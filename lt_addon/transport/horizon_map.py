@@ -28,10 +28,11 @@ Where the sky opens between two blocked elevations along an azimuth (a room's wi
 between two casters) the hull would block it: a map may keep the widest such open band too
 (``q[2:]``, :func:`..rays.horizon._gaps`), and the disc's part inside it counts lit again.
 On the gallery's interior (the window 1.6 x 1.2 m) the hull blocked every sun through the
-window.
+window: its box's map erred 0.80 against rays at held-out suns, 0.33 with the band.
 
 Arrays: ``q`` (2, A, Rh, Rh) uint8 codes (or (4, A, Rh, Rh): ``q[2]``, ``q[3]`` the open
-band's lower and upper edges, coded as upper edges; an empty band ``q[2] == q[3]``) -- ``q[1]`` the upper edges (:func:`decode`: -10
+band's lower and upper edges, coded as upper edges; an empty band ``q[2] == q[3]``) --
+``q[1]`` the upper edges (:func:`decode`: -10
 to 90 degrees, finest at the horizon; an upper edge under the horizon is the ground's, seen
 from a wall or a slope, which a large sun near the horizon reaches), ``q[0]`` the lower edges,
 the same but code 0 for "blocked from below" (``-pi / 2``); rows from v = 0 --, ``spread``
@@ -551,15 +552,18 @@ def from_points(H, texel, resolution: int, normals, margin=None, coarse=None,
     (edges linearly -- a lower edge blocked from below counts as 0 there --, normals then
     renormalised). One azimuth at a time: memory holds the codes and one row.
     ``coarse``: ``(texel, side, margin)`` when ``H`` was found at the points of a coarser
-    side (``normals`` stay at ``texel``, ``resolution``). ``spread``: (A, P) radians, the upper
+    side (``normals`` stay at ``texel``, ``resolution``), and optionally those points'
+    normals (their margin's sources facing away from an azimuth are left out, as
+    :func:`_codes` does at the texture's side). ``spread``: (A, P) radians, the upper
     edges' spread over the footprint (:func:`pair_edges`; ``H[1]`` then holds the means),
     or None."""
     if coarse is not None:
-        h_texel, Rh, h_margin = coarse
+        h_texel, Rh, h_margin = coarse[:3]
+        h_normals = coarse[3] if len(coarse) > 3 else None
     else:
         h_texel, Rh, h_margin = texel, resolution, margin
-    q = _codes(H, np.asarray(h_texel), int(Rh), h_margin,
-               normals if coarse is None else None)
+        h_normals = normals
+    q = _codes(H, np.asarray(h_texel), int(Rh), h_margin, h_normals)
     if len(q) == 4 and not (q[3] > q[2]).any():    # no open band anywhere: not kept
         q = q[:2]
     s_codes = (None if spread is None else

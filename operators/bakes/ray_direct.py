@@ -222,7 +222,8 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
             else:        # the margin in the horizons' texels, at least one
                 h_smp, h_pts = coarse[i]
                 low = (h_smp.texel, Rh,
-                       extend_margin(h_smp.covered(), max(1, -(-margin * Rh // R))))
+                       extend_margin(h_smp.covered(), max(1, -(-margin * Rh // R))),
+                       h_pts.Ns)
             who = f", object {i + 1}/{len(receivers)}" if len(receivers) > 1 else ""
             # (open: [0, 0]); H[2:] the open bands inside the intervals (a window's sky)
             H = np.zeros((4, A, h_pts.size), np.float16)

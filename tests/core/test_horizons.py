@@ -180,6 +180,11 @@ def test_quantize_and_margin_fill():
     assert abs(h[1, 5] - 0.3) < hmap.STEP and abs(h[1, 6] - 0.7) < hmap.STEP
     assert np.allclose(hm.normals.reshape(-1, 3)[5], [0.7071, 0, 0.7071], atol=1e-3)
     assert h[0, 7] == -np.pi / 2 and abs(h[1, 7] - 0.2) < hmap.STEP
+    # horizons at a coarser side (here the same texels) leave them out alike, given their
+    # points' normals
+    pts = np.array([0, 1, 2, 3, 4])
+    coarse = hmap.from_points(H, pts, 3, N, coarse=(pts, 3, (np.array([5, 6, 7]), op), N))
+    assert np.array_equal(coarse.q, hm.q)
     assert np.allclose(hm.normals.reshape(-1, 3)[7], [-0.7071, 0, 0.7071], atol=1e-3)
     assert np.all(hm.normals.reshape(-1, 3)[8:] == 0) and np.all(h[0, 8:] == -np.pi / 2)
     assert np.all(h[1, 8:] == 0)
