@@ -501,8 +501,8 @@ def _gaps(occluder, points, L, L32, idx, care, cast, top, bottom, which):
     one behind the point blocked (its cosine is 0 whatever). ``(ga, gb, rays)``: the band's
     first and last open indices into the elevations (n,), -1 where the hull has no open
     elevation inside -- a room's wall around its window, the sky between two casters, which
-    the hull alone counts blocked (the gallery's interior: the map's direct light 0.43-1.0 from
-    Cycles' at 3-75 degrees, the hull blocking every sun through the window)."""
+    the hull alone counts blocked (the gallery's interior at 64^2: the map's direct light 0.43-1.0
+    from Cycles' at 3-75 degrees, the hull blocking every sun through the window)."""
     J, n = cast.shape
     rays = 0
     open_ = np.zeros((J, n), bool)
