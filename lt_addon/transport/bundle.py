@@ -366,6 +366,16 @@ HORIZON_GAP_LOOKUPS = 12
 GAP_GAIN = 0.2
 
 
+def choose_bands(with_: dict, without: dict) -> dict:
+    """The held-out errors (:func:`.horizon_map.heldout_errors`) of a map with open bands
+    (``with_``) and without (``without``) -> those of the one kept (:data:`GAP_GAIN`), with
+    ``without`` and ``open_bands``: whether they were kept, and both figures."""
+    kept = with_["horizon"] < (1.0 - GAP_GAIN) * without["horizon"]
+    return {**(with_ if kept else without), "without": without,
+            "open_bands": {"kept": bool(kept), "heldout_with": round(with_["horizon"], 4),
+                           "heldout_without": round(without["horizon"], 4)}}
+
+
 def horizon_lookups(horizon) -> int:
     """Texture lookups per pixel of ``horizon``'s viewport."""
     return (HORIZON_LOOKUPS + (HORIZON_SPREAD_LOOKUPS if getattr(horizon, "spread", None)
@@ -419,19 +429,12 @@ def fit_viewport(store, settings: TransportTextureSettings, model, lights=TRUTH_
         e = trial
         if horizon.gaps and horizon_check is not None and trial is None:
             # the open bands kept only where the check sees them help (GAP_GAIN)
-            hull = hmap.HorizonMap(horizon.q[:2], horizon.normals, horizon.spread)
-            e = {**hmap.heldout_errors(hull, store, *horizon_check, settings.sun_angle,
-                                       settings.kernel)}
-            with_ = hmap.heldout_errors(horizon, store, *horizon_check, settings.sun_angle,
-                                        settings.kernel)
-            kept = with_["horizon"] < (1.0 - GAP_GAIN) * e["horizon"]
-            e = {**(with_ if kept else e), "open_bands": {
-                "kept": bool(kept), "heldout_with": round(with_["horizon"], 4),
-                "heldout_without": round(e["horizon"], 4)}}
+            e = choose_bands(*(hmap.heldout_errors(m, store, *horizon_check,
+                                                   settings.sun_angle, settings.kernel)
+                               for m in (horizon, horizon.without_bands())))
         gaps = (e or {}).get("open_bands") if horizon.gaps else None
         if (gaps is not None and gaps["kept"] and horizon.gpu_bytes() > budget
-                and hmap.HorizonMap(horizon.q[:2], horizon.normals,
-                                    horizon.spread).gpu_bytes() <= budget):
+                and horizon.without_bands().gpu_bytes() <= budget):
             gaps = {**gaps, "kept": False, "why": "over the GPU budget with them"}
             # the figures of the map shown: the check again, or the trial's without them
             e = None if trial is None else {**trial, **trial["without"]}

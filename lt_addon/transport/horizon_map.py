@@ -420,6 +420,10 @@ class HorizonMap:
         """Whether the map keeps an open band inside each interval (``q[2:]``)."""
         return int(self.q.shape[0]) == 4
 
+    def without_bands(self) -> "HorizonMap":
+        """The same map without its open bands (the hull alone)."""
+        return HorizonMap(self.q[:2], self.normals, self.spread)
+
     @property
     def resolution(self) -> int:
         """The texture's side (the normals')."""

@@ -18,7 +18,7 @@ import numpy as np
 from ...lt_addon.errors import InputError
 from ...lt_addon.rays import engine as ray_engine
 from ...lt_addon.rays import horizon
-from ...lt_addon.transport import horizon_map as hmap
+from ...lt_addon.transport import bundle, horizon_map as hmap
 from ...lt_addon.transport import horizon_trial
 from ...lt_addon.rays.direct import direct_rows
 from ...lt_addon.rays.footprint import HORIZON_LATTICE
@@ -499,23 +499,8 @@ def _trial(occluder, sample, store, pts, texels, directions, settings) -> dict:
     the map ``sample`` (its sampled tiles found) and T (the rows just written to ``store``)
     against :func:`_disc_mean` of points ``pts`` at ``texels`` (flat)."""
     refs = [_disc_mean(occluder, pts, d, settings) for d in directions]
-    got = hmap.heldout_errors(sample, store, directions, refs, settings.sun_angle,
-                              settings.kernel, texels=texels)
-    if sample.gaps:      # the open bands kept only where they help (bundle.fit_viewport)
-        hull = hmap.heldout_errors(hmap.HorizonMap(sample.q[:2], sample.normals, sample.spread),
-                                   store, directions, refs, settings.sun_angle,
-                                   settings.kernel, texels=texels)
-        got = bundle_gaps(got, hull)
-    return got
-
-
-def bundle_gaps(with_: dict, without: dict) -> dict:
-    """The held-out errors of a map with open bands (``with_``) and without (``without``) ->
-    those of the one kept (:data:`...lt_addon.transport.bundle.GAP_GAIN`), with
-    ``open_bands``: whether they were kept, and both figures."""
-    from ...lt_addon.transport.bundle import GAP_GAIN
-
-    kept = with_["horizon"] < (1.0 - GAP_GAIN) * without["horizon"]
-    return {**(with_ if kept else without), "without": without,
-            "open_bands": {"kept": bool(kept), "heldout_with": round(with_["horizon"], 4),
-                           "heldout_without": round(without["horizon"], 4)}}
+    got = [hmap.heldout_errors(m, store, directions, refs, settings.sun_angle,
+                               settings.kernel, texels=texels)
+           for m in ((sample, sample.without_bands()) if sample.gaps else (sample,))]
+    # the open bands kept only where they help (as the whole map's check keeps them)
+    return bundle.choose_bands(*got) if sample.gaps else got[0]
