@@ -436,8 +436,7 @@ def fit_viewport(store, settings: TransportTextureSettings, model, lights=TRUTH_
         if (gaps is not None and gaps["kept"] and horizon.gpu_bytes() > budget
                 and horizon.without_bands().gpu_bytes() <= budget):
             gaps = {**gaps, "kept": False, "why": "over the GPU budget with them"}
-            # the figures of the map shown: the check again, or the trial's without them
-            e = None if trial is None else {**trial, **trial["without"]}
+            e = {**e, **e["without"]}        # the figures of the map shown
         if gaps is not None and not gaps["kept"]:     # (in place: the map written is the one
             horizon.q = horizon.q[:2]                  # shown)
         mib = horizon.gpu_bytes() / 2**20
