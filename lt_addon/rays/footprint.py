@@ -222,6 +222,8 @@ class Footprint:
             mapped = points.mapped()
             if mapped is not None and len(mapped):
                 ok &= ~np.isin(thin, mapped)
+            if points.normal_set is not None:
+                ok &= points.normal_set.index(thin) < 0
             if points.contact is not None:
                 ok &= ~points.contact.touching[thin]
             idx = thin[ok]
@@ -386,6 +388,8 @@ class Footprint:
             if m.any():
                 sub.Ns = sub.N.copy()
                 sub.Ns[m] = points.Ns[of[m]]
+        if points.normal_set is not None:   # sampled normals: the texel's, for every sub-sample
+            sub.normal_set = points.normal_set.take(of)
         if points.contact is not None:
             sub.contact = points.contact.subset(of)
         return owner, sub, weight, centre_w
@@ -495,7 +499,8 @@ class Footprint:
         slot = slot[slot >= 0]
         if len(fast):
             i = idx[fast]
-            sub_p = points.subset(i) if points.mapped() is not None else None
+            sub_p = (points.subset(i) if points.mapped() is not None
+                     or points.normal_set is not None else None)
             cos = (cosine(sub_p, L) if sub_p is not None
                    else np.maximum(points.Ns[i] @ L, 0.0))
             lit = np.nonzero(cos > 0)[0]

@@ -58,6 +58,7 @@ class ShadingPoints:
     epsilon: float = EPSILON       # the origin's push off the plane (see EPSILON)
     contact: object = None         # .contact.Contact: points touching another object's surface
     footprint: object = None       # .footprint.Footprint: a texture bake's texel footprints
+    normal_set: object = None      # .normal_samples.NormalSet: sampled closure normals (maps)
 
     @property
     def size(self) -> int:
@@ -97,7 +98,8 @@ class ShadingPoints:
                              None if self.correction is None else self.correction[rows],
                              self.epsilon,
                              None if self.contact is None else self.contact.subset(rows),
-                             None if self.footprint is None else self.footprint.subset(rows))
+                             None if self.footprint is None else self.footprint.subset(rows),
+                             None if self.normal_set is None else self.normal_set.take(rows))
 
 
 def _unit(v):
@@ -265,6 +267,12 @@ def cosine(points: ShadingPoints, L, sl: slice | None = None) -> np.ndarray:
             cos[mapped - a] *= bump_shadowing(N, Ns, L)
         else:
             cos[mapped - a] *= bump_correction(N, Ns, L, points.correction[mapped])
+    ns = points.normal_set
+    if ns is not None:          # texels whose closure normal varies: the mean over its samples
+        lo, hi = np.searchsorted(ns.rows, [a, b])
+        if hi > lo:
+            r = ns.rows[lo:hi]
+            cos[r - a] = ns.cosine(slice(lo, hi), L)
     return cos
 
 
@@ -282,6 +290,12 @@ def cosine_at(points: ShadingPoints, L, rows) -> np.ndarray:
                 cos[pos] *= bump_shadowing(N, Ns, L)
             else:
                 cos[pos] *= bump_correction(N, Ns, L, points.correction[r])
+    ns = points.normal_set
+    if ns is not None:
+        at = ns.index(rows)
+        pos = np.nonzero(at >= 0)[0]
+        if len(pos):
+            cos[pos] = ns.cosine(at[pos], L)
     return cos
 
 

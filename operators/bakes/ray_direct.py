@@ -1,8 +1,9 @@
 """The texture transport bake's direct stage by rays (bpy): choose the engine, read the scene into
 arrays, and stream ``T[s]`` into the stores in chunks of directions.
 
-Cycles keeps what only it can do -- albedo, the shading normals of normal-mapped materials (one
-NORMAL bake), the indirect term and every truth; rays give visibility x cosine
+Cycles keeps what only it can do -- albedo, the shading normals of normal-mapped materials (1-spp
+NORMAL bakes at shifted texel centres: :func:`sampled_normals`), the indirect term and every
+truth; rays give visibility x cosine
 (:mod:`...lt_addon.rays`). A scene rays cannot reproduce (alpha-transparent casters, hair, volumes,
 true displacement) is baked by Cycles calls under ``--direct auto`` and refused under
 ``--direct rays``; the report says which engine baked and why.
@@ -75,6 +76,46 @@ def world_normals(obj, object_normals):
     return np.where(length > 0, n / np.maximum(length, 1e-30), 0.0)
 
 
+def sampled_normals(session, objects, mapped, resolution: int):
+    """``(normals, figures)``: the closure normals of the ``mapped`` objects (a list of
+    booleans; None for the others) as :class:`...lt_addon.rays.normal_samples.TexelNormals`,
+    sampled over each texel's jitter box by 1-spp NORMAL bakes of ``session`` (an
+    EnvironmentBake at 1 spp) at shifted texel centres. Where a mesh takes no UV map of ours
+    (linked data, or modifiers that drop it) every object keeps the centre's normal alone, and
+    the figures say why."""
+    import bpy
+
+    from ...lt_addon.rays import normal_samples as ns
+    from ...lt_addon.rays.footprint import jitter_box
+
+    t0 = time.perf_counter()
+    lattice = ns.lattice_for(resolution * resolution)
+    offsets = ns.offsets(lattice, jitter_box(bpy.app.version))
+    why = None
+
+    def collect(images_per_offset, count):
+        samplers = [ns.Sampler(count) if m else None for m in mapped]
+        for baked in images_per_offset:
+            for smp, o, n in zip(samplers, objects, baked):
+                if smp is not None:
+                    smp.add(world_normals(o, n))
+        return [None if smp is None else smp.done() for smp in samplers]
+
+    try:
+        normals = collect(session.bake_shifted_normals(offsets) if len(offsets) > 1
+                          else [session.bake_normals()], len(offsets))
+    except RuntimeError as e:
+        why = str(e).splitlines()[0] if str(e) else type(e).__name__
+        lattice, offsets = (1, 0), ns.offsets((1, 0), 1.0)
+        normals = collect([session.bake_normals()], 1)
+    figures = {"lattice": [int(lattice[0]), int(lattice[1])], "bakes": int(len(offsets)),
+               "varying_texels": int(sum(len(t.pixels) for t in normals if t is not None)),
+               "seconds": round(time.perf_counter() - t0, 3)}
+    if why:
+        figures["centre_only_because"] = why
+    return normals, figures
+
+
 def _blas_idle():
     """BLAS at one thread for the block, unless RELIGHT_BLAS_POLICY=off (cycles_device)."""
     import contextlib
@@ -100,6 +141,7 @@ def _nearest(image, side: int):
     nearest texel (the closure normals of normal-mapped objects, for the horizons' points)."""
     if image is None:
         return None
+    image = getattr(image, "mean", image)      # sampled normals: their mean
     R = image.shape[0]
     i = np.minimum(((np.arange(side) + 0.5) * R / side).astype(np.int64), R - 1)
     return np.asarray(image)[i][:, i]

@@ -172,10 +172,9 @@ def _bake_transport_textures(scene, objects, settings, out_dir, resume, client, 
     with EnvironmentBake(scene, objects, R, 1, 0, (8, 16), mode="irradiance", seed=settings.seed,
                          world_sampling="none", passes="color") as session:
         albedos = session.bake_all(np.zeros((8, 16), np.float32))
-        if any(mapped):
-            baked = session.bake_normals()
-            normals = [ray_direct.world_normals(o, n) if m else None
-                       for o, n, m in zip(objects, baked, mapped)]
+        if any(mapped):   # sampled over each texel (lt_addon/rays/normal_samples.py)
+            normals, engine["shading_normals"] = ray_direct.sampled_normals(
+                session, objects, mapped, R)
         seconds["albedo_cycles"] = session.bake_seconds
         calls += session.bake_calls
     yield Progress(1, total, "albedo baked")

@@ -680,17 +680,63 @@ class EnvironmentBake(SceneChanges):
             sun.data.energy = 0.0
 
 
-    def bake_normals(self) -> list:
+    def bake_shifted_normals(self, offsets):
+        """Generator: for each offset ``(du, dv)`` in texels of ``offsets`` (n, 2), Cycles'
+        NORMAL bake (1 spp: the texel centre) of every object at texel centres moved by that
+        offset, as :meth:`bake_normals` returns it. The offsets move a temporary copy of each
+        object's bake UV map (the resolution, and so Cycles' ray differentials, unchanged), which
+        is removed again, the maps' active and render flags as they were
+        (``lt_addon/rays/normal_samples.py`` says why). Raises RuntimeError where a mesh takes
+        no UV map of ours (linked data) or its modifiers drop it."""
+        if self.per_vertex or self.samples != 1:
+            raise BakeInputError("shifted normals are baked into textures at 1 spp")
+        name = f"{_PREFIX}NormalShift"
+        layers, base = [], []
+        try:
+            for o, uv_name in zip(self.objects, self.uv_maps):
+                uvs = o.data.uv_layers
+                if name in uvs:
+                    raise RuntimeError(f"{o.name} already has a UV map named {name}")
+                active, render = uvs.active.name, [u.active_render for u in uvs]
+                src = np.empty(len(o.data.loops) * 2, np.float32)
+                uvs[uv_name].data.foreach_get("uv", src)
+                layer = uvs.new(name=name, do_init=False)
+                if layer is None:
+                    raise RuntimeError(f"{o.name}: no UV map can be added (at most 8)")
+                layers.append((o.data, layer.name))
+                uvs.active = uvs[active]
+                for u, r in zip(uvs, render + [False]):
+                    u.active_render = r
+                base.append(src)
+            R = self.resolution
+            for du, dv in np.asarray(offsets, np.float64).reshape(-1, 2):
+                for (mesh, lname), src in zip(layers, base):
+                    moved = src.copy()
+                    moved[0::2] += np.float32(du / R)
+                    moved[1::2] += np.float32(dv / R)
+                    mesh.uv_layers[lname].data.foreach_set("uv", moved)
+                    mesh.update()
+                yield self.bake_normals(uv_layer=name)
+        finally:
+            for mesh, lname in layers:
+                layer = mesh.uv_layers.get(lname)
+                if layer is not None:
+                    mesh.uv_layers.remove(layer)
+                mesh.update()
+
+    def bake_normals(self, uv_layer: str | None = None) -> list:
         """Shading normals per texel of every object (Cycles' NORMAL bake, object space), as
         unit vectors (R, R, 3) float64 in the object's frame; texels no UV island covers (nor
-        the margin) come back as zero vectors. Image targets only."""
+        the margin) come back as zero vectors. Image targets only. ``uv_layer``: the UV map
+        that places the texels, if not the bake's own."""
         if self.per_vertex:
             raise BakeInputError("normals are baked into textures, not per vertex")
         start = time.perf_counter()
         with _reports_to_stderr():
             result = bpy.ops.object.bake(type="NORMAL", normal_space="OBJECT", use_clear=True,
                                          margin=self.margin, margin_type="EXTEND",
-                                         **self._uv_kw())
+                                         **({"uv_layer": uv_layer} if uv_layer else
+                                            self._uv_kw()))
         self.bake_seconds += time.perf_counter() - start
         self.bake_calls += 1
         if "FINISHED" not in result:

@@ -333,10 +333,12 @@ def normal_mapped(obj) -> bool:
 def receiver_points(obj, depsgraph, resolution: int, Ns_image=None, footprint: bool = True):
     """(TexelSamples, ShadingPoints) of ``obj``'s texture bake at ``resolution``: the evaluated
     mesh in world space, its bake UV map (:func:`.meshes.bake_uv_name`), corner normals, smooth
-    flags and the object's shadow-terminator geometry offset. ``Ns_image``: (R, R, 3) world closure normals (a Cycles
-    normal bake) for normal-mapped materials, or None. ``footprint``: the points carry their
-    texels' :class:`...lt_addon.rays.footprint.Footprint` (rays where a shadow edge passes
-    average the texel as a converged Cycles bake does)."""
+    flags and the object's shadow-terminator geometry offset. ``Ns_image``: for normal-mapped
+    materials, (R, R, 3) world closure normals (a Cycles normal bake) or a
+    :class:`...lt_addon.rays.normal_samples.TexelNormals` (their mean, and each texel's sampled
+    normals where they vary); else None. ``footprint``: the points carry their texels'
+    :class:`...lt_addon.rays.footprint.Footprint` (rays where a shadow edge passes average the
+    texel as a converged Cycles bake does)."""
     m = mesh_arrays(obj, depsgraph)
     if m.uv is None:
         raise ValueError(f"{obj.name} has no UV map")
@@ -358,6 +360,9 @@ def receiver_points(obj, depsgraph, resolution: int, Ns_image=None, footprint: b
         raise BakeInputError(f"{obj.name}: its UV map covers no texel centre at {resolution}^2 "
                              "(UV islands smaller than a texel, or outside 0..1); unwrap it "
                              "(UV > Unwrap) or raise the resolution")
+    sampled = getattr(Ns_image, "normal_set", None)   # TexelNormals.normal_set (a method)
+    if sampled is not None:
+        Ns_image = Ns_image.mean
     Ns = None if Ns_image is None else np.asarray(Ns_image, np.float64).reshape(-1, 3)[samples.texel]
     if Ns is not None:   # texels the normal bake left empty keep the smooth normal
         Ns = np.where(np.linalg.norm(Ns, axis=1, keepdims=True) > 0.5, Ns, np.nan)
@@ -378,4 +383,6 @@ def receiver_points(obj, depsgraph, resolution: int, Ns_image=None, footprint: b
         bad = np.isnan(Ns).any(axis=1)
         Ns[bad] = points.N[bad]
         points.Ns = Ns / np.linalg.norm(Ns, axis=1, keepdims=True)
+        if sampled is not None:
+            points.normal_set = sampled(samples.texel, points.N, points.correction, bump)
     return samples, points

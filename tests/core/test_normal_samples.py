@@ -1,0 +1,98 @@
+"""Sampled closure normals (lt_addon/rays/normal_samples.py): the set's cosine is the mean of
+the one-normal cosine (lt_addon/rays/shading.py, checked against Cycles' bake) over the samples,
+for both bump terminator terms; subsets and sub-samples keep their texels' samples."""
+
+import numpy as np
+import pytest
+
+from relightable_textures.lt_addon.rays import normal_samples as ns
+from relightable_textures.lt_addon.rays.shading import ShadingPoints, cosine, cosine_at
+
+
+def _unit(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _normals(R=8, K=21, seed=3):
+    """(K, R, R, 3) normals: tilted up to ~80 degrees in a band (the 'mortar'), flat with a
+    slight tilt elsewhere; the texel (0, 0) uncovered (zeros)."""
+    rng = np.random.default_rng(seed)
+    n = np.zeros((K, R, R, 3))
+    n[..., 2] = 1.0
+    n[..., 0] = 0.05
+    band = rng.random((K, R, R)) < 0.3
+    band[:, :, : R // 2] = False
+    n[band, 0] = rng.normal(0, 3.0, band.sum())
+    n[band, 1] = rng.normal(0, 3.0, band.sum())
+    n = _unit(n)
+    n[:, 0, 0] = 0.0
+    return n
+
+
+def _sampler(stack):
+    smp = ns.Sampler(len(stack))
+    for img in stack:
+        smp.add(img)
+    return smp.done()
+
+
+@pytest.mark.parametrize("bump,corr", [("conty", True), ("conty", False), ("chiang", True)])
+def test_the_sets_cosine_is_the_mean_of_the_one_normal_cosine(bump, corr):
+    R, K = 8, 21
+    stack = _normals(R, K)
+    tn = _sampler(stack)
+    assert tn.samples.dtype == np.float16 and tn.count == K
+    texel = np.arange(1, R * R)                        # every covered texel, one point each
+    P = len(texel)
+    N = np.tile([0.0, 0.0, 1.0], (P, 1))
+    correction = np.full(P, corr)
+    pts = ShadingPoints(np.zeros((P, 3)), N, N, tn.mean.reshape(-1, 3)[texel], np.zeros((P, 3)),
+                        np.zeros(P), bump, correction)
+    pts.normal_set = tn.normal_set(texel, N, correction, bump)
+    varying = np.isin(texel, tn.pixels)
+    assert varying.any() and not varying.all()         # the band's texels, not the flat ones
+    for L in _unit(np.array([[0.8, 0.3, 0.05], [0.3, -0.6, 0.7], [-0.1, 0.2, 0.97]])):
+        got = cosine(pts, L)
+        want = np.empty(P)
+        for j, t in enumerate(texel):
+            if varying[j]:     # the one-normal cosine (float16-stored normals) over the K samples
+                sub = _unit(stack[:, t // R, t % R].astype(np.float16).astype(np.float64))
+                one = ShadingPoints(np.zeros((K, 3)), np.tile(N[j], (K, 1)), np.tile(N[j], (K, 1)),
+                                    sub, np.zeros((K, 3)), np.zeros(K), bump, np.full(K, corr))
+                want[j] = cosine(one, L).mean()
+            else:
+                one = pts.subset([j])
+                one.normal_set = None
+                want[j] = cosine(one, L)[0]
+        np.testing.assert_allclose(got, want, atol=2e-5)
+        np.testing.assert_allclose(cosine(pts, L, slice(5, 40)), want[5:40], atol=2e-5)
+        rows = np.array([40, 3, 17, 17, 60])
+        np.testing.assert_allclose(cosine_at(pts, L, rows), want[rows], atol=2e-5)
+        sub = pts.subset(rows)
+        np.testing.assert_allclose(cosine(sub, L), want[rows], atol=2e-5)
+
+
+def test_flat_texels_keep_their_mean_and_samples_past_an_island_take_the_first():
+    R, K = 4, 5
+    stack = np.zeros((K, R, R, 3))
+    stack[..., 2] = 1.0
+    stack[:, 0, 0] = 0.0                               # uncovered
+    stack[:, 1, 1] = _unit(np.array([[0.3, 0, 1], [-0.3, 0, 1], [0, 0.3, 1], [0, -0.3, 1],
+                                     [0, 0, 1.0]]))
+    stack[3, 2, 2] = 0.0                               # one offset past the island's margin
+    tn = _sampler(stack)
+    assert list(tn.pixels) == [R + 1]                  # only (1, 1) varies
+    np.testing.assert_allclose(tn.mean[1, 1], [0, 0, 1], atol=1e-12)
+    np.testing.assert_allclose(tn.mean[2, 2], [0, 0, 1], atol=1e-12)
+    assert not tn.mean[0, 0].any()
+
+
+def test_the_lattice_and_its_memory():
+    off = ns.offsets(ns.LATTICE, 0.5)
+    assert off.shape == (21, 2) and np.abs(off).max() < 0.25
+    assert len(np.unique(off[:, 0])) == 21 and len(np.unique(off[:, 1])) == 21   # stratified
+    np.testing.assert_allclose(off.mean(axis=0), 0.0, atol=1e-12)
+    assert ns.lattice_for(128 ** 2) == ns.LATTICE
+    assert ns.lattice_for(4096 ** 2) == (1, 0)
+    assert ns.lattice_for(2048 ** 2)[0] * 2048 ** 2 * 6 <= ns.MEMORY
+    assert ns.offsets((1, 0), 1.0).tolist() == [[0.0, 0.0]]
