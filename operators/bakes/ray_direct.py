@@ -104,7 +104,7 @@ def sampled_normals(session, objects, mapped, resolution: int):
     try:
         normals = collect(session.bake_shifted_normals(offsets) if len(offsets) > 1
                           else [session.bake_normals()], len(offsets))
-    except RuntimeError as e:
+    except Exception as e:      # linked data, a ninth UV map, modifiers that drop ours
         why = str(e).splitlines()[0] if str(e) else type(e).__name__
         lattice, offsets = (1, 0), ns.offsets((1, 0), 1.0)
         normals = collect([session.bake_normals()], 1)

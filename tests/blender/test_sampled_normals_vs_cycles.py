@@ -82,3 +82,24 @@ def test_sampled_normals_follow_the_converged_bake_where_the_centre_does_not(fre
         # measured with bpy 5.0.1: the centre 0.708 / 0.444, the samples 0.017 / 0.015
         assert err_c > 0.2, (light, err_c)                  # the centre misses the mortar
         assert err_s < 0.1 * err_c and err_s < 0.03, (light, err_s, err_c)
+
+
+def test_a_mesh_that_takes_no_more_uv_maps_keeps_the_centres_normal(fresh_scene):
+    """Eight UV maps (Blender's limit): no shifted copy can be made, so the bake keeps one
+    normal per texel (Cycles' centre), says why, and leaves the maps as they were."""
+    from relightable_textures.operators.base.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.bakes import ray_direct
+
+    plane = _brick_plane()
+    uvs = plane.data.uv_layers
+    while len(uvs) < 8:
+        uvs.new(name=f"Extra{len(uvs)}")
+    before = [(u.name, u.active, u.active_render) for u in uvs]
+    with EnvironmentBake(fresh_scene, [plane], R, 1, 0, (8, 16), mode="irradiance", seed=0,
+                         world_sampling="none", passes="color") as session:
+        centre = ray_direct.world_normals(plane, session.bake_normals()[0])
+        sampled, figures = ray_direct.sampled_normals(session, [plane], [True], R)
+    assert [(u.name, u.active, u.active_render) for u in uvs] == before
+    assert figures["bakes"] == 1 and figures["varying_texels"] == 0
+    assert "UV map" in figures["centre_only_because"], figures
+    np.testing.assert_allclose(sampled[0].mean, centre, atol=1e-6)
