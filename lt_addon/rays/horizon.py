@@ -35,7 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import reach as reach_mod
-from .shading import ShadingPoints, cosine, cosine_at, shadow_origins
+from .shading import ShadingPoints, facing, facing_at, shadow_origins
 
 #: The scanned elevations (degrees): 1-2.5 degrees apart below 10, wider above (an object
 #: subtending less than its gap can be missed: 1 m seen from 25 m at the horizon is 2.3 degrees).
@@ -211,11 +211,11 @@ class _Scan:
         # only directions in front of the closure count: behind it the cosine is 0 whatever
         # the ray meets (often the object itself), and along one azimuth the directions in
         # front form one range of elevations
-        if points.mapped() is None:     # one product for all (azimuth, elevation) pairs
+        if points.mapped() is None and points.normal_set is None:   # one product for all
             care = (points.Ns[part] @ self.L[az].reshape(-1, 3).T > 0).reshape(n, g, J)
             care = care.transpose(2, 1, 0).reshape(J, m)                        # (J, m)
         else:                           # closure normals: their bump terms, direction by one
-            care = np.concatenate([np.stack([cosine(points, self.L[a, j], part) > 0
+            care = np.concatenate([np.stack([facing(points, self.L[a, j], part)
                                              for j in range(J)]) for a in az], 1)
         # the terminator along phi: cos(N, L(e)) ~ cos(e - e0)
         Ns = points.Ns[part]
@@ -309,14 +309,14 @@ class _Scan:
         points, els = self.points, self.els
         J, m = len(els), len(ai)
         L = self.L[ai]                                               # (m, J, 3)
-        if points.mapped() is None:
+        if points.mapped() is None and points.normal_set is None:
             care = np.einsum("mk,mjk->jm", points.Ns[pi], L) > 0                  # (J, m)
         else:
             care = np.zeros((J, m), bool)
             for a in np.unique(ai):
                 at = np.nonzero(ai == a)[0]
                 for j in range(J):
-                    care[j, at] = cosine_at(points, self.L[a, j], pi[at]) > 0
+                    care[j, at] = facing_at(points, self.L[a, j], pi[at])
         Ns = points.Ns[pi]
         e0 = np.arctan2(Ns[:, 2], Ns[:, 0] * self.ca[ai] + Ns[:, 1] * self.sa[ai])
         if bounds is not None:

@@ -38,8 +38,11 @@ import numpy as np
 LATTICE = (21, 13)
 #: Smaller lattices, in order, where :data:`LATTICE` would hold more than :data:`MEMORY`.
 SMALLER = ((13, 8), (8, 5), (5, 3))
-#: Memory for the sampled normals while they are baked (float16: 6 bytes a normal).
+#: Memory for the sampled normals of all mapped objects together, at :data:`NORMAL_BYTES` each.
 MEMORY = 256 << 20
+#: Bytes a sampled normal holds at most: 6 while baked (float16), then 21 for the cosine's
+#: precomputed terms (:class:`_Shared`), and a block's temporaries.
+NORMAL_BYTES = 32
 #: A texel keeps its sampled normals where one of them is further than this from their mean
 #: direction (1 - cos: 1e-4 is 0.8 degrees); elsewhere the mean's cosine is the samples' to
 #: second order.
@@ -47,10 +50,10 @@ VARYING = 1e-4
 
 
 def lattice_for(texels: int, memory: int = MEMORY) -> tuple:
-    """The lattice ``(n, k)`` whose normals for ``texels`` covered texels fit ``memory``
-    (6 bytes each), or ``(1, 0)`` (the centre alone) where none does."""
+    """The lattice ``(n, k)`` whose normals for ``texels`` texels (all mapped objects') fit
+    ``memory`` (:data:`NORMAL_BYTES` each), or ``(1, 0)`` (the centre alone) where none does."""
     for n, k in (LATTICE,) + SMALLER:
-        if n * int(texels) * 6 <= memory:
+        if n * int(texels) * NORMAL_BYTES <= memory:
             return (n, k)
     return (1, 0)
 
@@ -71,7 +74,8 @@ class Sampler:
     """Collects one object's sampled normals, offset by offset, into :class:`TexelNormals`.
 
     ``add(image)``: (R, R, 3) world unit normals of one offset (zeros where no texel was
-    baked); the first image's covered texels are the ones kept. ``done()``: the result."""
+    baked); the first image's covered texels are the ones kept. ``done(offsets)``: the result,
+    given the (K, 2) offsets in texels the images were baked at (:func:`offsets`)."""
 
     def __init__(self, count: int):
         self.count, self.k = int(count), 0
@@ -93,7 +97,7 @@ class Sampler:
         self.sum += n
         self.k += 1
 
-    def done(self) -> "TexelNormals":
+    def done(self, offsets) -> "TexelNormals":
         if self.k != self.count:
             raise ValueError(f"{self.k} of {self.count} offsets baked")
         mean = np.zeros(self.shape).reshape(-1, 3)
@@ -104,29 +108,36 @@ class Sampler:
         spread = 1.0 - np.einsum("qkj,qj->qk", s, m.astype(np.float32)).min(axis=1)
         keep = np.nonzero(spread > VARYING)[0] if self.count > 1 else np.zeros(0, np.int64)
         return TexelNormals(mean.reshape(self.shape), self.pixels[keep],
-                            np.ascontiguousarray(self.stack[keep]), self.count)
+                            np.ascontiguousarray(self.stack[keep]), self.count,
+                            np.asarray(offsets, np.float64).reshape(self.count, 2))
 
 
 @dataclass
 class TexelNormals:
     """One object's closure normals in world space: ``mean`` (R, R, 3) unit (zeros where no
     texel was baked), and the sampled normals (Q, K, 3) float16 of the ``pixels`` (Q,) (sorted
-    row-major indices) where they differ; ``count``: the lattice's size K."""
+    row-major indices) where they differ; ``count``: the lattice's size K; ``offsets`` (K, 2):
+    where in its texel (in texels, from the centre) the k-th normal was baked: the bake's UV
+    map was moved by the offset, so the normal is the surface's at the centre *minus* it."""
 
     mean: np.ndarray
     pixels: np.ndarray
     samples: np.ndarray
     count: int
+    offsets: np.ndarray = None
 
     @property
     def shape(self):
         return self.mean.shape
 
-    def normal_set(self, texel, N, correction=None, bump: str = "conty") -> "NormalSet | None":
+    def normal_set(self, texel, N, correction=None, bump: str = "conty",
+                   inside=None) -> "NormalSet | None":
         """The :class:`NormalSet` of the points whose texels are ``texel`` (P,), with their
         smooth normals ``N`` (P, 3) and their materials' bump map ``correction`` (P,) bool
-        (None: on), under Cycles' bump terminator term ``bump``; None where no point's texel
-        has sampled normals."""
+        (None: on), under Cycles' bump terminator term ``bump``; ``inside``: a function of the
+        points' indices (M,) that says (M, K) which of their samples lie on their centre's
+        triangle (:func:`inside_triangle`; Cycles' jitter stays on it), or None (all do). None
+        where no point's texel has sampled normals."""
         if not len(self.pixels):
             return None
         texel = np.asarray(texel, np.int64)
@@ -136,8 +147,27 @@ class TexelNormals:
             return None
         rows = np.nonzero(hit)[0]
         corr = None if correction is None else np.asarray(correction, bool)[rows]
-        shared = _Shared(self.samples[pos[hit]], np.asarray(N, np.float64)[rows], corr, bump)
+        on = None if inside is None else inside(rows)
+        shared = _Shared(self.samples[pos[hit]], np.asarray(N, np.float64)[rows], corr, bump, on)
         return NormalSet(rows, shared, np.arange(len(rows)))
+
+
+def inside_triangle(uv_tri, uv_centre, offsets, resolution: int) -> np.ndarray:
+    """(M, K) bool: whether each of M texels' K samples -- at ``uv_centre`` (M, 2) minus
+    ``offsets`` (K, 2) texels -- lies on the texel centre's UV triangle ``uv_tri`` (M, 3, 2)
+    (barycentrics >= 0, with a margin of 1e-9 of the triangle's size)."""
+    t = np.asarray(uv_tri, np.float64)
+    p = (np.asarray(uv_centre, np.float64)[:, None, :]
+         - np.asarray(offsets, np.float64)[None] / float(resolution))           # (M, K, 2)
+    a, b, c = t[:, 0][:, None], t[:, 1][:, None], t[:, 2][:, None]
+    v0, v1, v2 = b - a, c - a, p - a
+    den = v0[..., 0] * v1[..., 1] - v1[..., 0] * v0[..., 1]                    # (M, 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        wb = (v2[..., 0] * v1[..., 1] - v1[..., 0] * v2[..., 1]) / den
+        wc = (v0[..., 0] * v2[..., 1] - v2[..., 0] * v0[..., 1]) / den
+    eps = -1e-9
+    ok = (wb >= eps) & (wc >= eps) & (1.0 - wb - wc >= eps)
+    return np.where(np.abs(den) > 0, ok, True)
 
 
 #: Bytes of cosines :class:`_Shared` keeps per set for the directions asked last (the direct
@@ -147,39 +177,53 @@ CACHE_BYTES = 64 << 20
 
 class _Shared:
     """The sampled normals of a set's entries (Q, K, 3) with each entry's smooth normal
-    (its texel centre's), what the bump terminator term needs of them made once, and the
-    cosines of the directions asked last."""
+    (its texel centre's) and which samples count (those on the centre's triangle), what the
+    bump terminator term needs of them made once, and the cosines of the directions asked
+    last."""
 
-    def __init__(self, samples, N, correction, bump: str):
+    #: Entries per block of a cosine's evaluation (its temporaries: ~20 bytes a normal).
+    BLOCK = 1 << 16
+
+    def __init__(self, samples, N, correction, bump: str, inside=None):
         if bump not in ("conty", "chiang"):
             raise ValueError(f"bump must be 'conty' or 'chiang', got {bump!r}")
         n = np.asarray(samples, np.float32)
         n = n / np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-12)
+        Q, K = n.shape[:2]
+        w = np.ones((Q, K), np.float32) if inside is None else np.asarray(inside, np.float32)
+        none = w.sum(axis=1) == 0          # (no sample on the triangle: all count)
+        w[none] = 1.0
+        self.w = w / w.sum(axis=1, keepdims=True)
+        m = np.einsum("qk,qkj->qj", self.w, n).astype(np.float64)
+        self.mean = m / np.maximum(np.linalg.norm(m, axis=1, keepdims=True), 1e-12)
         self.n, self.N, self.bump = n, np.asarray(N, np.float64), bump
         self.cos_sn = np.einsum("qkj,qj->qk", n, self.N.astype(np.float32))        # (Q, K)
         cos_d = np.abs(self.cos_sn)
         alpha2 = np.clip(0.125 * (1.0 / np.maximum(cos_d * cos_d, 1e-30) - 1.0), 0.0, 1.0)
+        # the masking term is 1 where the sample is the smooth normal or the material's bump
+        # map correction is off (bump_correction's ``where(smoothing, g1, 1)``)
+        self.one = cos_d >= 1.0
         if correction is not None:
-            alpha2 = np.where(np.asarray(correction, bool)[:, None], alpha2, 0.0)
+            self.one |= ~np.asarray(correction, bool)[:, None]
         self.alpha2 = alpha2.astype(np.float32)
-        self.flat = cos_d >= 1.0
+        # how far the counted samples spread from their mean: where it is over 90 degrees
+        # any direction may be faced
+        c = np.where(self.w > 0, np.einsum("qkj,qj->qk", n, self.mean.astype(np.float32)),
+                     1.0).min(axis=1)
+        self.reach_below = np.where(c > 0, -np.sqrt(np.maximum(1.0 - c * c, 0.0)), -1.01)
         self.cache = {}
-        self.keep = max(1, CACHE_BYTES // max(4 * len(n), 1))
+        self.keep = max(1, CACHE_BYTES // max(4 * Q, 1))
 
     def __len__(self) -> int:
         return len(self.n)
 
-    def cosines(self, L) -> np.ndarray:
-        """(Q,) float32: each entry's mean cosine factor towards unit ``L`` (3,)."""
-        L = np.asarray(L, np.float64)
-        key = L.tobytes()
-        got = self.cache.get(key)
-        if got is not None:
-            return got
-        cos_ni = self.n @ L.astype(np.float32)                                  # (Q, K)
-        cos_si = (self.N @ L).astype(np.float32)[:, None]                       # (Q, 1)
+    def _eval(self, e, L) -> np.ndarray:
+        """(len(e),) float32: the mean cosine factor of entries ``e`` (indices or a slice)."""
+        n, cos_sn = self.n[e], self.cos_sn[e]
+        cos_ni = n @ L.astype(np.float32)                                       # (m, K)
+        cos_si = (self.N[e] @ L).astype(np.float32)[:, None]                    # (m, 1)
         if self.bump == "chiang":        # bump_shadowing: Ng's sign cancels in the ratio
-            den = cos_ni * self.cos_sn
+            den = cos_ni * cos_sn
             with np.errstate(divide="ignore", invalid="ignore"):
                 g = np.where(den != 0, cos_si / den, 0.0)
             g2 = g * g
@@ -188,14 +232,33 @@ class _Shared:
             cos_i = np.abs(cos_si)
             c2 = cos_i * cos_i
             tan2 = (1.0 - c2) / np.maximum(c2, 1e-30)
-            g1 = 2.0 / (1.0 + np.sqrt(1.0 + self.alpha2 * tan2))
-            g1 = np.where(self.flat | (cos_i >= 1), 1.0, np.where(cos_i < 1e-6, 0.0, g1))
-            term = np.where(cos_si * self.cos_sn * cos_ni < 0, 0.0, g1)
-        out = (np.maximum(cos_ni, 0.0) * term).mean(axis=1).astype(np.float32)
+            g1 = 2.0 / (1.0 + np.sqrt(1.0 + self.alpha2[e] * tan2))
+            g1 = np.where(cos_i >= 1, 1.0, np.where(cos_i < 1e-6, 0.0, g1))
+            g1 = np.where(self.one[e], 1.0, g1)
+            term = np.where(cos_si * cos_sn * cos_ni < 0, 0.0, g1)
+        return np.einsum("qk,qk->q", np.maximum(cos_ni, 0.0) * term,
+                         self.w[e]).astype(np.float32)
+
+    def cosines(self, L, entries=None) -> np.ndarray:
+        """Each entry's mean cosine factor towards unit ``L`` (3,), float32: of every entry
+        (Q,) (kept for the directions asked last), or of ``entries`` (indices) alone where
+        they are a small part of the set and ``L`` was not asked yet (the horizons ask many
+        directions of a few points at a time)."""
+        L = np.asarray(L, np.float64)
+        key = L.tobytes()
+        got = self.cache.get(key)
+        if got is not None:
+            return got if entries is None else got[entries]
+        Q = len(self.n)
+        if entries is not None and 4 * len(entries) < Q:
+            return self._eval(np.asarray(entries, np.int64), L)
+        out = np.empty(Q, np.float32)
+        for a in range(0, Q, self.BLOCK):
+            out[a:a + self.BLOCK] = self._eval(slice(a, a + self.BLOCK), L)
         if len(self.cache) >= self.keep:
             self.cache.pop(next(iter(self.cache)))
         self.cache[key] = out
-        return out
+        return out if entries is None else out[entries]
 
 
 class NormalSet:
@@ -225,9 +288,16 @@ class NormalSet:
         have = np.nonzero(pos >= 0)[0]
         return NormalSet(have, self.shared, self.pick[pos[have]]) if len(have) else None
 
+    def reach(self, sel, L) -> np.ndarray:
+        """(m,) bool: whether one of the entries ``sel``'s counted samples may face unit
+        ``L`` (3,): the mean within the samples' spread (conservative; no cosine made)."""
+        e = self.pick[sel]
+        sh = self.shared
+        return sh.mean[e] @ np.asarray(L, np.float64) > sh.reach_below[e]
+
     def cosine(self, sel, L) -> np.ndarray:
         """The mean over each entry's sampled normals of the diffuse closure's cosine factor
         (:func:`.shading.cosine`'s, bump terminator term included, with the texel centre's
         smooth normal) (m,) float64 of the set's entries ``sel`` (a slice or indices) towards
         unit ``L`` (3,)."""
-        return self.shared.cosines(L)[self.pick[sel]].astype(np.float64)
+        return self.shared.cosines(L, self.pick[sel]).astype(np.float64)

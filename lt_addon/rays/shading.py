@@ -253,9 +253,10 @@ def bump_correction(N, Ns, L, smoothing):
     return out * np.where(smoothing, g1, 1.0)
 
 
-def cosine(points: ShadingPoints, L, sl: slice | None = None) -> np.ndarray:
+def cosine(points: ShadingPoints, L, sl: slice | None = None, sets: bool = True) -> np.ndarray:
     """The diffuse closure's cosine factor (P,) for unit ``L`` (3,), before visibility; of the
-    points ``sl`` (a slice) only when given."""
+    points ``sl`` (a slice) only when given. Points with sampled normals (``normal_set``) take
+    the mean over them (``sets=False``: their mean normal's cosine instead)."""
     a, b = (0, points.size) if sl is None else sl.indices(points.size)[:2]
     cos = np.maximum(points.Ns[a:b] @ L, 0.0)
     mapped = points.mapped()
@@ -267,7 +268,7 @@ def cosine(points: ShadingPoints, L, sl: slice | None = None) -> np.ndarray:
             cos[mapped - a] *= bump_shadowing(N, Ns, L)
         else:
             cos[mapped - a] *= bump_correction(N, Ns, L, points.correction[mapped])
-    ns = points.normal_set
+    ns = points.normal_set if sets else None
     if ns is not None:          # texels whose closure normal varies: the mean over its samples
         lo, hi = np.searchsorted(ns.rows, [a, b])
         if hi > lo:
@@ -276,7 +277,7 @@ def cosine(points: ShadingPoints, L, sl: slice | None = None) -> np.ndarray:
     return cos
 
 
-def cosine_at(points: ShadingPoints, L, rows) -> np.ndarray:
+def cosine_at(points: ShadingPoints, L, rows, sets: bool = True) -> np.ndarray:
     """:func:`cosine` of the points ``rows`` (indices) alone (M,)."""
     rows = np.asarray(rows, np.int64)
     cos = np.maximum(points.Ns[rows] @ L, 0.0)
@@ -290,13 +291,40 @@ def cosine_at(points: ShadingPoints, L, rows) -> np.ndarray:
                 cos[pos] *= bump_shadowing(N, Ns, L)
             else:
                 cos[pos] *= bump_correction(N, Ns, L, points.correction[r])
-    ns = points.normal_set
+    ns = points.normal_set if sets else None
     if ns is not None:
         at = ns.index(rows)
         pos = np.nonzero(at >= 0)[0]
         if len(pos):
             cos[pos] = ns.cosine(at[pos], L)
     return cos
+
+
+def facing(points: ShadingPoints, L, sl: slice | None = None) -> np.ndarray:
+    """(P,) bool: whether :func:`cosine` may be positive -- exactly where a point has one
+    closure normal, and for sampled normals wherever one of them may face ``L`` (their mean
+    within their spread: :meth:`.normal_samples.NormalSet.reach`), without their cosines."""
+    a, b = (0, points.size) if sl is None else sl.indices(points.size)[:2]
+    out = cosine(points, L, sl, sets=False) > 0
+    ns = points.normal_set
+    if ns is not None:
+        lo, hi = np.searchsorted(ns.rows, [a, b])
+        if hi > lo:
+            out[ns.rows[lo:hi] - a] |= ns.reach(slice(lo, hi), L)
+    return out
+
+
+def facing_at(points: ShadingPoints, L, rows) -> np.ndarray:
+    """:func:`facing` of the points ``rows`` (indices) alone (M,)."""
+    rows = np.asarray(rows, np.int64)
+    out = cosine_at(points, L, rows, sets=False) > 0
+    ns = points.normal_set
+    if ns is not None:
+        at = ns.index(rows)
+        pos = np.nonzero(at >= 0)[0]
+        if len(pos):
+            out[pos] |= ns.reach(at[pos], L)
+    return out
 
 
 def _dot3(A, L):

@@ -76,40 +76,54 @@ def world_normals(obj, object_normals):
     return np.where(length > 0, n / np.maximum(length, 1e-30), 0.0)
 
 
-def sampled_normals(session, objects, mapped, resolution: int):
+def sampled_normals(scene, objects, mapped, resolution: int, seed: int = 0):
     """``(normals, figures)``: the closure normals of the ``mapped`` objects (a list of
     booleans; None for the others) as :class:`...lt_addon.rays.normal_samples.TexelNormals`,
-    sampled over each texel's jitter box by 1-spp NORMAL bakes of ``session`` (an
-    EnvironmentBake at 1 spp) at shifted texel centres. Where a mesh takes no UV map of ours
-    (linked data, or modifiers that drop it) every object keeps the centre's normal alone, and
-    the figures say why."""
+    sampled over each texel's jitter box by 1-spp NORMAL bakes at shifted texel centres, in a
+    bake session of those objects alone (the others' meshes are not touched). Where a mesh
+    takes no UV map of ours (linked data, eight maps, modifiers that change its UV map) every
+    object keeps the centre's normal alone, and the figures say why."""
     import bpy
 
     from ...lt_addon.rays import normal_samples as ns
     from ...lt_addon.rays.footprint import jitter_box
+    from ..base.cycles_bake import EnvironmentBake
 
     t0 = time.perf_counter()
-    lattice = ns.lattice_for(resolution * resolution)
+    which = [i for i, m in enumerate(mapped) if m]
+    objs = [objects[i] for i in which]
+    lattice = ns.lattice_for(resolution * resolution * len(objs))
     offsets = ns.offsets(lattice, jitter_box(bpy.app.version))
     why = None
 
-    def collect(images_per_offset, count):
-        samplers = [ns.Sampler(count) if m else None for m in mapped]
-        for baked in images_per_offset:
-            for smp, o, n in zip(samplers, objects, baked):
-                if smp is not None:
+    def collect(images_per_offset, offs):
+        samplers = [ns.Sampler(len(offs)) for _ in objs]
+        try:
+            for baked in images_per_offset:
+                for smp, o, n in zip(samplers, objs, baked):
                     smp.add(world_normals(o, n))
-        return [None if smp is None else smp.done() for smp in samplers]
+        finally:       # a generator's temporary UV maps go now, not when it is collected
+            close = getattr(images_per_offset, "close", None)
+            if close is not None:
+                close()
+        return [smp.done(offs) for smp in samplers]
 
-    try:
-        normals = collect(session.bake_shifted_normals(offsets) if len(offsets) > 1
-                          else [session.bake_normals()], len(offsets))
-    except Exception as e:      # linked data, a ninth UV map, modifiers that drop ours
-        why = str(e).splitlines()[0] if str(e) else type(e).__name__
-        lattice, offsets = (1, 0), ns.offsets((1, 0), 1.0)
-        normals = collect([session.bake_normals()], 1)
+    with EnvironmentBake(scene, objs, resolution, 1, 0, (8, 16), mode="irradiance", seed=seed,
+                         world_sampling="none", passes="color") as session:
+        try:
+            got = collect(session.bake_shifted_normals(offsets) if len(offsets) > 1
+                          else [session.bake_normals()], offsets)
+        except MemoryError:
+            raise
+        except Exception as e:    # linked data, a ninth UV map, modifiers that change ours
+            why = str(e).splitlines()[0] if str(e) else type(e).__name__
+            lattice, offsets = (1, 0), ns.offsets((1, 0), 1.0)
+            got = collect([session.bake_normals()], offsets)
+    normals = [None] * len(objects)
+    for i, t in zip(which, got):
+        normals[i] = t
     figures = {"lattice": [int(lattice[0]), int(lattice[1])], "bakes": int(len(offsets)),
-               "varying_texels": int(sum(len(t.pixels) for t in normals if t is not None)),
+               "varying_texels": int(sum(len(t.pixels) for t in got)),
                "seconds": round(time.perf_counter() - t0, 3)}
     if why:
         figures["centre_only_because"] = why

@@ -61,6 +61,15 @@ from ...lt_addon.transport.bundle import (INDIRECT, KIND, MODELS, TRUTH_LIGHTS, 
 CHUNK_DIRECTIONS = 16
 
 
+
+#: Cycles samples of the albedo (its colour pass): a texture finer than a texel is averaged over
+#: the texel as a converged bake averages it, not read at its centre. A 2 m plane at 128^2
+#: against its 256-spp colour bake (2026-12-07, bpy 5.0.1): a Checker of scale 40 / 150 (3.2 /
+#: 0.85 texels a square) 0.176 / 0.389 at 1 spp, 0.025 / 0.061 at 16, 0.006 / 0.016 at 64; a
+#: Brick texture's colour 0.142 / 0.018 / 0.004; a Noise of scale 60, detail 8 0.026 / 0.004 /
+#: 0.001. 16 spp took 0.07-0.29 s there (the Noise the slowest), a 64-spp lit bake about 1 s.
+ALBEDO_SAMPLES = 16
+
 def check_space(n_objects: int, dset, settings: TransportTextureSettings, out_dir: str,
                 resume: bool = True) -> int:
     """Refuse up front, with the figure, when T would not fit on disk -- twice, with the chunk
@@ -167,16 +176,19 @@ def _bake_transport_textures(scene, objects, settings, out_dir, resume, client, 
         engine["horizons_raised"] = raised
     mapped = ray_direct.needs_normals(objects) if rays else [False] * len(objects)
 
-    # 1. albedo (colour pass only), and the shading normals rays need for normal maps
+    # 1. albedo (colour pass only, averaged over each texel), and the shading normals rays need
+    # for normal maps
     normals = [None] * len(objects)
-    with EnvironmentBake(scene, objects, R, 1, 0, (8, 16), mode="irradiance", seed=settings.seed,
-                         world_sampling="none", passes="color") as session:
+    with EnvironmentBake(scene, objects, R, ALBEDO_SAMPLES, 0, (8, 16), mode="irradiance",
+                         seed=settings.seed, world_sampling="none", passes="color") as session:
         albedos = session.bake_all(np.zeros((8, 16), np.float32))
-        if any(mapped):   # sampled over each texel (lt_addon/rays/normal_samples.py)
-            normals, engine["shading_normals"] = ray_direct.sampled_normals(
-                session, objects, mapped, R)
         seconds["albedo_cycles"] = session.bake_seconds
         calls += session.bake_calls
+    if any(mapped):   # sampled over each texel (lt_addon/rays/normal_samples.py)
+        normals, engine["shading_normals"] = ray_direct.sampled_normals(
+            scene, objects, mapped, R, settings.seed)
+        seconds["normals_cycles"] = engine["shading_normals"]["seconds"]
+        calls += engine["shading_normals"]["bakes"]
     yield Progress(1, total, "albedo baked")
     mem.stage("direct")
 

@@ -687,11 +687,13 @@ class EnvironmentBake(SceneChanges):
         object's bake UV map (the resolution, and so Cycles' ray differentials, unchanged), which
         is removed again, the maps' active and render flags as they were
         (``lt_addon/rays/normal_samples.py`` says why). Raises RuntimeError where a mesh takes
-        no UV map of ours (linked data) or its modifiers drop it."""
+        no UV map of ours (linked data, Blender's eight maps) or its modifiers do not carry the
+        copy as they carry the bake's map (a UV Warp, a UV Project: checked on the evaluated
+        mesh at the first offset)."""
         if self.per_vertex or self.samples != 1:
             raise BakeInputError("shifted normals are baked into textures at 1 spp")
         name = f"{_PREFIX}NormalShift"
-        layers, base = [], []
+        layers, base, checked = [], [], False
         try:
             for o, uv_name in zip(self.objects, self.uv_maps):
                 uvs = o.data.uv_layers
@@ -704,6 +706,8 @@ class EnvironmentBake(SceneChanges):
                 if layer is None:
                     raise RuntimeError(f"{o.name}: no UV map can be added (at most 8)")
                 layers.append((o.data, layer.name))
+                if layer.name != name:     # (an attribute of that name: the bake names ours)
+                    raise RuntimeError(f"{o.name}: the UV map {name} was named {layer.name}")
                 uvs.active = uvs[active]
                 for u, r in zip(uvs, render + [False]):
                     u.active_render = r
@@ -716,6 +720,9 @@ class EnvironmentBake(SceneChanges):
                     moved[1::2] += np.float32(dv / R)
                     mesh.uv_layers[lname].data.foreach_set("uv", moved)
                     mesh.update()
+                if not checked:
+                    self._check_shifted(name, (du / R, dv / R))
+                    checked = True
                 yield self.bake_normals(uv_layer=name)
         finally:
             for mesh, lname in layers:
@@ -723,6 +730,24 @@ class EnvironmentBake(SceneChanges):
                 if layer is not None:
                     mesh.uv_layers.remove(layer)
                 mesh.update()
+
+    def _check_shifted(self, name: str, shift) -> None:
+        """Raise RuntimeError unless every object's evaluated mesh holds the UV map ``name``
+        equal to its bake map moved by ``shift`` (u, v)."""
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        for o, uv_name in zip(self.objects, self.uv_maps):
+            mesh = o.evaluated_get(depsgraph).data
+            got = mesh.uv_layers.get(name)
+            if got is None:
+                raise RuntimeError(f"{o.name}: its modifiers drop a copy of its UV map")
+            a = np.empty(len(mesh.loops) * 2, np.float32)
+            b = np.empty_like(a)
+            got.data.foreach_get("uv", a)
+            mesh.uv_layers[uv_name].data.foreach_get("uv", b)
+            d = (a - b).reshape(-1, 2) - np.asarray(shift, np.float32)
+            if len(d) and np.abs(d).max() > 1e-5 + 1e-6 * np.abs(b).max():
+                raise RuntimeError(f"{o.name}: its modifiers change its UV map {uv_name} "
+                                   "other than a copy of it (UV Warp, UV Project)")
 
     def bake_normals(self, uv_layer: str | None = None) -> list:
         """Shading normals per texel of every object (Cycles' NORMAL bake, object space), as

@@ -362,7 +362,7 @@ def receiver_points(obj, depsgraph, resolution: int, Ns_image=None, footprint: b
                              "(UV > Unwrap) or raise the resolution")
     sampled = getattr(Ns_image, "normal_set", None)   # TexelNormals.normal_set (a method)
     if sampled is not None:
-        Ns_image = Ns_image.mean
+        Ns_image, Ns_offsets = Ns_image.mean, Ns_image.offsets
     Ns = None if Ns_image is None else np.asarray(Ns_image, np.float64).reshape(-1, 3)[samples.texel]
     if Ns is not None:   # texels the normal bake left empty keep the smooth normal
         Ns = np.where(np.linalg.norm(Ns, axis=1, keepdims=True) > 0.5, Ns, np.nan)
@@ -383,6 +383,16 @@ def receiver_points(obj, depsgraph, resolution: int, Ns_image=None, footprint: b
         bad = np.isnan(Ns).any(axis=1)
         Ns[bad] = points.N[bad]
         points.Ns = Ns / np.linalg.norm(Ns, axis=1, keepdims=True)
-        if sampled is not None:
-            points.normal_set = sampled(samples.texel, points.N, points.correction, bump)
+        if sampled is not None:      # (samples off the centre's triangle do not count)
+            from ...lt_addon.rays.normal_samples import inside_triangle
+
+            def inside(rows):
+                t = uv[samples.triangle[rows]]
+                centre = np.einsum("mk,mkj->mj", samples.bary[rows], t)
+                return inside_triangle(t, centre, Ns_offsets, resolution)
+
+            points.normal_set = sampled(samples.texel, points.N, points.correction, bump,
+                                        None if Ns_offsets is None else inside)
+            if points.normal_set is not None:   # their mean, of the samples that count
+                points.Ns[points.normal_set.rows] = points.normal_set.shared.mean
     return samples, points

@@ -67,7 +67,7 @@ def test_sampled_normals_follow_the_converged_bake_where_the_centre_does_not(fre
     with EnvironmentBake(fresh_scene, [plane], R, 1, 0, (8, 16), mode="irradiance", seed=0,
                          world_sampling="none", passes="color") as session:
         centre = ray_direct.world_normals(plane, session.bake_normals()[0])
-        sampled, figures = ray_direct.sampled_normals(session, [plane], [True], R)
+    sampled, figures = ray_direct.sampled_normals(fresh_scene, [plane], [True], R)
     assert [(u.name, u.active, u.active_render) for u in uvs] == before
     assert figures["bakes"] == 21 and "centre_only_because" not in figures
     # the mortar's texels keep their samples, the bricks' middles their mean alone
@@ -98,8 +98,22 @@ def test_a_mesh_that_takes_no_more_uv_maps_keeps_the_centres_normal(fresh_scene)
     with EnvironmentBake(fresh_scene, [plane], R, 1, 0, (8, 16), mode="irradiance", seed=0,
                          world_sampling="none", passes="color") as session:
         centre = ray_direct.world_normals(plane, session.bake_normals()[0])
-        sampled, figures = ray_direct.sampled_normals(session, [plane], [True], R)
+    sampled, figures = ray_direct.sampled_normals(fresh_scene, [plane], [True], R)
     assert [(u.name, u.active, u.active_render) for u in uvs] == before
     assert figures["bakes"] == 1 and figures["varying_texels"] == 0
     assert "UV map" in figures["centre_only_because"], figures
     np.testing.assert_allclose(sampled[0].mean, centre, atol=1e-6)
+
+
+def test_a_modifier_that_moves_the_uv_map_keeps_the_centres_normal(fresh_scene):
+    """A UV Warp on the bake's map moves it but not our copy, so the copy's texel centres
+    would be somewhere else on the surface: the check on the evaluated mesh sees it."""
+    from relightable_textures.operators.bakes import ray_direct
+
+    plane = _brick_plane()
+    warp = plane.modifiers.new("Warp", "UV_WARP")
+    warp.uv_layer = plane.data.uv_layers[0].name
+    warp.offset = (0.013, 0.0)
+    sampled, figures = ray_direct.sampled_normals(fresh_scene, [plane], [True], R)
+    assert figures["bakes"] == 1 and "UV Warp" in figures["centre_only_because"], figures
+    assert [u.name for u in plane.data.uv_layers] == ["UVMap", "Lightmap"]

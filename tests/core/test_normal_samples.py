@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from relightable_textures.lt_addon.rays import normal_samples as ns
-from relightable_textures.lt_addon.rays.shading import ShadingPoints, cosine, cosine_at
+from relightable_textures.lt_addon.rays.shading import (ShadingPoints, cosine, cosine_at,
+                                                        facing, facing_at)
 
 
 def _unit(v):
@@ -33,7 +34,8 @@ def _sampler(stack):
     smp = ns.Sampler(len(stack))
     for img in stack:
         smp.add(img)
-    return smp.done()
+    K = len(stack)
+    return smp.done(ns.offsets(ns.LATTICE if K == 21 else (K, 3), 0.5))
 
 
 @pytest.mark.parametrize("bump,corr", [("conty", True), ("conty", False), ("chiang", True)])
@@ -51,7 +53,10 @@ def test_the_sets_cosine_is_the_mean_of_the_one_normal_cosine(bump, corr):
     pts.normal_set = tn.normal_set(texel, N, correction, bump)
     varying = np.isin(texel, tn.pixels)
     assert varying.any() and not varying.all()         # the band's texels, not the flat ones
-    for L in _unit(np.array([[0.8, 0.3, 0.05], [0.3, -0.6, 0.7], [-0.1, 0.2, 0.97]])):
+    # (the last: grazing a horizontal plane, where the masking term of a material without the
+    # bump map correction is still 1)
+    for L in _unit(np.array([[0.8, 0.3, 0.05], [0.3, -0.6, 0.7], [-0.1, 0.2, 0.97],
+                             [0.6, 0.8, 0.0]])):
         got = cosine(pts, L)
         want = np.empty(P)
         for j, t in enumerate(texel):
@@ -70,6 +75,12 @@ def test_the_sets_cosine_is_the_mean_of_the_one_normal_cosine(bump, corr):
         np.testing.assert_allclose(cosine_at(pts, L, rows), want[rows], atol=2e-5)
         sub = pts.subset(rows)
         np.testing.assert_allclose(cosine(sub, L), want[rows], atol=2e-5)
+        # the horizons' test of which directions count never leaves out a lit point
+        assert np.all(facing(pts, L)[got > 0])
+        assert np.array_equal(facing_at(pts, L, rows), facing(pts, L)[rows])
+        # a few points asked of a new direction are made alone, the same values
+        pts.normal_set.shared.cache.clear()
+        np.testing.assert_allclose(cosine_at(pts, L, rows[:2]), want[rows[:2]], atol=2e-5)
 
 
 def test_flat_texels_keep_their_mean_and_samples_past_an_island_take_the_first():
@@ -94,5 +105,27 @@ def test_the_lattice_and_its_memory():
     np.testing.assert_allclose(off.mean(axis=0), 0.0, atol=1e-12)
     assert ns.lattice_for(128 ** 2) == ns.LATTICE
     assert ns.lattice_for(4096 ** 2) == (1, 0)
-    assert ns.lattice_for(2048 ** 2)[0] * 2048 ** 2 * 6 <= ns.MEMORY
+    for texels in (512 ** 2, 1024 ** 2, 3 * 1024 ** 2, 2048 ** 2):
+        n = ns.lattice_for(texels)[0]
+        assert n == 1 or n * texels * ns.NORMAL_BYTES <= ns.MEMORY
     assert ns.offsets((1, 0), 1.0).tolist() == [[0.0, 0.0]]
+
+
+def test_samples_off_the_centres_triangle_do_not_count():
+    """A texel on a triangle's edge: Cycles' jitter stays on the centre's triangle, so the
+    normals baked past the edge (the moved map reads the neighbour there) are left out."""
+    off = np.array([[0.2, 0.0], [-0.2, 0.0]])              # texels; samples at centre - off
+    tri = np.array([[[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]])
+    R = 10
+    centre = np.array([[0.01, 0.5]])                        # 0.1 texel right of the edge u = 0
+    inside = ns.inside_triangle(tri, centre, off, R)
+    assert inside.tolist() == [[False, True]]               # u = 0.01 - 0.02 is off it
+    n = np.array([[[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]])     # the neighbour's, the centre's
+    N = np.array([[0.0, 0.0, 1.0]])
+    shared = ns._Shared(n.astype(np.float16), N, None, "conty", inside)
+    np.testing.assert_allclose(shared.mean, N, atol=1e-6)
+    L = _unit(np.array([0.6, 0.0, 0.8]))
+    np.testing.assert_allclose(shared.cosines(L), [0.8], atol=1e-6)
+    # none on the triangle (a sliver): all count
+    both = ns._Shared(n.astype(np.float16), N, None, "conty", np.zeros((1, 2), bool))
+    assert both.w.tolist() == [[0.5, 0.5]]
