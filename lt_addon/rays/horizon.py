@@ -180,6 +180,20 @@ def _blocks(P: int, A: int, J: int) -> list:
             for c0 in range(0, P, chunk) for a0 in range(0, A, group)]
 
 
+
+def _spread(points) -> np.ndarray:
+    """(P,) radians: how far past its mean normal's terminator a point's closure normals reach
+    -- 0 but for sampled normals (:meth:`.normal_samples.NormalSet.reach`); made once."""
+    got = getattr(points, "_horizon_spread", None)
+    if got is None or len(got) != points.size:
+        got = np.zeros(points.size)
+        ns = points.normal_set
+        if ns is not None:
+            below = ns.shared.reach_below[ns.pick]
+            got[ns.rows] = np.arcsin(np.clip(-below, 0.0, 1.0))
+        points._horizon_spread = got
+    return got
+
 class _Scan:
     """The scan's per-call constants, and :meth:`block`: one block's intervals."""
 
@@ -283,8 +297,10 @@ class _Scan:
         care_bottom = np.where(care[J0:], JJ[J0:], J).min(0)
         # blocked up to (or from) the end of the range in front: the edge is the terminator
         # itself -- continuous from one azimuth to the next, unlike "blocked to the zenith"
-        hi = np.where(any_, np.clip(e0 + np.pi / 2, BELOW, np.pi / 2), 0.0)
-        start = e0 - np.pi / 2
+        # (sampled normals: their terminators reach past the mean's by the samples' spread)
+        half = np.pi / 2 + _spread(self.points)[pi]
+        hi = np.where(any_, np.clip(e0 + half, BELOW, np.pi / 2), 0.0)
+        start = e0 - half
         lo = np.where(any_ & ~below, np.where(start > 0, start, FROM_BELOW), 0.0)  # open: [0, 0]
         lo[below] = FROM_BELOW
         # both edges bisected together: one engine call per step (an edge under the horizon

@@ -39,10 +39,13 @@ LATTICE = (21, 13)
 #: Smaller lattices, in order, where :data:`LATTICE` would hold more than :data:`MEMORY`.
 SMALLER = ((13, 8), (8, 5), (5, 3))
 #: Memory for the sampled normals of all mapped objects together, at :data:`NORMAL_BYTES` each.
-MEMORY = 256 << 20
-#: Bytes a sampled normal holds at most: 6 while baked (float16), then 21 for the cosine's
-#: precomputed terms (:class:`_Shared`), and a block's temporaries.
-NORMAL_BYTES = 32
+MEMORY = 512 << 20
+#: Bytes a sampled normal holds: 6 (float16) while baked and kept, 4 for its weight (float32);
+#: the cosines' terms are made a block at a time (:attr:`_Shared.BLOCK`).
+NORMAL_BYTES = 12
+#: Cycles' redraws of a jitter that fell off the centre's triangle before it keeps the centre
+#: (:data:`.footprint.TRIES`, the same rule).
+TRIES = 10
 #: A texel keeps its sampled normals where one of them is further than this from their mean
 #: direction (1 - cos: 1e-4 is 0.8 degrees); elsewhere the mean's cosine is the samples' to
 #: second order.
@@ -53,21 +56,22 @@ def lattice_for(texels: int, memory: int = MEMORY) -> tuple:
     """The lattice ``(n, k)`` whose normals for ``texels`` texels (all mapped objects') fit
     ``memory`` (:data:`NORMAL_BYTES` each), or ``(1, 0)`` (the centre alone) where none does."""
     for n, k in (LATTICE,) + SMALLER:
-        if n * int(texels) * NORMAL_BYTES <= memory:
+        if (n + 1) * int(texels) * NORMAL_BYTES <= memory:
             return (n, k)
     return (1, 0)
 
 
 def offsets(lattice, box: float) -> np.ndarray:
-    """(n, 2) offsets in texels from the texel centre of the lattice ``(n, k)`` over a jitter box
-    of side ``box`` (sample i at ((i + 1/2) / n, ((i k) mod n + 1/2) / n) of the box); the
-    centre alone for ``(1, 0)``."""
+    """(n + 1, 2) offsets in texels from the texel centre: the centre itself (Cycles keeps it
+    where its jitter keeps falling off the centre's triangle), then the lattice ``(n, k)`` over
+    a jitter box of side ``box`` (sample i at ((i + 1/2) / n, ((i k) mod n + 1/2) / n) of the
+    box); the centre alone for ``(1, 0)``."""
     n, k = int(lattice[0]), int(lattice[1])
     if n <= 1:
         return np.zeros((1, 2))
     i = np.arange(n)
     base = np.stack([(i + 0.5) / n, ((i * k) % n + 0.5) / n], axis=1)
-    return (base - 0.5) * float(box)
+    return np.vstack([np.zeros((1, 2)), (base - 0.5) * float(box)])
 
 
 class Sampler:
@@ -91,24 +95,33 @@ class Sampler:
             self.sum = np.zeros((len(self.pixels), 3))
         n = flat[self.pixels]
         bad = np.linalg.norm(n, axis=1) < 0.5     # an offset past the island and its margin
-        if self.k and bad.any():                  # (the first offset's normal stands in)
+        if self.k and bad.any():                  # (the centre's normal stands in)
             n[bad] = self.stack[bad, 0].astype(np.float64)
         self.stack[:, self.k] = n
-        self.sum += n
+        if self.k or self.count == 1:             # (the mean is the lattice's)
+            self.sum += n
         self.k += 1
 
     def done(self, offsets) -> "TexelNormals":
+        """The texels' normals: their mean over the lattice (the centre's alone without one),
+        and the samples of those whose normals spread further than :data:`VARYING`."""
         if self.k != self.count:
             raise ValueError(f"{self.k} of {self.count} offsets baked")
         mean = np.zeros(self.shape).reshape(-1, 3)
+        Q = len(self.pixels)
         m = self.sum / np.maximum(np.linalg.norm(self.sum, axis=1, keepdims=True), 1e-30)
         mean[self.pixels] = m
-        s = self.stack.astype(np.float32)
-        s /= np.maximum(np.linalg.norm(s, axis=2, keepdims=True), 1e-12)
-        spread = 1.0 - np.einsum("qkj,qj->qk", s, m.astype(np.float32)).min(axis=1)
-        keep = np.nonzero(spread > VARYING)[0] if self.count > 1 else np.zeros(0, np.int64)
-        return TexelNormals(mean.reshape(self.shape), self.pixels[keep],
-                            np.ascontiguousarray(self.stack[keep]), self.count,
+        keep = []
+        if self.count > 1:
+            for a in range(0, Q, _Shared.BLOCK):     # (a block's float32 temporaries at a time)
+                s = self.stack[a:a + _Shared.BLOCK].astype(np.float32)
+                s /= np.maximum(np.linalg.norm(s, axis=2, keepdims=True), 1e-12)
+                c = np.einsum("qkj,qj->qk", s, m[a:a + _Shared.BLOCK].astype(np.float32))
+                keep.append(a + np.nonzero(1.0 - c.min(axis=1) > VARYING)[0])
+        keep = np.concatenate(keep) if keep else np.zeros(0, np.int64)
+        samples = self.stack if len(keep) == Q else np.ascontiguousarray(self.stack[keep])
+        self.stack = None
+        return TexelNormals(mean.reshape(self.shape), self.pixels[keep], samples, self.count,
                             np.asarray(offsets, np.float64).reshape(self.count, 2))
 
 
@@ -116,9 +129,10 @@ class Sampler:
 class TexelNormals:
     """One object's closure normals in world space: ``mean`` (R, R, 3) unit (zeros where no
     texel was baked), and the sampled normals (Q, K, 3) float16 of the ``pixels`` (Q,) (sorted
-    row-major indices) where they differ; ``count``: the lattice's size K; ``offsets`` (K, 2):
-    where in its texel (in texels, from the centre) the k-th normal was baked: the bake's UV
-    map was moved by the offset, so the normal is the surface's at the centre *minus* it."""
+    row-major indices) where they differ; ``count``: K, the centre and the lattice's size;
+    ``offsets`` (K, 2): where in its texel (in texels, from the centre) the k-th normal was
+    baked: the bake's UV map was moved by the offset, so the normal is the surface's at the
+    centre *minus* it."""
 
     mean: np.ndarray
     pixels: np.ndarray
@@ -136,8 +150,8 @@ class TexelNormals:
         smooth normals ``N`` (P, 3) and their materials' bump map ``correction`` (P,) bool
         (None: on), under Cycles' bump terminator term ``bump``; ``inside``: a function of the
         points' indices (M,) that says (M, K) which of their samples lie on their centre's
-        triangle (:func:`inside_triangle`; Cycles' jitter stays on it), or None (all do). None
-        where no point's texel has sampled normals."""
+        triangle (:func:`inside_triangle`; Cycles' jitter stays on it), asked a block at a
+        time, or None (all do). None where no point's texel has sampled normals."""
         if not len(self.pixels):
             return None
         texel = np.asarray(texel, np.int64)
@@ -147,8 +161,11 @@ class TexelNormals:
             return None
         rows = np.nonzero(hit)[0]
         corr = None if correction is None else np.asarray(correction, bool)[rows]
-        on = None if inside is None else inside(rows)
-        shared = _Shared(self.samples[pos[hit]], np.asarray(N, np.float64)[rows], corr, bump, on)
+        at = pos[hit]
+        whole = len(at) == len(self.pixels) and bool(np.all(at[1:] > at[:-1]))
+        shared = _Shared(self.samples if whole else self.samples[at],
+                         np.asarray(N, np.float64)[rows], corr, bump,
+                         None if inside is None else (lambda sel: inside(rows[sel])))
         return NormalSet(rows, shared, np.arange(len(rows)))
 
 
@@ -170,58 +187,87 @@ def inside_triangle(uv_tri, uv_centre, offsets, resolution: int) -> np.ndarray:
     return np.where(np.abs(den) > 0, ok, True)
 
 
+#: Bytes a set may hold of the sun-independent terms of its cosines (the unit normals, their
+#: cosine with the smooth normal, the masking's roughness: 21 bytes a normal); past them the
+#: terms are made again a block at a time for every direction (measured on 7,273 texels x 22
+#: normals: 9.4 ms a direction made again, 2.4 ms kept).
+PRECOMPUTE_BYTES = 128 << 20
 #: Bytes of cosines :class:`_Shared` keeps per set for the directions asked last (the direct
 #: stage asks each direction of a chunk twice: its rows, then the footprints' refinement).
 CACHE_BYTES = 64 << 20
 
 
 class _Shared:
-    """The sampled normals of a set's entries (Q, K, 3) with each entry's smooth normal
-    (its texel centre's) and which samples count (those on the centre's triangle), what the
-    bump terminator term needs of them made once, and the cosines of the directions asked
-    last."""
+    """The sampled normals of a set's entries (Q, K, 3) float16 (the centre's first) with each
+    entry's smooth normal (its texel centre's) and the samples' weights: the lattice's samples
+    on the centre's triangle share what Cycles' jitter gives them, the centre the rest
+    (:data:`TRIES`); and the cosines of the directions asked last."""
 
-    #: Entries per block of a cosine's evaluation (its temporaries: ~20 bytes a normal).
-    BLOCK = 1 << 16
+    #: Entries per block of a cosine's evaluation (its temporaries: ~40 bytes a normal).
+    BLOCK = 1 << 15
 
     def __init__(self, samples, N, correction, bump: str, inside=None):
         if bump not in ("conty", "chiang"):
             raise ValueError(f"bump must be 'conty' or 'chiang', got {bump!r}")
-        n = np.asarray(samples, np.float32)
-        n = n / np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-12)
-        Q, K = n.shape[:2]
-        w = np.ones((Q, K), np.float32) if inside is None else np.asarray(inside, np.float32)
-        none = w.sum(axis=1) == 0          # (no sample on the triangle: all count)
-        w[none] = 1.0
-        self.w = w / w.sum(axis=1, keepdims=True)
-        m = np.einsum("qk,qkj->qj", self.w, n).astype(np.float64)
-        self.mean = m / np.maximum(np.linalg.norm(m, axis=1, keepdims=True), 1e-12)
-        self.n, self.N, self.bump = n, np.asarray(N, np.float64), bump
-        self.cos_sn = np.einsum("qkj,qj->qk", n, self.N.astype(np.float32))        # (Q, K)
-        cos_d = np.abs(self.cos_sn)
-        alpha2 = np.clip(0.125 * (1.0 / np.maximum(cos_d * cos_d, 1e-30) - 1.0), 0.0, 1.0)
-        # the masking term is 1 where the sample is the smooth normal or the material's bump
-        # map correction is off (bump_correction's ``where(smoothing, g1, 1)``)
-        self.one = cos_d >= 1.0
-        if correction is not None:
-            self.one |= ~np.asarray(correction, bool)[:, None]
-        self.alpha2 = alpha2.astype(np.float32)
-        # how far the counted samples spread from their mean: where it is over 90 degrees
-        # any direction may be faced
-        c = np.where(self.w > 0, np.einsum("qkj,qj->qk", n, self.mean.astype(np.float32)),
-                     1.0).min(axis=1)
-        self.reach_below = np.where(c > 0, -np.sqrt(np.maximum(1.0 - c * c, 0.0)), -1.01)
+        self.n16, self.N, self.bump = samples, np.asarray(N, np.float64), bump
+        Q, K = samples.shape[:2]
+        self.correction = (np.ones(Q, bool) if correction is None
+                           else np.asarray(correction, bool))
+        self.w = np.zeros((Q, K), np.float32)
+        self.mean = np.zeros((Q, 3))
+        self.reach_below = np.zeros(Q)
+        for a in range(0, Q, self.BLOCK):
+            e = slice(a, min(a + self.BLOCK, Q))
+            n = self._unit(e)
+            if K == 1:
+                w = np.ones((n.shape[0], 1), np.float32)
+            else:
+                on = (np.ones((n.shape[0], K - 1), bool) if inside is None
+                      else np.asarray(inside(e), bool)[:, 1:])
+                k_in = on.sum(axis=1)
+                w0 = (1.0 - k_in / (K - 1)) ** TRIES                # all redraws off: the centre
+                w = np.concatenate([w0[:, None], on * ((1.0 - w0) / np.maximum(k_in, 1))[:, None]],
+                                   axis=1).astype(np.float32)
+            self.w[e] = w
+            m = np.einsum("qk,qkj->qj", w, n).astype(np.float64)
+            m /= np.maximum(np.linalg.norm(m, axis=1, keepdims=True), 1e-12)
+            self.mean[e] = m
+            # how far the counted samples spread from their mean (over 90 degrees: any
+            # direction may be faced)
+            c = np.where(w > 0, np.einsum("qkj,qj->qk", n, m.astype(np.float32)), 1.0).min(1)
+            self.reach_below[e] = np.where(c > 0, -np.sqrt(np.maximum(1.0 - c * c, 0.0)), -1.01)
         self.cache = {}
         self.keep = max(1, CACHE_BYTES // max(4 * Q, 1))
+        # the terms that do not depend on the sun, made once where they fit (else per block)
+        self.pre = None
+        if Q * K * 21 <= PRECOMPUTE_BYTES:
+            n = self._unit(slice(None))
+            cos_sn = np.einsum("qkj,qj->qk", n, self.N.astype(np.float32))
+            self.pre = (n, cos_sn, self._alpha2(cos_sn))
+
+    @staticmethod
+    def _alpha2(cos_sn) -> np.ndarray:
+        cos_d = np.abs(cos_sn)
+        return np.clip(0.125 * (1.0 / np.maximum(cos_d * cos_d, 1e-30) - 1.0), 0.0, 1.0)
+
+    def _unit(self, e) -> np.ndarray:
+        n = self.n16[e].astype(np.float32)
+        return n / np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-12)
 
     def __len__(self) -> int:
-        return len(self.n)
+        return len(self.n16)
 
     def _eval(self, e, L) -> np.ndarray:
         """(len(e),) float32: the mean cosine factor of entries ``e`` (indices or a slice)."""
-        n, cos_sn = self.n[e], self.cos_sn[e]
+        N = self.N[e]
+        if self.pre is not None:
+            n, cos_sn, alpha2 = (a[e] for a in self.pre)
+        else:
+            n = self._unit(e)
+            cos_sn = np.einsum("qkj,qj->qk", n, N.astype(np.float32))           # (m, K)
+            alpha2 = self._alpha2(cos_sn)
         cos_ni = n @ L.astype(np.float32)                                       # (m, K)
-        cos_si = (self.N[e] @ L).astype(np.float32)[:, None]                    # (m, 1)
+        cos_si = (N @ L).astype(np.float32)[:, None]                            # (m, 1)
         if self.bump == "chiang":        # bump_shadowing: Ng's sign cancels in the ratio
             den = cos_ni * cos_sn
             with np.errstate(divide="ignore", invalid="ignore"):
@@ -232,9 +278,11 @@ class _Shared:
             cos_i = np.abs(cos_si)
             c2 = cos_i * cos_i
             tan2 = (1.0 - c2) / np.maximum(c2, 1e-30)
-            g1 = 2.0 / (1.0 + np.sqrt(1.0 + self.alpha2[e] * tan2))
+            g1 = 2.0 / (1.0 + np.sqrt(1.0 + alpha2 * tan2))
             g1 = np.where(cos_i >= 1, 1.0, np.where(cos_i < 1e-6, 0.0, g1))
-            g1 = np.where(self.one[e], 1.0, g1)
+            # 1 where the sample is the smooth normal or the material's bump map correction is
+            # off (bump_correction's ``where(smoothing, g1, 1)``)
+            g1 = np.where((np.abs(cos_sn) >= 1.0) | ~self.correction[e][:, None], 1.0, g1)
             term = np.where(cos_si * cos_sn * cos_ni < 0, 0.0, g1)
         return np.einsum("qk,qk->q", np.maximum(cos_ni, 0.0) * term,
                          self.w[e]).astype(np.float32)
@@ -249,7 +297,7 @@ class _Shared:
         got = self.cache.get(key)
         if got is not None:
             return got if entries is None else got[entries]
-        Q = len(self.n)
+        Q = len(self.n16)
         if entries is not None and 4 * len(entries) < Q:
             return self._eval(np.asarray(entries, np.int64), L)
         out = np.empty(Q, np.float32)

@@ -134,7 +134,8 @@ class TransportTextureSettings:
          "average 16 rays over the texel as a converged Cycles bake does (a brick relief under "
          "a 2-degree sun: 0.07 from Cycles' converged bake, as close as 16 Cycles samples; "
          "one ray is 0.36)"),
-        ("centre", "Centre", "One ray per texel, at its centre: exactly a 1-spp Cycles bake")),
+        ("centre", "Centre", "One ray per texel, at its centre: a 1-spp Cycles bake's direct "
+         "light (normal and bump maps are still sampled over the texel)")),
         help="Where in each texel the direct rays start")
     direct: str = setting("auto", label="Direct Light", choices=(
         ("auto", "Auto", "Ray-traced (Embree) when the scene allows it, else one Cycles call per "

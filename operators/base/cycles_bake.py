@@ -747,7 +747,8 @@ class EnvironmentBake(SceneChanges):
             d = (a - b).reshape(-1, 2) - np.asarray(shift, np.float32)
             if len(d) and np.abs(d).max() > 1e-5 + 1e-6 * np.abs(b).max():
                 raise RuntimeError(f"{o.name}: its modifiers change its UV map {uv_name} "
-                                   "other than a copy of it (UV Warp, UV Project)")
+                                   "other than a copy of it (UV Warp, UV Project, a Mirror's "
+                                   "UV flip)")
 
     def bake_normals(self, uv_layer: str | None = None) -> list:
         """Shading normals per texel of every object (Cycles' NORMAL bake, object space), as

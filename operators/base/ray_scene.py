@@ -394,5 +394,7 @@ def receiver_points(obj, depsgraph, resolution: int, Ns_image=None, footprint: b
             points.normal_set = sampled(samples.texel, points.N, points.correction, bump,
                                         None if Ns_offsets is None else inside)
             if points.normal_set is not None:   # their mean, of the samples that count
-                points.Ns[points.normal_set.rows] = points.normal_set.shared.mean
+                Ns = points.Ns.copy()           # (a new array: mapped() keys on it)
+                Ns[points.normal_set.rows] = points.normal_set.shared.mean
+                points.Ns = Ns
     return samples, points
