@@ -118,6 +118,33 @@ def offsets(n: int | None = None, k: int | None = None, box: float = BOX,
     return (base - 0.5) * float(box)
 
 
+def on_triangle(uv, centre, off, resolution: int):
+    """Cycles' bake jitter over M texels' centres ``centre`` (M, 2) on their UV triangles
+    ``uv`` (M, 3, 2): which of the sub-samples at ``off`` (M, K, 2) or (K, 2) texels from the
+    centre lie on the triangle (Cycles' strict test; none on a UV triangle of no area, where
+    Blender leaves the differentials 0), their barycentrics, and the weights of a texel's
+    mean: each sub-sample on the triangle ``each`` (M,) and the centre ``centre_w`` (M,) --
+    Cycles redraws a jitter that fell off the triangle up to :data:`TRIES` times, then keeps
+    the centre. Returns ``(inside (M, K), (b0, b1, b2) (M, K) each, each, centre_w)``."""
+    uv = np.asarray(uv, np.float64)
+    off = np.asarray(off, np.float64)
+    q = np.asarray(centre, np.float64)[:, None, :] + off / float(resolution)
+    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    # Blender leaves the differentials 0 (no jitter) for a UV triangle of no area
+    # (|A| <= FLT_EPSILON in texels^2): the centre alone
+    area_ok = np.abs(det) * float(resolution) ** 2 > np.finfo(np.float32).eps
+    safe = np.where(area_ok, det, 1.0)
+    d = q - uv[:, None, 0]
+    b1 = (d[..., 0] * e2[:, None, 1] - d[..., 1] * e2[:, None, 0]) / safe[:, None]
+    b2 = (e1[:, None, 0] * d[..., 1] - e1[:, None, 1] * d[..., 0]) / safe[:, None]
+    b0 = 1.0 - b1 - b2
+    inside = (b0 > 0) & (b1 > 0) & (b2 > 0) & area_ok[:, None]   # Cycles' strict test
+    k_in = inside.sum(axis=1)
+    jittered = 1.0 - (1.0 - k_in / inside.shape[1]) ** TRIES      # a draw landed inside
+    return inside, (b0, b1, b2), jittered / np.maximum(k_in, 1), 1.0 - jittered
+
+
 def thin_area_share(uv, resolution: int) -> float:
     """The share of the UV map's area (``uv`` (T, 3, 2), 0..1) in triangles narrower than
     :data:`THIN` texels (UV inradius) at ``resolution``: where :meth:`Footprint.thin` refines a
@@ -304,30 +331,14 @@ class Footprint:
         :data:`LATTICE` (the horizons' :data:`HORIZON_LATTICE`)."""
         idx = np.asarray(idx, np.int64)
         tri = self.triangle[idx]
-        w = self.bary[idx]
         uv = self.uv[tri]                                            # (M, 3, 2)
-        c = np.einsum("mk,mkj->mj", w, uv)
+        c = np.einsum("mk,mkj->mj", self.bary[idx], uv)
         n, k = lattice if lattice is not None else (None, None)
         off = offsets(n, k, box=self.box, shift=texel_shift(self.texel[idx]))   # (M, K, 2)
-        q = c[:, None, :] + off / float(self.resolution)
-        e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
-        det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-        # Blender leaves the differentials 0 (no jitter) for a UV triangle of no area
-        # (|A| <= FLT_EPSILON in texels^2): the centre alone
-        area_ok = np.abs(det) * float(self.resolution) ** 2 > np.finfo(np.float32).eps
-        safe = np.where(area_ok, det, 1.0)
-        d = q - uv[:, None, 0]
-        b1 = (d[..., 0] * e2[:, None, 1] - d[..., 1] * e2[:, None, 0]) / safe[:, None]
-        b2 = (e1[:, None, 0] * d[..., 1] - e1[:, None, 1] * d[..., 0]) / safe[:, None]
-        b0 = 1.0 - b1 - b2
-        inside = (b0 > 0) & (b1 > 0) & (b2 > 0) & area_ok[:, None]   # Cycles' strict test
-        k_in = inside.sum(axis=1)
-        p = k_in / inside.shape[1]
-        jittered = 1.0 - (1.0 - p) ** TRIES                          # a draw landed inside
+        inside, (b0, b1, b2), each, centre_w = on_triangle(uv, c, off, self.resolution)
         owner, sub = np.nonzero(inside)
-        weight = (jittered / np.maximum(k_in, 1))[owner]
         bary = np.stack([b0[owner, sub], b1[owner, sub], b2[owner, sub]], axis=1)
-        return owner, tri[owner], bary, weight, 1.0 - jittered
+        return owner, tri[owner], bary, each[owner], centre_w
 
     def _flat_cache(self, idx):
         """Slots (M,) of points ``idx`` (flat faces) in the sub-sample cache, filling the

@@ -180,7 +180,6 @@ def _blocks(P: int, A: int, J: int) -> list:
             for c0 in range(0, P, chunk) for a0 in range(0, A, group)]
 
 
-
 def _spread(points) -> np.ndarray:
     """(P,) radians: how far past its mean normal's terminator a point's closure normals reach
     -- 0 but for sampled normals (:meth:`.normal_samples.NormalSet.reach`); made once."""
@@ -193,6 +192,7 @@ def _spread(points) -> np.ndarray:
             got[ns.rows] = np.arcsin(np.clip(-below, 0.0, 1.0))
         points._horizon_spread = got
     return got
+
 
 class _Scan:
     """The scan's per-call constants, and :meth:`block`: one block's intervals."""

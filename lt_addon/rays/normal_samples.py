@@ -43,9 +43,6 @@ MEMORY = 512 << 20
 #: Bytes a sampled normal holds: 6 (float16) while baked and kept, 4 for its weight (float32);
 #: the cosines' terms are made a block at a time (:attr:`_Shared.BLOCK`).
 NORMAL_BYTES = 12
-#: Cycles' redraws of a jitter that fell off the centre's triangle before it keeps the centre
-#: (:data:`.footprint.TRIES`, the same rule).
-TRIES = 10
 #: A texel keeps its sampled normals where one of them is further than this from their mean
 #: direction (1 - cos: 1e-4 is 0.8 degrees); elsewhere the mean's cosine is the samples' to
 #: second order.
@@ -145,13 +142,13 @@ class TexelNormals:
         return self.mean.shape
 
     def normal_set(self, texel, N, correction=None, bump: str = "conty",
-                   inside=None) -> "NormalSet | None":
+                   weigh=None) -> "NormalSet | None":
         """The :class:`NormalSet` of the points whose texels are ``texel`` (P,), with their
         smooth normals ``N`` (P, 3) and their materials' bump map ``correction`` (P,) bool
-        (None: on), under Cycles' bump terminator term ``bump``; ``inside``: a function of the
-        points' indices (M,) that says (M, K) which of their samples lie on their centre's
-        triangle (:func:`inside_triangle`; Cycles' jitter stays on it), asked a block at a
-        time, or None (all do). None where no point's texel has sampled normals."""
+        (None: on), under Cycles' bump terminator term ``bump``; ``weigh``: a function of the
+        points' indices (M,) giving their samples' (M, K) weights (:func:`weights`), asked a
+        block at a time, or None (every texel wholly on its triangle: the lattice's samples
+        alike, the centre none). None where no point's texel has sampled normals."""
         if not len(self.pixels):
             return None
         texel = np.asarray(texel, np.int64)
@@ -165,26 +162,23 @@ class TexelNormals:
         whole = len(at) == len(self.pixels) and bool(np.all(at[1:] > at[:-1]))
         shared = _Shared(self.samples if whole else self.samples[at],
                          np.asarray(N, np.float64)[rows], corr, bump,
-                         None if inside is None else (lambda sel: inside(rows[sel])))
+                         None if weigh is None else (lambda sel: weigh(rows[sel])))
         return NormalSet(rows, shared, np.arange(len(rows)))
 
 
-def inside_triangle(uv_tri, uv_centre, offsets, resolution: int) -> np.ndarray:
-    """(M, K) bool: whether each of M texels' K samples -- at ``uv_centre`` (M, 2) minus
-    ``offsets`` (K, 2) texels -- lies on the texel centre's UV triangle ``uv_tri`` (M, 3, 2)
-    (barycentrics >= 0, with a margin of 1e-9 of the triangle's size)."""
-    t = np.asarray(uv_tri, np.float64)
-    p = (np.asarray(uv_centre, np.float64)[:, None, :]
-         - np.asarray(offsets, np.float64)[None] / float(resolution))           # (M, K, 2)
-    a, b, c = t[:, 0][:, None], t[:, 1][:, None], t[:, 2][:, None]
-    v0, v1, v2 = b - a, c - a, p - a
-    den = v0[..., 0] * v1[..., 1] - v1[..., 0] * v0[..., 1]                    # (M, 1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        wb = (v2[..., 0] * v1[..., 1] - v1[..., 0] * v2[..., 1]) / den
-        wc = (v0[..., 0] * v2[..., 1] - v2[..., 0] * v0[..., 1]) / den
-    eps = -1e-9
-    ok = (wb >= eps) & (wc >= eps) & (1.0 - wb - wc >= eps)
-    return np.where(np.abs(den) > 0, ok, True)
+def weights(uv_tri, uv_centre, offsets, resolution: int) -> np.ndarray:
+    """(M, K) weights of M texels' K sampled normals in their means -- the centre's first,
+    then the lattice's -- as Cycles' jitter weighs them (:func:`.footprint.on_triangle`: the
+    samples on the centre's UV triangle ``uv_tri`` (M, 3, 2) share what the jitter gives them,
+    the centre the rest). A sample was baked with the UV map moved by its offset, so it lies
+    at ``uv_centre`` (M, 2) *minus* ``offsets`` (K, 2) texels."""
+    from .footprint import on_triangle
+
+    if len(offsets) == 1:                        # the centre alone
+        return np.ones((len(uv_centre), 1))
+    off = -np.asarray(offsets, np.float64)[1:]
+    inside, _, each, centre_w = on_triangle(uv_tri, uv_centre, off, resolution)
+    return np.concatenate([centre_w[:, None], inside * each[:, None]], axis=1)
 
 
 #: Bytes a set may hold of the sun-independent terms of its cosines (the unit normals, their
@@ -199,14 +193,13 @@ CACHE_BYTES = 64 << 20
 
 class _Shared:
     """The sampled normals of a set's entries (Q, K, 3) float16 (the centre's first) with each
-    entry's smooth normal (its texel centre's) and the samples' weights: the lattice's samples
-    on the centre's triangle share what Cycles' jitter gives them, the centre the rest
-    (:data:`TRIES`); and the cosines of the directions asked last."""
+    entry's smooth normal (its texel centre's) and the samples' weights (:func:`weights`),
+    and the cosines of the directions asked last."""
 
     #: Entries per block of a cosine's evaluation (its temporaries: ~40 bytes a normal).
     BLOCK = 1 << 15
 
-    def __init__(self, samples, N, correction, bump: str, inside=None):
+    def __init__(self, samples, N, correction, bump: str, weigh=None):
         if bump not in ("conty", "chiang"):
             raise ValueError(f"bump must be 'conty' or 'chiang', got {bump!r}")
         self.n16, self.N, self.bump = samples, np.asarray(N, np.float64), bump
@@ -216,18 +209,13 @@ class _Shared:
         self.w = np.zeros((Q, K), np.float32)
         self.mean = np.zeros((Q, 3))
         self.reach_below = np.zeros(Q)
+        alike = np.full(K, 1.0 / max(K - 1, 1), np.float32)     # wholly on the triangle
+        alike[0] = 1.0 if K == 1 else 0.0
         for a in range(0, Q, self.BLOCK):
             e = slice(a, min(a + self.BLOCK, Q))
             n = self._unit(e)
-            if K == 1:
-                w = np.ones((n.shape[0], 1), np.float32)
-            else:
-                on = (np.ones((n.shape[0], K - 1), bool) if inside is None
-                      else np.asarray(inside(e), bool)[:, 1:])
-                k_in = on.sum(axis=1)
-                w0 = (1.0 - k_in / (K - 1)) ** TRIES                # all redraws off: the centre
-                w = np.concatenate([w0[:, None], on * ((1.0 - w0) / np.maximum(k_in, 1))[:, None]],
-                                   axis=1).astype(np.float32)
+            w = (np.broadcast_to(alike, (n.shape[0], K)) if weigh is None
+                 else np.asarray(weigh(e), np.float32))
             self.w[e] = w
             m = np.einsum("qk,qkj->qj", w, n).astype(np.float64)
             m /= np.maximum(np.linalg.norm(m, axis=1, keepdims=True), 1e-12)

@@ -60,8 +60,6 @@ from ...lt_addon.transport.bundle import (INDIRECT, KIND, MODELS, TRUTH_LIGHTS, 
 #: bakes at 256^2 are about 2 s here; a chunk of 16 x 256^2 half floats is 2 MiB per object).
 CHUNK_DIRECTIONS = 16
 
-
-
 #: Cycles samples of the albedo (its colour pass): a texture finer than a texel is averaged over
 #: the texel as a converged bake averages it, not read at its centre. A 2 m plane at 128^2
 #: against its 256-spp colour bake (2026-12-07, bpy 5.0.1): a Checker of scale 40 / 150 (3.2 /
@@ -69,6 +67,7 @@ CHUNK_DIRECTIONS = 16
 #: Brick texture's colour 0.142 / 0.018 / 0.004; a Noise of scale 60, detail 8 0.026 / 0.004 /
 #: 0.001. 16 spp took 0.07-0.29 s there (the Noise the slowest), a 64-spp lit bake about 1 s.
 ALBEDO_SAMPLES = 16
+
 
 def check_space(n_objects: int, dset, settings: TransportTextureSettings, out_dir: str,
                 resume: bool = True) -> int:

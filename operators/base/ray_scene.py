@@ -383,16 +383,16 @@ def receiver_points(obj, depsgraph, resolution: int, Ns_image=None, footprint: b
         bad = np.isnan(Ns).any(axis=1)
         Ns[bad] = points.N[bad]
         points.Ns = Ns / np.linalg.norm(Ns, axis=1, keepdims=True)
-        if sampled is not None:      # (samples off the centre's triangle do not count)
-            from ...lt_addon.rays.normal_samples import inside_triangle
+        if sampled is not None:      # (weighed as Cycles' jitter: on the centre's triangle)
+            from ...lt_addon.rays.normal_samples import weights
 
-            def inside(rows):
+            def weigh(rows):
                 t = uv[samples.triangle[rows]]
                 centre = np.einsum("mk,mkj->mj", samples.bary[rows], t)
-                return inside_triangle(t, centre, Ns_offsets, resolution)
+                return weights(t, centre, Ns_offsets, resolution)
 
             points.normal_set = sampled(samples.texel, points.N, points.correction, bump,
-                                        None if Ns_offsets is None else inside)
+                                        None if Ns_offsets is None else weigh)
             if points.normal_set is not None:   # their mean, of the samples that count
                 Ns = points.Ns.copy()           # (a new array: mapped() keys on it)
                 Ns[points.normal_set.rows] = points.normal_set.shared.mean

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from relightable_textures.lt_addon.rays import normal_samples as ns
+from relightable_textures.lt_addon.rays.footprint import TRIES
 from relightable_textures.lt_addon.rays.shading import (ShadingPoints, cosine, cosine_at,
                                                         facing, facing_at)
 
@@ -129,12 +130,12 @@ def test_samples_off_the_centres_triangle_do_not_count():
     tri = np.array([[[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]])
     R = 10
     centre = np.array([[0.01, 0.5]])                        # 0.1 texel right of the edge u = 0
-    inside = ns.inside_triangle(tri, centre, off, R)
-    assert inside.tolist() == [[True, False, True]]         # u = 0.01 - 0.02 is off it
+    W = ns.weights(tri, centre, off, R)
+    assert (W > 0).tolist() == [[True, False, True]]        # u = 0.01 - 0.02 is off it
     n = np.array([[[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 0.6, 0.8]]])   # centre, off, on
     N = np.array([[0.0, 0.0, 1.0]])
-    shared = ns._Shared(n.astype(np.float16), N, None, "conty", lambda e: inside[e])
-    w0 = 0.5 ** ns.TRIES                                    # half the lattice on: the centre
+    shared = ns._Shared(n.astype(np.float16), N, None, "conty", lambda e: W[e])
+    w0 = 0.5 ** TRIES                                       # half the lattice on: the centre
     np.testing.assert_allclose(shared.w, [[w0, 0.0, 1.0 - w0]], atol=1e-7)
     L = _unit(np.array([0.6, 0.0, 0.8]))
     want = w0 * 0.8 + (1 - w0) * 0.64 * ns._Shared(
@@ -142,6 +143,6 @@ def test_samples_off_the_centres_triangle_do_not_count():
     np.testing.assert_allclose(shared.cosines(L), [want], atol=1e-5)
     # none of the lattice on the triangle (a sliver): the centre alone
     none = ns._Shared(n.astype(np.float16), N, None, "conty",
-                      lambda e: np.array([[True, False, False]])[e])
+                      lambda e: ns.weights(tri, np.array([[-0.05, 0.5]]), off, R)[e])
     np.testing.assert_allclose(none.w, [[1.0, 0.0, 0.0]])
     np.testing.assert_allclose(none.mean, N, atol=1e-6)
