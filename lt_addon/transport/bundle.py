@@ -190,6 +190,12 @@ class TransportTextureSettings:
         help="Angular diameter of the preview sun in degrees, for the preview's tables and the "
              "truths (changing it re-tabulates the preview, no re-bake); -1: the scene's Sun's "
              "(Blender's default 0.526), 2 without a Sun")
+    under_horizon: float = setting(
+        -1.0, lo=-1.0, hi=10.0, label="Under the Horizon", metavar="DEG",
+        help="Degrees under the horizon T's directions reach, for the part of a wide sun's "
+             "disc there that lights walls and slopes (a 10-degree Sun 3 degrees high reaches "
+             "2 under): the band above the horizon mirrored, about a fifth more directions "
+             "at 5; -1: the bake Sun's radius, at least 5; 0: none (a floor alone needs none)")
     kernel: str = "linear"
     table_size: int = setting(
         32, lo=8, hi=256, label="Preview Table Size",
@@ -272,6 +278,9 @@ class TransportTextureSettings:
         if not (0.0 <= self.sun_angle <= 30.0 or self.sun_angle == -1.0):
             raise InputError(f"sun angle must be in 0..30 degrees (-1: the scene Sun's), got "
                              f"{self.sun_angle}")
+        if not (0.0 <= self.under_horizon <= 10.0 or self.under_horizon == -1.0):
+            raise InputError(f"under the horizon must be in 0..10 degrees (-1: the Sun's "
+                             f"radius, at least 5), got {self.under_horizon}")
         if self.kernel not in tt.KERNELS:
             raise InputError(f"kernel must be one of {tt.KERNELS}, got {self.kernel!r}")
         if not 8 <= self.table_size <= 256:
@@ -961,7 +970,9 @@ def write_bundle(result: TransportTextureResult, names: list, out_dir: str,
         report = {
             "kind": KIND, "format": FORMAT, "format_version": FORMAT, "addon_version": version, "object": b.name, "method": "transport",
             "settings": asdict(s), "directions": result.directions.size,
-            "direction_set": result.directions.spec,
+            # the spec asked for (the set itself may add a Sun's path and the band under the
+            # horizon: ``direct.direction_set`` says what it added)
+            "direction_set": s.directions,
             "objects_baked_together": list(names),
             "files": {k: os.path.abspath(v) for k, v in files.items()},
             "checksums": sums,

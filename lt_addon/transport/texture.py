@@ -123,7 +123,7 @@ def sun_weights(dset: DirectionSet, direction, sun_angle_deg: float = 0.0,
     Parameters
     ----------
     dset : DirectionSet
-        The baked directions (upper hemisphere).
+        The baked directions (upper hemisphere, and a band under it where the bake added one).
     direction : array_like, shape (3,)
         Towards the sun, world frame (z up); below the horizon gives no weights (the light is
         off, as for a distant light under the ground).
@@ -165,7 +165,9 @@ def sun_weights(dset: DirectionSet, direction, sun_angle_deg: float = 0.0,
     # enough disc points that neighbouring ones are closer than the sample spacing
     count = 1 if alpha <= 0 else int(min(256, max(1, np.ceil(4.0 * (alpha / 2.0 / h) ** 2 * 3))))
     pts = _disc_points(d, alpha / 2.0, count)
-    pts = pts[pts[:, 2] > 0.0]
+    # the disc's part under the horizon is dark, but where the set reaches under it
+    # (:mod:`..sphere.under_horizon`): there it is interpolated down to the set's lowest direction
+    pts = pts[pts[:, 2] > min(0.0, float(dset.directions[:, 2].min()))]
     if len(pts) == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0)
     tri, w = hull.weights(pts)
@@ -205,7 +207,9 @@ def environment_weights(dset: DirectionSet, env_image, *, row_order: str,
     Rt = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
     L = sample_equirect(env_image, dset.directions @ Rt.T, row_order=row_order,
                         validate=validate)
-    w = dset.solid_angles
+    # the upper hemisphere only: directions under the horizon serve a sun's disc
+    # (:mod:`..sphere.under_horizon`); their solid angles are their mirrors'
+    w = dset.solid_angles * (dset.directions[:, 2] > 0.0)
     return L * (w if L.ndim == 1 else w[:, None])
 
 

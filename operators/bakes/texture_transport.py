@@ -168,6 +168,9 @@ def _bake_transport_textures(scene, objects, settings, out_dir, resume, client, 
 
     engine = ray_direct.choose(scene, objects, settings)
     engine["direction_set"] = {"size": dset.size, "spec": settings.directions,
+                               "under_horizon": {
+                                   "directions": int(dset.params.get("under_directions", 0)),
+                                   "deg": dset.params.get("under_horizon_deg", 0.0)},
                                **(path_info if path_info and "study" in path_info else
                                   {"sun_path": path_info} if path_info else {})}
     rays = engine["engine"] == "rays"
@@ -343,7 +346,18 @@ def _bake_transport_textures(scene, objects, settings, out_dir, resume, client, 
 def resolve_directions(scene, settings):
     """The bake's direction set and where it came from: the settings' set, plus directions
     along the scene Sun's animated path (``sun_path`` auto and a Sun that moves, or a
-    ``+sun-path[:STEP]`` spec, which requires one). Returns ``(DirectionSet, info or None)``."""
+    ``+sun-path[:STEP]`` spec, which requires one), plus the band just above the horizon
+    mirrored under it, for a soft sun's disc there (:mod:`...lt_addon.sphere.under_horizon`:
+    down to the bake Sun's radius, at least 5 degrees). Returns ``(DirectionSet, info or
+    None)``."""
+    from ...lt_addon.sphere.under_horizon import depth_for, with_under
+
+    dset, info = _above_horizon(scene, settings)
+    return with_under(dset, depth_for(settings.sun_angle, settings.under_horizon)), info
+
+
+def _above_horizon(scene, settings):
+    """:func:`resolve_directions`' set above the horizon."""
     from ...lt_addon.sphere.sun_path import with_path
     from ...lt_addon.transport.bundle import split_sun_path
     from ..base.scene_sun import sun_path

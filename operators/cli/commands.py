@@ -49,7 +49,7 @@ class _Parser(argparse.ArgumentParser):
 #: bake-textures' options, made from the settings dataclasses (lt_addon/settings.py): the
 #: transport method's own, the three both methods take, the lobes method's own.
 TRANSPORT_OPTIONS = ("directions", "direct", "texel_sampling", "sun_path", "sun_path_step",
-                     "study", "sun_angle", "model",
+                     "study", "sun_angle", "under_horizon", "model",
                      "components", "tol", "indirect", "indirect_rays",
                      "indirect_components", "indirect_samples", "indirect_resolution",
                      "table_size", "viewport", "horizon_azimuths", "horizon_resolution",
@@ -697,20 +697,25 @@ def _cmd_bake_chunk(args) -> int:
                  if getattr(args, k) is not None}
     try:
         settings = tx.settings_from_preset(args.preset, **overrides)
-        dset = settings.validate()
+        settings.validate()
+    except BakeInputError as exc:
+        raise CliError(str(exc)) from None
+    if args.chunk < 0:
+        raise CliError(f"--chunk must be 0 or more, got {args.chunk}")
+    out_dir = check_output_dir(args.out, path)
+    objects = open_objects(path, args.object)
+    try:
+        for o in objects:
+            check_bakeable(o)
+        # the whole bake's set: what the scene adds (its Sun's path and size) included
+        settings, _ = tx.scene_light_settings(bpy.context.scene, settings)
+        dset, _ = tx.resolve_directions(bpy.context.scene, settings)
     except BakeInputError as exc:
         raise CliError(str(exc)) from None
     n = -(-dset.size // tx.CHUNK_DIRECTIONS)
     if not 0 <= args.chunk < n:
         raise CliError(f"--chunk must be in 0..{n - 1} ({dset.size} directions in chunks of "
                        f"{tx.CHUNK_DIRECTIONS}), got {args.chunk}")
-    out_dir = check_output_dir(args.out, path)
-    objects = open_objects(path, args.object)
-    try:
-        for o in objects:
-            check_bakeable(o)
-    except BakeInputError as exc:
-        raise CliError(str(exc)) from None
     start = args.chunk * tx.CHUNK_DIRECTIONS
     stop = min(start + tx.CHUNK_DIRECTIONS, dset.size)
     from ..base import cycles_device

@@ -209,8 +209,8 @@ class VIEW3D_PT_relight_bake_advanced(_RelightTab, bpy.types.Panel):
         layout.prop(props, "method")
         col = layout.column(align=True)
         if props.method == "transport":
-            for name in ("directions", "horizon_power", "sun_angle", "sun_path",
-                         "sun_path_step", "study", "transport_direct", "texel_sampling", "bounces", "transport_indirect",
+            for name in ("directions", "horizon_power", "sun_angle", "under_horizon",
+                         "sun_path", "sun_path_step", "study", "transport_direct", "texel_sampling", "bounces", "transport_indirect",
                          "indirect_rays", "indirect_components", "indirect_samples",
                          "indirect_resolution", "transport_components", "transport_tol",
                          "transport_viewport", "horizon_azimuths", "horizon_resolution",

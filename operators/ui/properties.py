@@ -459,7 +459,8 @@ MATERIAL_FIELDS = ("bounces", "direct", "bounce_bake", "rays", "samples", "ancho
                    "smoothing")
 MATERIAL_PROPS = {f: "material_" + f for f in MATERIAL_FIELDS}
 LOBES_FIELDS = ("frame", "order", "samples", "storage", "mode", "world_sampling")
-TRANSPORT_FIELDS = ("direct", "texel_sampling", "sun_path", "sun_path_step", "study", "model",
+TRANSPORT_FIELDS = ("direct", "texel_sampling", "sun_path", "sun_path_step", "study",
+                    "under_horizon", "model",
                     "viewport",
                     "horizon_azimuths", "horizon_resolution", "gpu_budget",
                     "tol",

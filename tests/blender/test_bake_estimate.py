@@ -61,8 +61,9 @@ def test_cli_estimate_prints_the_cost_and_bakes_nothing(tmp_path):
     # both what auto may skip: the block fit (the horizons shown) or most of the horizons (T
     # clearly closer on the sampled tiles)
     assert len(notes) == 2 and "timed whole" in notes[0] and "block viewport" in notes[1]
-    # the disk figure is T's own formula: 400 directions x 2048^2 texels x 2 bytes
-    assert "disk 3.1 GiB for T" in second and "of GPU memory" in second
+    # the disk figure is T's own formula: 479 directions (400 and the 79 of their band under
+    # 5 degrees mirrored under the horizon) x 2048^2 texels x 2 bytes
+    assert "disk 3.7 GiB for T" in second and "of GPU memory" in second
     assert not (tmp_path / "o").exists() and "relight: error" not in r.stderr
 
 

@@ -44,7 +44,8 @@ def test_two_local_workers_bake_the_same_bits_as_one_process(blend, tmp_path):
 
     rep = json.loads((tmp_path / "Bumps_texture_report.json").read_text())
     dist = rep["distributed"]
-    assert dist["chunks"] == rep["chunks_total"] == 25 and rep["chunks_reused"] == 0
+    # 400 directions and the 35 of their band under 5 degrees mirrored under the horizon
+    assert dist["chunks"] == rep["chunks_total"] == 28 and rep["chunks_reused"] == 0
     assert len(dist["workers"]) == 2 and dist["file_loads"] == 2   # each worker opened it once
     assert dist["cycles_threads_per_worker"] == max(1, os.cpu_count() // 2)
     # each worker baked on the bake's device (the CPU: the tests set RELIGHT_DEVICE=cpu), and
@@ -52,7 +53,7 @@ def test_two_local_workers_bake_the_same_bits_as_one_process(blend, tmp_path):
     assert sorted(dist["worker_devices"]) == sorted(str(w) for w in dist["workers"])
     assert all(d.startswith("CPU") for d in dist["worker_devices"].values())
     assert rep["device"]["device"] == "CPU"
-    assert "distributed: 25 chunks on 2 worker processes" in r.stdout
+    assert "distributed: 28 chunks on 2 worker processes" in r.stdout
     assert _same_bits(np.load(tmp_path / "Bumps_transport_texture.npy"), ref)
     assert ".relight_cache" not in os.listdir(tmp_path)
 
@@ -138,9 +139,11 @@ def test_the_flamenco_job_type_emits_chunk_commands_that_bake_the_same_bits(tmp_
     assert r.returncode == 0, r.stderr
     compiled = json.loads(r.stdout)
     tasks = compiled["tasks"]
-    assert [t["name"] for t in tasks] == [f"relight-chunk-{k}" for k in range(3)] + [
+    # 48 directions and the 4 under the horizon (its own count: a chunk left out would be
+    # baked by the final task, on one machine)
+    assert [t["name"] for t in tasks] == [f"relight-chunk-{k}" for k in range(4)] + [
         "relight-fit-and-write"]
-    assert tasks[-1]["deps"] == [f"relight-chunk-{k}" for k in range(3)]
+    assert tasks[-1]["deps"] == [f"relight-chunk-{k}" for k in range(4)]
     for t in tasks:
         (cmd,) = t["commands"]
         p = cmd["params"]
@@ -154,7 +157,7 @@ def test_the_flamenco_job_type_emits_chunk_commands_that_bake_the_same_bits(tmp_
     rep = json.loads((tmp_path / "farm" / "Bumps_texture_report.json").read_text())
     # the chunk tasks baked every direction; the final task gathers the indirect light by rays
     # over them (no Cycles chunks: the steerable term's 9 lights were chunks)
-    assert rep["direct_chunks"] == rep["chunks_reused"] == 3 and rep["indirect_chunks"] == 0
+    assert rep["direct_chunks"] == rep["chunks_reused"] == 4 and rep["indirect_chunks"] == 0
     assert rep["indirect"]["method"] == "gathered"
     ref = tmp_path / "ref"
     args = [a if a != str(tmp_path / "farm") else str(ref) for a in tasks[-1]["commands"][0]
@@ -344,8 +347,8 @@ def test_basis_light_stages_distribute_and_resume_bit_for_bit(blend, tmp_path):
     r = relight(*args, "--workers", "2", "--out", tmp_path / "dist")
     assert r.returncode == 0, r.stderr[-2000:]
     rep = json.loads((tmp_path / "dist" / "Bumps_texture_report.json").read_text())
-    assert rep["direct_chunks"] == 3 and rep["indirect_chunks"] == 9
-    assert rep["chunks_total"] == rep["distributed"]["chunks"] == 12
+    assert rep["direct_chunks"] == 4 and rep["indirect_chunks"] == 9    # 48 + 4 under the horizon
+    assert rep["chunks_total"] == rep["distributed"]["chunks"] == 13
     assert _same_exr(tmp_path / "dist" / "Bumps_indirect.exr",
                      tmp_path / "ref" / "Bumps_indirect.exr")
     assert _same_bits(np.load(tmp_path / "dist" / "Bumps_transport_texture.npy"),
@@ -382,14 +385,14 @@ def test_basis_light_stages_distribute_and_resume_bit_for_bit(blend, tmp_path):
                                      indirect_resolution=8, model="none", direct="cycles")
     out = tmp_path / "tresume"
     gen = tx.bake_transport_textures(scene, [obj], ts, str(out))
-    for step in gen:                   # the albedo, 48 directions, then indirect lights
+    for step in gen:                   # the albedo, 52 directions, then indirect lights
         if step.message.startswith("indirect bake 5/"):
             break
     gen.close()
     nested = list(out.glob(".relight_cache/Bumps/indirect/*/light_*.npy"))
-    assert len(nested) == 5 and len(list(out.glob(".relight_cache/Bumps/*/direct_*.npy"))) == 3
+    assert len(nested) == 5 and len(list(out.glob(".relight_cache/Bumps/*/direct_*.npy"))) == 4
     res = run(tx.bake_transport_textures(scene, [obj], ts, str(out)))
-    assert res.chunks["chunks_reused"] == 3 + 5 and res.chunks["chunks_total"] == 12
+    assert res.chunks["chunks_reused"] == 4 + 5 and res.chunks["chunks_total"] == 13
     tx.write_bake(res, [obj], str(out))
     assert _same_exr(out / "Bumps_indirect.exr", tmp_path / "ref" / "Bumps_indirect.exr")
     assert ".relight_cache" not in os.listdir(out)

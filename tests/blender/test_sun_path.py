@@ -57,12 +57,14 @@ def _settings(**kw):
 
 def test_the_path_is_read_from_the_frames_and_added(fresh_scene):
     from relightable_textures.lt_addon.errors import InputError
+    from relightable_textures.lt_addon.sphere.under_horizon import under_count
     from relightable_textures.operators.bakes.texture_transport import resolve_directions
 
     samples.build("bumps", fresh_scene, "test")
     # the sample scene's own Sun does not move: nothing is added, and +sun-path is refused
     d, info = resolve_directions(fresh_scene, _settings())
-    assert info is None and d.size == 100
+    # (and the band under 5 degrees mirrored under the horizon, its first rows)
+    assert info is None and d.size == 100 + under_count(d) and under_count(d) > 10
     with pytest.raises(InputError, match="no Sun lamp that moves"):
         resolve_directions(fresh_scene, _settings(directions="hemi:100:1.5+sun-path"))
     fresh_scene.frame_set(7)
@@ -73,12 +75,12 @@ def test_the_path_is_read_from_the_frames_and_added(fresh_scene):
     # the day's arc above the horizon, every half degree (about 200 deg of azimuth at up to
     # 50 deg of elevation: a few hundred directions)
     assert 250 < info["path_directions"] < 600 and d.size == info["base_directions"] + \
-        info["path_directions"]
+        info["path_directions"] + under_count(d)
     assert info["elevation_deg"][0] < 1.0 and info["elevation_deg"][1] == pytest.approx(50, abs=0.5)
     d1, info1 = resolve_directions(fresh_scene, _settings(directions="hemi:100:1.5+sun-path:1"))
     assert info1["path_directions"] < 0.6 * info["path_directions"]
     d0, info0 = resolve_directions(fresh_scene, _settings(sun_path="off"))
-    assert info0 is None and d0.size == 100
+    assert info0 is None and d0.size == 100 + under_count(d0)
 
 
 def test_a_low_sun_on_the_path_relights_closer_to_cycles(fresh_scene, tmp_path):
@@ -101,7 +103,8 @@ def test_a_low_sun_on_the_path_relights_closer_to_cycles(fresh_scene, tmp_path):
         store = res.objects[0].store
         errs[mode] = float(np.linalg.norm(store.sun(d, 0.0) - truth) / np.linalg.norm(truth))
         store.abort()
-    assert res.direct["direction_set"]["size"] == 100              # "off": the set alone
+    size = res.direct["direction_set"]["size"]                     # "off": the set alone
+    assert size == 100 + res.direct["direction_set"]["under_horizon"]["directions"]
     # on the path a baked direction lies within 0.07 degrees: nearly Cycles' own bake; off it,
     # the nearest of 100 directions are degrees away and their shadows blend
     assert errs["auto"] < 0.05 and errs["off"] > 4 * errs["auto"], errs

@@ -40,6 +40,11 @@ def statue(fresh_scene):
     return fresh_scene, bpy.data.objects["Statue"], bpy.data.objects["Ground"]
 
 
+#: Directions of :func:`settings`' set: hemi:48:1.5 and the 9 of its band under 5 degrees,
+#: mirrored under the horizon (lt_addon/sphere/under_horizon.py), the set's first rows.
+S, UNDER = 57, 9
+
+
 def settings(**kw):
     from relightable_textures.operators.bakes.texture_transport import TransportTextureSettings
 
@@ -73,7 +78,8 @@ def test_relight_at_a_sample_direction_with_a_point_sun_equals_that_directions_b
     scene, obj = bumps
     res = bake(scene, [obj], tmp_path, model="none", direct="cycles")
     store = tt.TransportStore.open(res.objects[0].store_path)
-    for s in (0, 20, 47):
+    assert store.directions.size == S and (store.directions.directions[:UNDER, 2] < 0).all()
+    for s in (UNDER, UNDER + 20, S - 1):           # (a sun under the horizon is off)
         d = store.directions.directions[s]
         fresh = sun_bake(scene, [obj], d)[0][..., 0]
         relit = store.sun(d, 0.0, "linear")
@@ -86,7 +92,7 @@ def test_stores_are_streamed_and_cancel_leaves_nothing(bumps, tmp_path, direct, 
     from relightable_textures.operators.bakes import texture_transport as tx
 
     scene, obj = bumps
-    # rays: the albedo, then the first chunk of directions (all 48 here) is in the store
+    # rays: the albedo, then the first chunk of directions (all 57 here) is in the store
     gen = tx.bake_transport_textures(scene, [obj], settings(direct=direct), str(tmp_path))
     for _ in range(steps):
         next(gen)
@@ -126,8 +132,8 @@ def test_a_cancelled_bake_resumes_from_its_finished_chunks_bit_for_bit(bumps, tm
         "direct_00000.npy", "direct_00000.npy.sha256", "direct_00016.npy",
         "direct_00016.npy.sha256", "key.json"]
     res = bake(scene, [obj], out, model="none", direct="cycles")
-    assert res.chunks == {"chunks_total": 3, "chunks_reused": 2, "chunk_directions": 16,
-                          "direct_chunks": 3, "indirect_chunks": 0, "chunks_rejected": 0}
+    assert res.chunks == {"chunks_total": 4, "chunks_reused": 2, "chunk_directions": 16,
+                          "direct_chunks": 4, "indirect_chunks": 0, "chunks_rejected": 0}
     np.testing.assert_array_equal(np.load(res.objects[0].store_path), T_ref)
     reports = tx.write_bake(res, [obj], str(out))
     assert reports[0]["chunks_reused"] == 2 and tx.CACHE_FOLDER not in os.listdir(out)
@@ -212,7 +218,7 @@ def test_pca_model_is_exact_at_full_rank_and_viewport_twin_matches(bumps, tmp_pa
     from relightable_textures.operators.preview import transport_preview as tp
 
     scene, obj = bumps
-    res = bake(scene, [obj], tmp_path, components=48)
+    res = bake(scene, [obj], tmp_path, components=S)
     b = res.objects[0]
     store = tt.TransportStore.open(b.store_path)
     for az, el in ((30, 20), (200, 65)):
@@ -301,7 +307,7 @@ def test_transport_viewport_rendered_by_cycles_equals_its_twin_and_T(bumps, tmp_
     assert prev["viewport"] == "transport" and rep["preview_cost"]["viewport"] == "transport"
     assert rep["model_vs_T"]["viewport"] == "transport"
     tiles, idx, wts, albedo = _sparse_preview(prev)
-    assert idx.shape == (64, 64, 3) and tiles.shape[0] == 48 // 3 and tiles.dtype == np.uint8
+    assert idx.shape == (64, 64, 3) and tiles.shape[0] == S // 3 and tiles.dtype == np.uint8
     store = tt.TransportStore.open(rep["files"]["transport"])
     albedo = albedo.astype(np.float64)
     # at a table texel centre: exactly T's kernel relight up to the 8-bit atlas (half a step
@@ -349,7 +355,7 @@ def test_transport_viewport_rendered_by_cycles_equals_its_twin_and_T(bumps, tmp_
             tt.disk_grid(64)[i, j][None] * min(1.0, 0.999 / np.hypot(*tt.disk_grid(64)[i, j]))
         )[0], 0.0)
         assert abs(sums[i, j] - w.sum()) < 1e-5
-    assert sums.max() <= 1.0 + 1e-5 and idx.max() < 48
+    assert sums.max() <= 1.0 + 1e-5 and idx.max() < S
     # the scales are the directions' maxima: every direction's brightest texel reads 255
     T = np.asarray(store.array, np.float64)
     assert np.allclose(scales, np.where(T.max(1) > 0, T.max(1), 1.0), rtol=1e-12)
@@ -566,7 +572,7 @@ def test_cli_bake_textures_default_method_relight_and_force(tmp_path):
     assert cli.run(args) == 0
     rep_path = tmp_path / "b_relight" / "Bumps_texture_report.json"
     rep = json.loads(rep_path.read_text())
-    assert rep["method"] == "transport" and rep["directions"] == 32
+    assert rep["method"] == "transport" and rep["directions"] == 32 + 3   # 3 under the horizon
     assert rep["timings"]["wall_total"] >= rep["timings"]["bake_total"] > 0
     assert 0 < rep["ground_truth"]["headline_rel_rmse"] < 1
     assert rep["model"]["kind"] == "pca"
@@ -635,7 +641,7 @@ def test_panel_operator_bakes_selected_objects_and_sun_size_retabulates(statue, 
         # the device it baked on: in the report and in the panel (Baked On)
         assert rep["device"]["device"] == "CPU" and rep["device"]["choice"] == "cpu"
         assert props.device_used.startswith("CPU") and scene.cycles.device == "CPU"
-        assert rep["directions"] == 24 and "ground_truth" in rep
+        assert rep["directions"] == 24 + 5 and "ground_truth" in rep     # 5 under the horizon
         # the report's picture: preview | Cycles Sun | difference from the scene camera at the
         # held-out light, captioned, its cost in the report and its line in the panel
         cmp = rep["comparison"]
@@ -852,7 +858,7 @@ def test_cli_bakes_an_object_of_a_scene_that_is_not_the_active_one(tmp_path):
             "--resolution", "8", "--indirect-resolution", "8", "--indirect-samples", "2"]
     assert cli.run(args) == 0
     rep = json.loads((tmp_path / "m_relight" / "Bumps_texture_report.json").read_text())
-    assert rep["directions"] == 16
+    assert rep["directions"] == 16 + 1                       # 1 under the horizon
     assert cli.run(args + ["--object", "Lone", "--force"]) == 2
 
 
@@ -887,8 +893,8 @@ def test_cli_bake_interrupted_by_sigint_resumes_with_the_same_command(tmp_path):
     r = relight(*args)
     assert r.returncode == 0, r.stderr[-2000:]
     rep = json.loads((out / "Bumps_texture_report.json").read_text())
-    assert rep["chunks_total"] == 25 and 0 < rep["chunks_reused"] < 25
-    assert f"resumed: {rep['chunks_reused']} of 25 chunks" in r.stdout
+    assert rep["chunks_total"] == 28 and 0 < rep["chunks_reused"] < 28   # 400 + 35 under
+    assert f"resumed: {rep['chunks_reused']} of 28 chunks" in r.stdout
     assert ".relight_cache" not in os.listdir(out)
     ref = tmp_path / "ref"
     assert relight(*args, "--no-resume", "--out", ref).returncode == 0
@@ -1047,7 +1053,7 @@ def test_every_bake_reports_how_far_the_viewport_model_is_from_T(bumps, tmp_path
     from relightable_textures.operators.base.jobs import run
 
     scene, obj = bumps
-    full = run(tx.bake_job(scene, [obj], settings(components=48, viewport="pca"),
+    full = run(tx.bake_job(scene, [obj], settings(components=S, viewport="pca"),
                            str(tmp_path / "full"), truth=0, preview=False)).reports[0]["model_vs_T"]
     assert full["headline"] < 2e-3 and full["viewport"] == "pca"
     assert [r["elevation"] for r in full["lights"]] == [10.0, 30.0, 55.0, 80.0]

@@ -37,19 +37,31 @@ const JOB_TYPE = {
 };
 
 const CHUNK_DIRECTIONS = 16;
-// The presets' direction counts (operators/bakes/transport_presets.json).
-const PRESET_DIRECTIONS = { draft: 400, balanced: 400, production: 2800 };
+// The presets' direction sets (operators/bakes/transport_presets.json).
+const PRESET_DIRECTIONS = { draft: "hemi:400:1.5", balanced: "hemi:400:1.5", production: "hemi:2800:1.5" };
+// The bake adds the set's directions under UNDER_DEG of elevation mirrored under the horizon
+// (lt_addon/sphere/under_horizon.py, a wide sun's disc there); a scene Sun wider than twice
+// that adds a few more, which the final task bakes itself.
+const UNDER_DEG = 5.0;
 
-// How many directions the bake has: N of `hemi:N[:P]`, or the preset's.
+// How many directions the bake has: those of `hemi:N[:P]` (or the preset's), and their band
+// under UNDER_DEG mirrored (hemi:N:P puts direction i at sin(elevation) ((i + 0.5) / N)^P).
 function directionCount(settings) {
-    if (!settings.directions) {
-        return PRESET_DIRECTIONS[settings.preset || "balanced"];
-    }
-    const m = /^hemi:(\d+)(:[0-9.]+)?$/.exec(settings.directions);
+    const spec = settings.directions || PRESET_DIRECTIONS[settings.preset || "balanced"];
+    const m = /^hemi:(\d+)(?::([0-9.]+))?$/.exec(spec || "");
     if (!m) {
         throw `directions must be hemi:N[:P], got "${settings.directions}"`;
     }
-    return parseInt(m[1], 10);
+    const n = parseInt(m[1], 10);
+    const power = m[2] ? parseFloat(m[2]) : 1.0;
+    const top = Math.sin(UNDER_DEG * Math.PI / 180);
+    let under = 0;
+    for (let i = 0; i < n; i++) {
+        if (Math.pow((i + 0.5) / n, power) < top) {
+            under++;
+        }
+    }
+    return n + under;
 }
 
 // The arguments both commands share: the file, the objects, the settings, the folder.
