@@ -83,13 +83,16 @@ def _disc_points(direction: np.ndarray, radius: float, count: int) -> np.ndarray
 
 
 class _Hull:
-    """Barycentric interpolation on the triangulated hull of the set plus a zero-valued nadir
-    (so every upper-hemisphere query lies in a triangle; weight on the nadir is dropped)."""
+    """Barycentric interpolation on the triangulated hull of the set's rows ``rows`` (all by
+    default) plus a zero-valued nadir (so every upper-hemisphere query lies in a triangle; weight
+    on the nadir is dropped). Indices are the set's own."""
 
-    def __init__(self, dset: DirectionSet):
-        pts = np.vstack([dset.directions, [[0.0, 0.0, -1.0]]])
+    def __init__(self, dset: DirectionSet, rows=None):
+        self.rows = np.arange(dset.size) if rows is None else np.asarray(rows, np.int64)
+        self.size = dset.size
+        pts = np.vstack([dset.directions[self.rows], [[0.0, 0.0, -1.0]]])
         self.points = pts
-        self.n = dset.size
+        self.n = len(self.rows)
         hull = scipy.spatial.ConvexHull(pts)
         self.eq = hull.equations
         if np.any(self.eq[:, 3] >= 0):
@@ -97,22 +100,28 @@ class _Hull:
         self.simplices = hull.simplices
 
     def weights(self, q: np.ndarray):
-        """(Q, 3) indices and (Q, 3) weights; indices == n (the nadir) carry weight 0."""
+        """(Q, 3) indices into the set and (Q, 3) weights; the nadir's index is the set's size
+        and carries weight 0."""
         tri, w = hull_barycentric(self.points, self.simplices, self.eq, q)
         w = w.copy()
-        w[tri == self.n] = 0.0
-        return tri, w
+        nadir = tri == self.n
+        w[nadir] = 0.0
+        return np.where(nadir, self.size, self.rows[np.minimum(tri, self.n - 1)]), w
 
 
 _HULLS: dict = {}
 
 
-def _hull(dset: DirectionSet) -> _Hull:
-    key = (dset.spec, dset.size) if dset.kind != "custom" else id(dset)
+def _hull(dset: DirectionSet, upper: bool = False) -> _Hull:
+    """The set's hull (cached by its directions' bytes); ``upper``: of its rows above the
+    horizon only, where the set reaches under it (:mod:`..sphere.under_horizon`)."""
+    import hashlib
+
+    key = (hashlib.sha1(np.ascontiguousarray(dset.directions).tobytes()).hexdigest(), upper)
     if key not in _HULLS:
         if len(_HULLS) > 8:
             _HULLS.clear()
-        _HULLS[key] = _Hull(dset)
+        _HULLS[key] = _Hull(dset, np.flatnonzero(dset.directions[:, 2] > 0.0) if upper else None)
     return _HULLS[key]
 
 
@@ -159,20 +168,27 @@ def sun_weights(dset: DirectionSet, direction, sun_angle_deg: float = 0.0,
         keep = np.nonzero(ang <= 4.0 * sigma)[0]
         w = np.exp(-0.5 * (ang[keep] / sigma) ** 2)
         return keep.astype(np.int64), w / w.sum()
-    hull = _hull(dset)
     cosang = dset.directions @ d
     h = float(_spacing(dset, np.array([int(np.argmax(cosang))]))[0])
     # enough disc points that neighbouring ones are closer than the sample spacing
     count = 1 if alpha <= 0 else int(min(256, max(1, np.ceil(4.0 * (alpha / 2.0 / h) ** 2 * 3))))
     pts = _disc_points(d, alpha / 2.0, count)
     # the disc's part under the horizon is dark, but where the set reaches under it
-    # (:mod:`..sphere.under_horizon`): there it is interpolated down to the set's lowest direction
-    pts = pts[pts[:, 2] > min(0.0, float(dset.directions[:, 2].min()))]
+    # (:mod:`..sphere.under_horizon`): there it is interpolated down to the set's lowest
+    # direction. Points above the horizon interpolate between the directions above it, as in a
+    # set without that band: near the horizon a hemi set's directions are dense in elevation
+    # but tens of degrees apart in azimuth, and the hull of both bands would blend a sun 1
+    # degree high with directions 3 under it (the gallery's fence: 0.015 -> 0.061 from Cycles).
+    lowest = float(dset.directions[:, 2].min())
+    pts = pts[pts[:, 2] > min(0.0, lowest)]
     if len(pts) == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0)
-    tri, w = hull.weights(pts)
     acc = np.zeros(dset.size + 1)
-    np.add.at(acc, tri.ravel(), w.ravel() / count)
+    below = pts[:, 2] <= 0.0
+    for part, hull in ((~below, _hull(dset, upper=lowest < 0.0)), (below, _hull(dset))):
+        if part.any():
+            tri, w = hull.weights(pts[part])
+            np.add.at(acc, tri.ravel(), w.ravel() / count)
     acc = acc[:-1]
     keep = np.nonzero(acc > 0)[0]
     return keep.astype(np.int64), acc[keep]

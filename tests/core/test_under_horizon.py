@@ -4,8 +4,8 @@ mirrored, the relight's interpolation across the horizon, and nothing else chang
 The reference is the disc average of the unshadowed cosine (4,000 hard suns spread over the disc,
 the relight's own sunflower): a wall facing the sun takes light from the disc's part under the
 horizon, a floor none. Measured 2026-12-07: a wall under a 10-degree Sun 1 / 3 / 8 degrees high
-0.16 / 0.20 / 0.20 % from it with the directions under the horizon (38 / 18 / 0.2 % dark
-without them); a floor moved by 1.7 / 2.1 / 0 % of its light."""
+0.17 / 0.19 / 0.20 % from it with the directions under the horizon (38 / 18 / 0.2 % dark
+without them); a floor moved by 3.2 / 2.6 / 0 % of its light."""
 
 import numpy as np
 import pytest
@@ -53,9 +53,10 @@ def test_a_wall_is_lit_by_the_disc_under_the_horizon_and_a_floor_is_not(el):
     truth = _disc_truth(wall, d, 10.0)
     assert abs(got["under"][0] - truth) < 0.006 * truth, (el, got, truth)
     # a floor: the directions under the horizon are dark, and its light near the horizon is
-    # interpolated towards them (+2 % at 1-3 degrees; the kernel's own error is 8 % at 3)
+    # interpolated towards them and the rows just above it (+3 % at 1-3 degrees; the kernel's
+    # own error is 9 % at 3)
     floor_truth = _disc_truth(floor, d, 10.0)
-    assert abs(got["under"][1] - got["base"][1]) < 0.025 * floor_truth, (el, got, floor_truth)
+    assert abs(got["under"][1] - got["base"][1]) < 0.04 * floor_truth, (el, got, floor_truth)
     missing = 1.0 - got["base"][0] / _disc_truth(wall, d, 10.0)
     # the disc's part under the horizon, dark without them: a quarter at 1 degree (3 under)
     assert missing > {1.0: 0.3, 3.0: 0.15, 8.0: -1}[el], missing
@@ -71,3 +72,20 @@ def test_an_environment_weighs_the_sky_above_the_horizon_only():
     assert (wu[:n] == 0).all()
     np.testing.assert_allclose(wu[n:], wb, rtol=1e-12)
     assert wu.sum() == pytest.approx(2 * np.pi, rel=1e-9)
+
+
+def test_a_sun_above_the_horizon_is_interpolated_as_without_the_band():
+    """A disc wholly above the horizon takes the weights the set without the band gives it:
+    near the horizon a hemi set's directions are tens of degrees apart in azimuth, and a hull
+    over both bands would blend a sun 1 degree high with directions under the horizon (the
+    gallery's fence at 1 degree under a 0.526-degree Sun: 0.015 -> 0.061 from Cycles that way)."""
+    base = parse_direction_spec("hemi:400:1.5")
+    under = with_under(base, 5.0)
+    n = under_count(under)
+    for az, el, size in ((37.0, 1.0, 0.526), (37.0, 1.0, 2.0), (90.0, 3.0, 2.0), (200, 30, 10)):
+        d = direction_from_az_el(az, el)
+        ib, wb = tt.sun_weights(base, d, size)
+        iu, wu = tt.sun_weights(under, d, size)
+        assert (iu >= n).all()
+        np.testing.assert_array_equal(iu - n, ib)
+        np.testing.assert_allclose(wu, wb, rtol=1e-12)
