@@ -205,8 +205,9 @@ class TransportTextureSettings:
     viewport: str = setting("auto", label="Viewport", choices=(
         ("auto", "Auto", "Per object: the horizon map where rays baked it and it is measured "
          "closer to rays at held-out suns; else T itself when its atlas fits the GPU budget "
-         "(400 directions at 256^2: 37 MiB; 1600 directions 140 MiB), else a PCA per texel "
-         "block, or the global PCA when it is measured closer to T"),
+         "(400 directions and their band under the horizon at 256^2: 43 MiB; 1600: 165 "
+         "MiB), else a PCA per texel block, or the global PCA when it is measured closer to "
+         "T"),
         ("horizon", "Horizons", "Per-texel horizons found by rays: a shadow edge moves with "
          "the sun instead of blending the baked directions' shadows (no ghosting at low suns); "
          "20 lookups per pixel and 4 bytes per texel and azimuth with the edges' spread over "

@@ -32,7 +32,7 @@ import numpy as np
 
 from ..sphere.directions import DirectionSet
 from ..sphere.hemisphere import disk_to_hemisphere, hemisphere_to_disk, normalize_directions
-from .texture import disk_grid, sun_weights
+from .texture import disk_grid, set_digest, sun_weights
 
 #: Taps per table texel, a multiple of three: one RGB lookup of each table holds three indices
 #: or three weights.
@@ -112,9 +112,9 @@ def cached_tables(dset: DirectionSet, size: int, sun_angle_deg: float, kernel: s
                   taps: int | None = None):
     """:func:`sparse_weight_tables` (``taps=None``: :func:`choose_taps`), memoised per
     (direction set, size, sun, kernel, taps). Returns (indices, weights, kept)."""
-    key = (dset.spec, dset.size, int(size), float(sun_angle_deg), kernel, taps)
-    if dset.kind == "custom":
-        key = key + (id(dset),)
+    # (by the directions' bytes: every bake's set is a custom one since the band under the
+    # horizon, and a collected set's id() is reused)
+    key = (set_digest(dset), int(size), float(sun_angle_deg), kernel, taps)
     if key not in _TABLES:
         if len(_TABLES) > 8:
             _TABLES.clear()

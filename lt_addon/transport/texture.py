@@ -112,16 +112,34 @@ class _Hull:
 _HULLS: dict = {}
 
 
-def _hull(dset: DirectionSet, upper: bool = False) -> _Hull:
-    """The set's hull (cached by its directions' bytes); ``upper``: of its rows above the
-    horizon only, where the set reaches under it (:mod:`..sphere.under_horizon`)."""
+def set_digest(dset: DirectionSet) -> str:
+    """A key for caches of what a direction set alone decides (its hulls, its viewport tables):
+    the sha1 of its directions' bytes (``id()`` is reused once a set is collected)."""
     import hashlib
 
-    key = (hashlib.sha1(np.ascontiguousarray(dset.directions).tobytes()).hexdigest(), upper)
+    return hashlib.sha1(np.ascontiguousarray(dset.directions).tobytes()).hexdigest()
+
+
+def _hull(dset: DirectionSet, upper: bool = False) -> _Hull:
+    """The set's hull (cached by :func:`set_digest`); ``upper``: of its rows above the
+    horizon only, where the set reaches under it (:mod:`..sphere.under_horizon`), with
+    ``mirror`` (S + 1,): each row's mirror under the horizon (-1: none; the nadir's own)."""
+    key = (set_digest(dset), upper)
     if key not in _HULLS:
         if len(_HULLS) > 8:
             _HULLS.clear()
-        _HULLS[key] = _Hull(dset, np.flatnonzero(dset.directions[:, 2] > 0.0) if upper else None)
+        d = dset.directions
+        h = _Hull(dset, np.flatnonzero(d[:, 2] > 0.0) if upper else None)
+        if upper:
+            h.mirror = np.full(dset.size + 1, -1, np.int64)
+            h.mirror[-1] = dset.size
+            under = np.flatnonzero(d[:, 2] < 0.0)
+            if len(under):
+                tree = scipy.spatial.cKDTree(d[under] * np.array([1.0, 1.0, -1.0]))
+                dist, j = tree.query(d)
+                hit = (dist < 1e-9) & (d[:, 2] > 0.0)
+                h.mirror[:-1][hit] = under[j[hit]]
+        _HULLS[key] = h
     return _HULLS[key]
 
 
@@ -142,7 +160,8 @@ def sun_weights(dset: DirectionSet, direction, sun_angle_deg: float = 0.0,
         ``"linear"``: barycentric interpolation over the triangulated direction set, averaged
         over points spread on the sun disc -- exact at a sample direction for a 0-degree sun.
         ``"gauss"``: a Gaussian in the angle to the sun with ``sigma^2 = (a/4)^2 + (h/2)^2``
-        (``h`` the local sample spacing), cut at 4 sigma and normalised (DESIGN.md sec. 3).
+        (``h`` the local sample spacing), cut at 4 sigma and normalised (DESIGN.md sec. 3),
+        over the directions above the horizon.
 
     Returns
     -------
@@ -160,7 +179,9 @@ def sun_weights(dset: DirectionSet, direction, sun_angle_deg: float = 0.0,
         return np.zeros(0, dtype=np.int64), np.zeros(0)
     alpha = np.radians(a)
     if kernel == "gauss":
-        cosang = np.clip(dset.directions @ d, -1.0, 1.0)
+        # (over the directions above the horizon: this kernel does not reach under it)
+        cosang = np.where(dset.directions[:, 2] > 0.0,
+                          np.clip(dset.directions @ d, -1.0, 1.0), -1.0)
         near = int(np.argmax(cosang))
         h = float(_spacing(dset, np.array([near]))[0])
         sigma = np.sqrt((alpha / 4.0) ** 2 + (0.5 * h) ** 2)
@@ -178,16 +199,28 @@ def sun_weights(dset: DirectionSet, direction, sun_angle_deg: float = 0.0,
     # direction. Points above the horizon interpolate between the directions above it, as in a
     # set without that band: near the horizon a hemi set's directions are dense in elevation
     # but tens of degrees apart in azimuth, and the hull of both bands would blend a sun 1
-    # degree high with directions 3 under it (the gallery's fence: 0.015 -> 0.061 from Cycles).
+    # degree high with directions 3 under it (the gallery's fence at 1 degree under a
+    # 0.526-degree Sun: 0.025 -> 0.063 from Cycles). A point under the horizon takes the
+    # weights of its mirror above it, moved onto the mirrored rows: the same triangle upside
+    # down, so the weights are continuous across the horizon and a floor stays dark under it
+    # (the hull of both bands where a row of that triangle has no mirror).
     lowest = float(dset.directions[:, 2].min())
     pts = pts[pts[:, 2] > min(0.0, lowest)]
     if len(pts) == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0)
     acc = np.zeros(dset.size + 1)
     below = pts[:, 2] <= 0.0
-    for part, hull in ((~below, _hull(dset, upper=lowest < 0.0)), (below, _hull(dset))):
-        if part.any():
-            tri, w = hull.weights(pts[part])
+    if (~below).any():
+        tri, w = _hull(dset, upper=lowest < 0.0).weights(pts[~below])
+        np.add.at(acc, tri.ravel(), w.ravel() / count)
+    if below.any():
+        upper = _hull(dset, upper=True)
+        tri, w = upper.weights(pts[below] * np.array([1.0, 1.0, -1.0]))
+        moved = upper.mirror[tri]
+        ok = (moved >= 0).all(axis=1)
+        np.add.at(acc, moved[ok].ravel(), w[ok].ravel() / count)
+        if (~ok).any():
+            tri, w = _hull(dset).weights(pts[below][~ok])
             np.add.at(acc, tri.ravel(), w.ravel() / count)
     acc = acc[:-1]
     keep = np.nonzero(acc > 0)[0]

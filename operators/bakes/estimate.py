@@ -97,7 +97,10 @@ def calibrate(scene, objects, settings, truth: int, truth_samples: int):
     samples = []
     lights = truth_lights(1) if truth else []
     try:   # the calibration fits the viewport the asked size will show (T's fits at 96^2)
-        shown, _ = sp.choose_viewport(settings.viewport, settings.validate().size,
+        from .texture_transport import resolve_directions
+
+        shown, _ = sp.choose_viewport(settings.viewport,
+                                      resolve_directions(scene, settings)[0].size,
                                       settings.resolution, budget_mib=settings.gpu_budget,
                                       table_size=settings.table_size)
     except Exception:

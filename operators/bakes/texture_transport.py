@@ -350,10 +350,16 @@ def resolve_directions(scene, settings):
     mirrored under it, for a soft sun's disc there (:mod:`...lt_addon.sphere.under_horizon`:
     down to the bake Sun's radius, at least 5 degrees). Returns ``(DirectionSet, info or
     None)``."""
+    from ...lt_addon.sphere.directions import MAX_DIRECTIONS
     from ...lt_addon.sphere.under_horizon import depth_for, with_under
 
     dset, info = _above_horizon(scene, settings)
-    return with_under(dset, depth_for(settings.sun_angle, settings.under_horizon)), info
+    dset = with_under(dset, depth_for(settings.sun_angle, settings.under_horizon))
+    if dset.size > MAX_DIRECTIONS:     # (what a bake folder's reader accepts)
+        raise BakeInputError(f"the bake would have {dset.size} directions (the set's, a Sun's "
+                             f"path and the band under the horizon); at most {MAX_DIRECTIONS}: "
+                             "use fewer directions, a coarser path step or --under-horizon 0")
+    return dset, info
 
 
 def _above_horizon(scene, settings):
