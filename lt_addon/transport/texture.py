@@ -859,7 +859,21 @@ def disk_kernel_matrix(dset: DirectionSet, size: int = 32, sun_angle_deg: float 
     """The sun kernel at each disk texel centre as a sparse (D*D, S) matrix (CSR, float64):
     row ``i`` holds :func:`sun_weights` of a sun at texel ``i``'s direction (row-major, row 0
     at y = -1). Texels whose centre lies outside the unit disk (below the horizon) take the
-    nearest disk point on the rim, so bilinear lookups of tables made from it stay continuous."""
+    nearest disk point on the rim, so bilinear lookups of tables made from it stay continuous.
+    Kept for the last few (set, size, sun, kernel): the objects baked together share a set, and
+    their T, indirect and block groups all tabulate it (read-only: callers must not change it)."""
+    key = (set_digest(dset), int(size), float(sun_angle_deg), kernel)
+    if key not in _DISK_KERNELS:
+        if len(_DISK_KERNELS) >= 4:
+            _DISK_KERNELS.clear()
+        _DISK_KERNELS[key] = _disk_kernel_matrix(dset, size, sun_angle_deg, kernel)
+    return _DISK_KERNELS[key]
+
+
+_DISK_KERNELS: dict = {}
+
+
+def _disk_kernel_matrix(dset: DirectionSet, size: int, sun_angle_deg: float, kernel: str):
     import scipy.sparse
 
     xy = disk_grid(size).reshape(-1, 2)

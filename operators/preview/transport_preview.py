@@ -221,6 +221,16 @@ def build_gathered_group(k: int, resolution: int, table_size: int, eig_image, ta
     return group
 
 
+def indirect_table_size(settings: dict) -> int:
+    """Side of the gathered indirect light's coefficient tables: T's sparse tables' (at least
+    :data:`...lt_addon.transport.sparse_tables.TABLE_SIZE`, 64). At 32 a sun 2 degrees high is
+    read between table texels 0 and 3.6 degrees high: 18 % too bright on the gallery's Suzanne
+    (48 % without the band under the horizon), 1.3 % at 64 (docs/bench/2026-12-gallery.md)."""
+    from ...lt_addon.transport import sparse_tables as sp
+
+    return max(sp.TABLE_SIZE, int(settings["table_size"]))
+
+
 def install_indirect_group(obj, report: dict, bake, base: str, sun_angle: float, uv_map: str):
     """The indirect term's group of ``obj`` (None without one): the gathered term's
     (:func:`build_gathered_group`, its component atlas and tables written beside the bake) or
@@ -247,15 +257,17 @@ def install_indirect_group(obj, report: dict, bake, base: str, sun_angle: float,
         bpy.data.images.remove(stale)
     if gathered:
         s = report["settings"]
-        eig, tables = gt.preview_arrays(bake.indirect, sun_angle, s["table_size"],
+        eig, tables = gt.preview_arrays(bake.indirect, sun_angle, indirect_table_size(s),
                                         s.get("kernel", "linear"))
         files = write_preview_files(base, eig, tables, ("indirect_eigen", "indirect_tables"),
                                     "relightable_textures.gathered_indirect_preview")
         iimg = pn.load_atlas_image(files["indirect_eigen"], aname)
         timg = pn.load_atlas_image(files["indirect_tables"], f"{obj.name} indirect tables")
-        group = build_gathered_group(len(eig), bake.indirect.resolution, s["table_size"], iimg,
-                                     timg, uv_map, iname + " new")
+        D = indirect_table_size(s)
+        group = build_gathered_group(len(eig), bake.indirect.resolution, D, iimg, timg, uv_map,
+                                     iname + " new")
         group["relight_indirect"] = "gathered"
+        group["relight_indirect_table_size"] = D      # what a new sun size rewrites
     else:
         atlas_path, _ = pn.write_atlas(bake.indirect, indirect_file)
         iimg = pn.load_atlas_image(atlas_path, aname)
@@ -994,8 +1006,11 @@ def rewrite_tables(obj, report: dict, bake, store, sun_angle: float) -> None:
     if group is not None and group.get("relight_viewport") == "horizon":
         set_horizon_sun(group, sun_angle)
     if isinstance(bake.indirect, gt.GatheredIndirect):   # its tables follow the sun's size
-        _, itab = gt.preview_arrays(bake.indirect, sun_angle, s["table_size"],
-                                    s.get("kernel", "linear"))
+        # at the side its group was built for (a group from before 64 had the bake's own)
+        igroup = bpy.data.node_groups.get(f"{GROUP_PREFIX} indirect ({obj.name})")
+        D = int(igroup.get("relight_indirect_table_size", s["table_size"])) if igroup else \
+            indirect_table_size(s)
+        _, itab = gt.preview_arrays(bake.indirect, sun_angle, D, s.get("kernel", "linear"))
         atlas = pack_atlas(itab, "edge")
         path = f"{base}_preview_indirect_tables.exr"
         exrio.write_exr(path, {c: atlas[..., i] for i, c in enumerate("RGB")},

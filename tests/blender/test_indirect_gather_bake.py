@@ -65,7 +65,9 @@ def test_gathered_indirect_viewport_rendered_by_cycles_equals_its_twin_and_the_t
     eig = _rgb(prev["eigen"], prev["tiles"] + 1, R)
     tab = _rgb(prev["tables"], prev["tiles"], 16)
     ieig = _rgb(prev["indirect_eigen"], 7, R)
-    itab = _rgb(prev["indirect_tables"], 3, 16)
+    D = tp.indirect_table_size(rep["settings"])        # T's tables' side, 64, not the bake's 16
+    assert D == 64
+    itab = _rgb(prev["indirect_tables"], 3, D)
     shares = []
     for az, el, inten in ((40.0, 35.0, 2.0), (250.0, 12.0, 1.0)):
         d = direction_from_az_el(az, el)
@@ -77,10 +79,10 @@ def test_gathered_indirect_viewport_rendered_by_cycles_equals_its_twin_and_the_t
         assert want.max() > 0.05
         assert np.abs(img - want).max() <= 2.0 ** -10 * want.max()
         # the twin reads what the bake stored: the same tables in float32 and the stored images
-        # agree to half-float storage; the tables' bilinear interpolation over 16^2 disk texels
+        # agree to half-float storage; the tables' bilinear interpolation over 64^2 disk texels
         # against the kernel weights of the exact direction is the viewport's only other
-        # approximation (measured 0.020 here, the direct PCA viewport's tables do the same)
-        exact_tab = gt.preview_arrays(bake.indirect, 4.0, 16)[1]
+        # approximation (0.020 here over 16^2, before they took T's tables' side)
+        exact_tab = gt.preview_arrays(bake.indirect, 4.0, D)[1]
         assert rel(ind, gt.viewport_relight(bake.indirect.basis_images, exact_tab, d)) < 3e-3
         assert rel(ind, bake.indirect.relight(d, 4.0)) < 0.05, (az, el)
         shares.append(ind.sum() / (want / inten).sum())
