@@ -200,7 +200,8 @@ class TransportTextureSettings:
     table_size: int = setting(
         32, lo=8, hi=256, label="Preview Table Size",
         help="Texels across the hemisphere disk of the preview's coefficient tables (64 "
-             "follows low suns more closely than 32; 4x the tabulation time)")
+             "follows low suns more closely than 32; 4x the tabulation time); T's and the "
+             "gathered indirect light's take at least 64")
     seed: int = setting(0, lo=0, help="Cycles seed")
     viewport: str = setting("auto", label="Viewport", choices=(
         ("auto", "Auto", "Per object: the horizon map where rays baked it and it is measured "
