@@ -5,11 +5,12 @@ The scene: a 1 m cube standing on a 4 m floor, only the cube baked, direct light
 10-degree Sun 2 degrees high reaches 3 degrees under the horizon: a quarter of its disc. Cycles
 lights the cube's sides from that quarter wherever the rays pass the floor's edge (above
 about 8 cm); T whose directions stop at the horizon counts it dark. Reference: Cycles' own
-128-spp irradiance bake of that Sun (its noise, seeds 1 and 2, measured below the bar's tenth).
-Measured 2026-12-07 with bpy 5.0.1 at 32^2, hemi:400:1.5 and its 79 directions under the
-horizon, texel centres: T 0.050 from Cycles (0.047 over the texels' footprints); the same T
-without them (its rows above the horizon, the relight of the set before this change) 0.263;
-Cycles' own noise 0.0054. The bar, 0.08, is under a third of the latter. (A set as coarse as
+128-spp irradiance bake of that Sun (its noise, seeds 1 and 2, measured under a fifth of the bar).
+Measured 2026-12-07 at 32^2, hemi:400:1.5 and its 79 directions under the horizon, texel
+centres, over the texels the cube's UV triangles cover (Blender 5.3 pads around them
+differently): T 0.013 from Cycles on bpy 5.0.1, 0.018 on 5.3.0; the same T without them (its
+rows above the horizon, the relight of the set before this change) 0.266 / 0.265; Cycles' own
+noise 0.0046 / 0.0055. The bar, 0.04, is under a sixth of the latter. (A set as coarse as
 hemi:64 relights a 10-degree Sun from its centre alone, by interpolation between directions
 18 degrees apart: the disc is not sampled, and the test would prove nothing.)
 """
@@ -58,7 +59,14 @@ def test_a_soft_low_sun_lights_walls_from_under_the_horizon(fresh_scene, tmp_pat
     finally:
         for b in res.objects:
             b.store.abort()
-    lit = truth[1] > 0
+    # the texels the cube's UV triangles cover (the margins around them are padding, which
+    # Blender 5.3 fills differently) that Cycles lights
+    from relightable_textures.lt_addon.rays.texels import texel_samples
+    from relightable_textures.operators.base.meshes import uv_triangles
+
+    covered = np.zeros(R * R, bool)
+    covered[texel_samples(uv_triangles(cube), R).texel] = True
+    lit = covered & (truth[1] > 0)
 
     def rel(a, b):
         return float(np.linalg.norm((a - b)[lit]) / np.linalg.norm(b[lit]))
@@ -68,4 +76,4 @@ def test_a_soft_low_sun_lights_walls_from_under_the_horizon(fresh_scene, tmp_pat
     figures = f"noise {noise:.4f}, with the directions under the horizon {now:.4f}, without {old:.4f}"
     assert noise < 0.008, figures
     assert old > 0.15, figures          # the check can fail: the set above the horizon is far off
-    assert now < 0.08, figures
+    assert now < 0.04, figures
