@@ -114,10 +114,13 @@ _HULLS: dict = {}
 
 def set_digest(dset: DirectionSet) -> str:
     """A key for caches of what a direction set alone decides (its hulls, its viewport tables):
-    the sha1 of its directions' bytes (``id()`` is reused once a set is collected)."""
+    the sha1 of its directions' and solid angles' bytes (the kernel's disc sampling reads the
+    solid angles; ``id()`` is reused once a set is collected)."""
     import hashlib
 
-    return hashlib.sha1(np.ascontiguousarray(dset.directions).tobytes()).hexdigest()
+    h = hashlib.sha1(np.ascontiguousarray(dset.directions).tobytes())
+    h.update(np.ascontiguousarray(dset.solid_angles).tobytes())
+    return h.hexdigest()
 
 
 def _hull(dset: DirectionSet, upper: bool = False) -> _Hull:
