@@ -25,6 +25,7 @@ def test_a_soft_low_sun_lights_walls_from_under_the_horizon(fresh_scene, tmp_pat
     from relightable_textures.lt_addon.sphere.hemisphere import direction_from_az_el
     from relightable_textures.lt_addon.transport import texture as tt
     from relightable_textures.operators.base.cycles_bake import EnvironmentBake
+    from relightable_textures.operators.base.jobs import run
     from relightable_textures.operators.bakes.texture_transport import (
         TransportTextureSettings, bake_transport_textures)
 
@@ -40,12 +41,7 @@ def test_a_soft_low_sun_lights_walls_from_under_the_horizon(fresh_scene, tmp_pat
             truth[seed] = session.bake_sun(d, 1.0, size)[..., 0].reshape(-1).astype(np.float64)
     s = TransportTextureSettings(directions="hemi:400:1.5", resolution=R, bounces=0,
                                  model="none", texel_sampling="centre", sun_angle=2.0)
-    gen = bake_transport_textures(fresh_scene, [cube], s, str(tmp_path / "b"), resume=False)
-    try:
-        while True:
-            next(gen)
-    except StopIteration as stop:
-        res = stop.value
+    res = run(bake_transport_textures(fresh_scene, [cube], s, str(tmp_path / "b"), resume=False))
     store = res.objects[0].store
     try:
         dset = store.directions
