@@ -142,7 +142,11 @@ try:
             group = bpy.data.node_groups.get("Relight Transport (Bumps)")
             indirect = bpy.data.node_groups.get("Relight Transport indirect (Bumps)")
             rep["indirect"] = bake_rep.get("indirect", {}).get("method")
-            rep["bake"] = (bake_rep["directions"] == 24
+            rep["directions"] = bake_rep["directions"]
+            rep["direction_set"] = bake_rep["direct"].get("direction_set")
+            # 24 hard suns and the band mirrored under the horizon (its own count)
+            under = (rep["direction_set"] or {}).get("under_horizon", {}).get("directions", -1)
+            rep["bake"] = (bake_rep["directions"] == 24 + under and under > 0
                            and bake_rep["direct"]["engine"] == "rays"
                            and images is not None and images <= set(files)
                            and group is not None and group.get("relight_viewport") == shown
