@@ -30,7 +30,7 @@ bounces | difference x 4).
 Usage: python benchmarks/bench_gallery.py [--scenes all|a,b|relief,lowpoly] [--resolution 128]
            [--elevations 1,3,8,20,45,75] [--sun-sizes 0.526,2,10] [--samples 256]
            [--preset balanced] [--bounces N] [--set FIELD=VALUE ...] [--json FILE]
-           [--out DIR]
+           [--out DIR] [--truth-cache DIR] [--split]
            [--camera all|SCENES [--camera-light AZ,EL] [--camera-resolution 320]]
 """
 
@@ -44,6 +44,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -114,6 +115,61 @@ def _rel(pairs) -> float:
     return math.sqrt(num / den) if den > 0 else float("nan")
 
 
+class TruthCache:
+    """Cycles truths kept between runs (``--truth-cache DIR``; none without it): one ``.npz``
+    per scene, texture side, samples, bounces, seed, Sun direction and size, and the versions
+    that made it (Blender's, and this file's and the scenes' source), so that a sweep of bake
+    settings pays for its converged truths once. The files are this bench's own output, read
+    without pickles and checked for the objects' shapes."""
+
+    def __init__(self, folder, key, objs, R, samples):
+        import hashlib
+
+        import bpy
+
+        self.folder, self.R, self.n = folder, R, len(objs)
+        here = os.path.dirname(os.path.abspath(__file__))
+        src = hashlib.sha1()
+        for f in ("gallery_scenes.py",):
+            with open(os.path.join(here, f), "rb") as fh:
+                src.update(fh.read())
+        self.base = {"scene": key, "objects": [o.name for o in objs], "R": R,
+                     "samples": samples, "blender": bpy.app.version_string,
+                     "source": src.hexdigest()}
+        self.mem: dict = {}
+
+    def _path(self, d, size, bounces, seed):
+        import hashlib
+
+        k = json.dumps({**self.base, "d": [round(float(x), 9) for x in d], "size": size,
+                        "bounces": bounces, "seed": seed}, sort_keys=True)
+        name = hashlib.sha1(k.encode()).hexdigest()[:20] + ".npz"
+        return name if self.folder is None else os.path.join(self.folder, name)
+
+    def get(self, d, size, bounces, seed):
+        p = self._path(d, size, bounces, seed)
+        if p in self.mem:
+            return self.mem[p]
+        if self.folder is None or not os.path.isfile(p):
+            return None
+        with np.load(p, allow_pickle=False) as z:
+            arrs = [z[f"arr_{i}"] for i in range(len(z.files))]
+        if len(arrs) != self.n or any(a.shape[:2] != (self.R, self.R) for a in arrs):
+            return None
+        self.mem[p] = arrs
+        return arrs
+
+    def put(self, d, size, bounces, seed, arrs):
+        p = self._path(d, size, bounces, seed)
+        arrs = [np.asarray(a, np.float32) for a in arrs]
+        self.mem[p] = arrs
+        if self.folder is not None:
+            os.makedirs(self.folder, exist_ok=True)
+            tmp = p + ".tmp.npz"
+            np.savez_compressed(tmp, *arrs)
+            os.replace(tmp, p)
+
+
 def _subset(report: dict) -> dict:
     """What the gallery keeps of a bake's report."""
     keep = {}
@@ -182,38 +238,64 @@ def run_scene(key, args, out_root):
     by_name = {b.name: (b, st) for b, st, _ in loaded}
     order = [by_name[o.name] for o in objs]
 
-    # the truths: Cycles' Sun at the scene's own bounces, converged
+    # the truths: Cycles' Sun at the scene's own bounces, converged (from --truth-cache where
+    # an earlier run of the same scene, texture, samples, bounces and light baked them)
     rows = []
     t0 = time.perf_counter()
-    with EnvironmentBake(scene, objs, R, args.samples, bounces, (8, 16), mode="radiance",
-                         seed=1, world_sampling="none") as session:
-        for label, az, el, d in lights:
-            for size in sizes:
-                truths = session.bake_sun_all(d, 1.0, size)
-                vp = [np.asarray(bundle.relight(b, st, d, size, 1.0, source="viewport"))
-                      for b, st in order]
-                tt = [np.asarray(bundle.relight(b, st, d, size, 1.0, source="transport"))
-                      for b, st in order]
-                row = {"label": label, "azimuth": round(az, 2), "elevation": el,
-                       "sun_size": size, "rel_rmse": _rel(zip(truths, vp)),
-                       "rel_rmse_T": _rel(zip(truths, tt)),
-                       "per_object": {o.name: _rel([(t, v)]) for o, t, v in
-                                      zip(objs, truths, vp)},
-                       "covered_texels": int(sum((np.asarray(t).sum(-1) > 0).sum()
-                                                 for t in truths))}
-                if row["covered_texels"] == 0:
-                    row["note"] = "Cycles bakes no light here"
-                rows.append(row)
-                if row is rows[0]:
-                    first_truths = truths
+    cache = TruthCache(args.truth_cache, key, objs, R, args.samples)
+    wanted = [(d, size, b) for _, _, _, d in lights for size in sizes
+              for b in ([bounces, 0] if args.split else [bounces])]
+    # a session per bounce count (the scene's, and 0 for --split's direct-only truths)
+    for n in sorted({b for _, _, b in wanted}, reverse=True):
+        missing = [(d, size) for d, size, b in wanted
+                   if b == n and cache.get(d, size, n, 1) is None]
+        if not missing:
+            continue
+        with EnvironmentBake(scene, objs, R, args.samples, n, (8, 16), mode="radiance",
+                             seed=1, world_sampling="none") as session:
+            for d, size in missing:
+                cache.put(d, size, n, 1, session.bake_sun_all(d, 1.0, size))
+    for label, az, el, d in lights:
+        for size in sizes:
+            truths = cache.get(d, size, bounces, 1)
+            vp = [np.asarray(bundle.relight(b, st, d, size, 1.0, source="viewport"))
+                  for b, st in order]
+            tt = [np.asarray(bundle.relight(b, st, d, size, 1.0, source="transport"))
+                  for b, st in order]
+            row = {"label": label, "azimuth": round(az, 2), "elevation": el,
+                   "sun_size": size, "rel_rmse": _rel(zip(truths, vp)),
+                   "rel_rmse_T": _rel(zip(truths, tt)),
+                   "per_object": {o.name: _rel([(t, v)]) for o, t, v in
+                                  zip(objs, truths, vp)},
+                   "covered_texels": int(sum((np.asarray(t).sum(-1) > 0).sum()
+                                             for t in truths))}
+            if args.split:
+                # the direct light alone against Cycles' 0-bounce bake, and the whole
+                # picture were the direct light exact (the bounce light's own share)
+                direct = cache.get(d, size, 0, 1)
+                vd = [np.asarray(bundle.relight(replace(b, indirect=None), st, d, size, 1.0,
+                                                source="viewport")) for b, st in order]
+                row["rel_rmse_direct"] = _rel(zip(direct, vd))
+                row["rel_rmse_indirect"] = _rel(
+                    (t, np.asarray(td, np.float64) + (np.asarray(v, np.float64)
+                                                      - np.asarray(w, np.float64)))
+                    for t, td, v, w in zip(truths, direct, vp, vd))
+            if row["covered_texels"] == 0:
+                row["note"] = "Cycles bakes no light here"
+            rows.append(row)
+            if row is rows[0]:
+                first_truths = truths
     res["truth_seconds"] = round(time.perf_counter() - t0, 1)
     res["rows"] = rows
     # the truths' own noise: a second seed at the lowest elevation, smallest Sun
     if lights:
         label, az, el, d = lights[0]
-        with EnvironmentBake(scene, objs, R, args.samples, bounces, (8, 16), mode="radiance",
-                             seed=2, world_sampling="none") as session:
-            second = session.bake_sun_all(d, 1.0, sizes[0])
+        second = cache.get(d, sizes[0], bounces, 2)
+        if second is None:
+            with EnvironmentBake(scene, objs, R, args.samples, bounces, (8, 16),
+                                 mode="radiance", seed=2, world_sampling="none") as session:
+                second = session.bake_sun_all(d, 1.0, sizes[0])
+            cache.put(d, sizes[0], bounces, 2, second)
         noise = _rel(zip(first_truths, second)) / math.sqrt(2)
         res["truth_noise"] = {"elevation": el, "sun_size": sizes[0], "rel_rmse": noise,
                               "samples": args.samples}
@@ -290,6 +372,11 @@ def main(argv=None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                     help="any other bake setting (repeatable), e.g. direct=cycles")
     ap.add_argument("--json", default=None, help="write the results here")
+    ap.add_argument("--truth-cache", default=None, metavar="DIR",
+                    help="keep the Cycles truths here and reuse them in later runs")
+    ap.add_argument("--split", action="store_true",
+                    help="also bake 0-bounce truths: each row's direct light's error alone, "
+                         "and the whole picture's were the direct light exact")
     ap.add_argument("--out", default=None, help="bake folders and camera pictures (default: a "
                                                 "temporary folder)")
     ap.add_argument("--camera", default="", help="the scenes (all, or names / letters) whose "
