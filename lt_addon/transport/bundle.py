@@ -162,7 +162,9 @@ class TransportTextureSettings:
         help="Cosine-weighted rays per point of the indirect grid (gathered indirect light)")
     indirect_components: int = setting(
         16, lo=1, hi=256, label="Indirect Components",
-        help="PCA components over directions of the gathered indirect light")
+        help="PCA components over directions of the gathered indirect light: at least "
+             "this many, up to 4x where the scene's bounce light needs more (an interior lit "
+             "through a window)")
     indirect_order: int = 3
     indirect_resolution: int = setting(
         128, lo=4, hi=8192, label="Indirect Resolution",

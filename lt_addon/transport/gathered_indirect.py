@@ -196,7 +196,8 @@ FLUSH_TEXELS = 1 << 20
 
 def indirect_pca(g: Gather, T, albedo_t, bounces: int = 2, components: int = 16,
                  oversample: int = 8, power: int = 1, seed: int = 0, chunk: int = 256,
-                 measure: bool = False, window: int | None = None):
+                 measure: bool = False, window: int | None = None, tail: float | None = None,
+                 most: int | None = None, figures: dict | None = None):
     """The top ``components`` of ``I`` over directions (the rows of :func:`indirect`, colours
     and gather points as columns) without forming ``I``: a randomised SVD (Halko et al. 2011,
     ``power`` subspace iterations) whose products with ``I`` and its transpose are the bounce
@@ -218,7 +219,15 @@ def indirect_pca(g: Gather, T, albedo_t, bounces: int = 2, components: int = 16,
     Returns ``(V, U, kept)``: coefficients V (S, k) float32 and images U (k, 3, P) float32 with
     ``I[c, s] ~ sum_j V[s, j] U[j, c]``, and with ``measure`` the share of ``||I||^2`` they
     keep (one more pass that bounces all of T by ``chunk`` directions: the cost of
-    :func:`indirect`), else None."""
+    :func:`indirect`), else None.
+
+    With ``tail`` the count grows as the scene needs: where the sketch's singular values past
+    the ``components``-th hold more than ``tail`` of its RMS (``sqrt(sum_{j>=k} s_j^2 /
+    sum_j s_j^2)``), the sketch is made again with twice the components, up to ``most``, and
+    the smallest count whose tail is within ``tail`` is kept (never fewer than
+    ``components``). The sketch sees ``oversample`` values past the count, so a tail it shows
+    is a floor of the true one. ``figures`` (a dict) receives the sketches' counts and the
+    kept count's tail."""
     if bounces < 1 or components < 1:
         raise ValueError(f"need bounces >= 1 and components >= 1; got {bounces}, {components}")
     T = np.asarray(T) if not hasattr(T, "shape") else T
@@ -298,16 +307,35 @@ def indirect_pca(g: Gather, T, albedo_t, bounces: int = 2, components: int = 16,
         q, _ = np.linalg.qr(Y.reshape(-1, Y.shape[-1]))
         return q.reshape(Y.shape)
 
-    omega = np.random.default_rng(seed).standard_normal((S, m))
-    Q = orth(apply_t(omega))                          # range of I^T (images)
-    for _ in range(int(power)):
-        C = t_adjoint(Q)
-        del Q                                         # (not held while the next is made)
-        Q = orth(apply_t(C))
-    C = t_adjoint(Q)                                  # I ~ C Q^T
-    held.clear()
-    Uc, sv, Vt = np.linalg.svd(C, full_matrices=False)
+    def sketch(m):
+        omega = np.random.default_rng(seed).standard_normal((S, m))
+        Q = orth(apply_t(omega))                      # range of I^T (images)
+        for _ in range(int(power)):
+            C = t_adjoint(Q)
+            del Q                                     # (not held while the next is made)
+            Q = orth(apply_t(C))
+        C = t_adjoint(Q)                              # I ~ C Q^T
+        return (Q, *np.linalg.svd(C, full_matrices=False))
+
+    def tail_at(sv, k):                               # the sketch's RMS past k, relative
+        e = sv.astype(np.float64) ** 2
+        return float(np.sqrt(e[k:].sum() / e.sum())) if e.sum() > 0 else 0.0
+
     k = min(int(components), m)
+    Q, Uc, sv, Vt = sketch(m)
+    tried = [k]
+    if tail is not None:
+        cap = min(S, int(most or components))
+        while tail_at(sv, k) > tail and k < cap:
+            k = min(cap, 2 * k)
+            m = min(S, k + int(oversample))
+            Q, Uc, sv, Vt = sketch(m)
+            tried.append(k)
+        # the fewest components (from the asked count up) whose tail is within ``tail``
+        k = next((j for j in range(min(int(components), k), k) if tail_at(sv, j) <= tail), k)
+    held.clear()
+    if figures is not None:
+        figures.update(sketches=tried, tail=round(tail_at(sv, k), 4), components=int(k))
     V = (Uc[:, :k] * sv[:k]).astype(np.float32)
     U = np.einsum("cpm,km->kcp", Q, Vt[:k]).astype(np.float32)
     if not measure:

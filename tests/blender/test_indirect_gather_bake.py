@@ -196,3 +196,13 @@ def test_re_baking_with_the_other_indirect_term_lights_the_world_with_the_new_at
         assert len([n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]) == 7
     finally:
         relightable_textures.unregister()
+
+
+def test_the_component_growth_stops_where_the_viewport_images_would_outgrow_their_bytes():
+    """The gathered term grows its PCA up to 4x the asked components, and only while its
+    half-float RGB images stay within 128 MiB: never fewer than asked."""
+    from relightable_textures.operators.bakes import indirect_gather as ig
+
+    assert ig.growth_cap(16, 128) == 64
+    assert ig.growth_cap(16, 1024) == 21 == (128 << 20) // (1024 ** 2 * 6)
+    assert ig.growth_cap(16, 2048) == 16 and ig.growth_cap(7, 16) == 28

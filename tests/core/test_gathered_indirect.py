@@ -187,3 +187,36 @@ def test_the_randomised_pca_is_the_exact_one_without_forming_the_term(monkeypatc
     got = 1 - np.sum((rebuilt - M) ** 2) / np.sum(M ** 2)
     assert exact > 0.99 and abs(got - exact) < 1e-6 and abs(kept - exact) < 1e-6
     assert gi.indirect_pca(g, Trows, alb, components=4)[2] is None
+
+
+@needs_engine
+def test_the_component_count_grows_to_the_fewest_whose_tail_is_within_the_bound():
+    """A term of rank 12 over 40 directions with a spread spectrum: asked for 2 components
+    with a 5 % tail, the PCA sketches 2, 4, 8 and 16, and keeps the fewest whose tail in the
+    exact SVD of the formed term is within 5 % (the sketch at full rank finds the same
+    values); without ``tail`` it keeps the 2 asked; ``most`` caps it."""
+    V, T, UV = _box()
+    smp, pts = _points(V, T, UV, 6)
+    g = _gather(V, T, UV, np.zeros(len(T), np.int64), pts, smp, 12, 6, rays=16)
+    rng = np.random.default_rng(7)
+    S = 40
+    # orthogonal patterns over texels and directions, each 0.7 of the one before (signed: a
+    # positive T's mean pattern would hold nearly all of it)
+    basis = np.linalg.qr(rng.standard_normal((144, 12)))[0].T
+    dirs = np.linalg.qr(rng.standard_normal((S, 12)))[0]
+    Trows = (4 * (dirs * 0.7 ** np.arange(12)) @ basis).astype(np.float16)
+    alb = rng.uniform(0.2, 0.9, (144, 3))
+    M = gi.indirect(g, Trows, alb, bounces=2).astype(np.float64).transpose(1, 0, 2).reshape(S, -1)
+    e = np.linalg.svd(M, compute_uv=False) ** 2
+    tails = np.sqrt(np.cumsum(e[::-1])[::-1] / e.sum())
+    want = int(np.argmax(tails <= 0.05))
+    assert 8 < want < 12                           # met only by the fourth sketch (16)
+    fig = {}
+    Vk, Uk, _ = gi.indirect_pca(g, Trows, alb, bounces=2, components=2, tail=0.05, most=32,
+                                figures=fig, oversample=24)
+    assert fig["sketches"] == [2, 4, 8, 16] and fig["components"] == want == Vk.shape[1]
+    assert fig["tail"] == pytest.approx(tails[want], abs=2e-3) and fig["tail"] <= 0.05
+    assert gi.indirect_pca(g, Trows, alb, bounces=2, components=2)[0].shape[1] == 2
+    fig = {}
+    gi.indirect_pca(g, Trows, alb, bounces=2, components=2, tail=0.05, most=4, figures=fig)
+    assert fig["sketches"] == [2, 4] and fig["components"] == 4 and fig["tail"] > 0.05
