@@ -164,10 +164,14 @@ class TruthCache:
         arrs = [np.asarray(a, np.float32) for a in arrs]
         self.mem[p] = arrs
         if self.folder is not None:
+            from relightable_textures.lt_addon.io.atomic import atomic_path
+            from relightable_textures.lt_addon.io.npz import save_npz
+
             os.makedirs(self.folder, exist_ok=True)
-            tmp = p + ".tmp.npz"
-            np.savez_compressed(tmp, *arrs)
-            os.replace(tmp, p)
+            with atomic_path(p) as tmp:
+                with open(tmp, "wb") as fh:
+                    save_npz(fh, compressed=True,
+                             **{f"arr_{i}": a for i, a in enumerate(arrs)})
 
 
 def _subset(report: dict) -> dict:

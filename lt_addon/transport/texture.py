@@ -146,6 +146,21 @@ def _hull(dset: DirectionSet, upper: bool = False) -> _Hull:
     return _HULLS[key]
 
 
+def check_interpolable(dset: DirectionSet, path: str) -> None:
+    """The hull a sun is interpolated on (:func:`sun_weights`: the rows above the horizon where
+    the set reaches under it, else all), built when a store's header is read: a set from
+    elsewhere whose directions do not surround the zenith (all on one great circle, or none
+    above the horizon) is refused there in one line naming the file, not by Qhull at the
+    first relight. The hull is cached, so the relight does not build it again."""
+    try:
+        _hull(dset, upper=bool(np.any(dset.directions[:, 2] < 0.0)))
+    except (ValueError, scipy.spatial.QhullError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise untrusted.UntrustedFileError(
+            path, f"has directions a sun cannot be interpolated between ({first[:120]})") \
+            from None
+
+
 def sun_weights(dset: DirectionSet, direction, sun_angle_deg: float = 0.0,
                 kernel: str = "linear") -> tuple[np.ndarray, np.ndarray]:
     """Sparse weights that relight a sun from the sampled hard suns: ``sum_s w_s T[s]``.
@@ -494,6 +509,7 @@ class TransportStore:
             raise untrusted.UntrustedFileError(hpath, f"has a bad direction set ({exc})") \
                 from None
         untrusted.check_count(hpath, dset.size, untrusted.MAX_DIRECTIONS, "directions", lo=1)
+        check_interpolable(dset, hpath)
         for key in ("directions", "resolution", "format", "format_version"):
             header.pop(key, None)
         store = cls(path, dset, res, header)

@@ -165,6 +165,23 @@ def test_a_t_header_with_a_huge_resolution_or_direction_count_allocates_nothing(
     del msg
 
 
+@pytest.mark.parametrize("case", ["one great circle", "all under the horizon", "one point"])
+def test_a_t_header_whose_directions_cannot_be_interpolated_is_refused_when_read(tmp_path,
+                                                                                 case):
+    """Directions that do not surround the zenith (S of them on the horizon's circle, all
+    under it, all the same) made Qhull fail at the first relight, in a traceback line naming
+    no file; now the header is refused when the store is opened, naming it. The set the bake
+    writes opens."""
+    path, hpath = _store_files(tmp_path)
+    tt.TransportStore.open(path)
+    t = np.linspace(0, 2 * np.pi, S, endpoint=False)
+    d = {"one great circle": np.stack([np.cos(t), np.sin(t), 0 * t], -1),
+         "all under the horizon": np.stack([np.cos(t), np.sin(t), -0.5 + 0 * t], -1),
+         "one point": np.tile([[0.3, 0.0, 0.95]], (S, 1))}[case]
+    _edit_header(hpath, directions={"directions": d.tolist(), "solid_angles": [0.05] * S})
+    _refused(hpath, tt.TransportStore.open, path, match="cannot be interpolated")
+
+
 def test_a_t_whose_npy_disagrees_with_its_header_is_refused_before_mapping(tmp_path):
     path, hpath = _store_files(tmp_path)
     good = open(path, "rb").read()
