@@ -119,7 +119,8 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_estimate.py --within 0.3
 	$(PY) benchmarks/bench_texel_cpca.py --out $(OUT)/bench
 	$(PY) benchmarks/bench_viewports.py --scenes statue,bumps --resolutions 1024,2048
-	$(PY) benchmarks/bench_gallery.py --out $(OUT)/bench/gallery --json $(OUT)/bench/gallery.json --camera all
+	$(PY) benchmarks/bench_gallery.py --out $(OUT)/bench/gallery --json $(OUT)/bench/gallery.json --camera all \
+	  --truth-cache $(OUT)/bench/gallery-truths
 	$(PY) benchmarks/bench_sun_study.py --json $(OUT)/bench/sun_study.json
 	$(PY) benchmarks/bench_sun_study_places.py --out $(OUT)/bench/sun_study_places
 
