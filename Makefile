@@ -116,13 +116,14 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_materials.py --size demo --anchors roughness:0.4,0.8 \
 	  --settings hemi:400:1.5/hemi:128/hemi:8@16
 	$(PY) benchmarks/bench_threads.py --out $(OUT)/bench
-	$(PY) benchmarks/bench_estimate.py --within 0.3
 	$(PY) benchmarks/bench_texel_cpca.py --out $(OUT)/bench
 	$(PY) benchmarks/bench_viewports.py --scenes statue,bumps --resolutions 1024,2048
 	$(PY) benchmarks/bench_gallery.py --out $(OUT)/bench/gallery --json $(OUT)/bench/gallery.json --camera all \
 	  --truth-cache $(OUT)/bench/gallery-truths
 	$(PY) benchmarks/bench_sun_study.py --json $(OUT)/bench/sun_study.json
 	$(PY) benchmarks/bench_sun_study_places.py --out $(OUT)/bench/sun_study_places
+	@# last: a timing check, which may fail on a busy machine after every figure above is out
+	$(PY) benchmarks/bench_estimate.py --within 0.3
 
 ## bench-full: the standard (demo-size) sweeps behind the tables in docs/ (results.md and the
 ##   method pages) and the presets (~2 h): writes docs/bench (presets.json among it: copy it over

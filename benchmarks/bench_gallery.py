@@ -118,7 +118,8 @@ def _rel(pairs) -> float:
 class TruthCache:
     """Cycles truths kept between runs (``--truth-cache DIR``; none without it): one ``.npz``
     per scene, texture side, samples, bounces, seed, Sun direction and size, and the versions
-    that made it (Blender's, and this file's and the scenes' source), so that a sweep of bake
+    that made it (Blender's, and the source of the scenes, this bench and
+    ``operators/base/cycles_bake.py``), so that a sweep of bake
     settings pays for its converged truths once. The files are this bench's own output, read
     without pickles and checked for the objects' shapes."""
 
@@ -129,9 +130,12 @@ class TruthCache:
 
         self.folder, self.R, self.n = folder, R, len(objs)
         here = os.path.dirname(os.path.abspath(__file__))
-        src = hashlib.sha1()
-        for f in ("gallery_scenes.py",):
-            with open(os.path.join(here, f), "rb") as fh:
+        from relightable_textures.operators.base import cycles_bake
+
+        src = hashlib.sha1()   # the scenes, this bench's truth sessions and Cycles' bake code
+        for f in (os.path.join(here, "gallery_scenes.py"), os.path.abspath(__file__),
+                  cycles_bake.__file__):
+            with open(f, "rb") as fh:
                 src.update(fh.read())
         self.base = {"scene": key, "objects": [o.name for o in objs], "R": R,
                      "samples": samples, "blender": bpy.app.version_string,
@@ -248,7 +252,7 @@ def run_scene(key, args, out_root):
     t0 = time.perf_counter()
     cache = TruthCache(args.truth_cache, key, objs, R, args.samples)
     wanted = [(d, size, b) for _, _, _, d in lights for size in sizes
-              for b in ([bounces, 0] if args.split else [bounces])]
+              for b in sorted({bounces, 0} if args.split else {bounces})]
     # a session per bounce count (the scene's, and 0 for --split's direct-only truths)
     for n in sorted({b for _, _, b in wanted}, reverse=True):
         missing = [(d, size) for d, size, b in wanted

@@ -232,8 +232,10 @@ def indirect_pca(g: Gather, T, albedo_t, bounces: int = 2, components: int = 16,
         raise ValueError(f"need bounces >= 1 and components >= 1; got {bounces}, {components}")
     T = np.asarray(T) if not hasattr(T, "shape") else T
     S, n_all = T.shape
-    m = min(S, int(components) + int(oversample))
     P = int(g.points)
+    # the term's rank is at most min(S, 3 P) (the images' QR needs 3 P >= m)
+    rank = min(S, 3 * P)
+    m = min(rank, int(components) + int(oversample))
     cols = np.unique(g.texel)                         # the met texels, sorted (n_t,)
     n_t = len(cols)
     alb = np.asarray(albedo_t, np.float32)[cols]      # (n_t, 3)
@@ -325,10 +327,11 @@ def indirect_pca(g: Gather, T, albedo_t, bounces: int = 2, components: int = 16,
     Q, Uc, sv, Vt = sketch(m)
     tried = [k]
     if tail is not None:
-        cap = min(S, int(most or components))
+        cap = min(rank, int(most or components))
         while tail_at(sv, k) > tail and k < cap:
             k = min(cap, 2 * k)
-            m = min(S, k + int(oversample))
+            m = min(rank, k + int(oversample))
+            del Q, Uc, Vt                             # (not held while the next is made)
             Q, Uc, sv, Vt = sketch(m)
             tried.append(k)
         # the fewest components (from the asked count up) whose tail is within ``tail``

@@ -124,15 +124,29 @@ def stack_points(grids, resolution: int):
 #: 0.024 -- so the statue, its ground and the bumps keep 16.
 COMPONENT_TAIL = 0.08
 COMPONENT_GROWTH = 4
-#: ... and only while the images the viewport holds (half-float RGB, a grid's side squared per
-#: component) stay within this: at a 128^2 grid it never binds, at 1024^2 it stops at 21
+#: ... and only while the atlas of component images the viewport holds (a padded tile per
+#: component, half-float RGBA on the GPU: :func:`image_bytes`) stays within this: at a 128^2
+#: grid it never binds, at 512^2 it stops at 56, at 1024^2 there is no growth from 16
 GROWTH_BYTES = 128 << 20
 
 
+def image_bytes(components: int, grid: int) -> int:
+    """GPU bytes of the gathered term's component atlas: ``components`` tiles of ``grid``^2
+    (one RGB image each, padded, :func:`...lt_addon.io.atlas.atlas_layout`), 8 bytes a texel."""
+    from ...lt_addon.io.atlas import atlas_layout
+
+    lay = atlas_layout(int(components), int(grid))
+    return lay["width"] * lay["height"] * 8
+
+
 def growth_cap(components: int, grid: int) -> int:
-    """The most components the gathered term's PCA may grow to (never fewer than asked)."""
-    return max(int(components), min(COMPONENT_GROWTH * int(components),
-                                    GROWTH_BYTES // (int(grid) ** 2 * 6)))
+    """The most components the gathered term's PCA may grow to: up to
+    :data:`COMPONENT_GROWTH` times the asked count while :func:`image_bytes` stays within
+    :data:`GROWTH_BYTES`, never fewer than asked."""
+    k = COMPONENT_GROWTH * int(components)
+    while k > int(components) and image_bytes(k, grid) > GROWTH_BYTES:
+        k -= 1
+    return max(int(components), k)
 
 
 def bake(scene, objects, arrays, albedos, dset, *, resolution: int, bounces: int,

@@ -5,7 +5,36 @@ comes to the bake it predicts is a timing goal: ``make bench`` checks it
 
 import os
 
-from relight_cli import make_scene, our_lines, relight
+from relight_cli import make_scene, relight
+
+
+def test_a_bake_with_its_estimate_records_the_estimate_and_how_close_it_came(tmp_path):
+    """The report of a bake estimated first (the statue's ground at 32^2, draft: calibrated
+    at 64^2 and 128^2) holds the estimate per stage, the bake's measured time and their ratio
+    as written in its file (how close it came is make bench's: bench_estimate.py)."""
+    import json
+
+    import bpy
+
+    from relightable_textures import samples
+    from relightable_textures.operators.bakes import texture_transport as tx
+    from relightable_textures.operators.bakes.estimate import estimate
+    from relightable_textures.operators.base.jobs import run
+
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = bpy.context.scene
+    samples.build("statue", scene, "test")
+    obj = bpy.data.objects["Ground"]
+    settings = tx.settings_from_preset("draft", resolution=32)
+    out = run(tx.bake_job(scene, [obj], settings, str(tmp_path / "o"), truth=0, preview=False,
+                          compare=False, resume=False, estimator=estimate))
+    rep = json.loads(open(out.reports[0]["report"]).read())
+    e = rep["estimate"]
+    assert set(e["seconds"]) >= {"direct", "indirect", "fit", "other"}
+    assert e["calibration_sizes"] == [64, 128] and e["calibration_seconds"] > 0
+    assert e["bake"] > 0 and e["disk_bytes"] > 0
+    assert e["measured_bake_seconds"] == rep["timings"]["bake_total"] > 0
+    assert e["measured_over_estimated"] == round(rep["timings"]["bake_total"] / e["bake"], 3)
 
 
 def test_cli_estimate_prints_the_cost_and_bakes_nothing(tmp_path):

@@ -199,10 +199,13 @@ def test_re_baking_with_the_other_indirect_term_lights_the_world_with_the_new_at
 
 
 def test_the_component_growth_stops_where_the_viewport_images_would_outgrow_their_bytes():
-    """The gathered term grows its PCA up to 4x the asked components, and only while its
-    half-float RGB images stay within 128 MiB: never fewer than asked."""
+    """The gathered term grows its PCA up to 4x the asked components, and only while the
+    viewport's atlas of its images (a padded half-float RGBA tile per component) stays within
+    128 MiB: never fewer than asked."""
     from relightable_textures.operators.bakes import indirect_gather as ig
 
-    assert ig.growth_cap(16, 128) == 64
-    assert ig.growth_cap(16, 1024) == 21 == (128 << 20) // (1024 ** 2 * 6)
-    assert ig.growth_cap(16, 2048) == 16 and ig.growth_cap(7, 16) == 28
+    assert ig.growth_cap(16, 128) == 64 and ig.growth_cap(7, 16) == 28
+    # 56 tiles of 514^2 (8 x 7 of them) at 8 bytes: 113 MiB; 57 would take 8 x 8, 129 MiB
+    assert ig.growth_cap(16, 512) == 56
+    assert ig.image_bytes(56, 512) == 8 * 514 * 7 * 514 * 8 <= 128 << 20 < ig.image_bytes(57, 512)
+    assert ig.growth_cap(16, 1024) == 16 and ig.growth_cap(16, 2048) == 16

@@ -214,9 +214,20 @@ def test_the_component_count_grows_to_the_fewest_whose_tail_is_within_the_bound(
     fig = {}
     Vk, Uk, _ = gi.indirect_pca(g, Trows, alb, bounces=2, components=2, tail=0.05, most=32,
                                 figures=fig, oversample=24)
-    assert fig["sketches"] == [2, 4, 8, 16] and fig["components"] == want == Vk.shape[1]
+    assert fig["sketches"] == [2, 4, 8, 16] and fig["components"] == want == Vk.shape[1] \
+        == Uk.shape[0]
     assert fig["tail"] == pytest.approx(tails[want], abs=2e-3) and fig["tail"] <= 0.05
     assert gi.indirect_pca(g, Trows, alb, bounces=2, components=2)[0].shape[1] == 2
     fig = {}
     gi.indirect_pca(g, Trows, alb, bounces=2, components=2, tail=0.05, most=4, figures=fig)
     assert fig["sketches"] == [2, 4] and fig["components"] == 4 and fig["tail"] > 0.05
+    # a grid of 4 points holds a term of rank 3 x 4 at most: the sketches stop there (they
+    # raised on reshaping the images' QR, 3 P < m, before they were capped by it)
+    smp2, pts2 = _points(V, T, UV, 2)
+    g2 = _gather(V, T, UV, np.zeros(len(T), np.int64), pts2, smp2, 12, 2, rays=16)
+    P = int(g2.points)
+    assert 3 * P < 16 + 8
+    fig = {}
+    Vs, Us, _ = gi.indirect_pca(g2, Trows, alb, bounces=2, components=16, tail=1e-9, most=64,
+                                figures=fig)
+    assert Vs.shape[1] == Us.shape[0] == fig["components"] <= 3 * P
