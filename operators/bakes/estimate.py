@@ -66,7 +66,10 @@ def calibration_sizes(objects, settings) -> tuple:
     return CALIBRATION
 #: the calibration bakes' indirect grid: the bake's own, at most this side (texels across).
 #: The gathered term's cost depends on the grid (its points and rays) and on the texture (its
-#: PCA reads T's rows) apart; with the grid fixed, the calibration measures the texture's share
+#: PCA reads T's rows) apart; with the grid fixed, the calibration measures the texture's share.
+#: (A term whose PCA grows its components, :data:`.indirect_gather.COMPONENT_TAIL`, grows them
+#: in the calibration too, up to the cap of its grid: over a 256^2 grid the bake may keep fewer
+#: than the calibration did, so its PCA is then overestimated, never under.)
 CALIBRATION_GRID = 256
 #: a bake at or above this resolution is estimated (and the estimate printed) before it starts
 ESTIMATE_FROM = 512
