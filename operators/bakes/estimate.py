@@ -3,7 +3,8 @@
 Two calibration bakes of the same objects and settings at 64^2 and 128^2 (the indirect term at
 the same sizes), and one held-out truth light at each, give each stage's fixed and per-texel
 cost on this machine and scene (:mod:`...lt_addon.transport.estimate`). These costs are then
-applied to the asked sizes. Where the UV map's triangles are narrower than a texel at 64^2 but
+applied to the asked sizes. A bake of 128^2 or less is calibrated at its own size and half of
+it instead (:func:`small_calibration`). Where the UV map's triangles are narrower than a texel at 64^2 but
 not at the asked size, the calibration moves up (:func:`calibration_sizes`): a texel footprint
 refines such texels at every direction, so the small bake's cost per texel is not the large
 one's. The calibration takes a few seconds. It writes nothing that stays:
@@ -38,14 +39,18 @@ THIN_SHARE_TOLERANCE = 0.05
 
 
 def calibration_sizes(objects, settings) -> tuple:
-    """The calibration pair for ``settings.resolution``: the first of
-    :data:`CALIBRATION_LADDER` below it whose sizes both hold as much of the UV area in thin
-    triangles as the asked size (within :data:`THIN_SHARE_TOLERANCE`), else (64, 128)."""
+    """The calibration pair for ``settings.resolution``: a bake no larger than
+    :data:`CALIBRATION`'s larger size is calibrated at its own size and half of it
+    (:func:`small_calibration`); a larger one at the first of :data:`CALIBRATION_LADDER` below
+    it whose sizes both hold as much of the UV area in thin triangles as the asked size (within
+    :data:`THIN_SHARE_TOLERANCE`), else (64, 128)."""
     import bpy
 
     from ...lt_addon.rays.footprint import thin_area_share
     from ..base.ray_scene import mesh_arrays
 
+    if settings.resolution <= CALIBRATION[1]:
+        return small_calibration(settings.resolution)
     if getattr(settings, "texel_sampling", "footprint") != "footprint":
         return CALIBRATION
     depsgraph = bpy.context.evaluated_depsgraph_get()
@@ -64,6 +69,17 @@ def calibration_sizes(objects, settings) -> tuple:
         if all(abs(thin_area_share(uv, r) - want) <= THIN_SHARE_TOLERANCE for r in pair):
             return pair
     return CALIBRATION
+
+
+def small_calibration(resolution: int) -> tuple:
+    """The calibration pair of a bake no larger than 128^2: its own size and half of it (at
+    least 4 and 8), so that an estimate never bakes more texels than the bake it predicts
+    twice over (at 64^2 and 128^2 a 32^2 bake's estimate baked 20 times its texels) and
+    measures the asked size itself."""
+    lo = max(4, int(resolution) // 2)
+    return lo, max(2 * lo, int(resolution))
+
+
 #: the calibration bakes' indirect grid: the bake's own, at most this side (texels across).
 #: The gathered term's cost depends on the grid (its points and rays) and on the texture (its
 #: PCA reads T's rows) apart; with the grid fixed, the calibration measures the texture's share.

@@ -305,7 +305,8 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                 if fph is not None:       # the footprints' edges for the trial's map ...
                     fph.swap(H)
                 sample = hmap.from_points(H, smp.texel, R, pts.Ns, mg, coarse=low,
-                                          spread=None if fph is None else fph.spread)
+                                          spread=None if fph is None else fph.spread,
+                                          margin_texels=margin if len(mg[0]) else 0)
                 if fph is not None:       # ... and the centres' back (the rest reads them)
                     fph.swap(H)
                 trial = _trial(occluder, sample, store, pts.subset(t_rows),
@@ -338,7 +339,8 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
             gap_maps += int(maps_gaps(H))
             maps.append(None if decided == "transport" else
                         hmap.from_points(H, smp.texel, R, pts.Ns, mg, coarse=low,
-                                         spread=None if fph is None else fph.spread))
+                                         spread=None if fph is None else fph.spread,
+                                         margin_texels=margin if len(mg[0]) else 0))
             trials.append(trial)
             checks.append(None if decided else _check_rows(occluder, smp, pts, mg, Dh,
                                                            settings))

@@ -232,6 +232,55 @@ def test_save_load_round_trip_and_a_newer_format_is_refused(tmp_path):
             hmap.load(path)
 
 
+def test_the_margin_is_lit_as_cycles_extends_the_islands_light(tmp_path):
+    """A map that keeps its island fills the bake's margin from the island's light, as Cycles'
+    Extend margin fills a baked texture (by hand: a texel beside a straight border is
+    ``(2 c + l + r) / 4`` of the three island texels it touches), not from its codes' margin,
+    which averages the edges: a lit texel (open sky) beside a shadowed one (edge 60 degrees)
+    gives an edge of 30 degrees, dark under a sun 3 degrees high, where Cycles' margin is half
+    lit. Whole or at some texels, bit for bit; kept by a file round trip; a file's margin out
+    of range is refused in one line."""
+    from relightable_textures.lt_addon.rays.texels import extend_margin
+
+    R, A = 6, 8
+    island = np.zeros((R, R), bool)
+    island[:, :3] = True                                # columns 0-2, margin columns 3-4
+    texel = np.flatnonzero(island)
+    P = len(texel)
+    col = texel % R
+    H = np.zeros((2, A, P))
+    H[0] = -np.pi / 2                                   # blocked from below ...
+    H[1] = np.where((col == 2) & (texel // R % 2 == 0), np.radians(60.0), 0.0)[None]
+    N = np.tile([0.0, 0.0, 1.0], (P, 1))
+    mg = extend_margin(island, 2)
+    plain = hmap.from_points(H, texel, R, N, mg)
+    hm = hmap.from_points(H, texel, R, N, mg, margin_texels=2)
+    assert plain.island is None and hm.margin == 2 and np.array_equal(hm.island, island)
+    d = horizon._dirs(0.0, np.radians(3.0))
+    lit = float(np.sin(np.radians(3.0)) / np.pi)
+    whole, codes = hm.direct(d, 0.526), hm.direct_codes(d, 0.526)
+    assert np.array_equal(plain.direct(d, 0.526), codes)        # no island: the codes' margin
+    assert np.array_equal(whole[island], codes[island])
+    # rows 0, 2, 4 of column 2 are shadowed (0), rows 1, 3, 5 lit; margin column 3 of row 2
+    # touches (1, 2), (2, 2), (3, 2): (lit + 2 * 0 + lit) / 4
+    assert codes[2, 2] == 0.0 and abs(codes[1, 2] - lit) < 2e-3 * lit
+    assert abs(whole[2, 3] - (codes[1, 2] + 2 * codes[2, 2] + codes[3, 2]) / 4) < 1e-9
+    assert whole[2, 3] > 0.4 * lit and codes[2, 3] < 0.01 * lit      # the codes': dark
+    assert np.all(whole[:, 5] == 0)                                  # past the margin
+    some = np.array([2 * R + 3, 1 * R + 4, 7, 5, 2 * R + 2])
+    assert np.array_equal(hm.direct(d, 0.526, some), whole.reshape(-1)[some])
+    path = str(tmp_path / "o_horizons.npz")
+    hmap.save(path, hm)
+    back = hmap.load(path)
+    assert back.margin == 2 and np.array_equal(back.island, island)
+    assert np.array_equal(back.direct(d, 0.526), whole)
+    z = dict(np.load(path))
+    z["margin"] = np.array(999)
+    np.savez(path, **z)
+    with pytest.raises(InputError, match="margin"):
+        hmap.load(path)
+
+
 def test_pair_edges_are_the_weighted_mean_and_spread_of_the_sub_samples():
     """Two texels, two azimuths: the footprint's upper edge is the weighted mean of its
     centre's and sub-samples' edges, its spread their weighted standard deviation; an open
