@@ -86,9 +86,9 @@ def test_the_calibration_sizes_follow_the_uv_maps_thin_triangles_and_small_bakes
 
 def test_the_panel_estimates_the_bake_and_shows_the_figures(tmp_path):
     """The panel's Estimate (bpy.ops, in process): the lines in the scene for the panel, and
-    nothing written to the output folder. (The statue's ground: its large triangles are
-    calibrated at 64^2 and 128^2, 30 s, where the test-size bumps' thin ones need 128^2 and
-    256^2, 59 s.)"""
+    nothing written to the output folder. (The statue's ground at 128^2, calibrated at 64^2
+    and 128^2 as a small bake: the CLI test above estimates a 2048^2 bake, calibrated at the
+    same sizes in 30 s.)"""
     import bpy
 
     import relightable_textures
@@ -104,12 +104,12 @@ def test_the_panel_estimates_the_bake_and_shows_the_figures(tmp_path):
     try:
         props = scene.relight
         props.preset = "draft"
-        props.resolution, props.device = 1024, "cpu"
+        props.resolution, props.device = 128, "cpu"
         props.output_dir = str(tmp_path / "o") + os.sep
         bpy.context.view_layer.objects.active = obj
         assert bpy.ops.relight.estimate() == {"FINISHED"}
         lines = scene["relight_last_estimate"].splitlines()
-        assert lines[0].startswith("estimate for 1 object(s) at 1024^2: about ")
+        assert lines[0].startswith("estimate for 1 object(s) at 128^2: about ")
         assert "GPU memory" in lines[1] and not (tmp_path / "o").exists()
     finally:
         relightable_textures.unregister()
