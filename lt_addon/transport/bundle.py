@@ -588,7 +588,9 @@ def relight(bake: ObjectBake, store, direction, sun_angle: float = 0.0, intensit
     full-accuracy reference at T's directions), ``"model"`` from the fitted model,
     ``"horizon"`` from the horizon map, ``"blocks"`` from the block viewport, ``"viewport"``
     from whichever of them the viewport shows (:func:`viewport_source`: what the panel and its
-    figures show)."""
+    figures show). Texel by texel, the bake margin as Cycles' Extend fills it from the island
+    (the horizon map's :meth:`.horizon_map.HorizonMap.direct`; the viewport's lookups read the
+    map's own margin codes at an island's border)."""
     if source == "viewport":
         source = viewport_source(bake)
     idx, w = tt.sun_weights(store.directions, direction, sun_angle, kernel)

@@ -431,13 +431,17 @@ class HorizonMap:
         return int(self.q.shape[0]) == 4
 
     def without_bands(self) -> "HorizonMap":
-        """The same map without its open bands (the hull alone)."""
-        return HorizonMap(self.q[:2], self.normals, self.spread, self.island, self.margin)
+        """The same map without its open bands (the hull alone; its island's Extend operator
+        shared)."""
+        m = HorizonMap(self.q[:2], self.normals, self.spread, self.island, self.margin)
+        m._extend = self._extend
+        return m
 
     def extend(self):
-        """``(island, dst, op)``: the island's flat texels (P,), and the margin's texels and
-        Extend operator (:func:`..rays.texels.extend_margin`) -- or None where the map keeps no
-        island. Built once per map."""
+        """``(island, dst, op)``: the island's flat texels (P,) ascending, and the margin's
+        texels and Extend operator (:func:`..rays.texels.extend_margin`, its columns the
+        island's texels) -- or None where the map keeps no island. Built once per map (a map
+        made by :func:`from_points` takes the bake's own)."""
         if self.island is None or self.margin <= 0:
             return None
         if self._extend is None:
@@ -470,33 +474,36 @@ class HorizonMap:
         degrees high: 90 % of one box's squared error was in margin texels, 0.34 -> 0.18 with
         this fill). ``texels``: flat indices (n,) to compute only there (the same values, bit
         for bit)."""
-        ext = self.extend()
-        if ext is None:
+        if self.island is None or self.margin <= 0:
             return self.direct_codes(d, sun_angle_deg, texels, moments)
-        island, dst, op = ext
         R = self.resolution
-        if texels is None:
-            out = np.zeros(R * R, np.float32)
-            vals = self.direct_codes(d, sun_angle_deg, island, moments)
-            out[island] = vals
+        if texels is None:        # the codes' light everywhere, then the margin refilled
+            out = self.direct_codes(d, sun_angle_deg, None, moments).reshape(-1)
+            island, dst, op = self.extend()
             if len(dst):
-                out[dst] = (op @ vals.astype(np.float64)).astype(np.float32)
+                out[dst] = (op @ out[island].astype(np.float64)).astype(np.float32)
             return out.reshape(R, R)
-        texels = np.asarray(texels, np.int64)
+        texels = np.asarray(texels, np.int64).reshape(-1)
+        if texels.size and (texels.min() < 0 or texels.max() >= R * R):
+            raise IndexError(f"texel indices outside 0..{R * R - 1}")
+        flat = np.asarray(self.island, bool).reshape(-1)
+        on = flat[texels]
         out = np.zeros(len(texels), np.float32)
-        pos_i = np.searchsorted(island, texels)
-        in_i = (pos_i < len(island)) & (island[np.minimum(pos_i, len(island) - 1)] == texels)
-        if in_i.any():
-            out[in_i] = self.direct_codes(d, sun_angle_deg, texels[in_i], moments)
-        if len(dst):
-            pos_m = np.searchsorted(dst, texels)
-            in_m = (pos_m < len(dst)) & (dst[np.minimum(pos_m, len(dst) - 1)] == texels)
-            if in_m.any():
-                rows = op[pos_m[in_m]]
+        if on.any():
+            out[on] = self.direct_codes(d, sun_angle_deg, texels[on], moments)
+        if not on.all():          # margin texels (others: 0, as the codes' zero normals)
+            island, dst, op = self.extend()
+            pos = np.searchsorted(dst, texels[~on])
+            hit = (pos < len(dst)) & (dst[np.minimum(pos, max(len(dst) - 1, 0))]
+                                      == texels[~on]) if len(dst) else np.zeros(len(pos), bool)
+            if hit.any():
+                rows = op[pos[hit]]
                 src = np.unique(rows.indices)
                 vals = np.zeros(len(island))
                 vals[src] = self.direct_codes(d, sun_angle_deg, island[src], moments)
-                out[in_m] = (rows @ vals).astype(np.float32)
+                sub = np.zeros(int((~on).sum()), np.float32)
+                sub[hit] = (rows @ vals).astype(np.float32)
+                out[~on] = sub
         return out
 
     def direct_codes(self, d, sun_angle_deg: float = 0.0, texels=None,
@@ -594,7 +601,8 @@ class HorizonMap:
 
     def storage_bytes(self) -> int:
         return int(self.q.nbytes + self.normals.nbytes
-                   + (self.spread.nbytes if self.spread is not None else 0))
+                   + (self.spread.nbytes if self.spread is not None else 0)
+                   + (self.island.size if self.island is not None else 0))
 
 
 def gpu_bytes(azimuths: int, resolution: int, horizon_resolution: int = 0,
@@ -652,8 +660,11 @@ def from_points(H, texel, resolution: int, normals, margin=None, coarse=None,
         island = np.zeros(R * R, bool)
         island[texel] = True
         island = island.reshape(R, R)
-    return HorizonMap(q, nrm.reshape(R, R, 3).astype(np.float16), s_codes, island,
-                      int(margin_texels) if island is not None else 0)
+    hm = HorizonMap(q, nrm.reshape(R, R, 3).astype(np.float16), s_codes, island,
+                    int(margin_texels) if island is not None else 0)
+    if island is not None and margin is not None:     # the bake's own Extend operator
+        hm._extend = (np.flatnonzero(island.reshape(-1)), np.asarray(margin[0]), margin[1])
+    return hm
 
 
 def _spread_codes(S, texel, R: int, margin) -> np.ndarray:
@@ -792,7 +803,9 @@ def heldout_errors(hm: HorizonMap, store, directions, rows, sun_angle: float,
     viewport shows, before its tables) are compared. Relative RMSE over texels, combined over
     the directions as ``sqrt(sum err^2 / sum ref^2)``, and per direction. ``texels``: flat
     indices (m,) to compare at only (``rows`` then (n, m)): the trial on sampled tiles
-    (:mod:`.horizon_trial`)."""
+    (:mod:`.horizon_trial`). Both fill the bake margin from their island's light (T holds it
+    so; the map's :meth:`HorizonMap.direct`), as Cycles' texture does: the margin, which the
+    viewport reads only at an island's border, counts alike for both."""
     from . import texture as tt
 
     num = {"horizon": 0.0, "transport": 0.0}
@@ -828,8 +841,10 @@ def save(path: str, hm: HorizonMap) -> None:
                  **{k: np.array(v) for k, v in versions.stamp(FORMAT).items()})
 
 
-#: The widest bake margin a map may say it has (texels): Blender's bake margin is at most 64.
-MAX_MARGIN = 64
+#: The widest bake margin a map may say it has (texels): the bakes' own (``ray_direct.bake``,
+#: Cycles' sessions alike). Its Extend operator grows with the margin's square per texel: a
+#: file's wider margin over a crafted island would make the first relight build a huge one.
+MAX_MARGIN = 4
 
 
 def load(path: str, resolution: int | None = None) -> HorizonMap:
@@ -862,6 +877,8 @@ def load(path: str, resolution: int | None = None) -> HorizonMap:
             island = np.asarray(z.get("island", shape=(R, R), dtype=np.uint8)) != 0
             margin = ut.npz_scalar(z, "margin", int)
             ut.check_count(path, margin, MAX_MARGIN, "margin", lo=1)
+            if not island.any():
+                raise ut.UntrustedFileError(path, "has an island without a covered texel")
         ut.check_values(path, normals, what="normals")
         q = np.asarray(q, np.uint8)
         if version < 4:                      # codes from the horizon up (recoded)

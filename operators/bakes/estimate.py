@@ -4,10 +4,10 @@ Two calibration bakes of the same objects and settings at 64^2 and 128^2 (the in
 the same sizes), and one held-out truth light at each, give each stage's fixed and per-texel
 cost on this machine and scene (:mod:`...lt_addon.transport.estimate`). These costs are then
 applied to the asked sizes. A bake of 128^2 or less is calibrated at its own size and half of
-it instead (:func:`small_calibration`). Where the UV map's triangles are narrower than a texel at 64^2 but
-not at the asked size, the calibration moves up (:func:`calibration_sizes`): a texel footprint
-refines such texels at every direction, so the small bake's cost per texel is not the large
-one's. The calibration takes a few seconds. It writes nothing that stays:
+it instead (:func:`small_calibration`). Where the UV map's triangles are narrower than a
+texel at 64^2 but not at the asked size, the calibration moves up (:func:`calibration_sizes`):
+a texel footprint refines such texels at every direction, so the small bake's cost per texel
+is not the large one's. The calibration takes a few seconds. It writes nothing that stays:
 the calibration bakes go to a temporary folder, without chunk caches.
 """
 
@@ -72,10 +72,10 @@ def calibration_sizes(objects, settings) -> tuple:
 
 
 def small_calibration(resolution: int) -> tuple:
-    """The calibration pair of a bake no larger than 128^2: its own size and half of it (at
-    least 4 and 8), so that an estimate never bakes more texels than the bake it predicts
-    twice over (at 64^2 and 128^2 a 32^2 bake's estimate baked 20 times its texels) and
-    measures the asked size itself."""
+    """The calibration pair of a bake no larger than 128^2: its own size and half of it, so
+    that from 8^2 up an estimate bakes 1.25 times the texels of the bake it predicts and
+    measures the asked size itself (at 64^2 and 128^2 a 32^2 bake's estimate baked 20 times
+    its texels); under 8^2, 4^2 and 8^2."""
     lo = max(4, int(resolution) // 2)
     return lo, max(2 * lo, int(resolution))
 

@@ -192,7 +192,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="transport bakes: relight what the viewport shows for this object "
                         "(viewport, the default: the one the panel and the report's figure "
                         "show -- its horizon map, T through sparse tables, the PCA or blocks), "
-                        "or from the fitted model, T itself, the horizon map or the blocks")
+                        "or from the fitted model, T itself, the horizon map or the blocks; "
+                        "the texture's margin filled from its islands as Cycles' Extend "
+                        "margin fills a bake")
     p.add_argument("--out", metavar="IMG.exr", help="write the relit texture (float RGB EXR)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
     p.set_defaults(func=_cmd_relight)

@@ -10,8 +10,9 @@ from relight_cli import make_scene, relight
 
 def test_a_bake_with_its_estimate_records_the_estimate_and_how_close_it_came(tmp_path):
     """The report of a bake estimated first (the statue's ground at 32^2, draft: calibrated
-    at 16^2 and 32^2, as every bake of 128^2 or less at its size and half of it) holds the estimate per stage, the bake's measured time and their ratio
-    as written in its file (how close it came is make bench's: bench_estimate.py)."""
+    at 16^2 and 32^2, as every bake of 128^2 or less at its size and half of it) holds the
+    estimate per stage, the bake's measured time and their ratio as written in its file (how
+    close it came is make bench's: bench_estimate.py)."""
     import json
 
     import bpy

@@ -239,7 +239,8 @@ def test_the_margin_is_lit_as_cycles_extends_the_islands_light(tmp_path):
     which averages the edges: a lit texel (open sky) beside a shadowed one (edge 60 degrees)
     gives an edge of 30 degrees, dark under a sun 3 degrees high, where Cycles' margin is half
     lit. Whole or at some texels, bit for bit; kept by a file round trip; a file's margin out
-    of range is refused in one line."""
+    of range (wider than the bakes' 4 texels) or an island without a texel is refused in one
+    line."""
     from relightable_textures.lt_addon.rays.texels import extend_margin
 
     R, A = 6, 8
@@ -274,11 +275,18 @@ def test_the_margin_is_lit_as_cycles_extends_the_islands_light(tmp_path):
     back = hmap.load(path)
     assert back.margin == 2 and np.array_equal(back.island, island)
     assert np.array_equal(back.direct(d, 0.526), whole)
+    # the bake's own operator, kept by from_points and shared without the bands, is the one
+    # a loaded map builds
+    assert (abs(back.extend()[2] - hm.extend()[2]).max() == 0
+            and hm.without_bands().extend() is hm.extend())
+    with pytest.raises(IndexError):
+        hm.direct(d, 0.526, np.array([R * R]))
     z = dict(np.load(path))
-    z["margin"] = np.array(999)
-    np.savez(path, **z)
-    with pytest.raises(InputError, match="margin"):
-        hmap.load(path)
+    for key, value, words in (("margin", np.array(hmap.MAX_MARGIN + 1), "margin"),
+                              ("island", np.zeros((R, R), np.uint8), "island")):
+        np.savez(path, **{**z, key: value})
+        with pytest.raises(InputError, match=words):
+            hmap.load(path)
 
 
 def test_pair_edges_are_the_weighted_mean_and_spread_of_the_sub_samples():
