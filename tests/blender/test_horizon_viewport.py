@@ -506,7 +506,8 @@ def test_the_margin_is_relit_as_cycles_extends_the_islands_light(fresh_scene, tm
     print(f"against Cycles: island {e_island:.3f}, margin {e_margin:.3f} (from the codes' "
           f"margin {e_codes:.3f})")
     # measured (64 spp) on 5.0.1: island 0.018, margin 0.020, the codes' margin 0.661; on
-    # 5.3.0, whose whole-texel jitter box the map's footprints follow less closely at 32^2:
-    # 0.138, 0.282, 0.681
+    # 5.3.0, whose whole-texel jitter box the map's footprints follow less closely at 32^2 and
+    # whose margin Blender fills otherwise (docs/transport-textures.md, Limits): 0.138, 0.282,
+    # 0.681
     assert e_margin < 2.5 * e_island + 0.02 and e_codes > 2.0 * e_margin
     store.close()
