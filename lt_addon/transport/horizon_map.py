@@ -493,15 +493,16 @@ class HorizonMap:
             out[on] = self.direct_codes(d, sun_angle_deg, texels[on], moments)
         if not on.all():          # margin texels (others: 0, as the codes' zero normals)
             island, dst, op = self.extend()
-            pos = np.searchsorted(dst, texels[~on])
-            hit = (pos < len(dst)) & (dst[np.minimum(pos, max(len(dst) - 1, 0))]
-                                      == texels[~on]) if len(dst) else np.zeros(len(pos), bool)
+            off = texels[~on]
+            pos = np.searchsorted(dst, off)           # (dst ascending: extend_margin's)
+            hit = pos < len(dst)
+            hit[hit] = dst[pos[hit]] == off[hit]
             if hit.any():
                 rows = op[pos[hit]]
                 src = np.unique(rows.indices)
                 vals = np.zeros(len(island))
                 vals[src] = self.direct_codes(d, sun_angle_deg, island[src], moments)
-                sub = np.zeros(int((~on).sum()), np.float32)
+                sub = np.zeros(len(off), np.float32)
                 sub[hit] = (rows @ vals).astype(np.float32)
                 out[~on] = sub
         return out

@@ -281,6 +281,8 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                        extend_margin(h_smp.covered(), max(1, -(-margin * Rh // R))),
                        h_pts.Ns)
             who = f", object {i + 1}/{len(receivers)}" if len(receivers) > 1 else ""
+            # the maps keep the island and margin where the bake has one (HorizonMap.direct)
+            keep = margin if len(mg[0]) else 0
             # (open: [0, 0]); H[2:] the open bands inside the intervals (a window's sky)
             H = np.zeros((4, A, h_pts.size), np.float16)
             # the footprints' upper edges and their spreads, kept apart from the centres'
@@ -306,7 +308,7 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                     fph.swap(H)
                 sample = hmap.from_points(H, smp.texel, R, pts.Ns, mg, coarse=low,
                                           spread=None if fph is None else fph.spread,
-                                          margin_texels=margin if len(mg[0]) else 0)
+                                          margin_texels=keep)
                 if fph is not None:       # ... and the centres' back (the rest reads them)
                     fph.swap(H)
                 trial = _trial(occluder, sample, store, pts.subset(t_rows),
@@ -340,7 +342,7 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
             maps.append(None if decided == "transport" else
                         hmap.from_points(H, smp.texel, R, pts.Ns, mg, coarse=low,
                                          spread=None if fph is None else fph.spread,
-                                         margin_texels=margin if len(mg[0]) else 0))
+                                         margin_texels=keep))
             trials.append(trial)
             checks.append(None if decided else _check_rows(occluder, smp, pts, mg, Dh,
                                                            settings))
