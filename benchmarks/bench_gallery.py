@@ -23,7 +23,8 @@ bake of the same textures (session set-up and one Sun bake), measured in the sam
 
 ``--camera SCENES`` (all, or a list) also bakes those scenes with their preview (its
 installation left out of the bake's time) and renders each scene camera's picture at a
-3-degree Sun (``--camera-light AZ,EL``; default: the scene's light at 8 degrees)
+3-degree Sun (``--camera-light AZ,EL``; default: the scene's light at 8 degrees; ``--camera-sun
+DEG`` another size)
 with :func:`operators.preview.compare_render.compare` (preview | Cycles Sun with the scene's
 bounces | difference x 4).
 
@@ -31,7 +32,7 @@ Usage: python benchmarks/bench_gallery.py [--scenes all|a,b|relief,lowpoly] [--r
            [--elevations 1,3,8,20,45,75] [--sun-sizes 0.526,2,10] [--samples 256]
            [--preset balanced] [--bounces N] [--set FIELD=VALUE ...] [--json FILE]
            [--out DIR] [--truth-cache DIR] [--split]
-           [--camera all|SCENES [--camera-light AZ,EL] [--camera-resolution 320]]
+           [--camera all|SCENES [--camera-light AZ,EL] [--camera-sun 3] [--camera-resolution 320]]
 """
 
 from __future__ import annotations
@@ -326,11 +327,12 @@ def run_scene(key, args, out_root):
             caz, cel = _floats(args.camera_light)
         else:
             _, caz, cel, _ = gs.lights(key, scene, [8.0])[0]
-        png = os.path.join(out_root, f"gallery_{key}_camera_3deg.png")
-        got = compare(scene, objs, caz, cel, 3.0, png, samples=args.samples,
+        sun = args.camera_sun
+        png = os.path.join(out_root, f"gallery_{key}_camera_{sun:g}deg.png")
+        got = compare(scene, objs, caz, cel, sun, png, samples=args.samples,
                       resolution=args.camera_resolution)
         res["camera"] = got
-        print(f"camera picture (3-deg Sun, az {caz:.0f} el {cel:.0f}): "
+        print(f"camera picture ({sun:g}-deg Sun, az {caz:.0f} el {cel:.0f}): "
               f"{got['rel_rmse_covered_pixels']:.4f} over covered pixels -> {png}", flush=True)
     for _, st in order:
         st.close()
@@ -388,8 +390,10 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=None, help="bake folders and camera pictures (default: a "
                                                 "temporary folder)")
     ap.add_argument("--camera", default="", help="the scenes (all, or names / letters) whose "
-                                                 "camera picture at a 3-degree Sun is rendered")
+                                                 "camera picture is rendered")
     ap.add_argument("--camera-light", default=None, help="AZ,EL of the camera picture's Sun")
+    ap.add_argument("--camera-sun", type=float, default=3.0,
+                    help="the camera picture's Sun size (degrees)")
     ap.add_argument("--camera-resolution", type=int, default=320)
     args = ap.parse_args(argv)
     # lowest elevation and smallest Sun first (the truths' noise is measured there)

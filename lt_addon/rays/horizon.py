@@ -616,18 +616,53 @@ def place_open(H, open_) -> None:
     H[1][take] = m
 
 
-def visible_fraction(el, lo, hi, radius: float, radius_hi=None) -> np.ndarray:
+#: An elevation beyond every disc (radians): the cosine's lit range :func:`lit_range` uses
+#: where it has no bound on one side (the node tree the same, with no infinities in it).
+BEYOND = 10.0
+
+
+def lit_range(el, cos, slope):
+    """The elevations ``(a, b)`` (radians, arrays like ``cos``) over which a shading cosine
+    linear in elevation across a sun's disc, ``cos + slope (e - el)`` (``cos`` the disc
+    centre's, ``slope`` its derivative in elevation), is positive: it is 0 at ``e0 = el - cos
+    / slope``, lit above it where the slope is positive (a floor: ``e0`` is the horizon), below
+    it where negative (a ceiling); the other bound :data:`BEYOND`. A zero slope counts as a
+    tiny negative one (lit everywhere where ``cos > 0``, nowhere where ``cos < 0``)."""
+    cos, slope = np.asarray(cos, np.float64), np.asarray(slope, np.float64)
+    up = slope > 0
+    safe = np.where(up, np.maximum(slope, 1e-9), np.minimum(slope, -1e-9))
+    e0 = np.clip(el - cos / safe, -BEYOND, BEYOND)
+    return np.where(up, e0, -BEYOND), np.where(up, BEYOND, e0)
+
+
+def part_above(el, x, radius):
+    """The part of a disc (``radius``, centre at ``el``) above the elevation ``x``."""
+    return disc_fraction((el - x) / radius)
+
+
+def visible_fraction(el, lo, hi, radius: float, radius_hi=None, lit=None) -> np.ndarray:
     """The part of a sun's disc (angular ``radius`` > 0, centre at elevation ``el``) outside
     the blocked elevations ``[lo, hi]``, each edge taken as a straight line across the disc
     (an empty interval, ``lo >= hi``, blocks nothing). ``radius_hi`` (array or float): the
     upper edge is cut by a wider disc (a soft edge: the edge's spread over a texel's
-    footprint folded into the disc, :func:`...transport.horizon_map.spread_radius`)."""
+    footprint folded into the disc, :func:`...transport.horizon_map.spread_radius`).
+    ``lit`` (``(a, b)``, :func:`lit_range`): only the part between ``a`` and ``b`` counts,
+    where the surface faces the sun -- the disc clipped at the surface's terminator, as each
+    of Cycles' rays is (a 10-degree Sun 1 degree high over an open floor: 0.62 of its light
+    without the clip). The edges are then clamped into ``[a, b]``, and the upper edge cut
+    by the sun's own disc where the clamp moved it."""
     r_hi = radius if radius_hi is None else radius_hi
-    return 1.0 - np.maximum(disc_fraction((el - lo) / radius)
-                            - disc_fraction((el - hi) / r_hi), 0.0)
+    if lit is None:
+        return 1.0 - np.maximum(disc_fraction((el - lo) / radius)
+                                - disc_fraction((el - hi) / r_hi), 0.0)
+    a, b = lit
+    lo_c, hi_c = np.clip(lo, a, b), np.clip(hi, a, b)
+    r_hi = np.where(hi_c == hi, r_hi, radius)
+    whole = part_above(el, a, radius) - part_above(el, b, radius)
+    return whole - np.maximum(part_above(el, lo_c, radius) - part_above(el, hi_c, r_hi), 0.0)
 
 
-def visible_moment(el, lo, hi, radius: float, radius_hi=None) -> np.ndarray:
+def visible_moment(el, lo, hi, radius: float, radius_hi=None, lit=None) -> np.ndarray:
     """The first moment in elevation of the part of the sun's disc :func:`visible_fraction`
     counts, about the disc's centre, over the disc's area (radians): ``fraction x (the visible
     part's mean elevation - el)``. The whole disc's is 0; the part above a line ``t`` radii
@@ -635,11 +670,20 @@ def visible_moment(el, lo, hi, radius: float, radius_hi=None) -> np.ndarray:
     takes its part away. A shading cosine linear in elevation over the disc is then exact:
     ``cos(el) fraction + d cos / d el x moment``, where the centre's cosine alone counts the
     visible part at the centre's height (a 10-degree Sun 3 degrees high whose upper half is
-    visible lights a floor 1.7 times as much as its centre says)."""
+    visible lights a floor 1.7 times as much as its centre says). ``lit``: as
+    :func:`visible_fraction`'s (the part between ``a`` and ``b``: its moment, less the
+    clamped interval's)."""
     r_hi = radius if radius_hi is None else radius_hi
+    if lit is not None:
+        a, b = lit
+        lo, hi = np.clip(lo, a, b), np.clip(hi, a, b)
+        whole = radius * (disc_moment((el - a) / radius) - disc_moment((el - b) / radius))
+    else:
+        whole = 0.0
     t_lo, t_hi = (el - lo) / radius, (el - hi) / r_hi
     blocked = disc_fraction(t_lo) > disc_fraction(t_hi)
-    return np.where(blocked, r_hi * disc_moment(t_hi) - radius * disc_moment(t_lo), 0.0)
+    return whole + np.where(blocked, r_hi * disc_moment(t_hi) - radius * disc_moment(t_lo),
+                            0.0)
 
 
 def disc_moment(t) -> np.ndarray:

@@ -57,7 +57,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..rays.horizon import BELOW, FROM_BELOW, visible_fraction, visible_moment
+from ..rays.horizon import (BELOW, FROM_BELOW, lit_range, part_above, visible_fraction,
+                            visible_moment)
 from ..io.npz import save_npz
 
 FORMAT = "relightable_textures.horizon_map"
@@ -524,6 +525,13 @@ class HorizonMap:
         centre's cosine, 0.010 / 0.007 with the moments; a 2-degree Sun 4 degrees high 0.043 /
         0.030 (tests/core/test_horizons.py).
 
+        The disc counts only where that linear cosine is positive (:func:`..rays.horizon.
+        lit_range`): clipped at the surface's terminator, as each of Cycles' rays is. Over an
+        open floor a 10-degree Sun 1 / 2 / 3 degrees high got 0.62 / 0.87 / 0.96 of its light
+        without the clip (its part under the floor counted with a negative cosine), within 0.2
+        % of the disc's integral with it; a face tilted away from the sun was dark while the
+        terminator was above the disc's centre (the same test).
+
         At each strip's azimuth (the sun's, and either side of it by 0.77 of the disc's
         radius) the disc is cut by that azimuth's interval (:func:`..rays.horizon.
         visible_fraction`; the upper edge by the wider disc of :func:`spread_radius` where the
@@ -549,6 +557,19 @@ class HorizonMap:
         # azimuth steps per radian across the disc at this elevation
         across = A / (2 * np.pi) / max(np.cos(el), COS_MIN)
         R = self.resolution
+        if texels is None:
+            n = self.normals.astype(np.float64)
+        else:
+            n = self.normals.reshape(-1, 3)[np.asarray(texels)].astype(np.float64)
+        length = np.linalg.norm(n, axis=-1)
+        # the cosine linear in elevation across the disc: its slope along d / d el
+        ch = np.hypot(d[0], d[1])
+        g = (np.array([-d[2] * d[0] / ch, -d[2] * d[1] / ch, ch]) if ch > 1e-9 else
+             np.zeros(3))
+        cos, slope = n @ d, n @ g
+        # the elevations where that cosine is positive: the disc is clipped at the terminator
+        lit = lit_range(el, cos, slope)
+        whole = part_above(el, lit[0], r) - part_above(el, lit[1], r)
         seen = {}
 
         def vis_at(k):        # the disc's visible part at azimuth k (strips often share one)
@@ -560,16 +581,18 @@ class HorizonMap:
                     c = (upsample(self.spread[k], R) if texels is None else
                          upsample_at(self.spread[k], R, texels))
                     r_hi = spread_radius(r, decode_spread(c))
-                vis_k = visible_fraction(el, h[0], h[1], r, r_hi)
+                vis_k = visible_fraction(el, h[0], h[1], r, r_hi, lit)
                 # (the sun's own disc: a spread is the edge's over the footprint, seen at
                 # the sun's one height)
-                mom_k = visible_moment(el, h[0], h[1], r) if moments else 0.0
+                mom_k = visible_moment(el, h[0], h[1], r, lit=lit) if moments else 0.0
                 if len(h) == 4:      # the open band inside the interval lit again (within it)
-                    g_lo, g_hi = np.maximum(h[2], h[0]), np.minimum(h[3], h[1])
-                    # (at most the whole disc: the interval's upper edge may be cut by a
+                    g_lo = np.clip(np.maximum(h[2], h[0]), *lit)
+                    g_hi = np.clip(np.minimum(h[3], h[1]), *lit)
+                    # (at most the disc's lit part: the interval's upper edge may be cut by a
                     # wider disc than the band's, which the footprint's mean edge can
                     # lower under the centre's band)
-                    vis_k = np.minimum(vis_k + 1.0 - visible_fraction(el, g_lo, g_hi, r), 1.0)
+                    vis_k = np.minimum(vis_k + 1.0 - visible_fraction(el, g_lo, g_hi, r),
+                                       whole)
                     if moments:
                         mom_k = mom_k - visible_moment(el, g_lo, g_hi, r)
                 seen[k] = (vis_k, mom_k)
@@ -583,16 +606,7 @@ class HorizonMap:
             (v0, m0), (v1, m1) = vis_at(k0), vis_at((k0 + 1) % A)
             vis = vis + w * ((1 - f) * v0 + f * v1)
             mom = mom + w * ((1 - f) * m0 + f * m1)
-        if texels is None:
-            n = self.normals.astype(np.float64)
-        else:
-            n = self.normals.reshape(-1, 3)[np.asarray(texels)].astype(np.float64)
-        length = np.linalg.norm(n, axis=-1)
-        # the cosine linear in elevation across the disc: its slope along d / d el
-        ch = np.hypot(d[0], d[1])
-        g = (np.array([-d[2] * d[0] / ch, -d[2] * d[1] / ch, ch]) if ch > 1e-9 else
-             np.zeros(3))
-        e = np.maximum((n @ d) * vis + (n @ g) * mom, 0.0) / np.maximum(length, 1e-12)
+        e = np.maximum(cos * vis + slope * mom, 0.0) / np.maximum(length, 1e-12)
         return (e / np.pi).astype(np.float32)
 
     def gpu_bytes(self) -> int:

@@ -643,8 +643,10 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     azimuths, the three weighted by the disc's chord there (``vis``); lit by ``max(0, (N . d)
     vis + (N . g) mom) / pi`` with the baked normal, ``g`` the direction's slope in elevation
     and ``mom`` the visible part's first moment, read likewise (the cosine over the visible
-    part: :func:`...lt_addon.rays.horizon.visible_moment`): 14 lookups (12 horizon channels,
-    the normal, the albedo). With
+    part: :func:`...lt_addon.rays.horizon.visible_moment`), the disc clipped where that
+    linear cosine is negative (every edge clamped into :func:`...lt_addon.rays.horizon.
+    lit_range`, the whole disc's part and moment its part's there): 14 lookups (12 horizon
+    channels, the normal, the albedo). With
     ``spread`` (the atlas' third set of tiles) the upper edge is cut by the wider disc
     ``sqrt(r^2 + 4 s^2)``, ``s = c^2 SPREAD_MAX`` from the spread channel ``c`` (0..1):
     6 lookups more (:func:`...lt_addon.transport.horizon_map.spread_radius`). With ``gaps``
@@ -654,6 +656,7 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     atlas may be coarser (``horizon_resolution``) than the normals' (``resolution``): its linear
     lookup reads the codes between its texels, as
     :func:`...lt_addon.transport.horizon_map.upsample`."""
+    from ...lt_addon.rays.horizon import BEYOND
     from ...lt_addon.transport.horizon_map import (COS_MIN, EDGE_MIN, SPREAD_MAX, STRIPS,
                                                    SUN_RADIUS_MIN)
 
@@ -684,6 +687,45 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     across = b.math("DIVIDE", b.math("MULTIPLY", r, A / (2 * np.pi), x=-1500, y=800),
                     b.math("MAXIMUM", b.math("COSINE", el, x=-1500, y=700), COS_MIN,
                            x=-1400, y=700), x=-1300, y=800)
+    ntile = atlas_layout(2, resolution)["tiles"]
+    nrm = b.vmath("NORMALIZE", _lookup(b, na_image, uv, ntile[0], 1200, -300), x=1600, y=-300)
+    d = b.vmath("NORMALIZE", gin.outputs["Light Direction"], x=1600, y=-450)
+    # the cosine linear in elevation across the disc: its slope d(d)/d(el) =
+    # (-dz dx / ch, -dz dy / ch, ch), ch = |(dx, dy)|
+    ch = b.math("SQRT", b.math("MULTIPLY_ADD", dx, dx, b.math("MULTIPLY", dy, dy, x=1400,
+                                                                 y=-700), x=1500, y=-700),
+                x=1600, y=-700)
+    k = b.math("DIVIDE", b.math("MULTIPLY", dz, -1.0, x=1600, y=-800),
+               b.math("MAXIMUM", ch, 1e-9, x=1650, y=-750), x=1700, y=-800)
+    g = b.node("ShaderNodeCombineXYZ", 1750, -750)
+    b.links.new(b.math("MULTIPLY", k, dx, x=1700, y=-850), g.inputs[0])
+    b.links.new(b.math("MULTIPLY", k, dy, x=1700, y=-900), g.inputs[1])
+    b.links.new(ch, g.inputs[2])
+    cos = b.vmath("DOT_PRODUCT", nrm, d, x=1700, y=-300)
+    slope = b.vmath("DOT_PRODUCT", nrm, g.outputs[0], x=1800, y=-700)
+    # where that cosine is positive, [a, b] (horizon.lit_range): the disc clipped there
+    up = b.math("GREATER_THAN", slope, 0.0, x=-1500, y=-1100)
+    neg = b.math("MINIMUM", slope, -1e-9, x=-1500, y=-1200)
+    safe = b.math("MULTIPLY_ADD", up, b.math("SUBTRACT", b.math("MAXIMUM", slope, 1e-9, x=-1400,
+                                                                  y=-1150), neg, x=-1300,
+                                               y=-1150), neg, x=-1200, y=-1100)
+    e0 = b.math("SUBTRACT", el, b.math("DIVIDE", cos, safe, x=-1100, y=-1100), x=-1000,
+                y=-1100)
+    e0 = b.math("MINIMUM", b.math("MAXIMUM", e0, -BEYOND, x=-900, y=-1100), BEYOND, x=-800,
+                y=-1100)
+    lit_a = b.math("MULTIPLY_ADD", up, b.math("ADD", e0, BEYOND, x=-700, y=-1100), -BEYOND,
+                   x=-600, y=-1100)
+    lit_b = b.math("MULTIPLY_ADD", up, b.math("SUBTRACT", BEYOND, e0, x=-700, y=-1200), e0,
+                   x=-600, y=-1200)
+    off_a = b.math("SUBTRACT", el, lit_a, x=-500, y=-1100)
+    off_b = b.math("SUBTRACT", el, lit_b, x=-500, y=-1200)
+    whole = b.math("SUBTRACT", _disc_part(b, off_a, r, -400, -1100),
+                   _disc_part(b, off_b, r, -400, -1300), x=300, y=-1100)
+    whole_m = b.math("SUBTRACT", _disc_moment(b, off_a, r, -400, -1500),
+                     _disc_moment(b, off_b, r, -400, -1600), x=500, y=-1500)
+
+    def clamp(h, x, y):
+        return b.math("MINIMUM", b.math("MAXIMUM", h, lit_a, x=x, y=y), lit_b, x=x + 50, y=y)
     vis, mom, acc = None, None, None
     for s_i, (x_s, w_s) in enumerate(STRIPS):
         y0 = 3200 - 1800 * s_i
@@ -714,18 +756,24 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
                                 4.0 * SPREAD_MAX ** 2, x=600, y=y - 200)
                     r_e = b.math("SQRT", b.math("MULTIPLY_ADD", r, r, s4, x=700, y=y - 200),
                                  x=800, y=y - 200)
+                h_c = clamp(h, 600, y - 100)
+                if upper and spread:     # (the sun's own disc where the clamp moved the edge)
+                    same = b.math("COMPARE", h_c, h, 0.0, x=700, y=y - 300)
+                    r_e = b.math("MULTIPLY_ADD", b.math("SUBTRACT", r_e, r, x=750, y=y - 300),
+                                 same, r, x=800, y=y - 300)
+                h = h_c
                 hv.append(h)
                 offset = b.math("SUBTRACT", el, h, x=800, y=y)
                 edge.append(_disc_part(b, offset, r_e, 900, y))
                 hs.append(_disc_moment(b, offset, r, 900, y - 150))   # the sun's own disc
             blocked = b.math("MAXIMUM", b.math("SUBTRACT", edge[0], edge[1], x=1600,
                                                y=y0 - 800 * j), 0.0, x=1650, y=y0 - 800 * j)
-            visible = b.math("SUBTRACT", 1.0, blocked, x=1700, y=y0 - 800 * j)
+            visible = b.math("SUBTRACT", whole, blocked, x=1700, y=y0 - 800 * j)
             # the visible part's first moment: the band's taken from the whole disc's 0
             band = b.math("LESS_THAN", hv[0], hv[1], x=1600, y=y0 - 800 * j - 100)
-            mom_j = b.math("MULTIPLY", b.math("SUBTRACT", hs[1], hs[0], x=1650,
-                                              y=y0 - 800 * j - 100),
-                           band, x=1700, y=y0 - 800 * j - 100)
+            mom_j = b.math("MULTIPLY_ADD", b.math("SUBTRACT", hs[1], hs[0], x=1650,
+                                                  y=y0 - 800 * j - 100),
+                           band, whole_m, x=1700, y=y0 - 800 * j - 100)
             if gaps:     # the open band inside the interval (clipped to it) lit again
                 g, gs = [], []
                 for e in range(2):
@@ -735,8 +783,10 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
                                        uv, lay, horizon_image, Rh, acc, -700, y)
                     acc = c
                     h = _decode_edge(b, c, 400, y)
-                    h = (b.math("MAXIMUM", h, hv[0], x=500, y=y) if e == 0 else
-                         b.math("MINIMUM", h, hv[1], x=500, y=y))
+                    h = (b.math("MINIMUM", b.math("MAXIMUM", h, hv[0], x=500, y=y), lit_b,
+                                x=550, y=y) if e == 0 else
+                         b.math("MAXIMUM", b.math("MINIMUM", h, hv[1], x=500, y=y), lit_a,
+                                x=550, y=y))
                     g.append(h)
                     offset = b.math("SUBTRACT", el, h, x=800, y=y)
                     gs.append((_disc_part(b, offset, r, 900, y),
@@ -745,8 +795,8 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
                                                     y=y0 - 800 * j - 250), 0.0, x=1650,
                                   y=y0 - 800 * j - 250)
                 visible = b.math("MINIMUM", b.math("ADD", visible, reopened, x=1750,
-                                                   y=y0 - 800 * j - 250), 1.0, x=1800,
-                                 y=y0 - 800 * j - 250)          # (at most the whole disc)
+                                                   y=y0 - 800 * j - 250), whole, x=1800,
+                                 y=y0 - 800 * j - 250)          # (at most the lit disc)
                 open_band = b.math("LESS_THAN", g[0], g[1], x=1600, y=y0 - 800 * j - 350)
                 mom_j = b.math("MULTIPLY_ADD", b.math("SUBTRACT", gs[0][1], gs[1][1], x=1650,
                                                       y=y0 - 800 * j - 350),
@@ -761,22 +811,6 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
                                               y=y0 - 100), f, moment[0], x=1800, y=y0 - 100)
         mom = (b.math("MULTIPLY", strip, w_s, x=1900, y=y0 - 100) if mom is None else
                b.math("MULTIPLY_ADD", strip, w_s, mom, x=1900, y=y0 - 100))
-    ntile = atlas_layout(2, resolution)["tiles"]
-    nrm = b.vmath("NORMALIZE", _lookup(b, na_image, uv, ntile[0], 1200, -300), x=1600, y=-300)
-    d = b.vmath("NORMALIZE", gin.outputs["Light Direction"], x=1600, y=-450)
-    # the cosine linear in elevation across the disc: its slope d(d)/d(el) =
-    # (-dz dx / ch, -dz dy / ch, ch), ch = |(dx, dy)|
-    ch = b.math("SQRT", b.math("MULTIPLY_ADD", dx, dx, b.math("MULTIPLY", dy, dy, x=1400,
-                                                                 y=-700), x=1500, y=-700),
-                x=1600, y=-700)
-    k = b.math("DIVIDE", b.math("MULTIPLY", dz, -1.0, x=1600, y=-800),
-               b.math("MAXIMUM", ch, 1e-9, x=1650, y=-750), x=1700, y=-800)
-    g = b.node("ShaderNodeCombineXYZ", 1750, -750)
-    b.links.new(b.math("MULTIPLY", k, dx, x=1700, y=-850), g.inputs[0])
-    b.links.new(b.math("MULTIPLY", k, dy, x=1700, y=-900), g.inputs[1])
-    b.links.new(ch, g.inputs[2])
-    cos = b.vmath("DOT_PRODUCT", nrm, d, x=1700, y=-300)
-    slope = b.vmath("DOT_PRODUCT", nrm, g.outputs[0], x=1800, y=-700)
     e = b.math("MULTIPLY_ADD", cos, vis, b.math("MULTIPLY", slope, mom, x=1850, y=-600),
                x=1900, y=-300)
     irr = b.math("MULTIPLY", b.math("MAXIMUM", e, 0.0, x=1950, y=0), 1.0 / np.pi, x=2000,

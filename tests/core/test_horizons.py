@@ -808,3 +808,32 @@ def test_a_band_up_to_a_spread_upper_edge_lights_at_most_the_whole_disc():
         sun = horizon._dirs(0.1, d(el))
         got = float(hm.direct(sun, 2.0)[0, 0])
         assert got <= np.sin(d(el + 1.0)) / np.pi + 1e-6, el
+
+
+def test_a_wide_low_sun_lights_only_the_part_of_its_disc_in_front_of_the_surface():
+    """The disc clipped at the surface's terminator, as each of Cycles' rays is. Over open
+    sky (one texel, every azimuth open) the map's relight equals ``max(0, N . w)`` averaged
+    over 4,000 directions spread over the disc, within 1 % (measured 0.2 %, 0.6 % where a
+    sliver of the disc is lit), for a floor under a 10-degree Sun 1-3 degrees high, a face
+    tilted 8 degrees away from the sun, a face tilted down towards a high sun (lit only under
+    its terminator) and one facing the sun (no clip).
+    Without the clip the floor got 0.62 / 0.87 / 0.96 of the light at 1 / 2 / 3 degrees (the
+    disc's part under the floor counted with a negative cosine), and the tilted face was dark
+    while its terminator was above the disc's centre."""
+    def face(nx, nz):
+        H = np.zeros((2, 32, 1, 1))                                        # open sky
+        n = np.array([[[nx, 0.0, nz]]]) / np.hypot(nx, nz)
+        return hmap.HorizonMap(hmap.quantize(H), n.astype(np.float16)), n[0, 0].astype(
+            np.float16).astype(np.float64)
+    t8, t5 = np.radians(8.0), np.radians(5.0)
+    cases = [((0.0, 1.0), el, 10.0) for el in (1.0, 2.0, 3.0)] + [
+        ((-np.sin(t8), np.cos(t8)), el, 10.0) for el in (5.0, 8.0, 11.0)] + [
+        ((np.cos(t5), -np.sin(t5)), el, 10.0) for el in (81.0, 85.0, 88.0)] + [
+        ((1.0, 0.3), 2.0, 10.0), ((0.0, 1.0), 0.5, 2.0)]
+    for (nx, nz), el, sun in cases:
+        hm, n = face(nx, nz)
+        d = horizon._dirs(0.0, np.radians(el))
+        w = tt._disc_points(d, np.radians(sun / 2), 4000)
+        want = np.maximum(w @ n, 0.0).mean() / np.pi
+        got = float(hm.direct(d, sun)[0, 0])
+        assert want > 1e-4 and abs(got - want) <= 0.01 * want, ((nx, nz), el, got, want)
