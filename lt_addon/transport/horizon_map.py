@@ -548,12 +548,12 @@ class HorizonMap:
         d = np.asarray(d, np.float64)
         d = d / np.linalg.norm(d)
         shape = (self.resolution,) * 2 if texels is None else (len(texels),)
-        if d[2] <= 0:
-            return np.zeros(shape, np.float32)
-        A = self.azimuths
-        xa = (np.arctan2(d[1], d[0]) % (2 * np.pi)) / (2 * np.pi) * A
         el = np.arcsin(np.clip(d[2], -1.0, 1.0))
         r = max(np.radians(sun_angle_deg) / 2, SUN_RADIUS_MIN)
+        if el <= -r:         # set: the whole disc under the horizon (its upper part lights
+            return np.zeros(shape, np.float32)      # while the centre is under it, as Cycles)
+        A = self.azimuths
+        xa = (np.arctan2(d[1], d[0]) % (2 * np.pi)) / (2 * np.pi) * A
         # azimuth steps per radian across the disc at this elevation
         across = A / (2 * np.pi) / max(np.cos(el), COS_MIN)
         R = self.resolution

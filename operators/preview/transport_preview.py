@@ -142,9 +142,11 @@ def _sun_group_head(name: str, x_in: float, x_out: float, albedo_input: bool = F
     return group, b, gin, gout, (sep.outputs["X"], sep.outputs["Y"], dz), root
 
 
-def _sun_group_tail(b, gin, gout, irradiance, albedo, dz, x: float) -> None:
-    """Output ``albedo * irradiance * Intensity * Color``, 0 with the light below the horizon."""
-    lit = b.math("GREATER_THAN", dz, 0.0, x=x, y=-200)
+def _sun_group_tail(b, gin, gout, irradiance, albedo, dz, x: float, lit=None) -> None:
+    """Output ``albedo * irradiance * Intensity * Color``, 0 with the light below the horizon
+    (``lit``: a socket, 1 where the light is up, instead)."""
+    if lit is None:
+        lit = b.math("GREATER_THAN", dz, 0.0, x=x, y=-200)
     scale = b.math("MULTIPLY", b.math("MULTIPLY", irradiance, lit, x=x + 200, y=-100),
                    gin.outputs["Intensity"], x=x + 400, y=-100)
     color = b.vmath("SCALE", albedo, x=x + 600, y=-300, scale=scale)
@@ -816,7 +818,9 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     irr = b.math("MULTIPLY", b.math("MAXIMUM", e, 0.0, x=1950, y=0), 1.0 / np.pi, x=2000,
                  y=0)
     albedo = _lookup(b, na_image, uv, ntile[1], 1800, -600)
-    _sun_group_tail(b, gin, gout, irr, albedo, dz, 2200)
+    # up while any of the disc is: its upper part lights while the centre is under the horizon
+    up = b.math("GREATER_THAN", b.math("ADD", el, r, x=2100, y=-250), 0.0, x=2150, y=-250)
+    _sun_group_tail(b, gin, gout, irr, albedo, dz, 2200, lit=up)
     group["relight_azimuths"] = A
     return group
 
