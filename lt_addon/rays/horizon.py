@@ -649,17 +649,18 @@ def visible_fraction(el, lo, hi, radius: float, radius_hi=None, lit=None) -> np.
     ``lit`` (``(a, b)``, :func:`lit_range`): only the part between ``a`` and ``b`` counts,
     where the surface faces the sun -- the disc clipped at the surface's terminator, as each
     of Cycles' rays is (a 10-degree Sun 1 degree high over an open floor: 0.62 of its light
-    without the clip). The edges are then clamped into ``[a, b]``, and the upper edge cut
-    by the sun's own disc where the clamp moved it."""
+    without the clip). The lower edge is then clamped into ``[a, b]`` and the upper edge cut
+    where it is, or at ``b`` where that is lower (with a wider disc than the sun's, the
+    blocked part kept within ``[0, whole]``: continuous as an edge crosses ``a`` or ``b``)."""
     r_hi = radius if radius_hi is None else radius_hi
     if lit is None:
         return 1.0 - np.maximum(disc_fraction((el - lo) / radius)
                                 - disc_fraction((el - hi) / r_hi), 0.0)
     a, b = lit
-    lo_c, hi_c = np.clip(lo, a, b), np.clip(hi, a, b)
-    r_hi = np.where(hi_c == hi, r_hi, radius)
     whole = part_above(el, a, radius) - part_above(el, b, radius)
-    return whole - np.maximum(part_above(el, lo_c, radius) - part_above(el, hi_c, r_hi), 0.0)
+    blocked = (part_above(el, np.clip(lo, a, b), radius)
+               - np.maximum(part_above(el, hi, r_hi), part_above(el, b, radius)))
+    return whole - np.clip(blocked, 0.0, whole)
 
 
 def visible_moment(el, lo, hi, radius: float, radius_hi=None, lit=None) -> np.ndarray:
@@ -672,8 +673,8 @@ def visible_moment(el, lo, hi, radius: float, radius_hi=None, lit=None) -> np.nd
     visible part at the centre's height (a 10-degree Sun 3 degrees high whose upper half is
     visible lights a floor 1.7 times as much as its centre says). ``lit``: as
     :func:`visible_fraction`'s (the part between ``a`` and ``b``: its moment, less the
-    clamped interval's)."""
-    r_hi = radius if radius_hi is None else radius_hi
+    clamped interval's, both edges cut by the sun's own disc)."""
+    r_hi = radius if radius_hi is None or lit is not None else radius_hi
     if lit is not None:
         a, b = lit
         lo, hi = np.clip(lo, a, b), np.clip(hi, a, b)

@@ -57,8 +57,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..rays.horizon import (BELOW, FROM_BELOW, lit_range, part_above, visible_fraction,
-                            visible_moment)
+from ..rays.horizon import (BELOW, FROM_BELOW, disc_moment, lit_range, part_above,
+                            visible_fraction, visible_moment)
 from ..io.npz import save_npz
 
 FORMAT = "relightable_textures.horizon_map"
@@ -76,6 +76,13 @@ SUN_RADIUS_MIN = 1e-4
 _X = np.array([-np.sqrt(0.6), 0.0, np.sqrt(0.6)])
 _W = np.array([5 / 9, 8 / 9, 5 / 9]) * np.sqrt(1 - _X * _X)
 STRIPS = tuple(zip(_X.tolist(), (_W / _W.sum()).tolist()))
+#: A floating interval (its lower edge above the horizon; the others' are
+#: :data:`..rays.horizon.FROM_BELOW`) counts as one, for the ground the scan does not keep
+#: under it, in full once its lower edge is at the horizon or above and it is this wide
+#: (radians), in part over the last 1 degree of either: continuous where the codes are read
+#: between texels or azimuths (an open sky's empty interval ``[m, m]`` beside a floating one,
+#: a from-below lower edge beside a floating one).
+FLOATING_RAMP = np.radians(1.0)
 #: The smallest cos(elevation) the strips' azimuth offsets divide by (a sun near the zenith
 #: spans every azimuth; its disc is then read over 1/COS_MIN radii of azimuth at most).
 COS_MIN = 1e-3
@@ -530,7 +537,10 @@ class HorizonMap:
         open floor a 10-degree Sun 1 / 2 / 3 degrees high got 0.62 / 0.87 / 0.96 of its light
         without the clip (its part under the floor counted with a negative cosine), within 0.2
         % of the disc's integral with it; a face tilted away from the sun was dark while the
-        terminator was above the disc's centre (the same test).
+        terminator was above the disc's centre (the same test). A sun lights while any of its
+        disc is above the horizon (a wall facing a 10-degree Sun whose centre has just set is
+        half lit in Cycles); under a floating interval (an eave over a wall), whose ground the
+        scan does not keep, the disc's part under the horizon counts blocked.
 
         At each strip's azimuth (the sun's, and either side of it by 0.77 of the disc's
         radius) the disc is cut by that azimuth's interval (:func:`..rays.horizon.
@@ -570,6 +580,10 @@ class HorizonMap:
         # the elevations where that cosine is positive: the disc is clipped at the terminator
         lit = lit_range(el, cos, slope)
         whole = part_above(el, lit[0], r) - part_above(el, lit[1], r)
+        # ... and its part under the horizon, which a floating interval's ground blocks
+        c0 = np.clip(0.0, *lit)
+        under = part_above(el, lit[0], r) - part_above(el, c0, r)
+        under_m = r * (disc_moment((el - lit[0]) / r) - disc_moment((el - c0) / r))
         seen = {}
 
         def vis_at(k):        # the disc's visible part at azimuth k (strips often share one)
@@ -595,6 +609,14 @@ class HorizonMap:
                                        whole)
                     if moments:
                         mom_k = mom_k - visible_moment(el, g_lo, g_hi, r)
+                # under a floating interval the scan keeps no ground (..rays.horizon): the
+                # disc's lit part under the horizon counts blocked, as the ground a scene's
+                # objects stand on blocks it (over no ground at all Cycles lights it there)
+                floating = (np.clip(h[0] / FLOATING_RAMP + 1.0, 0.0, 1.0)
+                            * np.clip((h[1] - h[0]) / FLOATING_RAMP, 0.0, 1.0))
+                vis_k = vis_k - floating * under
+                if moments:
+                    mom_k = mom_k - floating * under_m
                 seen[k] = (vis_k, mom_k)
             return seen[k]
         vis, mom = 0.0, 0.0

@@ -646,9 +646,10 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     vis + (N . g) mom) / pi`` with the baked normal, ``g`` the direction's slope in elevation
     and ``mom`` the visible part's first moment, read likewise (the cosine over the visible
     part: :func:`...lt_addon.rays.horizon.visible_moment`), the disc clipped where that
-    linear cosine is negative (every edge clamped into :func:`...lt_addon.rays.horizon.
-    lit_range`, the whole disc's part and moment its part's there): 14 lookups (12 horizon
-    channels, the normal, the albedo). With
+    linear cosine is negative (the edges clamped into :func:`...lt_addon.rays.horizon.
+    lit_range`, the whole disc's part and moment its part's there), its part under the
+    horizon blocked under a floating interval (no ground kept there), lit while any of the
+    disc is above the horizon: 14 lookups (12 horizon channels, the normal, the albedo). With
     ``spread`` (the atlas' third set of tiles) the upper edge is cut by the wider disc
     ``sqrt(r^2 + 4 s^2)``, ``s = c^2 SPREAD_MAX`` from the spread channel ``c`` (0..1):
     6 lookups more (:func:`...lt_addon.transport.horizon_map.spread_radius`). With ``gaps``
@@ -659,8 +660,8 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     lookup reads the codes between its texels, as
     :func:`...lt_addon.transport.horizon_map.upsample`."""
     from ...lt_addon.rays.horizon import BEYOND
-    from ...lt_addon.transport.horizon_map import (COS_MIN, EDGE_MIN, SPREAD_MAX, STRIPS,
-                                                   SUN_RADIUS_MIN)
+    from ...lt_addon.transport.horizon_map import (COS_MIN, EDGE_MIN, FLOATING_RAMP,
+                                                   SPREAD_MAX, STRIPS, SUN_RADIUS_MIN)
 
     Rh = int(horizon_resolution or resolution)
 
@@ -715,16 +716,24 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
                 y=-1100)
     e0 = b.math("MINIMUM", b.math("MAXIMUM", e0, -BEYOND, x=-900, y=-1100), BEYOND, x=-800,
                 y=-1100)
-    lit_a = b.math("MULTIPLY_ADD", up, b.math("ADD", e0, BEYOND, x=-700, y=-1100), -BEYOND,
-                   x=-600, y=-1100)
-    lit_b = b.math("MULTIPLY_ADD", up, b.math("SUBTRACT", BEYOND, e0, x=-700, y=-1200), e0,
-                   x=-600, y=-1200)
+    far = b.math("MULTIPLY_ADD", up, 2.0 * BEYOND, -BEYOND, x=-700, y=-1150)   # +-BEYOND
+    lit_a = b.math("MINIMUM", e0, far, x=-600, y=-1100)
+    lit_b = b.math("MAXIMUM", e0, far, x=-600, y=-1200)
     off_a = b.math("SUBTRACT", el, lit_a, x=-500, y=-1100)
     off_b = b.math("SUBTRACT", el, lit_b, x=-500, y=-1200)
-    whole = b.math("SUBTRACT", _disc_part(b, off_a, r, -400, -1100),
-                   _disc_part(b, off_b, r, -400, -1300), x=300, y=-1100)
-    whole_m = b.math("SUBTRACT", _disc_moment(b, off_a, r, -400, -1500),
-                     _disc_moment(b, off_b, r, -400, -1600), x=500, y=-1500)
+    above_a = _disc_part(b, off_a, r, -400, -1100)
+    above_b = _disc_part(b, off_b, r, -400, -1300)
+    whole = b.math("SUBTRACT", above_a, above_b, x=300, y=-1100)
+    mom_a = _disc_moment(b, off_a, r, -400, -1500)
+    whole_m = b.math("SUBTRACT", mom_a, _disc_moment(b, off_b, r, -400, -1600), x=500,
+                     y=-1500)
+    # ... and its part under the horizon, which a floating interval's ground blocks
+    c0 = b.math("MINIMUM", b.math("MAXIMUM", lit_a, 0.0, x=-600, y=-1900), lit_b, x=-550,
+                y=-1900)
+    off_0 = b.math("SUBTRACT", el, c0, x=-500, y=-1900)
+    under = b.math("SUBTRACT", above_a, _disc_part(b, off_0, r, -400, -1900), x=300, y=-1900)
+    under_m = b.math("SUBTRACT", mom_a, _disc_moment(b, off_0, r, -400, -2100), x=500,
+                     y=-2100)
 
     def clamp(h, x, y):
         return b.math("MINIMUM", b.math("MAXIMUM", h, lit_a, x=x, y=y), lit_b, x=x + 50, y=y)
@@ -738,7 +747,7 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
         k1 = mod_a(b.math("ADD", k0, 1.0, x=-700, y=y0 + 100), -600, y0 + 100)
         part, moment = [], []
         for j, kk in enumerate((k0, k1)):
-            edge, hs, hv = [], [], []
+            edge, hs, hv, raw = [], [], [], []
             for e, upper in enumerate((False, True)):
                 y = y0 - 400 * (2 * j + e)
                 idx = b.math("ADD", kk, float(3 * n), x=-800, y=y) if upper else kk
@@ -758,19 +767,30 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
                                 4.0 * SPREAD_MAX ** 2, x=600, y=y - 200)
                     r_e = b.math("SQRT", b.math("MULTIPLY_ADD", r, r, s4, x=700, y=y - 200),
                                  x=800, y=y - 200)
-                h_c = clamp(h, 600, y - 100)
-                if upper and spread:     # (the sun's own disc where the clamp moved the edge)
-                    same = b.math("COMPARE", h_c, h, 0.0, x=700, y=y - 300)
-                    r_e = b.math("MULTIPLY_ADD", b.math("SUBTRACT", r_e, r, x=750, y=y - 300),
-                                 same, r, x=800, y=y - 300)
-                h = h_c
+                raw.append(h)
+                h = clamp(h, 600, y - 100)
                 hv.append(h)
                 offset = b.math("SUBTRACT", el, h, x=800, y=y)
-                edge.append(_disc_part(b, offset, r_e, 900, y))
+                if upper:    # cut where it is (its own disc), or at lit_b where that is lower
+                    cut = _disc_part(b, b.math("SUBTRACT", el, raw[1], x=800, y=y - 50), r_e,
+                                     900, y - 50)
+                    edge.append(b.math("MAXIMUM", cut, above_b, x=1500, y=y - 50))
+                else:
+                    edge.append(_disc_part(b, offset, r, 900, y))
                 hs.append(_disc_moment(b, offset, r, 900, y - 150))   # the sun's own disc
-            blocked = b.math("MAXIMUM", b.math("SUBTRACT", edge[0], edge[1], x=1600,
-                                               y=y0 - 800 * j), 0.0, x=1650, y=y0 - 800 * j)
+            blocked = b.math("MINIMUM", b.math("MAXIMUM", b.math(
+                "SUBTRACT", edge[0], edge[1], x=1600, y=y0 - 800 * j), 0.0, x=1650,
+                y=y0 - 800 * j), whole, x=1660, y=y0 - 800 * j)
             visible = b.math("SUBTRACT", whole, blocked, x=1700, y=y0 - 800 * j)
+            # a floating interval (horizon_map.FLOATING_RAMP): no ground kept under it
+            yf = y0 - 800 * j - 50
+            low = b.math("MINIMUM", b.math("MAXIMUM", b.math(
+                "MULTIPLY_ADD", raw[0], 1.0 / FLOATING_RAMP, 1.0, x=1550, y=yf), 0.0, x=1580,
+                y=yf), 1.0, x=1600, y=yf)
+            wide = b.math("MINIMUM", b.math("MAXIMUM", b.math("MULTIPLY", b.math(
+                "SUBTRACT", raw[1], raw[0], x=1520, y=yf - 30), 1.0 / FLOATING_RAMP, x=1550,
+                y=yf - 30), 0.0, x=1580, y=yf - 30), 1.0, x=1600, y=yf - 30)
+            floating = b.math("MULTIPLY", low, wide, x=1650, y=yf)
             # the visible part's first moment: the band's taken from the whole disc's 0
             band = b.math("LESS_THAN", hv[0], hv[1], x=1600, y=y0 - 800 * j - 100)
             mom_j = b.math("MULTIPLY_ADD", b.math("SUBTRACT", hs[1], hs[0], x=1650,
@@ -803,6 +823,12 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
                 mom_j = b.math("MULTIPLY_ADD", b.math("SUBTRACT", gs[0][1], gs[1][1], x=1650,
                                                       y=y0 - 800 * j - 350),
                                open_band, mom_j, x=1750, y=y0 - 800 * j - 350)
+            visible = b.math("SUBTRACT", visible, b.math("MULTIPLY", floating, under, x=1800,
+                                                         y=y0 - 800 * j - 400),
+                             x=1850, y=y0 - 800 * j - 400)
+            mom_j = b.math("SUBTRACT", mom_j, b.math("MULTIPLY", floating, under_m, x=1800,
+                                                     y=y0 - 800 * j - 450),
+                           x=1850, y=y0 - 800 * j - 450)
             part.append(visible)
             moment.append(mom_j)
         strip = b.math("MULTIPLY_ADD", b.math("SUBTRACT", part[1], part[0], x=1750, y=y0),

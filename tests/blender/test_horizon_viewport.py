@@ -115,7 +115,7 @@ def test_horizon_viewport_rendered_by_cycles_equals_its_twin(bumps, tmp_path, si
     assert rel(twin, tp.viewport_relight_horizon(tiles, na, 24, direction_from_az_el(130, 14),
                                                  4.0)) > 0.01
     # the 12-degree disc 2 degrees high reaches under the faces' terminators: the tree clips
-    # it there as the twin does (horizon.lit_range), which changes the picture (by 0.032)
+    # it there as the twin does (horizon.lit_range), which changes the picture
     scene["relight_elevation"] = 2.0
     img = render_rgb(scene, tmp_path, R)
     twin = tp.viewport_relight_horizon(tiles, na, 24, direction_from_az_el(130, 2), 12.0)
