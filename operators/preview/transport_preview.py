@@ -142,11 +142,9 @@ def _sun_group_head(name: str, x_in: float, x_out: float, albedo_input: bool = F
     return group, b, gin, gout, (sep.outputs["X"], sep.outputs["Y"], dz), root
 
 
-def _sun_group_tail(b, gin, gout, irradiance, albedo, dz, x: float, lit=None) -> None:
-    """Output ``albedo * irradiance * Intensity * Color``, 0 with the light below the horizon
-    (``lit``: a socket, 1 where the light is up, instead)."""
-    if lit is None:
-        lit = b.math("GREATER_THAN", dz, 0.0, x=x, y=-200)
+def _sun_group_tail(b, gin, gout, irradiance, albedo, dz, x: float) -> None:
+    """Output ``albedo * irradiance * Intensity * Color``, 0 with the light below the horizon."""
+    lit = b.math("GREATER_THAN", dz, 0.0, x=x, y=-200)
     scale = b.math("MULTIPLY", b.math("MULTIPLY", irradiance, lit, x=x + 200, y=-100),
                    gin.outputs["Intensity"], x=x + 400, y=-100)
     color = b.vmath("SCALE", albedo, x=x + 600, y=-300, scale=scale)
@@ -647,9 +645,8 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     and ``mom`` the visible part's first moment, read likewise (the cosine over the visible
     part: :func:`...lt_addon.rays.horizon.visible_moment`), the disc clipped where that
     linear cosine is negative (the edges clamped into :func:`...lt_addon.rays.horizon.
-    lit_range`, the whole disc's part and moment its part's there), its part under the
-    horizon blocked under a floating interval (no ground kept there), lit while any of the
-    disc is above the horizon: 14 lookups (12 horizon channels, the normal, the albedo). With
+    lit_range`, the whole disc's part and moment its part's there): 14 lookups (12 horizon
+    channels, the normal, the albedo). With
     ``spread`` (the atlas' third set of tiles) the upper edge is cut by the wider disc
     ``sqrt(r^2 + 4 s^2)``, ``s = c^2 SPREAD_MAX`` from the spread channel ``c`` (0..1):
     6 lookups more (:func:`...lt_addon.transport.horizon_map.spread_radius`). With ``gaps``
@@ -660,8 +657,8 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     lookup reads the codes between its texels, as
     :func:`...lt_addon.transport.horizon_map.upsample`."""
     from ...lt_addon.rays.horizon import BEYOND
-    from ...lt_addon.transport.horizon_map import (COS_MIN, EDGE_MIN, FLOATING_RAMP,
-                                                   SPREAD_MAX, STRIPS, SUN_RADIUS_MIN)
+    from ...lt_addon.transport.horizon_map import (COS_MIN, EDGE_MIN, SPREAD_MAX, STRIPS,
+                                                   SUN_RADIUS_MIN)
 
     Rh = int(horizon_resolution or resolution)
 
@@ -724,16 +721,8 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     above_a = _disc_part(b, off_a, r, -400, -1100)
     above_b = _disc_part(b, off_b, r, -400, -1300)
     whole = b.math("SUBTRACT", above_a, above_b, x=300, y=-1100)
-    mom_a = _disc_moment(b, off_a, r, -400, -1500)
-    whole_m = b.math("SUBTRACT", mom_a, _disc_moment(b, off_b, r, -400, -1600), x=500,
-                     y=-1500)
-    # ... and its part under the horizon, which a floating interval's ground blocks
-    c0 = b.math("MINIMUM", b.math("MAXIMUM", lit_a, 0.0, x=-600, y=-1900), lit_b, x=-550,
-                y=-1900)
-    off_0 = b.math("SUBTRACT", el, c0, x=-500, y=-1900)
-    under = b.math("SUBTRACT", above_a, _disc_part(b, off_0, r, -400, -1900), x=300, y=-1900)
-    under_m = b.math("SUBTRACT", mom_a, _disc_moment(b, off_0, r, -400, -2100), x=500,
-                     y=-2100)
+    whole_m = b.math("SUBTRACT", _disc_moment(b, off_a, r, -400, -1500),
+                     _disc_moment(b, off_b, r, -400, -1600), x=500, y=-1500)
 
     def clamp(h, x, y):
         return b.math("MINIMUM", b.math("MAXIMUM", h, lit_a, x=x, y=y), lit_b, x=x + 50, y=y)
@@ -782,15 +771,6 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
                 "SUBTRACT", edge[0], edge[1], x=1600, y=y0 - 800 * j), 0.0, x=1650,
                 y=y0 - 800 * j), whole, x=1660, y=y0 - 800 * j)
             visible = b.math("SUBTRACT", whole, blocked, x=1700, y=y0 - 800 * j)
-            # a floating interval (horizon_map.FLOATING_RAMP): no ground kept under it
-            yf = y0 - 800 * j - 50
-            low = b.math("MINIMUM", b.math("MAXIMUM", b.math(
-                "MULTIPLY_ADD", raw[0], 1.0 / FLOATING_RAMP, 1.0, x=1550, y=yf), 0.0, x=1580,
-                y=yf), 1.0, x=1600, y=yf)
-            wide = b.math("MINIMUM", b.math("MAXIMUM", b.math("MULTIPLY", b.math(
-                "SUBTRACT", raw[1], raw[0], x=1520, y=yf - 30), 1.0 / FLOATING_RAMP, x=1550,
-                y=yf - 30), 0.0, x=1580, y=yf - 30), 1.0, x=1600, y=yf - 30)
-            floating = b.math("MULTIPLY", low, wide, x=1650, y=yf)
             # the visible part's first moment: the band's taken from the whole disc's 0
             band = b.math("LESS_THAN", hv[0], hv[1], x=1600, y=y0 - 800 * j - 100)
             mom_j = b.math("MULTIPLY_ADD", b.math("SUBTRACT", hs[1], hs[0], x=1650,
@@ -823,12 +803,6 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
                 mom_j = b.math("MULTIPLY_ADD", b.math("SUBTRACT", gs[0][1], gs[1][1], x=1650,
                                                       y=y0 - 800 * j - 350),
                                open_band, mom_j, x=1750, y=y0 - 800 * j - 350)
-            visible = b.math("SUBTRACT", visible, b.math("MULTIPLY", floating, under, x=1800,
-                                                         y=y0 - 800 * j - 400),
-                             x=1850, y=y0 - 800 * j - 400)
-            mom_j = b.math("SUBTRACT", mom_j, b.math("MULTIPLY", floating, under_m, x=1800,
-                                                     y=y0 - 800 * j - 450),
-                           x=1850, y=y0 - 800 * j - 450)
             part.append(visible)
             moment.append(mom_j)
         strip = b.math("MULTIPLY_ADD", b.math("SUBTRACT", part[1], part[0], x=1750, y=y0),
@@ -844,9 +818,7 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     irr = b.math("MULTIPLY", b.math("MAXIMUM", e, 0.0, x=1950, y=0), 1.0 / np.pi, x=2000,
                  y=0)
     albedo = _lookup(b, na_image, uv, ntile[1], 1800, -600)
-    # up while any of the disc is: its upper part lights while the centre is under the horizon
-    up = b.math("GREATER_THAN", b.math("ADD", el, r, x=2100, y=-250), 0.0, x=2150, y=-250)
-    _sun_group_tail(b, gin, gout, irr, albedo, dz, 2200, lit=up)
+    _sun_group_tail(b, gin, gout, irr, albedo, dz, 2200)
     group["relight_azimuths"] = A
     return group
 
