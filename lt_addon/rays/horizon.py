@@ -32,6 +32,8 @@ empty interval (:func:`place_open`).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from . import reach as reach_mod
@@ -640,13 +642,37 @@ def part_above(el, x, radius):
     return disc_fraction((el - x) / radius)
 
 
+class Lit(NamedTuple):
+    """A lit range ``[a, b]`` (:func:`lit_range`) and the parts of one disc (its centre ``el``,
+    its ``radius``) over it: ``above_b`` the part above ``b``, ``whole`` the part between,
+    ``whole_m`` that part's first moment (:func:`visible_moment`) -- the same at every azimuth
+    a relight reads, so computed once (:func:`lit_parts`)."""
+    a: np.ndarray
+    b: np.ndarray
+    above_b: np.ndarray
+    whole: np.ndarray
+    whole_m: np.ndarray
+
+
+def lit_parts(el, lit, radius: float) -> Lit:
+    """:class:`Lit` of the lit range ``lit`` (``(a, b)``, or a :class:`Lit` already) for a
+    disc of ``radius`` centred at elevation ``el``."""
+    if isinstance(lit, Lit):
+        return lit
+    a, b = lit
+    above_b = part_above(el, b, radius)
+    return Lit(a, b, above_b, part_above(el, a, radius) - above_b,
+               radius * (disc_moment((el - a) / radius) - disc_moment((el - b) / radius)))
+
+
 def visible_fraction(el, lo, hi, radius: float, radius_hi=None, lit=None) -> np.ndarray:
     """The part of a sun's disc (angular ``radius`` > 0, centre at elevation ``el``) outside
     the blocked elevations ``[lo, hi]``, each edge taken as a straight line across the disc
     (an empty interval, ``lo >= hi``, blocks nothing). ``radius_hi`` (array or float): the
     upper edge is cut by a wider disc (a soft edge: the edge's spread over a texel's
     footprint folded into the disc, :func:`...transport.horizon_map.spread_radius`).
-    ``lit`` (``(a, b)``, :func:`lit_range`): only the part between ``a`` and ``b`` counts,
+    ``lit`` (``(a, b)``, :func:`lit_range`, or its :class:`Lit`): only the part between ``a``
+    and ``b`` counts,
     where the surface faces the sun -- the disc clipped at the surface's terminator, as each
     of Cycles' rays is (a 10-degree Sun 1 degree high over an open floor: 0.62 of its light
     without the clip). The lower edge is then clamped into ``[a, b]`` and the upper edge cut
@@ -656,11 +682,10 @@ def visible_fraction(el, lo, hi, radius: float, radius_hi=None, lit=None) -> np.
     if lit is None:
         return 1.0 - np.maximum(disc_fraction((el - lo) / radius)
                                 - disc_fraction((el - hi) / r_hi), 0.0)
-    a, b = lit
-    whole = part_above(el, a, radius) - part_above(el, b, radius)
-    blocked = (part_above(el, np.clip(lo, a, b), radius)
-               - np.maximum(part_above(el, hi, r_hi), part_above(el, b, radius)))
-    return whole - np.clip(blocked, 0.0, whole)
+    lit = lit_parts(el, lit, radius)
+    blocked = (part_above(el, np.clip(lo, lit.a, lit.b), radius)
+               - np.maximum(part_above(el, hi, r_hi), lit.above_b))
+    return lit.whole - np.clip(blocked, 0.0, lit.whole)
 
 
 def visible_moment(el, lo, hi, radius: float, radius_hi=None, lit=None) -> np.ndarray:
@@ -674,17 +699,15 @@ def visible_moment(el, lo, hi, radius: float, radius_hi=None, lit=None) -> np.nd
     visible lights a floor 1.7 times as much as its centre says). ``lit``: as
     :func:`visible_fraction`'s (the part between ``a`` and ``b``: its moment, less the
     clamped interval's, both edges cut by the sun's own disc)."""
-    r_hi = radius if radius_hi is None or lit is not None else radius_hi
-    if lit is not None:
-        a, b = lit
-        lo, hi = np.clip(lo, a, b), np.clip(hi, a, b)
-        whole = radius * (disc_moment((el - a) / radius) - disc_moment((el - b) / radius))
-    else:
-        whole = 0.0
+    if lit is not None:   # (clamped, both edges cut by one disc: blocked where lo < hi)
+        lit = lit_parts(el, lit, radius)
+        lo, hi = np.clip(lo, lit.a, lit.b), np.clip(hi, lit.a, lit.b)
+        cut = radius * (disc_moment((el - hi) / radius) - disc_moment((el - lo) / radius))
+        return lit.whole_m + np.where(lo < hi, cut, 0.0)
+    r_hi = radius if radius_hi is None else radius_hi
     t_lo, t_hi = (el - lo) / radius, (el - hi) / r_hi
     blocked = disc_fraction(t_lo) > disc_fraction(t_hi)
-    return whole + np.where(blocked, r_hi * disc_moment(t_hi) - radius * disc_moment(t_lo),
-                            0.0)
+    return np.where(blocked, r_hi * disc_moment(t_hi) - radius * disc_moment(t_lo), 0.0)
 
 
 def disc_moment(t) -> np.ndarray:

@@ -57,7 +57,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..rays.horizon import (BELOW, FROM_BELOW, lit_range, part_above, visible_fraction,
+from ..rays.horizon import (BELOW, FROM_BELOW, lit_parts, lit_range, visible_fraction,
                             visible_moment)
 from ..io.npz import save_npz
 
@@ -573,8 +573,7 @@ class HorizonMap:
              np.zeros(3))
         cos, slope = n @ d, n @ g
         # the elevations where that cosine is positive: the disc is clipped at the terminator
-        lit = lit_range(el, cos, slope)
-        whole = part_above(el, lit[0], r) - part_above(el, lit[1], r)
+        lit = lit_parts(el, lit_range(el, cos, slope), r)     # (once: the same at every k)
         seen = {}
 
         def vis_at(k):        # the disc's visible part at azimuth k (strips often share one)
@@ -591,13 +590,13 @@ class HorizonMap:
                 # the sun's one height)
                 mom_k = visible_moment(el, h[0], h[1], r, lit=lit) if moments else 0.0
                 if len(h) == 4:      # the open band inside the interval lit again (within it)
-                    g_lo = np.clip(np.maximum(h[2], h[0]), *lit)
-                    g_hi = np.clip(np.minimum(h[3], h[1]), *lit)
+                    g_lo = np.clip(np.maximum(h[2], h[0]), lit.a, lit.b)
+                    g_hi = np.clip(np.minimum(h[3], h[1]), lit.a, lit.b)
                     # (at most the disc's lit part: the interval's upper edge may be cut by a
                     # wider disc than the band's, which the footprint's mean edge can
                     # lower under the centre's band)
                     vis_k = np.minimum(vis_k + 1.0 - visible_fraction(el, g_lo, g_hi, r),
-                                       whole)
+                                       lit.whole)
                     if moments:
                         mom_k = mom_k - visible_moment(el, g_lo, g_hi, r)
                 seen[k] = (vis_k, mom_k)

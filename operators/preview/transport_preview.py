@@ -736,7 +736,7 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
         k1 = mod_a(b.math("ADD", k0, 1.0, x=-700, y=y0 + 100), -600, y0 + 100)
         part, moment = [], []
         for j, kk in enumerate((k0, k1)):
-            edge, hs, hv, raw = [], [], [], []
+            edge, hs, hv = [], [], []
             for e, upper in enumerate((False, True)):
                 y = y0 - 400 * (2 * j + e)
                 idx = b.math("ADD", kk, float(3 * n), x=-800, y=y) if upper else kk
@@ -756,12 +756,12 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
                                 4.0 * SPREAD_MAX ** 2, x=600, y=y - 200)
                     r_e = b.math("SQRT", b.math("MULTIPLY_ADD", r, r, s4, x=700, y=y - 200),
                                  x=800, y=y - 200)
-                raw.append(h)
+                edge_at = h
                 h = clamp(h, 600, y - 100)
                 hv.append(h)
                 offset = b.math("SUBTRACT", el, h, x=800, y=y)
                 if upper:    # cut where it is (its own disc), or at lit_b where that is lower
-                    cut = _disc_part(b, b.math("SUBTRACT", el, raw[1], x=800, y=y - 50), r_e,
+                    cut = _disc_part(b, b.math("SUBTRACT", el, edge_at, x=800, y=y - 50), r_e,
                                      900, y - 50)
                     edge.append(b.math("MAXIMUM", cut, above_b, x=1500, y=y - 50))
                 else:
