@@ -21,18 +21,21 @@ FORMATS = {
     "relightable_textures.transport_sparse_table": 1,  # <object>_preview_sparse_*.exr
     "relightable_textures.transport_sparse_atlas": 1,  # <object>_preview_transport.json
     "relightable_textures.block_viewport": 1,         # <object>_viewport_blocks.npz
-    "relightable_textures.horizon_map": 5,            # <object>_horizons.npz (2: the
+    "relightable_textures.horizon_map": 6,            # <object>_horizons.npz (2: the
     #                                                   horizons may be coarser than the normals;
     #                                                   3: the upper edges are the footprint's
     #                                                   mean, with their spread; 4: the codes
     #                                                   start 10 degrees under the horizon --
     #                                                   older ones are recoded on load; 5: an
     #                                                   open band inside the interval, q's
-    #                                                   planes 2 and 3, where a map has one)
-    "relightable_textures.horizon_preview": 3,        # <object>_preview_horizons.png/.exr
+    #                                                   planes 2 and 3, where a map has one;
+    #                                                   6: where each azimuth gap's horizon
+    #                                                   jumps, "cross", where a map has one)
+    "relightable_textures.horizon_preview": 4,        # <object>_preview_horizons.png/.exr
     #                                                   (2: codes from 10 degrees under the
     #                                                   horizon, as horizon_map 4; 3: the
-    #                                                   open bands' tiles after the others)
+    #                                                   open bands' tiles after the others;
+    #                                                   4: the gaps' crossings' tiles last)
     "relightable_textures.block_preview": 1,          # <object>_preview_block_eigen/tables.exr
     "relightable_textures.gathered_indirect": 1,      # <object>_indirect.npz
     "relightable_textures.gathered_indirect_preview": 1,  # <object>_preview_indirect_*.exr

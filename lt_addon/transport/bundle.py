@@ -314,6 +314,10 @@ def direct_summary(direct: dict, directions: int) -> str:
         fh = direct.get("horizon_footprints") or {}
         fh_text = (f" (footprints of {fh['texels']} texels, {fh['seconds']:.1f} s)"
                    if fh.get("texels") else "")
+        hc = direct.get("horizon_crossings") or {}
+        if hc.get("vertical"):       # vertical edges placed between two azimuths
+            fh_text += (f"; {hc['vertical']} vertical edges between azimuths, {hc['rays']} rays,"
+                        f" {hc['seconds']:.1f} s")
         horizons = (f"; horizons at {direct['horizon_azimuths']} azimuths{side}{why}, "
                     f"{direct['horizon_seconds']:.1f} s of it{fh_text}"
                     if direct.get("horizon_azimuths") else "")
@@ -370,6 +374,9 @@ HORIZON_LOOKUPS = 14
 HORIZON_SPREAD_LOOKUPS = 6
 #: ... and the open bands' two edges (a window's sky), where the map keeps them.
 HORIZON_GAP_LOOKUPS = 12
+#: ... and the azimuth gaps' crossings (a jamb's, a post's azimuth), where the map has them:
+#: one per strip across the disc.
+HORIZON_CROSS_LOOKUPS = 3
 #: A map's open bands are kept only where they bring its error against rays at the held-out
 #: suns down by at least this much (relative): they cost 12 lookups per pixel (20 -> 32). On
 #: the statue demo's statue (128^2, 24 azimuths) they brought the whole map from 0.126 to
@@ -394,7 +401,8 @@ def horizon_lookups(horizon) -> int:
     """Texture lookups per pixel of ``horizon``'s viewport."""
     return (HORIZON_LOOKUPS + (HORIZON_SPREAD_LOOKUPS if getattr(horizon, "spread", None)
                                is not None else 0)
-            + (HORIZON_GAP_LOOKUPS if getattr(horizon, "gaps", False) else 0))
+            + (HORIZON_GAP_LOOKUPS if getattr(horizon, "gaps", False) else 0)
+            + (HORIZON_CROSS_LOOKUPS if getattr(horizon, "cross", None) is not None else 0))
 
 
 def fit_model(store, settings: TransportTextureSettings, albedo):
@@ -453,11 +461,19 @@ def fit_viewport(store, settings: TransportTextureSettings, model, lights=TRUTH_
             e = {**e, **e["without"]}        # the figures of the map shown
         if gaps is not None and not gaps["kept"]:     # (in place: the map written is the one
             horizon.q = horizon.q[:2]                  # shown)
+        crossings = None
+        if horizon.cross is not None:       # the gaps' crossings, where they fit the budget
+            crossings = {"kept": True, "gaps": int((horizon.cross > 0).sum())}
+            if (horizon.gpu_bytes() > budget
+                    and horizon.without_crossings().gpu_bytes() <= budget):
+                horizon.cross = None
+                crossings = {**crossings, "kept": False, "why": "over the GPU budget with them"}
         mib = horizon.gpu_bytes() / 2**20
         info = {"azimuths": horizon.azimuths, "gpu_mib": round(mib, 1),
                 "lookups_per_pixel": horizon_lookups(horizon),
                 "gpu_budget_mib": settings.gpu_budget,
-                **({"open_bands": gaps} if gaps is not None else {})}
+                **({"open_bands": gaps} if gaps is not None else {}),
+                **({"crossings": crossings} if crossings is not None else {})}
         if horizon_check is not None:
             if e is None:
                 e = hmap.heldout_errors(horizon, store, *horizon_check, settings.sun_angle,

@@ -193,6 +193,21 @@ def horizon_count(settings) -> int:
     return A
 
 
+def _crossings(occluder, points, H, figures: list, who: str, step: int, total: int):
+    """Generator: the crossings (A, P) of the intervals ``H`` of ``points``
+    (:func:`...lt_addon.rays.crossing.iter_crossings`), yielding Progress as "horizon
+    crossings k/P points<who>"; their figures (with their seconds) appended to ``figures``."""
+    from ...lt_addon.rays import crossing
+
+    t0 = time.perf_counter()
+    P = points.size
+    t, figs = yield from _progress(crossing.iter_crossings(occluder, points, H), P,
+                                   lambda done: f"horizon crossings {done}/{P} points{who}",
+                                   step, total)
+    figures.append({**figs, "seconds": time.perf_counter() - t0})
+    return t
+
+
 def horizon_spread(settings) -> bool:
     """Whether this bake's horizon maps get their edges' spread over the texels' footprints
     (:func:`...lt_addon.transport.horizon_map.pair_edges`): where the texels are sampled
@@ -271,6 +286,7 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
         trial_ok = settings.viewport == "auto" and _CALIBRATION_AZIMUTHS is None
         maps, skipped, searched, castable, checks, trials = [], 0, 0, 0, [], []
         gap_rays, gap_maps = 0, 0
+        cross_figs = []
         edges, with_spread = [], horizon_spread(settings)
         for i, ((smp, pts), mg, store) in enumerate(zip(receivers, margins, stores)):
             if coarse is None:
@@ -308,7 +324,10 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                     fph.swap(H)
                 sample = hmap.from_points(H, smp.texel, R, pts.Ns, mg, coarse=low,
                                           spread=None if fph is None else fph.spread,
-                                          margin_texels=keep)
+                                          margin_texels=keep,
+                                          cross=(yield from _crossings(
+                                              occluder, h_pts, H, cross_figs, who,
+                                              step + S - 1, total)))
                 if fph is not None:       # ... and the centres' back (the rest reads them)
                     fph.swap(H)
                 trial = _trial(occluder, sample, store, pts.subset(t_rows),
@@ -339,10 +358,14 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
             castable += sum(f["castable"] for _, f in counts)
             gap_rays += sum(f.get("gap_rays", 0) for _, f in counts)
             gap_maps += int(maps_gaps(H))
+            cross = None
+            if decided != "transport":      # where a vertical edge crosses each azimuth gap
+                cross = yield from _crossings(occluder, h_pts, H, cross_figs, who,
+                                              step + S - 1, total)
             maps.append(None if decided == "transport" else
                         hmap.from_points(H, smp.texel, R, pts.Ns, mg, coarse=low,
                                          spread=None if fph is None else fph.spread,
-                                         margin_texels=keep))
+                                         margin_texels=keep, cross=cross))
             trials.append(trial)
             checks.append(None if decided else _check_rows(occluder, smp, pts, mg, Dh,
                                                            settings))
@@ -353,6 +376,13 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                         "horizon_rays": int(occluder.rays - r2),
                         # scan rays no caster could meet (lt_addon/rays/reach.py): not cast
                         "horizon_rays_skipped": int(skipped),
+                        # where each texel's horizon jumps between two azimuths (a
+                        # jamb, a post: lt_addon/rays/crossing.py): the (gap, texel) pairs
+                        # searched, those given a crossing, their rays and seconds
+                        "horizon_crossings": {
+                            k: (round(sum(f[k] for f in cross_figs), 3) if k == "seconds"
+                                else int(sum(f[k] for f in cross_figs)))
+                            for k in ("pairs", "vertical", "rays", "seconds")},
                         # texels whose edges vary between neighbours: their footprints'
                         # sub-samples found horizons too (the map's spread, horizon_map.py)
                         "horizon_footprints": {

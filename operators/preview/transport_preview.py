@@ -525,15 +525,16 @@ def build_sparse_group(n_directions: int, resolution: int, table_size: int, taps
 
 
 def horizon_preview_arrays(hm, albedo):
-    """(8-bit horizon tiles (2 to 5 ceil(A/3), Rh, Rh, 3) uint8 -- the lower edges' tiles,
+    """(8-bit horizon tiles (2 to 6 ceil(A/3), Rh, Rh, 3) uint8 -- the lower edges' tiles,
     then the upper edges', then their spreads' where the map has them, then the open bands'
-    lower and upper edges' where it has them, three azimuths per RGB tile, at the horizons'
-    side; normal and albedo tiles (2, R, R, 3) float32 at the texture's) -- what
-    :func:`build_horizon_group` reads."""
+    lower and upper edges' where it has them, then the azimuth gaps' crossings where it has
+    them, three azimuths per RGB tile, at the horizons' side; normal and albedo tiles (2, R,
+    R, 3) float32 at the texture's) -- what :func:`build_horizon_group` reads."""
     _, A, Rh, _ = hm.q.shape
     n = -(-A // 3)
     planes = ([hm.q[0], hm.q[1]] + ([hm.spread] if hm.spread is not None else [])
-              + ([hm.q[2], hm.q[3]] if hm.gaps else []))
+              + ([hm.q[2], hm.q[3]] if hm.gaps else [])
+              + ([hm.cross] if hm.cross is not None else []))
     q = np.zeros((len(planes), n * 3, Rh, Rh), np.uint8)
     for i, plane in enumerate(planes):
         q[i, :A] = plane
@@ -560,17 +561,22 @@ def write_horizon_files(base: str, tiles, na, azimuths: int) -> dict:
     return out
 
 
-def viewport_relight_horizon(tiles, na, azimuths: int, direction, sun_angle: float):
+def viewport_relight_horizon(tiles, na, azimuths: int, direction, sun_angle: float,
+                             cross: bool = False):
     """NumPy twin of :func:`build_horizon_group` (direct light, intensity 1): (R, R, 3) from
-    the 8-bit horizon tiles and the half-float normal and albedo tiles."""
+    the 8-bit horizon tiles and the half-float normal and albedo tiles; ``cross``: the tiles
+    end with the gaps' crossings."""
     from ...lt_addon.transport.horizon_map import HorizonMap
 
     A = int(azimuths)
     n, Rh = -(-A // 3), tiles.shape[1]
     planes = len(tiles) // n          # 2: the edges; 3: and their spreads; 4 / 5: and the
     q = np.asarray(tiles).transpose(0, 3, 1, 2).reshape(planes, 3 * n, Rh, Rh)[:, :A]  # bands
+    c = q[-1] if cross else None      # (then the crossings)
+    planes -= bool(cross)
     edges = q[[0, 1, planes - 2, planes - 1]] if planes >= 4 else q[:2]
-    hm = HorizonMap(edges, np.asarray(na[0], np.float16), q[2] if planes in (3, 5) else None)
+    hm = HorizonMap(edges, np.asarray(na[0], np.float16), q[2] if planes in (3, 5) else None,
+                    cross=c)
     e = hm.direct(direction, sun_angle)
     return (e[..., None] * np.asarray(na[1], np.float64)).astype(np.float32)
 
@@ -634,7 +640,7 @@ def _disc_moment(b, offset, radius, x, y):
 
 def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image, uv_map: str,
                         name: str, sun_angle: float, horizon_resolution: int | None = None,
-                        spread: bool = False, gaps: bool = False):
+                        spread: bool = False, gaps: bool = False, cross: bool = False):
     """The sun group relighting from horizons (the sockets of :func:`build_group`): at three
     azimuths across the sun's disc (the sun's and either side, ``horizon_map.STRIPS``) the two
     azimuth channels around each are picked; at each, the sun's disc is cut by the blocked
@@ -651,12 +657,16 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     ``sqrt(r^2 + 4 s^2)``, ``s = c^2 SPREAD_MAX`` from the spread channel ``c`` (0..1):
     6 lookups more (:func:`...lt_addon.transport.horizon_map.spread_radius`). With ``gaps``
     (the atlas' last two sets of tiles: an open band inside each interval, a window's sky) the
-    disc's part inside the band, clipped to the interval, is lit again: 12 lookups more. The
-    horizon
+    disc's part inside the band, clipped to the interval, is lit again: 12 lookups more. With
+    ``cross`` (the atlas' last set of tiles: where each azimuth gap's horizon jumps,
+    :mod:`...lt_addon.rays.crossing`) each strip's place in its gap is read through the gap's
+    crossing (``horizon_map.warp``; the image read Closest: codes must not blend): 3 lookups
+    more. The horizon
     atlas may be coarser (``horizon_resolution``) than the normals' (``resolution``): its linear
     lookup reads the codes between its texels, as
     :func:`...lt_addon.transport.horizon_map.upsample`."""
     from ...lt_addon.rays.horizon import BEYOND
+    from ...lt_addon.rays.crossing import RAMP
     from ...lt_addon.transport.horizon_map import (COS_MIN, EDGE_MIN, SPREAD_MAX, STRIPS,
                                                    SUN_RADIUS_MIN)
 
@@ -676,8 +686,9 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
         return b.math("SUBTRACT", k, b.math("MULTIPLY", wrap, float(A), x=x + 200, y=y),
                       x=x + 300, y=y)
     uv = b.node("ShaderNodeUVMap", -1400, -600, uv_map=uv_map).outputs["UV"]
-    lay = atlas_layout((2 + bool(spread) + 2 * bool(gaps)) * n, Rh)
+    lay = atlas_layout((2 + bool(spread) + 2 * bool(gaps) + bool(cross)) * n, Rh)
     gap0 = (3 if spread else 2) * 3 * n      # the bands' lower edges' first channel
+    cross0 = gap0 + (6 * n if gaps else 0)   # the crossings' first channel
     el = b.math("ARCSINE", b.math("MINIMUM", dz, 1.0, x=600, y=200), x=700, y=200)
     radius = b.node("ShaderNodeValue", 600, 0)
     radius.name = radius.label = SUN_RADIUS_NODE
@@ -733,6 +744,24 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
         k = b.math("FLOOR", xs, x=-1100, y=y0)
         f = b.math("SUBTRACT", xs, k, x=-1000, y=y0 - 100)
         k0 = mod_a(k, -1000, y0)
+        if cross:     # the place in the gap read through its crossing (horizon_map.warp)
+            c = _atlas_channel(b, b.math("ADD", k0, float(cross0), x=-800, y=y0 + 300), uv,
+                               lay, horizon_image, Rh, acc, -700, y0 + 300,
+                               interpolation="Closest")
+            acc = c
+            t = b.math("MULTIPLY_ADD", c, 255.0 / 254.0, -1.0 / 254.0, x=400, y=y0 + 300)
+            # (across: the disc's radius in gaps; the ramp RAMP radii either side)
+            width = b.math("MAXIMUM", b.math("MULTIPLY", across, 2.0 * RAMP, x=400,
+                                             y=y0 + 250), 2e-6, x=500, y=y0 + 250)
+            ramp = b.math("MULTIPLY_ADD", b.math("DIVIDE", b.math("SUBTRACT", f, t, x=500,
+                                                                  y=y0 + 300),
+                                                 width, x=600, y=y0 + 300),
+                          1.0, 0.5, x=700, y=y0 + 300)
+            ramp = b.math("MINIMUM", b.math("MAXIMUM", ramp, 0.0, x=800, y=y0 + 300), 1.0,
+                          x=900, y=y0 + 300)
+            has = b.math("GREATER_THAN", c, 0.5 / 255.0, x=800, y=y0 + 250)
+            f = b.math("MULTIPLY_ADD", has, b.math("SUBTRACT", ramp, f, x=1000, y=y0 + 250),
+                       f, x=1100, y=y0 + 250)
         k1 = mod_a(b.math("ADD", k0, 1.0, x=-700, y=y0 + 100), -600, y0 + 100)
         part, moment = [], []
         for j, kk in enumerate((k0, k1)):
@@ -934,15 +963,18 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
                   "horizon_resolution": bake.horizon.horizon_resolution,
                   # the atlas' third set of tiles: the upper edges' spreads
                   "horizon_spread": bake.horizon.spread is not None,
-                  # its last two: the open bands inside the intervals
-                  "horizon_gaps": bool(bake.horizon.gaps)}
+                  # then two: the open bands inside the intervals
+                  "horizon_gaps": bool(bake.horizon.gaps),
+                  # and last: where each azimuth gap's horizon jumps
+                  "horizon_cross": bake.horizon.cross is not None}
         h_img = pn.load_atlas_image(sparse["horizon_atlas"], f"{obj.name} transport horizons")
         n_img = pn.load_atlas_image(sparse["horizon_normals"], f"{obj.name} transport normals")
         group = build_horizon_group(bake.horizon.azimuths, model.resolution, h_img, n_img,
                                     uv_map, gname + " new", angle,
                                     bake.horizon.horizon_resolution,
                                     spread=bake.horizon.spread is not None,
-                                    gaps=bool(bake.horizon.gaps))
+                                    gaps=bool(bake.horizon.gaps),
+                                    cross=bake.horizon.cross is not None)
     elif viewport == "blocks":
         view = bake.view
         beig, btab = block_preview_arrays(view, bake.albedo, store.directions, angle,

@@ -2,6 +2,8 @@
 its NumPy twin, and its relight against Cycles' own Sun bake at a low sun (the independent
 reference), next to T's interpolated directions."""
 
+import functools
+
 import numpy as np
 import pytest
 from render_check import render_rgb
@@ -40,8 +42,9 @@ def _horizon_preview(prev, azimuths, side=R, resolution=R):
     from relightable_textures.lt_addon.io.atlas import unpack_atlas
     from relightable_textures.lt_addon.io.contact_sheet import read_png
 
-    # the edges' spreads: a third set; the open bands' edges: two more
-    planes = 2 + bool(prev.get("horizon_spread")) + 2 * bool(prev.get("horizon_gaps"))
+    # the edges' spreads: a third set; the open bands' edges: two more; the crossings: one
+    planes = (2 + bool(prev.get("horizon_spread")) + 2 * bool(prev.get("horizon_gaps"))
+              + bool(prev.get("horizon_cross")))
     tiles = unpack_atlas(read_png(prev["horizon_atlas"])[::-1], planes * -(-azimuths // 3), side)
     ch = exrio.read_exr(prev["horizon_normals"])[0]
     na = unpack_atlas(np.stack([ch[c] for c in "RGB"], -1), 2, resolution)
@@ -85,18 +88,21 @@ def test_horizon_viewport_rendered_by_cycles_equals_its_twin(bumps, tmp_path, si
     # check sees no gain from them: the map leaves them out (and the group their lookups)
     assert rep["direct"]["horizon_gaps"]["objects_found"] == 1
     assert info["open_bands"]["kept"] is False and prev["horizon_gaps"] is False
+    cross = prev["horizon_cross"]       # (the bumps' rims jump between some azimuths)
     assert len([n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]) == \
-        (20 if spread else 14)
+        (20 if spread else 14) + 3 * cross
     tiles, na = _horizon_preview(prev, 24, side)
-    assert tiles.dtype == np.uint8 and tiles.shape == ((24 if spread else 16), side, side, 3)
+    assert tiles.dtype == np.uint8 and tiles.shape == ((24 if spread else 16) + 8 * cross,
+                                                       side, side, 3)
+    relight = functools.partial(tp.viewport_relight_horizon, cross=cross)
     if spread:        # the bumps' edges move within some texels: the spreads are not all 0
-        assert rep["direct"]["horizon_footprints"]["texels"] > 0 and tiles[16:].max() > 10
+        assert rep["direct"]["horizon_footprints"]["texels"] > 0 and tiles[16:24].max() > 10
     for az, el, inten, angle in ((40.0, 35.0, 2.0, 4.0), (250.0, 12.0, 1.0, 4.0),
                                  (179.9, 20.0, 1.0, 4.0), (-179.9, 8.0, 1.0, 4.0)):
         scene["relight_azimuth"], scene["relight_elevation"] = az, el
         scene["relight_intensity"] = inten
         img = render_rgb(scene, tmp_path, R)
-        twin = inten * tp.viewport_relight_horizon(tiles, na, 24, direction_from_az_el(az, el),
+        twin = inten * relight(tiles, na, 24, direction_from_az_el(az, el),
                                                    angle)
         assert twin.max() > 0.05
         assert np.abs(img - twin).max() <= 2.0 ** -10 * twin.max(), (az, el)
@@ -109,20 +115,20 @@ def test_horizon_viewport_rendered_by_cycles_equals_its_twin(bumps, tmp_path, si
     tp.rewrite_tables(obj, report_, bake_, store_, 12.0)      # the Sun Size slider
     scene["relight_azimuth"], scene["relight_elevation"] = 130.0, 14.0
     img = render_rgb(scene, tmp_path, R)
-    twin = tp.viewport_relight_horizon(tiles, na, 24, direction_from_az_el(130, 14), 12.0)
+    twin = relight(tiles, na, 24, direction_from_az_el(130, 14), 12.0)
     assert np.abs(img - twin).max() <= 2.0 ** -10 * twin.max()
-    assert rel(twin, tp.viewport_relight_horizon(tiles, na, 24, direction_from_az_el(130, 14),
+    assert rel(twin, relight(tiles, na, 24, direction_from_az_el(130, 14),
                                                  4.0)) > 0.01
     # the 12-degree disc 2 degrees high reaches under the faces' terminators: the tree clips
     # it there as the twin does (horizon.lit_range), which changes the picture
     scene["relight_elevation"] = 2.0
     img = render_rgb(scene, tmp_path, R)
-    twin = tp.viewport_relight_horizon(tiles, na, 24, direction_from_az_el(130, 2), 12.0)
+    twin = relight(tiles, na, 24, direction_from_az_el(130, 2), 12.0)
     assert twin.max() > 0.01 and np.abs(img - twin).max() <= 2.0 ** -10 * twin.max()
     from relightable_textures.lt_addon.transport import horizon_map
     monkeypatch.setattr(horizon_map, "lit_range", lambda el, c, s: (
         np.full(np.shape(c), -10.0), np.full(np.shape(c), 10.0)))
-    assert rel(twin, tp.viewport_relight_horizon(tiles, na, 24, direction_from_az_el(130, 2),
+    assert rel(twin, relight(tiles, na, 24, direction_from_az_el(130, 2),
                                                  12.0)) > 0.02
 
 
@@ -169,9 +175,12 @@ def test_a_sun_through_a_window_is_rendered_by_cycles_as_its_twin(fresh_scene, t
     assert prev["horizon_gaps"] is True and rep["direct"]["horizon_gaps"]["rays"] > 0
     bands = rep["viewport"]["open_bands"]           # kept: the check sees them help
     assert bands["kept"] and bands["heldout_with"] < 0.5 * bands["heldout_without"], bands
-    assert rep["viewport"]["lookups_per_pixel"] == 32
+    # the window's jambs are vertical edges between two azimuths: the map keeps where
+    assert prev["horizon_cross"] is True and rep["viewport"]["crossings"]["kept"]
+    assert rep["direct"]["horizon_crossings"]["vertical"] > 0
+    assert rep["viewport"]["lookups_per_pixel"] == 32 + 3
     group = bpy.data.node_groups[prev["group"]]
-    assert len([n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]) == 20 + 12
+    assert len([n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]) == 20 + 12 + 3
     tiles, na = _horizon_preview(prev, 24)
     bake_, store_, _ = tx.load_bake(rep["report"])
     az, el = 10.0, 30.0
@@ -179,9 +188,15 @@ def test_a_sun_through_a_window_is_rendered_by_cycles_as_its_twin(fresh_scene, t
     scene["relight_intensity"] = 1.0
     img = render_rgb(scene, tmp_path, R)
     d = direction_from_az_el(az, el)
-    twin = tp.viewport_relight_horizon(tiles, na, 24, d, 2.0)
-    hull = tp.viewport_relight_horizon(tiles[:-16], na, 24, d, 2.0)     # without the bands
+    twin = tp.viewport_relight_horizon(tiles, na, 24, d, 2.0, cross=True)
+    # without the bands (the two sets of tiles before the crossings'), and without crossings
+    hull = tp.viewport_relight_horizon(np.concatenate([tiles[:-24], tiles[-8:]]), na, 24, d,
+                                       2.0, cross=True)
+    linear = tp.viewport_relight_horizon(tiles[:-8], na, 24, d, 2.0)
     assert np.abs(img - twin).max() <= 2.0 ** -10 * twin.max()
+    # the crossings move the patch's sides: the tree reads them as the twin does
+    print(f"window: the crossings change the patch by {rel(linear, twin):.3f}")
+    assert rel(linear, twin) > 0.05
     lit = twin[..., 0] > 0.5 * twin.max()
     print(f"window patch: {lit.sum()} texels; the hull alone lights them "
           f"{hull[lit].mean() / twin[lit].mean():.3f} of the bands")
