@@ -17,7 +17,9 @@ and the linear visibility stays. :data:`STEPS` bisections each: 2 x 5 rays per s
 
 Shapes: ``H`` (2 or 4, A, P) radians as :mod:`.horizon` keeps it (``H[2:]`` an open band);
 gap ``k`` lies between azimuths ``k`` and ``k + 1`` (mod A). The result ``t`` (A, P) float32
-is the crossing's place in its gap, 0..1, NaN where the visibility stays linear.
+is the crossing's place in its gap, 0..1 (:data:`SLANTED` or NaN where the visibility stays
+linear); the map keeps codes (:func:`encode`), those of gaps where the crossing does not
+matter filled from their neighbours' (:func:`fill`), read linearly between texels.
 """
 
 from __future__ import annotations
@@ -85,7 +87,9 @@ def iter_crossings(occluder, points: ShadingPoints, H):
     """Generator: yields the points done after each chunk of them (a caller may stop between
     chunks); returns ``(t, figures)``: the crossing of each pair (gap, point), ``t`` (A, P)
     float32 in 0..1 (NaN: linear), and ``figures`` -- ``pairs`` searched, ``vertical`` of them
-    given a crossing, ``rays`` cast."""
+    given a crossing, ``rays`` cast. ``t`` is :data:`SLANTED` where the two elevations' edges
+    disagree (the gap stays linear) and NaN where the two azimuths do not differ over a run
+    (the gap's crossing does not matter: :func:`fill` may give it its neighbours')."""
     K, A, P = H.shape
     t = np.full((A, P), np.nan, np.float32)
     figures = {"pairs": 0, "vertical": 0, "rays": 0}
@@ -148,14 +152,47 @@ def _chunk(occluder, points, H, part: slice, t, figures) -> None:
     vertical = np.abs(f1 - f2) <= AGREE
     figures["vertical"] += int(vertical.sum())
     t[a[pick[vertical]], p[pick[vertical]]] = 0.5 * (f1 + f2)[vertical]
+    t[a[pick[~vertical]], p[pick[~vertical]]] = SLANTED
+
+
+#: ``t`` of a gap searched whose edge is slanted (its two elevations' crossings disagree):
+#: read linearly, never filled.
+SLANTED = -1.0
+
+
+def fill(T, R: int) -> np.ndarray:
+    """Crossings ``T`` (A, R * R) (NaN: no matter, :data:`SLANTED`: linear) with each
+    no-matter texel next to (8 neighbours) texels with a crossing in that gap given their
+    mean: the viewport reads the codes linearly between texels, and a texel whose two azimuths
+    agree (its edge in another gap) would otherwise blend a linear code into its neighbour's
+    crossing -- the shadow edge stepped texel by texel. Those texels' own light does not
+    change (their two azimuths agree). A copy."""
+    T = np.array(T, np.float64)
+    A = T.shape[0]
+    img = T.reshape(A, R, R)
+    known = np.isfinite(img) & (img >= 0)
+    val = np.where(known, img, 0.0)
+    total = np.zeros_like(val)
+    count = np.zeros_like(val)
+    pv = np.pad(val, ((0, 0), (1, 1), (1, 1)))
+    pk = np.pad(known.astype(np.float64), ((0, 0), (1, 1), (1, 1)))
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            if dy or dx:
+                total += pv[:, 1 + dy:1 + dy + R, 1 + dx:1 + dx + R]
+                count += pk[:, 1 + dy:1 + dy + R, 1 + dx:1 + dx + R]
+    take = np.isnan(img) & (count > 0)
+    img[take] = total[take] / count[take]
+    return img.reshape(A, R * R)
 
 
 def encode(t) -> np.ndarray:
-    """Codes (uint8) of crossings ``t`` (0..1, NaN linear): 0 linear, 1..255 the crossing
-    at ``(code - 1) / 254`` of its gap."""
+    """Codes (uint8) of crossings ``t`` (0..1; NaN or :data:`SLANTED`: linear): 0 linear,
+    1..255 the crossing at ``(code - 1) / 254`` of its gap."""
     t = np.asarray(t, np.float64)
-    c = 1 + np.round(np.clip(np.nan_to_num(t, nan=0.0), 0.0, 1.0) * 254)
-    return np.where(np.isnan(t), 0, c).astype(np.uint8)
+    linear = ~(np.isfinite(t) & (t >= 0))
+    c = 1 + np.round(np.clip(np.where(linear, 0.0, t), 0.0, 1.0) * 254)
+    return np.where(linear, 0, c).astype(np.uint8)
 
 
 def decode(c) -> np.ndarray:
@@ -171,10 +208,12 @@ RAMP = 0.4
 
 
 def warp(f, c, half_width):
-    """The place ``f`` (0..1) in a gap read through the gap's crossing codes ``c``: linear
-    (``f``) where the code is 0, else a ramp ``half_width`` (in gaps) wide either side of the
-    crossing."""
-    t = (np.asarray(c, np.float64) - 1) / 254.0
+    """The place ``f`` (0..1) in a gap read through the gap's crossing codes ``c`` (float: the
+    codes read linearly between texels, as the viewport's image lookup does): linear (``f``)
+    where the code is under 0.5, else a ramp ``half_width`` (in gaps) wide either side of the
+    crossing ``(c - 1) / 254``."""
+    c = np.asarray(c, np.float64)
+    t = (c - 1) / 254.0
     hw = max(float(half_width), 1e-6)
     ramp = np.clip((f - t) / (2 * hw) + 0.5, 0.0, 1.0)
-    return np.where(np.asarray(c) > 0, ramp, f)
+    return np.where(c > 0.5, ramp, f)

@@ -423,26 +423,6 @@ def upsample_at(img, R: int, texels) -> np.ndarray:
     return r0 * (1 - wc) + r1 * wc
 
 
-def nearest(img, R: int) -> np.ndarray:
-    """``img`` (..., Rh, Rh) read at the centres of an (R, R) grid's texels, nearest (codes
-    that must not blend: :mod:`..rays.crossing`'s)."""
-    img = np.asarray(img)
-    Rh = img.shape[-1]
-    if Rh == R:
-        return img
-    i = np.minimum(((np.arange(R) + 0.5) * (Rh / R)).astype(np.int64), Rh - 1)
-    return img[..., i, :][..., i]
-
-
-def nearest_at(img, R: int, texels) -> np.ndarray:
-    """:func:`nearest` read only at flat ``texels`` (n,) of the (R, R) grid: (..., n)."""
-    img = np.asarray(img)
-    texels = np.asarray(texels, np.int64)
-    Rh = img.shape[-1]
-    i = np.minimum(((np.arange(R) + 0.5) * (Rh / R)).astype(np.int64), Rh - 1)
-    return img[..., i[texels // R], i[texels % R]]
-
-
 @dataclass
 class HorizonMap:
     q: np.ndarray          # (2, A, Rh, Rh) uint8
@@ -649,8 +629,8 @@ class HorizonMap:
             f = xs - k
             k0 = int(k) % A
             if self.cross is not None:    # the gap's vertical edge, where it has one
-                c = (nearest(self.cross[k0], R) if texels is None else
-                     nearest_at(self.cross[k0], R, texels))
+                c = (upsample(self.cross[k0], R) if texels is None else
+                     upsample_at(self.cross[k0], R, texels))
                 f = warp(f, c, ramp)
             (v0, m0), (v1, m1) = vis_at(k0), vis_at((k0 + 1) % A)
             vis = vis + w * ((1 - f) * v0 + f * v1)
@@ -734,13 +714,13 @@ def from_points(H, texel, resolution: int, normals, margin=None, coarse=None,
         island[texel] = True
         island = island.reshape(R, R)
     c_codes = None
-    if cross is not None and np.isfinite(cross).any():
-        from ..rays.crossing import encode
+    if cross is not None and (np.asarray(cross) >= 0).any():
+        from ..rays.crossing import encode, fill
 
         Rh_ = int(Rh)
-        c_codes = np.zeros((cross.shape[0], Rh_ * Rh_), np.uint8)
-        c_codes[:, np.asarray(h_texel)] = encode(cross)
-        c_codes = c_codes.reshape(-1, Rh_, Rh_)
+        T = np.full((cross.shape[0], Rh_ * Rh_), np.nan)
+        T[:, np.asarray(h_texel)] = cross
+        c_codes = encode(fill(T, Rh_)).reshape(-1, Rh_, Rh_)
     hm = HorizonMap(q, nrm.reshape(R, R, 3).astype(np.float16), s_codes, island,
                     int(margin_texels) if island is not None else 0, c_codes)
     if island is not None and margin is not None:     # the bake's own Extend operator

@@ -660,8 +660,8 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     disc's part inside the band, clipped to the interval, is lit again: 12 lookups more. With
     ``cross`` (the atlas' last set of tiles: where each azimuth gap's horizon jumps,
     :mod:`...lt_addon.rays.crossing`) each strip's place in its gap is read through the gap's
-    crossing (``horizon_map.warp``; the image read Closest: codes must not blend): 3 lookups
-    more. The horizon
+    crossing (``crossing.warp``; the codes read linearly between texels, those that do not
+    matter filled from their neighbours': ``crossing.fill``): 3 lookups more. The horizon
     atlas may be coarser (``horizon_resolution``) than the normals' (``resolution``): its linear
     lookup reads the codes between its texels, as
     :func:`...lt_addon.transport.horizon_map.upsample`."""
@@ -746,8 +746,7 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
         k0 = mod_a(k, -1000, y0)
         if cross:     # the place in the gap read through its crossing (horizon_map.warp)
             c = _atlas_channel(b, b.math("ADD", k0, float(cross0), x=-800, y=y0 + 300), uv,
-                               lay, horizon_image, Rh, acc, -700, y0 + 300,
-                               interpolation="Closest")
+                               lay, horizon_image, Rh, acc, -700, y0 + 300)
             acc = c
             t = b.math("MULTIPLY_ADD", c, 255.0 / 254.0, -1.0 / 254.0, x=400, y=y0 + 300)
             # (across: the disc's radius in gaps; the ramp RAMP radii either side)

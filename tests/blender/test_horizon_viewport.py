@@ -207,8 +207,11 @@ def test_a_sun_through_a_window_is_rendered_by_cycles_as_its_twin(fresh_scene, t
     got = bundle.relight(bake_, store_, d, 2.0, 1.0, source="horizon")
     t = bundle.relight(bake_, store_, d, 2.0, 1.0, source="transport")
     e_map, e_t = rel(got, truth), rel(t, truth)
-    print(f"window: the map {e_map:.3f}, T {e_t:.3f}")
-    assert e_map < 0.6 * e_t
+    bake_.horizon = bake_.horizon.without_crossings()
+    e_lin = rel(bundle.relight(bake_, store_, d, 2.0, 1.0, source="horizon"), truth)
+    print(f"window: the map {e_map:.3f}, without its crossings {e_lin:.3f}, T {e_t:.3f}")
+    # (measured 0.127, 0.339 and 0.602: the jambs placed between the azimuths)
+    assert e_map < 0.6 * e_t and e_map < 0.6 * e_lin
     store_.close()
 
 
