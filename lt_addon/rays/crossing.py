@@ -16,7 +16,7 @@ vertical there and the gap's crossing is their mean; where they do not, the edge
 and the linear visibility stays. :data:`STEPS` bisections each: 2 x 5 rays per such pair.
 
 Shapes: ``H`` (2 or 4, A, P) radians as :mod:`.horizon` keeps it (``H[2:]`` an open band);
-gap ``k`` lies between azimuths ``k`` and ``k + 1`` (mod A). The result ``t`` (A, P) float32
+gap ``k`` lies between azimuths ``k`` and ``k + 1`` (mod A). The result ``t`` (A, P) float16
 is the crossing's place in its gap, 0..1 (:data:`SLANTED` or NaN where the visibility stays
 linear); the map keeps codes (:func:`encode`), those of gaps where the crossing does not
 matter filled from their neighbours' (:func:`fill`), read linearly between texels.
@@ -86,12 +86,12 @@ def crossings(occluder, points: ShadingPoints, H) -> tuple:
 def iter_crossings(occluder, points: ShadingPoints, H):
     """Generator: yields the points done after each chunk of them (a caller may stop between
     chunks); returns ``(t, figures)``: the crossing of each pair (gap, point), ``t`` (A, P)
-    float32 in 0..1 (NaN: linear), and ``figures`` -- ``pairs`` searched, ``vertical`` of them
+    float16 in 0..1 (NaN: linear), and ``figures`` -- ``pairs`` searched, ``vertical`` of them
     given a crossing, ``rays`` cast. ``t`` is :data:`SLANTED` where the two elevations' edges
     disagree (the gap stays linear) and NaN where the two azimuths do not differ over a run
     (the gap's crossing does not matter: :func:`fill` may give it its neighbours')."""
     K, A, P = H.shape
-    t = np.full((A, P), np.nan, np.float32)
+    t = np.full((A, P), np.nan, np.float16)     # (a 2^-11 step: finer than the codes' 1/254)
     figures = {"pairs": 0, "vertical": 0, "rays": 0}
     chunk = max(1, BLOCK // A)
     for p0 in range(0, P, chunk):
@@ -166,24 +166,26 @@ def fill(T, R: int) -> np.ndarray:
     mean: the viewport reads the codes linearly between texels, and a texel whose two azimuths
     agree (its edge in another gap) would otherwise blend a linear code into its neighbour's
     crossing -- the shadow edge stepped texel by texel. Those texels' own light does not
-    change (their two azimuths agree). A copy."""
-    T = np.array(T, np.float64)
-    A = T.shape[0]
-    img = T.reshape(A, R, R)
-    known = np.isfinite(img) & (img >= 0)
-    val = np.where(known, img, 0.0)
-    total = np.zeros_like(val)
-    count = np.zeros_like(val)
-    pv = np.pad(val, ((0, 0), (1, 1), (1, 1)))
-    pk = np.pad(known.astype(np.float64), ((0, 0), (1, 1), (1, 1)))
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            if dy or dx:
-                total += pv[:, 1 + dy:1 + dy + R, 1 + dx:1 + dx + R]
-                count += pk[:, 1 + dy:1 + dy + R, 1 + dx:1 + dx + R]
-    take = np.isnan(img) & (count > 0)
-    img[take] = total[take] / count[take]
-    return img.reshape(A, R * R)
+    change (their two azimuths agree). A float32 copy, one gap at a time (memory: a few
+    (R, R) images)."""
+    T = np.asarray(T)
+    out = np.empty(T.shape, np.float32)
+    for a in range(T.shape[0]):
+        img = T[a].reshape(R, R).astype(np.float64)
+        known = np.isfinite(img) & (img >= 0)
+        pv = np.pad(np.where(known, img, 0.0), 1)
+        pk = np.pad(known.astype(np.float64), 1)
+        total = np.zeros((R, R))
+        count = np.zeros((R, R))
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                if dy or dx:
+                    total += pv[1 + dy:1 + dy + R, 1 + dx:1 + dx + R]
+                    count += pk[1 + dy:1 + dy + R, 1 + dx:1 + dx + R]
+        take = np.isnan(img) & (count > 0)
+        img[take] = total[take] / count[take]
+        out[a] = img.reshape(-1)
+    return out
 
 
 def encode(t) -> np.ndarray:

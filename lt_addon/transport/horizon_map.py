@@ -718,9 +718,11 @@ def from_points(H, texel, resolution: int, normals, margin=None, coarse=None,
         from ..rays.crossing import encode, fill
 
         Rh_ = int(Rh)
-        T = np.full((cross.shape[0], Rh_ * Rh_), np.nan)
-        T[:, np.asarray(h_texel)] = cross
-        c_codes = encode(fill(T, Rh_)).reshape(-1, Rh_, Rh_)
+        c_codes = np.zeros((cross.shape[0], Rh_, Rh_), np.uint8)
+        for a in range(cross.shape[0]):      # (one gap at a time: memory)
+            T = np.full((1, Rh_ * Rh_), np.nan, np.float32)
+            T[0, np.asarray(h_texel)] = cross[a]
+            c_codes[a] = encode(fill(T, Rh_)).reshape(Rh_, Rh_)
     hm = HorizonMap(q, nrm.reshape(R, R, 3).astype(np.float16), s_codes, island,
                     int(margin_texels) if island is not None else 0, c_codes)
     if island is not None and margin is not None:     # the bake's own Extend operator
