@@ -39,9 +39,9 @@ MIN_RUN = np.radians(2.0)
 STEPS = 5
 #: The two elevations' crossings agree when they are within this part of the gap.
 AGREE = 0.25
-#: (Gap, point) pairs per chunk of points (memory: the grid's states, ~600 bytes a pair
-#: searched at most).
-BLOCK = 1 << 16
+#: (Gap, point) pairs per chunk of points (memory: the grid's states and cosines, ~4 KB a
+#: pair searched at most: 64 MiB).
+BLOCK = 1 << 14
 
 
 def blocked(H, a, p, els) -> np.ndarray:
@@ -50,7 +50,7 @@ def blocked(H, a, p, els) -> np.ndarray:
     one (an empty interval blocks nothing)."""
     lo = H[0, a, p].astype(np.float64)[:, None]
     hi = H[1, a, p].astype(np.float64)[:, None]
-    b = (els[None, :] >= lo) & (els[None, :] <= hi)
+    b = (els[None, :] >= lo) & (els[None, :] <= hi) & (lo < hi)
     if len(H) == 4:
         g_lo = H[2, a, p].astype(np.float64)[:, None]
         g_hi = H[3, a, p].astype(np.float64)[:, None]
@@ -73,9 +73,9 @@ def widest_run(diff) -> tuple:
     return best_end - best_len + 1, best_len
 
 
-def crossings(occluder, points: ShadingPoints, H) -> tuple:
+def crossings(occluder, points: ShadingPoints, H, rows=None) -> tuple:
     """``(t, figures)`` of :func:`iter_crossings`, run whole."""
-    gen = iter_crossings(occluder, points, H)
+    gen = iter_crossings(occluder, points, H, rows)
     while True:
         try:
             next(gen)
@@ -83,38 +83,45 @@ def crossings(occluder, points: ShadingPoints, H) -> tuple:
             return stop.value
 
 
-def iter_crossings(occluder, points: ShadingPoints, H):
+def iter_crossings(occluder, points: ShadingPoints, H, rows=None):
     """Generator: yields the points done after each chunk of them (a caller may stop between
     chunks); returns ``(t, figures)``: the crossing of each pair (gap, point), ``t`` (A, P)
     float16 in 0..1 (NaN: linear), and ``figures`` -- ``pairs`` searched, ``vertical`` of them
     given a crossing, ``rays`` cast. ``t`` is :data:`SLANTED` where the two elevations' edges
     disagree (the gap stays linear) and NaN where the two azimuths do not differ over a run
-    (the gap's crossing does not matter: :func:`fill` may give it its neighbours')."""
+    (the gap's crossing does not matter: :func:`fill` may give it its neighbours').
+    ``rows``: only these points (indices) are searched (the others' ``t`` NaN)."""
     K, A, P = H.shape
     t = np.full((A, P), np.nan, np.float16)     # (a 2^-11 step: finer than the codes' 1/254)
     figures = {"pairs": 0, "vertical": 0, "rays": 0}
+    rows = np.arange(P) if rows is None else np.asarray(rows, np.int64)
     chunk = max(1, BLOCK // A)
-    for p0 in range(0, P, chunk):
-        part = slice(p0, min(p0 + chunk, P))
+    for c0 in range(0, len(rows), chunk):
+        part = rows[c0:c0 + chunk]
         _chunk(occluder, points, H, part, t, figures)
-        yield part.stop
+        yield c0 + len(part)
     return t, figures
 
 
-def _chunk(occluder, points, H, part: slice, t, figures) -> None:
-    """:func:`iter_crossings` over the points ``part``, into ``t`` and ``figures``."""
+#: Grid points a differing run must hold: MIN_RUN over the grid's step, and one.
+RUN_POINTS = int(round(MIN_RUN / (GRID[1] - GRID[0]))) + 1
+
+
+def _chunk(occluder, points, H, part, t, figures) -> None:
+    """:func:`iter_crossings` over the points ``part`` (indices), into ``t`` and
+    ``figures``."""
     K, A, P = H.shape
     els = GRID
     step = els[1] - els[0]
-    run_min = int(np.ceil(MIN_RUN / step))
-    # only pairs some edge of which moves by MIN_RUN or more between the two azimuths can
-    # differ over such a run (an open sky's empty interval moves too: those are checked)
+    # the two azimuths' blocked sets differ by at most the sum of their edges' moves (an
+    # interval emptied between them moves each edge by half its height): only pairs whose
+    # moves add up to a run of RUN_POINTS grid points can hold one
     Hc = np.asarray(H[:, :, part], np.float32)
-    moved = (np.abs(Hc - np.roll(Hc, -1, axis=1)) >= MIN_RUN * 0.999).any(0)    # (A, n)
-    a, p = np.nonzero(moved)
+    moves = np.abs(Hc - np.roll(Hc, -1, axis=1)).sum(0)                        # (A, n)
+    a, p = np.nonzero(moves >= (RUN_POINTS - 1) * step * 0.999)
     if not a.size:
         return
-    p = p + part.start
+    p = part[p]
     a1 = (a + 1) % A
     b0, b1 = blocked(H, a, p, els), blocked(H, a1, p, els)
     # only elevations in front of the point along both azimuths count
@@ -126,7 +133,7 @@ def _chunk(occluder, points, H, part: slice, t, figures) -> None:
         front &= (ce * (n[:, :1] * np.cos(phi)[:, None] + n[:, 1:2] * np.sin(phi)[:, None])
                   + se * n[:, 2:3]) > 0
     start, length = widest_run((b0 != b1) & front)
-    pick = np.flatnonzero(length >= run_min)
+    pick = np.flatnonzero(length >= RUN_POINTS)
     if not pick.size:
         return
     figures["pairs"] += int(pick.size)

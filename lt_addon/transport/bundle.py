@@ -455,19 +455,24 @@ def fit_viewport(store, settings: TransportTextureSettings, model, lights=TRUTH_
                                                    settings.sun_angle, settings.kernel)
                                for m in (horizon, horizon.without_bands())))
         gaps = (e or {}).get("open_bands") if horizon.gaps else None
+        crossings = None
+        if horizon.cross is not None:    # the gaps' crossings go first where over the budget
+            crossings = {"kept": True}
+            shown = horizon if gaps is None or gaps["kept"] else horizon.without_bands()
+            if shown.gpu_bytes() > budget:
+                horizon.cross = None
+                crossings = {"kept": False, "why": "over the GPU budget with them"}
+                if trial is None:  # (measured with them: measured again on the map shown)
+                    e = None
+                else:              # (a trial's tiles are not measured again)
+                    crossings["heldout"] = "the trial's, measured with them"
         if (gaps is not None and gaps["kept"] and horizon.gpu_bytes() > budget
                 and horizon.without_bands().gpu_bytes() <= budget):
             gaps = {**gaps, "kept": False, "why": "over the GPU budget with them"}
-            e = {**e, **e["without"]}        # the figures of the map shown
+            if e is not None:
+                e = {**e, **e["without"]}        # the figures of the map shown
         if gaps is not None and not gaps["kept"]:     # (in place: the map written is the one
             horizon.q = horizon.q[:2]                  # shown)
-        crossings = None
-        if horizon.cross is not None:       # the gaps' crossings, where they fit the budget
-            crossings = {"kept": True, "gaps": int((horizon.cross > 0).sum())}
-            if (horizon.gpu_bytes() > budget
-                    and horizon.without_crossings().gpu_bytes() <= budget):
-                horizon.cross = None
-                crossings = {**crossings, "kept": False, "why": "over the GPU budget with them"}
         mib = horizon.gpu_bytes() / 2**20
         info = {"azimuths": horizon.azimuths, "gpu_mib": round(mib, 1),
                 "lookups_per_pixel": horizon_lookups(horizon),

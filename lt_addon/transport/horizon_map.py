@@ -689,7 +689,9 @@ def from_points(H, texel, resolution: int, normals, margin=None, coarse=None,
     or None. ``margin_texels``: the passes of ``margin`` (the bake's Extend margin), kept with
     the covered texels so that the relight fills the margin from the island's light
     (:meth:`HorizonMap.direct`); 0 keeps neither. ``cross``: (A, P) the gaps' crossings
-    (:func:`..rays.crossing.crossings`, NaN linear) or None; the margin's gaps are linear."""
+    (:func:`..rays.crossing.crossings`) or None; a gap whose crossing does not matter,
+    the margin's first ring of texels too, takes its neighbours' (:func:`..rays.crossing.
+    fill`)."""
     if coarse is not None:
         h_texel, Rh, h_margin = coarse[:3]
         h_normals = coarse[3] if len(coarse) > 3 else None
@@ -938,6 +940,9 @@ def load(path: str, resolution: int | None = None) -> HorizonMap:
         q = z.get("q", shape=(int(qs[0]), None, None, None), dtype=np.uint8)
         spread = (z.get("spread", shape=tuple(qs[1:]), dtype=np.uint8) if "spread" in z
                   else None)          # (version 2 maps have none: sharp edges)
+        if "cross" in z and version < 6:
+            raise ut.UntrustedFileError(path, f"has crossings in a format {version} map (they "
+                                              f"came with format 6)")
         cross = (z.get("cross", shape=tuple(qs[1:]), dtype=np.uint8) if "cross" in z
                  else None)           # (maps before 2026-12-07 have none: linear gaps)
         island, margin = None, 0

@@ -193,15 +193,17 @@ def horizon_count(settings) -> int:
     return A
 
 
-def _crossings(occluder, points, H, figures: list, who: str, step: int, total: int):
-    """Generator: the crossings (A, P) of the intervals ``H`` of ``points``
-    (:func:`...lt_addon.rays.crossing.iter_crossings`), yielding Progress as "horizon
-    crossings k/P points<who>"; their figures (with their seconds) appended to ``figures``."""
+def _crossings(occluder, points, H, figures: list, who: str, step: int, total: int,
+               rows=None):
+    """Generator: the crossings (A, P) of the intervals ``H`` of ``points`` (only ``rows``,
+    where given: :func:`...lt_addon.rays.crossing.iter_crossings`), yielding Progress as
+    "horizon crossings k/P points<who>"; their figures (with their seconds) appended to
+    ``figures``."""
     from ...lt_addon.rays import crossing
 
     t0 = time.perf_counter()
-    P = points.size
-    t, figs = yield from _progress(crossing.iter_crossings(occluder, points, H), P,
+    P = points.size if rows is None else len(rows)
+    t, figs = yield from _progress(crossing.iter_crossings(occluder, points, H, rows), P,
                                    lambda done: f"horizon crossings {done}/{P} points{who}",
                                    step, total)
     figures.append({**figs, "seconds": time.perf_counter() - t0})
@@ -322,12 +324,14 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                 rest = np.setdiff1d(rest, h_rows, assume_unique=True)
                 if fph is not None:       # the footprints' edges for the trial's map ...
                     fph.swap(H)
+                # (the tiles' crossings: searched again with the whole map, where the bands
+                # may be gone; their figures are the whole map's, the time is the horizons')
                 sample = hmap.from_points(H, smp.texel, R, pts.Ns, mg, coarse=low,
                                           spread=None if fph is None else fph.spread,
                                           margin_texels=keep,
                                           cross=(yield from _crossings(
-                                              occluder, h_pts, H, cross_figs, who,
-                                              step + S - 1, total)))
+                                              occluder, h_pts, H, [], who, step + S - 1,
+                                              total, rows=h_rows)))
                 if fph is not None:       # ... and the centres' back (the rest reads them)
                     fph.swap(H)
                 trial = _trial(occluder, sample, store, pts.subset(t_rows),
