@@ -18,8 +18,9 @@ and the linear visibility stays. :data:`STEPS` bisections each: 2 x 5 rays per s
 Shapes: ``H`` (2 or 4, A, P) radians as :mod:`.horizon` keeps it (``H[2:]`` an open band);
 gap ``k`` lies between azimuths ``k`` and ``k + 1`` (mod A). The result ``t`` (A, P) float16
 is the crossing's place in its gap, 0..1 (:data:`SLANTED` or NaN where the visibility stays
-linear); the map keeps codes (:func:`encode`), those of gaps where the crossing does not
-matter filled from their neighbours' (:func:`fill`), read linearly between texels.
+linear); the map keeps codes (:func:`encode`: the crossing with its weight, 0 where the gap
+is linear), those of gaps where the crossing does not matter filled from their neighbours'
+(:func:`fill`), read linearly between texels.
 """
 
 from __future__ import annotations
@@ -167,47 +168,60 @@ def _chunk(occluder, points, H, part, t, figures) -> None:
 SLANTED = -1.0
 
 
-def fill(T, R: int) -> np.ndarray:
-    """Crossings ``T`` (A, R * R) (NaN: no matter, :data:`SLANTED`: linear) with each
-    no-matter texel next to (8 neighbours) texels with a crossing in that gap given their
-    mean: the viewport reads the codes linearly between texels, and a texel whose two azimuths
-    agree (its edge in another gap) would otherwise blend a linear code into its neighbour's
-    crossing -- the shadow edge stepped texel by texel. Those texels' own light does not
-    change (their two azimuths agree). A float32 copy, one gap at a time (memory: a few
-    (R, R) images)."""
+def fill(T, R: int) -> tuple:
+    """The crossings ``T`` (A, R * R) (0..1 vertical, :data:`SLANTED`, NaN: no matter) as the
+    map keeps them, ``(t, h)`` (A, R * R) float32: ``t`` the crossing and ``h`` its weight
+    (1 vertical, 0 slanted). The viewport reads both linearly between texels, ``h t`` and
+    ``h`` (:func:`encode`), and draws ``h`` of the ramp and ``1 - h`` of the linear
+    visibility (:func:`warp`): between a vertical texel and a slanted one the crossing fades
+    out instead of a linear code blending into the crossing's (which drew the gallery's Suzanne's
+    long floor shadow speckled from the camera). A no-matter texel (its edge in another gap;
+    its own light does not change) next to (8 neighbours) texels searched takes their mean
+    weight and their vertical ones' mean crossing, so that the edge moves smoothly between
+    texels. One gap at a time (memory: a few (R, R) images)."""
     T = np.asarray(T)
-    out = np.empty(T.shape, np.float32)
+    t_out = np.full(T.shape, np.nan, np.float32)
+    h_out = np.zeros(T.shape, np.float32)
     for a in range(T.shape[0]):
         img = T[a].reshape(R, R).astype(np.float64)
-        known = np.isfinite(img) & (img >= 0)
-        pv = np.pad(np.where(known, img, 0.0), 1)
-        pk = np.pad(known.astype(np.float64), 1)
-        total = np.zeros((R, R))
-        count = np.zeros((R, R))
-        for dy in (-1, 0, 1):
-            for dx in (-1, 0, 1):
-                if dy or dx:
-                    total += pv[1 + dy:1 + dy + R, 1 + dx:1 + dx + R]
-                    count += pk[1 + dy:1 + dy + R, 1 + dx:1 + dx + R]
-        take = np.isnan(img) & (count > 0)
-        img[take] = total[take] / count[take]
-        out[a] = img.reshape(-1)
-    return out
+        vert = np.isfinite(img) & (img >= 0)
+        known = np.isfinite(img)                      # vertical or slanted
+        sums = []
+        for v in (np.where(vert, img, 0.0), vert, known):
+            pv = np.pad(np.asarray(v, np.float64), 1)
+            total = np.zeros((R, R))
+            for dy in (-1, 0, 1):
+                for dx in (-1, 0, 1):
+                    if dy or dx:
+                        total += pv[1 + dy:1 + dy + R, 1 + dx:1 + dx + R]
+            sums.append(total)
+        t_sum, n_vert, n_known = sums
+        t = np.where(vert, img, np.nan)
+        h = vert.astype(np.float64)
+        take = np.isnan(img) & (n_known > 0)
+        h[take] = n_vert[take] / n_known[take]
+        some = take & (n_vert > 0)
+        t[some] = t_sum[some] / n_vert[some]
+        t_out[a], h_out[a] = t.reshape(-1), h.reshape(-1)
+    return t_out, h_out
 
 
-def encode(t) -> np.ndarray:
-    """Codes (uint8) of crossings ``t`` (0..1; NaN or :data:`SLANTED`: linear): 0 linear,
-    1..255 the crossing at ``(code - 1) / 254`` of its gap."""
+def encode(t, h=None) -> np.ndarray:
+    """Codes (2, ...) uint8 of crossings ``t`` (0..1; NaN or :data:`SLANTED`: linear) with
+    weights ``h`` (0..1; default 1 where ``t`` is a crossing): ``h (1 + 254 t)`` and ``255 h``
+    -- both blend linearly between texels (:func:`warp` divides them again)."""
     t = np.asarray(t, np.float64)
-    linear = ~(np.isfinite(t) & (t >= 0))
-    c = 1 + np.round(np.clip(np.where(linear, 0.0, t), 0.0, 1.0) * 254)
-    return np.where(linear, 0, c).astype(np.uint8)
+    ok = np.isfinite(t) & (t >= 0)
+    h = ok.astype(np.float64) if h is None else np.where(ok, np.asarray(h, np.float64), 0.0)
+    c = h * (1 + 254 * np.clip(np.where(ok, t, 0.0), 0.0, 1.0))
+    return np.stack([np.round(c), np.round(255 * h)]).astype(np.uint8)
 
 
-def decode(c) -> np.ndarray:
-    """Crossings (float64, NaN linear) of codes ``c`` (:func:`encode`)."""
-    c = np.asarray(c, np.float64)
-    return np.where(c > 0, (c - 1) / 254.0, np.nan)
+def decode(codes) -> tuple:
+    """``(t, h)`` (float64; t NaN where h is 0) of codes (2, ...) (:func:`encode`)."""
+    c, hc = (np.asarray(x, np.float64) for x in codes)
+    h = hc / 255.0
+    return np.where(hc > 0, (c / np.maximum(h, 1e-12) - 1) / 254.0, np.nan), h
 
 
 #: The half-width (in sun radii) of the ramp a crossing is read as by each of the relight's
@@ -216,13 +230,13 @@ def decode(c) -> np.ndarray:
 RAMP = 0.4
 
 
-def warp(f, c, half_width):
-    """The place ``f`` (0..1) in a gap read through the gap's crossing codes ``c`` (float: the
-    codes read linearly between texels, as the viewport's image lookup does): linear (``f``)
-    where the code is under 0.5, else a ramp ``half_width`` (in gaps) wide either side of the
-    crossing ``(c - 1) / 254``."""
-    c = np.asarray(c, np.float64)
-    t = (c - 1) / 254.0
+def warp(f, c, hc, half_width):
+    """The place ``f`` (0..1) in a gap read through the gap's crossing codes ``c`` and ``hc``
+    (:func:`encode`; floats: read linearly between texels, as the viewport's image lookup
+    does): ``h`` of a ramp ``half_width`` (in gaps) wide either side of the crossing ``(c / h
+    - 1) / 254`` and ``1 - h`` of ``f`` itself (linear), ``h = hc / 255``."""
+    h = np.asarray(hc, np.float64) / 255.0
+    t = (np.asarray(c, np.float64) / np.maximum(h, 1e-6) - 1) / 254.0
     hw = max(float(half_width), 1e-6)
     ramp = np.clip((f - t) / (2 * hw) + 0.5, 0.0, 1.0)
-    return np.where(c > 0.5, ramp, f)
+    return h * ramp + (1 - h) * f

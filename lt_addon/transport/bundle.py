@@ -374,9 +374,9 @@ HORIZON_LOOKUPS = 14
 HORIZON_SPREAD_LOOKUPS = 6
 #: ... and the open bands' two edges (a window's sky), where the map keeps them.
 HORIZON_GAP_LOOKUPS = 12
-#: ... and the azimuth gaps' crossings (a jamb's, a post's azimuth), where the map has them:
-#: one per strip across the disc.
-HORIZON_CROSS_LOOKUPS = 3
+#: ... and the azimuth gaps' crossings (a jamb's, a post's azimuth) with their weights, where
+#: the map has them: two per strip across the disc.
+HORIZON_CROSS_LOOKUPS = 6
 #: A map's open bands are kept only where they bring its error against rays at the held-out
 #: suns down by at least this much (relative): they cost 12 lookups per pixel (20 -> 32). On
 #: the statue demo's statue (128^2, 24 azimuths) they brought the whole map from 0.126 to

@@ -37,8 +37,8 @@ texel's horizon jumps within a gap the bake finds the edge's azimuth by rays
 (:mod:`..rays.crossing`) and the map keeps it (``cross``); the relight then reads each strip's
 place in that gap through a ramp at the edge (:func:`..rays.crossing.warp`). On the gallery
 at 96 azimuths (256-spp truths, 2026-12-07) the mutual shadows at 8 degrees went from 0.077 /
-0.061 / 0.045 to 0.029 / 0.022 / 0.030 under the 0.526 / 2 / 10-degree Sun, the interior at 3
-degrees from 0.229 / 0.187 / 0.120 to 0.095 / 0.086 / 0.086 (docs/bench/2026-12-gallery.md).
+0.061 / 0.045 to 0.030 / 0.023 / 0.031 under the 0.526 / 2 / 10-degree Sun, the interior at 3
+degrees from 0.229 / 0.187 / 0.120 to 0.097 / 0.086 / 0.086 (docs/bench/2026-12-gallery.md).
 
 Arrays: ``q`` (2, A, Rh, Rh) uint8 codes (or (4, A, Rh, Rh): ``q[2]``, ``q[3]`` the open
 band's lower and upper edges, coded as upper edges; an empty band ``q[2] == q[3]``) --
@@ -48,8 +48,9 @@ from a wall or a slope, which a large sun near the horizon reaches), ``q[0]`` th
 the same but code 0 for "blocked from below" (``-pi / 2``); rows from v = 0 --, ``spread``
 (A, Rh, Rh) uint8 codes of the upper edges' spread over the footprint (:func:`encode_spread`;
 None in a map without it: a sharp edge) and ``normals`` (R, R, 3) float16 world unit vectors
-(zeros on texels no triangle covers), ``cross`` (A, Rh, Rh) uint8 (:func:`..rays.crossing.
-encode`: 0 a linear gap; None in a map without them). Azimuth ``a`` is ``2 pi a / A`` from +x
+(zeros on texels no triangle covers), ``cross`` (2, A, Rh, Rh) uint8 (:func:`..rays.crossing.
+encode`: a gap's crossing times its weight, and the weight; 0 a linear gap; None in a map
+without them). Azimuth ``a`` is ``2 pi a / A`` from +x
 toward +y; gap ``a`` lies between azimuths ``a`` and ``a + 1``.
 Where the bake has a margin, ``island`` (R, R) bool (the texels the UV triangles cover) and
 ``margin`` (its Extend passes): :meth:`HorizonMap.direct` lights the island from the codes and
@@ -433,8 +434,8 @@ class HorizonMap:
     #: 2026-12-07, and the viewport's tiles): its margin is then relit from its own codes
     island: np.ndarray | None = field(default=None, compare=False)
     margin: int = 0
-    #: (A, Rh, Rh) uint8: where between azimuth ``a`` and ``a + 1`` each texel's horizon
-    #: jumps (:mod:`..rays.crossing` codes: 0 linear), or None (every gap linear)
+    #: (2, A, Rh, Rh) uint8: where between azimuth ``a`` and ``a + 1`` each texel's horizon
+    #: jumps, and how much (:func:`..rays.crossing.encode`: 0 linear), or None (all linear)
     cross: np.ndarray | None = None
     _extend: tuple | None = field(default=None, init=False, repr=False, compare=False)
 
@@ -629,9 +630,9 @@ class HorizonMap:
             f = xs - k
             k0 = int(k) % A
             if self.cross is not None:    # the gap's vertical edge, where it has one
-                c = (upsample(self.cross[k0], R) if texels is None else
-                     upsample_at(self.cross[k0], R, texels))
-                f = warp(f, c, ramp)
+                c, hc = (upsample(self.cross[:, k0], R) if texels is None else
+                         upsample_at(self.cross[:, k0], R, texels))
+                f = warp(f, c, hc, ramp)
             (v0, m0), (v1, m1) = vis_at(k0), vis_at((k0 + 1) % A)
             vis = vis + w * ((1 - f) * v0 + f * v1)
             mom = mom + w * ((1 - f) * m0 + f * m1)
@@ -660,7 +661,8 @@ def gpu_bytes(azimuths: int, resolution: int, horizon_resolution: int = 0,
               spread: bool = False, gaps: bool = False, cross: bool = False) -> int:
     """GPU memory of a horizon viewport: the lower and upper edges (and their ``spread``, where
     the map has them: a third more tiles; the open bands' two edges, where it has them: two
-    thirds more; the gaps' crossings, ``cross``: a third more) as one 8-bit RGBA atlas (three
+    thirds more; the gaps' crossings and their weights, ``cross``: two thirds more) as one
+    8-bit RGBA atlas (three
     azimuths per tile) at
     the horizons' side (:func:`side`, of ``horizon_resolution``: 0 lets the bake choose) and the
     normals with the albedo in a half-float RGBA atlas (two tiles) at the texture's. Whether a
@@ -668,7 +670,8 @@ def gpu_bytes(azimuths: int, resolution: int, horizon_resolution: int = 0,
     would not fit the budget)."""
     from ..io.atlas import atlas_layout
 
-    h = atlas_layout((2 + bool(spread) + 2 * bool(gaps) + bool(cross)) * -(-int(azimuths) // 3),
+    h = atlas_layout((2 + bool(spread) + 2 * (bool(gaps) + bool(cross)))
+                     * -(-int(azimuths) // 3),
                      side(resolution, horizon_resolution))
     n = atlas_layout(2, int(resolution))
     return int(h["width"] * h["height"] * 4 + n["width"] * n["height"] * 8)
@@ -720,11 +723,11 @@ def from_points(H, texel, resolution: int, normals, margin=None, coarse=None,
         from ..rays.crossing import encode, fill
 
         Rh_ = int(Rh)
-        c_codes = np.zeros((cross.shape[0], Rh_, Rh_), np.uint8)
+        c_codes = np.zeros((2, cross.shape[0], Rh_, Rh_), np.uint8)
         for a in range(cross.shape[0]):      # (one gap at a time: memory)
             T = np.full((1, Rh_ * Rh_), np.nan, np.float32)
             T[0, np.asarray(h_texel)] = cross[a]
-            c_codes[a] = encode(fill(T, Rh_)).reshape(Rh_, Rh_)
+            c_codes[:, a] = encode(*fill(T, Rh_))[:, 0].reshape(2, Rh_, Rh_)
     hm = HorizonMap(q, nrm.reshape(R, R, 3).astype(np.float16), s_codes, island,
                     int(margin_texels) if island is not None else 0, c_codes)
     if island is not None and margin is not None:     # the bake's own Extend operator
@@ -918,7 +921,8 @@ def load(path: str, resolution: int | None = None) -> HorizonMap:
     """The map :func:`save` wrote (a newer format version is refused in one line), read as a
     file from elsewhere (:func:`..io.untrusted.open_npz`: capped, each array's header checked
     before it is inflated): ``q`` (2, A, Rh, Rh) uint8 with 3 <= A <= 4096 azimuths, Rh at
-    most the texture's side; ``spread`` and ``cross`` (A, Rh, Rh) uint8 where present;
+    most the texture's side; ``spread`` (A, Rh, Rh) and ``cross`` (2, A, Rh, Rh) uint8 where
+    present;
     ``normals`` (R, R, 3) float16, finite, R = ``resolution``
     (T's) when given."""
     from ..io import untrusted as ut, versions
@@ -943,7 +947,7 @@ def load(path: str, resolution: int | None = None) -> HorizonMap:
         if "cross" in z and version < 6:
             raise ut.UntrustedFileError(path, f"has crossings in a format {version} map (they "
                                               f"came with format 6)")
-        cross = (z.get("cross", shape=tuple(qs[1:]), dtype=np.uint8) if "cross" in z
+        cross = (z.get("cross", shape=(2,) + tuple(qs[1:]), dtype=np.uint8) if "cross" in z
                  else None)           # (maps before 2026-12-07 have none: linear gaps)
         island, margin = None, 0
         if "island" in z:                 # (maps before 2026-12-07 have none)

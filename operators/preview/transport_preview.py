@@ -525,16 +525,16 @@ def build_sparse_group(n_directions: int, resolution: int, table_size: int, taps
 
 
 def horizon_preview_arrays(hm, albedo):
-    """(8-bit horizon tiles (2 to 6 ceil(A/3), Rh, Rh, 3) uint8 -- the lower edges' tiles,
+    """(8-bit horizon tiles (2 to 7 ceil(A/3), Rh, Rh, 3) uint8 -- the lower edges' tiles,
     then the upper edges', then their spreads' where the map has them, then the open bands'
-    lower and upper edges' where it has them, then the azimuth gaps' crossings where it has
-    them, three azimuths per RGB tile, at the horizons' side; normal and albedo tiles (2, R,
+    lower and upper edges' where it has them, then the azimuth gaps' crossings and their
+    weights where it has them, three azimuths per RGB tile, at the horizons' side; normal and albedo tiles (2, R,
     R, 3) float32 at the texture's) -- what :func:`build_horizon_group` reads."""
     _, A, Rh, _ = hm.q.shape
     n = -(-A // 3)
     planes = ([hm.q[0], hm.q[1]] + ([hm.spread] if hm.spread is not None else [])
               + ([hm.q[2], hm.q[3]] if hm.gaps else [])
-              + ([hm.cross] if hm.cross is not None else []))
+              + ([hm.cross[0], hm.cross[1]] if hm.cross is not None else []))
     q = np.zeros((len(planes), n * 3, Rh, Rh), np.uint8)
     for i, plane in enumerate(planes):
         q[i, :A] = plane
@@ -572,8 +572,8 @@ def viewport_relight_horizon(tiles, na, azimuths: int, direction, sun_angle: flo
     n, Rh = -(-A // 3), tiles.shape[1]
     planes = len(tiles) // n          # 2: the edges; 3: and their spreads; 4 / 5: and the
     q = np.asarray(tiles).transpose(0, 3, 1, 2).reshape(planes, 3 * n, Rh, Rh)[:, :A]  # bands
-    c = q[-1] if cross else None      # (then the crossings)
-    planes -= bool(cross)
+    c = q[-2:] if cross else None     # (then the crossings and their weights)
+    planes -= 2 * bool(cross)
     edges = q[[0, 1, planes - 2, planes - 1]] if planes >= 4 else q[:2]
     hm = HorizonMap(edges, np.asarray(na[0], np.float16), q[2] if planes in (3, 5) else None,
                     cross=c)
@@ -660,8 +660,9 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     disc's part inside the band, clipped to the interval, is lit again: 12 lookups more. With
     ``cross`` (the atlas' last set of tiles: where each azimuth gap's horizon jumps,
     :mod:`...lt_addon.rays.crossing`) each strip's place in its gap is read through the gap's
-    crossing (``crossing.warp``; the codes read linearly between texels, those that do not
-    matter filled from their neighbours': ``crossing.fill``): 3 lookups more. The horizon
+    crossing, by its weight (``crossing.warp``; the codes read linearly between texels, those
+    that do not matter filled from their neighbours': ``crossing.fill``): 6 lookups more. The
+    horizon
     atlas may be coarser (``horizon_resolution``) than the normals' (``resolution``): its linear
     lookup reads the codes between its texels, as
     :func:`...lt_addon.transport.horizon_map.upsample`."""
@@ -686,7 +687,7 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
         return b.math("SUBTRACT", k, b.math("MULTIPLY", wrap, float(A), x=x + 200, y=y),
                       x=x + 300, y=y)
     uv = b.node("ShaderNodeUVMap", -1400, -600, uv_map=uv_map).outputs["UV"]
-    lay = atlas_layout((2 + bool(spread) + 2 * bool(gaps) + bool(cross)) * n, Rh)
+    lay = atlas_layout((2 + bool(spread) + 2 * bool(gaps) + 2 * bool(cross)) * n, Rh)
     gap0 = (3 if spread else 2) * 3 * n      # the bands' lower edges' first channel
     cross0 = gap0 + (6 * n if gaps else 0)   # the crossings' first channel
     el = b.math("ARCSINE", b.math("MINIMUM", dz, 1.0, x=600, y=200), x=700, y=200)
@@ -744,11 +745,19 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
         k = b.math("FLOOR", xs, x=-1100, y=y0)
         f = b.math("SUBTRACT", xs, k, x=-1000, y=y0 - 100)
         k0 = mod_a(k, -1000, y0)
-        if cross:     # the place in the gap read through its crossing (horizon_map.warp)
+        if cross:     # the place in the gap read through its crossing (crossing.warp)
             c = _atlas_channel(b, b.math("ADD", k0, float(cross0), x=-800, y=y0 + 300), uv,
                                lay, horizon_image, Rh, acc, -700, y0 + 300)
             acc = c
-            t = b.math("MULTIPLY_ADD", c, 255.0 / 254.0, -1.0 / 254.0, x=400, y=y0 + 300)
+            hw_ = _atlas_channel(b, b.math("ADD", k0, float(cross0 + 3 * n), x=-800,
+                                           y=y0 + 350), uv, lay, horizon_image, Rh, acc,
+                                 -700, y0 + 350)
+            acc = hw_
+            # t = (255 c / h - 1) / 254 (c read as code / 255, h as its weight)
+            t = b.math("MULTIPLY_ADD", b.math("DIVIDE", c, b.math("MAXIMUM", hw_, 1e-6, x=300,
+                                                                  y=y0 + 350),
+                                              x=350, y=y0 + 300),
+                       255.0 / 254.0, -1.0 / 254.0, x=400, y=y0 + 300)
             # (across: the disc's radius in gaps; the ramp RAMP radii either side)
             width = b.math("MAXIMUM", b.math("MULTIPLY", across, 2.0 * RAMP, x=400,
                                              y=y0 + 250), 2e-6, x=500, y=y0 + 250)
@@ -758,8 +767,8 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
                           1.0, 0.5, x=700, y=y0 + 300)
             ramp = b.math("MINIMUM", b.math("MAXIMUM", ramp, 0.0, x=800, y=y0 + 300), 1.0,
                           x=900, y=y0 + 300)
-            has = b.math("GREATER_THAN", c, 0.5 / 255.0, x=800, y=y0 + 250)
-            f = b.math("MULTIPLY_ADD", has, b.math("SUBTRACT", ramp, f, x=1000, y=y0 + 250),
+            # h of the ramp, 1 - h linear
+            f = b.math("MULTIPLY_ADD", hw_, b.math("SUBTRACT", ramp, f, x=1000, y=y0 + 250),
                        f, x=1100, y=y0 + 250)
         k1 = mod_a(b.math("ADD", k0, 1.0, x=-700, y=y0 + 100), -600, y0 + 100)
         part, moment = [], []

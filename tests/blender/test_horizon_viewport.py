@@ -42,9 +42,10 @@ def _horizon_preview(prev, azimuths, side=R, resolution=R):
     from relightable_textures.lt_addon.io.atlas import unpack_atlas
     from relightable_textures.lt_addon.io.contact_sheet import read_png
 
-    # the edges' spreads: a third set; the open bands' edges: two more; the crossings: one
+    # the edges' spreads: a third set; the open bands' edges: two more; the crossings and
+    # their weights: two more
     planes = (2 + bool(prev.get("horizon_spread")) + 2 * bool(prev.get("horizon_gaps"))
-              + bool(prev.get("horizon_cross")))
+              + 2 * bool(prev.get("horizon_cross")))
     tiles = unpack_atlas(read_png(prev["horizon_atlas"])[::-1], planes * -(-azimuths // 3), side)
     ch = exrio.read_exr(prev["horizon_normals"])[0]
     na = unpack_atlas(np.stack([ch[c] for c in "RGB"], -1), 2, resolution)
@@ -90,9 +91,9 @@ def test_horizon_viewport_rendered_by_cycles_equals_its_twin(bumps, tmp_path, si
     assert info["open_bands"]["kept"] is False and prev["horizon_gaps"] is False
     cross = prev["horizon_cross"]       # (the bumps' rims jump between some azimuths)
     assert len([n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]) == \
-        (20 if spread else 14) + 3 * cross
+        (20 if spread else 14) + 6 * cross
     tiles, na = _horizon_preview(prev, 24, side)
-    assert tiles.dtype == np.uint8 and tiles.shape == ((24 if spread else 16) + 8 * cross,
+    assert tiles.dtype == np.uint8 and tiles.shape == ((24 if spread else 16) + 16 * cross,
                                                        side, side, 3)
     relight = functools.partial(tp.viewport_relight_horizon, cross=cross)
     if spread:        # the bumps' edges move within some texels: the spreads are not all 0
@@ -139,7 +140,7 @@ def test_a_sun_through_a_window_is_rendered_by_cycles_as_its_twin(fresh_scene, t
     Cycles renders the group that reads the bands (twelve lookups more) equal to its NumPy
     twin, at a sun through the window whose patch the bands light (the twin without them is
     dark there) and whose sides the window's jambs cut -- vertical edges between two
-    azimuths, the crossings' three lookups more; against Cycles' own 64-spp bake of that Sun,
+    azimuths, the crossings' six lookups more; against Cycles' own 64-spp bake of that Sun,
     the map is far closer than T's 48 interpolated directions, and than itself without its
     crossings."""
     import bpy
@@ -180,9 +181,9 @@ def test_a_sun_through_a_window_is_rendered_by_cycles_as_its_twin(fresh_scene, t
     # the window's jambs are vertical edges between two azimuths: the map keeps where
     assert prev["horizon_cross"] is True and rep["viewport"]["crossings"]["kept"]
     assert rep["direct"]["horizon_crossings"]["vertical"] > 0
-    assert rep["viewport"]["lookups_per_pixel"] == 32 + 3
+    assert rep["viewport"]["lookups_per_pixel"] == 32 + 6
     group = bpy.data.node_groups[prev["group"]]
-    assert len([n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]) == 20 + 12 + 3
+    assert len([n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]) == 20 + 12 + 6
     tiles, na = _horizon_preview(prev, 24)
     bake_, store_, _ = tx.load_bake(rep["report"])
     az, el = 10.0, 30.0
@@ -192,9 +193,9 @@ def test_a_sun_through_a_window_is_rendered_by_cycles_as_its_twin(fresh_scene, t
     d = direction_from_az_el(az, el)
     twin = tp.viewport_relight_horizon(tiles, na, 24, d, 2.0, cross=True)
     # without the bands (the two sets of tiles before the crossings'), and without crossings
-    hull = tp.viewport_relight_horizon(np.concatenate([tiles[:-24], tiles[-8:]]), na, 24, d,
+    hull = tp.viewport_relight_horizon(np.concatenate([tiles[:-32], tiles[-16:]]), na, 24, d,
                                        2.0, cross=True)
-    linear = tp.viewport_relight_horizon(tiles[:-8], na, 24, d, 2.0)
+    linear = tp.viewport_relight_horizon(tiles[:-16], na, 24, d, 2.0)
     assert np.abs(img - twin).max() <= 2.0 ** -10 * twin.max()
     # the crossings move the patch's sides: the tree reads them as the twin does
     print(f"window: the crossings change the patch by {rel(linear, twin):.3f}")

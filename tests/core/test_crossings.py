@@ -59,8 +59,9 @@ def test_a_vertical_edge_is_found_where_it_is_between_two_azimuths():
     # no crossing in a gap no edge crosses
     assert not (t[edge_gaps == 0] >= 0).any()
     codes = crossing.encode(t)
-    back = crossing.decode(codes)
-    assert np.array_equal(np.isfinite(back), t >= 0)
+    back, h = crossing.decode(codes)
+    assert codes.shape == (2,) + t.shape and np.array_equal(np.isfinite(back), t >= 0)
+    assert np.array_equal(h, (t >= 0).astype(float))
     assert np.nanmax(np.abs(back - np.where(t >= 0, t, np.nan))) <= 0.5 / 254 + 1e-9
 
 
@@ -89,25 +90,25 @@ def test_a_wide_sun_cut_by_a_post_is_lit_as_rays_over_its_disc_say():
 
 
 def test_a_maps_crossings_survive_its_file_and_a_wrong_shape_is_refused(tmp_path):
-    """``cross`` (A, Rh, Rh) uint8 is written and read back with the map; a file whose
+    """``cross`` (2, A, Rh, Rh) uint8 is written and read back with the map; a file whose
     crossings do not match its codes' shape, or that says it is older than they are, is
-    refused in one line; the viewport's GPU figure counts them (a third set of tiles)."""
+    refused in one line; the viewport's GPU figure counts them (two sets of tiles more)."""
     from relightable_textures.lt_addon.errors import InputError
 
     rng = np.random.default_rng(3)
     q = rng.integers(0, 256, (2, 6, 8, 8), dtype=np.uint8)
     n = rng.normal(size=(8, 8, 3)).astype(np.float16)
-    c = rng.integers(0, 256, (6, 8, 8), dtype=np.uint8)
+    c = rng.integers(0, 256, (2, 6, 8, 8), dtype=np.uint8)
     hm = hmap.HorizonMap(q, n, cross=c)
     path = str(tmp_path / "o_horizons.npz")
     hmap.save(path, hm)
     back = hmap.load(path)
     assert np.array_equal(back.cross, c) and np.array_equal(back.q, q)
     assert back.gpu_bytes() == hmap.gpu_bytes(6, 8, cross=True) == hmap.gpu_bytes(6, 8,
-                                                                                  spread=True)
+                                                                                  gaps=True)
     assert hm.without_crossings().cross is None
     assert hm.without_crossings().gpu_bytes() == hmap.gpu_bytes(6, 8)
-    for cross, version in ((c[:, :4], 6), (c, 5)):     # a wrong shape; an older format's
+    for cross, version in ((c[0], 6), (c, 5)):     # a wrong shape; an older format's
         np.savez(path, q=q, normals=n, cross=cross, format=np.array(hmap.FORMAT),
                  format_version=np.array(version))
         with pytest.raises(InputError, match="cross"):
@@ -115,25 +116,37 @@ def test_a_maps_crossings_survive_its_file_and_a_wrong_shape_is_refused(tmp_path
 
 
 def test_gaps_where_the_crossing_does_not_matter_take_their_neighbours():
-    """A texel whose two azimuths agree (NaN) next to texels with a crossing in that gap takes
-    their mean, so that the viewport's linear lookup between them moves the edge smoothly; a
-    slanted gap stays linear (code 0), and so does a texel with no crossing around it."""
+    """A texel whose two azimuths agree (NaN) next to searched texels takes their mean weight
+    (1 vertical, 0 slanted) and its vertical ones' mean crossing, so that the viewport's linear
+    lookup between texels moves the edge smoothly, and fades it out towards a slanted texel
+    (linear) instead of blending a linear code into the crossing; a texel with no searched
+    neighbour stays linear (weight 0)."""
     R = 4
     T = np.full((2, R * R), np.nan)
-    T[0, 5], T[0, 6] = 0.2, 0.6             # texels (1, 1) and (1, 2)
+    T[0, 5], T[0, 6] = 0.2, 0.6             # texels (1, 1) and (1, 2): vertical
     T[0, 15] = crossing.SLANTED             # (3, 3): searched, slanted
     T[1, 0] = 0.5
-    got = crossing.fill(T, R)
-    assert np.allclose(got[0, [5, 6]], [0.2, 0.6]) and got[0, 15] == crossing.SLANTED
-    assert np.isclose(got[0, 1], 0.4) and np.isclose(got[0, 0], 0.2)     # both, one of them
-    assert np.isclose(got[0, 10], 0.4) and np.isclose(got[0, 11], 0.6)
-    assert np.isnan(got[0, 12]) and np.isnan(got[0, 3 * R + 0])          # no neighbour's
-    assert np.isclose(got[1, 5], 0.5) and np.isnan(got[1, 10])
-    c = crossing.encode(got)
-    assert c[0, 15] == 0 and c[0, 12] == 0 and c[0, 5] == 1 + round(0.2 * 254)
-    # read linearly between a crossing and a filled texel: the crossing stays within them
-    mid = 0.5 * (float(c[0, 5]) + float(c[0, 1]))               # t ~ 0.3
-    assert crossing.warp(0.32, mid, 0.0) == 1.0 and crossing.warp(0.28, mid, 0.0) == 0.0
+    t, h = crossing.fill(T, R)
+    assert np.allclose(t[0, [5, 6]], [0.2, 0.6]) and np.allclose(h[0, [5, 6]], 1.0)
+    assert h[0, 15] == 0.0
+    assert np.isclose(t[0, 1], 0.4) and np.isclose(t[0, 0], 0.2) and h[0, 1] == 1.0
+    # (2, 2) touches both vertical texels and the slanted one: two thirds of the weight
+    assert np.isclose(t[0, 10], 0.4) and np.isclose(h[0, 10], 2 / 3)
+    assert np.isclose(t[0, 11], 0.6) and np.isclose(h[0, 11], 0.5)        # (2, 3)
+    assert np.isnan(t[0, 12]) and h[0, 12] == 0.0                        # no neighbour's
+    assert np.isclose(t[1, 5], 0.5) and h[1, 10] == 0.0
+    c = crossing.encode(t, h)
+    assert c.shape == (2, 2, R * R) and c[0, 0, 15] == 0 and c[1, 0, 15] == 0
+    back, hb = crossing.decode(c)
+    assert np.abs(back[0, 10] - 0.4) < 2 / 254 and abs(hb[0, 10] - 2 / 3) < 1 / 255
+    # read linearly halfway between a vertical texel (t 0.2) and the slanted one: half the
+    # ramp at the vertical one's crossing, half linear
+    mid = 0.5 * (c[:, 0, 5].astype(float) + c[:, 0, 15])
+    for f in (0.1, 0.3, 0.7):
+        want = 0.5 * (1.0 if f > 0.2 else 0.0) + 0.5 * f
+        assert abs(crossing.warp(f, mid[0], mid[1], 0.0) - want) < 1e-3, f
+    # a weight of 0 is linear whatever the code
+    assert crossing.warp(0.3, 200.0, 0.0, 0.1) == 0.3
 
 
 @needs_engine
