@@ -662,10 +662,9 @@ def gpu_bytes(azimuths: int, resolution: int, horizon_resolution: int = 0,
     """GPU memory of a horizon viewport: the lower and upper edges (and their ``spread``, where
     the map has them: a third more tiles; the open bands' two edges, where it has them: two
     thirds more; the gaps' crossings and their weights, ``cross``: two thirds more) as one
-    8-bit RGBA atlas (three
-    azimuths per tile) at
-    the horizons' side (:func:`side`, of ``horizon_resolution``: 0 lets the bake choose) and the
-    normals with the albedo in a half-float RGBA atlas (two tiles) at the texture's. Whether a
+    8-bit RGBA atlas (three azimuths per tile) at the horizons' side (:func:`side`, of
+    ``horizon_resolution``: 0 lets the bake choose) and the normals with the albedo in a
+    half-float RGBA atlas (two tiles) at the texture's. Whether a
     map can be shown at all is decided without the spreads (the bake leaves them out where they
     would not fit the budget)."""
     from ..io.atlas import atlas_layout
@@ -922,9 +921,7 @@ def load(path: str, resolution: int | None = None) -> HorizonMap:
     file from elsewhere (:func:`..io.untrusted.open_npz`: capped, each array's header checked
     before it is inflated): ``q`` (2, A, Rh, Rh) uint8 with 3 <= A <= 4096 azimuths, Rh at
     most the texture's side; ``spread`` (A, Rh, Rh) and ``cross`` (2, A, Rh, Rh) uint8 where
-    present;
-    ``normals`` (R, R, 3) float16, finite, R = ``resolution``
-    (T's) when given."""
+    present; ``normals`` (R, R, 3) float16, finite, R = ``resolution`` (T's) when given."""
     from ..io import untrusted as ut, versions
 
     with ut.open_npz(path) as z:

@@ -528,8 +528,9 @@ def horizon_preview_arrays(hm, albedo):
     """(8-bit horizon tiles (2 to 7 ceil(A/3), Rh, Rh, 3) uint8 -- the lower edges' tiles,
     then the upper edges', then their spreads' where the map has them, then the open bands'
     lower and upper edges' where it has them, then the azimuth gaps' crossings and their
-    weights where it has them, three azimuths per RGB tile, at the horizons' side; normal and albedo tiles (2, R,
-    R, 3) float32 at the texture's) -- what :func:`build_horizon_group` reads."""
+    weights where it has them, three azimuths per RGB tile, at the horizons' side; normal and
+    albedo tiles (2, R, R, 3) float32 at the texture's) -- what :func:`build_horizon_group`
+    reads."""
     _, A, Rh, _ = hm.q.shape
     n = -(-A // 3)
     planes = ([hm.q[0], hm.q[1]] + ([hm.spread] if hm.spread is not None else [])
@@ -565,13 +566,14 @@ def viewport_relight_horizon(tiles, na, azimuths: int, direction, sun_angle: flo
                              cross: bool = False):
     """NumPy twin of :func:`build_horizon_group` (direct light, intensity 1): (R, R, 3) from
     the 8-bit horizon tiles and the half-float normal and albedo tiles; ``cross``: the tiles
-    end with the gaps' crossings."""
+    end with two sets more, the gaps' crossings and their weights."""
     from ...lt_addon.transport.horizon_map import HorizonMap
 
     A = int(azimuths)
     n, Rh = -(-A // 3), tiles.shape[1]
     planes = len(tiles) // n          # 2: the edges; 3: and their spreads; 4 / 5: and the
     q = np.asarray(tiles).transpose(0, 3, 1, 2).reshape(planes, 3 * n, Rh, Rh)[:, :A]  # bands
+    # (2 more with ``cross``)
     c = q[-2:] if cross else None     # (then the crossings and their weights)
     planes -= 2 * bool(cross)
     edges = q[[0, 1, planes - 2, planes - 1]] if planes >= 4 else q[:2]
@@ -658,13 +660,12 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     6 lookups more (:func:`...lt_addon.transport.horizon_map.spread_radius`). With ``gaps``
     (the atlas' last two sets of tiles: an open band inside each interval, a window's sky) the
     disc's part inside the band, clipped to the interval, is lit again: 12 lookups more. With
-    ``cross`` (the atlas' last set of tiles: where each azimuth gap's horizon jumps,
+    ``cross`` (the atlas' last two sets of tiles: where each azimuth gap's horizon jumps,
     :mod:`...lt_addon.rays.crossing`) each strip's place in its gap is read through the gap's
     crossing, by its weight (``crossing.warp``; the codes read linearly between texels, those
     that do not matter filled from their neighbours': ``crossing.fill``): 6 lookups more. The
-    horizon
-    atlas may be coarser (``horizon_resolution``) than the normals' (``resolution``): its linear
-    lookup reads the codes between its texels, as
+    horizon atlas may be coarser (``horizon_resolution``) than the normals' (``resolution``):
+    its linear lookup reads the codes between its texels, as
     :func:`...lt_addon.transport.horizon_map.upsample`."""
     from ...lt_addon.rays.horizon import BEYOND
     from ...lt_addon.rays.crossing import RAMP
