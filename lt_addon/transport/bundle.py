@@ -215,7 +215,8 @@ class TransportTextureSettings:
          "the sun instead of blending the baked directions' shadows (no ghosting at low suns); "
          "20 lookups per pixel and 4 bytes per texel and azimuth with the edges' spread over "
          "each texel's footprint (14 and 2.7 without, where the spreads would not fit the GPU "
-         "budget); needs the ray engine"),
+         "budget), 6 and 2 more where a vertical edge (a jamb, a post) lies between two "
+         "azimuths; needs the ray engine"),
         ("transport", "Transport (T)", "Relight from T itself: a few baked directions per "
          "pixel through sparse kernel tables; keeps cast shadows on large receivers; an atlas "
          "of every direction in memory"),
