@@ -15,12 +15,24 @@ three quarters up it). Where the two agree (within :data:`AGREE` of the gap) the
 vertical there and the gap's crossing is their mean; where they do not, the edge is slanted
 and the linear visibility stays. :data:`STEPS` bisections each: 2 x 5 rays per such pair.
 
+A vertical edge near the texel moves across its footprint: seen from the texel's jitter box
+(:mod:`.footprint`, what a converged bake averages) it spans ``u`` gaps of azimuth, the box's
+side over the edge's horizontal distance (one ray more per vertical pair finds it). Such an edge
+is kept with the weight ``1 - (u / BLUR)^2`` (:data:`BLUR`): the relight draws that much of
+the ramp and the rest linearly, and an edge as wide as a gap is linear. On the bumps demo
+(32^2, 48 azimuths, a 2-degree Sun at 20 degrees, against Cycles' 128-spp bake: 0.062
+linear) the crossings taken sharp from the texel centres drew 0.071 -- most of its vertical
+pairs were bumps within a few texels (a median span of 0.6 to 1.5 gaps) --, and a gap whose
+edges move less than a run (a smooth rim) filled with its neighbours' crossing drew 0.064;
+both fixed, 0.062.
+
 Shapes: ``H`` (2 or 4, A, P) radians as :mod:`.horizon` keeps it (``H[2:]`` an open band);
 gap ``k`` lies between azimuths ``k`` and ``k + 1`` (mod A). The result ``t`` (A, P) float16
-is the crossing's place in its gap, 0..1 (:data:`SLANTED` or NaN where the visibility stays
-linear); the map keeps codes (:func:`encode`: the crossing with its weight, 0 where the gap
-is linear), those of gaps where the crossing does not matter filled from their neighbours'
-(:func:`fill`), read linearly between texels.
+is the crossing's place in its gap, 0..1 (:data:`SLANTED` where the visibility stays linear,
+NaN where the two azimuths agree and the crossing does not matter), with ``w`` (A, P) float16
+its weight (0..1, NaN but at crossings); the map keeps codes (:func:`encode`: the crossing
+with its weight, 0 where the gap is linear), those of gaps where the crossing does not matter
+filled from their neighbours' (:func:`fill`), read linearly between texels.
 """
 
 from __future__ import annotations
@@ -36,6 +48,17 @@ GRID = np.radians(np.arange(np.degrees(BELOW), 90.0 + 1e-9, 0.5))
 #: A gap is searched where the two azimuths' states differ over a run of at least this many
 #: radians of elevation (2 degrees): narrower differences are a slope's rim moving.
 MIN_RUN = np.radians(2.0)
+#: A gap whose edges move by this much in all (radians) is read linearly where no vertical
+#: crossing is found in it (never filled from its neighbours': a smooth rim moving less than
+#: a run is what the linear visibility draws); below, its two azimuths are as good as equal.
+LINEAR_MOVES = np.radians(0.5)
+#: A vertical edge spanning this many gaps across the texel's footprint is read linearly
+#: (weight 0); a sharp one (span 0) has weight 1, ``1 - (span / BLUR)^2`` between (the
+#: weight that draws a step blurred over ``span`` nearest in the mean over the gap is about
+#: ``1 - span``, but the relight's ramp already blurs it by the sun's disc: ``1 - span`` cost
+#: the gallery's interior 0.003-0.005 at 3 degrees against the square's 0.000, and gained
+#: the bumps nothing more).
+BLUR = 1.0
 #: Bisection steps along the azimuth: the gap / 2^5 (0.12 degrees at 96 azimuths).
 STEPS = 5
 #: The two elevations' crossings agree when they are within this part of the gap.
@@ -75,7 +98,7 @@ def widest_run(diff) -> tuple:
 
 
 def crossings(occluder, points: ShadingPoints, H, rows=None) -> tuple:
-    """``(t, figures)`` of :func:`iter_crossings`, run whole."""
+    """``(t, w, figures)`` of :func:`iter_crossings`, run whole."""
     gen = iter_crossings(occluder, points, H, rows)
     while True:
         try:
@@ -86,30 +109,33 @@ def crossings(occluder, points: ShadingPoints, H, rows=None) -> tuple:
 
 def iter_crossings(occluder, points: ShadingPoints, H, rows=None):
     """Generator: yields the points done after each chunk of them (a caller may stop between
-    chunks); returns ``(t, figures)``: the crossing of each pair (gap, point), ``t`` (A, P)
-    float16 in 0..1 (NaN: linear), and ``figures`` -- ``pairs`` searched, ``vertical`` of them
-    given a crossing, ``rays`` cast. ``t`` is :data:`SLANTED` where the two elevations' edges
-    disagree (the gap stays linear) and NaN where the two azimuths do not differ over a run
-    (the gap's crossing does not matter: :func:`fill` may give it its neighbours').
-    ``rows``: only these points (indices) are searched (the others' ``t`` NaN)."""
+    chunks); returns ``(t, w, figures)``: the crossing of each pair (gap, point), ``t`` (A, P)
+    float16 in 0..1, its weight ``w`` (A, P) float16 (1 a sharp edge, less one that moves
+    across the footprint: :data:`BLUR`; NaN where ``t`` is no crossing), and ``figures`` --
+    ``pairs`` searched, ``vertical`` of them given a crossing, ``rays`` cast. ``t`` is
+    :data:`SLANTED` where the two elevations' edges disagree, or the edges move (by
+    :data:`LINEAR_MOVES`) but not over a run (the gap stays linear), and NaN where the two
+    azimuths are as good as equal (the gap's crossing does not matter: :func:`fill` may give
+    it its neighbours'). ``rows``: only these points (indices) are searched (the others' NaN)."""
     K, A, P = H.shape
     t = np.full((A, P), np.nan, np.float16)     # (a 2^-11 step: finer than the codes' 1/254)
+    w = np.full((A, P), np.nan, np.float16)
     figures = {"pairs": 0, "vertical": 0, "rays": 0}
     rows = np.arange(P) if rows is None else np.asarray(rows, np.int64)
     chunk = max(1, BLOCK // A)
     for c0 in range(0, len(rows), chunk):
         part = rows[c0:c0 + chunk]
-        _chunk(occluder, points, H, part, t, figures)
+        _chunk(occluder, points, H, part, t, w, figures)
         yield c0 + len(part)
-    return t, figures
+    return t, w, figures
 
 
 #: Grid points a differing run must hold: MIN_RUN over the grid's step, and one.
 RUN_POINTS = int(round(MIN_RUN / (GRID[1] - GRID[0]))) + 1
 
 
-def _chunk(occluder, points, H, part, t, figures) -> None:
-    """:func:`iter_crossings` over the points ``part`` (indices), into ``t`` and
+def _chunk(occluder, points, H, part, t, w, figures) -> None:
+    """:func:`iter_crossings` over the points ``part`` (indices), into ``t``, ``w`` and
     ``figures``."""
     K, A, P = H.shape
     els = GRID
@@ -119,6 +145,8 @@ def _chunk(occluder, points, H, part, t, figures) -> None:
     # moves add up to a run of RUN_POINTS grid points can hold one
     Hc = np.asarray(H[:, :, part], np.float32)
     moves = np.abs(Hc - np.roll(Hc, -1, axis=1)).sum(0)                        # (A, n)
+    la, lp = np.nonzero(moves >= LINEAR_MOVES)          # linear unless found vertical below
+    t[la, part[lp]] = SLANTED
     a, p = np.nonzero(moves >= (RUN_POINTS - 1) * step * 0.999)
     if not a.size:
         return
@@ -158,9 +186,49 @@ def _chunk(occluder, points, H, part, t, figures) -> None:
     frac = (0.5 * (lo + hi) - phi0[rows]) / (2 * np.pi / A)
     f1, f2 = frac[:pick.size], frac[pick.size:]
     vertical = np.abs(f1 - f2) <= AGREE
+    weight = np.ones(pick.size)
+    if vertical.any():
+        v = np.flatnonzero(vertical)
+        # the blocked side of the lower elevation's final bracket: the edge's distance there
+        side = np.where(first[v], lo[v], hi[v])
+        weight[v], cast = sharpness(occluder, points, pts[v], e[v], side, A)
+        figures["rays"] += cast
+    vertical &= weight > 0
     figures["vertical"] += int(vertical.sum())
     t[a[pick[vertical]], p[pick[vertical]]] = 0.5 * (f1 + f2)[vertical]
+    w[a[pick[vertical]], p[pick[vertical]]] = weight[vertical]
     t[a[pick[~vertical]], p[pick[~vertical]]] = SLANTED
+
+
+def footprint_sides(points: ShadingPoints, p) -> np.ndarray:
+    """The side (m,) in metres of the jitter box of points ``p`` (m,) (:mod:`.footprint`: the
+    box's side in texels times the texel's size on its triangle, the root of the triangle's
+    area over its UV area in texels); 0 where the points have no footprint."""
+    fp = getattr(points, "footprint", None)
+    if fp is None:
+        return np.zeros(len(p))
+    tri = fp.triangle[p]
+    V = np.asarray(fp.vertices, np.float64)[np.asarray(fp.triangles)[tri]]      # (m, 3, 3)
+    area = 0.5 * np.linalg.norm(np.cross(V[:, 1] - V[:, 0], V[:, 2] - V[:, 0]), axis=1)
+    uv = np.asarray(fp.uv, np.float64)[tri] * fp.resolution                     # (m, 3, 2)
+    d1, d2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    uv_area = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
+    return fp.box * np.sqrt(area / np.maximum(uv_area, 1e-30))
+
+
+def sharpness(occluder, points: ShadingPoints, p, e, phi, A: int) -> np.ndarray:
+    """The weights (m,) of vertical edges seen from points ``p`` (m,) at elevations ``e`` and
+    azimuths ``phi`` (m,) radians (just on the blocked side): ``1 - (u / BLUR)^2`` clipped to 0..1,
+    ``u`` the gaps (of ``A`` azimuths) the edge spans seen across the point's footprint (its
+    side, :func:`footprint_sides`, over the edge's horizontal distance: one ray each), and the
+    rays cast (none where the points have no footprint: all 1)."""
+    side = footprint_sides(points, p)
+    if not side.any():
+        return np.ones(len(p)), 0
+    L = np.stack([np.cos(e) * np.cos(phi), np.cos(e) * np.sin(phi), np.sin(e)], -1)
+    hit, dist = occluder.nearest(shadow_origins(points, L, p), L.astype(np.float32))
+    span = side / np.maximum(dist * np.cos(e), 1e-9) / (2 * np.pi / A)
+    return np.where(hit >= 0, np.clip(1.0 - (span / BLUR) ** 2, 0.0, 1.0), 1.0), len(p)
 
 
 #: ``t`` of a gap searched whose edge is slanted (its two elevations' crossings disagree):
@@ -168,10 +236,10 @@ def _chunk(occluder, points, H, part, t, figures) -> None:
 SLANTED = -1.0
 
 
-def fill(T, R: int) -> tuple:
-    """The crossings ``T`` (A, R * R) (0..1 vertical, :data:`SLANTED`, NaN: no matter) as the
-    map keeps them, ``(t, h)`` (A, R * R) float32: ``t`` the crossing and ``h`` its weight
-    (1 vertical, 0 slanted). The viewport reads both linearly between texels, ``h t`` and
+def fill(T, R: int, W=None) -> tuple:
+    """The crossings ``T`` (A, R * R) (0..1 vertical, :data:`SLANTED`, NaN: no matter) with
+    their weights ``W`` (A, R * R) (default 1 at every crossing) as the map keeps them,
+    ``(t, h)`` (A, R * R) float32: ``t`` the crossing and ``h`` its weight (0 slanted). The viewport reads both linearly between texels, ``h t`` and
     ``h`` (:func:`encode`), and draws ``h`` of the ramp and ``1 - h`` of the linear
     visibility (:func:`warp`): between a vertical texel and a slanted one the crossing fades
     out instead of a linear code blending into the crossing's (which drew the gallery's Suzanne's
@@ -185,9 +253,11 @@ def fill(T, R: int) -> tuple:
     for a in range(T.shape[0]):
         img = T[a].reshape(R, R).astype(np.float64)
         vert = np.isfinite(img) & (img >= 0)
+        wt = (vert.astype(np.float64) if W is None else
+              np.where(vert, np.nan_to_num(np.asarray(W[a], np.float64).reshape(R, R)), 0.0))
         known = np.isfinite(img)                      # vertical or slanted
         sums = []
-        for v in (np.where(vert, img, 0.0), vert, known):
+        for v in (np.where(vert, img, 0.0), vert, known, wt):
             pv = np.pad(np.asarray(v, np.float64), 1)
             total = np.zeros((R, R))
             for dy in (-1, 0, 1):
@@ -195,11 +265,11 @@ def fill(T, R: int) -> tuple:
                     if dy or dx:
                         total += pv[1 + dy:1 + dy + R, 1 + dx:1 + dx + R]
             sums.append(total)
-        t_sum, n_vert, n_known = sums
+        t_sum, n_vert, n_known, w_sum = sums
         t = np.where(vert, img, np.nan)
-        h = vert.astype(np.float64)
+        h = wt.copy()
         take = np.isnan(img) & (n_known > 0)
-        h[take] = n_vert[take] / n_known[take]
+        h[take] = w_sum[take] / n_known[take]
         some = take & (n_vert > 0)
         t[some] = t_sum[some] / n_vert[some]
         t_out[a], h_out[a] = t.reshape(-1), h.reshape(-1)

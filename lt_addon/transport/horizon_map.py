@@ -690,8 +690,9 @@ def from_points(H, texel, resolution: int, normals, margin=None, coarse=None,
     edges' spread over the footprint (:func:`pair_edges`; ``H[1]`` then holds the means),
     or None. ``margin_texels``: the passes of ``margin`` (the bake's Extend margin), kept with
     the covered texels so that the relight fills the margin from the island's light
-    (:meth:`HorizonMap.direct`); 0 keeps neither. ``cross``: (A, P) the gaps' crossings
-    (:func:`..rays.crossing.crossings`) or None; a gap whose crossing does not matter,
+    (:meth:`HorizonMap.direct`); 0 keeps neither. ``cross``: (A, P) the gaps' crossings, or
+    ``(t, w)`` the crossings and their weights (:func:`..rays.crossing.crossings`), or None;
+    a gap whose crossing does not matter,
     the margin's first ring of texels too, takes its neighbours' (:func:`..rays.crossing.
     fill`)."""
     if coarse is not None:
@@ -718,6 +719,7 @@ def from_points(H, texel, resolution: int, normals, margin=None, coarse=None,
         island[texel] = True
         island = island.reshape(R, R)
     c_codes = None
+    cross, c_weight = cross if isinstance(cross, tuple) else (cross, None)
     if cross is not None and (np.asarray(cross) >= 0).any():
         from ..rays.crossing import encode, fill
 
@@ -726,7 +728,11 @@ def from_points(H, texel, resolution: int, normals, margin=None, coarse=None,
         for a in range(cross.shape[0]):      # (one gap at a time: memory)
             T = np.full((1, Rh_ * Rh_), np.nan, np.float32)
             T[0, np.asarray(h_texel)] = cross[a]
-            c_codes[:, a] = encode(*fill(T, Rh_))[:, 0].reshape(2, Rh_, Rh_)
+            W = None
+            if c_weight is not None:
+                W = np.zeros((1, Rh_ * Rh_), np.float32)
+                W[0, np.asarray(h_texel)] = c_weight[a]
+            c_codes[:, a] = encode(*fill(T, Rh_, W))[:, 0].reshape(2, Rh_, Rh_)
     hm = HorizonMap(q, nrm.reshape(R, R, 3).astype(np.float16), s_codes, island,
                     int(margin_texels) if island is not None else 0, c_codes)
     if island is not None and margin is not None:     # the bake's own Extend operator

@@ -195,19 +195,20 @@ def horizon_count(settings) -> int:
 
 def _crossings(occluder, points, H, figures: list, who: str, step: int, total: int,
                rows=None):
-    """Generator: the crossings (A, P) of the intervals ``H`` of ``points`` (only ``rows``,
-    where given: :func:`...lt_addon.rays.crossing.iter_crossings`), yielding Progress as
+    """Generator: the crossings and their weights ``(t, w)`` (A, P) each of the intervals
+    ``H`` of ``points`` (only ``rows``, where given: :func:`...lt_addon.rays.crossing.
+    iter_crossings`), yielding Progress as
     "horizon crossings k/P points<who>"; their figures (with their seconds) appended to
     ``figures``."""
     from ...lt_addon.rays import crossing
 
     t0 = time.perf_counter()
     P = points.size if rows is None else len(rows)
-    t, figs = yield from _progress(crossing.iter_crossings(occluder, points, H, rows), P,
-                                   lambda done: f"horizon crossings {done}/{P} points{who}",
-                                   step, total)
+    t, w, figs = yield from _progress(crossing.iter_crossings(occluder, points, H, rows), P,
+                                      lambda done: f"horizon crossings {done}/{P} points{who}",
+                                      step, total)
     figures.append({**figs, "seconds": time.perf_counter() - t0})
-    return t
+    return t, w
 
 
 def horizon_spread(settings) -> bool:
