@@ -108,6 +108,59 @@ def test_an_edge_near_the_texel_is_weighted_by_its_span_over_the_footprint():
 
 
 @needs_engine
+def test_a_jamb_is_found_where_the_interval_drops_the_wall_under_the_sill():
+    """A closed 4 m room with a window (y in -0.8..0.8, z in 0.6..1.8) in its wall x = 2, seen
+    from the opposite wall just above the sill's height: along the window's azimuths the wall
+    under the sill is blocked, the window open, the wall over it blocked -- one blocked
+    interval per azimuth keeps the upper part only, so a quarter up the run between a window
+    azimuth and the jamb's the map says "open" where both are blocked. The azimuths' states
+    are tested by rays: the jamb is found at atan2(0.8 - y, 4) in its gap (within 0.03 of it)
+    for every point, where the map's states alone left most of those gaps linear."""
+    from relightable_textures.lt_addon.rays.shading import shading_points
+
+    quads = [[[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]],              # floor
+             [[-2, -2, 2.5], [-2, 2, 2.5], [2, 2, 2.5], [2, -2, 2.5]],      # ceiling
+             [[-2, -2, 0], [-2, 2, 0], [-2, 2, 2.5], [-2, -2, 2.5]],        # x = -2 (points)
+             [[-2, -2, 0], [2, -2, 0], [2, -2, 2.5], [-2, -2, 2.5]],
+             [[-2, 2, 0], [-2, 2, 2.5], [2, 2, 2.5], [2, 2, 0]],
+             [[2, -2, 0], [2, 2, 0], [2, 2, 0.6], [2, -2, 0.6]],            # under the sill
+             [[2, -2, 1.8], [2, 2, 1.8], [2, 2, 2.5], [2, -2, 2.5]],        # over the lintel
+             [[2, -2, 0.6], [2, -0.8, 0.6], [2, -0.8, 1.8], [2, -2, 1.8]],  # the jambs' sides
+             [[2, 0.8, 0.6], [2, 2, 0.6], [2, 2, 1.8], [2, 0.8, 1.8]]]
+    V = np.array(quads, float).reshape(-1, 3)
+    q = np.arange(len(quads))[:, None] * 4
+    T = np.concatenate([q + [0, 1, 2], q + [0, 2, 3]])
+    rng = np.random.default_rng(7)
+    n = 80
+    P = np.column_stack([np.full(n, -2.0), rng.uniform(-0.6, 0.6, n), rng.uniform(0.63, 0.7, n)])
+    # barycentrics on the x = -2 wall's triangles (rows 2 and 2 + len(quads) of T)
+    tri = np.empty(n, np.int64)
+    bary = np.empty((n, 3))
+    for k in (2, 2 + len(quads)):
+        a, b, c = V[T[k]]
+        m = np.linalg.lstsq(np.column_stack([b - a, c - a]), (P - a).T, rcond=None)[0].T
+        inside = (m >= -1e-9).all(1) & (m.sum(1) <= 1 + 1e-9)
+        tri[inside] = k
+        bary[inside] = np.column_stack([1 - m.sum(1), m])[inside]
+    normal = np.tile([1.0, 0, 0], (len(T), 3, 1))
+    pts = shading_points(V, T, normal, np.zeros(len(T), bool), tri, bary)
+    occ = engine.Occluder(V, T)
+    A = 96
+    gap = 2 * np.pi / A
+    H = horizon.horizons(occ, pts, azimuths=A)
+    t, _, _ = crossing.crossings(occ, pts, H)
+    phi = np.arctan2(0.8 - P[:, 1], 4.0)
+    k = np.floor(phi / gap).astype(int)
+    want = phi / gap - k
+    # the interval at the window's azimuth before the jamb: its upper part only (the lintel)
+    assert (np.degrees(H[0, k, np.arange(n)]) > 10).mean() > 0.9
+    got = t[k, np.arange(n)]
+    clear = (want > 0.05) & (want < 0.95)
+    assert clear.sum() > 50 and (got[clear] >= 0).all(), got[clear]
+    assert np.abs(got[clear] - want[clear]).max() < 0.03
+
+
+@needs_engine
 def test_a_wide_sun_cut_by_a_post_is_lit_as_rays_over_its_disc_say():
     """A Sun 8 degrees high, its disc cut by the posts' vertical edges, 48 azimuths: the map's
     relight with crossings within 0.08 of 2,000 hard suns by rays over the disc (relative RMS
