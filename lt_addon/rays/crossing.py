@@ -10,10 +10,14 @@ at -1.9 and the texel lit 0.048 where Cycles lights 0.0975.
 
 :func:`crossings` finds, per texel and azimuth gap where the blocked elevations of the two
 azimuths differ over more than :data:`MIN_RUN`, the azimuth where the state changes, by
-bisection along the azimuth at two elevations within the widest differing run (a quarter and
-three quarters up it). Where the two agree (within :data:`AGREE` of the gap) the edge is
-vertical there and the gap's crossing is their mean; where they do not, the edge is slanted
-and the linear visibility stays. :data:`STEPS` bisections each: 2 x 5 rays per such pair.
+bisection along the azimuth at two elevations within the widest differing run. The two
+azimuths' states are first tested by rays at :data:`TESTS` (a quarter, half and three quarters
+up the run: the map's one interval may not hold them, as where a wall's part under a window's
+sill is dropped); two elevations where the rays differ, the furthest apart, are bisected from
+the ray's state, else the quarter and three quarters from the map's. Where the two crossings
+agree (within :data:`AGREE` of the gap) the edge is vertical there and the gap's crossing is
+their mean; where they do not, the edge is slanted and the linear visibility stays. 6 rays
+and :data:`STEPS` bisections at each of two elevations: 16 rays per such pair.
 
 A vertical edge near the texel moves across its footprint: seen from the texel's jitter box
 (:mod:`.footprint`, what a converged bake averages) it spans ``u`` gaps of azimuth, the box's

@@ -383,7 +383,7 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                         "horizon_rays_skipped": int(skipped),
                         # where each texel's horizon jumps between two azimuths (a
                         # jamb, a post: lt_addon/rays/crossing.py): the (gap, texel) pairs
-                        # searched, those whose edge is vertical (kept with weight 1, the
+                        # searched, those whose edge is vertical (kept with a weight, the
                         # others linear), their rays and seconds
                         "horizon_crossings": {
                             k: (round(sum(f[k] for f in cross_figs), 3) if k == "seconds"
