@@ -228,7 +228,8 @@ def _chunk(occluder, points, H, part, t, w, figures) -> None:
         side = np.where(first[v], lo[v], hi[v])
         weight[v], cast = sharpness(occluder, points, pts[v], e[v], side, A)
         figures["rays"] += cast
-    vertical &= weight > 0
+    # (a weight under half a code step is a linear gap: 0 in the codes)
+    vertical &= weight >= 0.5 / 255
     figures["vertical"] += int(vertical.sum())
     t[a[pick[vertical]], p[pick[vertical]]] = 0.5 * (f1 + f2)[vertical]
     w[a[pick[vertical]], p[pick[vertical]]] = weight[vertical]
@@ -238,7 +239,9 @@ def _chunk(occluder, points, H, part, t, w, figures) -> None:
 def footprint_sides(points: ShadingPoints, p) -> np.ndarray:
     """The side (m,) in metres of the jitter box of points ``p`` (m,) (:mod:`.footprint`: the
     box's side in texels times the texel's size on its triangle, the root of the triangle's
-    area over its UV area in texels); 0 where the points have no footprint."""
+    area over its UV area in texels), at most the triangle's longest edge (the jitter stays
+    on the triangle); 0 where the points have no footprint, and on a UV triangle of no area
+    (Cycles does not jitter there: :func:`.footprint.on_triangle`)."""
     fp = getattr(points, "footprint", None)
     if fp is None:
         return np.zeros(len(p))
@@ -247,11 +250,14 @@ def footprint_sides(points: ShadingPoints, p) -> np.ndarray:
     area = 0.5 * np.linalg.norm(np.cross(V[:, 1] - V[:, 0], V[:, 2] - V[:, 0]), axis=1)
     uv = np.asarray(fp.uv, np.float64)[tri] * fp.resolution                     # (m, 3, 2)
     d1, d2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
-    uv_area = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
-    return fp.box * np.sqrt(area / np.maximum(uv_area, 1e-30))
+    det = np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])              # 2 x UV area, texels
+    ok = det > np.finfo(np.float32).eps
+    side = fp.box * np.sqrt(2.0 * area / np.where(ok, det, 1.0))
+    longest = np.linalg.norm(V - np.roll(V, 1, axis=1), axis=2).max(1)
+    return np.where(ok, np.minimum(side, longest), 0.0)
 
 
-def sharpness(occluder, points: ShadingPoints, p, e, phi, A: int) -> np.ndarray:
+def sharpness(occluder, points: ShadingPoints, p, e, phi, A: int) -> tuple:
     """The weights (m,) of vertical edges seen from points ``p`` (m,) at elevations ``e`` and
     azimuths ``phi`` (m,) radians (just on the blocked side): ``1 - (u / BLUR)^2`` clipped to 0..1,
     ``u`` the gaps (of ``A`` azimuths) the edge spans seen across the point's footprint (its
@@ -289,7 +295,8 @@ def fill(T, R: int, W=None) -> tuple:
         img = T[a].reshape(R, R).astype(np.float64)
         vert = np.isfinite(img) & (img >= 0)
         wt = (vert.astype(np.float64) if W is None else
-              np.where(vert, np.nan_to_num(np.asarray(W[a], np.float64).reshape(R, R)), 0.0))
+              np.where(vert, np.nan_to_num(np.asarray(W[a], np.float64).reshape(R, R),
+                                           nan=1.0), 0.0))
         known = np.isfinite(img)                      # vertical or slanted
         sums = []
         for v in (np.where(vert, img, 0.0), vert, known, wt):

@@ -104,6 +104,14 @@ def test_an_edge_near_the_texel_is_weighted_by_its_span_over_the_footprint():
             assert ok.sum() > (40 if R == 32 else 0)
             assert np.abs(got_w[ok] - want[ok]).max() < 0.02, R
     assert counts[0] > 0.9 * f0["vertical"] and counts[1] < 0.5 * f0["vertical"], counts
+    # a UV triangle of no area: Cycles does not jitter there (footprint.on_triangle), so its
+    # points' edges stay sharp
+    pts.footprint = Footprint(V, tri, np.tile([0.0, 0, 1], (2, 3, 1)), np.zeros(2, bool), 0.0,
+                              False, "", None, np.zeros_like(uv), 32, np.arange(len(P)),
+                              np.where(P[:, 0] >= P[:, 1], 0, 1), np.zeros((len(P), 3)))
+    assert not crossing.footprint_sides(pts, np.arange(len(P))).any()
+    t, w, _ = crossing.crossings(occ, pts, H)
+    assert np.array_equal(t >= 0, t0 >= 0) and np.all(w[t >= 0] == 1.0)
     pts.footprint = None
 
 
@@ -242,6 +250,14 @@ def test_gaps_where_the_crossing_does_not_matter_take_their_neighbours():
         assert abs(crossing.warp(f, mid[0], mid[1], 0.0) - want) < 1e-3, f
     # a weight of 0 is linear whatever the code
     assert crossing.warp(0.3, 200.0, 0.0, 0.1) == 0.3
+    # with the crossings' own weights (an edge near the texel: less than 1): the vertical
+    # texels keep theirs, a no-matter neighbour takes the mean weight of the searched ones
+    W = np.full((2, R * R), np.nan)
+    W[0, 5], W[0, 6] = 0.5, 0.8
+    t2, h2 = crossing.fill(T, R, W)
+    assert np.allclose(h2[0, [5, 6]], [0.5, 0.8]) and h2[0, 15] == 0.0
+    assert np.isclose(h2[0, 10], (0.5 + 0.8 + 0.0) / 3) and np.isclose(h2[0, 1], 0.65)
+    assert np.allclose(t2[0, [1, 10]], t[0, [1, 10]])
 
 
 @needs_engine
