@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .footprint import jitters
 from .horizon import BELOW
 from .shading import ShadingPoints, shadow_origins
 
@@ -241,7 +242,7 @@ def footprint_sides(points: ShadingPoints, p) -> np.ndarray:
     box's side in texels times the texel's size on its triangle, the root of the triangle's
     area over its UV area in texels), at most the triangle's longest edge (the jitter stays
     on the triangle); 0 where the points have no footprint, and on a UV triangle of no area
-    (Cycles does not jitter there: :func:`.footprint.on_triangle`)."""
+    (Cycles does not jitter there: :func:`.footprint.jitters`)."""
     fp = getattr(points, "footprint", None)
     if fp is None:
         return np.zeros(len(p))
@@ -251,7 +252,7 @@ def footprint_sides(points: ShadingPoints, p) -> np.ndarray:
     uv = np.asarray(fp.uv, np.float64)[tri] * fp.resolution                     # (m, 3, 2)
     d1, d2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
     det = np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])              # 2 x UV area, texels
-    ok = det > np.finfo(np.float32).eps
+    ok = jitters(det)
     side = fp.box * np.sqrt(2.0 * area / np.where(ok, det, 1.0))
     longest = np.linalg.norm(V - np.roll(V, 1, axis=1), axis=2).max(1)
     return np.where(ok, np.minimum(side, longest), 0.0)
@@ -280,11 +281,12 @@ SLANTED = -1.0
 def fill(T, R: int, W=None) -> tuple:
     """The crossings ``T`` (A, R * R) (0..1 vertical, :data:`SLANTED`, NaN: no matter) with
     their weights ``W`` (A, R * R) (default 1 at every crossing) as the map keeps them,
-    ``(t, h)`` (A, R * R) float32: ``t`` the crossing and ``h`` its weight (0 slanted). The viewport reads both linearly between texels, ``h t`` and
-    ``h`` (:func:`encode`), and draws ``h`` of the ramp and ``1 - h`` of the linear
-    visibility (:func:`warp`): between a vertical texel and a slanted one the crossing fades
-    out instead of a linear code blending into the crossing's (which drew the gallery's Suzanne's
-    long floor shadow speckled from the camera). A no-matter texel (its edge in another gap;
+    ``(t, h)`` (A, R * R) float32: ``t`` the crossing and ``h`` its weight (0 slanted). The
+    viewport reads both linearly between texels, ``h t`` and ``h`` (:func:`encode`), and
+    draws ``h`` of the ramp and ``1 - h`` of the linear visibility (:func:`warp`): between a
+    vertical texel and a slanted one the crossing fades out instead of a linear code blending
+    into the crossing's (which drew the gallery's Suzanne's long floor shadow speckled from the
+    camera). A no-matter texel (its edge in another gap;
     its own light does not change) next to (8 neighbours) texels searched takes their mean
     weight and their vertical ones' mean crossing, so that the edge moves smoothly between
     texels. One gap at a time (memory: a few (R, R) images)."""

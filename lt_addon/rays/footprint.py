@@ -118,6 +118,13 @@ def offsets(n: int | None = None, k: int | None = None, box: float = BOX,
     return (base - 0.5) * float(box)
 
 
+def jitters(det) -> np.ndarray:
+    """Whether Cycles jitters the bake over UV triangles whose ``det`` (twice the UV area, in
+    texels^2) is given: Blender leaves the differentials 0 (no jitter: the centre alone) for a
+    triangle of no area (``|det| <= FLT_EPSILON``)."""
+    return np.abs(np.asarray(det, np.float64)) > np.finfo(np.float32).eps
+
+
 def on_triangle(uv, centre, off, resolution: int):
     """Cycles' bake jitter over M texels' centres ``centre`` (M, 2) on their UV triangles
     ``uv`` (M, 3, 2): which of the sub-samples at ``off`` (M, K, 2) or (K, 2) texels from the
@@ -131,9 +138,7 @@ def on_triangle(uv, centre, off, resolution: int):
     q = np.asarray(centre, np.float64)[:, None, :] + off / float(resolution)
     e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
     det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-    # Blender leaves the differentials 0 (no jitter) for a UV triangle of no area
-    # (|A| <= FLT_EPSILON in texels^2): the centre alone
-    area_ok = np.abs(det) * float(resolution) ** 2 > np.finfo(np.float32).eps
+    area_ok = jitters(np.abs(det) * float(resolution) ** 2)
     safe = np.where(area_ok, det, 1.0)
     d = q - uv[:, None, 0]
     b1 = (d[..., 0] * e2[:, None, 1] - d[..., 1] * e2[:, None, 0]) / safe[:, None]
