@@ -339,9 +339,10 @@ def decode(codes) -> tuple:
 
 
 #: The half-width (in sun radii) of the ramp a crossing is read as by each of the relight's
-#: strips across the disc: the three strips' sum of such ramps is nearest the disc's part past
-#: a vertical edge (RMS 0.031 of the disc over all offsets; a hard step 0.105).
-RAMP = 0.4
+#: strips across the disc (:data:`..transport.horizon_map.STRIPS`): the five strips' sum of
+#: such ramps is nearest the disc's part past a vertical edge (RMS 0.0116 of the disc over the
+#: edge's offsets within 1.2 radii; a hard step 0.070; three strips: 0.41, RMS 0.032).
+RAMP = 0.27
 
 
 def warp(f, c, hc, half_width):

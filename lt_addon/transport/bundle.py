@@ -33,7 +33,7 @@ from ..io import atomic, exrio, untrusted, versions
 from ..settings import check_ranges, setting
 from ..sphere.hemisphere import direction_from_az_el
 from . import texture as tt
-from .horizon_map import PATH_AZIMUTHS
+from .horizon_map import PATH_AZIMUTHS, STRIPS
 from .gathered_texture import GatheredIndirect, direction_matrix, indirect_images
 
 KIND = "transport_texture"
@@ -213,9 +213,9 @@ class TransportTextureSettings:
          "T"),
         ("horizon", "Horizons", "Per-texel horizons found by rays: a shadow edge moves with "
          "the sun instead of blending the baked directions' shadows (no ghosting at low suns); "
-         "20 lookups per pixel and 4 bytes per texel and azimuth with the edges' spread over "
-         "each texel's footprint (14 and 2.7 without, where the spreads would not fit the GPU "
-         "budget), 6 and 2 more where a vertical edge (a jamb, a post) lies between two "
+         "32 lookups per pixel and 4 bytes per texel and azimuth with the edges' spread over "
+         "each texel's footprint (22 and 2.7 without, where the spreads would not fit the GPU "
+         "budget), 10 and 2 more where a vertical edge (a jamb, a post) lies between two "
          "azimuths; needs the ray engine"),
         ("transport", "Transport (T)", "Relight from T itself: a few baked directions per "
          "pixel through sparse kernel tables; keeps cast shadows on large receivers; an atlas "
@@ -369,17 +369,17 @@ class TransportTextureResult:
 
 
 #: Texture lookups per pixel of the horizon viewport: both edges at the two azimuths around each
-#: of the sun disc's three strips (horizon_map.STRIPS), the normal, the albedo; and the upper
+#: of the sun disc's strips (horizon_map.STRIPS, five), the normal, the albedo; and the upper
 #: edges' spreads where the map has them (:func:`horizon_lookups`).
-HORIZON_LOOKUPS = 14
-HORIZON_SPREAD_LOOKUPS = 6
+HORIZON_LOOKUPS = 4 * len(STRIPS) + 2
+HORIZON_SPREAD_LOOKUPS = 2 * len(STRIPS)
 #: ... and the open bands' two edges (a window's sky), where the map keeps them.
-HORIZON_GAP_LOOKUPS = 12
+HORIZON_GAP_LOOKUPS = 4 * len(STRIPS)
 #: ... and the azimuth gaps' crossings (a jamb's, a post's azimuth) with their weights, where
 #: the map has them: two per strip across the disc.
-HORIZON_CROSS_LOOKUPS = 6
+HORIZON_CROSS_LOOKUPS = 2 * len(STRIPS)
 #: A map's open bands are kept only where they bring its error against rays at the held-out
-#: suns down by at least this much (relative): they cost 12 lookups per pixel (20 -> 32). On
+#: suns down by at least this much (relative): they cost 20 lookups per pixel (32 -> 52). On
 #: the statue demo's statue (128^2, 24 azimuths) they brought the whole map from 0.126 to
 #: 0.110 (T: 0.068) and, on its sampled tiles, from 0.126 to 0.092 against T's 0.079: the trial
 #: undecided, the whole map found (16.95 M horizon rays, more than without a trial) only to be

@@ -643,27 +643,27 @@ def _disc_moment(b, offset, radius, x, y):
 def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image, uv_map: str,
                         name: str, sun_angle: float, horizon_resolution: int | None = None,
                         spread: bool = False, gaps: bool = False, cross: bool = False):
-    """The sun group relighting from horizons (the sockets of :func:`build_group`): at three
-    azimuths across the sun's disc (the sun's and either side, ``horizon_map.STRIPS``) the two
-    azimuth channels around each are picked; at each, the sun's disc is cut by the blocked
+    """The sun group relighting from horizons (the sockets of :func:`build_group`): at five
+    azimuths across the sun's disc (the sun's and two either side, ``horizon_map.STRIPS``) the
+    two azimuth channels around each are picked; at each, the sun's disc is cut by the blocked
     interval's edges (``1 - max(0, F((e - lo) / r) - F((e - hi) / r))`` with
     ``F(t) = 0.5 + (t sqrt(1 - t^2) + asin t) / pi``), the two visibilities linear between the
-    azimuths, the three weighted by the disc's chord there (``vis``); lit by ``max(0, (N . d)
+    azimuths, the five weighted by the disc's chord there (``vis``); lit by ``max(0, (N . d)
     vis + (N . g) mom) / pi`` with the baked normal, ``g`` the direction's slope in elevation
     and ``mom`` the visible part's first moment, read likewise (the cosine over the visible
     part: :func:`...lt_addon.rays.horizon.visible_moment`), the disc clipped where that
     linear cosine is negative (the edges clamped into :func:`...lt_addon.rays.horizon.
-    lit_range`, the whole disc's part and moment its part's there): 14 lookups (12 horizon
+    lit_range`, the whole disc's part and moment its part's there): 22 lookups (20 horizon
     channels, the normal, the albedo). With
     ``spread`` (the atlas' third set of tiles) the upper edge is cut by the wider disc
     ``sqrt(r^2 + 4 s^2)``, ``s = c^2 SPREAD_MAX`` from the spread channel ``c`` (0..1):
-    6 lookups more (:func:`...lt_addon.transport.horizon_map.spread_radius`). With ``gaps``
+    10 lookups more (:func:`...lt_addon.transport.horizon_map.spread_radius`). With ``gaps``
     (the atlas' last two sets of tiles: an open band inside each interval, a window's sky) the
-    disc's part inside the band, clipped to the interval, is lit again: 12 lookups more. With
+    disc's part inside the band, clipped to the interval, is lit again: 20 lookups more. With
     ``cross`` (the atlas' last two sets of tiles: where each azimuth gap's horizon jumps,
     :mod:`...lt_addon.rays.crossing`) each strip's place in its gap is read through the gap's
     crossing, by its weight (``crossing.warp``; the codes read linearly between texels, those
-    that do not matter filled from their neighbours': ``crossing.fill``): 6 lookups more. The
+    that do not matter filled from their neighbours': ``crossing.fill``): 10 lookups more. The
     horizon atlas may be coarser (``horizon_resolution``) than the normals' (``resolution``):
     its linear lookup reads the codes between its texels, as
     :func:`...lt_addon.transport.horizon_map.upsample`."""
@@ -741,7 +741,7 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
         return b.math("MINIMUM", b.math("MAXIMUM", h, lit_a, x=x, y=y), lit_b, x=x + 50, y=y)
     vis, mom, acc = None, None, None
     for s_i, (x_s, w_s) in enumerate(STRIPS):
-        y0 = 3200 - 1800 * s_i
+        y0 = 500 + 1800 * (len(STRIPS) - 1 - s_i)     # (above the lit range's nodes)
         xs = b.math("MULTIPLY_ADD", across, x_s, xa, x=-1200, y=y0)
         k = b.math("FLOOR", xs, x=-1100, y=y0)
         f = b.math("SUBTRACT", xs, k, x=-1000, y=y0 - 100)

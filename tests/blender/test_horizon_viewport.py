@@ -56,13 +56,13 @@ def _horizon_preview(prev, azimuths, side=R, resolution=R):
 @pytest.mark.parametrize("side", [R, R // 2])
 def test_horizon_viewport_rendered_by_cycles_equals_its_twin(bumps, tmp_path, side,
                                                              monkeypatch):
-    """Cycles renders the horizon group (azimuth channels picked in the tree at three azimuths
+    """Cycles renders the horizon group (azimuth channels picked in the tree at five azimuths
     across the disc, the disc cut by each one's horizon line, the baked normal's cosine) equal
     to its NumPy twin to half precision, at lights between the azimuths, across the wrap of the
     azimuth at 180 degrees, and after the Sun Size slider rewrote the group's radius in place
-    (a 12-degree disc spans several azimuths). Twenty texture lookups at the texture's side,
-    where the bake found the upper edges' spreads over the texels' footprints (six of them)
-    and the twin cuts the edges with their wider discs; fourteen with the horizons at half the
+    (a 12-degree disc spans several azimuths). 32 texture lookups at the texture's side,
+    where the bake found the upper edges' spreads over the texels' footprints (ten of them)
+    and the twin cuts the edges with their wider discs; 22 with the horizons at half the
     texture's side (no footprints there), where the image's linear lookup reads the codes
     between their texels as the twin does (horizon_map.upsample). A wide disc low enough to
     reach under the faces' terminators: the tree clips it there as the twin does."""
@@ -91,7 +91,7 @@ def test_horizon_viewport_rendered_by_cycles_equals_its_twin(bumps, tmp_path, si
     assert info["open_bands"]["kept"] is False and prev["horizon_gaps"] is False
     cross = prev["horizon_cross"]       # (the bumps' rims jump between some azimuths)
     assert len([n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]) == \
-        (20 if spread else 14) + 6 * cross
+        (32 if spread else 22) + 10 * cross
     tiles, na = _horizon_preview(prev, 24, side)
     assert tiles.dtype == np.uint8 and tiles.shape == ((24 if spread else 16) + 16 * cross,
                                                        side, side, 3)
@@ -137,10 +137,10 @@ def test_horizon_viewport_rendered_by_cycles_equals_its_twin(bumps, tmp_path, si
 def test_a_sun_through_a_window_is_rendered_by_cycles_as_its_twin(fresh_scene, tmp_path):
     """A 2 m floor beside a wall with a window (x = 1.2, the window |y| < 0.6, 0.4 < z < 1.2):
     the floor's horizons keep the window as an open band inside the wall's interval, and
-    Cycles renders the group that reads the bands (twelve lookups more) equal to its NumPy
+    Cycles renders the group that reads the bands (20 lookups more) equal to its NumPy
     twin, at a sun through the window whose patch the bands light (the twin without them is
     dark there) and whose sides the window's jambs cut -- vertical edges between two
-    azimuths, the crossings' six lookups more; against Cycles' own 64-spp bake of that Sun,
+    azimuths, the crossings' ten lookups more; against Cycles' own 64-spp bake of that Sun,
     the map is far closer than T's 48 interpolated directions, and than itself without its
     crossings."""
     import bpy
@@ -181,9 +181,9 @@ def test_a_sun_through_a_window_is_rendered_by_cycles_as_its_twin(fresh_scene, t
     # the window's jambs are vertical edges between two azimuths: the map keeps where
     assert prev["horizon_cross"] is True and rep["viewport"]["crossings"]["kept"]
     assert rep["direct"]["horizon_crossings"]["vertical"] > 0
-    assert rep["viewport"]["lookups_per_pixel"] == 32 + 6
+    assert rep["viewport"]["lookups_per_pixel"] == 32 + 20 + 10
     group = bpy.data.node_groups[prev["group"]]
-    assert len([n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]) == 20 + 12 + 6
+    assert len([n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]) == 32 + 20 + 10
     tiles, na = _horizon_preview(prev, 24)
     bake_, store_, _ = tx.load_bake(rep["report"])
     az, el = 10.0, 30.0
