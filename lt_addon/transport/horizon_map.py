@@ -86,12 +86,12 @@ DEFAULT_AZIMUTHS = 128
 SUN_RADIUS_MIN = 1e-4
 #: Where the sun's disc is read (:meth:`HorizonMap.direct`): (azimuth offset across the disc in
 #: radii, weight), the 5-point Gauss-Legendre rule weighted by the chord sqrt(1 - x^2) there,
-#: normalised. A wide sun spans azimuth gaps (a 10-degree Sun 8 degrees high: 2.8 gaps of 96
+#: normalised. A wide sun spans azimuth gaps (a 10-degree Sun 8 degrees high: 2.7 gaps of 96
 #: azimuths), and a thin caster (a window's mullion, a picket) can hide between three strips.
-#: On the gallery's interior (a 10-degree Sun, direct light against Cycles' 1,024-spp 0-bounce
-#: bake, 2026-12-08) three strips erred 0.059 / 0.080 / 0.108 / 0.082 at 3 / 8 / 20 / 45
-#: degrees, five 0.045 / 0.038 / 0.075 / 0.074, seven 0.041 / 0.026 / 0.070 / 0.073; over the
-#: whole gallery five moved no cell the wrong way by more than 0.001. Each strip costs the
+#: On the gallery's interior (its Room's direct light under a 10-degree Sun against Cycles'
+#: 1,024-spp 0-bounce bake, 2026-12-08) three strips erred 0.059 / 0.080 / 0.108 / 0.082 at
+#: 3 / 8 / 20 / 45 degrees, five 0.045 / 0.039 / 0.075 / 0.074, seven 0.041 / 0.025 / 0.070 /
+#: 0.073; over the whole gallery five moved no cell the wrong way by more than 0.001. Each strip costs the
 #: viewport 4 lookups (2 more with spreads, 4 with open bands, 2 with crossings).
 _X, _W = np.polynomial.legendre.leggauss(5)
 _W = _W * np.sqrt(1 - _X * _X)
@@ -562,8 +562,8 @@ class HorizonMap:
         it blocked instead took the gallery's interior at 1 degree from 0.146 to 0.343).
 
         At each strip's azimuth (the sun's, and either side of it by 0.54 and 0.91 of the
-        disc's radius: :data:`STRIPS`) the disc is cut by that azimuth's interval (:func:`..rays.horizon.
-        visible_fraction`; the upper edge by the wider disc of :func:`spread_radius` where the
+        disc's radius: :data:`STRIPS`) the disc is cut by that azimuth's interval
+        (:func:`..rays.horizon.visible_fraction`; the upper edge by the wider disc of :func:`spread_radius` where the
         map has spreads), the visibility linear between the two azimuths around it
         (interpolating the visibility rather than the edges was measured better: statue demo's
         ground at a 2-degree Sun 0.042 against 0.074) -- or, in a gap where the map keeps a
