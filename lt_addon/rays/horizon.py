@@ -264,12 +264,13 @@ class _Scan:
         return ai, pi, lo, hi, any_, figures
 
     def _gap_edges(self, ai, pi, L, L32, care, cast, top, bottom, which):
-        """The widest open band inside each pair's interval (:func:`_gaps`), its edges
-        bisected as the interval's are: ``((g_lo, g_hi) (m,) radians, rays)``; no band:
-        ``[0, 0]``."""
-        els = self.els
+        """The widest open band inside each pair's interval (:func:`_gaps`, on the scan's
+        elevations and the midpoints of its steps wider than :data:`GAP_STEP`:
+        :func:`gap_grid`), its edges bisected as the interval's are: ``((g_lo, g_hi) (m,)
+        radians, rays)``; no band: ``[0, 0]``."""
+        els, L, L32, care, cast, top, bottom = gap_grid(self.els, L, care, cast, top, bottom)
         ga, gb, rays = _gaps(self.occluder, self.points, L, L32, pi, care, cast, top, bottom,
-                             which)
+                             which, els)
         m = len(ai)
         g_lo, g_hi = np.zeros(m), np.zeros(m)
         has = np.nonzero(ga >= 0)[0]
@@ -512,7 +513,52 @@ def _search(occluder, points, L, L32, part: slice, idx, cast, which=None):
     return top, bottom, rays
 
 
-def _gaps(occluder, points, L, L32, idx, care, cast, top, bottom, which):
+#: The widest step of the elevations the open bands are sought at (degrees): a band narrower
+#: than a step can fall between two scanned elevations, both blocked (a window seen past a
+#: box's top from across a room: 21-25 degrees, between the scan's 20 and 25), so the gap
+#: search adds the midpoint of every wider step above the horizon (:func:`gap_grid`). On the
+#: gallery's interior (2026-12-08, against 1,024-spp truths): 20 degrees under a 10- and a
+#: 2-degree Sun 0.047 -> 0.040 and 0.039 -> 0.037, no other cell moved; its band rays 18.6 M
+#: -> 30.1 M, its horizons' seconds 4.18 -> 4.26 (short rays, to the room's walls); the other
+#: scenes 0.01-1.9 M rays more, no cell moved.
+GAP_STEP = 3.0
+
+
+def gap_grid(els, L, care, cast, top, bottom):
+    """The elevations the open bands are sought at: ``els`` (J,) radians (the scan's, the
+    horizontal at :data:`J0`) and the midpoint of each step above the horizon wider than
+    :data:`GAP_STEP`, with the directions ``L`` (J, g, 3) there (the azimuth's horizontal
+    direction turned up), in front ``care`` where both ends are (along one azimuth the
+    directions in front form one range), cast where one end is (``cast`` (J, m)), and the
+    search's ``top`` and ``bottom`` (m,) as indices into the new grid. Returns ``(els, L,
+    L32, care, cast, top, bottom)``; the scan's elevations keep their directions bit for
+    bit."""
+    els = np.asarray(els, np.float64)
+    wide = np.flatnonzero((np.arange(len(els) - 1) >= J0)
+                          & (np.diff(els) > np.radians(GAP_STEP)))
+    if not wide.size:
+        return els, L, L.astype(np.float32), care, cast, top, bottom
+    mid = 0.5 * (els[wide] + els[wide + 1])
+    order = np.argsort(np.concatenate([els, mid]), kind="stable")
+    new_index = np.empty(len(order), np.int64)
+    new_index[order] = np.arange(len(order))
+    at = new_index[:len(els)]                 # the scan's elevation j -> its place in the grid
+    flat = L[J0]                                                 # (g, 3) the horizontals
+    Lm = (np.cos(mid)[:, None, None] * flat[None]
+          + np.sin(mid)[:, None, None] * np.array([0.0, 0.0, 1.0]))
+    L2 = np.concatenate([L, Lm])[order]
+    care2 = np.concatenate([care, care[wide] & care[wide + 1]])[order]
+    cast2 = np.concatenate([cast, care[wide] & care[wide + 1]
+                            & (cast[wide] | cast[wide + 1])])[order]
+    J = len(els)
+
+    def move(k):                               # -1 and J stay outside the grid
+        return np.where(k < 0, -1, np.where(k >= J, len(order), at[np.clip(k, 0, J - 1)]))
+    return (np.concatenate([els, mid])[order], L2, L2.astype(np.float32), care2, cast2,
+            move(top), move(bottom))
+
+
+def _gaps(occluder, points, L, L32, idx, care, cast, top, bottom, which, els=None):
     """The widest open band strictly inside each pair's blocked hull (the scan's ``bottom``
     to ``top``, :func:`_search`): the elevations between them (which the search does not
     cast) are cast where in front of the point; an elevation no caster can reach is open,
@@ -520,7 +566,8 @@ def _gaps(occluder, points, L, L32, idx, care, cast, top, bottom, which):
     first and last open indices into the elevations (n,), -1 where the hull has no open
     elevation inside -- a room's wall around its window, the sky between two casters, which
     the hull alone counts blocked (the gallery's interior at 64^2: the map's direct light 0.43-1.0
-    from Cycles' at 3-75 degrees, the hull blocking every sun through the window)."""
+    from Cycles' at 3-75 degrees, the hull blocking every sun through the window). ``els``
+    (J,) radians: the elevations of ``L``'s rows (the scan's by default, :func:`gap_grid`)."""
     J, n = cast.shape
     rays = 0
     open_ = np.zeros((J, n), bool)
@@ -537,7 +584,7 @@ def _gaps(occluder, points, L, L32, idx, care, cast, top, bottom, which):
             b = occluder.occluded(shadow_origins(points, d, np.take(idx, pick)), d)
             open_[j, pick] = ~b
     # the widest run of open elevations (in radians), per pair
-    els = np.radians(np.asarray(ELEVATIONS))
+    els = np.radians(np.asarray(ELEVATIONS)) if els is None else np.asarray(els)
     ga = np.full(n, -1, np.int64)
     gb = np.full(n, -1, np.int64)
     best = np.zeros(n)

@@ -771,6 +771,27 @@ def test_a_window_is_an_open_band_inside_the_walls_interval():
 
 
 @needs_engine
+def test_a_band_narrower_than_the_scans_step_is_found_at_its_midpoint(monkeypatch):
+    """A slit 0.38 < z < 0.44 in a wall 1 m away along +x: points 0.98-1.02 m from it see the
+    sky at 20.4-24.2 degrees, between the scan's 20 and 25 (both blocked). The band search
+    also casts the midpoints of the scan's steps wider than GAP_STEP (22.5 here): the slit
+    is found, both edges within the scan's precision; without the midpoints it is missed (the
+    hull alone: a window seen past a box's top from across a room)."""
+    wall = np.array([[[1, -10, 0], [1, 10, 0], [1, 10, 0.38], [1, -10, 0.38]],
+                     [[1, -10, 0.44], [1, 10, 0.44], [1, 10, 3], [1, -10, 3]]], float)
+    occ, pts, P = _floor_points(100, 5, wall.reshape(-1, 3), x=(-0.02, 0.02))
+    w = 1.0 - P[:, 0]
+    lo, hi = np.arctan(0.38 / w), np.arctan(0.44 / w)
+    assert np.degrees(lo).min() > 20.0 and np.degrees(hi).max() < 25.0
+    G, _ = _run(horizon.iter_horizons(occ, pts, 16, gaps=True))
+    assert np.abs(G[2, 0].astype(np.float64) - lo).max() < TOL
+    assert np.abs(G[3, 0].astype(np.float64) - hi).max() < TOL
+    monkeypatch.setattr(horizon, "GAP_STEP", 90.0)
+    G, _ = _run(horizon.iter_horizons(occ, pts, 16, gaps=True))
+    assert np.all(G[3, 0] <= G[2, 0])
+
+
+@needs_engine
 def test_the_map_lights_a_sun_through_a_window_as_rays_do():
     """A 2-degree Sun 25 degrees high through the window lights a patch of the floor: the
     map with the open bands (128 azimuths) relights it within 0.1 of 256 hard suns by rays
