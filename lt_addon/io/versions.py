@@ -21,7 +21,7 @@ FORMATS = {
     "relightable_textures.transport_sparse_table": 1,  # <object>_preview_sparse_*.exr
     "relightable_textures.transport_sparse_atlas": 1,  # <object>_preview_transport.json
     "relightable_textures.block_viewport": 1,         # <object>_viewport_blocks.npz
-    "relightable_textures.horizon_map": 6,            # <object>_horizons.npz (2: the
+    "relightable_textures.horizon_map": 7,            # <object>_horizons.npz (2: the
     #                                                   horizons may be coarser than the normals;
     #                                                   3: the upper edges are the footprint's
     #                                                   mean, with their spread; 4: the codes
@@ -30,12 +30,17 @@ FORMATS = {
     #                                                   open band inside the interval, q's
     #                                                   planes 2 and 3, where a map has one;
     #                                                   6: where each azimuth gap's horizon
-    #                                                   jumps, "cross", where a map has one)
-    "relightable_textures.horizon_preview": 4,        # <object>_preview_horizons.png/.exr
+    #                                                   jumps, "cross", where a map has one;
+    #                                                   7: the open bands' edges the
+    #                                                   footprint's mean, their spreads
+    #                                                   "band_spread", where a map has them)
+    "relightable_textures.horizon_preview": 5,        # <object>_preview_horizons.png/.exr
     #                                                   (2: codes from 10 degrees under the
     #                                                   horizon, as horizon_map 4; 3: the
     #                                                   open bands' tiles after the others;
-    #                                                   4: the gaps' crossings' tiles last)
+    #                                                   4: the gaps' crossings' tiles after
+    #                                                   them; 5: the bands' edges' spreads
+    #                                                   last)
     "relightable_textures.block_preview": 1,          # <object>_preview_block_eigen/tables.exr
     "relightable_textures.gathered_indirect": 1,      # <object>_indirect.npz
     "relightable_textures.gathered_indirect_preview": 1,  # <object>_preview_indirect_*.exr

@@ -216,7 +216,8 @@ class TransportTextureSettings:
          "32 lookups per pixel and 4 bytes per texel and azimuth with the edges' spread over "
          "each texel's footprint (22 and 2.7 without, where the spreads would not fit the GPU "
          "budget), 10 and 2 more where a vertical edge (a jamb, a post) lies between two "
-         "azimuths; needs the ray engine"),
+         "azimuths, 40 and 4 more where a window's open band and its edges' spread are kept; "
+         "needs the ray engine"),
         ("transport", "Transport (T)", "Relight from T itself: a few baked directions per "
          "pixel through sparse kernel tables; keeps cast shadows on large receivers; an atlas "
          "of every direction in memory"),
@@ -378,6 +379,8 @@ HORIZON_GAP_LOOKUPS = 4 * len(STRIPS)
 #: ... and the azimuth gaps' crossings (a jamb's, a post's azimuth) with their weights, where
 #: the map has them: two per strip across the disc.
 HORIZON_CROSS_LOOKUPS = 2 * len(STRIPS)
+#: ... and the bands' two edges' spreads over the footprints, where the map has them.
+HORIZON_BAND_SPREAD_LOOKUPS = 4 * len(STRIPS)
 #: A map's open bands are kept only where they bring its error against rays at the held-out
 #: suns down by at least this much (relative): they cost 20 lookups per pixel (32 -> 52). On
 #: the statue demo's statue (128^2, 24 azimuths) they brought the whole map from 0.126 to
@@ -403,7 +406,9 @@ def horizon_lookups(horizon) -> int:
     return (HORIZON_LOOKUPS + (HORIZON_SPREAD_LOOKUPS if getattr(horizon, "spread", None)
                                is not None else 0)
             + (HORIZON_GAP_LOOKUPS if getattr(horizon, "gaps", False) else 0)
-            + (HORIZON_CROSS_LOOKUPS if getattr(horizon, "cross", None) is not None else 0))
+            + (HORIZON_CROSS_LOOKUPS if getattr(horizon, "cross", None) is not None else 0)
+            + (HORIZON_BAND_SPREAD_LOOKUPS if getattr(horizon, "band_spread", None) is not None
+               else 0))
 
 
 def fit_model(store, settings: TransportTextureSettings, albedo):
@@ -456,6 +461,11 @@ def fit_viewport(store, settings: TransportTextureSettings, model, lights=TRUTH_
                                                    settings.sun_angle, settings.kernel)
                                for m in (horizon, horizon.without_bands())))
         gaps = (e or {}).get("open_bands") if horizon.gaps else None
+        # the bands' edges' spreads go with the bands, and first where over the budget (the
+        # bake made them only where the whole map fits it)
+        if horizon.band_spread is not None and ((gaps is not None and not gaps["kept"])
+                                                or horizon.gpu_bytes() > budget):
+            horizon.band_spread = None
         crossings = None
         if horizon.cross is not None:    # the gaps' crossings go first where over the budget
             crossings = {"kept": True}
@@ -474,6 +484,7 @@ def fit_viewport(store, settings: TransportTextureSettings, model, lights=TRUTH_
                 e = {**e, **e["without"]}        # the figures of the map shown
         if gaps is not None and not gaps["kept"]:     # (in place: the map written is the one
             horizon.q = horizon.q[:2]                  # shown)
+            horizon.band_spread = None
         mib = horizon.gpu_bytes() / 2**20
         info = {"azimuths": horizon.azimuths, "gpu_mib": round(mib, 1),
                 "lookups_per_pixel": horizon_lookups(horizon),

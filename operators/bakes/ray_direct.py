@@ -211,6 +211,99 @@ def _crossings(occluder, points, H, figures: list, who: str, step: int, total: i
     return t, w
 
 
+#: How far from the texel centre's band edge a sub-sample's is sought (radians), and the
+#: bisection steps within that bracket: 10 degrees / 2^8 = 0.04 degrees (2^6 = 0.16 degrees
+#: read as a spread of its own that widened a 0.526-degree Sun's cut by half).
+BAND_BRACKET = np.radians(5.0)
+BAND_STEPS = 8
+
+
+def _band_edge(occluder, sub, rows, phi, lo, hi, low_blocked: bool):
+    """The elevation (n,) where the rays of sub-samples ``rows`` (n,) along azimuths ``phi``
+    change between ``lo`` and ``hi`` (n,): blocked under it and open over it
+    (``low_blocked``), or the reverse; outside the bracket, the bracket's end that its rays
+    say. Returns ``(edge, rays)``."""
+    from ...lt_addon.rays.shading import shadow_origins
+
+    cp, sp_ = np.cos(phi), np.sin(phi)
+
+    def blocked(e):
+        ce = np.cos(e)
+        L = np.stack([ce * cp, ce * sp_, np.sin(e)], -1)
+        return occluder.occluded(shadow_origins(sub, L, rows), L.astype(np.float32))
+    a, b = lo.copy(), hi.copy()
+    at_a, at_b = blocked(a), blocked(b)
+    inside = (at_a == low_blocked) & (at_b != low_blocked)
+    for _ in range(BAND_STEPS):
+        m = 0.5 * (a + b)
+        under = blocked(m) == low_blocked
+        a, b = np.where(under, m, a), np.where(under, b, m)
+    edge = np.where(inside, 0.5 * (a + b), np.where(at_a != low_blocked, lo, hi))
+    return edge, len(rows) * (2 + BAND_STEPS)
+
+
+def _band_footprints(occluder, smp, pts, H, A: int, who: str, step: int, total: int):
+    """Generator: the open bands' edges over the footprints of the (azimuth, point) pairs of
+    ``H`` (4, A, P) that have a band (``H[3] > H[2]``) whose edges differ from a grid
+    neighbour's, or that a neighbour lacks (:func:`...lt_addon.transport.horizon_map.
+    varying_pairs` of the bands, ``smp`` the points' texels: elsewhere the footprint's band is
+    the centre's, and a sub-sample on another face around an edge would shut it): each
+    texel's sub-samples
+    (:data:`...lt_addon.rays.footprint.HORIZON_LATTICE`) tested at the band's middle (shut
+    there: no band) and their edges bisected within :data:`BAND_BRACKET` of the centre's
+    (:func:`_band_edge`), kept as the weighted means and spreads
+    (:func:`...lt_addon.transport.horizon_map.band_edges`): the means into ``H[2:]``, returns
+    ``(spreads (2, A, P) float32 radians, figures)``."""
+    from ...lt_addon.rays.shading import shadow_origins
+
+    t0 = time.perf_counter()
+    spreads = np.zeros((2, A, H.shape[2]), np.float32)
+    band = H[3] > H[2]
+    # (not beside an azimuth without the band: there a vertical edge -- a jamb -- shuts it,
+    # which the crossings draw; its sub-samples shut too would darken it twice)
+    band = (band & np.roll(band, 1, axis=0) & np.roll(band, -1, axis=0)
+            & hmap.varying_pairs(H[2:], smp.texel, smp.resolution))
+    texels = np.nonzero(band.any(axis=0))[0]
+    n = HORIZON_LATTICE[0]
+    part = max(1, FOOTPRINT_BYTES // (64 * n * A))
+    parts = -(-len(texels) // part)
+    points = pairs = rays = 0
+    for j, a0 in enumerate(range(0, len(texels), part)):
+        idx = texels[a0:a0 + part]
+        owner, sub, weight, centre_w = pts.footprint._sub_points(pts, idx, HORIZON_LATTICE)
+        points += sub.size
+        start = np.searchsorted(owner, np.arange(len(idx) + 1))
+        count = np.diff(start)
+        fa, fk = np.nonzero(band[:, idx])                   # the part's pairs (azimuth, texel)
+        pairs += len(fa)
+        c = count[fk]
+        group = np.repeat(np.arange(len(fa)), c)
+        rows = np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c) + np.repeat(start[fk], c)
+        t = idx[fk]
+        g_lo = H[2, fa, t].astype(np.float64)
+        g_hi = H[3, fa, t].astype(np.float64)
+        mid = 0.5 * (g_lo + g_hi)
+        phi = 2 * np.pi * np.repeat(fa, c) / A
+        lo_c, hi_c, mid_s = g_lo[group], g_hi[group], mid[group]
+        top = np.pi / 2 - 1e-6
+        L = np.stack([np.cos(mid_s) * np.cos(phi), np.cos(mid_s) * np.sin(phi),
+                      np.sin(mid_s)], -1)
+        shut = occluder.occluded(shadow_origins(sub, L, rows), L.astype(np.float32))
+        lo_s, r1 = _band_edge(occluder, sub, rows, phi, np.maximum(lo_c - BAND_BRACKET, -top),
+                              np.minimum(lo_c + BAND_BRACKET, mid_s), True)
+        hi_s, r2 = _band_edge(occluder, sub, rows, phi, np.maximum(hi_c - BAND_BRACKET, mid_s),
+                              np.minimum(hi_c + BAND_BRACKET, top), False)
+        rays += len(rows) + r1 + r2
+        m_lo, m_hi, s_lo, s_hi = hmap.band_edges(g_lo, g_hi, lo_s, hi_s, shut, group,
+                                                 weight[rows], centre_w[fk])
+        H[2, fa, t], H[3, fa, t] = m_lo, m_hi
+        spreads[0, fa, t], spreads[1, fa, t] = s_lo, s_hi
+        yield Progress(step, total, f"horizon bands over footprints "
+                                    f"{j + 1}/{parts}{who}")
+    return spreads, {"texels": int(len(texels)), "pairs": int(pairs), "points": int(points),
+                     "rays": int(rays), "seconds": time.perf_counter() - t0}
+
+
 def horizon_spread(settings) -> bool:
     """Whether this bake's horizon maps get their edges' spread over the texels' footprints
     (:func:`...lt_addon.transport.horizon_map.pair_edges`): where the texels are sampled
@@ -289,7 +382,7 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
         trial_ok = settings.viewport == "auto" and _CALIBRATION_AZIMUTHS is None
         maps, skipped, searched, castable, checks, trials = [], 0, 0, 0, [], []
         gap_rays, gap_maps = 0, 0
-        cross_figs = []
+        cross_figs, band_figs = [], []
         edges, with_spread = [], horizon_spread(settings)
         for i, ((smp, pts), mg, store) in enumerate(zip(receivers, margins, stores)):
             if coarse is None:
@@ -363,14 +456,22 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
             castable += sum(f["castable"] for _, f in counts)
             gap_rays += sum(f.get("gap_rays", 0) for _, f in counts)
             gap_maps += int(maps_gaps(H))
-            cross = None
+            cross, b_spread = None, None
             if decided != "transport":      # where a vertical edge crosses each azimuth gap
                 cross = yield from _crossings(occluder, h_pts, H, cross_figs, who,
                                               step + S - 1, total)
+                # the open bands' edges over the footprints, where the map with them fits
+                if fph is not None and maps_gaps(H) and hmap.gpu_bytes(
+                        A, R, settings.horizon_resolution, spread=True, gaps=True,
+                        cross=True, band_spread=True) <= int(settings.gpu_budget) << 20:
+                    b_spread, figs = yield from _band_footprints(occluder, h_smp, h_pts, H, A,
+                                                                 who, step + S - 1, total)
+                    band_figs.append(figs)
             maps.append(None if decided == "transport" else
                         hmap.from_points(H, smp.texel, R, pts.Ns, mg, coarse=low,
                                          spread=None if fph is None else fph.spread,
-                                         margin_texels=keep, cross=cross))
+                                         margin_texels=keep, cross=cross,
+                                         band_spread=b_spread))
             trials.append(trial)
             checks.append(None if decided else _check_rows(occluder, smp, pts, mg, Dh,
                                                            settings))
@@ -407,6 +508,12 @@ def bake(scene, objects, settings, dset, stores, normals, step: int, total: int,
                         # viewport's open_bands says whether its map keeps them)
                         "horizon_gaps": {"rays": int(gap_rays),
                                          "objects_found": int(gap_maps)},
+                        # their edges over the footprints (where the map keeps bands and
+                        # footprints): the pairs, sub-samples and rays, and seconds
+                        "horizon_band_footprints": {
+                            k: (round(sum(f[k] for f in band_figs), 3) if k == "seconds"
+                                else int(sum(f[k] for f in band_figs)))
+                            for k in ("texels", "pairs", "points", "rays", "seconds")},
                         # scan rays a caster could meet, and those the search cast of them
                         # (lt_addon/rays/horizon.py _search)
                         "horizon_scan_rays": {"castable": int(castable),

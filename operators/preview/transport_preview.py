@@ -525,17 +525,20 @@ def build_sparse_group(n_directions: int, resolution: int, table_size: int, taps
 
 
 def horizon_preview_arrays(hm, albedo):
-    """(8-bit horizon tiles (2 to 7 ceil(A/3), Rh, Rh, 3) uint8 -- the lower edges' tiles,
+    """(8-bit horizon tiles (2 to 9 ceil(A/3), Rh, Rh, 3) uint8 -- the lower edges' tiles,
     then the upper edges', then their spreads' where the map has them, then the open bands'
     lower and upper edges' where it has them, then the azimuth gaps' crossings and their
-    weights where it has them, three azimuths per RGB tile, at the horizons' side; normal and
+    weights where it has them, then the bands' edges' spreads where it has them, three
+    azimuths per RGB tile, at the horizons' side; normal and
     albedo tiles (2, R, R, 3) float32 at the texture's) -- what :func:`build_horizon_group`
     reads."""
     _, A, Rh, _ = hm.q.shape
     n = -(-A // 3)
     planes = ([hm.q[0], hm.q[1]] + ([hm.spread] if hm.spread is not None else [])
               + ([hm.q[2], hm.q[3]] if hm.gaps else [])
-              + ([hm.cross[0], hm.cross[1]] if hm.cross is not None else []))
+              + ([hm.cross[0], hm.cross[1]] if hm.cross is not None else [])
+              + ([hm.band_spread[0], hm.band_spread[1]] if hm.band_spread is not None
+                 else []))
     q = np.zeros((len(planes), n * 3, Rh, Rh), np.uint8)
     for i, plane in enumerate(planes):
         q[i, :A] = plane
@@ -563,22 +566,25 @@ def write_horizon_files(base: str, tiles, na, azimuths: int) -> dict:
 
 
 def viewport_relight_horizon(tiles, na, azimuths: int, direction, sun_angle: float,
-                             cross: bool = False):
+                             cross: bool = False, band_spread: bool = False):
     """NumPy twin of :func:`build_horizon_group` (direct light, intensity 1): (R, R, 3) from
     the 8-bit horizon tiles and the half-float normal and albedo tiles; ``cross``: the tiles
-    end with two sets more, the gaps' crossings and their weights."""
+    end with two sets more, the gaps' crossings and their weights; ``band_spread``: and then
+    two more, the bands' edges' spreads."""
     from ...lt_addon.transport.horizon_map import HorizonMap
 
     A = int(azimuths)
     n, Rh = -(-A // 3), tiles.shape[1]
     planes = len(tiles) // n          # 2: the edges; 3: and their spreads; 4 / 5: and the
     q = np.asarray(tiles).transpose(0, 3, 1, 2).reshape(planes, 3 * n, Rh, Rh)[:, :A]  # bands
-    # (2 more with ``cross``)
-    c = q[-2:] if cross else None     # (then the crossings and their weights)
+    # (2 more with ``cross``, and 2 more with ``band_spread``)
+    bs = q[-2:] if band_spread else None       # (last: the bands' edges' spreads)
+    planes -= 2 * bool(band_spread)
+    c = q[planes - 2:planes] if cross else None     # (then the crossings and their weights)
     planes -= 2 * bool(cross)
     edges = q[[0, 1, planes - 2, planes - 1]] if planes >= 4 else q[:2]
     hm = HorizonMap(edges, np.asarray(na[0], np.float16), q[2] if planes in (3, 5) else None,
-                    cross=c)
+                    cross=c, band_spread=bs)
     e = hm.direct(direction, sun_angle)
     return (e[..., None] * np.asarray(na[1], np.float64)).astype(np.float32)
 
@@ -642,7 +648,8 @@ def _disc_moment(b, offset, radius, x, y):
 
 def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image, uv_map: str,
                         name: str, sun_angle: float, horizon_resolution: int | None = None,
-                        spread: bool = False, gaps: bool = False, cross: bool = False):
+                        spread: bool = False, gaps: bool = False, cross: bool = False,
+                        band_spread: bool = False):
     """The sun group relighting from horizons (the sockets of :func:`build_group`): at five
     azimuths across the sun's disc (the sun's and two either side, ``horizon_map.STRIPS``) the
     two azimuth channels around each are picked; at each, the sun's disc is cut by the blocked
@@ -663,7 +670,10 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     ``cross`` (the atlas' last two sets of tiles: where each azimuth gap's horizon jumps,
     :mod:`...lt_addon.rays.crossing`) each strip's place in its gap is read through the gap's
     crossing, by its weight (``crossing.warp``; the codes read linearly between texels, those
-    that do not matter filled from their neighbours': ``crossing.fill``): 10 lookups more. The
+    that do not matter filled from their neighbours': ``crossing.fill``): 10 lookups more. With
+    ``band_spread`` (the atlas' last two sets of tiles: the bands' edges' spreads over the
+    footprint) each band edge is cut by its wider disc as the upper edge is: 20 lookups more.
+    The
     horizon atlas may be coarser (``horizon_resolution``) than the normals' (``resolution``):
     its linear lookup reads the codes between its texels, as
     :func:`...lt_addon.transport.horizon_map.upsample`."""
@@ -688,9 +698,11 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
         return b.math("SUBTRACT", k, b.math("MULTIPLY", wrap, float(A), x=x + 200, y=y),
                       x=x + 300, y=y)
     uv = b.node("ShaderNodeUVMap", -1400, -600, uv_map=uv_map).outputs["UV"]
-    lay = atlas_layout((2 + bool(spread) + 2 * bool(gaps) + 2 * bool(cross)) * n, Rh)
+    lay = atlas_layout((2 + bool(spread) + 2 * bool(gaps) + 2 * bool(cross)
+                        + 2 * bool(band_spread)) * n, Rh)
     gap0 = (3 if spread else 2) * 3 * n      # the bands' lower edges' first channel
     cross0 = gap0 + (6 * n if gaps else 0)   # the crossings' first channel
+    bs0 = cross0 + (6 * n if cross else 0)   # the bands' edges' spreads' first channel
     el = b.math("ARCSINE", b.math("MINIMUM", dz, 1.0, x=600, y=200), x=700, y=200)
     radius = b.node("ShaderNodeValue", 600, 0)
     radius.name = radius.label = SUN_RADIUS_NODE
@@ -829,7 +841,18 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
                                 x=550, y=y))
                     g.append(h)
                     offset = b.math("SUBTRACT", el, h, x=800, y=y)
-                    gs.append((_disc_part(b, offset, r, 900, y),
+                    r_g = r
+                    if band_spread:     # the edge's spread over the footprint: a wider disc
+                        c = _atlas_channel(b, b.math("ADD", kk, float(bs0 + 3 * e * n),
+                                                     x=-800, y=y - 150),
+                                           uv, lay, horizon_image, Rh, acc, -700, y - 150)
+                        acc = c
+                        c2 = b.math("MULTIPLY", c, c, x=400, y=y - 150)
+                        s4 = b.math("MULTIPLY", b.math("MULTIPLY", c2, c2, x=500, y=y - 150),
+                                    4.0 * SPREAD_MAX ** 2, x=600, y=y - 150)
+                        r_g = b.math("SQRT", b.math("MULTIPLY_ADD", r, r, s4, x=700,
+                                                    y=y - 150), x=800, y=y - 150)
+                    gs.append((_disc_part(b, offset, r_g, 900, y),
                                _disc_moment(b, offset, r, 900, y - 100)))
                 reopened = b.math("MAXIMUM", b.math("SUBTRACT", gs[0][0], gs[1][0], x=1600,
                                                     y=y0 - 800 * j - 250), 0.0, x=1650,
@@ -974,8 +997,10 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
                   "horizon_spread": bake.horizon.spread is not None,
                   # then two: the open bands inside the intervals
                   "horizon_gaps": bool(bake.horizon.gaps),
-                  # and last: where each azimuth gap's horizon jumps
-                  "horizon_cross": bake.horizon.cross is not None}
+                  # then: where each azimuth gap's horizon jumps
+                  "horizon_cross": bake.horizon.cross is not None,
+                  # and last: the bands' edges' spreads over the footprints
+                  "horizon_band_spread": bake.horizon.band_spread is not None}
         h_img = pn.load_atlas_image(sparse["horizon_atlas"], f"{obj.name} transport horizons")
         n_img = pn.load_atlas_image(sparse["horizon_normals"], f"{obj.name} transport normals")
         group = build_horizon_group(bake.horizon.azimuths, model.resolution, h_img, n_img,
@@ -983,7 +1008,8 @@ def install_transport_preview(scene, obj, report: dict, bake, store, sun_angle: 
                                     bake.horizon.horizon_resolution,
                                     spread=bake.horizon.spread is not None,
                                     gaps=bool(bake.horizon.gaps),
-                                    cross=bake.horizon.cross is not None)
+                                    cross=bake.horizon.cross is not None,
+                                    band_spread=bake.horizon.band_spread is not None)
     elif viewport == "blocks":
         view = bake.view
         beig, btab = block_preview_arrays(view, bake.albedo, store.directions, angle,

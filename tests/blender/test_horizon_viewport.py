@@ -43,9 +43,9 @@ def _horizon_preview(prev, azimuths, side=R, resolution=R):
     from relightable_textures.lt_addon.io.contact_sheet import read_png
 
     # the edges' spreads: a third set; the open bands' edges: two more; the crossings and
-    # their weights: two more
+    # their weights: two more; the bands' edges' spreads: two more
     planes = (2 + bool(prev.get("horizon_spread")) + 2 * bool(prev.get("horizon_gaps"))
-              + 2 * bool(prev.get("horizon_cross")))
+              + 2 * bool(prev.get("horizon_cross")) + 2 * bool(prev.get("horizon_band_spread")))
     tiles = unpack_atlas(read_png(prev["horizon_atlas"])[::-1], planes * -(-azimuths // 3), side)
     ch = exrio.read_exr(prev["horizon_normals"])[0]
     na = unpack_atlas(np.stack([ch[c] for c in "RGB"], -1), 2, resolution)
@@ -182,9 +182,13 @@ def test_a_sun_through_a_window_is_rendered_by_cycles_as_its_twin(fresh_scene, t
     # the window's jambs are vertical edges between two azimuths: the map keeps where
     assert prev["horizon_cross"] is True and rep["viewport"]["crossings"]["kept"]
     assert rep["direct"]["horizon_crossings"]["vertical"] > 0
-    assert rep["viewport"]["lookups_per_pixel"] == 32 + 20 + 10
+    # the bands' edges vary across the floor (the window's sides and sill seen from nearer
+    # and further): their spreads over the footprints, 20 lookups more
+    assert prev["horizon_band_spread"] is True
+    assert rep["direct"]["horizon_band_footprints"]["pairs"] > 0
+    assert rep["viewport"]["lookups_per_pixel"] == 32 + 20 + 10 + 20
     group = bpy.data.node_groups[prev["group"]]
-    assert len([n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]) == 32 + 20 + 10
+    assert len([n for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"]) == 82
     tiles, na = _horizon_preview(prev, 24)
     bake_, store_, _ = tx.load_bake(rep["report"])
     az, el = 10.0, 30.0
@@ -192,13 +196,14 @@ def test_a_sun_through_a_window_is_rendered_by_cycles_as_its_twin(fresh_scene, t
     scene["relight_intensity"] = 1.0
     img = render_rgb(scene, tmp_path, R)
     d = direction_from_az_el(az, el)
-    twin = tp.viewport_relight_horizon(tiles, na, 24, d, 2.0, cross=True)
-    # without the bands (the two sets of tiles before the crossings'), and without crossings
-    hull = tp.viewport_relight_horizon(np.concatenate([tiles[:-32], tiles[-16:]]), na, 24, d,
-                                       2.0, cross=True)
-    linear = tp.viewport_relight_horizon(tiles[:-16], na, 24, d, 2.0)
+    twin = tp.viewport_relight_horizon(tiles, na, 24, d, 2.0, cross=True, band_spread=True)
+    # without the bands (the two sets of tiles before the crossings', and their spreads
+    # after), and without crossings (the bands' edges sharp)
+    hull = tp.viewport_relight_horizon(np.concatenate([tiles[:-48], tiles[-32:-16]]), na, 24,
+                                       d, 2.0, cross=True)
+    linear = tp.viewport_relight_horizon(tiles[:-32], na, 24, d, 2.0)
     assert np.abs(img - twin).max() <= 2.0 ** -10 * twin.max()
-    # the viewport is EEVEE's: the same group (62 lookups, five strips) compiles and reads
+    # the viewport is EEVEE's: the same group (82 lookups, five strips) compiles and reads
     # the same (software GL here: 7 s the first time; lookups Closest, as in
     # test_eevee_preview.py; measured 0.0007 from the twin)
     for n in group.nodes:
@@ -219,7 +224,11 @@ def test_a_sun_through_a_window_is_rendered_by_cycles_as_its_twin(fresh_scene, t
     got = bundle.relight(bake_, store_, d, 2.0, 1.0, source="horizon")
     t = bundle.relight(bake_, store_, d, 2.0, 1.0, source="transport")
     e_map, e_t = rel(got, truth), rel(t, truth)
-    bake_.horizon = bake_.horizon.without_crossings()
+    sharp = bake_.horizon
+    bake_.horizon = sharp.without_band_spread()
+    e_sharp = rel(bundle.relight(bake_, store_, d, 2.0, 1.0, source="horizon"), truth)
+    print(f"window: the bands' edges sharp {e_sharp:.3f}")
+    bake_.horizon = sharp.without_crossings()
     e_lin = rel(bundle.relight(bake_, store_, d, 2.0, 1.0, source="horizon"), truth)
     print(f"window: the map {e_map:.3f}, without its crossings {e_lin:.3f}, T {e_t:.3f}")
     # (measured 0.106, 0.339 and 0.602 with five strips across the disc, 0.127 with three:

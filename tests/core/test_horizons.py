@@ -232,6 +232,51 @@ def test_save_load_round_trip_and_a_newer_format_is_refused(tmp_path):
             hmap.load(path)
 
 
+def test_band_spreads_survive_the_file_and_are_refused_without_bands_or_before_format_7(
+        tmp_path):
+    """``band_spread`` (2, A, Rh, Rh) uint8 is written and read back with a banded map (the GPU
+    figure: two sets of tiles more); in a format-6 file, or beside two planes of codes, it is
+    refused in one line; without its bands (the hull) or with its edges sharp it is gone."""
+    rng = np.random.default_rng(4)
+    q = rng.integers(0, 256, (4, 6, 8, 8), dtype=np.uint8)
+    n = rng.normal(size=(8, 8, 3)).astype(np.float16)
+    bs = rng.integers(0, 256, (2, 6, 8, 8), dtype=np.uint8)
+    hb = hmap.HorizonMap(q, n, band_spread=bs)
+    path = str(tmp_path / "o_horizons.npz")
+    hmap.save(path, hb)
+    back = hmap.load(path)
+    assert np.array_equal(back.band_spread, bs) and np.array_equal(back.q, q)
+    assert back.gpu_bytes() == hmap.gpu_bytes(6, 8, gaps=True, band_spread=True) > \
+        hmap.gpu_bytes(6, 8, gaps=True)
+    assert back.without_bands().band_spread is None and back.without_band_spread().band_spread \
+        is None and np.array_equal(back.without_crossings().band_spread, bs)
+    for qq, version in ((q, 6), (q[:2], 7)):
+        np.savez(path, q=qq, normals=n, band_spread=bs, format=np.array(hmap.FORMAT),
+                 format_version=np.array(version))
+        with pytest.raises(InputError, match="band spreads"):
+            hmap.load(path)
+
+
+def test_a_bands_edges_over_the_footprint_count_a_shut_sub_sample_at_its_middle():
+    """Two pairs, the centre weighted 0.25 and three sub-samples 0.25 each: the first pair's
+    sub-samples all see the band, so its means and spreads are those of the four edges; in the
+    second one sub-sample is shut (behind a box's edge), so both its edges count at the
+    centre's band's middle, 20 degrees: the lower edge's mean rises, the upper's falls."""
+    g_lo, g_hi = np.radians([10.0, 10.0]), np.radians([30.0, 30.0])
+    group = np.array([0, 0, 0, 1, 1, 1])
+    lo_s = np.radians([9.0, 11.0, 10.0, 9.0, 11.0, 0.0])
+    hi_s = np.radians([29.0, 31.0, 30.0, 29.0, 31.0, 0.0])
+    shut = np.array([False, False, False, False, False, True])
+    m_lo, m_hi, s_lo, s_hi = hmap.band_edges(g_lo, g_hi, lo_s, hi_s, shut, group,
+                                            np.full(6, 0.25), np.full(2, 0.25))
+    one = np.radians([10.0, 9.0, 11.0, 10.0])
+    assert np.allclose(m_lo[0], one.mean()) and np.allclose(s_lo[0], one.std())
+    assert np.allclose(m_hi[0], np.radians(30.0)) and np.allclose(s_hi[0], one.std())
+    two_lo, two_hi = np.radians([10.0, 9.0, 11.0, 20.0]), np.radians([30.0, 29.0, 31.0, 20.0])
+    assert np.allclose([m_lo[1], m_hi[1]], [two_lo.mean(), two_hi.mean()])
+    assert np.allclose([s_lo[1], s_hi[1]], [two_lo.std(), two_hi.std()])
+
+
 def test_the_margin_is_lit_as_cycles_extends_the_islands_light(tmp_path):
     """A map that keeps its island fills the bake's margin from the island's light, as Cycles'
     Extend margin fills a baked texture (by hand: a texel beside a straight border is
