@@ -247,8 +247,9 @@ def _band_footprints(occluder, smp, pts, H, A: int, who: str, step: int, total: 
     ``H`` (4, A, P) that have a band (``H[3] > H[2]``) whose edges differ from a grid
     neighbour's, or that a neighbour lacks (:func:`...lt_addon.transport.horizon_map.
     varying_pairs` of the bands, ``smp`` the points' texels: elsewhere the footprint's band is
-    the centre's, and a sub-sample on another face around an edge would shut it): each
-    texel's sub-samples
+    the centre's, and a sub-sample on another face around an edge would shut it), and whose
+    two neighbouring azimuths have a band too (beside one without, a jamb's vertical edge
+    shuts it, which the crossings draw): each texel's sub-samples
     (:data:`...lt_addon.rays.footprint.HORIZON_LATTICE`) tested at the band's middle (shut
     there: no band) and their edges bisected within :data:`BAND_BRACKET` of the centre's
     (:func:`_band_edge`), kept as the weighted means and spreads
