@@ -211,6 +211,27 @@ def _crossings(occluder, points, H, figures: list, who: str, step: int, total: i
     return t, w
 
 
+def _footprint_parts(pts, texels, want, A: int):
+    """The footprints' sub-samples of ``texels`` and their (azimuth, point) pairs ``want``
+    (A, P) bool, a part of the texels at a time (:data:`FOOTPRINT_BYTES`): yields ``(j,
+    parts, idx, sub, weight, centre_w, fa, fk, count, group, rows)`` -- the part's index and
+    count, its texels, their sub-samples (:data:`...lt_addon.rays.footprint.HORIZON_LATTICE`,
+    ``Footprint._sub_points``), the pairs' azimuths and places in ``idx`` (m,), each pair's
+    sub-samples' count (m,), and per sub-sample row its pair and its point in ``sub``."""
+    n = HORIZON_LATTICE[0]
+    part = max(1, FOOTPRINT_BYTES // (64 * n * A))     # sub-samples' points and pairs a part
+    parts = -(-len(texels) // part)
+    for j, a0 in enumerate(range(0, len(texels), part)):
+        idx = texels[a0:a0 + part]
+        owner, sub, weight, centre_w = pts.footprint._sub_points(pts, idx, HORIZON_LATTICE)
+        start = np.searchsorted(owner, np.arange(len(idx) + 1))
+        fa, fk = np.nonzero(want[:, idx])                   # the part's pairs (azimuth, texel)
+        c = np.diff(start)[fk]
+        group = np.repeat(np.arange(len(fa)), c)
+        rows = np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c) + np.repeat(start[fk], c)
+        yield j, parts, idx, sub, weight, centre_w, fa, fk, c, group, rows
+
+
 #: How far from the texel centre's band edge a sub-sample's is sought (radians), and the
 #: bisection steps within that bracket: 10 degrees / 2^8 = 0.04 degrees (2^6 = 0.16 degrees
 #: read as a spread of its own that widened a 0.526-degree Sun's cut by half).
@@ -265,21 +286,11 @@ def _band_footprints(occluder, smp, pts, H, A: int, who: str, step: int, total: 
     band = (band & np.roll(band, 1, axis=0) & np.roll(band, -1, axis=0)
             & hmap.varying_pairs(H[2:], smp.texel, smp.resolution))
     texels = np.nonzero(band.any(axis=0))[0]
-    n = HORIZON_LATTICE[0]
-    part = max(1, FOOTPRINT_BYTES // (64 * n * A))
-    parts = -(-len(texels) // part)
     points = pairs = rays = 0
-    for j, a0 in enumerate(range(0, len(texels), part)):
-        idx = texels[a0:a0 + part]
-        owner, sub, weight, centre_w = pts.footprint._sub_points(pts, idx, HORIZON_LATTICE)
+    for j, parts, idx, sub, weight, centre_w, fa, fk, c, group, rows in _footprint_parts(
+            pts, texels, band, A):
         points += sub.size
-        start = np.searchsorted(owner, np.arange(len(idx) + 1))
-        count = np.diff(start)
-        fa, fk = np.nonzero(band[:, idx])                   # the part's pairs (azimuth, texel)
         pairs += len(fa)
-        c = count[fk]
-        group = np.repeat(np.arange(len(fa)), c)
-        rows = np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c) + np.repeat(start[fk], c)
         t = idx[fk]
         g_lo = H[2, fa, t].astype(np.float64)
         g_hi = H[3, fa, t].astype(np.float64)
@@ -608,21 +619,11 @@ def _footprints(occluder, smp, pts, H, fph, found, A: int, who: str, step: int, 
         want[a_s, t_s] = False
         n_smooth += len(a_s)
     texels = np.nonzero(want.any(axis=0))[0]
-    n = HORIZON_LATTICE[0]
-    part = max(1, FOOTPRINT_BYTES // (64 * n * A))     # sub-samples' points and pairs a part
-    parts = -(-len(texels) // part)
     points = pairs = 0
-    for j, a0 in enumerate(range(0, len(texels), part)):
-        idx = texels[a0:a0 + part]
-        owner, sub, weight, centre_w = pts.footprint._sub_points(pts, idx, HORIZON_LATTICE)
+    for j, parts, idx, sub, weight, centre_w, fa, fk, c, group, rows in _footprint_parts(
+            pts, texels, want, A):
         points += sub.size
-        start = np.searchsorted(owner, np.arange(len(idx) + 1))
-        count = np.diff(start)
-        fa, fk = np.nonzero(want[:, idx])                   # the part's pairs (azimuth, texel)
         pairs += len(fa)
-        c = count[fk]
-        group = np.repeat(np.arange(len(fa)), c)
-        rows = np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c) + np.repeat(start[fk], c)
         label = "horizon footprints" + (f" (part {j + 1}/{parts})" if parts > 1 else "")
         # each sub-sample's edge between its texel's and the neighbours' (bracketed search)
         lo_b, hi_b = hmap.brackets(H, nb, fa, idx[fk])
