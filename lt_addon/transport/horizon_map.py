@@ -98,8 +98,9 @@ SUN_RADIUS_MIN = 1e-4
 #: On the gallery's interior (its Room's direct light under a 10-degree Sun against Cycles'
 #: 1,024-spp 0-bounce bake, 2026-12-08) three strips erred 0.059 / 0.080 / 0.108 / 0.082 at
 #: 3 / 8 / 20 / 45 degrees, five 0.045 / 0.039 / 0.075 / 0.074, seven 0.041 / 0.025 / 0.070 /
-#: 0.073; over the whole gallery five moved no cell the wrong way by more than 0.001. Each strip costs the
-#: viewport 4 lookups (2 more with spreads, 4 with open bands, 2 with crossings).
+#: 0.073; over the whole gallery five moved no cell the wrong way by more than 0.001. Each
+#: strip costs the viewport 4 lookups (2 more with spreads, 4 with open bands and 4 more with
+#: their edges' spreads, 2 with crossings).
 _X, _W = np.polynomial.legendre.leggauss(5)
 _W = _W * np.sqrt(1 - _X * _X)
 STRIPS = tuple(zip(_X.tolist(), (_W / _W.sum()).tolist()))
@@ -608,9 +609,9 @@ class HorizonMap:
 
         At each strip's azimuth (the sun's, and either side of it by 0.54 and 0.91 of the
         disc's radius: :data:`STRIPS`) the disc is cut by that azimuth's interval
-        (:func:`..rays.horizon.visible_fraction`; the upper edge by the wider disc of :func:`spread_radius` where the
-        map has spreads), the visibility linear between the two azimuths around it
-        (interpolating the visibility rather than the edges was measured better: statue demo's
+        (:func:`..rays.horizon.visible_fraction`; the upper edge by the wider disc of
+        :func:`spread_radius` where the map has spreads), the visibility linear between the
+        two azimuths around it (interpolating the visibility rather than the edges was measured better: statue demo's
         ground at a 2-degree Sun 0.042 against 0.074) -- or, in a gap where the map keeps a
         crossing (``cross``: a vertical edge), a ramp :data:`..rays.crossing.RAMP` sun radii
         either side of it (:func:`..rays.crossing.warp`); the strips are weighted by the disc's
@@ -997,7 +998,8 @@ def load(path: str, resolution: int | None = None) -> HorizonMap:
     file from elsewhere (:func:`..io.untrusted.open_npz`: capped, each array's header checked
     before it is inflated): ``q`` (2, A, Rh, Rh) uint8 with 3 <= A <= 4096 azimuths, Rh at
     most the texture's side; ``spread`` (A, Rh, Rh), ``cross`` and ``band_spread`` (2, A, Rh,
-    Rh) uint8 where present; ``normals`` (R, R, 3) float16, finite, R = ``resolution`` (T's) when given."""
+    Rh) uint8 where present; ``normals`` (R, R, 3) float16, finite, R = ``resolution``
+    (T's) when given."""
     from ..io import untrusted as ut, versions
 
     with ut.open_npz(path) as z:
