@@ -679,7 +679,7 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     :func:`...lt_addon.transport.horizon_map.upsample`."""
     from ...lt_addon.rays.horizon import BEYOND
     from ...lt_addon.rays.crossing import RAMP
-    from ...lt_addon.transport.horizon_map import (COS_MIN, EDGE_MIN, SPREAD_MAX, STRIPS,
+    from ...lt_addon.transport.horizon_map import (COS_MIN, EDGE_MIN, STRIPS,
                                                    SUN_RADIUS_MIN)
 
     Rh = int(horizon_resolution or resolution)
@@ -801,11 +801,7 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
                     c = _atlas_channel(b, b.math("ADD", kk, float(6 * n), x=-800, y=y - 200),
                                        uv, lay, horizon_image, Rh, acc, -700, y - 200)
                     acc = c
-                    c2 = b.math("MULTIPLY", c, c, x=400, y=y - 200)
-                    s4 = b.math("MULTIPLY", b.math("MULTIPLY", c2, c2, x=500, y=y - 200),
-                                4.0 * SPREAD_MAX ** 2, x=600, y=y - 200)
-                    r_e = b.math("SQRT", b.math("MULTIPLY_ADD", r, r, s4, x=700, y=y - 200),
-                                 x=800, y=y - 200)
+                    r_e = _spread_disc(b, c, r, 400, y - 200)
                 edge_at = h
                 h = clamp(h, 600, y - 100)
                 hv.append(h)
@@ -847,11 +843,7 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
                                                      x=-800, y=y - 150),
                                            uv, lay, horizon_image, Rh, acc, -700, y - 150)
                         acc = c
-                        c2 = b.math("MULTIPLY", c, c, x=400, y=y - 150)
-                        s4 = b.math("MULTIPLY", b.math("MULTIPLY", c2, c2, x=500, y=y - 150),
-                                    4.0 * SPREAD_MAX ** 2, x=600, y=y - 150)
-                        r_g = b.math("SQRT", b.math("MULTIPLY_ADD", r, r, s4, x=700,
-                                                    y=y - 150), x=800, y=y - 150)
+                        r_g = _spread_disc(b, c, r, 400, y - 150)
                     gs.append((_disc_part(b, offset, r_g, 900, y),
                                _disc_moment(b, offset, r, 900, y - 100)))
                 reopened = b.math("MAXIMUM", b.math("SUBTRACT", gs[0][0], gs[1][0], x=1600,
@@ -882,6 +874,18 @@ def build_horizon_group(azimuths: int, resolution: int, horizon_image, na_image,
     _sun_group_tail(b, gin, gout, irr, albedo, dz, 2200)
     group["relight_azimuths"] = A
     return group
+
+
+def _spread_disc(b, c, r, x, y):
+    """The disc that cuts an edge spread over the footprint: ``sqrt(r^2 + 4 s^2)`` with ``s =
+    c^2 SPREAD_MAX`` from its spread channel ``c`` (0..1, as the 8-bit image reads it) --
+    :func:`...lt_addon.transport.horizon_map.spread_radius` of ``decode_spread``."""
+    from ...lt_addon.transport.horizon_map import SPREAD_MAX
+
+    c2 = b.math("MULTIPLY", c, c, x=x, y=y)
+    s4 = b.math("MULTIPLY", b.math("MULTIPLY", c2, c2, x=x + 100, y=y), 4.0 * SPREAD_MAX ** 2,
+                x=x + 200, y=y)
+    return b.math("SQRT", b.math("MULTIPLY_ADD", r, r, s4, x=x + 300, y=y), x=x + 400, y=y)
 
 
 def _decode_edge(b, q, x, y):
